@@ -1,0 +1,1 @@
+"""Heart-motion predictors, all on the `Predictor` contract of `predictors.base`."""

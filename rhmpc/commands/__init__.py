@@ -1,0 +1,1 @@
+"""Command modules of the `rhmpc` console script, one module per subcommand."""

@@ -1,0 +1,35 @@
+"""The URDF ships as package data: it is found after a non-editable install, not only in-tree."""
+
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def test_urdf_found_after_non_editable_install(tmp_path):
+    wheel_dir, target = tmp_path / "wheel", tmp_path / "site"
+    subprocess.run(
+        [sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q",
+         "-w", str(wheel_dir), str(REPO)],
+        check=True, capture_output=True, cwd=tmp_path,
+    )
+    (wheel,) = wheel_dir.glob("rhmpc-*.whl")
+    assert "robots/urdf/phantom_premium_1_5a.urdf" in zipfile.ZipFile(wheel).namelist()
+    subprocess.run(
+        [sys.executable, "-m", "pip", "install", "--no-deps", "-q", "--target", str(target),
+         str(wheel)],
+        check=True, capture_output=True, cwd=tmp_path,
+    )
+    # Run from a directory without the source tree, importing the installed copy only.
+    code = (
+        "import robots, sys; from robots import load_robot; r = load_robot('phantom'); "
+        "assert robots.__file__.startswith(sys.argv[1]), robots.__file__; print(r.model.nq)"
+    )
+    out = subprocess.run(
+        [sys.executable, "-I", "-c", f"import sys; sys.path.insert(0, {str(target)!r}); " + code,
+         str(target)],
+        check=True, capture_output=True, text=True, cwd=tmp_path,
+    )
+    assert out.stdout.strip() == "3"
