@@ -22,14 +22,18 @@ Numerical guards (counted in ``counts``):
 
 ``rls_reset``  κ ≤ 0 or non-finite P: P is reset to P₀ (weights kept);
 ``rls_bound``  wind-up: with λ < 1, directions that the data do not excite grow
-               as λ^{−k}; when max diag P exceeds ``p_max`` P is scaled down to it.
+               as λ^{−k}; diagonal entries above ``p_max`` are brought back to it
+               by the congruence P ← D P D (D diagonal ≤ 1), which keeps P positive
+               definite and leaves the excited coordinates alone.
 """
 
 from __future__ import annotations
 
+import math
 from collections import Counter
 
 import numpy as np
+from scipy.linalg.blas import dger, dsymv, dsyr
 
 __all__ = ["RecursiveLeastSquares"]
 
@@ -69,11 +73,9 @@ class RecursiveLeastSquares:
         B, n, q = self.B, self.n, self.q
         self.W = np.zeros((B, q, n))
         self.P = np.empty((B, n, n))
-        self._pi = np.empty((B, n, 1))
-        self._kappa = np.empty((B, 1, 1))
-        self._e = np.empty((B, q, 1))
-        self._tmp = np.empty((B, n, n))
-        self._wbuf = np.empty((B, q, n))
+        self._pi = np.empty((B, n))
+        self._PT = [self.P[b].T for b in range(B)]  # Fortran-ordered views for BLAS
+        self._WT = [self.W[b].T for b in range(B)]
         self._diag = np.einsum("bii->bi", self.P)  # a writable view of the diagonals
         self.reset_covariance()
 
@@ -88,36 +90,38 @@ class RecursiveLeastSquares:
         return np.matmul(self.W, x[:, :, None])[:, :, 0]
 
     def update(self, x: np.ndarray, y: np.ndarray) -> None:
-        """One RLS step with regressors ``x`` (B, n) and targets ``y`` (B, q)."""
-        xc = x[:, :, None]
-        pi, kappa, e, tmp = self._pi, self._kappa, self._e, self._tmp
-        np.matmul(self.P, xc, out=pi)
-        np.matmul(x[:, None, :], pi, out=kappa)
-        kappa += self.lam
-        if not (np.isfinite(kappa).all() and (kappa > 0.0).all()):
-            self.counts["rls_reset"] += 1
-            self.reset_covariance()
-            return
-        np.matmul(self.W, xc, out=e)
-        np.subtract(y[:, :, None], e, out=e)  # a-priori error
-        pi /= kappa  # gain k = π/κ (π is now k)
-        # W += e kᵀ
-        np.matmul(e, pi.transpose(0, 2, 1), out=self._wbuf)
-        self.W += self._wbuf
-        # P ← (P − k πᵀ)/λ with π = κ k, i.e. P − κ k kᵀ
-        np.matmul(pi, pi.transpose(0, 2, 1), out=tmp)
-        tmp *= kappa
-        self.P -= tmp
-        # symmetrise and divide by λ in one pass
-        np.add(self.P, self.P.transpose(0, 2, 1), out=tmp)
-        np.multiply(tmp, 0.5 / self.lam, out=self.P)
-        peak = self._diag.max()
-        if not np.isfinite(peak) or self._diag.min() <= 0.0:
-            self.counts["rls_reset"] += 1
-            self.reset_covariance()
-        elif peak > self.p_max:
-            self.counts["rls_bound"] += 1
-            for b in range(self.B):
-                top = self._diag[b].max()
-                if top > self.p_max:
-                    self.P[b] *= self.p_max / top
+        """One RLS step with regressors ``x`` (B, n) and targets ``y`` (B, q).
+
+        BLAS level-2 calls on preallocated storage: P is kept exactly symmetric by
+        updating one triangle (``dsyr``) and reading it with ``dsymv``.
+        """
+        lam = self.lam
+        for b in range(self.B):
+            xb = x[b]
+            Pb = self._PT[b]  # Fortran view of P[b]; its upper triangle is authoritative
+            pi = dsymv(1.0, Pb, xb, y=self._pi[b], overwrite_y=1)
+            kappa = lam + float(np.dot(xb, pi))
+            if not (kappa > 0.0 and math.isfinite(kappa)):
+                self.counts["rls_reset"] += 1
+                self.reset_covariance(b)
+                continue
+            e = y[b] - np.dot(self.W[b], xb)  # a-priori error
+            dger(1.0 / kappa, pi, e, a=self._WT[b], overwrite_a=1)  # W += e kᵀ, k = π/κ
+            dsyr(-1.0 / kappa, pi, a=Pb, overwrite_a=1)  # P −= π πᵀ/κ
+            if lam != 1.0:
+                self.P[b] *= 1.0 / lam
+            diag = self._diag[b]
+            peak = diag.max()
+            if not (math.isfinite(peak) and diag.min() > 0.0):
+                self.counts["rls_reset"] += 1
+                self.reset_covariance(b)
+            elif (
+                peak > self.p_max
+            ):  # P ← D P D, D = diag(min(1, √(p_max/P_ii))): congruent, stays PD
+                self.counts["rls_bound"] += 1
+                scale = np.sqrt(np.minimum(1.0, self.p_max / diag))
+                self.P[b] *= np.multiply.outer(scale, scale)
+
+    def covariance(self, b: int = 0) -> np.ndarray:
+        """The full symmetric P of problem ``b`` (a copy)."""
+        return np.triu(self._PT[b]) + np.triu(self._PT[b], 1).T

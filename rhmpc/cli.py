@@ -21,7 +21,7 @@ from rhmpc import __version__
 from rhmpc.errors import UsageError
 
 #: Subcommand modules, in the order ``rhmpc --help`` lists them.
-COMMANDS: tuple[str, ...] = ("robots",)
+COMMANDS: tuple[str, ...] = ("simulate", "compare", "robots", "data", "bench", "predict")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -15,6 +15,8 @@ one call covers a whole 2 kHz run.
 
 from __future__ import annotations
 
+import itertools
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -147,8 +149,8 @@ class StaircaseProfile:
     The heart beats ``initial`` seconds at the first level, then steps through the levels up
     to the last one and back down, ``step`` seconds per level, and stays at the first level
     until the end. Rates change linearly over ``transition`` seconds (pacing takes effect
-    within a beat or two). If the whole staircase does not fit in ``duration``, ``initial``
-    and ``step`` shrink in proportion.
+    within a beat or two). A shorter record simply ends part-way through the protocol (with
+    the defaults, 140 s end during the descent, after all six levels).
 
     Attributes
     ----------
@@ -170,13 +172,11 @@ class StaircaseProfile:
     def knots(self, duration: float) -> tuple[np.ndarray, np.ndarray]:
         """Knot times [s] and rates [Hz] of the piecewise-linear profile over ``[0, duration]``."""
         sequence = list(self.levels) + list(self.levels[-2::-1])
-        needed = self.initial + self.step * (len(sequence) - 2)
-        scale = min(1.0, duration / needed) if needed > 0 else 1.0
-        initial, step = self.initial * scale, self.step * scale
+        initial, step = self.initial, self.step
         ramp = min(self.transition, 0.5 * step)
         ts, fs = [0.0], [sequence[0]]
         t = initial
-        for prev, nxt in zip(sequence[:-1], sequence[1:], strict=True):
+        for prev, nxt in itertools.pairwise(sequence):
             ts += [t - 0.5 * ramp, t + 0.5 * ramp]
             fs += [prev, nxt]
             t += step
@@ -208,7 +208,7 @@ def beat_times_from_rr(rr: np.ndarray, start: float = 0.0) -> np.ndarray:
 
 
 def _record_base(record_path: str | Path) -> Path:
-    """``dir/100`` from ``dir/100``, ``dir/100.atr``, ``dir/100.hea`` or a folder with one record."""
+    """Record base ``dir/100`` from ``dir/100``, ``dir/100.atr``/``.hea`` or its folder."""
     path = Path(record_path)
     if path.is_dir():
         atr = sorted(path.glob("*.atr"))
@@ -234,10 +234,12 @@ def beat_times_from_annotations(record_path: str | Path) -> np.ndarray:
         The record without extension (``.../mitdb-100/100``), its ``.atr``/``.hea`` file, or
         a folder that holds exactly one ``.atr`` file.
     """
-    import wfdb
-
     base = _record_base(record_path)
-    ann = wfdb.rdann(str(base), "atr")
+    with warnings.catch_warnings():  # wfdb's pandas deprecation noise, not ours
+        warnings.filterwarnings("ignore", module=r"wfdb(\.|$)")
+        import wfdb
+
+        ann = wfdb.rdann(str(base), "atr")
     keep = np.array([s in BEAT_SYMBOLS for s in ann.symbol], dtype=bool)
     samples = np.asarray(ann.sample)[keep]
     if samples.size < 2:

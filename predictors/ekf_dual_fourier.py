@@ -1,0 +1,224 @@
+"""Dual (respiratory + cardiac) time-varying Fourier-series EKF (Richa, Bó & Poignet 2010, §I-C/D).
+
+Model, per axis (eq. 1), two frequencies shared by all axes:
+
+    y(t) = c_r + Σ_{h=1}^{H_r} [a_h sin hθ_r + b_h cos hθ_r]
+               + Σ_{h=1}^{H_c} [d_h sin hθ_c + e_h cos hθ_c],
+
+θ_r, θ_c the accumulated phases (θ ← θ + ωΔt, Richa's Σ_k ω(k)).  All coefficients
+and both frequencies are random walks (eq. 2, P⁻ = P + Q); the EKF correction is
+eqs. (3)–(5) with C = ∂y/∂x.  Deviation from the paper: the two accumulated phases
+are carried as (noise-free) states, so that the frequency enters through the
+transition F (θ += ωΔt) and its Jacobian is exact; with the phases held outside the
+state Richa's identity transition is recovered.  The offset c_r starts at the first
+sample instead of 0 (samples in a robot frame are far from 0); everything else
+starts at zero and the frequencies at their given initial values, as in Richa.
+
+Parameters (Richa §I-D): H_r = 3, H_c = 5; process variances 1e-5 mm² (respiratory
+coefficients), 1e-6 mm² (offset), 1e-5 mm² (cardiac coefficients), 1e-8 (rad/sample)²
+(frequencies), R = 0.1 mm², all per sample at Richa's 83.3 Hz.  Stored here in SI:
+m², and (rad/s)² for the frequencies (1e-8·83.3² = 6.94e-5), rescaled to the
+predictor's rate by ``dt · q_rate_hz``.  Initial covariance: not given by Richa;
+ours is ``p0_coefficient``, ``p0_offset`` and ``p0_omega_*``.
+
+Cost per update: O(n²·d) with n = d(2H_r + 2H_c + 1) + 4 (55 for d = 3).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from predictors.base import Predictor, PredictorSettings
+from predictors.ekf_fourier import wrap_phase
+
+__all__ = ["DualEKFSettings", "DualFourierEKF"]
+
+_TWO_PI = 2.0 * math.pi
+
+
+@dataclass(frozen=True)
+class DualEKFSettings(PredictorSettings):
+    """Dual Fourier EKF settings (defaults: Richa et al. 2010; initial frequencies: Tuna §III-B).
+
+    Attributes
+    ----------
+    respiratory_harmonics, cardiac_harmonics : int
+        H_r, H_c [-].
+    respiratory_hz, cardiac_hz : float
+        Initial frequencies [Hz] (Richa take them from the ventilator and the ECG).
+    q_respiratory, q_offset, q_cardiac : float
+        Process variances of the coefficients [m² per sample at ``q_rate_hz``].
+    q_omega : float
+        Process variance of each frequency [(rad/s)² per sample at ``q_rate_hz``].
+    r : float
+        Measurement variance per axis [m²].
+    p0_coefficient : float
+        Initial variance of every coefficient (not the offset) [m²].
+    p0_offset : float
+        Initial variance of the offset [m²].
+    p0_omega_respiratory, p0_omega_cardiac : float
+        Initial variances of the two frequencies [(rad/s)²]: (2π·0.01 Hz)² and (2π·0.05 Hz)²;
+        a loose respiratory prior lets ω_r slide to a subharmonic.
+    q_rate_hz : float or None
+        Rate the process variances are given at [Hz] (Richa: 83.3); ``None`` = per own sample.
+    omega_limits_hz : tuple of float
+        Both frequencies are clamped to this range [Hz].
+    unit : float
+        Metres per data unit.
+    """
+
+    respiratory_harmonics: int = 3
+    cardiac_harmonics: int = 5
+    respiratory_hz: float = 0.17
+    cardiac_hz: float = 1.66
+    q_respiratory: float = 1e-5 * 1e-6
+    q_offset: float = 1e-6 * 1e-6
+    q_cardiac: float = 1e-5 * 1e-6
+    q_omega: float = 1e-8 * 83.3**2
+    r: float = 0.1 * 1e-6
+    p0_coefficient: float = 25e-6
+    p0_offset: float = 1e-6
+    p0_omega_respiratory: float = (_TWO_PI * 0.01) ** 2
+    p0_omega_cardiac: float = (_TWO_PI * 0.05) ** 2
+    q_rate_hz: float | None = 83.3
+    omega_limits_hz: tuple[float, float] = (0.02, 5.0)
+    unit: float = 1.0
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        for name in ("respiratory_harmonics", "cardiac_harmonics"):
+            v = getattr(self, name)
+            if int(v) != v or v < 1:
+                raise ValueError(f"{name} must be a positive integer, got {v!r}")
+        for name in ("respiratory_hz", "cardiac_hz", "r", "p0_coefficient", "p0_offset", "unit"):
+            if not getattr(self, name) > 0.0:
+                raise ValueError(f"{name} must be > 0, got {getattr(self, name)!r}")
+        for name in (
+            "q_respiratory",
+            "q_offset",
+            "q_cardiac",
+            "q_omega",
+            "p0_omega_respiratory",
+            "p0_omega_cardiac",
+        ):
+            if not getattr(self, name) >= 0.0:
+                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
+        if self.q_rate_hz is not None and not self.q_rate_hz > 0.0:
+            raise ValueError(f"q_rate_hz must be > 0 or None, got {self.q_rate_hz!r}")
+
+
+class DualFourierEKF(Predictor):
+    """Richa's dual time-varying Fourier-series EKF, 1-D or 3-D (shared ω_r, ω_c)."""
+
+    Settings = DualEKFSettings
+
+    def _allocate(self, d: int) -> None:
+        s = self.settings
+        hr, hc = s.respiratory_harmonics, s.cardiac_harmonics
+        self.k = k = 2 * hr + 1 + 2 * hc  # coefficients per axis: a, b, c_r, d, e
+        self.nx = d * k + 4  # + ω_r, ω_c, θ_r, θ_c
+        self.iwr, self.iwc, self.itr, self.itc = d * k, d * k + 1, d * k + 2, d * k + 3
+        self._hr = np.arange(1.0, hr + 1.0)
+        self._hc = np.arange(1.0, hc + 1.0)
+        scale = 1.0 if s.q_rate_hz is None else self.dt * s.q_rate_hz
+        u2 = s.unit**2
+        qa = np.concatenate(
+            [np.full(2 * hr, s.q_respiratory), [s.q_offset], np.full(2 * hc, s.q_cardiac)]
+        )
+        self._q = np.concatenate([np.tile(qa / u2, d), [s.q_omega, s.q_omega, 0.0, 0.0]]) * scale
+        self._r = s.r / u2
+        p0 = np.full(k, s.p0_coefficient / u2)
+        p0[2 * hr] = s.p0_offset / u2
+        self._p0 = np.concatenate(
+            [np.tile(p0, d), [s.p0_omega_respiratory, s.p0_omega_cardiac, 0.0, 0.0]]
+        )
+        self._w_lo, self._w_hi = (_TWO_PI * f for f in s.omega_limits_hz)
+        self.x = np.zeros(self.nx)
+        self.P = np.zeros((self.nx, self.nx))
+        self._coef = self.x[: d * k].reshape(d, k)
+        self._H = np.zeros((d, self.nx))
+        self._Hblk = np.einsum("aaj->aj", self._H[:, : d * k].reshape(d, d, k))
+        self.nis = math.nan
+
+    def _basis(self, th_r: np.ndarray, th_c: np.ndarray) -> np.ndarray:
+        """[sin hθ_r, cos hθ_r, 1, sin hθ_c, cos hθ_c] for phases of shape (K,) → (K, k)."""
+        pr = np.multiply.outer(th_r, self._hr)
+        pc = np.multiply.outer(th_c, self._hc)
+        one = np.ones((pr.shape[0], 1))
+        return np.hstack([np.sin(pr), np.cos(pr), one, np.sin(pc), np.cos(pc)])
+
+    def _update(self, z: np.ndarray) -> None:
+        s = self.settings
+        if not self.ready:  # Richa: zeros, given frequencies; the offset at the first sample
+            self.x[:] = 0.0
+            self._coef[:, 2 * s.respiratory_harmonics] = z
+            self.x[self.iwr] = _TWO_PI * s.respiratory_hz
+            self.x[self.iwc] = _TWO_PI * s.cardiac_hz
+            self.P[:] = np.diag(self._p0)
+            self.ready = True
+            return
+        self._time_update()
+        x, P, H, hr = self.x, self.P, self._H, s.respiratory_harmonics
+        phi = self._basis(x[self.itr : self.itr + 1], x[self.itc : self.itc + 1])[0]
+        self._Hblk[:] = phi
+        coef = self._coef
+        # ∂y/∂θ_r = Σ h (a_h cos hθ_r − b_h sin hθ_r); likewise for θ_c
+        sr, cr = phi[:hr], phi[hr : 2 * hr]
+        sc, cc = phi[2 * hr + 1 : 2 * hr + 1 + len(self._hc)], phi[2 * hr + 1 + len(self._hc) :]
+        a, b = coef[:, :hr], coef[:, hr : 2 * hr]
+        dd, e = (
+            coef[:, 2 * hr + 1 : 2 * hr + 1 + len(self._hc)],
+            coef[:, 2 * hr + 1 + len(self._hc) :],
+        )
+        H[:, self.itr] = (a * cr - b * sr) @ self._hr
+        H[:, self.itc] = (dd * cc - e * sc) @ self._hc
+        nu = z - coef @ phi
+        PHt = P @ H.T
+        S = H @ PHt
+        S.flat[:: self.d + 1] += self._r
+        Sinv = np.linalg.inv(S)
+        if not (np.isfinite(Sinv).all() and (np.diag(S) > 0.0).all()):
+            self.counts["ekf_reinit"] += 1
+            self.ready = False
+            return
+        Sinv_nu = Sinv @ nu
+        self.nis = float(nu @ Sinv_nu)
+        x += PHt @ Sinv_nu
+        P -= (PHt @ Sinv) @ PHt.T
+        P += P.T
+        P *= 0.5
+        wrap_phase(x[self.itr :])
+        for i in (self.iwr, self.iwc):
+            if not self._w_lo <= x[i] <= self._w_hi:
+                self.counts["omega_clamped"] += 1
+                x[i] = min(max(x[i], self._w_lo), self._w_hi) if math.isfinite(x[i]) else 1.0
+
+    def _time_update(self) -> None:
+        x, P, dt = self.x, self.P, self.dt
+        x[self.itr] += dt * x[self.iwr]
+        x[self.itc] += dt * x[self.iwc]
+        wrap_phase(x[self.itr :])
+        for it, iw in ((self.itr, self.iwr), (self.itc, self.iwc)):  # F P Fᵀ, F = I + Δt e_θ e_ωᵀ
+            P[it, :] += dt * P[iw, :]
+            P[:, it] += dt * P[:, iw]
+        P[np.diag_indices_from(P)] += self._q
+
+    def _missing(self) -> None:
+        if self.ready:
+            self._time_update()
+
+    def _predict(self, steps: int) -> np.ndarray:
+        k = np.arange(1.0, steps + 1.0)
+        x = self.x
+        phi = self._basis(
+            x[self.itr] + k * x[self.iwr] * self.dt, x[self.itc] + k * x[self.iwc] * self.dt
+        )
+        return phi @ self._coef.T
+
+    @property
+    def frequencies_hz(self) -> tuple[float, float]:
+        """(respiratory, cardiac) frequency estimates [Hz]."""
+        return float(self.x[self.iwr] / _TWO_PI), float(self.x[self.iwc] / _TWO_PI)

@@ -1,0 +1,83 @@
+"""Batch initialisation of Fourier-series predictors (Yuen et al. 2008, §III-A).
+
+1. Fundamental: the largest peak of the Hamming-windowed power spectrum inside the
+   heart-rate band (0.5–2.5 Hz), summed over axes (one shared ω).  The FFT is
+   zero-padded and the peak refined by a parabola through the log-power of its
+   neighbours, so ω̂₀ is not quantised to the 1/T bin width.
+2. Harmonics: with ω̂₀ fixed, eq. (3) y(t) = c₀ + Σ_i a_i sin(iω̂₀t) + b_i cos(iω̂₀t)
+   is linear; least squares gives c₀, a_i, b_i per axis.  Time is measured from
+   the newest sample (t = 0 there), so r_i = √(a_i² + b_i²) and
+   θ_i = atan2(b_i, a_i) are directly the state at the end of the window.
+   Harmonics at or above 0.45·f_s (aliased) are left out (amplitude 0).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["fit_harmonics", "fundamental_frequency", "initial_fourier_state"]
+
+
+def fundamental_frequency(
+    window: np.ndarray, dt: float, band_hz: tuple[float, float] = (0.5, 2.5), pad: int = 8
+) -> float:
+    """ω̂₀ [rad/s] of ``window`` (T, d) sampled at ``dt`` [s]; NaN rows are ignored."""
+    x = np.array(window, dtype=float)
+    if x.ndim == 1:
+        x = x[:, None]
+    mean = np.nanmean(x, axis=0)
+    x = np.where(np.isfinite(x), x - mean, 0.0)
+    T = x.shape[0]
+    nfft = int(2 ** np.ceil(np.log2(T * pad)))
+    spec = np.abs(np.fft.rfft(x * np.hamming(T)[:, None], n=nfft, axis=0)) ** 2
+    power = spec.sum(axis=1)
+    f = np.fft.rfftfreq(nfft, dt)
+    band = np.flatnonzero((f >= band_hz[0]) & (f <= band_hz[1]))
+    if band.size == 0:
+        raise ValueError(f"no FFT bin in {band_hz} Hz (window {T * dt:.2f} s at dt={dt})")
+    k = band[np.argmax(power[band])]
+    fk = f[k]
+    if 0 < k < power.size - 1 and np.all(power[k - 1 : k + 2] > 0):
+        la, lb, lc = np.log(power[k - 1 : k + 2])
+        den = la - 2 * lb + lc
+        if den < 0:
+            fk += 0.5 * (la - lc) / den * (f[1] - f[0])
+    return 2 * np.pi * float(fk)
+
+
+def fit_harmonics(
+    window: np.ndarray, dt: float, omega: float, m: int, ridge: float = 1e-9
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Least-squares c₀ (d,), a (d, m), b (d, m) of eq. (3) on ``window`` (T, d), t = 0 at the end.
+
+    A tiny ridge (``ridge`` × mean diagonal of AᵀA) keeps the normal equations
+    regular; rows with NaN are dropped; aliased harmonics get a = b = 0.
+    """
+    x = np.array(window, dtype=float)
+    if x.ndim == 1:
+        x = x[:, None]
+    T, d = x.shape
+    t = (np.arange(T) - (T - 1)) * dt
+    keep = np.isfinite(x).all(axis=1)
+    usable = np.arange(1, m + 1) * omega / (2 * np.pi) < 0.45 / dt
+    i = np.arange(1, m + 1)[usable]
+    ph = np.outer(t[keep], i * omega)
+    A = np.hstack([np.ones((ph.shape[0], 1)), np.sin(ph), np.cos(ph)])
+    G = A.T @ A
+    G[np.diag_indices_from(G)] += ridge * np.trace(G) / G.shape[0]
+    coef = np.linalg.solve(G, A.T @ x[keep])  # (1 + 2k, d)
+    k = i.size
+    a = np.zeros((d, m))
+    b = np.zeros((d, m))
+    a[:, usable] = coef[1 : 1 + k].T
+    b[:, usable] = coef[1 + k :].T
+    return coef[0].copy(), a, b
+
+
+def initial_fourier_state(
+    window: np.ndarray, dt: float, m: int, band_hz: tuple[float, float] = (0.5, 2.5)
+) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+    """(ω̂₀ [rad/s], c (d,), r (d, m), θ (d, m)) at the newest sample of ``window``."""
+    omega = fundamental_frequency(window, dt, band_hz)
+    c, a, b = fit_harmonics(window, dt, omega, m)
+    return omega, c, np.hypot(a, b), np.arctan2(b, a)

@@ -1,0 +1,137 @@
+"""Last cycle: the previous heart cycle forecasts the next (Yuen 2008; Bebek & Cavusoglu 2007).
+
+    ẑ_{n+k} = z(t_n + kΔt − T),
+
+with T the current cardiac period and z(·) linearly interpolated between samples
+(applied repeatedly when kΔt > T).  T comes from
+
+* the signal: the lag in [1/f_max, 1/f_min] maximising the (biased) autocorrelation
+  of the last ``window_seconds`` of samples, refined by a parabola, re-estimated
+  every ``period_every`` seconds; or
+* RR annotations when ``beat_times`` is given: T = the latest RR interval completed
+  by the time of the newest sample (t = t0 + n·dt).
+
+A missing sample is filled with its own forecast (open loop).  Until a period is
+known the forecast holds the newest sample.  Cost per update: O(1), plus an
+O(W log W) FFT every ``period_every`` seconds (W samples in the window).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from predictors.base import Predictor, PredictorSettings
+
+__all__ = ["LastCycle", "LastCycleSettings"]
+
+
+@dataclass(frozen=True)
+class LastCycleSettings(PredictorSettings):
+    """Last-cycle settings.
+
+    Attributes
+    ----------
+    window_seconds : float
+        History used to estimate the period [s]; at least two slowest periods.
+    period_every : float
+        Re-estimation interval of the period [s].
+    band_hz : tuple of float
+        Heart-rate band [Hz]: lags between 1/high and 1/low.
+    beat_times : tuple of float or None
+        R-peak times [s] on the predictor's clock (t0 + n·dt); if given, T is the RR interval.
+    t0 : float
+        Time of the first sample [s] (only used with ``beat_times``).
+    """
+
+    window_seconds: float = 5.0
+    period_every: float = 0.5
+    band_hz: tuple[float, float] = (0.5, 2.5)
+    beat_times: tuple[float, ...] | None = None
+    t0: float = 0.0
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        lo, hi = self.band_hz
+        if not 0.0 < lo < hi:
+            raise ValueError("band_hz must be (low, high) with 0 < low < high [Hz]")
+        if not self.window_seconds >= 2.0 / lo:
+            raise ValueError(f"window_seconds must be >= 2/band_hz[0] = {2.0 / lo} s")
+        if not self.period_every > 0.0:
+            raise ValueError("period_every must be > 0 [s]")
+        if self.beat_times is not None:
+            bt = np.asarray(self.beat_times, dtype=float)
+            if bt.ndim != 1 or bt.size < 2 or np.any(np.diff(bt) <= 0):
+                raise ValueError("beat_times must be >= 2 increasing times [s]")
+
+
+class LastCycle(Predictor):
+    """Previous-cycle predictor; period from the autocorrelation or from RR annotations."""
+
+    Settings = LastCycleSettings
+
+    def _allocate(self, d: int) -> None:
+        s = self.settings
+        self.L = int(np.ceil(s.window_seconds / self.dt)) + 2
+        self.hist = np.zeros((self.L, d))  # newest first
+        self.filled = 0
+        self.period = np.nan  # in samples
+        self._every = max(1, round(s.period_every / self.dt))
+        self._lags = (
+            int(np.floor(1.0 / (s.band_hz[1] * self.dt))),
+            int(np.ceil(1.0 / (s.band_hz[0] * self.dt))),
+        )
+        self._beats = None if s.beat_times is None else np.asarray(s.beat_times, dtype=float)
+
+    def _push(self, z: np.ndarray) -> None:
+        self.hist[1:] = self.hist[:-1]
+        self.hist[0] = z
+        self.filled = min(self.filled + 1, self.L)
+
+    def _update(self, z: np.ndarray) -> None:
+        self._push(z)
+        if self._beats is not None:
+            t = self.settings.t0 + (self.n - 1) * self.dt
+            i = np.searchsorted(self._beats, t, side="right")
+            if i >= 2:
+                self.period = (self._beats[i - 1] - self._beats[i - 2]) / self.dt
+        elif self.filled >= min(self.L, 2 * self._lags[1] + 1) and self.n % self._every == 0:
+            self.period = self._estimate_period()
+        self.ready = np.isfinite(self.period) and self.period + 1 < self.filled
+
+    def _estimate_period(self) -> float:
+        x = self.hist[: self.filled][::-1]
+        x = x - x.mean(axis=0)
+        W = x.shape[0]
+        nfft = int(2 ** np.ceil(np.log2(2 * W)))
+        X = np.fft.rfft(x, n=nfft, axis=0)
+        ac = np.fft.irfft((X * X.conj()).real.sum(axis=1), n=nfft)[:W]
+        lo, hi = self._lags
+        hi = min(hi, W - 2)
+        if hi <= lo:
+            return self.period
+        k = lo + int(np.argmax(ac[lo : hi + 1]))
+        a, b, c = ac[k - 1], ac[k], ac[k + 1]
+        den = a - 2 * b + c
+        return k + (0.5 * (a - c) / den if den < 0 else 0.0)
+
+    def _missing(self) -> None:
+        self._push(self._predict(1)[0] if self.ready else self.hist[0].copy())
+
+    def _value_at(self, back: float) -> np.ndarray:
+        """z at ``back`` samples before the newest one (fractional, linear interpolation)."""
+        i = int(np.floor(back))
+        f = back - i
+        i = min(i, self.filled - 2)
+        return (1 - f) * self.hist[i] + f * self.hist[i + 1]
+
+    def _predict(self, steps: int) -> np.ndarray:
+        T = self.period
+        out = np.empty((steps, self.d))
+        for k in range(1, steps + 1):
+            back = T - k
+            while back < 0:
+                back += T
+            out[k - 1] = self._value_at(back)
+        return out

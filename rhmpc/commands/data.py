@@ -1,0 +1,293 @@
+"""`rhmpc data`: list, show, export and plot heart-motion scenarios and recordings.
+
+``rhmpc data list``                 the named scenarios with their statistics
+``rhmpc data show NAME``            p-p, RMS, heart-rate range, spectral peaks
+``rhmpc data export NAME FILE``     write the motion (or a sensor's samples) to .csv/.npz
+``rhmpc data plot NAME FILE.png``   position per axis over time and its PSD (Tuna Fig. 2)
+
+NAME is a scenario name or the path of a recording (.csv/.npz). Millimetres appear only here.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from rhmpc.errors import UsageError
+from sim.analysis import fill_gaps, motion_stats, psd
+from sim.heart import (
+    DEFAULT_SCENARIO,
+    SCENARIOS,
+    SPECS,
+    load_recording,
+    make_scenario,
+    save_recording,
+)
+from sim.motion import MotionSource
+from sim.recordings import export_source
+from sim.scenarios import DEFAULT_SEED
+from sim.sensors import SENSORS, sensor_from_name
+
+
+@dataclass(frozen=True)
+class _Target:
+    """What the CLI works on: a source with its natural rate and duration."""
+
+    name: str
+    source: MotionSource
+    rate: float
+    duration: float
+    description: str
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``rhmpc data`` and its actions."""
+    parser = subparsers.add_parser(
+        "data", help="list, show, export and plot heart-motion scenarios",
+        description="Heart-motion scenarios (synthetic replicas of the papers' data sets) "
+        "and recordings: statistics, export and figures.")
+    actions = parser.add_subparsers(dest="action", metavar="ACTION")
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument("--seed", type=int, default=DEFAULT_SEED,
+                        help="seed of the beat-to-beat variability (default %(default)s)")
+    common.add_argument("--duration", type=float, help="seconds to use (default: the scenario's)")
+    common.add_argument("--bpm", type=float, help="constant heart rate [beats/min]")
+    common.add_argument("--record", help="PhysioNet record whose annotated beats drive the heart")
+
+    p_list = actions.add_parser("list", parents=[common], help="scenarios and their statistics")
+    p_list.add_argument("--json", action="store_true", help="machine-readable output")
+
+    p_show = actions.add_parser("show", parents=[common], help="statistics of one scenario/file")
+    p_show.add_argument("name", nargs="?", default=DEFAULT_SCENARIO,
+                        help=f"scenario or recording file (default {DEFAULT_SCENARIO})")
+    p_show.add_argument("--json", action="store_true", help="machine-readable output")
+
+    p_exp = actions.add_parser("export", parents=[common], help="write a scenario to .csv/.npz")
+    p_exp.add_argument("name", help="scenario or recording file")
+    p_exp.add_argument("file", help="output .csv (s, mm) or .npz (s, m)")
+    p_exp.add_argument("--rate", type=float, help="sample rate [Hz] (default: the sensor's)")
+    p_exp.add_argument("--sensor", choices=SENSORS,
+                       help="write this sensor's noisy samples instead of the true motion")
+    p_exp.add_argument("--force", action="store_true", help="overwrite an existing file")
+
+    p_plot = actions.add_parser("plot", parents=[common], help="figure: position and PSD")
+    p_plot.add_argument("name", help="scenario or recording file")
+    p_plot.add_argument("file", help="output image (.png, .pdf, .svg)")
+    p_plot.add_argument("--window", type=float, default=10.0,
+                        help="length of the zoomed time window [s] (default %(default)s)")
+    p_plot.add_argument("--start", type=float, default=0.0,
+                        help="start of the zoomed window [s] (default %(default)s)")
+    parser.set_defaults(func=run, action=None)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Dispatch to the action."""
+    if args.action is None:
+        raise UsageError("choose an action: list, show, export or plot")
+    return {"list": _list, "show": _show, "export": _export, "plot": _plot}[args.action](args)
+
+
+def _target(name: str, args: argparse.Namespace) -> _Target:
+    """Resolve NAME to a scenario (with the command-line overrides) or a recording."""
+    overrides: dict = {}
+    if args.bpm is not None:
+        if not args.bpm > 0:
+            raise UsageError(f"--bpm must be positive, got {args.bpm}")
+        overrides["heart_rate"] = args.bpm / 60.0
+    if args.record is not None:
+        overrides["record"] = args.record
+    if args.duration is not None:
+        if not args.duration > 0:
+            raise UsageError(f"--duration must be positive, got {args.duration}")
+        overrides["duration"] = args.duration
+    if name in SPECS:
+        sc = make_scenario(name, np.random.default_rng(args.seed), **overrides)
+        return _Target(sc.name, sc.source, sc.sensor_rate, sc.duration, sc.description)
+    path = Path(name)
+    if path.suffix.lower() in {".csv", ".npz", ".txt"} or path.exists():
+        if args.bpm is not None or args.record is not None:
+            raise UsageError("--bpm and --record apply to scenarios, not recordings")
+        rec = load_recording(path)
+        duration = rec.duration if args.duration is None else min(args.duration, rec.duration)
+        return _Target(path.name, rec, rec.sample_rate, duration, f"recording {path}")
+    raise UsageError(f"unknown scenario {name!r}; valid names: {', '.join(SCENARIOS)} "
+                     "(or the path of a .csv/.npz recording)")
+
+
+def _stats_row(target: _Target) -> dict:
+    stats = motion_stats(target.source, target.duration, target.rate)
+    row = {"name": target.name, "dim": int(target.source.dim),
+           "sensor_rate_hz": target.rate, "duration_s": round(target.duration, 3)}
+    row.update(stats.as_dict())
+    row["description"] = target.description
+    return row
+
+
+def _list(args: argparse.Namespace) -> int:
+    rows = []
+    for name in SCENARIOS:
+        row = _stats_row(_target(name, args))
+        spec = SPECS[name]
+        row["target_peak_to_peak_mm"] = round(spec.peak_to_peak * 1e3, 3)
+        row["target_rms_mm"] = None if spec.rms is None else round(spec.rms * 1e3, 3)
+        rows.append(row)
+    if args.json:
+        print(json.dumps(rows, indent=2))
+        return 0
+    head = (f"{'name':<16} {'dim':>3} {'rate':>6} {'dur':>6} {'p-p':>7} {'(target)':>9} "
+            f"{'RMS':>6} {'(target)':>9} {'HR bpm':>12}")
+    print(head)
+    print(f"{'':<16} {'':>3} {'[Hz]':>6} {'[s]':>6} {'[mm]':>7} {'':>9} {'[mm]':>6}")
+    for r in rows:
+        hr = r["heart_rate_bpm"]
+        hr_text = f"{hr[0]:.0f}" if abs(hr[1] - hr[0]) < 0.5 else f"{hr[0]:.0f}–{hr[1]:.0f}"
+        rms_t = "—" if r["target_rms_mm"] is None else f"{r['target_rms_mm']:.2f}"
+        print(f"{r['name']:<16} {r['dim']:>3} {r['sensor_rate_hz']:>6g} {r['duration_s']:>6g} "
+              f"{r['peak_to_peak_mm']:>7.2f} {r['target_peak_to_peak_mm']:>9.2f} "
+              f"{r['rms_mm']:>6.2f} {rms_t:>9} {hr_text:>12}")
+    print("All scenarios are synthetic replicas calibrated to the papers' reported statistics.")
+    return 0
+
+
+def _show(args: argparse.Namespace) -> int:
+    row = _stats_row(_target(args.name, args))
+    if args.json:
+        print(json.dumps(row, indent=2))
+        return 0
+    hr = row["heart_rate_bpm"]
+    print(f"{row['name']}: {row['description']}")
+    print(f"  axes              {row['dim']}")
+    print(f"  sample rate       {row['sensor_rate_hz']:g} Hz")
+    print(f"  duration          {row['duration_s']:g} s")
+    print(f"  peak-to-peak      {row['peak_to_peak_mm']:.3f} mm (largest per-axis range)")
+    print(f"  RMS               {row['rms_mm']:.3f} mm (3-D, about the mean)")
+    print("  RMS per axis      " + ", ".join(f"{v:.3f}" for v in row["rms_per_axis_mm"]) + " mm")
+    print(f"  heart rate        {hr[0]:.1f}–{hr[1]:.1f} beats/min")
+    print("  spectral peaks    " + ", ".join(f"{v:.2f}" for v in row["spectral_peaks_hz"])
+          + " Hz")
+    if row["missing_fraction"]:
+        print(f"  missing samples   {100 * row['missing_fraction']:.2f} %")
+    return 0
+
+
+def _export(args: argparse.Namespace) -> int:
+    target = _target(args.name, args)
+    out = Path(args.file)
+    if out.suffix.lower() not in {".csv", ".npz"}:
+        raise UsageError(f"{out}: output must end in .csv or .npz")
+    if out.exists() and not args.force:
+        raise UsageError(f"{out} exists; pass --force to overwrite")
+    rate = target.rate if args.rate is None else args.rate
+    if not rate > 0:
+        raise UsageError(f"--rate must be positive, got {rate}")
+    comment = f"rhmpc {target.name}: {target.description}"
+    if args.sensor:
+        sensor = sensor_from_name(args.sensor, rate=args.rate, dim=int(target.source.dim))
+        stream = sensor.measure(target.source, target.duration, np.random.default_rng(args.seed))
+        save_recording(out, stream.t, stream.z, comment + f"; measured by {sensor.name}")
+        n = len(stream)
+    else:
+        export_source(target.source, out, target.duration, rate, comment=comment)
+        n = round(target.duration * rate) + 1
+    print(f"wrote {n} samples of {target.name} to {out}")
+    return 0
+
+
+def _plot(args: argparse.Namespace) -> int:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    target = _target(args.name, args)
+    if not args.window > 0:
+        raise UsageError(f"--window must be positive, got {args.window}")
+    n = round(target.duration * target.rate) + 1
+    t = np.arange(n) / target.rate
+    p = np.asarray(target.source.position(t)).reshape(n, -1) * 1e3
+    stats = motion_stats(target.source, target.duration, target.rate)
+    f, s = psd(fill_gaps(t, p), target.rate, resolution=0.02)
+    dim = p.shape[1]
+    labels = ("x", "y", "z") if dim == 3 else ("x",)
+    phase = getattr(target.source, "phase", None)
+    fig = plt.figure(figsize=(13, 2.3 * dim + 4.2), layout="constrained")
+    grid = fig.add_gridspec(dim + 2, 2, width_ratios=(2.2, 1.0),
+                            height_ratios=(*([1.0] * dim), 0.6, 1.1))
+    w0 = min(max(args.start, 0.0), max(target.duration - args.window, 0.0))
+    zoom = (t >= w0) & (t <= w0 + args.window)
+    for d in range(dim):
+        ax = fig.add_subplot(grid[d, 0])
+        tb, lo, hi = _envelope(t, p[:, d], target.rate)
+        ax.fill_between(tb, lo, hi, color="0.6", lw=0)
+        ax.set_ylabel(f"{labels[d]} [mm]")
+        ax.set_xlim(0, target.duration)
+        if d == 0:
+            ax.set_title("position over the whole record (min–max over 1.2 s)")
+        if d == dim - 1:
+            ax.set_xlabel("time [s]")
+        ax.axvspan(w0, w0 + args.window, color="tab:orange", alpha=0.15, lw=0)
+        axz = fig.add_subplot(grid[d, 1])
+        axz.plot(t[zoom], p[zoom, d], lw=0.9, color="tab:blue")
+        axz.set_xlim(w0, w0 + args.window)
+        if d == 0:
+            axz.set_title(f"{args.window:g} s window")
+        if d == dim - 1:
+            axz.set_xlabel("time [s]")
+    ax_hr = fig.add_subplot(grid[dim, 0])
+    if phase is not None:
+        ax_hr.plot(t, 60 * phase.rate(t), color="tab:red", lw=1.0)
+        ax_hr.set_xlim(0, target.duration)
+        ax_hr.set_ylabel("heart rate\n[beats/min]")
+        ax_hr.set_xlabel("time [s]")
+    else:
+        ax_hr.axis("off")
+        ax_hr.text(0.0, 0.5, "heart rate unknown for a recording", transform=ax_hr.transAxes)
+    ax_txt = fig.add_subplot(grid[dim, 1])
+    ax_txt.axis("off")
+    ax_txt.text(0.0, 1.0, "\n".join([
+        f"peak-to-peak  {stats.peak_to_peak * 1e3:.2f} mm (largest axis range)",
+        f"RMS           {stats.rms * 1e3:.2f} mm (3-D, about the mean)",
+        "spectral peaks " + ", ".join(f"{v:.2f}" for v in stats.peaks[:6]) + " Hz",
+    ]), transform=ax_txt.transAxes, va="top", family="monospace", fontsize=8)
+    ax = fig.add_subplot(grid[dim + 1, :])
+    for d in range(dim):
+        ax.semilogy(f, s[:, d], lw=0.9, label=labels[d])
+    ax.set_xlim(0, min(30.0, target.rate / 2))
+    floor = max(np.max(s) * 1e-9, 1e-12)
+    ax.set_ylim(floor, np.max(s) * 5)
+    ax.set_xlabel("frequency [Hz]")
+    ax.set_ylabel("PSD [mm²/Hz]")
+    ax.set_title("power spectral density (Welch)")
+    ax.legend(loc="upper right", ncols=dim)
+    for fp in stats.peaks[:6]:
+        ax.axvline(fp, color="0.5", lw=0.5, ls=":")
+    hr = stats.heart_rate
+    hr_text = (f"{60 * hr[0]:.0f} bpm" if abs(hr[1] - hr[0]) * 60 < 0.5
+               else f"{60 * hr[0]:.0f}–{60 * hr[1]:.0f} bpm")
+    fig.suptitle(f"{target.name}: p-p {stats.peak_to_peak * 1e3:.2f} mm, "
+                 f"RMS {stats.rms * 1e3:.2f} mm, heart rate {hr_text}, "
+                 f"{target.rate:g} Hz, {target.duration:g} s\n{target.description}",
+                 fontsize=10)
+    out = Path(args.file)
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    print(f"wrote {out}")
+    return 0
+
+
+def _envelope(t: np.ndarray, y: np.ndarray, rate: float, window: float = 1.2,
+              points: int = 3000) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Rolling min/max of ``y`` over ``window`` seconds (about one beat), decimated to
+    ``points`` samples, so a long record plots as a clean band around the breathing."""
+    from scipy.ndimage import maximum_filter1d, minimum_filter1d
+
+    filled = np.where(np.isfinite(y), y, np.nanmean(y))
+    size = max(1, round(window * rate))
+    lo = minimum_filter1d(filled, size, mode="nearest")
+    hi = maximum_filter1d(filled, size, mode="nearest")
+    step = max(1, t.size // points)
+    return t[::step], lo[::step], hi[::step]

@@ -1,0 +1,362 @@
+"""One closed-loop run, from a :class:`RunConfig` to a JSON-ready result document.
+
+This is where the packages meet: ``robots`` (model, linearisation), ``sim`` (heart motion,
+sensor, plant, loop), ``predictors`` and the controller of :mod:`rhmpc.mpc`. ``rhmpc simulate``,
+``rhmpc compare`` and ``rhmpc tune`` all run through :func:`run_experiment`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import platform
+import time
+import tomllib
+from dataclasses import dataclass, field
+from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from rhmpc.config import MPCSettings, from_dict, to_dict
+from rhmpc.errors import UsageError
+from sim.estimation import ObserverSettings
+from sim.loop import LoopSettings
+from sim.plant import ModelMismatch, PlantSettings
+
+#: Sections of a run's TOML file and the settings class each one builds.
+SECTIONS: dict[str, type] = {
+    "loop": LoopSettings,
+    "mpc": MPCSettings,
+    "plant": PlantSettings,
+    "mismatch": ModelMismatch,
+    "observer": ObserverSettings,
+}
+
+
+GROUND_TRUTHS: tuple[str, ...] = ("recorded", "true")
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """Every setting of a closed-loop run (what ``rhmpc simulate --config FILE.toml`` reads).
+
+    Attributes
+    ----------
+    robot : str
+        Registered robot name (``rhmpc robots``).
+    scenario : str
+        Named heart-motion scenario (``rhmpc data list``); ignored when ``data`` is given.
+    data : str | None
+        A recording (CSV/NPZ, see ``sim.recordings``) to track instead of a scenario.
+    rr : str | None
+        PhysioNet record (path without extension) whose beat annotations drive the heart phase.
+    sensor : str
+        Sensor model name, or ``"recorded"`` to use a recording's samples as they are.
+    sensor_settings : dict
+        Keyword settings of the sensor model (SI units).
+    predictor : str
+        Predictor name (``predictors.PREDICTORS``), or ``"exact"`` for the true future.
+    predictor_settings : dict
+        Keyword settings passed to ``predictors.make_predictor``.
+    ground_truth : str
+        What the error is measured against and what ``exact`` reads: ``"recorded"`` — the
+        sensor's samples as streamed to the controller (Tuna et al.'s protocol: the prerecorded
+        data are the target, noise and echo outliers included) — or ``"true"`` — the noise-free
+        motion.
+    seed : int
+        Seed of the run's ``numpy.random.Generator`` (heart variability, sensor noise).
+    loop, mpc, plant, mismatch, observer
+        Component settings (see their classes for units).
+    """
+
+    robot: str = "phantom"
+    scenario: str = "fixed-a2-top"
+    data: str | None = None
+    rr: str | None = None
+    sensor: str = "sonomicrometry"
+    sensor_settings: dict = field(default_factory=dict)
+    predictor: str = "generalized"
+    predictor_settings: dict = field(default_factory=dict)
+    ground_truth: str = "recorded"
+    seed: int = 0
+    loop: LoopSettings = field(default_factory=LoopSettings)
+    mpc: MPCSettings = field(default_factory=MPCSettings)
+    plant: PlantSettings = field(default_factory=PlantSettings)
+    mismatch: ModelMismatch = field(default_factory=ModelMismatch)
+    observer: ObserverSettings = field(default_factory=ObserverSettings)
+
+    def __post_init__(self) -> None:
+        if self.ground_truth not in GROUND_TRUTHS:
+            raise ValueError(
+                f"ground_truth must be one of {', '.join(GROUND_TRUTHS)}, got {self.ground_truth!r}"
+            )
+
+    def to_dict(self) -> dict[str, Any]:
+        """TOML-ready nested dict (``None`` values left out)."""
+        out: dict[str, Any] = {}
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if f.name in SECTIONS:
+                out[f.name] = to_dict(value)
+            elif value is not None:
+                out[f.name] = dict(value) if isinstance(value, dict) else value
+        return out
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any], where: str = "config") -> RunConfig:
+        """Build from a nested dict; unknown keys raise ``UsageError`` naming the key."""
+        names = {f.name for f in dataclasses.fields(cls)}
+        kwargs: dict[str, Any] = {}
+        for key, value in data.items():
+            if key not in names:
+                raise UsageError(f"{where}: unknown key {key!r}; valid keys: {', '.join(sorted(names))}")
+            if key in SECTIONS:
+                if not isinstance(value, dict):
+                    raise UsageError(f"{where}: [{key}] must be a table")
+                try:
+                    kwargs[key] = from_dict(SECTIONS[key], value)
+                except (TypeError, ValueError) as exc:
+                    raise UsageError(f"{where}: [{key}] {exc}") from None
+            elif key in ("sensor_settings", "predictor_settings"):
+                if not isinstance(value, dict):
+                    raise UsageError(f"{where}: [{key}] must be a table")
+                kwargs[key] = dict(value)
+            else:
+                kwargs[key] = value
+        try:
+            return cls(**kwargs)
+        except (TypeError, ValueError) as exc:
+            raise UsageError(f"{where}: {exc}") from None
+
+    def replace(self, **changes: Any) -> RunConfig:
+        """A copy with top-level fields or dotted section fields (``"mpc.effort_weight"``) changed."""
+        top: dict[str, Any] = {}
+        nested: dict[str, dict[str, Any]] = {}
+        for key, value in changes.items():
+            section, _, name = key.partition(".")
+            if name:
+                nested.setdefault(section, {})[name] = value
+            else:
+                top[key] = value
+        for section, values in nested.items():
+            if section in SECTIONS:
+                try:
+                    top[section] = dataclasses.replace(getattr(self, section), **values)
+                except (TypeError, ValueError) as exc:
+                    raise UsageError(f"[{section}] {exc}") from None
+            elif section in ("sensor_settings", "predictor_settings"):
+                top[section] = {**getattr(self, section), **values}
+            else:
+                raise UsageError(f"unknown setting {section}.{next(iter(values))!r}")
+        names = {f.name for f in dataclasses.fields(self)}
+        unknown = sorted(set(top) - names)
+        if unknown:
+            raise UsageError(f"unknown setting(s) {', '.join(unknown)}; valid: "
+                             f"{', '.join(sorted(names))}")
+        try:
+            return dataclasses.replace(self, **top)
+        except (TypeError, ValueError) as exc:
+            raise UsageError(str(exc)) from None
+
+
+def load_config(path: str | Path) -> RunConfig:
+    """Read a run's TOML file; errors name the file and the key."""
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text())
+    except OSError as exc:
+        raise UsageError(f"{path}: cannot read: {exc.strerror}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise UsageError(f"{path}: not valid TOML: {exc}") from None
+    return RunConfig.from_dict(data, where=str(path))
+
+
+def save_config(config: RunConfig, path: str | Path) -> None:
+    import tomli_w
+
+    Path(path).write_text(tomli_w.dumps(config.to_dict()))
+
+
+def versions() -> dict[str, str]:
+    """Versions of the packages a result depends on."""
+    out = {"python": platform.python_version()}
+    for name in ("rhmpc", "pin", "osqp", "casadi", "numpy", "scipy"):
+        try:
+            out[name] = version(name)
+        except PackageNotFoundError:
+            out[name] = "not installed"
+    return out
+
+
+class _Shifted:
+    """A motion source read from ``t0`` on, so that the run starts at t = 0."""
+
+    def __init__(self, source, t0: float) -> None:
+        self.source, self.t0, self.dim = source, float(t0), source.dim
+
+    def position(self, t):
+        return self.source.position(np.asarray(t, dtype=float) + self.t0)
+
+
+@dataclass
+class Run:
+    """Everything a closed-loop run is made of, built from a :class:`RunConfig`."""
+
+    config: RunConfig
+    robot: Any
+    arm: Any
+    controller: Any
+    reference: Any
+    truth: np.ndarray
+    center: np.ndarray
+    stream: Any
+    label: str
+    duration: float
+
+
+def heart_source(config: RunConfig, rng: np.random.Generator):
+    """The true motion and its label: a recording (``data``) or a named scenario (``rr``)."""
+    from sim.heart import load_recording, make_scenario
+
+    if config.data is not None:
+        recording = load_recording(config.data)
+        source = _Shifted(recording, recording.t[0]) if recording.t[0] != 0 else recording
+        return source, f"file:{Path(config.data).name}", recording.duration, recording
+    overrides = {"record": config.rr} if config.rr else {}
+    scenario = make_scenario(config.scenario, rng=rng, **overrides)
+    return scenario.source, scenario.name, scenario.duration, scenario
+
+
+def build_stream(config: RunConfig, source, origin, duration: float, rng: np.random.Generator):
+    """The sensor samples the controller sees (SI units), over ``duration`` seconds."""
+    from sim.sensors import SampleStream, Upsample, sensor_from_name
+
+    control_rate = 1.0 / config.loop.Ts
+    if config.sensor == "recorded":
+        if config.data is None:
+            raise UsageError("sensor 'recorded' needs a recording (--data FILE)")
+        t = origin.t - origin.t[0]
+        stream = SampleStream(t, origin.z, t.copy(), origin.sample_rate)
+        return Upsample(control_rate).apply(stream, rng)
+    settings = dict(config.sensor_settings)
+    if config.sensor == "sonomicrometry":
+        settings.setdefault("rate", getattr(origin, "sensor_rate", None) or 257.0)
+        settings.setdefault("upsample", control_rate)  # the paper's 2-kHz streamed playback
+    try:
+        sensor = sensor_from_name(config.sensor, dim=source.dim, **settings)
+    except TypeError as exc:
+        raise UsageError(f"sensor {config.sensor!r}: {exc}") from None
+    return sensor.measure(source, duration, rng)
+
+
+def build_run(config: RunConfig) -> Run:
+    """Build robot, controller, heart motion, sensor stream and reference for ``config``."""
+    from predictors import make_predictor
+    from rhmpc.mpc import RecedingHorizonMPC
+    from rhmpc.reference import ExactReference, PredictedReference
+    from robots import linearize, load_robot
+    from sim.loop import poi_truth
+
+    loop = config.loop
+    if config.mpc.horizon != loop.horizon:
+        raise UsageError(
+            f"mpc.horizon ({config.mpc.horizon}) and loop.horizon ({loop.horizon}) must agree"
+        )
+    rng = np.random.default_rng(config.seed)
+    heart_rng, sensor_rng = rng.spawn(2)
+    robot = load_robot(config.robot)
+    arm = linearize(robot, Ts=loop.Ts)
+    controller = RecedingHorizonMPC(arm, config.mpc)
+    source, label, available, origin = heart_source(config, heart_rng)
+    if config.data is not None and loop.duration > available:
+        raise UsageError(
+            f"{config.data}: the recording lasts {available:.2f} s, the run asks for "
+            f"{loop.duration:.2f} s (set --duration)"
+        )
+    margin = (loop.horizon + 1) * loop.Ts
+    stream = build_stream(config, source, origin, loop.duration + margin, sensor_rng)
+    if config.ground_truth == "recorded":
+        from sim.heart import RecordedMotion
+
+        target = RecordedMotion(stream.t, stream.z, name="recorded stream")
+    else:
+        target = source
+    center, truth = poi_truth(target, loop.ticks + loop.horizon + 1, loop.Ts)
+    if config.predictor == "exact":
+        reference = ExactReference(truth, loop.horizon)
+    else:
+        predictor = make_predictor(
+            config.predictor, dt=loop.downsample * loop.Ts, **config.predictor_settings
+        )
+        reference = PredictedReference(
+            predictor, loop.Ts, loop.horizon, loop.downsample, loop.prediction_points
+        )
+    return Run(config, robot, arm, controller, reference, truth, center, stream, label,
+               loop.duration)
+
+
+def run_experiment(config: RunConfig, progress: bool = False) -> tuple[Any, dict]:
+    """Run ``config`` in closed loop; returns the :class:`~sim.loop.LoopResult` and its document.
+
+    The document holds the settings, the metrics (``rms_error_mm``, ``max_error_mm``,
+    ``rms_effort_mNm``, ``tick_us`` with ``p50``/``p99``/``max``, ``fallbacks`` …), the wall
+    time and the package versions.
+    """
+    from sim.loop import run_closed_loop
+
+    run = build_run(config)
+    bar = None
+    callback = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=config.loop.ticks, unit="tick", unit_scale=True, leave=False,
+                   desc=f"{config.predictor} on {run.label}", mininterval=0.5)
+
+        def callback(done: int) -> None:
+            bar.update(done - bar.n)
+
+    wall = time.perf_counter()
+    try:
+        result = run_closed_loop(
+            run.robot, run.arm, run.controller, run.reference, run.truth, run.center, run.stream,
+            config.loop, plant_settings=config.plant, mismatch=config.mismatch,
+            observer_settings=config.observer, progress=callback,
+        )
+    finally:
+        if bar is not None:
+            bar.close()
+    wall = time.perf_counter() - wall
+    metrics = result.metrics()
+    stats = result.controller_stats
+    document = {
+        "predictor": config.predictor,
+        "scenario": run.label,
+        "robot": config.robot,
+        "seed": config.seed,
+        "sensor": config.sensor,
+        "ground_truth": config.ground_truth,
+        **metrics,
+        "fallbacks": int(stats.get("fallback_total", 0)),
+        "controller": _jsonable(stats),
+        "predictor_counts": _jsonable(result.predictor_counts),
+        "wall_s": wall,
+        "real_time_factor": config.loop.duration / wall,
+        "settings": config.to_dict(),
+        "versions": versions(),
+    }
+    return result, document
+
+
+def _jsonable(obj: Any) -> Any:
+    """Plain JSON types for stats mappings (numpy scalars, tuples, nested dicts)."""
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    return obj

@@ -1,0 +1,126 @@
+"""From predictor samples to the MPC's N control-rate reference points.
+
+The predictor runs every ``downsample`` ticks (period ``dt = downsample·Ts``, 7.5 ms in the
+paper) on the newest measured sample ``z(t_a)``, measured at ``t_a`` (the anchor; a sensor's
+latency makes it older than the current tick), and forecasts ``K`` points::
+
+    nodes  t_a + k·dt,  k = 0 … K      values  z(t_a), ẑ(t_a + dt), …, ẑ(t_a + K·dt)
+
+Each control tick ``t`` between two predictor updates takes its N points
+``r_j = r(t + j·Ts), j = 1 … N`` from a piecewise-quadratic (3-node Lagrange) interpolation of
+these nodes: with ``s = (τ − t_a)/dt`` and the window of nodes ``m, m+1, m+2``
+(``m = min(⌊s⌋, K − 2)``), ``u = s − m``::
+
+    r(τ) = ½(u−1)(u−2)·z_m − u(u−2)·z_{m+1} + ½u(u−1)·z_{m+2}
+
+Beyond the last node the last window's quadratic extrapolates (with the paper's K = 4 and
+downsample 15 that is at most the last 2.5 ms of the last horizon before the next update).
+``K = prediction_points + ⌈latency/dt⌉`` so that a sensor's latency is predicted across.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+def quadratic_weights(s: np.ndarray, n_nodes: int) -> tuple[np.ndarray, np.ndarray]:
+    """Window start ``m`` and the three Lagrange weights for node coordinates ``s`` (in periods)."""
+    if n_nodes < 3:
+        raise ValueError(f"quadratic interpolation needs at least 3 nodes, got {n_nodes}")
+    m = np.clip(np.floor(s).astype(int), 0, n_nodes - 3)
+    u = s - m
+    w = np.stack([0.5 * (u - 1) * (u - 2), -u * (u - 2), 0.5 * u * (u - 1)], axis=1)
+    return m, w
+
+
+class PredictedReference:
+    """The N-point reference from a predictor, refreshed every ``downsample`` ticks.
+
+    Parameters
+    ----------
+    predictor : predictors.Predictor
+        Runs at ``dt = downsample · Ts``; fed centred heart coordinates [m].
+    Ts : float
+        Control period [s].
+    horizon : int
+        N, reference points per tick.
+    downsample : int
+        Ticks between predictor updates.
+    prediction_points : int
+        Forecast points per update before latency compensation (4 in Tuna et al.).
+    """
+
+    def __init__(
+        self, predictor, Ts: float, horizon: int, downsample: int, prediction_points: int = 4
+    ) -> None:
+        if prediction_points < 2:
+            raise ValueError(f"prediction_points must be >= 2, got {prediction_points}")
+        self.predictor = predictor
+        self.Ts, self.N, self.downsample = Ts, horizon, downsample
+        self.dt = downsample * Ts
+        if not math.isclose(predictor.dt, self.dt, rel_tol=1e-9):
+            raise ValueError(f"predictor dt {predictor.dt} s != downsample·Ts = {self.dt} s")
+        self.prediction_points = prediction_points
+        self._span = downsample - 1 + horizon  # ticks a refresh must cover
+        self.reset()
+
+    def reset(self) -> None:
+        self.predictor.reset()
+        self._dense: np.ndarray | None = None
+        self._first = 0
+        self._anchor: float | None = None
+
+    def refresh(self, tick: int, z: np.ndarray | None, stamp: float) -> None:
+        """Feed the newest sample ``z`` measured at ``stamp`` [s] (None = no new sample)."""
+        self.predictor.update(z)
+        valid = z is not None and bool(np.all(np.isfinite(z)))
+        if valid:
+            self._anchor = stamp
+        elif self._anchor is None:
+            return  # nothing measured yet: keep holding
+        else:
+            self._anchor += self.dt  # the predictor advanced one period open-loop
+        now = tick * self.Ts
+        latency = max(0.0, now - self._anchor)
+        K = self.prediction_points + math.ceil(latency / self.dt - 1e-9)
+        points = self.predictor.predict(K)
+        if valid:
+            nodes, t0 = np.vstack([np.asarray(z, dtype=float)[None, :], points]), self._anchor
+        else:
+            nodes, t0 = points, self._anchor + self.dt
+        times = now + self.Ts * np.arange(1, self._span + 1)
+        m, w = quadratic_weights((times - t0) / self.dt, nodes.shape[0])
+        self._dense = (
+            w[:, :1] * nodes[m] + w[:, 1:2] * nodes[m + 1] + w[:, 2:] * nodes[m + 2]
+        )
+        self._first = tick + 1
+
+    def horizon(self, tick: int) -> np.ndarray | None:
+        """r_{tick+1} … r_{tick+N}, shape (N, d), or None before the first valid sample."""
+        if self._dense is None:
+            return None
+        start = tick + 1 - self._first
+        if start + self.N > self._dense.shape[0]:  # refresh skipped: hold the last points
+            start = self._dense.shape[0] - self.N
+        return self._dense[start : start + self.N]
+
+
+class ExactReference:
+    """"Exact reference information" (Tuna et al.): the true future, no predictor.
+
+    ``truth`` holds the centred POI position at every tick of the run plus a horizon's margin.
+    """
+
+    def __init__(self, truth: np.ndarray, horizon: int) -> None:
+        self.truth, self.N = truth, horizon
+
+    def reset(self) -> None:
+        pass
+
+    def refresh(self, tick: int, z: np.ndarray | None, stamp: float) -> None:
+        pass
+
+    def horizon(self, tick: int) -> np.ndarray:
+        return self.truth[tick + 1 : tick + 1 + self.N]

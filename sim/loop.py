@@ -1,0 +1,291 @@
+"""The closed loop: heart → sensor → predictor → reference → MPC → cancellation → plant.
+
+Time is integer ticks of ``Ts`` (seconds = tick·Ts). Each tick ``i``:
+
+1. the newest sensor sample that has *arrived* by ``i·Ts`` is known (``newest[i]``);
+2. every ``downsample`` ticks the reference is refreshed with it (the predictor runs; a tick
+   with no new sample since the last refresh is a missing sample for the predictor);
+3. the reference gives the N points ``r_{i+1..i+N}`` (centred heart coordinates) and the loop
+   places them in the robot's workspace: ``r = y0 + offset + E·r_c``;
+4. the encoders quantise ``q``, the observer estimates ``x̂ = [q − q0; q̇]``;
+5. the MPC computes ``τ_mpc``; the cancellation adds ``ĝ + Ĉq̇ + f̂`` at the estimated state;
+6. the plant integrates one tick with the (clipped) torque held.
+
+The POI trajectory is centred on its mean over the run and placed at the end-effector's home
+position plus ``poi_offset``. A 1-D motion moves along the x axis. The error is
+``p_ee(q_{i+1}) − p_poi((i+1)·Ts)``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import gc
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+import pinocchio as pin
+
+from robots import LinearArm, Robot
+from sim.estimation import JointObserver, ObserverSettings
+from sim.metrics import rms, timing_stats, tracking_metrics
+from sim.plant import ArmPlant, ModelMismatch, NonlinearityCancellation, PlantSettings
+
+
+@dataclass(frozen=True)
+class LoopSettings:
+    """Timing and placement of a closed-loop run.
+
+    Attributes
+    ----------
+    Ts : float
+        Control period [s] (2 kHz in the paper).
+    horizon : int
+        N, reference points per tick [ticks] (50 = 25 ms).
+    downsample : int
+        Ticks between predictor updates (15 → 7.5 ms, Tuna et al. Fig. 9).
+    prediction_points : int
+        Points the predictor forecasts per update, before latency compensation (4).
+    duration : float
+        Simulated time [s].
+    settling : float
+        Initial time excluded from the metrics while the predictors converge [s].
+    poi_offset : tuple[float, float, float]
+        Mean POI position relative to the end-effector's home position [m].
+    """
+
+    Ts: float = 0.5e-3
+    horizon: int = 50
+    downsample: int = 15
+    prediction_points: int = 4
+    duration: float = 20.0
+    settling: float = 5.0
+    poi_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.Ts) and self.Ts > 0):
+            raise ValueError(f"Ts must be > 0 [s], got {self.Ts!r}")
+        for name in ("horizon", "downsample", "prediction_points"):
+            value = getattr(self, name)
+            if not isinstance(value, int) or value < 1:
+                raise ValueError(f"{name} must be a positive integer, got {value!r}")
+        if self.prediction_points < 2:
+            raise ValueError("prediction_points must be >= 2 (quadratic interpolation)")
+        if not (np.isfinite(self.duration) and self.duration > 0):
+            raise ValueError(f"duration must be > 0 [s], got {self.duration!r}")
+        if not (0 <= self.settling < self.duration):
+            raise ValueError(
+                f"settling must be in [0, duration) [s], got {self.settling!r} "
+                f"with duration {self.duration!r}"
+            )
+        if len(self.poi_offset) != 3 or not np.all(np.isfinite(self.poi_offset)):
+            raise ValueError(f"poi_offset must be 3 finite numbers [m], got {self.poi_offset!r}")
+
+    @property
+    def ticks(self) -> int:
+        return int(round(self.duration / self.Ts))
+
+    @property
+    def settling_ticks(self) -> int:
+        return int(round(self.settling / self.Ts))
+
+
+def embed3(p: np.ndarray) -> np.ndarray:
+    """(n, d) positions with d ≤ 3 as (n, 3), missing axes zero (1-D motion along x)."""
+    p = np.atleast_2d(p)
+    if p.shape[1] == 3:
+        return p
+    out = np.zeros((p.shape[0], 3))
+    out[:, : p.shape[1]] = p
+    return out
+
+
+def poi_truth(source, n_ticks: int, Ts: float) -> tuple[np.ndarray, np.ndarray]:
+    """The source's mean over the run, and its centred position at ticks 0 … n_ticks−1.
+
+    Returns ``(center (d,), truth (n_ticks, d))`` in metres.
+    """
+    p = np.asarray(source.position(np.arange(n_ticks) * Ts), dtype=float).reshape(n_ticks, -1)
+    center = np.nanmean(p, axis=0)
+    if not np.all(np.isfinite(center)):
+        raise ValueError("the heart motion has no finite sample over the run")
+    return center, p - center
+
+
+def newest_arrived(arrival: np.ndarray, n_ticks: int, Ts: float) -> np.ndarray:
+    """Index of the newest sample arrived by each tick's time (−1 before the first)."""
+    return np.searchsorted(arrival, np.arange(n_ticks) * Ts + 1e-12, side="right") - 1
+
+
+@dataclass
+class LoopResult:
+    """What a run produced (SI units); :meth:`metrics` summarises it."""
+
+    settings: LoopSettings
+    time: np.ndarray  # (n,) [s], the instant of each recorded state (i+1)·Ts
+    ee: np.ndarray  # (n, 3) end-effector position [m]
+    poi: np.ndarray  # (n, 3) true POI position [m]
+    reference0: np.ndarray  # (n, 3) first reference point r_{i+1} given to the MPC [m]
+    tau_mpc: np.ndarray  # (n, nv) [N·m]
+    tau: np.ndarray  # (n, nv) applied torque after clipping [N·m]
+    tick_ns: np.ndarray  # (n,) controller time per tick [ns]
+    horizon_error: np.ndarray  # (N,) RMS error of the reference vs the truth per lead tick [m]
+    controller_stats: dict = field(default_factory=dict)
+    saturated_ticks: int = 0
+    predictor_counts: dict = field(default_factory=dict)
+
+    @property
+    def error(self) -> np.ndarray:
+        return self.ee - self.poi
+
+    def metrics(self) -> dict:
+        s = self.settings.settling_ticks
+        out = tracking_metrics(self.error[s:], self.tau_mpc[s:], self.tau[s:])
+        out["tick_us"] = timing_stats(self.tick_ns[s:])
+        out["prediction_rms_mm"] = {
+            "lead_1": float(1e3 * self.horizon_error[0]),
+            "lead_N": float(1e3 * self.horizon_error[-1]),
+            "mean": float(1e3 * rms(self.horizon_error)),
+        }
+        out["saturated_ticks"] = int(self.saturated_ticks)
+        return out
+
+
+def run_closed_loop(
+    robot: Robot,
+    arm: LinearArm,
+    controller,
+    reference,
+    truth: np.ndarray,
+    center: np.ndarray,
+    stream,
+    settings: LoopSettings,
+    *,
+    plant_settings: PlantSettings | None = None,
+    mismatch: ModelMismatch | None = None,
+    observer_settings: ObserverSettings | None = None,
+    progress: Callable[[int], None] | None = None,
+) -> LoopResult:
+    """Run the closed loop for ``settings.duration``.
+
+    Parameters
+    ----------
+    controller
+        ``step(x, ref) -> τ_mpc`` and a ``stats`` mapping (:class:`rhmpc.mpc.RecedingHorizonMPC`).
+    reference
+        ``refresh(tick, z, stamp)`` and ``horizon(tick) -> (N, d) | None`` in centred heart
+        coordinates (:mod:`rhmpc.reference`).
+    truth, center
+        From :func:`poi_truth` over at least ``ticks + horizon + 1`` ticks.
+    stream
+        Sensor samples with arrays ``t`` [s], ``z`` (n, d) [m] (NaN = missing) and ``arrival`` [s].
+    progress
+        Called with the number of ticks done, every 2000 ticks.
+    """
+    n, N, ds, Ts = settings.ticks, settings.horizon, settings.downsample, settings.Ts
+    if truth.shape[0] < n + N + 1:
+        raise ValueError(f"truth covers {truth.shape[0]} ticks, the run needs {n + N + 1}")
+    d = truth.shape[1]
+    anchor = arm.y0 + np.asarray(settings.poi_offset, dtype=float)
+    poi = anchor + embed3(truth[1 : n + 1])
+
+    plant = ArmPlant(robot, Ts, plant_settings)
+    plant.reset()
+    cancel = NonlinearityCancellation(
+        robot, mismatch, stiction_velocity=plant.settings.stiction_velocity
+    )
+    observer = JointObserver(arm, robot.encoder_resolution, observer_settings)
+    resolution = robot.encoder_resolution
+    newest = newest_arrived(np.asarray(stream.arrival, dtype=float), n, Ts)
+    z_all = np.asarray(stream.z, dtype=float).reshape(len(stream.t), -1) - center
+    t_all = np.asarray(stream.t, dtype=float)
+
+    nv = robot.nv
+    q_log = np.empty((n, nv))
+    ref0 = np.empty((n, 3))
+    tau_mpc_log = np.empty((n, nv))
+    tau_log = np.empty((n, nv))
+    tick_ns = np.empty(n, dtype=np.int64)
+    n_updates = (n + ds - 1) // ds
+    horizons = np.full((n_updates, N, d), np.nan)
+    hold = np.zeros((N, d))
+    last_j = -1
+    ref = np.empty((N, 3))
+    ref[:] = anchor
+    clock = time.perf_counter_ns
+    gc_was_enabled = gc.isenabled()
+    gc.disable()  # a collection inside the 2 kHz loop would be a 10-ms stall
+    try:
+        for i in range(n):
+            t_start = clock()
+            if i % ds == 0:
+                j = newest[i]
+                if j >= 0 and j != last_j:
+                    last_j = j
+                    reference.refresh(i, z_all[j], t_all[j])
+                else:
+                    reference.refresh(i, None, i * Ts)
+                h = reference.horizon(i)
+                if h is not None:
+                    horizons[i // ds] = h
+            h = reference.horizon(i)
+            if h is None:
+                h = hold
+            if d == 3:
+                np.add(anchor, h, out=ref)
+            else:
+                ref[:, 0] = anchor[0] + h[:, 0]
+            q_meas = plant.q if resolution is None else np.round(plant.q / resolution) * resolution
+            x_hat = observer.correct(q_meas)
+            u = controller.step(x_hat, ref)
+            tau = u + cancel.torque(q_meas, x_hat[nv:])
+            tick_ns[i] = clock() - t_start
+            applied = plant.step(tau)
+            observer.predict(applied - (tau - u))
+            q_log[i] = plant.q
+            ref0[i] = ref[0]
+            tau_mpc_log[i] = u
+            tau_log[i] = applied
+            if progress is not None and (i + 1) % 2000 == 0:
+                progress(i + 1)
+    finally:
+        if gc_was_enabled:
+            gc.enable()
+
+    ee = np.empty((n, 3))
+    data, fid = robot.create_data(), robot.ee_frame_id
+    for i in range(n):
+        pin.framesForwardKinematics(robot.model, data, q_log[i])
+        ee[i] = data.oMf[fid].translation
+    # Horizon prediction error per lead tick, after settling.
+    first = -(-settings.settling_ticks // ds)
+    lead = np.arange(1, N + 1)
+    err = []
+    for k in range(first, n_updates):
+        tick = k * ds
+        if tick + N < truth.shape[0] and np.all(np.isfinite(horizons[k])):
+            err.append(np.linalg.norm(horizons[k] - truth[tick + lead], axis=1))
+    horizon_error = rms(np.array(err), axis=0) if err else np.full(N, np.nan)
+
+    stats_obj = getattr(controller, "stats", None)
+    if dataclasses.is_dataclass(stats_obj):
+        stats = dataclasses.asdict(stats_obj)
+        stats["fallback_total"] = int(getattr(stats_obj, "fallback_total", 0))
+    else:
+        stats = dict(stats_obj or {})
+    counts = dict(getattr(getattr(reference, "predictor", None), "counts", {}) or {})
+    return LoopResult(
+        settings=settings,
+        time=(np.arange(n) + 1) * Ts,
+        ee=ee,
+        poi=poi,
+        reference0=ref0,
+        tau_mpc=tau_mpc_log,
+        tau=tau_log,
+        tick_ns=tick_ns,
+        horizon_error=horizon_error,
+        controller_stats=stats,
+        saturated_ticks=plant.saturated_ticks,
+        predictor_counts=counts,
+    )

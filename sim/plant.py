@@ -1,0 +1,180 @@
+"""The plant: the full nonlinear arm (Pinocchio forward dynamics) and the controller's cancellation.
+
+Plant dynamics, with the joint torque ``τ`` held constant over a control tick::
+
+    M(q) q̈ + C(q, q̇) q̇ + g(q) = τ − D q̇ − F_c tanh(q̇ / v_s)        (ABA solves for q̈)
+
+``M`` includes the reflected rotor inertia (armature); ``D`` is viscous damping and ``F_c``
+Coulomb friction, smoothed by ``tanh`` over the stiction velocity ``v_s`` so that the ODE stays
+integrable. The controller adds to its MPC torque a cancellation from its *own* model::
+
+    τ = τ_mpc + ĝ(q) + Ĉ(q, q̇) q̇ + D̂ q̇ + F̂_c tanh(q̇ / v_s),   ĝ + Ĉq̇ = RNEA(q̂, q̇, 0)
+
+where the model's masses and friction may be scaled (``model_mismatch``) to study robustness.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from robots import Robot
+
+
+INTEGRATORS = ("midpoint", "rk4", "semi-implicit-euler")
+
+
+@dataclass(frozen=True)
+class PlantSettings:
+    """Integration of the plant.
+
+    Attributes
+    ----------
+    integrator : str
+        ``"midpoint"`` (explicit midpoint, 2nd order, 2 ABA calls per step), ``"rk4"``
+        (classical Runge–Kutta, 4 calls) or ``"semi-implicit-euler"`` (symplectic Euler, 1 call).
+    substeps : int
+        Integration steps per control tick; the step is ``Ts / substeps`` [s]. The default,
+        midpoint with 2 steps of 0.25 ms, has a local error per tick below 0.5 µm at the
+        end-effector against RK4 with 500 steps (tests/sim/test_plant.py), at half the cost of RK4
+        with 2 steps.
+    stiction_velocity : float
+        Velocity scale ``v_s`` of the smoothed Coulomb friction [rad/s].
+    """
+
+    integrator: str = "midpoint"
+    substeps: int = 2
+    stiction_velocity: float = 5e-3
+
+    def __post_init__(self) -> None:
+        if self.integrator not in INTEGRATORS:
+            raise ValueError(
+                f"unknown integrator {self.integrator!r}; valid: {', '.join(INTEGRATORS)}"
+            )
+        if self.substeps < 1:
+            raise ValueError(f"substeps must be >= 1, got {self.substeps}")
+        if not self.stiction_velocity > 0:
+            raise ValueError(f"stiction_velocity must be > 0 [rad/s], got {self.stiction_velocity}")
+
+
+class ArmPlant:
+    """Forward dynamics of ``robot`` integrated over control ticks of ``Ts`` seconds.
+
+    Torques are clipped to the actuator limits before they act (and the clip is counted).
+    """
+
+    def __init__(self, robot: Robot, Ts: float, settings: PlantSettings | None = None) -> None:
+        self.robot = robot
+        self.settings = settings or PlantSettings()
+        self.Ts = float(Ts)
+        self.model = robot.model
+        self.data = robot.create_data()
+        self._damping = robot.damping
+        self._coulomb = robot.coulomb_friction
+        self._tau_max = robot.torque_limit
+        self._h = self.Ts / self.settings.substeps
+        self._step = {
+            "midpoint": self._midpoint,
+            "rk4": self._rk4,
+            "semi-implicit-euler": self._symplectic_euler,
+        }[self.settings.integrator]
+        self.saturated_ticks = 0
+        self.q = robot.q0.copy()
+        self.v = np.zeros(robot.nv)
+
+    def reset(self, q: np.ndarray | None = None, v: np.ndarray | None = None) -> None:
+        """Place the arm at ``q`` (default home) with velocity ``v`` (default rest)."""
+        self.q = self.robot.check_posture(self.robot.q0 if q is None else q).copy()
+        self.v = np.zeros(self.robot.nv) if v is None else np.asarray(v, dtype=float).copy()
+        self.saturated_ticks = 0
+
+    def friction(self, v: np.ndarray) -> np.ndarray:
+        """Joint friction torque D q̇ + F_c tanh(q̇ / v_s) opposing the motion [N·m]."""
+        return self._damping * v + self._coulomb * np.tanh(v / self.settings.stiction_velocity)
+
+    def acceleration(self, q: np.ndarray, v: np.ndarray, tau: np.ndarray) -> np.ndarray:
+        """q̈ = ABA(q, q̇, τ − friction(q̇)) [rad/s²]."""
+        return pin.aba(self.model, self.data, q, v, tau - self.friction(v))
+
+    def step(self, tau: np.ndarray) -> np.ndarray:
+        """Advance one control tick with ``tau`` [N·m] held constant; returns the applied torque."""
+        applied = np.minimum(np.maximum(tau, -self._tau_max), self._tau_max)
+        if not np.array_equal(applied, tau):
+            self.saturated_ticks += 1
+        for _ in range(self.settings.substeps):
+            self._step(applied)
+        return applied
+
+    def _symplectic_euler(self, tau: np.ndarray) -> None:
+        h = self._h
+        self.v = self.v + h * self.acceleration(self.q, self.v, tau)
+        self.q = self.q + h * self.v
+
+    def _midpoint(self, tau: np.ndarray) -> None:
+        h, q, v = self._h, self.q, self.v
+        v_mid = v + 0.5 * h * self.acceleration(q, v, tau)
+        a_mid = self.acceleration(q + 0.5 * h * v, v_mid, tau)
+        self.q = q + h * v_mid
+        self.v = v + h * a_mid
+
+    def _rk4(self, tau: np.ndarray) -> None:
+        h, q, v, acc = self._h, self.q, self.v, self.acceleration
+        a1 = acc(q, v, tau)
+        v2 = v + 0.5 * h * a1
+        a2 = acc(q + 0.5 * h * v, v2, tau)
+        v3 = v + 0.5 * h * a2
+        a3 = acc(q + 0.5 * h * v2, v3, tau)
+        v4 = v + h * a3
+        a4 = acc(q + h * v3, v4, tau)
+        self.q = q + h / 6.0 * (v + 2.0 * v2 + 2.0 * v3 + v4)
+        self.v = v + h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
+
+
+@dataclass(frozen=True)
+class ModelMismatch:
+    """How the controller's model differs from the plant (1.0 = exact knowledge).
+
+    Attributes
+    ----------
+    mass_scale : float
+        Factor on every link mass and rotational inertia in the controller's model [-].
+    friction_scale : float
+        Factor on the viscous damping and Coulomb friction the controller cancels [-].
+    """
+
+    mass_scale: float = 1.0
+    friction_scale: float = 1.0
+
+    def __post_init__(self) -> None:
+        for name in ("mass_scale", "friction_scale"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} must be a finite number >= 0, got {value!r}")
+
+
+class NonlinearityCancellation:
+    """The controller's estimate ĝ(q) + Ĉ(q, q̇)q̇ + f̂(q̇) from its own (possibly mismatched) model."""
+
+    def __init__(
+        self, robot: Robot, mismatch: ModelMismatch | None = None, stiction_velocity: float = 5e-3
+    ) -> None:
+        self.mismatch = mismatch or ModelMismatch()
+        self.model = robot.model.copy()
+        for i, inertia in enumerate(self.model.inertias):
+            self.model.inertias[i] = pin.Inertia(
+                inertia.mass * self.mismatch.mass_scale,
+                inertia.lever,
+                inertia.inertia * self.mismatch.mass_scale,
+            )
+        self.data = self.model.createData()
+        self._damping = robot.damping * self.mismatch.friction_scale
+        self._coulomb = robot.coulomb_friction * self.mismatch.friction_scale
+        self._stiction_velocity = stiction_velocity
+        self._zero = np.zeros(robot.nv)
+
+    def torque(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Cancellation torque [N·m] at the estimated state (q, q̇)."""
+        bias = pin.rnea(self.model, self.data, q, v, self._zero)
+        return bias + self._damping * v + self._coulomb * np.tanh(v / self._stiction_velocity)

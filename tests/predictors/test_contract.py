@@ -1,0 +1,141 @@
+"""Every predictor on the `Predictor` contract: shapes, missing samples, dropouts, registry errors."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from predictors import PREDICTORS, Predictor, make_predictor
+from tests.predictors.helpers import HarmonicSource
+
+DT = 0.0075
+SRC = HarmonicSource(f_hz=1.2)
+
+
+def _make(name, dt=DT, **kw):
+    if name == "exact":
+        kw.setdefault("source", SRC)
+    return make_predictor(name, dt, **kw)
+
+
+@pytest.mark.parametrize("name", list(PREDICTORS))
+def test_shapes_reset_and_missing_kinds(name):
+    p = _make(name)
+    assert isinstance(p, Predictor)
+    z = SRC.position(np.arange(50) * DT)
+    for zk in z:
+        p.update(zk)
+    assert p.predict(4).shape == (4, 3)
+    assert p.predict(1).shape == (1, 3)
+    before = p.counts["missing"]
+    p.update(None)
+    p.update([np.nan, 0.0, 0.0])
+    p.update(np.array([0.0, np.inf, 0.0]))
+    assert p.counts["missing"] == before + 3
+    assert np.isfinite(p.predict(4)).all()
+    with pytest.raises(ValueError):
+        p.update(np.zeros(2))  # wrong dimension is a wiring bug, not a dropout
+    with pytest.raises(ValueError):
+        p.predict(0)
+    p.reset()
+    assert p.n == 0 and not p.counts
+
+
+@pytest.mark.parametrize("name", [n for n in PREDICTORS if n != "exact"])
+def test_predict_before_any_sample_raises(name):
+    p = _make(name)
+    with pytest.raises(RuntimeError):
+        p.predict(4)
+
+
+@pytest.mark.parametrize("name", list(PREDICTORS))
+def test_one_second_dropout_stays_finite_and_recovers_within_two_seconds(name):
+    """20 s of data, 1 s without samples, then 4 s: the 4-step error 2–4 s after the gap is back."""
+    dt = DT if name not in ("wflc", "ar", "fading-ar") else 1 / 28  # tuned at the 3DUS rate
+    t = np.arange(int(25 / dt)) * dt
+    truth = SRC.position(t)
+    rng = np.random.default_rng(10)
+    z = truth + 20e-6 * rng.standard_normal(truth.shape)
+    gap = (t >= 20.0) & (t < 21.0)
+    p = _make(name, dt)
+    K = 4
+    err = np.full(t.size, np.nan)
+    for k in range(t.size):
+        p.update(None if gap[k] else z[k])
+        f = p.predict(K)
+        assert np.isfinite(f).all(), f"non-finite forecast at t={t[k]:.3f}"
+        if k + K < t.size:
+            err[k] = np.linalg.norm(f[-1] - truth[k + K])
+    assert p.counts["missing"] == gap.sum()
+    before = np.sqrt(np.nanmean(err[(t >= 17) & (t < 20)] ** 2))
+    after = np.sqrt(np.nanmean(err[(t >= 23) & (t < 24.9)] ** 2))
+    assert after <= 1.5 * before + 30e-6, (before, after)
+
+
+def test_registry_rejects_bad_names_and_settings():
+    with pytest.raises(ValueError, match="valid: one-step"):
+        make_predictor("kalman", DT)
+    with pytest.raises(ValueError, match="order"):
+        make_predictor("one-step", DT, ordr=3)
+    with pytest.raises(ValueError, match="yuen2008"):
+        make_predictor("ekf", DT, params="nope")
+    with pytest.raises(ValueError, match="params"):
+        make_predictor("hold", DT, params="tuna2013")
+    with pytest.raises(ValueError, match="forgetting_factor"):
+        make_predictor("generalized", DT, forgetting_factor=1.5)
+    with pytest.raises(ValueError, match="harmonics"):
+        make_predictor("ekf", DT, harmonics=0)
+    with pytest.raises(ValueError, match="source"):
+        make_predictor("exact", DT)
+    with pytest.raises(ValueError, match="dt"):
+        make_predictor("hold", 0.0)
+
+
+def test_registry_presets_and_overrides():
+    assert make_predictor("ekf", DT).settings.harmonics == 5  # tuna2013 by default
+    e = make_predictor("ekf", DT, params="yuen2008", sigma_r=1e-3)
+    assert e.settings.harmonics == 8 and e.settings.sigma_r == 1e-3
+    assert make_predictor("fading-ar", DT).settings.forgetting_factor == 0.985
+    assert make_predictor("ar", DT).settings.forgetting_factor == 1.0
+
+
+def test_exact_reads_the_future_and_follows_set_time():
+    p = make_predictor("exact", DT, source=SRC, t0=1.0)
+    np.testing.assert_allclose(p.predict(2), SRC.position(1.0 + DT * np.arange(2)))
+    for _ in range(10):
+        p.update(None)
+    assert p.time == pytest.approx(1.0 + 9 * DT)
+    np.testing.assert_allclose(p.predict(3), SRC.position(1.0 + DT * np.arange(10, 13)))
+    p.set_time(5.0)
+    np.testing.assert_allclose(p.predict(1)[0], SRC.position(5.0 + DT))
+
+
+def test_hold_repeats_the_last_valid_sample():
+    p = make_predictor("hold", DT)
+    p.update([1.0, 2.0, 3.0])
+    p.update(None)
+    np.testing.assert_array_equal(p.predict(3), [[1.0, 2.0, 3.0]] * 3)
+
+
+def test_last_cycle_period_from_signal_and_from_rr():
+    dt = 1 / 28
+    t = np.arange(int(12 / dt)) * dt
+    z = SRC.position(t)
+    p = make_predictor("last-cycle", dt)
+    for zk in z:
+        p.update(zk)
+    assert p.period * dt == pytest.approx(1 / 1.2, rel=0.01)
+    beats = tuple(np.arange(0.0, 13.0, 1 / 1.2))
+    q = make_predictor("last-cycle", dt, beat_times=beats)
+    for zk in z:
+        q.update(zk)
+    assert q.period * dt == pytest.approx(1 / 1.2)
+    np.testing.assert_allclose(q.predict(3), SRC.position(t[-1] + dt * np.arange(1, 4)), atol=0.3e-3)
+
+
+def test_caller_buffers_are_not_kept_by_reference():
+    p = make_predictor("hold", DT)
+    buf = np.array([1.0, 2.0, 3.0])
+    p.update(buf)
+    buf[:] = 0.0
+    np.testing.assert_array_equal(p.predict(1)[0], [1.0, 2.0, 3.0])

@@ -1,0 +1,62 @@
+"""Small stand-ins for loop tests: a harmonic heart, an ideal stream and an unconstrained LQ tracker.
+
+They are independent of the project's heart models and MPC, so the loop's plumbing is tested on
+its own.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+class HarmonicHeart:
+    """p(t) = Σ_h a_h sin(2π h f t + φ_h) per axis [m]; 1.66 Hz, ~8 mm peak to peak."""
+
+    def __init__(self, f: float = 1.66, amplitude: float = 4e-3, dim: int = 3) -> None:
+        self.f, self.dim = f, dim
+        self.amp = amplitude * np.array([1.0, 0.5, 0.3, 0.15])[:, None] * np.linspace(1, 0.5, dim)
+        self.phase = np.array([0.0, 0.7, 1.9, 2.6])[:, None] + np.arange(dim)
+
+    def position(self, t):
+        t = np.asarray(t, dtype=float)
+        h = np.arange(1, 5)[:, None, None]
+        p = np.sum(self.amp[:, None, :] * np.sin(2 * np.pi * h * self.f * t[None, ..., None]
+                                                 + self.phase[:, None, :]), axis=0)
+        return p
+
+
+@dataclass
+class Stream:
+    t: np.ndarray
+    z: np.ndarray
+    arrival: np.ndarray
+
+
+def ideal_stream(source, duration: float, rate: float = 2000.0, latency: float = 0.0) -> Stream:
+    t = np.arange(int(duration * rate) + 1) / rate
+    return Stream(t=t, z=source.position(t), arrival=t + latency)
+
+
+class LQTracker:
+    """Unconstrained finite-horizon LQ tracking: u0 of argmin Σ‖y_k − r_k‖²/s² + ‖u_k‖²·w."""
+
+    def __init__(self, arm, N: int = 50, position_scale: float = 1e-4, effort: float = 1e-2):
+        nx, nu = arm.B.shape
+        Phi = np.vstack([arm.C @ np.linalg.matrix_power(arm.A, k) for k in range(1, N + 1)])
+        Gam = np.zeros((3 * N, nu * N))
+        for k in range(1, N + 1):
+            for j in range(k):
+                Gam[3 * (k - 1) : 3 * k, nu * j : nu * (j + 1)] = (
+                    arm.C @ np.linalg.matrix_power(arm.A, k - 1 - j) @ arm.B
+                )
+        W = np.diag(1 / arm.torque_limit**2)
+        H = Gam.T @ Gam / position_scale**2 + effort * np.kron(np.eye(N), W)
+        self.K = -np.linalg.solve(H, Gam.T / position_scale**2)[:nu]
+        self.Phi, self.y0, self.N = Phi, arm.y0, N
+        self.stats = {"fallbacks": 0}
+
+    def step(self, x, ref):
+        e = (self.Phi @ x + np.tile(self.y0, self.N)) - ref.reshape(-1)
+        return self.K @ e
