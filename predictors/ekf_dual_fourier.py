@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from predictors.base import Predictor, PredictorSettings
-from predictors.ekf_fourier import wrap_phase
+from predictors.ekf_fourier import spd_inverse, wrap_phase
 
 __all__ = ["DualEKFSettings", "DualFourierEKF"]
 
@@ -179,8 +179,8 @@ class DualFourierEKF(Predictor):
         PHt = P @ H.T
         S = H @ PHt
         S.flat[:: self.d + 1] += self._r
-        Sinv = np.linalg.inv(S)
-        if not (np.isfinite(Sinv).all() and (np.diag(S) > 0.0).all()):
+        Sinv = spd_inverse(S)
+        if Sinv is None:
             self.counts["ekf_reinit"] += 1
             self.ready = False
             return

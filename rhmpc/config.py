@@ -19,7 +19,7 @@ from typing import Any, TypeVar
 #: of the 50-tick horizon; 10 blocks (30 QP variables for 3 joints), sum 50.
 DEFAULT_BLOCKS: tuple[int, ...] = (2, 2, 3, 3, 4, 5, 6, 7, 8, 10)
 
-WARM_STARTS: tuple[str, ...] = ("shift", "keep", "none")
+WARM_STARTS: tuple[str, ...] = ("shift", "shift_primal", "keep", "none")
 TERMINALS: tuple[str, ...] = ("none", "dare")
 
 
@@ -99,8 +99,9 @@ class MPCSettings:
     scaling : int
         OSQP Ruiz equilibration iterations (0 = rely on the physical scaling) [-].
     warm_start : str
-        ``"shift"`` (previous primal/dual shifted one tick), ``"keep"`` (previous solution as is)
-        or ``"none"`` (cold start every tick).
+        ``"shift"`` (previous primal and dual shifted one tick), ``"shift_primal"`` (primal
+        shifted, OSQP's dual kept), ``"keep"`` (OSQP's previous iterate as is) or ``"none"``
+        (cold start every tick).
     plan_fallback_ticks : int
         After a failed solve, the previous plan (shifted) is used for at most this many ticks
         since it was computed; later failures use the clipped unconstrained LQ solution [ticks].

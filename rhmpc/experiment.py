@@ -110,7 +110,9 @@ class RunConfig:
         kwargs: dict[str, Any] = {}
         for key, value in data.items():
             if key not in names:
-                raise UsageError(f"{where}: unknown key {key!r}; valid keys: {', '.join(sorted(names))}")
+                raise UsageError(
+                    f"{where}: unknown key {key!r}; valid keys: {', '.join(sorted(names))}"
+                )
             if key in SECTIONS:
                 if not isinstance(value, dict):
                     raise UsageError(f"{where}: [{key}] must be a table")
@@ -130,7 +132,7 @@ class RunConfig:
             raise UsageError(f"{where}: {exc}") from None
 
     def replace(self, **changes: Any) -> RunConfig:
-        """A copy with top-level fields or dotted section fields (``"mpc.effort_weight"``) changed."""
+        """A copy with top-level or dotted section fields (``"mpc.effort_weight"``) changed."""
         top: dict[str, Any] = {}
         nested: dict[str, dict[str, Any]] = {}
         for key, value in changes.items():

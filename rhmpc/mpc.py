@@ -125,6 +125,7 @@ class RecedingHorizonMPC:
         self.u_max = qp.u_max.copy()
         self.u_max.setflags(write=False)
         self._ws = self.settings.warm_start
+        self._ws_dual = self._ws == "shift"
 
         # -- per-tick buffers and views ------------------------------------------------------
         # One mat-vec per tick gives q: p_ext = [p; 1], F_ext = [F, f0], q = F_ext p_ext. The
@@ -135,7 +136,9 @@ class RecedingHorizonMPC:
         self._p = self._p_ext[:-1]
         self._p_x = self._p_ext[:nx]
         self._p_r = self._p_ext[nx:nx + N * ny]
+        self._p_r2 = self._p_r.reshape(N, ny)  # a view: ref is copied in without a reshape
         self._p_u = self._p_ext[nx + N * ny:-1]
+        self._x_shape, self._ref_shape = (nx,), (N, ny)
         self._F_ext = np.ascontiguousarray(np.column_stack([qp.F, qp.f0]))
         self._q = np.empty(nz)
         self._l = qp.l0.copy()
@@ -180,19 +183,30 @@ class RecedingHorizonMPC:
         else:
             self._osqp.update(q=self._q)
 
+    def _warm_start(self, x: np.ndarray, y: np.ndarray | None) -> None:
+        if self._raw is not None:
+            self._raw.warm_start(x, y)
+        else:
+            self._osqp.warm_start(x=x, y=y)
+
     def _solve(self) -> tuple[int, int, np.ndarray, np.ndarray | None]:
         if self._raw is not None:
             raw = self._raw
             raw.solve()
             info, sol = raw.info, raw.solution
-            return info.status_val, info.iter, sol.x, sol.y if self._ws == "shift" else None
+            return info.status_val, info.iter, sol.x, sol.y if self._ws_dual else None
         res = self._osqp.solve(raise_error=False)
         return res.info.status_val, res.info.iter, res.x, res.y
 
     # -- public API --------------------------------------------------------------------------
-    def reset(self) -> None:
-        """Forget the previous input, plan and warm start; zero the counters."""
-        self._u_prev = np.zeros(self.nu)
+    def reset(self, u_prev: np.ndarray | None = None) -> None:
+        """Forget the plan and warm start, zero the counters, and set u_{−1} (default 0) [N·m].
+
+        A non-zero ``u_prev`` gives a bumpless start when the MPC takes over from another
+        controller (the rate term R_Δ penalises the change from it).
+        """
+        # u_{−1}: the last returned torque lives in the parameter buffer.
+        self._p_u[:] = 0.0 if u_prev is None else np.clip(u_prev, -self.u_max, self.u_max)
         self._plan: np.ndarray | None = None  # (nz,) normalised block inputs of the last good solve
         self._plan_age = 0
         self._ws_x: np.ndarray | None = None
@@ -216,7 +230,7 @@ class RecedingHorizonMPC:
         self, x: np.ndarray, ref: np.ndarray, u_prev: np.ndarray | None = None
     ) -> np.ndarray:
         """QP parameter vector p = [x; r_1..r_N; u_{−1}] (u_{−1} defaults to the last output)."""
-        up = self._u_prev if u_prev is None else u_prev
+        up = self._p_u if u_prev is None else u_prev
         return self.qp.params(np.asarray(x, float), np.asarray(ref, float), np.asarray(up, float))
 
     def qp_vectors(
@@ -239,7 +253,7 @@ class RecedingHorizonMPC:
     @property
     def u_prev(self) -> np.ndarray:
         """The torque returned by the last tick (u_{−1} of the next QP) [N·m]."""
-        return self._u_prev.copy()
+        return self._p_u.copy()
 
     def unconstrained(
         self, x: np.ndarray, ref: np.ndarray, u_prev: np.ndarray | None = None
@@ -261,14 +275,13 @@ class RecedingHorizonMPC:
         stats.ticks += 1
         x = np.asarray(x, dtype=float)
         ref = np.asarray(ref, dtype=float)
-        if x.shape != (self.nx,) or ref.shape != (self.N, self.ny):
+        if x.shape != self._x_shape or ref.shape != self._ref_shape:
             raise ValueError(
-                f"step expects x {(self.nx,)} and ref {(self.N, self.ny)}, "
+                f"step expects x {self._x_shape} and ref {self._ref_shape}, "
                 f"got {x.shape}, {ref.shape}"
             )
         self._p_x[:] = x
-        self._p_r[:] = ref.reshape(-1)
-        self._p_u[:] = self._u_prev
+        self._p_r2[...] = ref
         p_ext = self._p_ext
         if not math.isfinite(np.dot(p_ext, p_ext)):  # NaN, ±inf (or absurd > 1e154)
             t1 = clock()
@@ -286,7 +299,7 @@ class RecedingHorizonMPC:
         try:
             self._update_q()
             if self._ws_x is not None:
-                self._osqp.warm_start(x=self._ws_x, y=self._ws_y)
+                self._warm_start(self._ws_x, self._ws_y)
                 self._ws_x = None
             t2 = clock()
             status, iters, z, y = self._solve()
@@ -318,7 +331,7 @@ class RecedingHorizonMPC:
                 z, y = self.last_solution()
                 if not (np.isfinite(z).all() and np.isfinite(y).all()):
                     pass
-                elif self._ws == "shift":
+                elif self._ws != "keep":
                     self._ws_x = self._shift @ z
                     self._ws_y = self._shift_dual @ y
                 else:
@@ -328,16 +341,19 @@ class RecedingHorizonMPC:
 
         np.maximum(tau, self._neg_umax, out=tau)
         np.minimum(tau, self.u_max, out=tau)
+        self._p_u[:] = tau  # u_{−1} of the next tick (a copy: the caller owns tau)
         self._plan = z  # a fresh array from OSQP on every access of solution.x
         self._plan_age = 0
-        if self._ws == "shift":
+        ws = self._ws
+        if ws == "shift":
             self._ws_x = self._shift @ z
             self._ws_y = self._shift_dual @ y
-        self._u_prev = tau
+        elif ws == "shift_primal":
+            self._ws_x = self._shift @ z
         stats.status = "solved"
         stats.source = "qp"
         stats.parts_ns[:] = [t1 - t0, t2 - t1, t3 - t2, clock() - t3]
-        return tau.copy()
+        return tau
 
     # -- fallback ------------------------------------------------------------------------------
     def _fallback(self, reason: str, *, inputs_finite: bool) -> np.ndarray:
@@ -360,9 +376,9 @@ class RecedingHorizonMPC:
         tau = np.clip(tau, self._neg_umax, self.u_max)
         stats.source = source
         stats.fallbacks[source] += 1
-        self._u_prev = tau
+        self._p_u[:] = tau
         # Next warm start: the plan shifted to the next tick (or cold if there is none).
         if self._plan is not None and self._ws != "none":
             self._ws_x = self._shift @ self._plan
             self._ws_y = np.zeros(self.qp.A.shape[0])
-        return tau.copy()
+        return tau

@@ -1,4 +1,4 @@
-"""Prediction studies: Yuen et al. 2008 §III-D (Tuna et al. 2013 §VIII-C, Figs 12–13) and Tuna Fig. 8.
+"""Prediction studies: Yuen et al. 2008 §III-D (Tuna 2013 §VIII-C, Figs 12–13) and Tuna Fig. 8.
 
 ``noise``    mitral-1d at 60 bpm, 28 Hz, white noise σ_R ∈ [0.3, 3] mm; 30 s to initialise,
              then the RMS of the one-sample-ahead error against the truth over 10 s.
@@ -163,19 +163,21 @@ def _mitral_trial(param, study: str, trial_seed: np.random.SeedSequence, s: Stud
         slow = slow[slow <= INIT_S]
         fast = slow[-1] + np.arange(1.0, 40.0) * 60.0 / (YUEN_BPM + float(param))
         beats = np.concatenate([slow, fast[fast <= dur + 3.0]])
-        scn = make_scenario("mitral-1d", rng=rng_scn, beat_gain_std=0.0, beat_times=beats,
-                            duration=dur)
+        scn = make_scenario(
+            "mitral-1d", rng=rng_scn, beat_gain_std=0.0, beat_times=beats, duration=dur
+        )
     else:  # rr: a random stretch of the record's beats
         sigma = s.sigma_mm * MM
         beats = beat_times_from_annotations(param)
         span = dur + 5.0
         start = rng_scn.uniform(beats[0], max(beats[0], beats[-1] - span))
         sel = beats[(beats >= start - 3.0) & (beats <= start + span)]
-        scn = make_scenario("mitral-1d", rng=rng_scn, beat_gain_std=0.0, beat_times=sel - start,
-                            duration=dur)
+        scn = make_scenario(
+            "mitral-1d", rng=rng_scn, beat_gain_std=0.0, beat_times=sel - start, duration=dur
+        )
     stream = Sensor(YUEN_RATE, (WhiteNoise(sigma),), "3DUS").measure(scn.source, dur, rng_noise)
     truth = np.asarray(scn.source.position(stream.t)).reshape(len(stream), -1)
-    first = int(round(INIT_S * YUEN_RATE))
+    first = round(INIT_S * YUEN_RATE)
     out = {}
     for name in s.names:
         pred = _yuen_predictor(name, 1.0 / YUEN_RATE, sigma, study != "noise")
@@ -191,13 +193,14 @@ def _horizon_trial(param, study: str, trial_seed: np.random.SeedSequence, s: Stu
     rng_scn, rng_noise = (np.random.default_rng(c) for c in trial_seed.spawn(2))
     dur = HORIZON_WARM_S + HORIZON_EVAL_S
     scn = make_scenario(str(param), rng=rng_scn, duration=dur + 1.0)
-    sensor = sonomicrometry(SonomicrometrySettings(rate=1.0 / HORIZON_DT, outliers=None),
-                            dim=scn.dim)
+    sensor = sonomicrometry(
+        SonomicrometrySettings(rate=1.0 / HORIZON_DT, outliers=None), dim=scn.dim
+    )
     stream = sensor.measure(scn.source, dur, rng_noise)
     K = HORIZON_LEADS
     t_ext = stream.t[0] + HORIZON_DT * np.arange(len(stream) + K)
     truth = np.asarray(scn.source.position(t_ext)).reshape(t_ext.size, -1)
-    first = int(round(HORIZON_WARM_S / HORIZON_DT))
+    first = round(HORIZON_WARM_S / HORIZON_DT)
     out = {}
     for name in s.names:
         kw = {"source": scn.source} if name == "exact" else {}
@@ -263,8 +266,9 @@ def run_study(
             else:
                 rms = np.array([r["rms"] for r in per]) / MM
                 mx = np.array([r["max"] for r in per]) / MM
-                row.update(rms_mm=float(rms.mean()), rms_std_mm=float(rms.std()),
-                           max_mm=float(mx.mean()))
+                row.update(
+                    rms_mm=float(rms.mean()), rms_std_mm=float(rms.std()), max_mm=float(mx.mean())
+                )
             rows.append(row)
     settings = asdict(s)
     settings["predictors"] = list(s.names)
@@ -283,8 +287,12 @@ def _versions() -> dict:
 
     import rhmpc
 
-    return {"python": sys.version.split()[0], "numpy": np.__version__,
-            "scipy": scipy.__version__, "rhmpc": rhmpc.__version__}
+    return {
+        "python": sys.version.split()[0],
+        "numpy": np.__version__,
+        "scipy": scipy.__version__,
+        "rhmpc": rhmpc.__version__,
+    }
 
 
 _PARAM_LABEL = {"noise": "σ_R [mm]", "hr-step": "ΔHR [bpm]", "rr": "record", "horizon": "lead [ms]"}
@@ -302,7 +310,9 @@ def format_table(result: dict) -> str:
             lines.append(f"{scn}: RMS prediction error [mm] vs lead time")
             lines.append(f"{'lead [ms]':>10}" + "".join(f"{n:>{w}}" for n in names))
             for k, lead in enumerate(sub[names[0]]["lead_ms"]):
-                lines.append(f"{lead:>10.1f}" + "".join(f"{sub[n]['rms_mm'][k]:>{w}.3f}" for n in names))
+                lines.append(
+                    f"{lead:>10.1f}" + "".join(f"{sub[n]['rms_mm'][k]:>{w}.3f}" for n in names)
+                )
             lines.append("")
         return "\n".join(lines).rstrip()
     lines.append(f"mean RMS one-sample-ahead error [mm], {result['settings']['trials']} trials")
@@ -338,15 +348,20 @@ def plot_study(result: dict, path: str | Path) -> Path:
         fig, ax = plt.subplots(figsize=(6.5, 4.5))
         x = np.arange(len(params)) if study == "rr" else np.asarray(params, dtype=float)
         for n in names:
-            y = [next(r for r in rows if r["parameter"] == p and r["predictor"] == n)["rms_mm"]
-                 for p in params]
+            y = [
+                next(r for r in rows if r["parameter"] == p and r["predictor"] == n)["rms_mm"]
+                for p in params
+            ]
             ax.plot(x, y, marker="o", label=n)
         if study == "noise":
             ax.plot(x, x, "k--", lw=1, label="σ_R")
         if study == "rr":
             ax.set_xticks(x, [Path(p).name for p in params])
-        ax.set(xlabel=_PARAM_LABEL[study], ylabel="RMS one-sample-ahead error [mm]",
-               title=f"prediction study: {study} (28 Hz, mitral-1d)")
+        ax.set(
+            xlabel=_PARAM_LABEL[study],
+            ylabel="RMS one-sample-ahead error [mm]",
+            title=f"prediction study: {study} (28 Hz, mitral-1d)",
+        )
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=8)
     fig.tight_layout()

@@ -84,11 +84,11 @@ class LoopSettings:
 
     @property
     def ticks(self) -> int:
-        return int(round(self.duration / self.Ts))
+        return round(self.duration / self.Ts)
 
     @property
     def settling_ticks(self) -> int:
-        return int(round(self.settling / self.Ts))
+        return round(self.settling / self.Ts)
 
 
 def embed3(p: np.ndarray) -> np.ndarray:
@@ -197,6 +197,7 @@ def run_closed_loop(
     )
     observer = JointObserver(arm, robot.encoder_resolution, observer_settings)
     resolution = robot.encoder_resolution
+    inv_resolution = None if resolution is None else 1.0 / resolution
     newest = newest_arrived(np.asarray(stream.arrival, dtype=float), n, Ts)
     z_all = np.asarray(stream.z, dtype=float).reshape(len(stream.t), -1) - center
     t_all = np.asarray(stream.t, dtype=float)
@@ -205,7 +206,7 @@ def run_closed_loop(
     q_log = np.empty((n, nv))
     ref0 = np.empty((n, 3))
     tau_mpc_log = np.empty((n, nv))
-    tau_log = np.empty((n, nv))
+    tau_log = np.empty((n, nv))  # commanded: τ_mpc + cancellation, before the actuator clip
     tick_ns = np.empty(n, dtype=np.int64)
     n_updates = (n + ds - 1) // ds
     horizons = np.full((n_updates, N, d), np.nan)
@@ -236,23 +237,28 @@ def run_closed_loop(
                 np.add(anchor, h, out=ref)
             else:
                 ref[:, 0] = anchor[0] + h[:, 0]
-            q_meas = plant.q if resolution is None else np.round(plant.q / resolution) * resolution
+            q = plant.q
+            q_meas = q if resolution is None else np.rint(q * inv_resolution) * resolution
             x_hat = observer.correct(q_meas)
             u = controller.step(x_hat, ref)
             tau = u + cancel.torque(q_meas, x_hat[nv:])
             tick_ns[i] = clock() - t_start
             applied = plant.step(tau)
-            observer.predict(applied - (tau - u))
+            observer.predict(u + (applied - tau))  # the MPC torque that really acted
             q_log[i] = plant.q
             ref0[i] = ref[0]
             tau_mpc_log[i] = u
-            tau_log[i] = applied
+            tau_log[i] = tau
             if progress is not None and (i + 1) % 2000 == 0:
                 progress(i + 1)
     finally:
         if gc_was_enabled:
             gc.enable()
 
+    limit = robot.torque_limit
+    saturated = np.abs(tau_log) > limit
+    saturated_ticks = int(saturated.any(axis=1).sum())
+    tau_log = np.clip(tau_log, -limit, limit)  # what acted
     ee = np.empty((n, 3))
     data, fid = robot.create_data(), robot.ee_frame_id
     for i in range(n):
@@ -286,6 +292,6 @@ def run_closed_loop(
         tick_ns=tick_ns,
         horizon_error=horizon_error,
         controller_stats=stats,
-        saturated_ticks=plant.saturated_ticks,
+        saturated_ticks=saturated_ticks,
         predictor_counts=counts,
     )

@@ -43,6 +43,10 @@ _HEADER_FIELD = re.compile(
     r"^\s*(?P<name>[A-Za-z]+)\s*(?:(?:_|\[|\()\s*(?P<unit>[A-Za-zµ]+)\s*[\])]?)?\s*$")
 
 
+#: Times closer than this to a sample time count as that sample [s].
+SNAP = 1e-9
+
+
 class RecordingError(ValueError):
     """A recording file is missing, unreadable or malformed; the message names file and line."""
 
@@ -80,6 +84,10 @@ class RecordedMotion:
         """1 / median sample interval [Hz]."""
         return float(1.0 / np.median(np.diff(self.t)))
 
+    def starting_at(self, t0: float = 0.0) -> RecordedMotion:
+        """The same recording with its time axis shifted so that it starts at ``t0`` [s]."""
+        return RecordedMotion(self.t - self.t[0] + t0, self.z, self.name)
+
     def position(self, t: float | np.ndarray) -> np.ndarray:
         """p(t) [m]: shape (dim,) for a float, (n, dim) for an array; NaN where no data."""
         ts, scalar = as_time_array(t)
@@ -88,11 +96,12 @@ class RecordedMotion:
         w = ((ts - t0) / (t1 - t0))[:, None]
         with np.errstate(invalid="ignore"):
             out = (1.0 - w) * self.z[k] + w * self.z[k + 1]
-        out = np.where((ts == t0)[:, None], self.z[k], out)
-        out = np.where((ts == t1)[:, None], self.z[k + 1], out)
-        bad = (ts < self.t[0]) | (ts > self.t[-1])
-        bad |= self._missing[k] & (ts != t1)
-        bad |= self._missing[k + 1] & (ts != t0)
+        # A time within SNAP of a sample is that sample (resampling at the file's own rate).
+        at0, at1 = np.abs(ts - t0) <= SNAP, np.abs(ts - t1) <= SNAP
+        out = np.where(at0[:, None], self.z[k], np.where(at1[:, None], self.z[k + 1], out))
+        bad = (ts < self.t[0] - SNAP) | (ts > self.t[-1] + SNAP)
+        bad |= self._missing[k] & ~at1
+        bad |= self._missing[k + 1] & ~at0
         out[bad] = np.nan
         return out[0] if scalar else out
 

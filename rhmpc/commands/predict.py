@@ -32,16 +32,28 @@ def register(sub: argparse._SubParsersAction) -> None:
         "versus lead time (Tuna Fig. 8) on sonomicrometry replicas at 7.5 ms.",
     )
     p.add_argument("--study", required=True, choices=STUDIES, help="which study")
-    p.add_argument("--trials", type=int, default=None,
-                   help="Monte Carlo trials per value (default 100; horizon 10)")
+    p.add_argument(
+        "--trials",
+        type=int,
+        default=None,
+        help="Monte Carlo trials per value (default 100; horizon 10)",
+    )
     p.add_argument("--jobs", type=int, default=1, help="worker processes (default 1; 0 = all CPUs)")
     p.add_argument("--seed", type=int, default=0, help="study seed (default 0)")
-    p.add_argument("--predictors", default=None,
-                   help="comma-separated predictor names (default: the study's set)")
-    p.add_argument("--noise-mm", default=None, help="σ_R values for --study noise [mm], e.g. 0.3,1,3")
+    p.add_argument(
+        "--predictors",
+        default=None,
+        help="comma-separated predictor names (default: the study's set)",
+    )
+    p.add_argument(
+        "--noise-mm", default=None, help="σ_R values for --study noise [mm], e.g. 0.3,1,3"
+    )
     p.add_argument("--delta-bpm", default=None, help="ΔHR values for --study hr-step [bpm]")
-    p.add_argument("--records", default=None,
-                   help="comma-separated PhysioNet records for --study rr (default: ../shared/data)")
+    p.add_argument(
+        "--records",
+        default=None,
+        help="comma-separated PhysioNet records for --study rr (default: ../shared/data)",
+    )
     p.add_argument("--scenarios", default=None, help="scenarios for --study horizon")
     p.add_argument("--json", action="store_true", help="print machine-readable JSON")
     p.add_argument("--out", type=Path, default=None, help="write the result JSON to this file")
@@ -58,7 +70,9 @@ def _settings(args: argparse.Namespace) -> StudySettings:
         names = tuple(n.strip() for n in args.predictors.split(",") if n.strip())
         bad = [n for n in names if n not in PREDICTORS]
         if bad:
-            raise UsageError(f"unknown predictor(s) {', '.join(bad)}; valid: {', '.join(PREDICTORS)}")
+            raise UsageError(
+                f"unknown predictor(s) {', '.join(bad)}; valid: {', '.join(PREDICTORS)}"
+            )
         if "exact" in names and args.study != "horizon":
             raise UsageError("`exact` only makes sense in --study horizon")
         kw["predictors"] = names
@@ -71,8 +85,9 @@ def _settings(args: argparse.Namespace) -> StudySettings:
         raise UsageError(str(exc)) from None
     if args.records:
         recs = tuple(r.strip() for r in args.records.split(",") if r.strip())
-        missing = [r for r in recs if not Path(r).with_suffix(".atr").exists()
-                   and not Path(r).is_dir()]
+        missing = [
+            r for r in recs if not Path(r).with_suffix(".atr").exists() and not Path(r).is_dir()
+        ]
         if missing:
             raise UsageError(f"record(s) not found: {', '.join(missing)}")
         kw["records"] = recs
@@ -99,12 +114,17 @@ def run(args: argparse.Namespace) -> int:
     if sys.stderr.isatty():
         from tqdm import tqdm
 
-        bar = tqdm(total=len(s.parameters()) * s.trials, desc=f"predict {s.study}",
-                   unit="trial", file=sys.stderr)
+        bar = tqdm(
+            total=len(s.parameters()) * s.trials,
+            desc=f"predict {s.study}",
+            unit="trial",
+            file=sys.stderr,
+        )
 
         def progress(done: int, total: int) -> None:
             bar.update(done - bar.n)
     else:
+
         def progress(done: int, total: int) -> None:
             if done == total or done % max(1, total // 10) == 0:
                 print(f"rhmpc predict: {done}/{total} trials", file=sys.stderr, flush=True)
@@ -121,6 +141,9 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(result, indent=2))
     else:
         print(format_table(result))
-        print(f"({result['elapsed_s']:.1f} s, {jobs} job(s); default predictors "
-              f"{','.join(DEFAULT_PREDICTORS[s.study])})", file=sys.stderr)
+        print(
+            f"({result['elapsed_s']:.1f} s, {jobs} job(s); default predictors "
+            f"{','.join(DEFAULT_PREDICTORS[s.study])})",
+            file=sys.stderr,
+        )
     return 0

@@ -21,7 +21,8 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--robot", help="robot name (rhmpc robots); default phantom")
     p.add_argument("--sensor", help="sonomicrometry (default), ultrasound, ideal; 'recorded' "
                    "uses a --data file's samples as they are")
-    p.add_argument("--duration", type=float, help=f"simulated seconds (default {DEFAULT_DURATION:g})")
+    p.add_argument("--duration", type=float,
+                   help=f"simulated seconds (default {DEFAULT_DURATION:g})")
     p.add_argument("--settling", type=float,
                    help=f"seconds excluded from the metrics (default {DEFAULT_SETTLING:g})")
     p.add_argument("--ground-truth", choices=("recorded", "true"),

@@ -6,15 +6,19 @@ import numpy as np
 
 
 class HarmonicSource:
-    """p(t) = offset + Σ_i amp[:, i] sin(2π(i+1) f t + phase[:, i]), in metres; shape (d,) or (n, d)."""
+    """p(t) = offset + Σ_i amp[:, i] sin(2π(i+1) f t + phase[:, i]) [m]; (d,) or (n, d)."""
 
     def __init__(self, f_hz=1.2, amp=None, phase=None, offset=None, breathing=None):
         self.f = f_hz
         self.amp = np.asarray(
-            amp if amp is not None else [[4e-3, 1.5e-3, 0.7e-3], [2e-3, 1e-3, 0.3e-3], [3e-3, 0.5e-3, 0.2e-3]]
+            amp
+            if amp is not None
+            else [[4e-3, 1.5e-3, 0.7e-3], [2e-3, 1e-3, 0.3e-3], [3e-3, 0.5e-3, 0.2e-3]]
         )
         d, m = self.amp.shape
-        self.phase = np.asarray(phase if phase is not None else np.linspace(0.3, 2.5, d * m).reshape(d, m))
+        self.phase = np.asarray(
+            phase if phase is not None else np.linspace(0.3, 2.5, d * m).reshape(d, m)
+        )
         self.offset = np.asarray(offset if offset is not None else [0.01, 0.2, 0.05][:d])
         self.breathing = breathing  # (f_hz, amplitude (d,)) or None
 

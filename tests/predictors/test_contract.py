@@ -1,4 +1,4 @@
-"""Every predictor on the `Predictor` contract: shapes, missing samples, dropouts, registry errors."""
+"""Every predictor on the `Predictor` contract: shapes, missing samples, dropouts, registry."""
 
 from __future__ import annotations
 
@@ -130,7 +130,9 @@ def test_last_cycle_period_from_signal_and_from_rr():
     for zk in z:
         q.update(zk)
     assert q.period * dt == pytest.approx(1 / 1.2)
-    np.testing.assert_allclose(q.predict(3), SRC.position(t[-1] + dt * np.arange(1, 4)), atol=0.3e-3)
+    np.testing.assert_allclose(
+        q.predict(3), SRC.position(t[-1] + dt * np.arange(1, 4)), atol=0.3e-3
+    )
 
 
 def test_caller_buffers_are_not_kept_by_reference():

@@ -35,8 +35,16 @@ def test_ekf_recovers_heart_rate_and_amplitudes(d):
 def test_ekf_nis_within_chi2_bounds_on_its_own_model():
     dt, m, d = 1 / 28, 3, 1
     p = make_predictor(
-        "ekf", dt, params="yuen2008", harmonics=m, sigma_r=0.5e-3, q=1e-4 * 1e-6, q_phase=1e-5,
-        q_omega=1e-4, q_rate_hz=None, dim=d,
+        "ekf",
+        dt,
+        params="yuen2008",
+        harmonics=m,
+        sigma_r=0.5e-3,
+        q=1e-4 * 1e-6,
+        q_phase=1e-5,
+        q_omega=1e-4,
+        q_rate_hz=None,
+        dim=d,
     )
     rng = np.random.default_rng(6)
     x = np.zeros(p.nx)
@@ -94,3 +102,15 @@ def test_dual_ekf_tracks_breathing_plus_heartbeat():
     err = forecast_errors(run(p, z, 4), truth, 4)
     assert np.sqrt(np.mean(err[-int(10 / dt) :] ** 2)) < 0.15e-3
     assert abs(p.frequencies_hz[1] - 1.5) < 0.01
+
+
+@pytest.mark.parametrize("d", [1, 2, 3, 5])
+def test_spd_inverse_matches_numpy_and_rejects_indefinite(d):
+    from predictors.ekf_fourier import spd_inverse
+
+    A = np.random.default_rng(d).random((d, d))
+    S = A @ A.T + np.eye(d)
+    np.testing.assert_allclose(spd_inverse(S), np.linalg.inv(S), rtol=1e-12, atol=1e-14)
+    bad = np.eye(d)
+    bad[-1, -1] = -1.0
+    assert spd_inverse(bad) is None

@@ -12,7 +12,9 @@ from tests.predictors.helpers import HarmonicSource, forecast_errors, run
 
 def _regression(z, N, lead=1):
     """Rows x_n = [z_{n−lead}; …; z_{n−lead−N+1}] and targets z_n."""
-    X = np.array([z[n - lead - N + 1 : n - lead + 1][::-1].reshape(-1) for n in range(N + lead - 1, len(z))])
+    X = np.array(
+        [z[n - lead - N + 1 : n - lead + 1][::-1].reshape(-1) for n in range(N + lead - 1, len(z))]
+    )
     Y = z[N + lead - 1 :]
     return X, Y
 
@@ -24,7 +26,13 @@ def test_lambda_one_equals_batch_least_squares(correlated):
     z = rng.standard_normal((T, d)).cumsum(axis=0) * 0.1 + rng.standard_normal((T, d))
     delta = 1e-3
     p = make_predictor(
-        "one-step", 0.01, order=N, forgetting_factor=1.0, delta=delta, init="zeros", correlated=correlated
+        "one-step",
+        0.01,
+        order=N,
+        forgetting_factor=1.0,
+        delta=delta,
+        init="zeros",
+        correlated=correlated,
     )
     for zk in z:
         p.update(zk)
@@ -84,7 +92,9 @@ def test_one_step_matches_padasip_rls():
     ref = pa.filters.FilterRLS(N, mu=lam, eps=eps, w="zeros")
     for n, zn in enumerate(z):
         ours.update([zn])
-        if n >= N:  # padasip: a-priori error e = d − wᵀx, R ← (R − R x xᵀ R/(μ + xᵀRx))/μ, w += R x e
+        if (
+            n >= N
+        ):  # padasip: a-priori error e = d − wᵀx, R ← (R − R x xᵀ R/(μ + xᵀRx))/μ, w += R x e
             ref.adapt(zn, z[n - N : n][::-1].copy())
     np.testing.assert_allclose(ours.weights[0], ref.w, rtol=0, atol=1e-8 * np.abs(ref.w).max())
 

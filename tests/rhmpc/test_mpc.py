@@ -117,8 +117,7 @@ def test_unblocked_first_input_equals_backward_riccati(arm, point_weights):
         u_lq = riccati_first_input(arm, Q, R, Rd, x, ref, u_prev)
         assert np.all(np.abs(u_lq) < 0.5 * mpc.u_max)  # the bounds are inactive
         assert _rel(mpc.unconstrained(x, ref, u_prev), u_lq) < 1e-6  # the QP data
-        mpc.reset()
-        mpc._u_prev[:] = u_prev
+        mpc.reset(u_prev)
         u = mpc.step(x, ref)
         assert mpc.stats.status == "solved"
         assert _rel(u, u_lq) < 1e-6  # the OSQP solution
@@ -132,7 +131,7 @@ def test_blocked_first_input_equals_blocked_least_squares(arm):
     x, ref, u_prev = _small_problem(arm, rng)
     u_ls = blocked_lstsq_first_input(arm, settings.blocks, Q, R, Rd, x, ref, u_prev)
     assert _rel(mpc.unconstrained(x, ref, u_prev), u_ls) < 1e-6
-    mpc._u_prev[:] = u_prev
+    mpc.reset(u_prev)
     assert _rel(mpc.step(x, ref), u_ls) < 1e-6
     # …and blocking really changes the problem: the unblocked solution differs.
     u_free = riccati_first_input(arm, Q, R, Rd, x, ref, u_prev)

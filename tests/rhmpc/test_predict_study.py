@@ -19,8 +19,13 @@ def _rows(result):
 
 
 def test_noise_study_reproduces_yuen_ordering():
-    s = StudySettings("noise", trials=3, seed=1, noise_mm=(1.3,),
-                      predictors=("ekf", "ar", "fading-ar", "last-cycle"))
+    s = StudySettings(
+        "noise",
+        trials=3,
+        seed=1,
+        noise_mm=(1.3,),
+        predictors=("ekf", "ar", "fading-ar", "last-cycle"),
+    )
     rows = _rows(run_study(s))
     ekf, ar, far, lc = (rows[1.3, n]["rms_mm"] for n in ("ekf", "ar", "fading-ar", "last-cycle"))
     assert ekf < ar < far < 1.3  # Yuen Fig. 3A: all three below σ_R, EKF best, AR < fading AR
@@ -28,8 +33,9 @@ def test_noise_study_reproduces_yuen_ordering():
 
 
 def test_hr_step_fading_ar_beats_ar_for_large_steps():
-    s = StudySettings("hr-step", trials=2, seed=2, delta_bpm=(10.0,),
-                      predictors=("ekf", "ar", "fading-ar"))
+    s = StudySettings(
+        "hr-step", trials=2, seed=2, delta_bpm=(10.0,), predictors=("ekf", "ar", "fading-ar")
+    )
     rows = _rows(run_study(s))
     assert rows[10.0, "fading-ar"]["rms_mm"] < rows[10.0, "ar"]["rms_mm"]
     assert rows[10.0, "ekf"]["rms_mm"] < 1.3
@@ -42,8 +48,13 @@ def test_studies_are_reproducible_and_parallel_equals_serial():
 
 
 def test_horizon_study_error_grows_with_lead_and_exact_is_zero():
-    s = StudySettings("horizon", trials=1, seed=4, scenarios=("fixed-a2-top",),
-                      predictors=("generalized", "hold", "exact"))
+    s = StudySettings(
+        "horizon",
+        trials=1,
+        seed=4,
+        scenarios=("fixed-a2-top",),
+        predictors=("generalized", "hold", "exact"),
+    )
     result = run_study(s)
     rows = _rows(result)
     hold = np.array(rows["fixed-a2-top", "hold"]["rms_mm"])
@@ -55,8 +66,13 @@ def test_horizon_study_error_grows_with_lead_and_exact_is_zero():
 
 @pytest.mark.skipif(not (DATA / "1003" / "1003.atr").exists(), reason="../shared/data/1003 absent")
 def test_rr_study_runs_on_a_physionet_record():
-    s = StudySettings("rr", trials=1, seed=5, records=(str(DATA / "1003" / "1003"),),
-                      predictors=("ekf", "last-cycle"))
+    s = StudySettings(
+        "rr",
+        trials=1,
+        seed=5,
+        records=(str(DATA / "1003" / "1003"),),
+        predictors=("ekf", "last-cycle"),
+    )
     rows = _rows(run_study(s))
     assert all(np.isfinite(r["rms_mm"]) for r in rows.values())
     assert str(DATA / "1003" / "1003") in default_records()
@@ -64,17 +80,48 @@ def test_rr_study_runs_on_a_physionet_record():
 
 def test_cli_predict_writes_json_table_and_plot(tmp_path, capsys):
     out, png = tmp_path / "r.json", tmp_path / "r.png"
-    code = main(["predict", "--study", "noise", "--trials", "1", "--noise-mm", "0.3,3",
-                 "--predictors", "ar,last-cycle", "--seed", "7", "--out", str(out),
-                 "--plot", str(png)])
+    code = main(
+        [
+            "predict",
+            "--study",
+            "noise",
+            "--trials",
+            "1",
+            "--noise-mm",
+            "0.3,3",
+            "--predictors",
+            "ar,last-cycle",
+            "--seed",
+            "7",
+            "--out",
+            str(out),
+            "--plot",
+            str(png),
+        ]
+    )
     assert code == 0
     table = capsys.readouterr().out
     assert "last-cycle" in table and "σ_R" in table
     data = json.loads(out.read_text())
     assert data["study"] == "noise" and len(data["rows"]) == 4
     assert png.stat().st_size > 0
-    assert main(["predict", "--study", "noise", "--trials", "1", "--noise-mm", "1",
-                 "--predictors", "hold", "--json"]) == 0
+    assert (
+        main(
+            [
+                "predict",
+                "--study",
+                "noise",
+                "--trials",
+                "1",
+                "--noise-mm",
+                "1",
+                "--predictors",
+                "hold",
+                "--json",
+            ]
+        )
+        == 0
+    )
     assert json.loads(capsys.readouterr().out)["rows"][0]["predictor"] == "hold"
 
 

@@ -1,4 +1,4 @@
-"""Small stand-ins for loop tests: a harmonic heart, an ideal stream and an unconstrained LQ tracker.
+"""Stand-ins for loop tests: a harmonic heart, an ideal stream, an unconstrained LQ tracker.
 
 They are independent of the project's heart models and MPC, so the loop's plumbing is tested on
 its own.
@@ -43,7 +43,7 @@ class LQTracker:
     """Unconstrained finite-horizon LQ tracking: u0 of argmin Σ‖y_k − r_k‖²/s² + ‖u_k‖²·w."""
 
     def __init__(self, arm, N: int = 50, position_scale: float = 1e-4, effort: float = 1e-2):
-        nx, nu = arm.B.shape
+        _nx, nu = arm.B.shape
         Phi = np.vstack([arm.C @ np.linalg.matrix_power(arm.A, k) for k in range(1, N + 1)])
         Gam = np.zeros((3 * N, nu * N))
         for k in range(1, N + 1):

@@ -118,7 +118,7 @@ def test_staircase_rates_are_spectral_peaks(replicas: dict[str, Scenario], name:
         band = (f > level - 0.05) & (f < level + 0.05)
         i = np.argmax(total[band])
         assert abs(f[band][i] - level) < 0.02, (level, f[band][i])
-        assert total[band][i] > 3 * floor, f"{level} Hz not a visible peak"
+        assert total[band][i] > 5 * floor, f"{level} Hz not a visible peak"
 
 
 def test_staircase_profile_shape() -> None:
@@ -169,7 +169,7 @@ def test_position_shapes_scalar_and_vector() -> None:
 
 def test_positions_are_metres_and_continuous() -> None:
     src = make_scenario("varying-a1-top").source
-    t = np.arange(0, 251, 1 / 2000)
+    t = np.arange(30, 130, 1 / 2000)  # the climb, the top and the first steps down
     p = src.position(t)
     assert np.max(np.abs(p)) < 0.02  # centimetres, not millimetres
     step = np.max(np.abs(np.diff(p, axis=0)))

@@ -88,7 +88,7 @@ def test_nan_laden_spiky_stream_never_gives_nan_torque(phantom, name):
 
 
 def test_scripted_solver_failures_are_survived_and_counted(phantom):
-    robot, arm = phantom
+    _robot, arm = phantom
     mpc = RecedingHorizonMPC(arm, MPCSettings())
     mpc.force_failures(40)
     result = run_with(phantom, lambda truth: ExactReference(truth, SHORT.horizon), controller=mpc)

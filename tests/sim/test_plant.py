@@ -68,7 +68,6 @@ def test_torque_is_clipped_to_actuator_limits(phantom):
     plant = ArmPlant(phantom, TS)
     applied = plant.step(np.array([10.0, -10.0, 0.0]))
     np.testing.assert_allclose(applied, [phantom.torque_limit[0], -phantom.torque_limit[1], 0.0])
-    assert plant.saturated_ticks == 1
 
 
 def test_exact_cancellation_holds_the_arm_still(phantom):

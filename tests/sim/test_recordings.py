@@ -152,3 +152,16 @@ def test_save_recording_writes_missing_as_empty(tmp_path: Path) -> None:
     assert path.read_text().splitlines()[2] == "0.100000000,,,"
     back = load_recording(path)
     np.testing.assert_allclose(back.z, z, atol=1e-12)
+
+
+def test_resampling_at_own_rate_keeps_every_sample(tmp_path: Path) -> None:
+    """Times computed as t0 + k/rate hit the file's samples despite rounding (no lost data)."""
+    lines = ["t,x"] + [f"{100 + k / 10:.1f},{'' if k == 1 else k}" for k in range(40)]
+    rec = load_recording(_write(tmp_path, "\n".join(lines) + "\n"))
+    t = 100 + np.arange(40) / 10
+    p = rec.position(t)[:, 0]
+    assert np.isnan(p[1]) and np.isnan(rec.position(100.05)).all()
+    np.testing.assert_allclose(np.delete(p, 1), np.delete(np.arange(40.0), 1) * 1e-3)
+    moved = rec.starting_at(0.0)
+    np.testing.assert_allclose(moved.t[:3], [0.0, 0.1, 0.2])
+    np.testing.assert_allclose(moved.position(0.2), [2e-3])
