@@ -1,0 +1,97 @@
+"""Quadratic interpolation of the predictor's points into the N control-rate references."""
+
+import numpy as np
+import pytest
+
+from rhmpc.reference import ExactReference, PredictedReference, quadratic_weights
+
+TS, DS, N = 0.5e-3, 15, 50
+
+
+class Scripted:
+    """A 'predictor' that knows the signal f(t): its forecasts are exact at its own grid."""
+
+    def __init__(self, f, dt=DS * TS):
+        self.f, self.dt = f, dt
+        self.reset()
+
+    def reset(self):
+        self.t, self.calls = None, []
+
+    def update(self, z):
+        self.t = self.t + self.dt if self.t is not None else 0.0
+        if z is not None:
+            self.t = z[1]  # the test passes the sample time in the 2nd component
+
+    def predict(self, steps):
+        self.calls.append(steps)
+        t = self.t + self.dt * np.arange(1, steps + 1)
+        return np.column_stack([self.f(t), t])
+
+
+def test_weights_reproduce_quadratics_exactly():
+    s = np.linspace(-0.5, 6.5, 57)
+    m, w = quadratic_weights(s, 6)
+    nodes = 3.0 - 2.0 * np.arange(6) + 0.7 * np.arange(6) ** 2
+    got = w[:, 0] * nodes[m] + w[:, 1] * nodes[m + 1] + w[:, 2] * nodes[m + 2]
+    np.testing.assert_allclose(got, 3.0 - 2.0 * s + 0.7 * s**2, atol=1e-12)
+    with pytest.raises(ValueError):
+        quadratic_weights(s, 2)
+
+
+def build(f, latency_ticks=0, points=4):
+    pred = Scripted(f)
+    ref = PredictedReference(pred, TS, N, DS, points)
+    for k in range(4):
+        tick = k * DS
+        stamp = (tick - latency_ticks) * TS
+        ref.refresh(tick, np.array([f(stamp), stamp]), stamp)
+    return ref, pred, 3 * DS
+
+
+def test_quadratic_signal_is_reproduced_over_every_tick_of_the_cycle():
+    f = lambda t: 1e-3 + 0.2 * t - 3.0 * t**2  # noqa: E731
+    ref, _, tick0 = build(f)
+    for tick in range(tick0, tick0 + DS):
+        t = (tick + np.arange(1, N + 1)) * TS
+        np.testing.assert_allclose(ref.horizon(tick)[:, 0], f(t), atol=1e-15)
+
+
+def test_heart_like_sinusoid_is_interpolated_within_a_micrometre():
+    f = lambda t: 4e-3 * np.sin(2 * np.pi * 1.66 * t)  # noqa: E731
+    ref, _, tick0 = build(f)
+    worst = max(
+        np.abs(ref.horizon(tick)[:, 0] - f((tick + np.arange(1, N + 1)) * TS)).max()
+        for tick in range(tick0, tick0 + DS)
+    )
+    assert worst < 1e-6
+
+
+def test_latency_extends_the_forecast():
+    f = lambda t: 2.0 * t  # noqa: E731
+    ref, pred, tick0 = build(f, latency_ticks=136)  # 68 ms ultrasound latency
+    assert pred.calls[-1] == 4 + int(np.ceil(136 / DS))
+    t = (tick0 + np.arange(1, N + 1)) * TS
+    np.testing.assert_allclose(ref.horizon(tick0)[:, 0], f(t), atol=1e-12)
+
+
+def test_missing_samples_keep_a_finite_reference_and_none_before_data():
+    f = lambda t: np.sin(t)  # noqa: E731
+    ref = PredictedReference(Scripted(f), TS, N, DS)
+    ref.refresh(0, None, 0.0)
+    assert ref.horizon(0) is None
+    ref.refresh(DS, np.array([f(DS * TS), DS * TS]), DS * TS)
+    ref.refresh(2 * DS, None, 2 * DS * TS)
+    h = ref.horizon(2 * DS)
+    assert h.shape == (N, 2) and np.all(np.isfinite(h))
+
+
+def test_predictor_period_must_match():
+    with pytest.raises(ValueError, match="downsample"):
+        PredictedReference(Scripted(np.sin, dt=0.01), TS, N, DS)
+
+
+def test_exact_reference_slices_the_truth():
+    truth = np.arange(300.0)[:, None] * np.ones(3)
+    ref = ExactReference(truth, N)
+    np.testing.assert_array_equal(ref.horizon(10)[:, 0], np.arange(11, 11 + N))
