@@ -138,6 +138,7 @@ class DualFourierEKF(Predictor):
         self._w_lo, self._w_hi = (_TWO_PI * f for f in s.omega_limits_hz)
         self.x = np.zeros(self.nx)
         self.P = np.zeros((self.nx, self.nx))
+        self._Pdiag = np.einsum("ii->i", self.P)  # writable view
         self._coef = self.x[: d * k].reshape(d, k)
         self._H = np.zeros((d, self.nx))
         self._Hblk = np.einsum("aaj->aj", self._H[:, : d * k].reshape(d, d, k))
@@ -145,10 +146,16 @@ class DualFourierEKF(Predictor):
 
     def _basis(self, th_r: np.ndarray, th_c: np.ndarray) -> np.ndarray:
         """[sin hθ_r, cos hθ_r, 1, sin hθ_c, cos hθ_c] for phases of shape (K,) → (K, k)."""
+        hr, hc = self._hr.size, self._hc.size
+        out = np.empty((th_r.shape[0], self.k))
         pr = np.multiply.outer(th_r, self._hr)
         pc = np.multiply.outer(th_c, self._hc)
-        one = np.ones((pr.shape[0], 1))
-        return np.hstack([np.sin(pr), np.cos(pr), one, np.sin(pc), np.cos(pc)])
+        np.sin(pr, out=out[:, :hr])
+        np.cos(pr, out=out[:, hr : 2 * hr])
+        out[:, 2 * hr] = 1.0
+        np.sin(pc, out=out[:, 2 * hr + 1 : 2 * hr + 1 + hc])
+        np.cos(pc, out=out[:, 2 * hr + 1 + hc :])
+        return out
 
     def _update(self, z: np.ndarray) -> None:
         s = self.settings
@@ -157,7 +164,8 @@ class DualFourierEKF(Predictor):
             self._coef[:, 2 * s.respiratory_harmonics] = z
             self.x[self.iwr] = _TWO_PI * s.respiratory_hz
             self.x[self.iwc] = _TWO_PI * s.cardiac_hz
-            self.P[:] = np.diag(self._p0)
+            self.P[:] = 0.0
+            self._Pdiag[:] = self._p0
             self.ready = True
             return
         self._time_update()
@@ -204,7 +212,7 @@ class DualFourierEKF(Predictor):
         for it, iw in ((self.itr, self.iwr), (self.itc, self.iwc)):  # F P Fᵀ, F = I + Δt e_θ e_ωᵀ
             P[it, :] += dt * P[iw, :]
             P[:, it] += dt * P[:, iw]
-        P[np.diag_indices_from(P)] += self._q
+        self._Pdiag += self._q
 
     def _missing(self) -> None:
         if self.ready:

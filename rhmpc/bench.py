@@ -100,15 +100,20 @@ class GainTick:
             return np.zeros_like(self._k0)
         u = self._K @ p
         u += self._k0
-        return np.clip(u, self._lo, self._hi, out=u)
+        np.maximum(u, self._lo, out=u)
+        return np.minimum(u, self._hi, out=u)
 
 
 class ExactTick:
     """Reference 2: the same QP solved exactly by DAQP (active set, hot-started)."""
 
     def __init__(self, mpc: RecedingHorizonMPC) -> None:
-        import daqp
-
+        try:
+            import daqp
+        except ImportError:
+            raise ValueError(
+                "the exact reference needs the 'daqp' package (pip install '.[test]')"
+            ) from None
         qp = mpc.qp
         if qp.param_bounds:
             raise ValueError("the exact reference supports torque bounds only (no joint bounds)")
@@ -116,6 +121,7 @@ class ExactTick:
         self._p = np.zeros(qp.npar)
         self._f = np.empty(qp.nz)
         self._nx, self._nr, self._nu = qp.nx, qp.N * qp.ny, qp.nu
+        self._lo = -qp.u_max
         self._model = daqp.Model()
         # All constraints are simple bounds on ẑ: DAQP takes them without a constraint matrix.
         exitflag, _ = self._model.setup(
@@ -138,7 +144,8 @@ class ExactTick:
         z, _, exitflag, info = self._model.solve()
         self.exitflag, self.iterations, self.zhat = exitflag, info["iterations"], z
         u = z[: self._nu] * self._qp.u_max
-        return np.clip(u, -self._qp.u_max, self._qp.u_max, out=u)
+        np.maximum(u, self._lo, out=u)
+        return np.minimum(u, self._qp.u_max, out=u)
 
 
 def _pct(values: np.ndarray) -> dict[str, float]:

@@ -21,7 +21,7 @@ from rhmpc import __version__
 from rhmpc.errors import UsageError
 
 #: Subcommand modules, in the order ``rhmpc --help`` lists them.
-COMMANDS: tuple[str, ...] = ("simulate", "compare", "robots", "data", "bench", "predict")
+COMMANDS: tuple[str, ...] = ("simulate", "compare", "robots", "data", "bench", "predict", "tune")
 
 
 def build_parser() -> argparse.ArgumentParser:

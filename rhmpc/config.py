@@ -94,6 +94,8 @@ class MPCSettings:
         Rho is only changed when the new estimate differs by more than this factor [-].
     check_termination : int
         OSQP checks its residuals every this many iterations [-].
+    check_dualgap : bool
+        OSQP also requires the duality gap to be below the tolerance to stop.
     polish : bool
         OSQP solution polishing (an extra reduced KKT factorisation per tick).
     scaling : int
@@ -127,9 +129,10 @@ class MPCSettings:
     adaptive_rho_interval: int = 25
     adaptive_rho_tolerance: float = 5.0
     check_termination: int = 5
+    check_dualgap: bool = True
     polish: bool = False
     scaling: int = 0
-    warm_start: str = "shift"
+    warm_start: str = "shift_primal"
     plan_fallback_ticks: int = 10
 
     def __post_init__(self) -> None:

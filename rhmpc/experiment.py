@@ -227,7 +227,8 @@ def heart_source(config: RunConfig, rng: np.random.Generator):
         return source, f"file:{Path(config.data).name}", recording.duration, recording
     overrides = {"record": config.rr} if config.rr else {}
     scenario = make_scenario(config.scenario, rng=rng, **overrides)
-    return scenario.source, scenario.name, scenario.duration, scenario
+    label = scenario.name + (f"+rr:{Path(config.rr).name}" if config.rr else "")
+    return scenario.source, label, scenario.duration, scenario
 
 
 def build_stream(config: RunConfig, source, origin, duration: float, rng: np.random.Generator):

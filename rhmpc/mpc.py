@@ -166,6 +166,7 @@ class RecedingHorizonMPC:
             max_iter=s.max_iter, rho=s.rho,
             adaptive_rho=s.adaptive_rho, adaptive_rho_interval=s.adaptive_rho_interval,
             adaptive_rho_tolerance=s.adaptive_rho_tolerance, check_termination=s.check_termination,
+            check_dualgap=s.check_dualgap,
             polishing=s.polish, scaling=s.scaling, warm_starting=s.warm_start != "none", **extra,
         )
         # The public OSQP.solve() wraps every result in namespaces (~10 µs per call); the

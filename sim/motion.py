@@ -160,6 +160,8 @@ class SyntheticHeartMotion:
         self.beat_gains = np.asarray(beat_gains, dtype=float).reshape(-1, self.dim)
         self.first_beat = int(first_beat)
         self.offset = np.zeros(self.dim) if offset is None else np.asarray(offset, dtype=float)
+        self._heart = _Series(self.heart)
+        self._breath = _Series(self.breathing)
 
     def scaled(self, factor: float | np.ndarray) -> SyntheticHeartMotion:
         """The same motion with its displacement about p₀ multiplied by ``factor`` (per axis)."""
@@ -177,17 +179,20 @@ class SyntheticHeartMotion:
     def breathing_motion(self, t: float | np.ndarray) -> np.ndarray:
         """The breathing part b(t) [m], shape like position."""
         ts, scalar = as_time_array(t)
-        out = _fourier(self.breathing, self.breathing_rate * ts)
+        out = self._breath(self.breathing_rate * ts)
         return out[0] if scalar else out
 
     def _heartbeat(self, ts: np.ndarray) -> np.ndarray:
         phi = self.phase(ts)
-        h = _fourier(self.heart, phi)
-        beats = self.first_beat + np.arange(self.beat_gains.shape[0], dtype=float)
-        if beats.size > 1:
-            # Beat i's gain applies at mid-beat φ = i + ½; linear in φ in between.
-            g = np.stack([np.interp(phi, beats + 0.5, self.beat_gains[:, d])
-                          for d in range(self.dim)], axis=1)
+        h = self._heart(phi)
+        n_beats = self.beat_gains.shape[0]
+        if n_beats > 1:
+            # Beat i's gain applies at mid-beat φ = i + ½, linear in φ in between, held
+            # beyond the first and last beats.
+            u = np.clip(phi - self.first_beat - 0.5, 0.0, n_beats - 1.0)
+            i = np.minimum(u.astype(np.int64), n_beats - 2)
+            w = (u - i)[:, None]
+            g = (1.0 - w) * self.beat_gains[i] + w * self.beat_gains[i + 1]
         else:
             g = self.beat_gains[0]
         mod = 1.0 + self.coupling * np.cos(2 * np.pi * self.breathing_rate * ts
@@ -197,19 +202,39 @@ class SyntheticHeartMotion:
     def position(self, t: float | np.ndarray) -> np.ndarray:
         """p(t) [m]: shape (dim,) for a float, (n, dim) for an array of n times."""
         ts, scalar = as_time_array(t)
-        out = (self.offset + _fourier(self.breathing, self.breathing_rate * ts)
-               + self._heartbeat(ts))
+        out = self.offset + self._breath(self.breathing_rate * ts) + self._heartbeat(ts)
         return out[0] if scalar else out
+
+
+class _Series:
+    """Re Σ_k c_{d,k} e^{i2πk·cycles} with the coefficients prepared once."""
+
+    def __init__(self, coef: np.ndarray) -> None:
+        self.coef = coef
+        self.re = np.ascontiguousarray(coef.real)
+        self.im = np.ascontiguousarray(coef.imag)
+        self.re_t = np.ascontiguousarray(coef.real.T)
+        self.im_t = np.ascontiguousarray(coef.imag.T)
+        self.k = np.arange(1, coef.shape[1] + 1, dtype=float)
+
+    def __call__(self, cycles: np.ndarray) -> np.ndarray:
+        if cycles.shape[0] < 2048 or self.k.size < 4:
+            arg = np.outer(2 * np.pi * np.mod(cycles, 1.0), self.k)
+            return np.cos(arg) @ self.re_t - np.sin(arg) @ self.im_t
+        return _fourier(self.coef, cycles)
 
 
 def _fourier(coef: np.ndarray, cycles: np.ndarray) -> np.ndarray:
     """Re Σ_k c_{d,k} e^{i2πk·cycles} for every axis d: shape (n, dim).
 
-    cos(kx) and sin(kx) come from the angle-addition recurrence, so only one cos/sin pair is
-    evaluated per sample.
+    For long inputs cos(kx) and sin(kx) come from the angle-addition recurrence, so only one
+    cos/sin pair is evaluated per sample.
     """
     n, harmonics = cycles.shape[0], coef.shape[1]
     x = 2 * np.pi * np.mod(cycles, 1.0)
+    if n < 2048:  # few samples (one control tick): one vectorised cos/sin beats the loop
+        arg = np.outer(x, np.arange(1, harmonics + 1))
+        return np.cos(arg) @ coef.real.T - np.sin(arg) @ coef.imag.T
     c1, s1 = np.cos(x), np.sin(x)
     cos_k = np.empty((harmonics, n))
     sin_k = np.empty((harmonics, n))

@@ -108,10 +108,8 @@ class PhaseTrack:
         """φ(t) [cycles], same shape as ``t``."""
         t = np.asarray(t, dtype=float)
         inside = np.clip(t, self.t_start, self.t_end)
-        phi = self._poly(inside)
-        phi = phi + np.where(t < self.t_start, (t - self.t_start) * self._f0, 0.0)
-        phi = phi + np.where(t > self.t_end, (t - self.t_end) * self._f1, 0.0)
-        return phi
+        outside = t - inside  # < 0 before the start, > 0 after the end, else 0
+        return self._poly(inside) + outside * np.where(outside < 0, self._f0, self._f1)
 
     def rate(self, t: float | np.ndarray) -> np.ndarray:
         """Instantaneous heart rate f_h(t) = dφ/dt [Hz]."""

@@ -101,6 +101,16 @@ def test_real_solver_failure_max_iter_takes_the_fallback(arm):
     assert mpc.stats.fallback_total >= 1
 
 
+def test_time_limit_failure_takes_the_fallback(arm):
+    mpc = RecedingHorizonMPC(arm, MPCSettings(time_limit=1e-7))  # 0.1 µs: always exceeded
+    ref = np.tile(arm.y0 + np.array([3e-3, 0.0, 0.0]), (mpc.N, 1))
+    for _ in range(3):
+        tau = mpc.step(np.zeros(6), ref)
+        assert mpc.stats.status == "time_limit" and mpc.stats.source == "lq"
+        assert np.all(np.abs(tau) <= mpc.u_max)
+    assert mpc.stats.failures == {"time_limit": 3}
+
+
 @pytest.mark.parametrize("bad", ["x_nan", "x_inf", "ref_nan", "ref_inf", "ref_neg_inf"])
 def test_nonfinite_inputs_trigger_the_fallback_without_exception(arm, mpc, bad):
     x = _run(mpc, arm, 20)
