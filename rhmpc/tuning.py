@@ -34,6 +34,7 @@ import json
 import math
 import os
 import platform
+import threading
 import time
 import tomllib
 import traceback
@@ -58,6 +59,7 @@ __all__ = [
     "evaluation_key",
     "load_spec",
     "parse_spec",
+    "with_sampler_seed",
 ]
 
 #: Record format version written into every results line.
@@ -519,6 +521,13 @@ def parse_spec(data: dict, where: str = "spec", root: Path | None = None,
     return spec
 
 
+def with_sampler_seed(spec: TuneSpec, seed: int, where: str = "spec") -> TuneSpec:
+    """``spec`` with another sampler seed (``rhmpc tune --seed``), its points validated."""
+    out = dataclasses.replace(spec, sampler_seed=int(seed))
+    _validate_points(out, where)
+    return out
+
+
 def _is_int(value: Any) -> bool:
     return isinstance(value, int) and not isinstance(value, bool)
 
@@ -747,26 +756,34 @@ def record_for(task: Task, status: str, **fields: Any) -> dict:
     }
 
 
+#: One closed-loop run at a time per process: the run stack is not thread-safe (two runs in
+#: threads of one process corrupt the heap), and a Dask worker may have several threads.
+_RUN_LOCK = threading.Lock()
+
+
 def evaluate_task(task: Task, extra: dict | None = None) -> dict:
     """Run one evaluation (in a worker) and return its results line.
 
     Exceptions of the run are caught and recorded (status ``"failed"`` with the error and the
     traceback's last lines); ``KeyboardInterrupt`` and other non-``Exception`` errors propagate.
-    ``extra`` entries (e.g. the sweep's name and objective) are added to the record.
+    ``extra`` entries (e.g. the sweep's name and objective) are added to the record. Runs in
+    one process are serialised (:data:`_RUN_LOCK`); give Dask workers one thread each
+    (``dask worker --nthreads 1 --nworkers N``) to use N cores.
     """
     from rhmpc.experiment import run_experiment
 
-    started = time.time()
-    wall = time.perf_counter()
-    timing = {"started": started, "host": platform.node(), "pid": os.getpid()}
-    try:
-        _, document = run_experiment(task.config)
-    except Exception as exc:
-        tb = traceback.format_exc().strip().splitlines()
-        return record_for(task, "failed", **(extra or {}),
-                          error=f"{type(exc).__name__}: {exc}", traceback=tb[-6:],
-                          timing={**timing, "wall_s": time.perf_counter() - wall})
-    return record_for(task, "ok", **(extra or {}), metrics=_plain(_metrics(document)),
-                      scenario_label=document.get("scenario"),
-                      timing={**timing, "wall_s": time.perf_counter() - wall,
-                              "run_wall_s": document.get("wall_s")})
+    with _RUN_LOCK:
+        started = time.time()
+        wall = time.perf_counter()
+        timing = {"started": started, "host": platform.node(), "pid": os.getpid()}
+        try:
+            _, document = run_experiment(task.config)
+        except Exception as exc:
+            tb = traceback.format_exc().strip().splitlines()
+            return record_for(task, "failed", **(extra or {}),
+                              error=f"{type(exc).__name__}: {exc}", traceback=tb[-6:],
+                              timing={**timing, "wall_s": time.perf_counter() - wall})
+        return record_for(task, "ok", **(extra or {}), metrics=_plain(_metrics(document)),
+                          scenario_label=document.get("scenario"),
+                          timing={**timing, "wall_s": time.perf_counter() - wall,
+                                  "run_wall_s": document.get("wall_s")})

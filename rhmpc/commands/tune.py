@@ -24,7 +24,7 @@ USAGE = ("rhmpc tune SPEC.toml [--jobs N | --scheduler ADDRESS] [--results FILE.
          "       rhmpc tune report RESULTS.jsonl [--spec SPEC.toml] [report options]")
 
 #: Options of one mode only (their argparse dest), to reject them in the other.
-RUN_ONLY = ("jobs", "scheduler", "results", "retry_failed", "dry_run")
+RUN_ONLY = ("jobs", "scheduler", "results", "retry_failed", "dry_run", "seed")
 REPORT_ONLY = ("spec",)
 
 
@@ -53,6 +53,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                      "directory)")
     run.add_argument("--retry-failed", action="store_true", default=None,
                      help="run again the evaluations recorded as failed")
+    run.add_argument("--seed", type=int, default=None,
+                     help="seed of the random/lhs sampler (overrides sampler.seed; the run "
+                     "seeds are evaluate.seeds)")
     run.add_argument("--dry-run", action="store_true", default=None,
                      help="list the points and what is left to run, run nothing")
     rep = p.add_argument_group("report options")
@@ -92,11 +95,13 @@ def _extra(spec) -> dict:
 
 
 def sweep(args: argparse.Namespace, spec_path: Path) -> int:
-    from rhmpc.tuning import load_spec
+    from rhmpc.tuning import load_spec, with_sampler_seed
     from rhmpc.tuning_runner import pending, process_pool, run_sweep
     from rhmpc.tuning_store import ResultsWriter, read_results
 
     spec = load_spec(spec_path)
+    if args.seed is not None:
+        spec = with_sampler_seed(spec, args.seed, where=str(spec_path))
     if args.jobs is not None and args.jobs < 1:
         raise UsageError("--jobs must be >= 1")
     results_path = Path(args.results or f"{spec_path.stem}.results.jsonl")

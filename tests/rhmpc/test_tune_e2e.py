@@ -84,7 +84,9 @@ def test_dask_local_cluster(tmp_path: Path, capsys: pytest.CaptureFixture[str]) 
     distributed = pytest.importorskip("distributed")
     spec = write_spec(tmp_path)
     results = tmp_path / "dask.jsonl"
-    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
+    # two threads in one worker process: evaluations must not run concurrently in a process
+    # (building two MPCs at once crashes inside CasADi), rhmpc.tuning serialises them
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=True,
                                   host="127.0.0.1", dashboard_address=None,
                                   silence_logs=40) as cluster:
         code = main(["tune", str(spec), "--scheduler", cluster.scheduler_address,

@@ -199,3 +199,18 @@ def test_metric_names_and_values() -> None:
                      'constraint = {metric = "rms_efort_mNm", max = 1.0}\n')
     with pytest.raises(UsageError, match="'rms_efort_mNm' is not in the results"):
         check_objective_metrics(spec.objective, metrics)
+
+
+def test_cli_seed_and_dry_run(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    spec = tmp_path / "lhs.toml"
+    spec.write_text('[parameters]\n"mpc.rate_weight" = {low = 0.01, high = 1.0, scale = "log"}\n'
+                    '[sampler]\nmethod = "lhs"\nbudget = 4\n')
+    tables = []
+    for seed in ("1", "1", "2"):
+        assert main(["tune", str(spec), "--seed", seed, "--dry-run",
+                     "--results", str(tmp_path / "r.jsonl")]) == 0
+        captured = capsys.readouterr()
+        assert "4 points × 1 evaluations = 4; done 0, failed 0, to run 4" in captured.err
+        tables.append(captured.out)
+    assert tables[0] == tables[1] != tables[2]
+    assert not (tmp_path / "r.jsonl").exists()
