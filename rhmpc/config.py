@@ -104,6 +104,11 @@ class MPCSettings:
         ``"shift"`` (previous primal and dual shifted one tick), ``"shift_primal"`` (primal
         shifted, OSQP's dual kept), ``"keep"`` (OSQP's previous iterate as is) or ``"none"``
         (cold start every tick).
+    screening : bool
+        Try the unconstrained minimiser first: ẑ* = −P⁻¹ q(p) is one mat-vec with a matrix
+        factorised at build time, and if l ≤ A ẑ* ≤ u it *is* the QP's solution (the KKT
+        conditions hold with zero multipliers), so OSQP is not called. OSQP solves every tick on
+        which a constraint would be violated. ``False`` calls OSQP on every tick.
     plan_fallback_ticks : int
         After a failed solve, the previous plan (shifted) is used for at most this many ticks
         since it was computed; later failures use the clipped unconstrained LQ solution [ticks].
@@ -133,6 +138,7 @@ class MPCSettings:
     polish: bool = False
     scaling: int = 0
     warm_start: str = "shift_primal"
+    screening: bool = True
     plan_fallback_ticks: int = 10
 
     def __post_init__(self) -> None:
@@ -194,6 +200,9 @@ class MPCSettings:
         if self.warm_start not in WARM_STARTS:
             raise ValueError(f"warm_start must be one of {WARM_STARTS}, got {self.warm_start!r}")
         _integer("plan_fallback_ticks", self.plan_fallback_ticks, 0)
+        for name in ("adaptive_rho", "check_dualgap", "polish", "screening"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"{name} must be true or false, got {getattr(self, name)!r}")
 
     @property
     def block_lengths(self) -> tuple[int, ...]:

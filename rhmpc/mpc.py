@@ -4,9 +4,13 @@ Built once (:func:`rhmpc.mpc_qp.build_condensed_qp`: CasADi → numpy data → `
 tick then only does::
 
     p = [x; r_1..r_N; u_{−1}]          (copy into a preallocated buffer, finiteness check)
+    ẑ* = −P⁻¹(F p + f0)                 (screening: one mat-vec; if l ≤ A ẑ* ≤ u, ẑ = ẑ*, done)
     q = F p + f0                        (one mat-vec; l, u only if joint bounds are on)
     solver.update(q) ; warm start (previous solution shifted one tick) ; solver.solve()
     τ = clip(u_max ∘ ẑ_0, −u_max, u_max)   if the status is "solved", else the fallback
+
+Screening is exact, not an approximation: a minimiser of the unconstrained problem that is
+feasible satisfies the QP's KKT conditions with zero multipliers, and P ≻ 0 makes it unique.
 
 A tick whose solve is not "solved" never uses OSQP's ``x``: it applies the previous plan shifted
 to the current tick (for at most ``plan_fallback_ticks`` ticks), else the clipped unconstrained
@@ -63,6 +67,8 @@ class MPCStats:
         Where the last torque came from: ``"qp"``, ``"plan"``, ``"lq"`` or ``"zero"``.
     iterations : int
         OSQP iterations of the last tick (0 if no solve ran).
+    screened : int
+        Ticks solved by screening, without calling OSQP (their ``source`` is ``"qp"``).
     solve_time : float
         Wall time of the last ``solve()`` call [s].
     parts_ns : list[int]
@@ -78,6 +84,7 @@ class MPCStats:
     status: str = "none"
     source: str = "none"
     iterations: int = 0
+    screened: int = 0
     solve_time: float = 0.0
     parts_ns: list[int] = field(default_factory=lambda: [0, 0, 0, 0])
     failures: dict[str, int] = field(default_factory=dict)
@@ -148,6 +155,11 @@ class RecedingHorizonMPC:
         self._shift, self._shift_dual = qp.shift, qp.shift_dual
         self._scale0 = qp.u_max.copy()
         self._gain, self._gain0 = qp.gain, qp.gain0
+        self._screen = self.settings.screening
+        self._Z_ext = np.ascontiguousarray(qp.minimiser)
+        self._z_star = np.empty(nz)
+        self._z_abs = np.empty(nz)
+        self._y_zero = np.zeros(qp.A.shape[0])
         self._neg_umax = -qp.u_max
         self._nu_ = self.nu
 
@@ -213,6 +225,8 @@ class RecedingHorizonMPC:
         self._ws_x: np.ndarray | None = None
         self._ws_y: np.ndarray | None = None
         self._forced: list[str] = []
+        self._last_screened = False
+        self._ws_pending = False
         self.stats = MPCStats()
         zeros = np.zeros(self.qp.nz)
         self._osqp.warm_start(x=zeros, y=np.zeros(self.qp.A.shape[0]))
@@ -242,7 +256,12 @@ class RecedingHorizonMPC:
         return (self.qp.q(p), *self.qp.bounds(p))
 
     def last_solution(self) -> tuple[np.ndarray, np.ndarray]:
-        """OSQP's primal ẑ and dual y of the last solve (whatever its status), as copies."""
+        """Primal ẑ and dual y of the last tick's QP, as copies.
+
+        After a screened tick: (ẑ*, 0); otherwise OSQP's last iterate, whatever its status.
+        """
+        if self._last_screened:
+            return self._z_star.copy(), np.zeros(self.qp.A.shape[0])
         if self._raw is not None:
             sol = self._raw.solution
             return np.array(sol.x, dtype=float), np.array(sol.y, dtype=float)
@@ -253,8 +272,19 @@ class RecedingHorizonMPC:
 
     @property
     def u_prev(self) -> np.ndarray:
-        """The torque returned by the last tick (u_{−1} of the next QP) [N·m]."""
+        """The torque returned by the last tick (u_{−1} of the next QP) [N·m].
+
+        Assign to it when another torque than the returned one acted (e.g. another controller
+        ran this tick); the value is clipped to ±u_max. Non-finite values raise ``ValueError``.
+        """
         return self._p_u.copy()
+
+    @u_prev.setter
+    def u_prev(self, value: np.ndarray) -> None:
+        value = np.asarray(value, dtype=float)
+        if value.shape != (self.nu,) or not np.all(np.isfinite(value)):
+            raise ValueError(f"u_prev must be {self.nu} finite torques [N·m], got {value!r}")
+        self._p_u[:] = np.clip(value, -self.u_max, self.u_max)
 
     def unconstrained(
         self, x: np.ndarray, ref: np.ndarray, u_prev: np.ndarray | None = None
@@ -291,17 +321,39 @@ class RecedingHorizonMPC:
             stats.solve_time = 0.0
             return self._fallback("nonfinite_input", inputs_finite=False)
 
-        np.dot(self._F_ext, p_ext, out=self._q)
-        t1 = clock()
         if self.qp.param_bounds:
             np.dot(self._G, self._p, out=self._g)
             np.subtract(self.qp.l0, self._g, out=self._l)
             np.subtract(self.qp.u0, self._g, out=self._u)
+        if self._screen and not self._forced and self._screened(p_ext):
+            z = self._z_star.copy()
+            tau = z[: self._nu_] * self._scale0
+            self._p_u[:] = tau
+            self._plan = z
+            self._plan_age = 0
+            # The next OSQP solve starts from this plan shifted (computed only when it runs);
+            # all multipliers are zero here.
+            self._ws_pending = self._ws != "none"
+            stats.iterations = 0
+            stats.solve_time = 0.0
+            stats.screened += 1
+            self._last_screened = True
+            stats.status = "solved"
+            stats.source = "qp"
+            t1 = clock()
+            stats.parts_ns[:] = [t1 - t0, 0, 0, 0]
+            return tau
+        self._last_screened = False
+        np.dot(self._F_ext, p_ext, out=self._q)
+        t1 = clock()
         try:
             self._update_q()
+            if self._ws_pending:
+                self._ws_x, self._ws_y = self._shift @ self._plan, self._y_zero
+                self._ws_pending = False
             if self._ws_x is not None:
                 self._warm_start(self._ws_x, self._ws_y)
-                self._ws_x = None
+                self._ws_x = self._ws_y = None
             t2 = clock()
             status, iters, z, y = self._solve()
         except Exception:  # the loop must survive any solver error
@@ -322,7 +374,7 @@ class RecedingHorizonMPC:
             reason = None
         if reason is None:
             tau = z[: self._nu_] * self._scale0
-            if not math.isfinite(tau.sum()):
+            if not math.isfinite(np.dot(tau, tau)):
                 reason = "nonfinite_solution"
         if reason is not None:
             out = self._fallback(reason, inputs_finite=True)
@@ -356,6 +408,14 @@ class RecedingHorizonMPC:
         stats.parts_ns[:] = [t1 - t0, t2 - t1, t3 - t2, clock() - t3]
         return tau
 
+    def _screened(self, p_ext: np.ndarray) -> bool:
+        """Compute ẑ* = −P⁻¹ q(p); True if it satisfies every constraint (then it is the QP's ẑ)."""
+        z = np.dot(self._Z_ext, p_ext, out=self._z_star)
+        if not self.qp.param_bounds:  # A = I, l = −1, u = 1: the normalised torque bounds
+            return bool(np.abs(z, out=self._z_abs).max() <= 1.0)
+        g = np.dot(self.qp.A, z, out=self._g)
+        return bool((g - self._u).max() <= 0.0 and (self._l - g).max() <= 0.0)
+
     # -- fallback ------------------------------------------------------------------------------
     def _fallback(self, reason: str, *, inputs_finite: bool) -> np.ndarray:
         stats = self.stats
@@ -379,6 +439,7 @@ class RecedingHorizonMPC:
         stats.fallbacks[source] += 1
         self._p_u[:] = tau
         # Next warm start: the plan shifted to the next tick (or cold if there is none).
+        self._ws_pending = False
         if self._plan is not None and self._ws != "none":
             self._ws_x = self._shift @ self._plan
             self._ws_y = np.zeros(self.qp.A.shape[0])

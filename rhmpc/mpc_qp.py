@@ -48,6 +48,8 @@ class CondensedQP:
     block_of_tick : (N,) block index of each tick
     shift : (nz, nz) ẑ of the plan shifted by one tick (projected back onto the blocks)
     shift_dual : (m, m) the same shift applied to the constraint multipliers
+    minimiser : (nz, npar + 1)
+        the unconstrained minimiser ẑ* = −P⁻¹ q(p) = minimiser @ [p; 1] [-]
     gain, gain0 : (nu, npar), (nu,)
         first input of the unconstrained minimiser, u0 = gain p + gain0 [N·m]
     terminal_weight : (nx, nx) | None
@@ -68,6 +70,7 @@ class CondensedQP:
     block_of_tick: np.ndarray
     shift: np.ndarray
     shift_dual: np.ndarray
+    minimiser: np.ndarray
     gain: np.ndarray
     gain0: np.ndarray
     terminal_weight: np.ndarray | None
@@ -247,6 +250,6 @@ def build_condensed_qp(arm: LinearArm, settings: MPCSettings) -> CondensedQP:
     return CondensedQP(
         P=H, F=F, f0=f0, A=Acon, G=G, l0=l0, u0=u0, param_bounds=bool(np.any(G != 0)),
         u_max=u_max, scale=np.tile(u_max, nb), blocking=blocking, block_of_tick=block_of_tick,
-        shift=shift, shift_dual=shift_dual, gain=gain, gain0=gain0,
+        shift=shift, shift_dual=shift_dual, minimiser=Z, gain=gain, gain0=gain0,
         terminal_weight=terminal_weight, N=N, nx=nx, nu=nu, ny=ny,
     )

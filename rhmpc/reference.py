@@ -24,15 +24,45 @@ import math
 
 import numpy as np
 
+#: The three Lagrange weights on nodes m, m+1, m+2 as polynomials in u = s − m, in the basis
+#: (u², u, 1): ½(u−1)(u−2), −u(u−2), ½u(u−1).
+_LAGRANGE = np.array([[0.5, -1.5, 1.0], [-1.0, 2.0, 0.0], [0.5, -0.5, 0.0]])
 
-def quadratic_weights(s: np.ndarray, n_nodes: int) -> tuple[np.ndarray, np.ndarray]:
-    """Window start ``m`` and the three Lagrange weights for node coordinates ``s`` (in periods)."""
+
+def _window_weights(s: np.ndarray, n_nodes: int) -> tuple[np.ndarray, np.ndarray]:
+    """``m`` (n,) and the weights as rows, shape (3, n)."""
     if n_nodes < 3:
         raise ValueError(f"quadratic interpolation needs at least 3 nodes, got {n_nodes}")
-    m = np.clip(np.floor(s).astype(int), 0, n_nodes - 3)
-    u = s - m
-    w = np.stack([0.5 * (u - 1) * (u - 2), -u * (u - 2), 0.5 * u * (u - 1)], axis=1)
-    return m, w
+    m = np.floor(s)
+    np.minimum(m, float(n_nodes - 3), out=m)
+    np.maximum(m, 0.0, out=m)
+    basis = np.ones((3, s.shape[0]))
+    u = np.subtract(s, m, out=basis[1])
+    np.multiply(u, u, out=basis[0])
+    return m.astype(np.intp), _LAGRANGE @ basis
+
+
+def quadratic_weights(s: np.ndarray, n_nodes: int) -> tuple[np.ndarray, np.ndarray]:
+    """Window start ``m`` and the three Lagrange weights for node coordinates ``s`` (in periods).
+
+    Returns ``m`` (n,) and ``w`` (n, 3) with r(s) = Σ_j w[:, j] · node[m + j].
+    """
+    m, w = _window_weights(s, n_nodes)
+    return m, w.T
+
+
+def interpolation_matrix(s: np.ndarray, n_nodes: int) -> np.ndarray:
+    """W (n, n_nodes) with W @ nodes = the piecewise-quadratic interpolation at ``s``."""
+    m, w = _window_weights(s, n_nodes)
+    n = s.shape[0]
+    W = np.zeros(n * n_nodes)
+    m += np.arange(0, n * n_nodes, n_nodes)  # flat index of each row's first node
+    W[m] = w[0]
+    m += 1
+    W[m] = w[1]
+    m += 1
+    W[m] = w[2]
+    return W.reshape(n, n_nodes)
 
 
 class PredictedReference:
@@ -64,6 +94,7 @@ class PredictedReference:
             raise ValueError(f"predictor dt {predictor.dt} s != downsample·Ts = {self.dt} s")
         self.prediction_points = prediction_points
         self._span = downsample - 1 + horizon  # ticks a refresh must cover
+        self._lead = np.arange(1, self._span + 1) * (Ts / self.dt)  # (τ − now)/dt per point
         self.reset()
 
     def reset(self) -> None:
@@ -75,7 +106,7 @@ class PredictedReference:
     def refresh(self, tick: int, z: np.ndarray | None, stamp: float) -> None:
         """Feed the newest sample ``z`` measured at ``stamp`` [s] (None = no new sample)."""
         self.predictor.update(z)
-        valid = z is not None and bool(np.all(np.isfinite(z)))
+        valid = z is not None and math.isfinite(float(np.dot(z, z)))
         if valid:
             self._anchor = stamp
         elif self._anchor is None:
@@ -87,14 +118,12 @@ class PredictedReference:
         K = self.prediction_points + math.ceil(latency / self.dt - 1e-9)
         points = self.predictor.predict(K)
         if valid:
-            nodes, t0 = np.vstack([np.asarray(z, dtype=float)[None, :], points]), self._anchor
+            nodes = np.concatenate((np.reshape(z, (1, -1)), points))
+            t0 = self._anchor
         else:
             nodes, t0 = points, self._anchor + self.dt
-        times = now + self.Ts * np.arange(1, self._span + 1)
-        m, w = quadratic_weights((times - t0) / self.dt, nodes.shape[0])
-        self._dense = (
-            w[:, :1] * nodes[m] + w[:, 1:2] * nodes[m + 1] + w[:, 2:] * nodes[m + 2]
-        )
+        W = interpolation_matrix(self._lead + (now - t0) / self.dt, nodes.shape[0])
+        self._dense = W @ nodes
         self._first = tick + 1
 
     def horizon(self, tick: int) -> np.ndarray | None:

