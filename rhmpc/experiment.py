@@ -162,16 +162,20 @@ class RunConfig:
             raise UsageError(str(exc)) from None
 
 
-def load_config(path: str | Path) -> RunConfig:
-    """Read a run's TOML file; errors name the file and the key."""
+def read_toml(path: str | Path) -> dict[str, Any]:
+    """A TOML file as a ``dict``; unreadable or invalid files raise ``UsageError`` naming it."""
     path = Path(path)
     try:
-        data = tomllib.loads(path.read_text())
+        return tomllib.loads(path.read_text())
     except OSError as exc:
         raise UsageError(f"{path}: cannot read: {exc.strerror}") from None
     except tomllib.TOMLDecodeError as exc:
         raise UsageError(f"{path}: not valid TOML: {exc}") from None
-    return RunConfig.from_dict(data, where=str(path))
+
+
+def load_config(path: str | Path) -> RunConfig:
+    """Read a run's TOML file; errors name the file and the key."""
+    return RunConfig.from_dict(read_toml(path), where=str(path))
 
 
 def save_config(config: RunConfig, path: str | Path) -> None:
@@ -293,7 +297,8 @@ def build_run(config: RunConfig) -> Run:
             config.predictor, dt=loop.downsample * loop.Ts, **config.predictor_settings
         )
         reference = PredictedReference(
-            predictor, loop.Ts, loop.horizon, loop.downsample, loop.prediction_points
+            predictor, loop.Ts, loop.horizon, loop.downsample, loop.prediction_points,
+            outlier_gate=loop.outlier_gate, max_rejections=loop.outlier_max_rejections,
         )
     return Run(config, robot, arm, controller, reference, truth, center, stream, label,
                loop.duration)

@@ -16,6 +16,15 @@ these nodes: with ``s = (τ − t_a)/dt`` and the window of nodes ``m, m+1, m+2`
 Beyond the last node the last window's quadratic extrapolates (with the paper's K = 4 and
 downsample 15 that is at most the last 2.5 ms of the last horizon before the next update).
 ``K = prediction_points + ⌈latency/dt⌉`` so that a sensor's latency is predicted across.
+
+Outlier gate (innovation gating): while *locked*, a sample whose miss e = z − ẑ (ẑ the
+forecast made for it one period earlier) has ‖e‖ > max(``outlier_gate``, 4·e_rms) is treated
+as missing; e_rms² is the exponentially weighted mean of ‖e‖² over the accepted samples (weight
+1/50), so a predictor with larger one-step errors gets a proportionally wider gate. Rejections
+are counted in the predictor's ``counts["outliers_rejected"]``. After ``max_rejections``
+consecutive rejections the gate *unlocks* and accepts every sample (a real jump, or a forecast
+gone wrong: gating on a wrong forecast would run the predictor open-loop and let it diverge)
+until ``relock`` consecutive samples fall inside it again (``counts["gate_unlocked"]``).
 """
 
 from __future__ import annotations
@@ -80,13 +89,25 @@ class PredictedReference:
         Ticks between predictor updates.
     prediction_points : int
         Forecast points per update before latency compensation (4 in Tuna et al.).
+    outlier_gate : float
+        Largest accepted distance of a sample from its forecast [m]; 0 disables the gate.
+    max_rejections : int
+        Consecutive rejections after which the gate unlocks.
+    relock : int
+        Consecutive samples inside the gate after which an unlocked gate locks again.
     """
 
     def __init__(
-        self, predictor, Ts: float, horizon: int, downsample: int, prediction_points: int = 4
+        self, predictor, Ts: float, horizon: int, downsample: int, prediction_points: int = 4,
+        *, outlier_gate: float = 0.0, max_rejections: int = 2, relock: int = 20,
     ) -> None:
         if prediction_points < 2:
             raise ValueError(f"prediction_points must be >= 2, got {prediction_points}")
+        if not (math.isfinite(outlier_gate) and outlier_gate >= 0) or max_rejections < 0:
+            raise ValueError("outlier_gate must be >= 0 [m] and max_rejections >= 0")
+        self._gate2 = outlier_gate**2
+        self._threshold2 = self._gate2
+        self.max_rejections, self.relock = max_rejections, relock
         self.predictor = predictor
         self.Ts, self.N, self.downsample = Ts, horizon, downsample
         self.dt = downsample * Ts
@@ -102,11 +123,36 @@ class PredictedReference:
         self._dense: np.ndarray | None = None
         self._first = 0
         self._anchor: float | None = None
+        self._forecast: np.ndarray | None = None  # ẑ of the next sample, made one period ago
+        self._rejected = 0  # consecutive rejections (locked)
+        self._inside = 0  # consecutive samples inside the gate (unlocked)
+        self._locked = True
+        self._miss2 = 0.0  # e_rms²
+        self._threshold2 = self._gate2
 
     def refresh(self, tick: int, z: np.ndarray | None, stamp: float) -> None:
         """Feed the newest sample ``z`` measured at ``stamp`` [s] (None = no new sample)."""
-        self.predictor.update(z)
         valid = z is not None and math.isfinite(float(np.dot(z, z)))
+        if valid and self._gate2 > 0 and self._forecast is not None:
+            miss = z - self._forecast
+            miss2 = float(np.dot(miss, miss))
+            outside = miss2 > self._threshold2
+            if not self._locked:
+                self._inside = 0 if outside else self._inside + 1
+                self._locked = self._inside >= self.relock
+            elif not outside:
+                self._rejected = 0
+            elif self._rejected < self.max_rejections:
+                self._rejected += 1
+                self.predictor.counts["outliers_rejected"] += 1
+                z, valid = None, False
+            else:
+                self._locked, self._rejected, self._inside = False, 0, 0
+                self.predictor.counts["gate_unlocked"] += 1
+            if valid:  # accepted: update e_rms² and the threshold
+                self._miss2 += 0.02 * (miss2 - self._miss2)
+                self._threshold2 = max(self._gate2, 16.0 * self._miss2)
+        self.predictor.update(z)
         if valid:
             self._anchor = stamp
         elif self._anchor is None:
@@ -117,6 +163,8 @@ class PredictedReference:
         latency = max(0.0, now - self._anchor)
         K = self.prediction_points + math.ceil(latency / self.dt - 1e-9)
         points = self.predictor.predict(K)
+        if self._gate2 > 0:
+            self._forecast = points[0] if getattr(self.predictor, "ready", True) else None
         if valid:
             nodes = np.concatenate((np.reshape(z, (1, -1)), points))
             t0 = self._anchor
@@ -125,6 +173,11 @@ class PredictedReference:
         W = interpolation_matrix(self._lead + (now - t0) / self.dt, nodes.shape[0])
         self._dense = W @ nodes
         self._first = tick + 1
+
+    @property
+    def locked(self) -> bool:
+        """True while the outlier gate rejects samples outside it."""
+        return self._locked
 
     def horizon(self, tick: int) -> np.ndarray | None:
         """r_{tick+1} … r_{tick+N}, shape (N, d), or None before the first valid sample."""
@@ -140,9 +193,20 @@ class ExactReference:
     """"Exact reference information" (Tuna et al.): the true future, no predictor.
 
     ``truth`` holds the centred POI position at every tick of the run plus a horizon's margin.
+    Gaps in it (NaN: dropouts of a recorded stream used as the truth) are bridged linearly for the
+    reference, so that the MPC is never handed NaN; the metrics still skip those ticks.
     """
 
     def __init__(self, truth: np.ndarray, horizon: int) -> None:
+        truth = np.array(truth, dtype=float)
+        missing = ~np.isfinite(truth)
+        if missing.any():
+            ticks = np.arange(truth.shape[0])
+            for axis in range(truth.shape[1]):
+                bad = missing[:, axis]
+                if bad.all():
+                    raise ValueError("the exact reference has no finite sample on some axis")
+                truth[bad, axis] = np.interp(ticks[bad], ticks[~bad], truth[~bad, axis])
         self.truth, self.N = truth, horizon
 
     def reset(self) -> None:

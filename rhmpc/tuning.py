@@ -36,7 +36,6 @@ import os
 import platform
 import threading
 import time
-import tomllib
 import traceback
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -46,7 +45,7 @@ import numpy as np
 
 from rhmpc.config import to_dict as settings_to_dict
 from rhmpc.errors import UsageError
-from rhmpc.experiment import SECTIONS, RunConfig, load_config
+from rhmpc.experiment import SECTIONS, RunConfig, load_config, read_toml
 
 __all__ = [
     "Constraint",
@@ -460,13 +459,7 @@ def check_objective_metrics(objective: Objective, metrics: dict) -> None:
 def load_spec(path: str | Path) -> TuneSpec:
     """Read and validate a sweep specification; errors name the file and the key."""
     path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text())
-    except OSError as exc:
-        raise UsageError(f"{path}: cannot read: {exc.strerror}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise UsageError(f"{path}: not valid TOML: {exc}") from None
-    return parse_spec(data, where=str(path), root=path.parent, default_name=path.stem)
+    return parse_spec(read_toml(path), where=str(path), root=path.parent, default_name=path.stem)
 
 
 def parse_spec(data: dict, where: str = "spec", root: Path | None = None,

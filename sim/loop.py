@@ -47,6 +47,12 @@ class LoopSettings:
         Ticks between predictor updates (15 → 7.5 ms, Tuna et al. Fig. 9).
     prediction_points : int
         Points the predictor forecasts per update, before latency compensation (4).
+    outlier_gate : float
+        A sensor sample farther than this from its one-step forecast is treated as missing (echo
+        outliers: the heart cannot jump millimetres in one 7.5 ms period); 0 disables [m].
+    outlier_max_rejections : int
+        After this many consecutive rejected samples the gate opens (a real jump, or a forecast
+        gone wrong) until 20 samples in a row fall inside it again [samples].
     duration : float
         Simulated time [s].
     settling : float
@@ -59,6 +65,8 @@ class LoopSettings:
     horizon: int = 50
     downsample: int = 15
     prediction_points: int = 4
+    outlier_gate: float = 1.5e-3
+    outlier_max_rejections: int = 2
     duration: float = 20.0
     settling: float = 5.0
     poi_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -70,6 +78,13 @@ class LoopSettings:
             value = getattr(self, name)
             if not isinstance(value, int) or value < 1:
                 raise ValueError(f"{name} must be a positive integer, got {value!r}")
+        if not (np.isfinite(self.outlier_gate) and self.outlier_gate >= 0):
+            raise ValueError(f"outlier_gate must be >= 0 [m], got {self.outlier_gate!r}")
+        if not isinstance(self.outlier_max_rejections, int) or self.outlier_max_rejections < 0:
+            raise ValueError(
+                f"outlier_max_rejections must be an integer >= 0, got "
+                f"{self.outlier_max_rejections!r}"
+            )
         if self.prediction_points < 2:
             raise ValueError("prediction_points must be >= 2 (quadratic interpolation)")
         if not (np.isfinite(self.duration) and self.duration > 0):

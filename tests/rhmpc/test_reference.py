@@ -95,3 +95,45 @@ def test_exact_reference_slices_the_truth():
     truth = np.arange(300.0)[:, None] * np.ones(3)
     ref = ExactReference(truth, N)
     np.testing.assert_array_equal(ref.horizon(10)[:, 0], np.arange(11, 11 + N))
+
+
+def test_outlier_gate_rejects_spikes_and_relocks_on_a_real_jump():
+    """A 4 mm spike lasting two samples is treated as missing; a lasting 4 mm step opens the
+    gate after ``max_rejections`` samples, and it locks again once the forecasts agree."""
+    from predictors import make_predictor
+
+    dt = DS * TS
+    pred = make_predictor("one-step", dt=dt)
+    ref = PredictedReference(pred, TS, N, DS, outlier_gate=1.5e-3, max_rejections=2, relock=20)
+    clean = PredictedReference(make_predictor("one-step", dt=dt), TS, N, DS)
+    f = lambda t: 2e-3 * np.sin(2 * np.pi * 1.5 * t)  # noqa: E731
+    n = 2000
+    spikes = {1500, 1501}
+    for k in range(n):
+        t = k * dt
+        z = np.array([f(t) + (4e-3 if k in spikes else 0.0)])
+        ref.refresh(k * DS, z, t)
+        clean.refresh(k * DS, np.array([f(t)]), t)
+        if k == 1502:
+            assert pred.counts["outliers_rejected"] == 2
+            # Two samples missing cost little: the horizons agree within 0.1 mm.
+            np.testing.assert_allclose(ref.horizon(k * DS), clean.horizon(k * DS), atol=1e-4)
+    # A lasting step: rejected max_rejections times, then the gate opens and every sample is
+    # taken; the predictor re-converges and the gate locks again.
+    for k in range(n, n + 1500):
+        t = k * dt
+        ref.refresh(k * DS, np.array([f(t) + 4e-3]), t)
+    assert pred.counts["outliers_rejected"] == 2 + 2
+    assert pred.counts["gate_unlocked"] == 1 and ref.locked
+    np.testing.assert_allclose(ref.horizon((n + 1499) * DS)[:, 0],
+                               f((n + 1499) * dt + TS * np.arange(1, N + 1)) + 4e-3, atol=2e-4)
+
+
+def test_exact_reference_bridges_gaps_of_a_recorded_truth():
+    truth = np.column_stack([np.arange(100.0), np.zeros(100), np.ones(100)])
+    truth[40:45, 0] = np.nan
+    ref = ExactReference(truth, N)
+    assert np.all(np.isfinite(ref.horizon(10)))
+    np.testing.assert_allclose(ref.horizon(30)[9:15, 0], np.arange(40.0, 46.0))
+    with pytest.raises(ValueError, match="no finite"):
+        ExactReference(np.full((100, 3), np.nan), N)

@@ -14,19 +14,10 @@ from rhmpc.commands.simulate import config_from_args
 from rhmpc.experiment import RunConfig, load_config
 from rhmpc.tuning import load_spec
 from rhmpc.tuning_store import read_results
+from tests.rhmpc.test_tune_spec import TINY as BASE_TINY
 
-TINY = """
-name = "tiny"
-[base]
-predictor = "generalized"
-[base.loop]
-duration = 0.6
-settling = 0.2
-[parameters]
-"mpc.effort_weight" = [1e-4, 1e-3]
-[evaluate]
-scenarios = ["fixed-a2-top"]
-[objective]
+# The spec of test_tune_spec, with an objective that trades error against effort.
+TINY = BASE_TINY.replace("{", "{{").replace("}", "}}") + """[objective]
 metric = "rms_error_mm"
 penalty = {{ metric = "rms_effort_mNm", weight = 1e-4, limit = 0.0 }}
 {extra}
