@@ -299,6 +299,7 @@ def build_run(config: RunConfig) -> Run:
         reference = PredictedReference(
             predictor, loop.Ts, loop.horizon, loop.downsample, loop.prediction_points,
             outlier_gate=loop.outlier_gate, max_rejections=loop.outlier_max_rejections,
+            guard_speed=loop.guard_speed, guard_margin=loop.guard_margin,
         )
     return Run(config, robot, arm, controller, reference, truth, center, stream, label,
                loop.duration)

@@ -74,6 +74,54 @@ def interpolation_matrix(s: np.ndarray, n_nodes: int) -> np.ndarray:
     return W.reshape(n, n_nodes)
 
 
+class OutlierGate:
+    """Innovation gate on sensor samples (see the module docstring for the rule).
+
+    Parameters
+    ----------
+    gate : float
+        Smallest gate radius [m]; the radius is max(gate, 4·e_rms).
+    max_rejections : int
+        Consecutive rejections after which the gate unlocks.
+    relock : int
+        Consecutive samples inside the gate after which an unlocked gate locks again.
+    """
+
+    def __init__(self, gate: float, max_rejections: int = 2, relock: int = 20) -> None:
+        if not (math.isfinite(gate) and gate > 0) or max_rejections < 0 or relock < 1:
+            raise ValueError("the gate must be > 0 [m], max_rejections >= 0 and relock >= 1")
+        self.gate2, self.max_rejections, self.relock = gate**2, max_rejections, relock
+        self.reset()
+
+    def reset(self) -> None:
+        self.locked = True
+        self._rejected = 0  # consecutive rejections (locked)
+        self._inside = 0  # consecutive samples inside the gate (unlocked)
+        self._miss2 = 0.0  # e_rms², over accepted samples
+        self._threshold2 = self.gate2
+
+    def accept(self, z: np.ndarray, forecast: np.ndarray, counts) -> bool:
+        """Whether sample ``z`` is accepted given its ``forecast``; events go to ``counts``."""
+        miss = z - forecast
+        miss2 = float(np.dot(miss, miss))
+        outside = miss2 > self._threshold2
+        if not self.locked:
+            self._inside = 0 if outside else self._inside + 1
+            self.locked = self._inside >= self.relock
+        elif not outside:
+            self._rejected = 0
+        elif self._rejected < self.max_rejections:
+            self._rejected += 1
+            counts["outliers_rejected"] += 1
+            return False
+        else:
+            self.locked, self._rejected, self._inside = False, 0, 0
+            counts["gate_unlocked"] += 1
+        self._miss2 += 0.02 * (miss2 - self._miss2)
+        self._threshold2 = max(self.gate2, 16.0 * self._miss2)
+        return True
+
+
 class PredictedReference:
     """The N-point reference from a predictor, refreshed every ``downsample`` ticks.
 
@@ -90,24 +138,27 @@ class PredictedReference:
     prediction_points : int
         Forecast points per update before latency compensation (4 in Tuna et al.).
     outlier_gate : float
-        Largest accepted distance of a sample from its forecast [m]; 0 disables the gate.
-    max_rejections : int
-        Consecutive rejections after which the gate unlocks.
-    relock : int
-        Consecutive samples inside the gate after which an unlocked gate locks again.
+        Smallest radius of the :class:`OutlierGate` [m]; 0 disables the gate.
+    max_rejections, relock : int
+        See :class:`OutlierGate`.
+    guard_speed, guard_margin : float
+        Reference guard: a forecast point farther from the last accepted sample than
+        ``guard_margin + guard_speed · (its time − that sample's time)`` [m/s, m] means the
+        predictor has diverged: the reference holds that sample and the predictor is reset (it
+        relearns; until it is ready it holds too). ``guard_speed`` 0 disables the guard.
     """
 
     def __init__(
         self, predictor, Ts: float, horizon: int, downsample: int, prediction_points: int = 4,
         *, outlier_gate: float = 0.0, max_rejections: int = 2, relock: int = 20,
+        guard_speed: float = 0.0, guard_margin: float = 2e-3,
     ) -> None:
         if prediction_points < 2:
             raise ValueError(f"prediction_points must be >= 2, got {prediction_points}")
-        if not (math.isfinite(outlier_gate) and outlier_gate >= 0) or max_rejections < 0:
-            raise ValueError("outlier_gate must be >= 0 [m] and max_rejections >= 0")
-        self._gate2 = outlier_gate**2
-        self._threshold2 = self._gate2
-        self.max_rejections, self.relock = max_rejections, relock
+        self.gate = OutlierGate(outlier_gate, max_rejections, relock) if outlier_gate else None
+        if not (guard_speed >= 0 and guard_margin > 0):
+            raise ValueError("guard_speed must be >= 0 [m/s] and guard_margin > 0 [m]")
+        self.guard_speed, self.guard_margin = guard_speed, guard_margin
         self.predictor = predictor
         self.Ts, self.N, self.downsample = Ts, horizon, downsample
         self.dt = downsample * Ts
@@ -124,37 +175,21 @@ class PredictedReference:
         self._first = 0
         self._anchor: float | None = None
         self._forecast: np.ndarray | None = None  # ẑ of the next sample, made one period ago
-        self._rejected = 0  # consecutive rejections (locked)
-        self._inside = 0  # consecutive samples inside the gate (unlocked)
-        self._locked = True
-        self._miss2 = 0.0  # e_rms²
-        self._threshold2 = self._gate2
+        self._held: np.ndarray | None = None  # the last accepted sample …
+        self._held_stamp = 0.0  # … and its time [s]
+        if self.gate is not None:
+            self.gate.reset()
 
     def refresh(self, tick: int, z: np.ndarray | None, stamp: float) -> None:
         """Feed the newest sample ``z`` measured at ``stamp`` [s] (None = no new sample)."""
         valid = z is not None and math.isfinite(float(np.dot(z, z)))
-        if valid and self._gate2 > 0 and self._forecast is not None:
-            miss = z - self._forecast
-            miss2 = float(np.dot(miss, miss))
-            outside = miss2 > self._threshold2
-            if not self._locked:
-                self._inside = 0 if outside else self._inside + 1
-                self._locked = self._inside >= self.relock
-            elif not outside:
-                self._rejected = 0
-            elif self._rejected < self.max_rejections:
-                self._rejected += 1
-                self.predictor.counts["outliers_rejected"] += 1
-                z, valid = None, False
-            else:
-                self._locked, self._rejected, self._inside = False, 0, 0
-                self.predictor.counts["gate_unlocked"] += 1
-            if valid:  # accepted: update e_rms² and the threshold
-                self._miss2 += 0.02 * (miss2 - self._miss2)
-                self._threshold2 = max(self._gate2, 16.0 * self._miss2)
+        if valid and self._forecast is not None and not self.gate.accept(
+            z, self._forecast, self.predictor.counts
+        ):
+            z, valid = None, False
         self.predictor.update(z)
         if valid:
-            self._anchor = stamp
+            self._anchor, self._held, self._held_stamp = stamp, np.array(z, dtype=float), stamp
         elif self._anchor is None:
             return  # nothing measured yet: keep holding
         else:
@@ -163,21 +198,35 @@ class PredictedReference:
         latency = max(0.0, now - self._anchor)
         K = self.prediction_points + math.ceil(latency / self.dt - 1e-9)
         points = self.predictor.predict(K)
-        if self._gate2 > 0:
+        if self.gate is not None:
             self._forecast = points[0] if getattr(self.predictor, "ready", True) else None
         if valid:
             nodes = np.concatenate((np.reshape(z, (1, -1)), points))
             t0 = self._anchor
         else:
             nodes, t0 = points, self._anchor + self.dt
-        W = interpolation_matrix(self._lead + (now - t0) / self.dt, nodes.shape[0])
-        self._dense = W @ nodes
+        s = self._lead + (now - t0) / self.dt
+        self._dense = interpolation_matrix(s, nodes.shape[0]) @ nodes
         self._first = tick + 1
+        if self.guard_speed > 0 and self._held is not None:
+            lead = now + self._span * self.Ts - self._held_stamp  # [s] to the last point
+            if np.abs(self._dense - self._held).max() > self.guard_margin + self.guard_speed * lead:
+                self._diverged()
+
+    def _diverged(self) -> None:
+        """Hold the last accepted sample; restart the predictor from it (counts are kept)."""
+        counts = self.predictor.counts.copy()
+        self.predictor.reset()
+        self.predictor.counts.update(counts)
+        self.predictor.counts["reference_guard"] += 1
+        self.predictor.update(self._held)
+        self._forecast = None
+        self._dense = np.broadcast_to(self._held, self._dense.shape)
 
     @property
     def locked(self) -> bool:
-        """True while the outlier gate rejects samples outside it."""
-        return self._locked
+        """True while the outlier gate rejects samples outside it (False without a gate)."""
+        return self.gate is not None and self.gate.locked
 
     def horizon(self, tick: int) -> np.ndarray | None:
         """r_{tick+1} … r_{tick+N}, shape (N, d), or None before the first valid sample."""

@@ -33,6 +33,10 @@ def format_summary(doc: dict) -> str:
         + (f", failures {fails}" if fails else ""),
         f"  wall time        {doc['wall_s']:.1f} s ({doc['real_time_factor']:.1f}× real time)",
     ]
+    counts = doc.get("predictor_counts") or {}
+    if counts:  # what the predictor and the safety layers did (missing samples, outliers, …)
+        events = ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in sorted(counts.items()))
+        lines.insert(-1, f"  predictor        {events}")
     return "\n".join(lines)
 
 

@@ -53,6 +53,13 @@ class LoopSettings:
     outlier_max_rejections : int
         After this many consecutive rejected samples the gate opens (a real jump, or a forecast
         gone wrong) until 20 samples in a row fall inside it again [samples].
+    guard_speed : float
+        Reference guard: forecasts farther from the last accepted sample than ``guard_margin +
+        guard_speed · lead`` mean a diverged predictor; the reference then holds that sample and
+        the predictor restarts. Above the fastest POI motion of the replicas (0.21 m/s); 0
+        disables [m/s].
+    guard_margin : float
+        Constant part of the guard's reach [m].
     duration : float
         Simulated time [s].
     settling : float
@@ -67,6 +74,8 @@ class LoopSettings:
     prediction_points: int = 4
     outlier_gate: float = 1.5e-3
     outlier_max_rejections: int = 2
+    guard_speed: float = 0.3
+    guard_margin: float = 2e-3
     duration: float = 20.0
     settling: float = 5.0
     poi_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -85,6 +94,10 @@ class LoopSettings:
                 f"outlier_max_rejections must be an integer >= 0, got "
                 f"{self.outlier_max_rejections!r}"
             )
+        if not (np.isfinite(self.guard_speed) and self.guard_speed >= 0):
+            raise ValueError(f"guard_speed must be >= 0 [m/s], got {self.guard_speed!r}")
+        if not (np.isfinite(self.guard_margin) and self.guard_margin > 0):
+            raise ValueError(f"guard_margin must be > 0 [m], got {self.guard_margin!r}")
         if self.prediction_points < 2:
             raise ValueError("prediction_points must be >= 2 (quadratic interpolation)")
         if not (np.isfinite(self.duration) and self.duration > 0):

@@ -137,3 +137,44 @@ def test_exact_reference_bridges_gaps_of_a_recorded_truth():
     np.testing.assert_allclose(ref.horizon(30)[9:15, 0], np.arange(40.0, 46.0))
     with pytest.raises(ValueError, match="no finite"):
         ExactReference(np.full((100, 3), np.nan), N)
+
+
+class Diverging:
+    """A 'predictor' whose forecasts run away after ``after`` updates (like an unstable AR)."""
+
+    def __init__(self, dt=DS * TS, after=50):
+        from collections import Counter
+
+        self.dt, self.after, self.counts = dt, after, Counter()
+        self.reset()
+
+    def reset(self):
+        self.n, self.last, self.ready = 0, None, False
+        self.counts.clear()
+
+    def update(self, z):
+        if z is not None:
+            self.n, self.last, self.ready = self.n + 1, np.asarray(z, float), True
+
+    def predict(self, steps):
+        growth = np.ones(steps) if self.n < self.after else 3.0 ** np.arange(1, steps + 1)
+        return self.last[None, :] * growth[:, None]
+
+
+def test_reference_guard_holds_the_last_sample_when_the_predictor_diverges():
+    pred = Diverging()
+    ref = PredictedReference(pred, TS, N, DS, guard_speed=0.3, guard_margin=2e-3)
+    z = np.array([5e-3, -2e-3, 1e-3])
+    for k in range(49):
+        ref.refresh(k * DS, z, k * DS * TS)
+    assert pred.counts["reference_guard"] == 0
+    ref.refresh(49 * DS, z, 49 * DS * TS)  # the 50th update: forecasts ×3, ×9, … run away
+    assert pred.counts["reference_guard"] == 1
+    h = ref.horizon(49 * DS)
+    np.testing.assert_array_equal(h, np.broadcast_to(z, h.shape))  # holds the last sample
+    assert pred.n == 1  # restarted from the held sample
+    # Without the guard the same forecasts would be handed to the MPC.
+    free = PredictedReference(Diverging(), TS, N, DS)
+    for k in range(50):
+        free.refresh(k * DS, z, k * DS * TS)
+    assert np.abs(free.horizon(49 * DS)).max() > 0.01
