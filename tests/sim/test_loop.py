@@ -87,6 +87,37 @@ def test_nan_laden_spiky_stream_never_gives_nan_torque(phantom, name):
     assert result.predictor_counts.get("missing", 0) > 0
 
 
+def spiky(source, duration=3.2):
+    """257 Hz samples with 5 mm echo outliers lasting two samples (7.8 ms, so that the 7.5 ms
+    predictor sees each), every 0.5 s from 1.2 s on."""
+    stream = ideal_stream(source, duration, rate=257.0)
+    z = stream.z.copy()
+    for t_spike in np.arange(1.2, 3.0, 0.5):
+        k = int(t_spike * 257.0)
+        z[k:k + 2] += np.array([5e-3, 0.0, 0.0])
+    return type(stream)(t=stream.t, z=z, arrival=stream.arrival)
+
+
+def test_outlier_gate_keeps_the_robot_from_chasing_echo_spikes(phantom):
+    """Against the true motion: with the gate the spikes leave no trace; without it the robot
+    jumps towards each 5 mm spike."""
+    def gated(gate):
+        from predictors import make_predictor
+
+        def build(truth):
+            pred = make_predictor("generalized", dt=SHORT.downsample * SHORT.Ts)
+            return PredictedReference(pred, SHORT.Ts, SHORT.horizon, SHORT.downsample,
+                                      outlier_gate=gate)
+        return build
+
+    with_gate = run_with(phantom, gated(1.5e-3), stream_of=spiky)
+    without = run_with(phantom, gated(0.0), stream_of=spiky)
+    clean = run_with(phantom, gated(1.5e-3)).metrics()
+    assert with_gate.predictor_counts["outliers_rejected"] >= 3
+    assert with_gate.metrics()["max_error_mm"] < 2 * clean["max_error_mm"]
+    assert without.metrics()["max_error_mm"] > 1.0 > with_gate.metrics()["max_error_mm"]
+
+
 def test_scripted_solver_failures_are_survived_and_counted(phantom):
     _robot, arm = phantom
     mpc = RecedingHorizonMPC(arm, MPCSettings())
