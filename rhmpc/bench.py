@@ -116,7 +116,7 @@ class ExactTick:
             import daqp
         except ImportError:
             raise ValueError(
-                "the exact reference needs the 'daqp' package (pip install '.[test]')"
+                "the exact reference needs the daqp package (an rhmpc dependency: pip install daqp)"
             ) from None
         qp = mpc.qp
         if qp.param_bounds:

@@ -36,7 +36,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="parallel processes (default: the number of cores)")
     p.add_argument("--full", action="store_true",
                    help="use each scenario's full duration (235-472 s) instead of --duration")
-    add_run_options(p)
+    add_run_options(p, DEFAULT_DURATION, DEFAULT_SETTLING)
     p.add_argument("--json", action="store_true", help="print all result documents as JSON")
     p.add_argument("--out", metavar="FILE.json", help="write all result documents")
     p.set_defaults(func=run)
@@ -59,6 +59,11 @@ def configs(args: argparse.Namespace) -> list[RunConfig]:
     unknown = [s for s in scenarios if s not in SCENARIOS]
     if unknown:
         raise UsageError(f"unknown scenario(s) {', '.join(unknown)}; valid: {', '.join(SCENARIOS)}")
+    from predictors import PREDICTORS
+
+    bad = [p for p in predictors if p not in PREDICTORS]
+    if bad:
+        raise UsageError(f"unknown predictor(s) {', '.join(bad)}; valid: {', '.join(PREDICTORS)}")
     if args.seeds < 1 or args.jobs < 1:
         raise UsageError("--seeds and --jobs must be >= 1")
     args.predictor = args.scenario = args.data = args.seed = None

@@ -15,16 +15,20 @@ DEFAULT_DURATION = 30.0
 DEFAULT_SETTLING = 10.0
 
 
-def add_run_options(p: argparse.ArgumentParser) -> None:
-    """Options shared by ``simulate`` and ``compare`` (all default to the config's values)."""
+def add_run_options(
+    p: argparse.ArgumentParser,
+    duration: float = DEFAULT_DURATION,
+    settling: float = DEFAULT_SETTLING,
+) -> None:
+    """Options shared by ``simulate`` and ``compare`` (``duration``/``settling``: for the help)."""
     p.add_argument("--config", metavar="FILE.toml", help="every setting of the run (TOML)")
     p.add_argument("--robot", help="robot name (rhmpc robots); default phantom")
     p.add_argument("--sensor", help="sonomicrometry (default), ultrasound, ideal; 'recorded' "
                    "uses a --data file's samples as they are")
     p.add_argument("--duration", type=float,
-                   help=f"simulated seconds (default {DEFAULT_DURATION:g})")
+                   help=f"simulated seconds (default {duration:g})")
     p.add_argument("--settling", type=float,
-                   help=f"seconds excluded from the metrics (default {DEFAULT_SETTLING:g})")
+                   help=f"seconds excluded from the metrics (default {settling:g})")
     p.add_argument("--ground-truth", choices=("recorded", "true"),
                    help="score against the recorded stream (paper protocol, default) or the "
                    "noise-free motion")

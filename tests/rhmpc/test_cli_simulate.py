@@ -96,3 +96,16 @@ def test_compare_prints_the_table(capsys):
     assert code == 0
     assert "RMS position error" in out and "ratio to exact" in out
     assert "hold" in out and "fixed-a2-top" in out
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--predictors", "exact,foo"], "unknown predictor(s) foo"),
+        (["--scenarios", "nope"], "unknown scenario(s) nope"),
+        (["--seeds", "0"], "--seeds"),
+    ],
+)
+def test_compare_bad_options_exit_2_before_running(capsys, argv, message):
+    code, _, err = run_cli(capsys, "compare", *argv)
+    assert code == 2 and message in err, err
