@@ -13,7 +13,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import signal
 
 from sim.motion import MotionSource
 
@@ -48,6 +47,8 @@ def psd(p: np.ndarray, rate: float, resolution: float = 0.01) -> tuple[np.ndarra
     """
     p = np.asarray(p, dtype=float).reshape(len(p), -1)
     nper = min(len(p), round(rate / resolution))
+    from scipy import signal  # imported here: scipy.signal costs ~1 s of start-up
+
     f, s = signal.welch(p, fs=rate, nperseg=nper, detrend="constant", axis=0)
     return f, s
 
@@ -62,6 +63,8 @@ def spectral_peaks(f: np.ndarray, s: np.ndarray, fmin: float = 0.05, fmax: float
     total = np.sum(np.reshape(s, (len(f), -1)), axis=1)
     band = (f >= fmin) & (f <= fmax)
     fb, logs = f[band], np.log10(np.maximum(total[band], 1e-300))
+    from scipy import signal
+
     idx, _ = signal.find_peaks(logs, prominence=prominence)
     order = np.argsort(logs[idx])[::-1][:count]
     return fb[idx[order]]
