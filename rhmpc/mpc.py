@@ -229,7 +229,7 @@ class RecedingHorizonMPC:
         self._ws_pending = False
         self.stats = MPCStats()
         zeros = np.zeros(self.qp.nz)
-        self._osqp.warm_start(x=zeros, y=np.zeros(self.qp.A.shape[0]))
+        self._osqp.warm_start(x=zeros, y=self._y_zero)
 
     def force_failures(self, count: int = 1, reason: str = "injected") -> None:
         """Make the next ``count`` solves report failure ``reason`` (tests, fault injection).
@@ -442,5 +442,5 @@ class RecedingHorizonMPC:
         self._ws_pending = False
         if self._plan is not None and self._ws != "none":
             self._ws_x = self._shift @ self._plan
-            self._ws_y = np.zeros(self.qp.A.shape[0])
+            self._ws_y = self._y_zero
         return tau

@@ -48,8 +48,9 @@ class LoopSettings:
     prediction_points : int
         Points the predictor forecasts per update, before latency compensation (4).
     outlier_gate : float
-        A sensor sample farther than this from its one-step forecast is treated as missing (echo
-        outliers: the heart cannot jump millimetres in one 7.5 ms period); 0 disables [m].
+        A sensor sample farther from its one-step forecast than max(this, 4 × the running RMS
+        forecast miss) is treated as missing (echo outliers: the heart cannot jump millimetres in
+        one 7.5 ms period); 0 disables [m].
     outlier_max_rejections : int
         After this many consecutive rejected samples the gate opens (a real jump, or a forecast
         gone wrong) until 20 samples in a row fall inside it again [samples].

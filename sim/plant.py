@@ -75,10 +75,9 @@ class ArmPlant:
         self._coulomb = robot.coulomb_friction
         self._damping_list = np.broadcast_to(robot.damping, (robot.nv,)).tolist()
         self._coulomb_list = np.broadcast_to(robot.coulomb_friction, (robot.nv,)).tolist()
-        self._tau_max = robot.torque_limit
-        self._tau_min = -robot.torque_limit
         self._inv_stiction = 1.0 / self.settings.stiction_velocity
-        self._tau_min_list, self._tau_max_list = self._tau_min.tolist(), self._tau_max.tolist()
+        self._tau_max_list = robot.torque_limit.tolist()
+        self._tau_min_list = (-robot.torque_limit).tolist()
         self._substeps = self.settings.substeps
         self._h = self.Ts / self.settings.substeps
         self._advance = {  # all substeps of one tick, torque given as a list of floats
@@ -206,7 +205,6 @@ class NonlinearityCancellation:
         self.data = self.model.createData()
         self._damping = robot.damping * self.mismatch.friction_scale
         self._coulomb = robot.coulomb_friction * self.mismatch.friction_scale
-        self._stiction_velocity = stiction_velocity
         self._inv_stiction = 1.0 / stiction_velocity
         nv = robot.nv
         self._damping_list = np.broadcast_to(self._damping, (nv,)).tolist()
@@ -217,7 +215,7 @@ class NonlinearityCancellation:
         """Cancellation torque [N·m] at the estimated state (q, q̇)."""
         bias = pin.rnea(self.model, self.data, q, v, self._zero)
         inv_vs = self._inv_stiction
-        return np.array([  # floats: see ArmPlant._net_torque
+        return np.array([  # floats: see ArmPlant._midpoint_steps
             b + d * x + c * math.tanh(x * inv_vs)
             for b, d, c, x in zip(bias.tolist(), self._damping_list, self._coulomb_list,
                                   v.tolist(), strict=True)
