@@ -326,23 +326,7 @@ class RecedingHorizonMPC:
             np.subtract(self.qp.l0, self._g, out=self._l)
             np.subtract(self.qp.u0, self._g, out=self._u)
         if self._screen and not self._forced and self._screened(p_ext):
-            z = self._z_star.copy()
-            tau = z[: self._nu_] * self._scale0
-            self._p_u[:] = tau
-            self._plan = z
-            self._plan_age = 0
-            # The next OSQP solve starts from this plan shifted (computed only when it runs);
-            # all multipliers are zero here.
-            self._ws_pending = self._ws != "none"
-            stats.iterations = 0
-            stats.solve_time = 0.0
-            stats.screened += 1
-            self._last_screened = True
-            stats.status = "solved"
-            stats.source = "qp"
-            t1 = clock()
-            stats.parts_ns[:] = [t1 - t0, 0, 0, 0]
-            return tau
+            return self._screened_output(t0)
         self._last_screened = False
         np.dot(self._F_ext, p_ext, out=self._q)
         t1 = clock()
@@ -406,6 +390,27 @@ class RecedingHorizonMPC:
         stats.status = "solved"
         stats.source = "qp"
         stats.parts_ns[:] = [t1 - t0, t2 - t1, t3 - t2, clock() - t3]
+        return tau
+
+    def _screened_output(self, t0: int) -> np.ndarray:
+        """τ from the screened ẑ* (the QP's solution): bookkeeping of a tick without OSQP."""
+        z = self._z_star.copy()
+        tau = z[: self._nu_] * self._scale0
+        self._p_u[:] = tau
+        self._plan = z
+        self._plan_age = 0
+        # The next OSQP solve starts from this plan shifted (computed only when it runs); all
+        # multipliers are zero here.
+        self._ws_pending = self._ws != "none"
+        self._last_screened = True
+        stats = self.stats
+        stats.iterations = 0
+        stats.solve_time = 0.0
+        stats.screened += 1
+        stats.status = "solved"
+        stats.source = "qp"
+        stats.parts_ns[0] = time.perf_counter_ns() - t0
+        stats.parts_ns[1] = stats.parts_ns[2] = stats.parts_ns[3] = 0
         return tau
 
     def _screened(self, p_ext: np.ndarray) -> bool:

@@ -25,6 +25,11 @@ are counted in the predictor's ``counts["outliers_rejected"]``. After ``max_reje
 consecutive rejections the gate *unlocks* and accepts every sample (a real jump, or a forecast
 gone wrong: gating on a wrong forecast would run the predictor open-loop and let it diverge)
 until ``relock`` consecutive samples fall inside it again (``counts["gate_unlocked"]``).
+
+Placement: both references work in centred heart coordinates (d = 1 or 3 axes); after
+``place(origin)`` their ``horizon`` returns workspace points ``r = origin + E r_c`` (N, 3), with
+``E`` embedding a 1-D motion along x. The closed loop places once, so the offset is added once
+per refresh instead of once per tick.
 """
 
 from __future__ import annotations
@@ -32,6 +37,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
+
+from sim.loop import embed3
 
 #: The three Lagrange weights on nodes m, m+1, m+2 as polynomials in u = s − m, in the basis
 #: (u², u, 1): ½(u−1)(u−2), −u(u−2), ½u(u−1).
@@ -72,6 +79,13 @@ def interpolation_matrix(s: np.ndarray, n_nodes: int) -> np.ndarray:
     m += 1
     W[m] = w[2]
     return W.reshape(n, n_nodes)
+
+
+def _origin(origin) -> np.ndarray:
+    origin = np.array(origin, dtype=float).reshape(-1)
+    if origin.shape != (3,) or not np.all(np.isfinite(origin)):
+        raise ValueError(f"origin must be 3 finite coordinates [m], got {origin!r}")
+    return origin
 
 
 class OutlierGate:
@@ -167,11 +181,21 @@ class PredictedReference:
         self.prediction_points = prediction_points
         self._span = downsample - 1 + horizon  # ticks a refresh must cover
         self._lead = np.arange(1, self._span + 1) * (Ts / self.dt)  # (τ − now)/dt per point
+        # Interpolation matrices by (nodes, (now − t0)/Ts): with sensor stamps on the tick grid
+        # only a few offsets occur, so a refresh is one small product instead of a rebuild.
+        self._matrices: dict[tuple[int, float], np.ndarray] = {}
+        self._origin: np.ndarray | None = None
         self.reset()
+
+    def place(self, origin) -> None:
+        """From now on ``horizon`` returns workspace points origin + E r_c, shape (N, 3) [m]."""
+        self._origin = _origin(origin)
+        self._placed = None if self._dense is None else self._origin + embed3(self._dense)
 
     def reset(self) -> None:
         self.predictor.reset()
         self._dense: np.ndarray | None = None
+        self._placed: np.ndarray | None = None
         self._first = 0
         self._anchor: float | None = None
         self._forecast: np.ndarray | None = None  # ẑ of the next sample, made one period ago
@@ -205,13 +229,24 @@ class PredictedReference:
             t0 = self._anchor
         else:
             nodes, t0 = points, self._anchor + self.dt
-        s = self._lead + (now - t0) / self.dt
-        self._dense = interpolation_matrix(s, nodes.shape[0]) @ nodes
+        self._dense = self._interpolation(nodes.shape[0], now - t0) @ nodes
         self._first = tick + 1
         if self.guard_speed > 0 and self._held is not None:
             lead = now + self._span * self.Ts - self._held_stamp  # [s] to the last point
             if np.abs(self._dense - self._held).max() > self.guard_margin + self.guard_speed * lead:
                 self._diverged()
+        if self._origin is not None:
+            self._placed = self._origin + embed3(self._dense)
+
+    def _interpolation(self, n_nodes: int, age: float) -> np.ndarray:
+        """The matrix of :func:`interpolation_matrix` for nodes starting ``age`` s before now."""
+        key = (n_nodes, round(age / self.Ts, 6))
+        W = self._matrices.get(key)
+        if W is None:
+            if len(self._matrices) >= 64:  # off-grid stamps (jittery recordings): stay bounded
+                self._matrices.clear()
+            W = self._matrices[key] = interpolation_matrix(self._lead + age / self.dt, n_nodes)
+        return W
 
     def _diverged(self) -> None:
         """Hold the last accepted sample; restart the predictor from it (counts are kept)."""
@@ -229,13 +264,18 @@ class PredictedReference:
         return self.gate is not None and self.gate.locked
 
     def horizon(self, tick: int) -> np.ndarray | None:
-        """r_{tick+1} … r_{tick+N}, shape (N, d), or None before the first valid sample."""
-        if self._dense is None:
+        """r_{tick+1} … r_{tick+N}, or None before the first valid sample.
+
+        Shape (N, d) in centred coordinates, or (N, 3) in the workspace after :meth:`place`.
+        A view: valid until the next ``refresh``.
+        """
+        dense = self._dense if self._origin is None else self._placed
+        if dense is None:
             return None
         start = tick + 1 - self._first
-        if start + self.N > self._dense.shape[0]:  # refresh skipped: hold the last points
-            start = self._dense.shape[0] - self.N
-        return self._dense[start : start + self.N]
+        if start + self.N > dense.shape[0]:  # refresh skipped: hold the last points
+            start = dense.shape[0] - self.N
+        return dense[start : start + self.N]
 
 
 class ExactReference:
@@ -257,6 +297,11 @@ class ExactReference:
                     raise ValueError("the exact reference has no finite sample on some axis")
                 truth[bad, axis] = np.interp(ticks[bad], ticks[~bad], truth[~bad, axis])
         self.truth, self.N = truth, horizon
+        self._points = truth
+
+    def place(self, origin) -> None:
+        """From now on ``horizon`` returns workspace points origin + E r_c, shape (N, 3) [m]."""
+        self._points = _origin(origin) + embed3(self.truth)
 
     def reset(self) -> None:
         pass
@@ -265,4 +310,5 @@ class ExactReference:
         pass
 
     def horizon(self, tick: int) -> np.ndarray:
-        return self.truth[tick + 1 : tick + 1 + self.N]
+        """r_{tick+1} … r_{tick+N}: (N, d) centred, or (N, 3) in the workspace after ``place``."""
+        return self._points[tick + 1 : tick + 1 + self.N]

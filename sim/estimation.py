@@ -67,19 +67,36 @@ class JointObserver:
         P = scipy.linalg.solve_discrete_are(self.A.T, H.T, Qw, np.diag(meas_var))
         self.L = P @ H.T @ np.linalg.inv(H @ P @ H.T + np.diag(meas_var))
         self._n = n
+        # Both steps as one mat-vec on preallocated storage (allocation-free at 2 kHz):
+        #   correct: x̂ = [I − L H, L] [x̂⁻; q̃] − L q0      predict: x̂⁻ = [A, B] [x̂; u]
+        self._correct_matrix = np.hstack([np.eye(2 * n) - self.L @ H, self.L])
+        self._correct_offset = self.L @ self.q0
+        self._predict_matrix = np.hstack([self.A, self.B])
+        self._prior_and_q = np.zeros(3 * n)  # [x̂⁻; q̃]
+        self._post_and_u = np.zeros(3 * n)  # [x̂; u]
+        self.x_prior = self._prior_and_q[: 2 * n]
+        self.x = self._post_and_u[: 2 * n]
+        self._q_in = self._prior_and_q[2 * n :]
+        self._u_in = self._post_and_u[2 * n :]
         self.reset()
 
     def reset(self, x: np.ndarray | None = None) -> None:
         """Start from ``x`` (default: at rest at q0)."""
-        self.x_prior = np.zeros(2 * self._n) if x is None else np.asarray(x, dtype=float).copy()
-        self.x = self.x_prior.copy()
+        self.x_prior[:] = 0.0 if x is None else np.asarray(x, dtype=float)
+        self.x[:] = self.x_prior
 
     def correct(self, q_measured: np.ndarray) -> np.ndarray:
-        """Fuse the measured joint angles [rad]; returns the estimate x̂ = [q − q0; q̇]."""
-        innovation = q_measured - self.q0 - self.x_prior[: self._n]
-        self.x = self.x_prior + self.L @ innovation
-        return self.x
+        """Fuse the measured joint angles [rad]; returns the estimate x̂ = [q − q0; q̇].
+
+        The returned array is the filter's own storage: it is overwritten by the next
+        ``correct`` (copy it to keep it).
+        """
+        self._q_in[:] = q_measured
+        x = np.dot(self._correct_matrix, self._prior_and_q, out=self.x)
+        x -= self._correct_offset
+        return x
 
     def predict(self, u: np.ndarray) -> None:
         """Propagate with the applied MPC torque u [N·m] to the next tick."""
-        self.x_prior = self.A @ self.x + self.B @ u
+        self._u_in[:] = u
+        np.dot(self._predict_matrix, self._post_and_u, out=self.x_prior)

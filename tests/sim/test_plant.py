@@ -40,6 +40,20 @@ def test_default_integrator_local_error_against_fine_rk4(phantom):
     assert np.abs(coarse[:, :3] - ref[:, :3]).max() > np.abs(got[:, :3] - ref[:, :3]).max()
 
 
+def test_unrolled_three_joint_midpoint_is_bit_identical_to_the_general_one(phantom):
+    rng = np.random.default_rng(11)
+    fast = ArmPlant(phantom, TS)
+    assert fast._advance == fast._midpoint_steps_3
+    for _ in range(50):
+        q, v, tau = phantom.q0 + rng.normal(size=3) * 0.3, rng.normal(size=3), rng.normal(size=3)
+        fast.q, fast.v = q.copy(), v.copy()
+        fast._midpoint_steps_3(tau.tolist())
+        fast_state = np.concatenate([fast.q, fast.v])
+        fast.q, fast.v = q.copy(), v.copy()
+        fast._midpoint_steps(tau.tolist())
+        np.testing.assert_array_equal(fast_state, np.concatenate([fast.q, fast.v]))
+
+
 def total_energy(robot, data, q, v):
     return pin.computeKineticEnergy(robot.model, data, q, v) + pin.computePotentialEnergy(
         robot.model, data, q
