@@ -267,15 +267,21 @@ class PredictedReference:
         """r_{tick+1} … r_{tick+N}, or None before the first valid sample.
 
         Shape (N, d) in centred coordinates, or (N, 3) in the workspace after :meth:`place`.
-        A view: valid until the next ``refresh``.
+        A view of an array that the next ``refresh`` replaces (it is never changed in place).
         """
+        return self.horizons(tick, 1)[0]
+
+    def horizons(self, tick: int, count: int) -> list[np.ndarray | None]:
+        """``[horizon(tick), …, horizon(tick + count − 1)]`` from the current refresh."""
         dense = self._dense if self._origin is None else self._placed
         if dense is None:
-            return None
-        start = tick + 1 - self._first
-        if start + self.N > dense.shape[0]:  # refresh skipped: hold the last points
-            start = dense.shape[0] - self.N
-        return dense[start : start + self.N]
+            return [None] * count
+        N, last = self.N, dense.shape[0] - self.N
+        first = tick + 1 - self._first
+        starts = range(first, first + count)
+        if first + count - 1 > last:  # a refresh was skipped: hold the last points
+            starts = [min(k, last) for k in starts]
+        return [dense[k : k + N] for k in starts]
 
 
 class ExactReference:
@@ -312,3 +318,8 @@ class ExactReference:
     def horizon(self, tick: int) -> np.ndarray:
         """r_{tick+1} … r_{tick+N}: (N, d) centred, or (N, 3) in the workspace after ``place``."""
         return self._points[tick + 1 : tick + 1 + self.N]
+
+    def horizons(self, tick: int, count: int) -> list[np.ndarray]:
+        """``[horizon(tick), …, horizon(tick + count − 1)]`` (views)."""
+        points, N = self._points, self.N
+        return [points[k : k + N] for k in range(tick + 1, tick + 1 + count)]

@@ -68,15 +68,16 @@ class JointObserver:
         self.L = P @ H.T @ np.linalg.inv(H @ P @ H.T + np.diag(meas_var))
         self._n = n
         # Both steps as one mat-vec on preallocated storage (allocation-free at 2 kHz):
-        #   correct: x̂ = [I − L H, L] [x̂⁻; q̃] − L q0      predict: x̂⁻ = [A, B] [x̂; u]
-        self._correct_matrix = np.hstack([np.eye(2 * n) - self.L @ H, self.L])
-        self._correct_offset = self.L @ self.q0
+        #   correct: x̂ = [I − L H, L, −L q0] [x̂⁻; q̃; 1]      predict: x̂⁻ = [A, B] [x̂; u]
+        self._correct_matrix = np.hstack([np.eye(2 * n) - self.L @ H, self.L,
+                                          -(self.L @ self.q0)[:, None]])
         self._predict_matrix = np.hstack([self.A, self.B])
-        self._prior_and_q = np.zeros(3 * n)  # [x̂⁻; q̃]
+        self._prior_q_one = np.zeros(3 * n + 1)  # [x̂⁻; q̃; 1]
+        self._prior_q_one[-1] = 1.0
         self._post_and_u = np.zeros(3 * n)  # [x̂; u]
-        self.x_prior = self._prior_and_q[: 2 * n]
+        self.x_prior = self._prior_q_one[: 2 * n]
         self.x = self._post_and_u[: 2 * n]
-        self._q_in = self._prior_and_q[2 * n :]
+        self._q_in = self._prior_q_one[2 * n : 3 * n]
         self._u_in = self._post_and_u[2 * n :]
         self.reset()
 
@@ -92,9 +93,7 @@ class JointObserver:
         ``correct`` (copy it to keep it).
         """
         self._q_in[:] = q_measured
-        x = np.dot(self._correct_matrix, self._prior_and_q, out=self.x)
-        x -= self._correct_offset
-        return x
+        return np.dot(self._correct_matrix, self._prior_q_one, out=self.x)
 
     def predict(self, u: np.ndarray) -> None:
         """Propagate with the applied MPC torque u [N·m] to the next tick."""

@@ -209,7 +209,8 @@ def run_closed_loop(
     controller
         ``step(x, ref) -> τ_mpc`` and a ``stats`` mapping (:class:`rhmpc.mpc.RecedingHorizonMPC`).
     reference
-        ``place(origin)``, ``refresh(tick, z, stamp)`` and ``horizon(tick) -> (N, 3) | None``
+        ``place(origin)``, ``refresh(tick, z, stamp)`` and ``horizons(tick, count)`` → the
+        (N, 3) points of ticks tick … tick + count − 1, None before the first sample
         (:mod:`rhmpc.reference`); the loop places it at the workspace anchor before the run.
     truth, center
         From :func:`poi_truth` over at least ``ticks + horizon + 1`` ticks.
@@ -234,6 +235,7 @@ def run_closed_loop(
     velocity = observer.x[robot.nv :]  # a view of the estimate x̂ = [q − q0; q̇]
     resolution = robot.encoder_resolution
     inv_resolution = None if resolution is None else 1.0 / resolution
+    encoder = np.empty(robot.nv)  # the quantised reading, rewritten every tick
     newest = newest_arrived(np.asarray(stream.arrival, dtype=float), n, Ts)
     z_all = np.asarray(stream.z, dtype=float).reshape(len(stream.t), -1) - center
     t_all = np.asarray(stream.t, dtype=float)
@@ -259,26 +261,28 @@ def run_closed_loop(
             # robot, so a chunk's references are made first, each predictor period timed and
             # charged to its refresh tick; the closed loop then runs with warm caches.
             refs, period_ns = [], []
-            for i in range(c0, c1):
-                if i % ds == 0:
-                    t_start = clock()
-                    j = newest[i]
-                    if j >= 0 and j != last_j:
-                        last_j = j
-                        reference.refresh(i, z_all[j], t_all[j])
-                    else:
-                        reference.refresh(i, None, i * Ts)
-                    h = reference.horizon(i)
-                    if h is not None:
-                        horizons[i // ds] = h
-                    period_ns.append(clock() - t_start)
-                h = reference.horizon(i)  # a view; later refreshes replace the array it views
-                refs.append(hold if h is None else h)
+            for i in range(c0, c1, ds):  # c0 is a multiple of ds: every i refreshes
+                t_start = clock()
+                j = newest[i]
+                if j >= 0 and j != last_j:
+                    last_j = j
+                    reference.refresh(i, z_all[j], t_all[j])
+                else:
+                    reference.refresh(i, None, i * Ts)
+                # views; later refreshes replace the arrays they view, never change them
+                period = reference.horizons(i, min(ds, c1 - i))
+                if period[0] is not None:
+                    horizons[i // ds] = period[0]
+                refs.extend(hold if h is None else h for h in period)
+                period_ns.append(clock() - t_start)
             for i in range(c0, c1):
                 t_start = clock()
                 ref = refs[i - c0]
-                q = plant.q
-                q_meas = q if resolution is None else np.rint(q * inv_resolution) * resolution
+                q_meas = plant.q
+                if resolution is not None:  # encoders: q̃ = Δ·round(q/Δ)
+                    q_meas = np.multiply(q_meas, inv_resolution, out=encoder)
+                    np.rint(encoder, out=encoder)
+                    encoder *= resolution
                 x_hat = observer.correct(q_meas)
                 u = controller.step(x_hat, ref)
                 tau = cancel.torque(q_meas, velocity, u)
@@ -304,11 +308,12 @@ def run_closed_loop(
     saturated = np.abs(tau_log) > limit
     saturated_ticks = int(saturated.any(axis=1).sum())
     tau_log = np.clip(tau_log, -limit, limit)  # what acted
-    ee = np.empty((n, 3))
-    data, fid = robot.create_data(), robot.ee_frame_id
-    for i in range(n):
-        pin.framesForwardKinematics(robot.model, data, q_log[i])
-        ee[i] = data.oMf[fid].translation
+    model, data, fid = robot.model, robot.create_data(), robot.ee_frame_id
+    ee = []
+    for q in q_log:
+        pin.forwardKinematics(model, data, q)
+        ee.append(pin.updateFramePlacement(model, data, fid).translation)
+    ee = np.array(ee).reshape(n, 3)
     # Horizon prediction error per lead tick, after settling.
     first = -(-settings.settling_ticks // ds)
     lead = np.arange(1, N + 1)

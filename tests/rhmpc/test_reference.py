@@ -178,3 +178,29 @@ def test_reference_guard_holds_the_last_sample_when_the_predictor_diverges():
     for k in range(50):
         free.refresh(k * DS, z, k * DS * TS)
     assert np.abs(free.horizon(49 * DS)).max() > 0.01
+
+
+def test_placement_and_batched_horizons_match_single_lookups():
+    f = np.sin
+    origin = np.array([0.1, -0.2, 0.3])
+    ref = PredictedReference(Scripted(f), TS, N, DS, 4)
+    ref.place(origin)
+    for k in range(3):
+        t = k * DS * TS
+        ref.refresh(k * DS, np.array([f(t), t]), t)
+    tick = 2 * DS
+    batch = ref.horizons(tick, DS + 20)  # past the next refresh: the last points are held
+    for offset, h in enumerate(batch):
+        np.testing.assert_array_equal(h, ref.horizon(tick + offset))
+    assert batch[0].shape == (N, 3)
+    np.testing.assert_allclose(batch[0][:, 0] - origin[0], f((tick + np.arange(1, N + 1)) * TS),
+                               atol=1e-3)
+    np.testing.assert_array_equal(batch[0][:, 2], origin[2])  # 2-D sample: z axis is the origin
+    np.testing.assert_array_equal(batch[-1], batch[DS - 1 + 5])  # held
+
+    truth = np.arange(300.0)[:, None]
+    exact = ExactReference(truth, N)
+    exact.place(origin)
+    for offset, h in enumerate(exact.horizons(10, 5)):
+        np.testing.assert_array_equal(h, origin + np.c_[np.arange(11, 11 + N) + offset,
+                                                       np.zeros((N, 2))])
