@@ -261,7 +261,7 @@ class RecedingHorizonMPC:
         After a screened tick: (ẑ*, 0); otherwise OSQP's last iterate, whatever its status.
         """
         if self._last_screened:
-            return self._z_star.copy(), np.zeros(self.qp.A.shape[0])
+            return self._z_star.copy(), self._y_zero.copy()
         if self._raw is not None:
             sol = self._raw.solution
             return np.array(sol.x, dtype=float), np.array(sol.y, dtype=float)

@@ -66,7 +66,6 @@ class JointObserver:
         H = np.hstack([np.eye(n), np.zeros((n, n))])
         P = scipy.linalg.solve_discrete_are(self.A.T, H.T, Qw, np.diag(meas_var))
         self.L = P @ H.T @ np.linalg.inv(H @ P @ H.T + np.diag(meas_var))
-        self._n = n
         # Both steps as one mat-vec on preallocated storage (allocation-free at 2 kHz):
         #   correct: x̂ = [I − L H, L, −L q0] [x̂⁻; q̃; 1]      predict: x̂⁻ = [A, B] [x̂; u]
         self._correct_matrix = np.hstack([np.eye(2 * n) - self.L @ H, self.L,

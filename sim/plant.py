@@ -239,12 +239,10 @@ class NonlinearityCancellation:
                 inertia.inertia * self.mismatch.mass_scale,
             )
         self.data = self.model.createData()
-        self._damping = robot.damping * self.mismatch.friction_scale
-        self._coulomb = robot.coulomb_friction * self.mismatch.friction_scale
         self._inv_stiction = 1.0 / stiction_velocity
-        nv = robot.nv
-        self._damping_list = np.broadcast_to(self._damping, (nv,)).tolist()
-        self._coulomb_list = np.broadcast_to(self._coulomb, (nv,)).tolist()
+        scale, nv = self.mismatch.friction_scale, robot.nv
+        self._damping_list = np.broadcast_to(robot.damping * scale, (nv,)).tolist()
+        self._coulomb_list = np.broadcast_to(robot.coulomb_friction * scale, (nv,)).tolist()
         self._zero = np.zeros(robot.nv)
 
     def torque(self, q: np.ndarray, v: np.ndarray, tau_mpc: np.ndarray | None = None) -> np.ndarray:
