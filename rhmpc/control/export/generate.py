@@ -1,0 +1,196 @@
+"""`rhmpc export`: the controller as a self-contained C library (OSQP codegen + the tick).
+
+What is written to ``OUTDIR``::
+
+    rhmpc.h          the API, units and array layouts (sizes baked in as macros)
+    rhmpc.c          the per-tick logic of RecedingHorizonMPC.step (screening, vector update,
+                     shifted warm start, fallback chain plan → LQ → zero, torque clipping)
+    rhmpc_data.h/.c  the numbers, as ``const`` arrays, from the controller's own CondensedQP:
+                     F_ext = [F, f0] (p → q), the screening map Z = −P⁻¹[F, f0], A, G, l0, u0,
+                     the LQ gain, the one-tick shift (primal and dual), block of each tick, u_max
+    osqp/            OSQP's embedded code (``OSQP.codegen``, ``parameters="vectors"``), generated
+                     from the controller's own solver object: P, A, settings and KKT factorisation
+    CMakeLists.txt   builds librhmpc.a and librhmpc_shared.so
+
+Everything numeric is read from a built :class:`RecedingHorizonMPC`, so the C code solves the
+same QP as the Python controller; the equivalence tests compare the two tick for tick.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import re
+import shutil
+import tempfile
+from dataclasses import dataclass
+from importlib.metadata import PackageNotFoundError, version
+from importlib.resources import files
+from pathlib import Path
+
+import numpy as np
+
+from rhmpc.control.mpc import RecedingHorizonMPC
+from rhmpc.control.settings import to_dict
+
+#: Prefix of OSQP's generated globals (``rhmpc_osqp_solver``) and workspace files.
+OSQP_PREFIX = "rhmpc_osqp_"
+_WARM_STARTS = {"shift": 0, "shift_primal": 1, "keep": 2, "none": 3}
+_TEMPLATES = ("rhmpc.h", "rhmpc.c", "rhmpc_data.h", "CMakeLists.txt")
+
+
+class ExportError(ValueError):
+    """The controller cannot be exported as it is configured (the message says why)."""
+
+
+@dataclass(frozen=True)
+class ExportInfo:
+    """What :func:`export_controller` wrote.
+
+    Attributes
+    ----------
+    outdir : Path
+        The library's source directory (give it to ``cmake -S``).
+    key : str
+        Hash of everything the generated code depends on (QP data, settings, versions).
+    files : tuple[str, ...]
+        Files written, relative to ``outdir``.
+    """
+
+    outdir: Path
+    key: str
+    files: tuple[str, ...]
+
+
+def _version(name: str) -> str:
+    try:
+        return version(name)
+    except PackageNotFoundError:
+        return "unknown"
+
+
+def _check(mpc: RecedingHorizonMPC) -> None:
+    """Raise ExportError for what the generated code does not reproduce."""
+    qp, s = mpc.qp, mpc.settings
+    expected = qp.nx + qp.N * qp.ny + qp.nu
+    if qp.npar != expected:
+        raise ExportError(
+            f"the QP has {qp.npar} parameters, the C tick takes x, ref, u_prev ({expected}); "
+            "this controller's extra per-tick inputs are not exported yet"
+        )
+    if s.adaptive_rho:
+        raise ExportError("adaptive_rho needs OSQP's KKT refactorisation, which the vectors-mode "
+                          "embedded code does not have; set mpc.adaptive_rho = false")
+    if s.polish:
+        raise ExportError("OSQP's embedded code does not polish; set mpc.polish = false")
+    if s.warm_start not in _WARM_STARTS:
+        raise ExportError(f"warm start {s.warm_start!r} is not exported")
+    m = qp.A.shape[0]
+    arrays = {"P": qp.P, "F": qp.F, "f0": qp.f0, "A": qp.A, "G": qp.G, "l0": qp.l0, "u0": qp.u0,
+              "minimiser": qp.minimiser, "gain": qp.gain, "gain0": qp.gain0}
+    for name, a in arrays.items():
+        if not np.all(np.isfinite(a)):
+            raise ExportError(f"the QP's {name} has non-finite entries")
+    if qp.shift.shape != (qp.nz, qp.nz) or qp.shift_dual.shape != (m, m):
+        raise ExportError("unexpected shapes of the warm-start shift")
+
+
+def _data_arrays(mpc: RecedingHorizonMPC) -> dict[str, np.ndarray]:
+    """The const arrays of rhmpc_data.c, row-major, from the controller's CondensedQP."""
+    qp = mpc.qp
+    return {
+        "F_ext": np.column_stack([qp.F, qp.f0]),
+        "minimiser": np.asarray(qp.minimiser),
+        "A": np.asarray(qp.A),
+        "G": np.asarray(qp.G),
+        "l0": np.asarray(qp.l0),
+        "u0": np.asarray(qp.u0),
+        "gain": np.asarray(qp.gain),
+        "gain0": np.asarray(qp.gain0),
+        "shift": np.asarray(qp.shift),
+        "shift_dual": np.asarray(qp.shift_dual),
+        "u_max": np.asarray(qp.u_max),
+    }
+
+
+def _c_array(name: str, values: np.ndarray, ctype: str = "double") -> str:
+    flat = np.ascontiguousarray(values, dtype=float if ctype == "double" else np.int64).ravel()
+    # repr of a Python float is the shortest string that round-trips: the C compiler reads back
+    # the same double.
+    items = [repr(float(v)) if ctype == "double" else str(int(v)) for v in flat]
+    lines = [", ".join(items[i:i + 6]) for i in range(0, len(items), 6)]
+    body = ",\n  ".join(lines) if lines else "0"
+    return f"const {ctype} rhmpc_{name}[{max(len(items), 1)}] = {{\n  {body}\n}};\n"
+
+
+def export_key(mpc: RecedingHorizonMPC, robot: str) -> str:
+    """Hash of the QP data, the settings and the versions the generated code depends on."""
+    h = hashlib.sha256()
+    meta = {"robot": robot, "settings": to_dict(mpc.settings), "rhmpc": _version("rhmpc"),
+            "osqp": _version("osqp"), "Ts": float(mpc.arm.Ts)}
+    h.update(json.dumps(meta, sort_keys=True).encode())
+    qp = mpc.qp
+    for a in (qp.P, *(_data_arrays(mpc).values()), qp.block_of_tick):
+        h.update(np.ascontiguousarray(a, dtype=float).tobytes())
+    for name in _TEMPLATES:
+        h.update(files(__package__).joinpath("templates", name).read_bytes())
+    return h.hexdigest()[:16]
+
+
+def export_controller(mpc: RecedingHorizonMPC, outdir: str | Path, *, robot: str) -> ExportInfo:
+    """Write the C library of ``mpc`` (a freshly built or reset controller) to ``outdir``.
+
+    Raises
+    ------
+    ExportError
+        If the controller uses something the generated code does not reproduce.
+    """
+    _check(mpc)
+    qp, s = mpc.qp, mpc.settings
+    outdir = Path(outdir)
+    outdir.mkdir(parents=True, exist_ok=True)
+    key = export_key(mpc, robot)
+    subs = {
+        "ROBOT": robot, "ROBOT_ID": "".join(c if c.isalnum() else "_" for c in robot),
+        "HASH": key, "VERSION": _version("rhmpc"), "OSQP_VERSION": _version("osqp"),
+        "TS_US": f"{mpc.arm.Ts * 1e6:g}", "N": qp.N, "NX": qp.nx, "NU": qp.nu, "NY": qp.ny,
+        "NZ": qp.nz, "M": qp.A.shape[0], "NPAR": qp.npar,
+        "PLAN_FALLBACK_TICKS": s.plan_fallback_ticks, "MAX_ITER": s.max_iter,
+        "WARM_START": _WARM_STARTS[s.warm_start], "WARM_START_NAME": s.warm_start,
+        "SCREENING": int(s.screening), "PARAM_BOUNDS": int(qp.param_bounds),
+        "OSQP_PREFIX": OSQP_PREFIX,
+    }
+    written = []
+    for name in _TEMPLATES:
+        text = files(__package__).joinpath("templates", name).read_text()
+        for k, v in subs.items():
+            text = text.replace(f"@{k}@", str(v))
+        leftover = re.search(r"@[A-Z_]+@", text)
+        if leftover:
+            raise RuntimeError(f"template {name}: unreplaced placeholder {leftover.group()}")
+        (outdir / name).write_text(text)
+        written.append(name)
+
+    data = _data_arrays(mpc)
+    parts = [f"/* Generated by `rhmpc export` (robot \"{robot}\", hash {key}): the controller's "
+             "numbers, from its CondensedQP. Row-major. */\n#include \"rhmpc_data.h\"\n\n"]
+    for name, values in data.items():
+        parts.append(_c_array(name, values))
+    parts.append(_c_array("block_of_tick", qp.block_of_tick, ctype="int"))
+    (outdir / "rhmpc_data.c").write_text("".join(parts))
+    written.append("rhmpc_data.c")
+
+    osqp_dir = outdir / "osqp"
+    if osqp_dir.exists():
+        shutil.rmtree(osqp_dir)
+    with tempfile.TemporaryDirectory() as tmp:
+        solver = mpc._osqp  # the controller's own solver: same P, A, settings
+        solver.codegen(
+            str(Path(tmp) / "osqp"), parameters="vectors", extension_name=None,
+            force_rewrite=True, prefix=OSQP_PREFIX, profiling_enable=s.time_limit > 0,
+        )
+        shutil.copytree(Path(tmp) / "osqp", osqp_dir)
+    for leftover in ("emosqp.c", "Makefile"):  # OSQP's example program (printf, main)
+        (osqp_dir / leftover).unlink(missing_ok=True)
+    written += sorted(str(p.relative_to(outdir)) for p in osqp_dir.rglob("*") if p.is_file())
+    return ExportInfo(outdir=outdir, key=key, files=tuple(written))
