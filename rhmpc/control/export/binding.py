@@ -157,14 +157,23 @@ class CController:
         return int(self._pub.tick_ns)
 
     @property
+    def source(self) -> str:
+        """Where the last torque came from: ``"qp"``, ``"plan"``, ``"lq"`` or ``"zero"``."""
+        return SOURCE_NAMES[self._pub.source] if self._pub.ticks else "none"
+
+    @property
+    def status(self) -> str:
+        """Last tick: ``"solved"`` or the reason the QP result was not used."""
+        return STATUS_NAMES[self._pub.status] if self._pub.ticks else "none"
+
+    @property
     def stats(self) -> MPCStats:
         """The counters in the form of :class:`MPCStats` (``parts_ns[0]`` = the C tick)."""
         pub = self._pub
         failures = {STATUS_NAMES[i]: int(n) for i, n in enumerate(pub.failures) if n}
         fallbacks = {name: int(pub.fallbacks[i]) for i, name in enumerate(SOURCE_NAMES) if i}
         return MPCStats(
-            ticks=int(pub.ticks), status=STATUS_NAMES[pub.status] if pub.ticks else "none",
-            source=SOURCE_NAMES[pub.source] if pub.ticks else "none",
+            ticks=int(pub.ticks), status=self.status, source=self.source,
             iterations=int(pub.iterations), screened=int(pub.screened), solve_time=0.0,
             parts_ns=[int(pub.tick_ns), 0, 0, 0], failures=failures, fallbacks=fallbacks,
         )

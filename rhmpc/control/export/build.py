@@ -20,7 +20,7 @@ from .generate import export_controller, export_key
 COMPILERS = ("cc", "gcc", "clang")
 
 
-class ToolchainError(RuntimeError):
+class ToolchainError(OSError):
     """No C compiler or no cmake, or the build failed (the message says which, in one line)."""
 
 
