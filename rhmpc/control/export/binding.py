@@ -157,6 +157,11 @@ class CController:
         return int(self._pub.tick_ns)
 
     @property
+    def screened(self) -> int:
+        """Ticks solved by screening (OSQP not called) since the last reset."""
+        return int(self._pub.screened)
+
+    @property
     def source(self) -> str:
         """Where the last torque came from: ``"qp"``, ``"plan"``, ``"lq"`` or ``"zero"``."""
         return SOURCE_NAMES[self._pub.source] if self._pub.ticks else "none"

@@ -78,7 +78,9 @@ def test_run_bench_with_the_compiled_controller(tmp_path_factory):
     assert r["c_vs_python_max_frac"] <= 1e-6  # measured ≈ 2e-11
     assert r["c_mismatched_ticks"] == 0
     assert r["c_fallbacks"] == r["fallbacks"]
-    assert r["screened_ticks"] < r["ticks"]  # OSQP ran in C too
+    # OSQP ran in C on exactly the ticks the Python controller did not screen
+    assert 0 < r["c_osqp_ticks"] == r["ticks"] - r["screened_ticks"]
+    assert r["c_osqp_tick_us"]["p50"] > 0 and r["c_screened_tick_us"]["p50"] > 0
     text = format_table(r)
     assert "C tick, inside C" in text and "C tick / Python tick" in text
     json.dumps(r)
