@@ -50,6 +50,8 @@ def run(args: argparse.Namespace) -> int:
     src = shlex.quote(str(outdir))
     print(f"rhmpc export: {robot}, N = {q.N}, {q.nz} QP variables, {q.A.shape[0]} constraints, "
           f"{len(info.files)} files in {outdir} (key {info.key})")
+    for note in info.notes:
+        print(f"note:  {note}")
     print(f"build: cmake -S {src} -B {build} && cmake --build {build}")
     print(f"API:   {outdir / 'rhmpc.h'} (units and array layouts)")
     return 0

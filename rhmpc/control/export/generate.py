@@ -55,11 +55,14 @@ class ExportInfo:
         Hash of everything the generated code depends on (QP data, settings, versions).
     files : tuple[str, ...]
         Files written, relative to ``outdir``.
+    notes : tuple[str, ...]
+        Settings the C code does not reproduce exactly (also written into ``rhmpc.h``).
     """
 
     outdir: Path
     key: str
     files: tuple[str, ...]
+    notes: tuple[str, ...] = ()
 
 
 def _version(name: str) -> str:
@@ -147,9 +150,17 @@ def export_controller(mpc: RecedingHorizonMPC, outdir: str | Path, *, robot: str
     """
     _check(mpc)
     qp, s = mpc.qp, mpc.settings
+    if not hasattr(mpc, "_osqp"):
+        raise ExportError("the controller has no OSQP solver object to generate code from")
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
     key = export_key(mpc, robot)
+    notes = []
+    if s.time_limit > 0:
+        # OSQP 1.1's embedded sources have no timer (no timing.c; the generated workspace has
+        # no timer object), so the wall-clock limit cannot be generated.
+        notes.append(f"time_limit = {s.time_limit:g} s is not enforced in C (OSQP's embedded "
+                     f"code has no timer); a solve is bounded by max_iter = {s.max_iter}")
     subs = {
         "ROBOT": robot, "ROBOT_ID": "".join(c if c.isalnum() else "_" for c in robot),
         "HASH": key, "VERSION": _version("rhmpc"), "OSQP_VERSION": _version("osqp"),
@@ -159,6 +170,7 @@ def export_controller(mpc: RecedingHorizonMPC, outdir: str | Path, *, robot: str
         "WARM_START": _WARM_STARTS[s.warm_start], "WARM_START_NAME": s.warm_start,
         "SCREENING": int(s.screening), "PARAM_BOUNDS": int(qp.param_bounds),
         "OSQP_PREFIX": OSQP_PREFIX,
+        "NOTES": "".join(f"\n * Not exported: {n}." for n in notes) or "\n * (Nothing left out.)",
     }
     written = []
     for name in _TEMPLATES:
@@ -187,10 +199,10 @@ def export_controller(mpc: RecedingHorizonMPC, outdir: str | Path, *, robot: str
         solver = mpc._osqp  # the controller's own solver: same P, A, settings
         solver.codegen(
             str(Path(tmp) / "osqp"), parameters="vectors", extension_name=None,
-            force_rewrite=True, prefix=OSQP_PREFIX, profiling_enable=s.time_limit > 0,
+            force_rewrite=True, prefix=OSQP_PREFIX,
         )
         shutil.copytree(Path(tmp) / "osqp", osqp_dir)
     for leftover in ("emosqp.c", "Makefile"):  # OSQP's example program (printf, main)
         (osqp_dir / leftover).unlink(missing_ok=True)
     written += sorted(str(p.relative_to(outdir)) for p in osqp_dir.rglob("*") if p.is_file())
-    return ExportInfo(outdir=outdir, key=key, files=tuple(written))
+    return ExportInfo(outdir=outdir, key=key, files=tuple(written), notes=tuple(notes))

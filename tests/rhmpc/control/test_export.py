@@ -259,6 +259,11 @@ def test_export_refuses_what_the_embedded_code_cannot_do(arm, tmp_path):
         mpc = RecedingHorizonMPC(arm, MPCSettings(**bad))
         with pytest.raises(ExportError, match=match):
             export_controller(mpc, tmp_path / "out", robot="phantom")
+    # A wall-clock limit cannot be generated (no timer in OSQP's embedded code): said, not hidden
+    mpc = RecedingHorizonMPC(arm, MPCSettings(time_limit=2e-4))
+    info = export_controller(mpc, tmp_path / "out", robot="phantom")
+    assert len(info.notes) == 1 and "time_limit" in info.notes[0]
+    assert "Not exported: time_limit" in (tmp_path / "out" / "rhmpc.h").read_text()
 
 
 def test_export_writes_the_controllers_numbers(arm, tmp_path):

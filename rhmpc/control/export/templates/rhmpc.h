@@ -32,6 +32,8 @@
  *
  * The QP solver is OSQP's generated embedded code (vectors mode), whose workspace is a set of
  * static globals: one controller per program (rhmpc_init re-initialises it).
+ *
+ * Settings of the Python controller this code does not reproduce:@NOTES@
  */
 #ifndef RHMPC_H
 #define RHMPC_H
