@@ -113,6 +113,8 @@ def _data_arrays(mpc: RecedingHorizonMPC) -> dict[str, np.ndarray]:
         "shift": np.asarray(qp.shift),
         "shift_dual": np.asarray(qp.shift_dual),
         "u_max": np.asarray(qp.u_max),
+        "q0": np.asarray(mpc.arm.q0, dtype=float),
+        "y0": np.asarray(mpc.arm.y0, dtype=float),
     }
 
 
@@ -164,7 +166,8 @@ def export_controller(mpc: RecedingHorizonMPC, outdir: str | Path, *, robot: str
     subs = {
         "ROBOT": robot, "ROBOT_ID": "".join(c if c.isalnum() else "_" for c in robot),
         "HASH": key, "VERSION": _version("rhmpc"), "OSQP_VERSION": _version("osqp"),
-        "TS_US": f"{mpc.arm.Ts * 1e6:g}", "N": qp.N, "NX": qp.nx, "NU": qp.nu, "NY": qp.ny,
+        "TS_US": f"{mpc.arm.Ts * 1e6:g}", "TS": repr(float(mpc.arm.Ts)),
+        "N": qp.N, "NX": qp.nx, "NU": qp.nu, "NY": qp.ny,
         "NZ": qp.nz, "M": qp.A.shape[0], "NPAR": qp.npar,
         "PLAN_FALLBACK_TICKS": s.plan_fallback_ticks, "MAX_ITER": s.max_iter,
         "WARM_START": _WARM_STARTS[s.warm_start], "WARM_START_NAME": s.warm_start,

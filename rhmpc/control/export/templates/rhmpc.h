@@ -12,7 +12,8 @@
  *   x[RHMPC_NX]          state about the linearisation posture q0: x = [q - q0 (rad, RHMPC_NU);
  *                        qdot (rad/s, RHMPC_NU)]
  *   ref[RHMPC_NY*RHMPC_N]  end-effector reference points r_1..r_N of the next N ticks (m, absolute,
- *                        in the robot's base frame), point after point: ref[3*k + a] = r_{k+1}[a],
+ *                        in the robot model's world frame, like rhmpc_y0), point after point:
+ *                        ref[RHMPC_NY*k + a] = r_{k+1}[a],
  *                        a = x, y, z (row-major (N, 3), as numpy's C order)
  *   u_prev[RHMPC_NU]     MPC torque that acted in the previous tick (N*m); NULL = the torque this
  *                        library returned last tick. Clipped to +-u_max like the output.
@@ -20,7 +21,7 @@
  *                        caller adds its nonlinearity cancellation (gravity, Coriolis, friction).
  *
  * Return value: RHMPC_SOLVED (0) if the QP's solution (OSQP's or the screened unconstrained
- * minimiser) was applied; otherwise the reason the QP result was not used (RHMPC_MAX_ITER, ...),
+ * minimiser) was applied; otherwise the reason the QP result was not used (RHMPC_MAX_ITER_REACHED, ...),
  * and tau came from the fallback chain: the previous plan shifted to this tick (at most
  * RHMPC_PLAN_FALLBACK_TICKS ticks after it was computed), else the clipped unconstrained LQ input,
  * else zero. ctl.source says which (RHMPC_SOURCE_*); the counters in rhmpc_t count every event.
@@ -105,6 +106,11 @@ void rhmpc_force_failures(rhmpc_t *ctl, long long count);
 
 /* MPC torque bounds u_max [N*m] (the robot's limits less the cancellation margin). */
 extern const double rhmpc_u_max[RHMPC_NU];
+/* The linearisation posture q0 [rad] (x = [q - q0; qdot]) and the end-effector position there,
+ * y0 [m]: the model is y = C x + y0. */
+extern const double rhmpc_q0[RHMPC_NU];
+extern const double rhmpc_y0[RHMPC_NY];
+#define RHMPC_TS @TS@ /* control period [s] */
 
 /* Names of the status codes and sources, e.g. for logs outside the control loop. */
 const char *rhmpc_status_name(int status);
