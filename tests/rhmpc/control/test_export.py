@@ -302,3 +302,41 @@ def test_cli_without_toolchain_says_so_and_exits_2(monkeypatch, capsys):
         assert main(argv) == 2
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and "cmake" in err, err
+
+
+STATIC_MAIN = r"""
+#include <stdio.h>
+#include "rhmpc.h"
+/* 200 ticks at rest, reference 3 mm away along x (bounds bind at first), no Python. */
+int main(void) {
+  static rhmpc_t ctl;
+  double x[RHMPC_NX] = {0}, ref[RHMPC_NY * RHMPC_N], tau[RHMPC_NU];
+  for (int k = 0; k < RHMPC_N; ++k)
+    for (int a = 0; a < RHMPC_NY; ++a) ref[RHMPC_NY * k + a] = rhmpc_y0[a] + (a == 0 ? 3e-3 : 0);
+  rhmpc_init(&ctl);
+  for (int k = 0; k < 200; ++k) rhmpc_tick(&ctl, x, ref, NULL, tau);
+  printf("%.17g %.17g %.17g %lld %lld\n", tau[0], tau[1], tau[2], ctl.ticks, ctl.screened);
+  return 0;
+}
+"""
+
+
+@needs_cc
+def test_static_library_links_into_a_c_program(arm, built, tmp_path):
+    """A plain C program against rhmpc.h and librhmpc.a gives Python's torque."""
+    build = built("default").parent
+    src = next(build.parent.glob("src"))
+    (tmp_path / "main.c").write_text(STATIC_MAIN)
+    cc = next(c for c in ("cc", "gcc", "clang") if shutil.which(c))
+    exe = tmp_path / "main"
+    subprocess.run([cc, "-O2", "-I", str(src), str(tmp_path / "main.c"),
+                    str(build / "librhmpc.a"), "-lm", "-o", str(exe)], check=True)
+    out = subprocess.run([str(exe)], capture_output=True, text=True, check=True).stdout.split()
+    py = RecedingHorizonMPC(arm, MPCSettings())
+    ref = np.tile(arm.y0 + np.array([3e-3, 0.0, 0.0]), (py.N, 1))
+    for _ in range(200):
+        tau = py.step(np.zeros(arm.nx), ref)
+    np.testing.assert_allclose([float(v) for v in out[:3]], tau, rtol=0,
+                               atol=TOL * np.max(arm.torque_limit))
+    assert int(out[3]) == 200 and int(out[4]) == py.stats.screened
+    assert int(out[4]) < 200  # OSQP ran (a bound was active on some ticks)
