@@ -122,10 +122,12 @@ def _c_array(name: str, values: np.ndarray, ctype: str = "double") -> str:
     flat = np.ascontiguousarray(values, dtype=float if ctype == "double" else np.int64).ravel()
     # repr of a Python float is the shortest string that round-trips: the C compiler reads back
     # the same double.
+    if not np.any(flat):  # e.g. G without joint bounds: C zero-fills the rest
+        return f"const {ctype} rhmpc_{name}[{max(flat.size, 1)}] = {{0}};\n"
     items = [repr(float(v)) if ctype == "double" else str(int(v)) for v in flat]
     lines = [", ".join(items[i:i + 6]) for i in range(0, len(items), 6)]
-    body = ",\n  ".join(lines) if lines else "0"
-    return f"const {ctype} rhmpc_{name}[{max(len(items), 1)}] = {{\n  {body}\n}};\n"
+    body = ",\n  ".join(lines)
+    return f"const {ctype} rhmpc_{name}[{len(items)}] = {{\n  {body}\n}};\n"
 
 
 def export_key(mpc: RecedingHorizonMPC, robot: str) -> str:
