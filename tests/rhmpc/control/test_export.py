@@ -340,3 +340,19 @@ def test_static_library_links_into_a_c_program(arm, built, tmp_path):
                                atol=TOL * np.max(arm.torque_limit))
     assert int(out[3]) == 200 and int(out[4]) == py.stats.screened
     assert int(out[4]) < 200  # OSQP ran (a bound was active on some ticks)
+
+
+@needs_cc
+def test_cli_simulate_with_the_c_controller(monkeypatch, cache, capsys):
+    """`rhmpc simulate --controller c`: the same run as the Python controller's."""
+    import json
+
+    monkeypatch.setenv("RHMPC_CACHE_DIR", str(cache))
+    docs = {}
+    for impl in ("python", "c"):
+        assert main(["simulate", "--controller", impl, "--duration", "1", "--json"]) == 0
+        docs[impl] = json.loads(capsys.readouterr().out)
+    assert docs["c"]["implementation"] == "c"
+    for key in ("rms_error_mm", "max_error_mm", "rms_effort_mNm"):
+        assert docs["c"][key] == pytest.approx(docs["python"][key], rel=1e-9), key
+    assert docs["c"]["controller"]["ticks"] == 2000
