@@ -30,4 +30,5 @@ __all__ = [
 def compiled_controller(mpc, robot: str, cache: str | None = None) -> CController:
     """The compiled twin of ``mpc`` (exported and built once per distinct data, then cached)."""
     lib = build_cached(mpc, robot, cache)
-    return CController(lib, dims=(mpc.N, mpc.nx, mpc.nu, mpc.ny))
+    extra = getattr(mpc, "offset", None) if mpc.qp.npar > mpc.nx + mpc.N * mpc.ny + mpc.nu else None
+    return CController(lib, dims=(mpc.N, mpc.nx, mpc.nu, mpc.ny), extra_inputs=extra)

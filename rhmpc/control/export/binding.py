@@ -11,6 +11,7 @@ import shutil
 import tempfile
 import time
 import weakref
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -23,7 +24,7 @@ STATUS_NAMES = (
     "solved_inaccurate", "primal_infeasible", "dual_infeasible", "max_iter", "time_limit",
     "non_convex", "interrupted", "unsolved",
 )
-SOURCE_NAMES = ("qp", "plan", "lq", "zero")
+SOURCE_NAMES = ("qp", "plan", "lq", "brake", "zero")
 
 
 class _Public(ctypes.Structure):
@@ -33,7 +34,7 @@ class _Public(ctypes.Structure):
         ("ticks", ctypes.c_longlong),
         ("screened", ctypes.c_longlong),
         ("failures", ctypes.c_longlong * len(STATUS_NAMES)),
-        ("fallbacks", ctypes.c_longlong * 4),
+        ("fallbacks", ctypes.c_longlong * len(SOURCE_NAMES)),
         ("status", ctypes.c_int),
         ("source", ctypes.c_int),
         ("iterations", ctypes.c_int),
@@ -53,6 +54,9 @@ class CController:
         The shared library built from an export (:func:`~.build.build_cached`).
     dims : tuple[int, int, int, int] | None
         Expected (N, nx, nu, ny), checked against the library's.
+    extra_inputs : callable | None
+        ``extra_inputs(x) -> (n_extra,)``: the per-tick inputs of the QP after u_{−1} (the
+        controller's output offset), evaluated in Python before each finite-state tick.
 
     Attributes
     ----------
@@ -62,7 +66,12 @@ class CController:
         Duration of the last tick as seen from Python (the ctypes call) [ns].
     """
 
-    def __init__(self, library: str | Path, dims: tuple[int, int, int, int] | None = None) -> None:
+    def __init__(
+        self,
+        library: str | Path,
+        dims: tuple[int, int, int, int] | None = None,
+        extra_inputs: Callable[[np.ndarray], np.ndarray] | None = None,
+    ) -> None:
         path = str(Path(library).resolve())
         other = _in_use.get(path)
         if other is not None and other() is not None:
@@ -75,8 +84,8 @@ class CController:
         self.library = path
         self._lib = lib
         vp, ll = ctypes.c_void_p, ctypes.c_longlong
-        lib.rhmpc_tick.argtypes = (vp, vp, vp, vp, vp)
-        lib.rhmpc_tick.restype = ctypes.c_int
+        lib.rhmpc_tick_ext.argtypes = (vp, vp, vp, vp, vp, vp)
+        lib.rhmpc_tick_ext.restype = ctypes.c_int
         lib.rhmpc_init.argtypes = (vp,)
         lib.rhmpc_init.restype = None
         lib.rhmpc_force_failures.argtypes = (vp, ll)
@@ -84,9 +93,13 @@ class CController:
         lib.rhmpc_sizeof.restype = ll
         lib.rhmpc_dims.argtypes = (vp,)
         lib.rhmpc_dims.restype = None
-        d = np.zeros(7, dtype=np.intc)
+        d = np.zeros(9, dtype=np.intc)
         lib.rhmpc_dims(d.ctypes.data)
-        self.N, self.nx, self.nu, self.ny, self.nz, self.m, self.npar = (int(v) for v in d)
+        self.N, self.nx, self.nu, self.ny, self.nv, self.m, self.npar, self.nz, self.n_extra = (
+            int(v) for v in d)
+        if self.n_extra and extra_inputs is None:
+            raise ValueError(f"library {path} takes {self.n_extra} extra per-tick inputs; "
+                             "give extra_inputs")
         if dims is not None and tuple(dims) != (self.N, self.nx, self.nu, self.ny):
             raise ValueError(f"library {path} is for (N, nx, nu, ny) = "
                              f"{(self.N, self.nx, self.nu, self.ny)}, expected {tuple(dims)}")
@@ -101,9 +114,12 @@ class CController:
         self._ref = np.zeros((self.N, self.ny))
         self._u_in = np.zeros(self.nu)
         self._tau = np.zeros(self.nu)
+        self._extra = np.zeros(self.n_extra)
+        self._extra_inputs = extra_inputs if self.n_extra else None
         self._ptr = [a.ctypes.data for a in (self._x, self._ref, self._u_in, self._tau)]
+        self._extra_ptr = self._extra.ctypes.data if self.n_extra else None
         self._u_pending = False
-        self._tick = lib.rhmpc_tick
+        self._tick = lib.rhmpc_tick_ext
         self.call_ns = 0
         self.reset()
 
@@ -144,11 +160,13 @@ class CController:
                              f"got {x.shape}, {ref.shape}")
         self._x[:] = x
         self._ref[...] = ref
+        if self._extra_inputs is not None and np.isfinite(x).all():
+            self._extra[:] = self._extra_inputs(x)  # not timed: the caller's work on a target
         px, pr, pu, pt = self._ptr
         u_in = pu if self._u_pending else None
         self._u_pending = False
         t0 = time.perf_counter_ns()
-        self._tick(self._addr, px, pr, u_in, pt)
+        self._tick(self._addr, px, pr, u_in, self._extra_ptr, pt)
         self.call_ns = time.perf_counter_ns() - t0
         return self._tau.copy()
 
@@ -176,7 +194,9 @@ class CController:
         """The counters in the form of :class:`MPCStats` (``parts_ns[0]`` = the C tick)."""
         pub = self._pub
         failures = {STATUS_NAMES[i]: int(n) for i, n in enumerate(pub.failures) if n}
-        fallbacks = {name: int(pub.fallbacks[i]) for i, name in enumerate(SOURCE_NAMES) if i}
+        # the sources the Python controller's statistics have (which fallbacks it knows)
+        fallbacks = {name: int(pub.fallbacks[SOURCE_NAMES.index(name)])
+                     for name in MPCStats().fallbacks}
         return MPCStats(
             ticks=int(pub.ticks), status=self.status, source=self.source,
             iterations=int(pub.iterations), screened=int(pub.screened), solve_time=0.0,

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rhmpc.control.mpc import RecedingHorizonMPC
+from rhmpc.control.mpc import MPCStats, RecedingHorizonMPC
 from rhmpc.control.settings import to_dict
 
 #: Prefix of OSQP's generated globals (``rhmpc_osqp_solver``) and workspace files.
@@ -72,15 +72,29 @@ def _version(name: str) -> str:
         return "unknown"
 
 
+def _n_extra(mpc: RecedingHorizonMPC) -> int:
+    """Per-tick inputs of p after [x; r_1..r_N; u_{−1}] (e.g. an output offset)."""
+    qp = mpc.qp
+    return qp.npar - (qp.nx + qp.N * qp.ny + qp.nu)
+
+
+def _brakes(mpc: RecedingHorizonMPC) -> bool:
+    """True if the controller's fallback chain has a braking step (then its LQ step is checked
+    against the constraint rows): read from its statistics' fallback sources."""
+    return "brake" in MPCStats().fallbacks
+
+
 def _check(mpc: RecedingHorizonMPC) -> None:
     """Raise ExportError for what the generated code does not reproduce."""
     qp, s = mpc.qp, mpc.settings
-    expected = qp.nx + qp.N * qp.ny + qp.nu
-    if qp.npar != expected:
-        raise ExportError(
-            f"the QP has {qp.npar} parameters, the C tick takes x, ref, u_prev ({expected}); "
-            "this controller's extra per-tick inputs are not exported yet"
-        )
+    if _n_extra(mpc) < 0:
+        raise ExportError(f"the QP has {qp.npar} parameters, fewer than x, ref and u_prev")
+    if _n_extra(mpc) > 0 and not callable(getattr(mpc, "offset", None)):
+        raise ExportError(f"the QP has {_n_extra(mpc)} per-tick inputs besides x, ref, u_prev "
+                          "and the controller does not say how to compute them (offset(x))")
+    unknown = set(MPCStats().fallbacks) - {"plan", "lq", "brake", "zero"}
+    if unknown:
+        raise ExportError(f"fallback source(s) {sorted(unknown)} are not exported yet")
     if s.adaptive_rho:
         raise ExportError("adaptive_rho needs OSQP's KKT refactorisation, which the vectors-mode "
                           "embedded code does not have; set mpc.adaptive_rho = false")
@@ -88,13 +102,16 @@ def _check(mpc: RecedingHorizonMPC) -> None:
         raise ExportError("OSQP's embedded code does not polish; set mpc.polish = false")
     if s.warm_start not in _WARM_STARTS:
         raise ExportError(f"warm start {s.warm_start!r} is not exported")
-    m = qp.A.shape[0]
-    arrays = {"P": qp.P, "F": qp.F, "f0": qp.f0, "A": qp.A, "G": qp.G, "l0": qp.l0, "u0": qp.u0,
+    m, nv = qp.A.shape
+    arrays = {"P": qp.P, "F": qp.F, "f0": qp.f0, "A": qp.A, "G": qp.G,
               "minimiser": qp.minimiser, "gain": qp.gain, "gain0": qp.gain0}
     for name, a in arrays.items():
         if not np.all(np.isfinite(a)):
             raise ExportError(f"the QP's {name} has non-finite entries")
-    if qp.shift.shape != (qp.nz, qp.nz) or qp.shift_dual.shape != (m, m):
+    for name, a in (("l0", qp.l0), ("u0", qp.u0)):  # ±inf: a row bounded on one side only
+        if np.any(np.isnan(a)):
+            raise ExportError(f"the QP's {name} has NaN entries")
+    if qp.shift.shape != (nv, nv) or qp.shift_dual.shape != (m, m):
         raise ExportError("unexpected shapes of the warm-start shift")
 
 
@@ -115,7 +132,16 @@ def _data_arrays(mpc: RecedingHorizonMPC) -> dict[str, np.ndarray]:
         "u_max": np.asarray(qp.u_max),
         "q0": np.asarray(mpc.arm.q0, dtype=float),
         "y0": np.asarray(mpc.arm.y0, dtype=float),
+        "M0": np.asarray(mpc.arm.M0, dtype=float),
     }
+
+
+def _c_double(v: float) -> str:
+    """A C literal that reads back as the same double (Python's repr round-trips)."""
+    v = float(v)
+    if np.isinf(v):
+        return "HUGE_VAL" if v > 0 else "-HUGE_VAL"
+    return repr(v)
 
 
 def _c_array(name: str, values: np.ndarray, ctype: str = "double") -> str:
@@ -124,7 +150,7 @@ def _c_array(name: str, values: np.ndarray, ctype: str = "double") -> str:
     # the same double.
     if not np.any(flat):  # e.g. G without joint bounds: C zero-fills the rest
         return f"const {ctype} rhmpc_{name}[{max(flat.size, 1)}] = {{0}};\n"
-    items = [repr(float(v)) if ctype == "double" else str(int(v)) for v in flat]
+    items = [_c_double(v) if ctype == "double" else str(int(v)) for v in flat]
     lines = [", ".join(items[i:i + 6]) for i in range(0, len(items), 6)]
     body = ",\n  ".join(lines)
     return f"const {ctype} rhmpc_{name}[{len(items)}] = {{\n  {body}\n}};\n"
@@ -170,7 +196,15 @@ def export_controller(mpc: RecedingHorizonMPC, outdir: str | Path, *, robot: str
         "HASH": key, "VERSION": _version("rhmpc"), "OSQP_VERSION": _version("osqp"),
         "TS_US": f"{mpc.arm.Ts * 1e6:g}", "TS": repr(float(mpc.arm.Ts)),
         "N": qp.N, "NX": qp.nx, "NU": qp.nu, "NY": qp.ny,
-        "NZ": qp.nz, "M": qp.A.shape[0], "NPAR": qp.npar,
+        "NV": qp.P.shape[0], "NZ": int(qp.nz), "M": qp.A.shape[0], "NPAR": qp.npar,
+        "NEXTRA": _n_extra(mpc),
+        "EXTRA_DOC": ("none" if _n_extra(mpc) == 0 else
+                      f"{_n_extra(mpc)} values, RecedingHorizonMPC.offset(x): the output offset "
+                      "d = p(q0 + x_q) - (C x + y0) [m] from forward kinematics"),
+        "BRAKE": int(_brakes(mpc)), "BRAKE_TICKS": s.block_lengths[0],
+        "LQ_DOC": ("used only if its clipped plan keeps every constraint row, else the braking "
+                   "torque -M0 qdot / (RHMPC_BRAKE_TICKS Ts), clipped" if _brakes(mpc) else
+                   "clipped to +-u_max"),
         "PLAN_FALLBACK_TICKS": s.plan_fallback_ticks, "MAX_ITER": s.max_iter,
         "WARM_START": _WARM_STARTS[s.warm_start], "WARM_START_NAME": s.warm_start,
         "SCREENING": int(s.screening), "PARAM_BOUNDS": int(qp.param_bounds),
@@ -190,7 +224,8 @@ def export_controller(mpc: RecedingHorizonMPC, outdir: str | Path, *, robot: str
 
     data = _data_arrays(mpc)
     parts = [f"/* Generated by `rhmpc export` (robot \"{robot}\", hash {key}): the controller's "
-             "numbers, from its CondensedQP. Row-major. */\n#include \"rhmpc_data.h\"\n\n"]
+             "numbers, from its CondensedQP. Row-major. */\n"
+             "#include \"rhmpc_data.h\"\n#include <math.h>\n\n"]
     for name, values in data.items():
         parts.append(_c_array(name, values))
     parts.append(_c_array("block_of_tick", qp.block_of_tick, ctype="int"))

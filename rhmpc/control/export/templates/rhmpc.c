@@ -78,22 +78,23 @@ static const char *const status_names[RHMPC_N_STATUS] = {
     "solved", "nonfinite_input", "nonfinite_solution", "solver_error", "injected",
     "solved_inaccurate", "primal_infeasible", "dual_infeasible", "max_iter", "time_limit",
     "non_convex", "interrupted", "unsolved"};
-static const char *const source_names[4] = {"qp", "plan", "lq", "zero"};
+static const char *const source_names[RHMPC_N_SOURCES] = {"qp", "plan", "lq", "brake", "zero"};
 
 const char *rhmpc_status_name(int status) {
   return (status >= 0 && status < RHMPC_N_STATUS) ? status_names[status] : "unknown";
 }
 const char *rhmpc_source_name(int source) {
-  return (source >= 0 && source < 4) ? source_names[source] : "unknown";
+  return (source >= 0 && source < RHMPC_N_SOURCES) ? source_names[source] : "unknown";
 }
 long long rhmpc_sizeof(void) { return (long long)sizeof(rhmpc_t); }
-void rhmpc_dims(int out[7]) {
+void rhmpc_dims(int out[9]) {
   out[0] = RHMPC_N; out[1] = RHMPC_NX; out[2] = RHMPC_NU; out[3] = RHMPC_NY;
-  out[4] = RHMPC_NZ; out[5] = RHMPC_M; out[6] = RHMPC_NPAR;
+  out[4] = RHMPC_NV; out[5] = RHMPC_M; out[6] = RHMPC_NPAR; out[7] = RHMPC_NZ;
+  out[8] = RHMPC_NEXTRA;
 }
 
 void rhmpc_init(rhmpc_t *ctl) {
-  static const double zeros_z[RHMPC_NZ] = {0};
+  static const double zeros_z[RHMPC_NV] = {0};
   memset(ctl, 0, sizeof(*ctl));
   ctl->p_ext[RHMPC_NPAR] = 1.0;
   memcpy(ctl->l, rhmpc_l0, sizeof(ctl->l));
@@ -105,7 +106,38 @@ void rhmpc_force_failures(rhmpc_t *ctl, long long count) {
   if (count > 0) ctl->forced += count;
 }
 
-/* The fallback chain: plan shifted to this tick -> clipped LQ input -> zero. */
+#if RHMPC_BRAKE
+/* The clipped LQ input if its whole clipped plan (slacks zero) keeps every constraint row
+ * beyond the torque rows, else the torque that stops the joints within RHMPC_BRAKE_TICKS:
+ * tau = -M0 qdot / (RHMPC_BRAKE_TICKS Ts) (clipped by the caller). */
+static int lq_or_brake(rhmpc_t *ctl, double tau[RHMPC_NU]) {
+  double *v = ctl->v_lq;
+  int holds = 1;
+  matvec(rhmpc_minimiser, ctl->p_ext, RHMPC_NV, NPE, v);
+  for (int i = 0; i < RHMPC_NV; ++i) v[i] = i < RHMPC_NZ ? clip(v[i], 1.0) : 0.0; /* slacks 0 */
+#if RHMPC_PARAM_BOUNDS
+  for (int i = RHMPC_NZ; holds && i < RHMPC_M; ++i) {
+    double g = 0.0;
+    for (int j = 0; j < RHMPC_NV; ++j) g += rhmpc_A[(long)i * RHMPC_NV + j] * v[j];
+    holds = g >= ctl->l[i] && g <= ctl->u[i];
+  }
+#endif
+  if (holds) {
+    for (int i = 0; i < RHMPC_NU; ++i) tau[i] = v[i] * rhmpc_u_max[i];
+    return RHMPC_SOURCE_LQ;
+  }
+  const double *qdot = ctl->p_ext + RHMPC_NX / 2;
+  const double span = RHMPC_BRAKE_TICKS * RHMPC_TS;
+  for (int i = 0; i < RHMPC_NU; ++i) {
+    double s = 0.0;
+    for (int j = 0; j < RHMPC_NU; ++j) s += rhmpc_M0[i * RHMPC_NU + j] * qdot[j];
+    tau[i] = -s / span;
+  }
+  return RHMPC_SOURCE_BRAKE;
+}
+#endif
+
+/* The fallback chain: plan shifted to this tick -> clipped LQ input (or braking) -> zero. */
 static int fallback(rhmpc_t *ctl, int status, int inputs_finite, double tau[RHMPC_NU]) {
   int source = -1;
   ctl->status = status;
@@ -118,9 +150,13 @@ static int fallback(rhmpc_t *ctl, int status, int inputs_finite, double tau[RHMP
     source = RHMPC_SOURCE_PLAN;
   }
   if (source < 0 && inputs_finite) {
+#if RHMPC_BRAKE
+    source = lq_or_brake(ctl, tau);
+#else
     matvec(rhmpc_gain, ctl->p_ext, RHMPC_NU, RHMPC_NPAR, tau);
     for (int i = 0; i < RHMPC_NU; ++i) tau[i] += rhmpc_gain0[i];
     source = RHMPC_SOURCE_LQ;
+#endif
   }
   int finite = source >= 0;
   for (int i = 0; finite && i < RHMPC_NU; ++i) finite = isfinite(tau[i]);
@@ -134,7 +170,7 @@ static int fallback(rhmpc_t *ctl, int status, int inputs_finite, double tau[RHMP
   for (int i = 0; i < RHMPC_NU; ++i) ctl->p_ext[RHMPC_NX + RHMPC_NY * RHMPC_N + i] = tau[i];
   ctl->ws_pending = 0;
   if (ctl->plan_valid && RHMPC_WARM_START != RHMPC_WS_NONE) {
-    matvec(rhmpc_shift, ctl->plan, RHMPC_NZ, RHMPC_NZ, ctl->ws_x);
+    matvec(rhmpc_shift, ctl->plan, RHMPC_NV, RHMPC_NV, ctl->ws_x);
     memset(ctl->ws_y, 0, sizeof(ctl->ws_y));
     ctl->ws_x_set = ctl->ws_y_set = 1;
   }
@@ -142,13 +178,13 @@ static int fallback(rhmpc_t *ctl, int status, int inputs_finite, double tau[RHMP
 }
 
 static int screened(rhmpc_t *ctl) {
-  matvec(rhmpc_minimiser, ctl->p_ext, RHMPC_NZ, NPE, ctl->z_star);
+  matvec(rhmpc_minimiser, ctl->p_ext, RHMPC_NV, NPE, ctl->z_star);
 #if !RHMPC_PARAM_BOUNDS
-  for (int i = 0; i < RHMPC_NZ; ++i)
+  for (int i = 0; i < RHMPC_NV; ++i)
     if (!(fabs(ctl->z_star[i]) <= 1.0)) return 0;
   return 1;
 #else
-  matvec(rhmpc_A, ctl->z_star, RHMPC_M, RHMPC_NZ, ctl->g);
+  matvec(rhmpc_A, ctl->z_star, RHMPC_M, RHMPC_NV, ctl->g);
   for (int i = 0; i < RHMPC_M; ++i)
     if (!(ctl->g[i] - ctl->u[i] <= 0.0 && ctl->l[i] - ctl->g[i] <= 0.0)) return 0;
   return 1;
@@ -162,15 +198,23 @@ static int finish(rhmpc_t *ctl, long long t0, int status) {
 
 int rhmpc_tick(rhmpc_t *ctl, const double x[RHMPC_NX], const double ref[RHMPC_NY * RHMPC_N],
                const double u_prev[RHMPC_NU], double tau[RHMPC_NU]) {
+  return rhmpc_tick_ext(ctl, x, ref, u_prev, NULL, tau);
+}
+
+int rhmpc_tick_ext(rhmpc_t *ctl, const double x[RHMPC_NX], const double ref[RHMPC_NY * RHMPC_N],
+                   const double u_prev[RHMPC_NU], const double *extra, double tau[RHMPC_NU]) {
   long long t0 = now_ns();
   double *p = ctl->p_ext;
   double *p_u = p + RHMPC_NX + RHMPC_NY * RHMPC_N;
+  double *p_extra = p_u + RHMPC_NU;
   double ss = 0.0;
   ctl->ticks += 1;
   memcpy(p, x, RHMPC_NX * sizeof(double));
   memcpy(p + RHMPC_NX, ref, RHMPC_NY * RHMPC_N * sizeof(double));
   if (u_prev != NULL)
     for (int i = 0; i < RHMPC_NU; ++i) p_u[i] = clip(u_prev[i], rhmpc_u_max[i]);
+  if (extra != NULL)
+    for (int i = 0; i < RHMPC_NEXTRA; ++i) p_extra[i] = extra[i];
   for (int i = 0; i < NPE; ++i) ss += p[i] * p[i];
   ctl->iterations = 0;
   if (!isfinite(ss)) /* NaN, +-inf (or absurd > 1e154) */
@@ -197,14 +241,14 @@ int rhmpc_tick(rhmpc_t *ctl, const double x[RHMPC_NX], const double ref[RHMPC_NY
     return finish(ctl, t0, RHMPC_SOLVED);
   }
   ctl->last_screened = 0;
-  matvec(rhmpc_F_ext, p, RHMPC_NZ, NPE, ctl->q);
+  matvec(rhmpc_F_ext, p, RHMPC_NV, NPE, ctl->q);
 #if RHMPC_PARAM_BOUNDS
   OSQPInt err = osqp_update_data_vec(SOLVER, ctl->q, ctl->l, ctl->u);
 #else
   OSQPInt err = osqp_update_data_vec(SOLVER, ctl->q, OSQP_NULL, OSQP_NULL);
 #endif
   if (ctl->ws_pending) {
-    matvec(rhmpc_shift, ctl->plan, RHMPC_NZ, RHMPC_NZ, ctl->ws_x);
+    matvec(rhmpc_shift, ctl->plan, RHMPC_NV, RHMPC_NV, ctl->ws_x);
     memset(ctl->ws_y, 0, sizeof(ctl->ws_y));
     ctl->ws_x_set = ctl->ws_y_set = 1;
     ctl->ws_pending = 0;
@@ -239,11 +283,11 @@ int rhmpc_tick(rhmpc_t *ctl, const double x[RHMPC_NX], const double ref[RHMPC_NY
     if (continues(status) && RHMPC_WARM_START != RHMPC_WS_NONE) {
       /* An unfinished solve is a good start for the next, nearly identical QP. */
       int finite = 1;
-      for (int i = 0; finite && i < RHMPC_NZ; ++i) finite = isfinite(z[i]);
+      for (int i = 0; finite && i < RHMPC_NV; ++i) finite = isfinite(z[i]);
       for (int i = 0; finite && i < RHMPC_M; ++i) finite = isfinite(y[i]);
       if (!finite) {
       } else if (RHMPC_WARM_START != RHMPC_WS_KEEP) {
-        matvec(rhmpc_shift, z, RHMPC_NZ, RHMPC_NZ, ctl->ws_x);
+        matvec(rhmpc_shift, z, RHMPC_NV, RHMPC_NV, ctl->ws_x);
         matvec(rhmpc_shift_dual, y, RHMPC_M, RHMPC_M, ctl->ws_y);
         ctl->ws_x_set = ctl->ws_y_set = 1;
       } else {
@@ -260,11 +304,11 @@ int rhmpc_tick(rhmpc_t *ctl, const double x[RHMPC_NX], const double ref[RHMPC_NY
   ctl->plan_valid = 1;
   ctl->plan_age = 0;
   if (RHMPC_WARM_START == RHMPC_WS_SHIFT) {
-    matvec(rhmpc_shift, z, RHMPC_NZ, RHMPC_NZ, ctl->ws_x);
+    matvec(rhmpc_shift, z, RHMPC_NV, RHMPC_NV, ctl->ws_x);
     matvec(rhmpc_shift_dual, y, RHMPC_M, RHMPC_M, ctl->ws_y);
     ctl->ws_x_set = ctl->ws_y_set = 1;
   } else if (RHMPC_WARM_START == RHMPC_WS_SHIFT_PRIMAL) {
-    matvec(rhmpc_shift, z, RHMPC_NZ, RHMPC_NZ, ctl->ws_x);
+    matvec(rhmpc_shift, z, RHMPC_NV, RHMPC_NV, ctl->ws_x);
     ctl->ws_x_set = 1;
   }
   ctl->status = RHMPC_SOLVED;

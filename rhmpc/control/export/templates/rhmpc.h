@@ -23,8 +23,8 @@
  * Return value: RHMPC_SOLVED (0) if the QP's solution (OSQP's or the screened unconstrained
  * minimiser) was applied; otherwise the reason the QP result was not used (RHMPC_MAX_ITER_REACHED, ...),
  * and tau came from the fallback chain: the previous plan shifted to this tick (at most
- * RHMPC_PLAN_FALLBACK_TICKS ticks after it was computed), else the clipped unconstrained LQ input,
- * else zero. ctl.source says which (RHMPC_SOURCE_*); the counters in rhmpc_t count every event.
+ * RHMPC_PLAN_FALLBACK_TICKS ticks after it was computed), else the clipped unconstrained LQ input
+ * (@LQ_DOC@), else zero (non-finite inputs). ctl.source says which (RHMPC_SOURCE_*); the counters in rhmpc_t count every event.
  *
  * Real time: rhmpc_tick allocates nothing, does no I/O and takes no lock. Its work is bounded:
  * a few dense mat-vecs and at most RHMPC_MAX_ITER OSQP iterations. It reads the monotonic clock
@@ -47,9 +47,11 @@ extern "C" {
 #define RHMPC_NX @NX@     /* state dimension */
 #define RHMPC_NU @NU@     /* joints / torques */
 #define RHMPC_NY @NY@     /* end-effector coordinates per reference point */
-#define RHMPC_NZ @NZ@    /* QP variables: normalised block inputs */
+#define RHMPC_NV @NV@    /* QP variables: normalised block inputs, then slacks (if any) */
+#define RHMPC_NZ @NZ@    /* of which normalised block inputs */
 #define RHMPC_M @M@     /* QP constraint rows */
-#define RHMPC_NPAR @NPAR@  /* QP parameters p = [x; r_1..r_N; u_prev] */
+#define RHMPC_NPAR @NPAR@  /* QP parameters p = [x; r_1..r_N; u_prev; extra] */
+#define RHMPC_NEXTRA @NEXTRA@  /* extra per-tick inputs at the end of p: @EXTRA_DOC@ */
 #define RHMPC_PLAN_FALLBACK_TICKS @PLAN_FALLBACK_TICKS@
 #define RHMPC_MAX_ITER @MAX_ITER@
 
@@ -72,14 +74,17 @@ enum rhmpc_status {
 };
 
 /* Where the torque of a tick came from. */
-enum rhmpc_source { RHMPC_SOURCE_QP = 0, RHMPC_SOURCE_PLAN, RHMPC_SOURCE_LQ, RHMPC_SOURCE_ZERO };
+enum rhmpc_source {
+  RHMPC_SOURCE_QP = 0, RHMPC_SOURCE_PLAN, RHMPC_SOURCE_LQ, RHMPC_SOURCE_BRAKE, RHMPC_SOURCE_ZERO,
+  RHMPC_N_SOURCES
+};
 
 typedef struct {
   /* -- counters since rhmpc_init (read them freely) ---------------------------------------- */
   long long ticks;                      /* rhmpc_tick calls */
   long long screened;                   /* ticks solved by screening, without OSQP */
   long long failures[RHMPC_N_STATUS];   /* ticks whose QP result was not used, by status */
-  long long fallbacks[4];               /* ticks served by each source; [0] (QP) stays 0 */
+  long long fallbacks[RHMPC_N_SOURCES]; /* ticks served by each source; [0] (QP) stays 0 */
   /* -- the last tick ----------------------------------------------------------------------- */
   int status;                           /* enum rhmpc_status */
   int source;                           /* enum rhmpc_source */
@@ -88,10 +93,11 @@ typedef struct {
   /* -- internal state (do not touch) ------------------------------------------------------- */
   long long forced;                     /* pending injected failures */
   int plan_valid, plan_age, ws_x_set, ws_y_set, ws_pending, last_screened;
-  double p_ext[RHMPC_NPAR + 1];         /* [x; r; u_prev; 1] */
-  double q[RHMPC_NZ], l[RHMPC_M], u[RHMPC_M], g[RHMPC_M];
-  double z_star[RHMPC_NZ], plan[RHMPC_NZ];
-  double ws_x[RHMPC_NZ], ws_y[RHMPC_M];
+  double p_ext[RHMPC_NPAR + 1];         /* [x; r; u_prev; extra; 1] */
+  double v_lq[RHMPC_NV];                /* the LQ fallback's plan */
+  double q[RHMPC_NV], l[RHMPC_M], u[RHMPC_M], g[RHMPC_M];
+  double z_star[RHMPC_NV], plan[RHMPC_NV];
+  double ws_x[RHMPC_NV], ws_y[RHMPC_M];
 } rhmpc_t;
 
 /* Reset the controller: no plan, zero counters, u_prev = 0, OSQP warm start at zero. */
@@ -100,6 +106,11 @@ void rhmpc_init(rhmpc_t *ctl);
 /* One control tick (see the units and layouts above). Returns an enum rhmpc_status. */
 int rhmpc_tick(rhmpc_t *ctl, const double x[RHMPC_NX], const double ref[RHMPC_NY * RHMPC_N],
                const double u_prev[RHMPC_NU], double tau[RHMPC_NU]);
+
+/* The same, with the extra per-tick inputs (RHMPC_NEXTRA values; NULL keeps the last ones,
+ * zeros after rhmpc_init). rhmpc_tick is rhmpc_tick_ext with extra = NULL. */
+int rhmpc_tick_ext(rhmpc_t *ctl, const double x[RHMPC_NX], const double ref[RHMPC_NY * RHMPC_N],
+                   const double u_prev[RHMPC_NU], const double *extra, double tau[RHMPC_NU]);
 
 /* Make the next `count` solves report RHMPC_INJECTED (fault injection; the solve still runs). */
 void rhmpc_force_failures(rhmpc_t *ctl, long long count);
@@ -116,9 +127,9 @@ extern const double rhmpc_y0[RHMPC_NY];
 const char *rhmpc_status_name(int status);
 const char *rhmpc_source_name(int source);
 
-/* sizeof(rhmpc_t) and the dimensions {N, NX, NU, NY, NZ, M, NPAR}, for bindings. */
+/* sizeof(rhmpc_t) and the dimensions {N, NX, NU, NY, NV, M, NPAR, NZ, NEXTRA}, for bindings. */
 long long rhmpc_sizeof(void);
-void rhmpc_dims(int out[7]);
+void rhmpc_dims(int out[9]);
 
 #ifdef __cplusplus
 }

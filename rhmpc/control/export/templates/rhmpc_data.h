@@ -9,17 +9,20 @@
 #define RHMPC_WS_NONE 3
 #define RHMPC_WARM_START @WARM_START@ /* settings.warm_start = "@WARM_START_NAME@" */
 #define RHMPC_SCREENING @SCREENING@
-#define RHMPC_PARAM_BOUNDS @PARAM_BOUNDS@ /* 1: l, u depend on p (joint bounds) */
+#define RHMPC_PARAM_BOUNDS @PARAM_BOUNDS@ /* 1: l, u depend on p (joint bounds, envelope) */
+#define RHMPC_BRAKE @BRAKE@ /* 1: LQ fallback only if it keeps the constraint rows, else brake */
+#define RHMPC_BRAKE_TICKS @BRAKE_TICKS@ /* brake: stop the joints in this many ticks */
 
-extern const double rhmpc_F_ext[RHMPC_NZ * (RHMPC_NPAR + 1)];
-extern const double rhmpc_minimiser[RHMPC_NZ * (RHMPC_NPAR + 1)];
-extern const double rhmpc_A[RHMPC_M * RHMPC_NZ];
+extern const double rhmpc_F_ext[RHMPC_NV * (RHMPC_NPAR + 1)];
+extern const double rhmpc_minimiser[RHMPC_NV * (RHMPC_NPAR + 1)];
+extern const double rhmpc_A[RHMPC_M * RHMPC_NV];
 extern const double rhmpc_G[RHMPC_M * RHMPC_NPAR];
 extern const double rhmpc_l0[RHMPC_M];
 extern const double rhmpc_u0[RHMPC_M];
 extern const double rhmpc_gain[RHMPC_NU * RHMPC_NPAR];
 extern const double rhmpc_gain0[RHMPC_NU];
-extern const double rhmpc_shift[RHMPC_NZ * RHMPC_NZ];
+extern const double rhmpc_shift[RHMPC_NV * RHMPC_NV];
 extern const double rhmpc_shift_dual[RHMPC_M * RHMPC_M];
 extern const int rhmpc_block_of_tick[RHMPC_N];
+extern const double rhmpc_M0[RHMPC_NU * RHMPC_NU];
 #endif
