@@ -74,6 +74,11 @@ def built(arm, cache):
     return get
 
 
+def twin(py, lib, **kwargs) -> CController:
+    """The compiled controller of ``lib``, given ``py``'s extra per-tick inputs if it has any."""
+    return CController(lib, extra_inputs=getattr(py, "offset", None), **kwargs)
+
+
 def bench_trajectory(arm, ticks: int, seed: int = 0) -> np.ndarray:
     """The bench's reference: heart-like motion with 2-mm jumps every 1000 ticks."""
     return heart_like_reference(ticks + 51, arm.Ts, np.random.default_rng(seed), arm.y0,
@@ -113,7 +118,7 @@ def assert_same_counters(py, c):
 def test_bench_trajectory_torques_and_fallbacks_match_python(arm, built):
     """20 000 ticks of the bench trajectory (torque bounds active after every jump)."""
     py = RecedingHorizonMPC(arm, MPCSettings())
-    c = CController(built("default"))
+    c = twin(py, built("default"))
     ticks = 20_000
     err, differ = lockstep(arm, py, c, bench_trajectory(arm, ticks), ticks)
     assert differ == []
@@ -127,7 +132,7 @@ def test_bench_trajectory_torques_and_fallbacks_match_python(arm, built):
 def test_other_paths_match_python(arm, built, variant):
     """Joint bounds, max_iter failures and every warm-start mode, with injected faults."""
     py = RecedingHorizonMPC(arm, MPCSettings(**VARIANTS[variant]))
-    c = CController(built(variant))
+    c = twin(py, built(variant))
 
     def faults(k, x, ref, py, c):
         if k % 700 == 350:
@@ -187,7 +192,7 @@ def test_closed_loop_with_faults_matches_python(arm, built):
     config = RunConfig().replace(**{"loop.duration": 10.0, "loop.settling": 1.0})
     run = build_run(config)
     py = run.controller
-    lock = Lockstep(py, CController(built("default")), np.asarray(run.robot.torque_limit))
+    lock = Lockstep(py, twin(py, built("default")), np.asarray(run.robot.torque_limit))
     run_closed_loop(run.robot, run.arm, lock, run.reference, run.truth, run.center, run.stream,
                     config.loop, plant_settings=config.plant, mismatch=config.mismatch,
                     observer_settings=config.observer)
@@ -205,14 +210,14 @@ def test_two_controllers_on_one_library_do_not_share_the_solver(arm, built):
     """OSQP's generated workspace is static: a second instance must get its own copy."""
     lib = built("default")
     py = RecedingHorizonMPC(arm, MPCSettings())
-    first = CController(lib)
+    first = twin(py, lib)
     traj = bench_trajectory(arm, 2200)
     x = np.zeros(arm.nx)
     second = None
     for k in range(2200):
         ref = traj[k + 1:k + 51]
         if k == 990:
-            second = CController(lib)  # its init must not reset the first one's solver
+            second = twin(py, lib)  # its init must not reset the first one's solver
         if second is not None:
             second.step(x + 1e-3, ref[::-1])
         tp, tc = py.step(x, ref), first.step(x, ref)
@@ -241,15 +246,16 @@ def test_library_uses_no_heap_io_or_locks(built):
 
 @needs_cc
 def test_binding_counters_and_u_prev(arm, built):
-    c = CController(built("default"), dims=(50, 6, 3, 3))
-    np.testing.assert_allclose(c.u_max, RecedingHorizonMPC(arm).u_max, rtol=0, atol=0)
+    py = RecedingHorizonMPC(arm)
+    c = twin(py, built("default"), dims=(50, 6, 3, 3))
+    np.testing.assert_allclose(c.u_max, py.u_max, rtol=0, atol=0)
     assert c.stats.ticks == 0 and c.source == "none"
     c.u_prev = np.array([100.0, 0.0, 0.0])  # clipped to u_max inside C, as in Python
     assert c.u_prev[0] == c.u_max[0]
     with pytest.raises(ValueError, match="u_prev"):
         c.u_prev = np.array([np.nan, 0.0, 0.0])
     with pytest.raises(ValueError, match="expected"):
-        CController(built("default"), dims=(40, 6, 3, 3))
+        twin(py, built("default"), dims=(40, 6, 3, 3))
     with pytest.raises(ValueError, match="step expects"):
         c.step(np.zeros(5), np.zeros((50, 3)))
 
