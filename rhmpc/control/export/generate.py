@@ -133,6 +133,8 @@ def _data_arrays(mpc: RecedingHorizonMPC) -> dict[str, np.ndarray]:
         "q0": np.asarray(mpc.arm.q0, dtype=float),
         "y0": np.asarray(mpc.arm.y0, dtype=float),
         "M0": np.asarray(mpc.arm.M0, dtype=float),
+        # the dual the controller pairs with a primal plan in its warm starts
+        "y_plan": np.asarray(getattr(mpc, "_y_zero", np.zeros(qp.A.shape[0])), dtype=float),
     }
 
 

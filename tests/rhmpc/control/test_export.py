@@ -281,7 +281,7 @@ def test_export_writes_the_controllers_numbers(arm, tmp_path):
     values = np.array([float(v) for v in body.replace("\n", " ").split(",")])
     np.testing.assert_array_equal(values, mpc.qp.minimiser.ravel())
     header = (info.outdir / "rhmpc.h").read_text()
-    assert "#define RHMPC_N 50" in header and "#define RHMPC_NPAR 159" in header
+    assert "#define RHMPC_N 50" in header and f"#define RHMPC_NPAR {mpc.qp.npar} " in header
     assert (info.outdir / "CMakeLists.txt").is_file()
     assert (info.outdir / "osqp" / "rhmpc_osqp_workspace.c").is_file()
     assert not (info.outdir / "osqp" / "emosqp.c").exists()  # OSQP's example main (printf)

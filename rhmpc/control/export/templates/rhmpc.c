@@ -23,7 +23,6 @@
 #define SOLVER (&@OSQP_PREFIX@solver)
 #define NPE (RHMPC_NPAR + 1)
 
-static const double zeros_m[RHMPC_M] = {0};
 
 static long long now_ns(void) {
 #ifndef RHMPC_NO_TIMING
@@ -99,7 +98,7 @@ void rhmpc_init(rhmpc_t *ctl) {
   ctl->p_ext[RHMPC_NPAR] = 1.0;
   memcpy(ctl->l, rhmpc_l0, sizeof(ctl->l));
   memcpy(ctl->u, rhmpc_u0, sizeof(ctl->u));
-  osqp_warm_start(SOLVER, zeros_z, zeros_m);
+  osqp_warm_start(SOLVER, zeros_z, rhmpc_y_plan);
 }
 
 void rhmpc_force_failures(rhmpc_t *ctl, long long count) {
@@ -171,7 +170,7 @@ static int fallback(rhmpc_t *ctl, int status, int inputs_finite, double tau[RHMP
   ctl->ws_pending = 0;
   if (ctl->plan_valid && RHMPC_WARM_START != RHMPC_WS_NONE) {
     matvec(rhmpc_shift, ctl->plan, RHMPC_NV, RHMPC_NV, ctl->ws_x);
-    memset(ctl->ws_y, 0, sizeof(ctl->ws_y));
+    memcpy(ctl->ws_y, rhmpc_y_plan, sizeof(ctl->ws_y));
     ctl->ws_x_set = ctl->ws_y_set = 1;
   }
   return status;
@@ -249,7 +248,7 @@ int rhmpc_tick_ext(rhmpc_t *ctl, const double x[RHMPC_NX], const double ref[RHMP
 #endif
   if (ctl->ws_pending) {
     matvec(rhmpc_shift, ctl->plan, RHMPC_NV, RHMPC_NV, ctl->ws_x);
-    memset(ctl->ws_y, 0, sizeof(ctl->ws_y));
+    memcpy(ctl->ws_y, rhmpc_y_plan, sizeof(ctl->ws_y));
     ctl->ws_x_set = ctl->ws_y_set = 1;
     ctl->ws_pending = 0;
   }

@@ -25,4 +25,7 @@ extern const double rhmpc_shift[RHMPC_NV * RHMPC_NV];
 extern const double rhmpc_shift_dual[RHMPC_M * RHMPC_M];
 extern const int rhmpc_block_of_tick[RHMPC_N];
 extern const double rhmpc_M0[RHMPC_NU * RHMPC_NU];
+/* The multipliers that go with a primal plan in a warm start (the controller's "zero" dual:
+ * 0 on the torque rows; on slack rows, the value of a slack bound that is active). */
+extern const double rhmpc_y_plan[RHMPC_M];
 #endif
