@@ -121,14 +121,10 @@ def _data_arrays(mpc: RecedingHorizonMPC) -> dict[str, np.ndarray]:
     return {
         "F_ext": np.column_stack([qp.F, qp.f0]),
         "minimiser": np.asarray(qp.minimiser),
-        "A": np.asarray(qp.A),
-        "G": np.asarray(qp.G),
         "l0": np.asarray(qp.l0),
         "u0": np.asarray(qp.u0),
         "gain": np.asarray(qp.gain),
         "gain0": np.asarray(qp.gain0),
-        "shift": np.asarray(qp.shift),
-        "shift_dual": np.asarray(qp.shift_dual),
         "u_max": np.asarray(qp.u_max),
         "q0": np.asarray(mpc.arm.q0, dtype=float),
         "y0": np.asarray(mpc.arm.y0, dtype=float),
@@ -158,6 +154,18 @@ def _c_array(name: str, values: np.ndarray, ctype: str = "double") -> str:
     return f"const {ctype} rhmpc_{name}[{len(items)}] = {{\n  {body}\n}};\n"
 
 
+#: Matrices written in CSR form (mostly zeros: identity rows, a few parameter columns).
+_SPARSE = ("A", "G", "shift", "shift_dual")
+
+
+def _csr(values: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(row pointers, column indices, values) of the non-zero entries, row after row."""
+    values = np.asarray(values, dtype=float)
+    rows, cols = np.nonzero(values)
+    ptr = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=values.shape[0]))])
+    return ptr, cols, values[rows, cols]
+
+
 def export_key(mpc: RecedingHorizonMPC, robot: str) -> str:
     """Hash of the QP data, the settings and the versions the generated code depends on."""
     h = hashlib.sha256()
@@ -165,7 +173,8 @@ def export_key(mpc: RecedingHorizonMPC, robot: str) -> str:
             "osqp": _version("osqp"), "Ts": float(mpc.arm.Ts)}
     h.update(json.dumps(meta, sort_keys=True).encode())
     qp = mpc.qp
-    for a in (qp.P, *(_data_arrays(mpc).values()), qp.block_of_tick):
+    sparse = [getattr(qp, name) for name in _SPARSE]
+    for a in (qp.P, *(_data_arrays(mpc).values()), *sparse, qp.block_of_tick):
         h.update(np.ascontiguousarray(a, dtype=float).tobytes())
     for name in _TEMPLATES:
         h.update(files(__package__).joinpath("templates", name).read_bytes())
@@ -230,6 +239,10 @@ def export_controller(mpc: RecedingHorizonMPC, outdir: str | Path, *, robot: str
              "#include \"rhmpc_data.h\"\n#include <math.h>\n\n"]
     for name, values in data.items():
         parts.append(_c_array(name, values))
+    for name in _SPARSE:
+        ptr, col, val = _csr(getattr(qp, name))
+        parts += [_c_array(f"{name}_p", ptr, ctype="int"), _c_array(f"{name}_i", col, ctype="int"),
+                  _c_array(f"{name}_x", val)]
     parts.append(_c_array("block_of_tick", qp.block_of_tick, ctype="int"))
     (outdir / "rhmpc_data.c").write_text("".join(parts))
     written.append("rhmpc_data.c")

@@ -49,6 +49,20 @@ static void matvec(const double *M, const double *v, int rows, int cols, double 
   }
 }
 
+/* Sparse (CSR) matrices: row r holds val[ptr[r]..ptr[r+1]) in the columns col[...]. */
+#define CSR(name) rhmpc_##name##_p, rhmpc_##name##_i, rhmpc_##name##_x
+
+static double row_dot(const int *ptr, const int *col, const double *val, int r, const double *v) {
+  double s = 0.0;
+  for (int k = ptr[r]; k < ptr[r + 1]; ++k) s += val[k] * v[col[k]];
+  return s;
+}
+
+static void spmv(const int *ptr, const int *col, const double *val, int rows, const double *v,
+                 double *out) {
+  for (int r = 0; r < rows; ++r) out[r] = row_dot(ptr, col, val, r, v);
+}
+
 static double clip(double v, double hi) { return v > hi ? hi : (v < -hi ? -hi : v); }
 
 static int status_of(OSQPInt status_val) {
@@ -116,8 +130,7 @@ static int lq_or_brake(rhmpc_t *ctl, double tau[RHMPC_NU]) {
   for (int i = 0; i < RHMPC_NV; ++i) v[i] = i < RHMPC_NZ ? clip(v[i], 1.0) : 0.0; /* slacks 0 */
 #if RHMPC_PARAM_BOUNDS
   for (int i = RHMPC_NZ; holds && i < RHMPC_M; ++i) {
-    double g = 0.0;
-    for (int j = 0; j < RHMPC_NV; ++j) g += rhmpc_A[(long)i * RHMPC_NV + j] * v[j];
+    double g = row_dot(CSR(A), i, v);
     holds = g >= ctl->l[i] && g <= ctl->u[i];
   }
 #endif
@@ -169,7 +182,7 @@ static int fallback(rhmpc_t *ctl, int status, int inputs_finite, double tau[RHMP
   for (int i = 0; i < RHMPC_NU; ++i) ctl->p_ext[RHMPC_NX + RHMPC_NY * RHMPC_N + i] = tau[i];
   ctl->ws_pending = 0;
   if (ctl->plan_valid && RHMPC_WARM_START != RHMPC_WS_NONE) {
-    matvec(rhmpc_shift, ctl->plan, RHMPC_NV, RHMPC_NV, ctl->ws_x);
+    spmv(CSR(shift), RHMPC_NV, ctl->plan, ctl->ws_x);
     memcpy(ctl->ws_y, rhmpc_y_plan, sizeof(ctl->ws_y));
     ctl->ws_x_set = ctl->ws_y_set = 1;
   }
@@ -183,7 +196,7 @@ static int screened(rhmpc_t *ctl) {
     if (!(fabs(ctl->z_star[i]) <= 1.0)) return 0;
   return 1;
 #else
-  matvec(rhmpc_A, ctl->z_star, RHMPC_M, RHMPC_NV, ctl->g);
+  spmv(CSR(A), RHMPC_M, ctl->z_star, ctl->g);
   for (int i = 0; i < RHMPC_M; ++i)
     if (!(ctl->g[i] - ctl->u[i] <= 0.0 && ctl->l[i] - ctl->g[i] <= 0.0)) return 0;
   return 1;
@@ -220,7 +233,7 @@ int rhmpc_tick_ext(rhmpc_t *ctl, const double x[RHMPC_NX], const double ref[RHMP
     return finish(ctl, t0, fallback(ctl, RHMPC_NONFINITE_INPUT, 0, tau));
 
 #if RHMPC_PARAM_BOUNDS
-  matvec(rhmpc_G, p, RHMPC_M, RHMPC_NPAR, ctl->g);
+  spmv(CSR(G), RHMPC_M, p, ctl->g);
   for (int i = 0; i < RHMPC_M; ++i) {
     ctl->l[i] = rhmpc_l0[i] - ctl->g[i];
     ctl->u[i] = rhmpc_u0[i] - ctl->g[i];
@@ -247,7 +260,7 @@ int rhmpc_tick_ext(rhmpc_t *ctl, const double x[RHMPC_NX], const double ref[RHMP
   OSQPInt err = osqp_update_data_vec(SOLVER, ctl->q, OSQP_NULL, OSQP_NULL);
 #endif
   if (ctl->ws_pending) {
-    matvec(rhmpc_shift, ctl->plan, RHMPC_NV, RHMPC_NV, ctl->ws_x);
+    spmv(CSR(shift), RHMPC_NV, ctl->plan, ctl->ws_x);
     memcpy(ctl->ws_y, rhmpc_y_plan, sizeof(ctl->ws_y));
     ctl->ws_x_set = ctl->ws_y_set = 1;
     ctl->ws_pending = 0;
@@ -286,8 +299,8 @@ int rhmpc_tick_ext(rhmpc_t *ctl, const double x[RHMPC_NX], const double ref[RHMP
       for (int i = 0; finite && i < RHMPC_M; ++i) finite = isfinite(y[i]);
       if (!finite) {
       } else if (RHMPC_WARM_START != RHMPC_WS_KEEP) {
-        matvec(rhmpc_shift, z, RHMPC_NV, RHMPC_NV, ctl->ws_x);
-        matvec(rhmpc_shift_dual, y, RHMPC_M, RHMPC_M, ctl->ws_y);
+        spmv(CSR(shift), RHMPC_NV, z, ctl->ws_x);
+        spmv(CSR(shift_dual), RHMPC_M, y, ctl->ws_y);
         ctl->ws_x_set = ctl->ws_y_set = 1;
       } else {
         ctl->ws_x_set = 0; /* "keep": OSQP's own iterate */
@@ -303,11 +316,11 @@ int rhmpc_tick_ext(rhmpc_t *ctl, const double x[RHMPC_NX], const double ref[RHMP
   ctl->plan_valid = 1;
   ctl->plan_age = 0;
   if (RHMPC_WARM_START == RHMPC_WS_SHIFT) {
-    matvec(rhmpc_shift, z, RHMPC_NV, RHMPC_NV, ctl->ws_x);
-    matvec(rhmpc_shift_dual, y, RHMPC_M, RHMPC_M, ctl->ws_y);
+    spmv(CSR(shift), RHMPC_NV, z, ctl->ws_x);
+    spmv(CSR(shift_dual), RHMPC_M, y, ctl->ws_y);
     ctl->ws_x_set = ctl->ws_y_set = 1;
   } else if (RHMPC_WARM_START == RHMPC_WS_SHIFT_PRIMAL) {
-    matvec(rhmpc_shift, z, RHMPC_NV, RHMPC_NV, ctl->ws_x);
+    spmv(CSR(shift), RHMPC_NV, z, ctl->ws_x);
     ctl->ws_x_set = 1;
   }
   ctl->status = RHMPC_SOLVED;

@@ -15,14 +15,18 @@
 
 extern const double rhmpc_F_ext[RHMPC_NV * (RHMPC_NPAR + 1)];
 extern const double rhmpc_minimiser[RHMPC_NV * (RHMPC_NPAR + 1)];
-extern const double rhmpc_A[RHMPC_M * RHMPC_NV];
-extern const double rhmpc_G[RHMPC_M * RHMPC_NPAR];
+/* Sparse matrices in CSR form (row pointers _p, column indices _i, values _x): A (M x NV),
+ * G (M x NPAR), shift (NV x NV), shift_dual (M x M). */
+#define RHMPC_CSR(name) extern const int rhmpc_##name##_p[]; extern const int rhmpc_##name##_i[]; \
+  extern const double rhmpc_##name##_x[];
+RHMPC_CSR(A)
+RHMPC_CSR(G)
+RHMPC_CSR(shift)
+RHMPC_CSR(shift_dual)
 extern const double rhmpc_l0[RHMPC_M];
 extern const double rhmpc_u0[RHMPC_M];
 extern const double rhmpc_gain[RHMPC_NU * RHMPC_NPAR];
 extern const double rhmpc_gain0[RHMPC_NU];
-extern const double rhmpc_shift[RHMPC_NV * RHMPC_NV];
-extern const double rhmpc_shift_dual[RHMPC_M * RHMPC_M];
 extern const int rhmpc_block_of_tick[RHMPC_N];
 extern const double rhmpc_M0[RHMPC_NU * RHMPC_NU];
 /* The multipliers that go with a primal plan in a warm start (the controller's "zero" dual:
