@@ -35,8 +35,10 @@ import pinocchio as pin
 
 from robots import LinearArm, Robot
 from sim.estimation import JointObserver, ObserverSettings
-from sim.metrics import rms, timing_stats, tracking_metrics
+from sim.metrics import RunningTracking, TickHistogram, rms
 from sim.plant import ArmPlant, ModelMismatch, NonlinearityCancellation, PlantSettings
+from sim.streams import ArrayTruth, StreamCursor, as_samples
+from sim.trace import DecimatedTrace, TraceFile
 
 
 @dataclass(frozen=True)
@@ -155,29 +157,40 @@ def newest_arrived(arrival: np.ndarray, n_ticks: int, Ts: float) -> np.ndarray:
 
 @dataclass
 class LoopResult:
-    """What a run produced (SI units); :meth:`metrics` summarises it."""
+    """What a run produced: its metrics, and a fixed-size trace of its ticks (SI units).
+
+    The per-tick arrays (``time``, ``ee``, ``poi``, ``reference0``, ``tau_mpc``, ``tau``,
+    ``tick_ns``) are those of the decimated trace (:class:`sim.trace.DecimatedTrace`: every tick of
+    a run up to 20 000 ticks long; beyond, every ``stride``-th tick plus the last 2 s at full
+    rate). The metrics cover every tick after settling.
+    """
 
     settings: LoopSettings
-    time: np.ndarray  # (n,) [s], the instant of each recorded state (i+1)·Ts
-    ee: np.ndarray  # (n, 3) end-effector position [m]
-    poi: np.ndarray  # (n, 3) true POI position [m]
-    reference0: np.ndarray  # (n, 3) first reference point r_{i+1} given to the MPC [m]
-    tau_mpc: np.ndarray  # (n, nv) [N·m]
-    tau: np.ndarray  # (n, nv) applied torque after clipping [N·m]
-    tick_ns: np.ndarray  # (n,) controller time per tick [ns]
+    trace: dict  # field -> array over the traced ticks
+    stride: int  # ticks between traced samples before the full-rate tail
+    tracking: dict  # tracking_metrics of every tick after settling
+    tick_us: dict  # p50 / p99 / p999 / max / mean of the whole control tick [µs]
     horizon_error: np.ndarray  # (N,) RMS error of the reference vs the truth per lead tick [m]
     controller_stats: dict = field(default_factory=dict)
     saturated_ticks: int = 0
     predictor_counts: dict = field(default_factory=dict)
+
+    time = property(lambda self: self.trace["time"])  # [s], the instant of the state (i+1)·Ts
+    ee = property(lambda self: self.trace["ee"])  # (n, 3) end-effector position [m]
+    poi = property(lambda self: self.trace["poi"])  # (n, 3) true POI position [m]
+    reference0 = property(lambda self: self.trace["reference0"])  # (n, 3) r_{i+1} [m]
+    tau_mpc = property(lambda self: self.trace["tau_mpc"])  # (n, nv) [N·m]
+    tau_command = property(lambda self: self.trace["tau_command"])  # (n, nv) before the clip
+    tau = property(lambda self: self.trace["tau"])  # (n, nv) applied, after the clip [N·m]
+    tick_ns = property(lambda self: self.trace["tick_ns"])  # (n,) whole control tick [ns]
 
     @property
     def error(self) -> np.ndarray:
         return self.ee - self.poi
 
     def metrics(self) -> dict:
-        s = self.settings.settling_ticks
-        out = tracking_metrics(self.error[s:], self.tau_mpc[s:], self.tau[s:])
-        out["tick_us"] = timing_stats(self.tick_ns[s:])
+        out = dict(self.tracking)
+        out["tick_us"] = dict(self.tick_us)
         out["prediction_rms_mm"] = {
             "lead_1": float(1e3 * self.horizon_error[0]),
             "lead_N": float(1e3 * self.horizon_error[-1]),
@@ -192,8 +205,8 @@ def run_closed_loop(
     arm: LinearArm,
     controller,
     reference,
-    truth: np.ndarray,
-    center: np.ndarray,
+    truth,
+    center: np.ndarray | None,
     stream,
     settings: LoopSettings,
     *,
@@ -201,8 +214,9 @@ def run_closed_loop(
     mismatch: ModelMismatch | None = None,
     observer_settings: ObserverSettings | None = None,
     progress: Callable[[int], None] | None = None,
+    trace_file: str | None = None,
 ) -> LoopResult:
-    """Run the closed loop for ``settings.duration``.
+    """Run the closed loop for ``settings.duration``, in chunks of ≈ 1 s of ticks.
 
     Parameters
     ----------
@@ -213,17 +227,23 @@ def run_closed_loop(
         (N, 3) points of ticks tick … tick + count − 1, None before the first sample
         (:mod:`rhmpc.reference`); the loop places it at the workspace anchor before the run.
     truth, center
-        From :func:`poi_truth` over at least ``ticks + horizon + 1`` ticks.
+        The centred POI truth over at least ``ticks + horizon + 1`` ticks: an array from
+        :func:`poi_truth` with its ``center``, or an object with ``window(i0, i1)``, ``n_ticks``
+        and ``center`` (:class:`sim.streams.SourceTruth`; ``center`` is then ignored).
     stream
-        Sensor samples with arrays ``t`` [s], ``z`` (n, d) [m] (NaN = missing) and ``arrival`` [s].
+        Sensor samples: arrays ``t`` [s], ``z`` (n, d) [m] (NaN = missing) and ``arrival`` [s],
+        or a sample source of :mod:`sim.streams` read block by block.
     progress
         Called with the number of ticks done, every 2000 ticks.
+    trace_file
+        Write every tick to this NPZ file as the run goes (:class:`sim.trace.TraceFile`).
     """
     n, N, ds, Ts = settings.ticks, settings.horizon, settings.downsample, settings.Ts
-    if truth.shape[0] < n + N + 1:
-        raise ValueError(f"truth covers {truth.shape[0]} ticks, the run needs {n + N + 1}")
+    if not hasattr(truth, "window"):
+        truth = ArrayTruth(truth, center)
+    if truth.n_ticks < n + N + 1:
+        raise ValueError(f"truth covers {truth.n_ticks} ticks, the run needs {n + N + 1}")
     anchor = arm.y0 + np.asarray(settings.poi_offset, dtype=float)
-    poi = anchor + embed3(truth[1 : n + 1])
 
     reference.place(anchor)
     plant = ArmPlant(robot, Ts, plant_settings)
@@ -236,45 +256,41 @@ def run_closed_loop(
     resolution = robot.encoder_resolution
     inv_resolution = None if resolution is None else 1.0 / resolution
     encoder = np.empty(robot.nv)  # the quantised reading, rewritten every tick
-    newest = newest_arrived(np.asarray(stream.arrival, dtype=float), n, Ts)
-    z_all = np.asarray(stream.z, dtype=float).reshape(len(stream.t), -1) - center
-    t_all = np.asarray(stream.t, dtype=float)
+    cursor = StreamCursor(as_samples(stream))
+    center = truth.center
 
-    # Per-tick logs as lists of floats (an append is cheaper than a row store); arrays after.
-    q_log: list = []  # plant.q: the plant replaces its arrays, never mutates them
-    ref0: list = []
-    tau_mpc_log: list = []
-    tau_log: list = []  # commanded: τ_mpc + cancellation, before the actuator clip
-    tick_ns: list = []
-    n_updates = (n + ds - 1) // ds
-    horizons = np.full((n_updates, N, 3), np.nan)  # workspace points
+    record = _Recorder(robot, settings, truth, anchor, trace_file)
     hold = np.tile(anchor, (N, 1))  # before the first sample: the POI's mean position
     chunk = ds * max(1, 2000 // ds)  # ticks per open-loop pass (a multiple of ds, ≈ 1 s)
     last_j = -1
     clock = time.perf_counter_ns
     gc_was_enabled = gc.isenabled()
-    gc.disable()  # a collection inside the 2 kHz loop would be a 10-ms stall
+    gc.collect()
+    gc.freeze()  # what exists now is never scanned again …
+    gc.disable()  # … and no collection runs inside the 2 kHz loop (a 10-ms stall)
     try:
         for c0 in range(0, n, chunk):
             c1 = min(c0 + chunk, n)
             # Open-loop part: heart → sensor → predictor → reference does not depend on the
             # robot, so a chunk's references are made first, each predictor period timed and
             # charged to its refresh tick; the closed loop then runs with warm caches.
-            refs, period_ns = [], []
+            refs, period_ns, horizons = [], [], []
             for i in range(c0, c1, ds):  # c0 is a multiple of ds: every i refreshes
                 t_start = clock()
-                j = newest[i]
+                j = cursor.newest(i * Ts + 1e-12)
                 if j >= 0 and j != last_j:
                     last_j = j
-                    reference.refresh(i, z_all[j], t_all[j])
+                    t_j, z_j = cursor.sample(j)
+                    reference.refresh(i, z_j - center, t_j)
                 else:
                     reference.refresh(i, None, i * Ts)
                 # views; later refreshes replace the arrays they view, never change them
                 period = reference.horizons(i, min(ds, c1 - i))
-                if period[0] is not None:
-                    horizons[i // ds] = period[0]
                 refs.extend(hold if h is None else h for h in period)
                 period_ns.append(clock() - t_start)
+                horizons.append(period[0])
+            log = record.start_chunk()
+            q_log, ref0, tau_mpc_log, tau_log, tick_ns = log
             for i in range(c0, c1):
                 t_start = clock()
                 ref = refs[i - c0]
@@ -297,33 +313,12 @@ def run_closed_loop(
                 tau_log.append(tau.tolist())
                 if progress is not None and (i + 1) % 2000 == 0:
                     progress(i + 1)
+            record.end_chunk(c0, c1, log, horizons)
     finally:
         if gc_was_enabled:
             gc.enable()
-
-    q_log, ref0 = np.array(q_log), np.array(ref0)
-    tau_mpc_log, tau_log = np.array(tau_mpc_log), np.array(tau_log)
-    tick_ns = np.array(tick_ns, dtype=np.int64)
-    limit = robot.torque_limit
-    saturated = np.abs(tau_log) > limit
-    saturated_ticks = int(saturated.any(axis=1).sum())
-    tau_log = np.clip(tau_log, -limit, limit)  # what acted
-    model, data, fid = robot.model, robot.create_data(), robot.ee_frame_id
-    ee = []
-    for q in q_log:
-        pin.forwardKinematics(model, data, q)
-        ee.append(pin.updateFramePlacement(model, data, fid).translation)
-    ee = np.array(ee).reshape(n, 3)
-    # Horizon prediction error per lead tick, after settling.
-    first = -(-settings.settling_ticks // ds)
-    lead = np.arange(1, N + 1)
-    placed_truth = anchor + embed3(truth)
-    err = []
-    for k in range(first, n_updates):
-        tick = k * ds
-        if tick + N < truth.shape[0] and np.all(np.isfinite(horizons[k])):
-            err.append(np.linalg.norm(horizons[k] - placed_truth[tick + lead], axis=1))
-    horizon_error = rms(np.array(err), axis=0) if err else np.full(N, np.nan)
+        gc.unfreeze()
+        record.close()
 
     stats_obj = getattr(controller, "stats", None)
     if dataclasses.is_dataclass(stats_obj):
@@ -332,17 +327,77 @@ def run_closed_loop(
     else:
         stats = dict(stats_obj or {})
     counts = dict(getattr(getattr(reference, "predictor", None), "counts", {}) or {})
-    return LoopResult(
-        settings=settings,
-        time=(np.arange(n) + 1) * Ts,
-        ee=ee,
-        poi=poi,
-        reference0=ref0,
-        tau_mpc=tau_mpc_log,
-        tau=tau_log,
-        tick_ns=tick_ns,
-        horizon_error=horizon_error,
-        controller_stats=stats,
-        saturated_ticks=saturated_ticks,
-        predictor_counts=counts,
-    )
+    return record.result(stats, counts)
+
+
+class _Recorder:
+    """Turns each chunk's per-tick lists into running statistics, the trace and the trace file."""
+
+    def __init__(self, robot: Robot, settings: LoopSettings, truth, anchor, trace_file) -> None:
+        self.robot, self.settings, self.truth, self.anchor = robot, settings, truth, anchor
+        self.model, self.data, self.fid = robot.model, robot.create_data(), robot.ee_frame_id
+        self.tracking = RunningTracking()
+        self.ticks = TickHistogram()
+        self.trace = DecimatedTrace(settings.ticks)
+        self.file = None if trace_file is None else TraceFile(trace_file)
+        N = settings.horizon
+        self.lead = np.arange(1, N + 1)
+        self.horizon2, self.n_horizons = np.zeros(N), np.zeros(N, dtype=np.int64)
+        self.saturated_ticks = 0
+
+    @staticmethod
+    def start_chunk() -> tuple[list, list, list, list, list]:
+        """Fresh per-tick lists: q, r_{i+1}, τ_mpc, commanded τ, tick [ns]."""
+        return [], [], [], [], []
+
+    def end_chunk(self, c0: int, c1: int, log, horizons: list) -> None:
+        settings, N, ds = self.settings, self.settings.horizon, self.settings.downsample
+        q_log, ref0, tau_mpc, tau_cmd, tick_ns = log
+        m = c1 - c0
+        model, data, fid = self.model, self.data, self.fid
+        ee = np.empty((m, 3))
+        for k, q in enumerate(q_log):
+            pin.forwardKinematics(model, data, q)
+            ee[k] = pin.updateFramePlacement(model, data, fid).translation
+        placed = self.anchor + embed3(self.truth.window(c0, c1 + N + 1))
+        poi = placed[1 : m + 1]
+        tau_mpc, tau_cmd = np.array(tau_mpc), np.array(tau_cmd)
+        tick_ns = np.array(tick_ns, dtype=np.int64)
+        limit = self.robot.torque_limit
+        self.saturated_ticks += int((np.abs(tau_cmd) > limit).any(axis=1).sum())
+        tau = np.clip(tau_cmd, -limit, limit)  # what acted
+        s = max(settings.settling_ticks - c0, 0)
+        self.tracking.add(ee[s:] - poi[s:], tau_mpc[s:], tau[s:])
+        self.ticks.add(tick_ns[s:])
+        # horizon prediction error per lead tick, refreshes after settling
+        first = -(-settings.settling_ticks // ds)
+        for k, h in zip(range(c0 // ds, -(-c1 // ds)), horizons, strict=True):
+            tick = k * ds
+            if k >= first and h is not None and tick + N < self.truth.n_ticks \
+                    and np.all(np.isfinite(h)):
+                err2 = np.square(h - placed[tick - c0 + self.lead]).sum(axis=1)
+                finite = np.isfinite(err2)  # no truth at some leads: skipped per lead
+                self.horizon2 += np.where(finite, err2, 0.0)
+                self.n_horizons += finite
+        ticks = np.arange(c0, c1)
+        chunk = {"tick": ticks, "time": (ticks + 1) * settings.Ts, "ee": ee, "poi": poi,
+                 "reference0": np.array(ref0), "tau_mpc": tau_mpc, "tau_command": tau_cmd,
+                 "tau": tau, "tick_ns": tick_ns}
+        self.trace.add(chunk)
+        if self.file is not None:
+            self.file.add(chunk)
+
+    def close(self) -> None:
+        if self.file is not None:
+            self.file.close()
+            self.file = None
+
+    def result(self, stats: dict, counts: dict) -> LoopResult:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            horizon_error = np.sqrt(self.horizon2 / self.n_horizons)  # NaN where no refresh
+        return LoopResult(
+            settings=self.settings, trace=self.trace.arrays(), stride=self.trace.stride,
+            tracking=self.tracking.result(), tick_us=self.ticks.stats_us(),
+            horizon_error=horizon_error, controller_stats=stats,
+            saturated_ticks=self.saturated_ticks, predictor_counts=counts,
+        )
