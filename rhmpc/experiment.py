@@ -214,9 +214,9 @@ class Run:
     arm: Any
     controller: Any
     reference: Any
-    truth: np.ndarray
+    truth: Any  # sim.streams.SourceTruth: the centred POI truth, read per window
     center: np.ndarray
-    stream: Any
+    stream: Any  # a sample source of sim.streams
     label: str
     duration: float
 
@@ -236,25 +236,39 @@ def heart_source(config: RunConfig, rng: np.random.Generator):
 
 
 def build_stream(config: RunConfig, source, origin, duration: float, rng: np.random.Generator):
-    """The sensor samples the controller sees (SI units), over ``duration`` seconds."""
-    from sim.sensors import SampleStream, Upsample, sensor_from_name
+    """The sensor samples the controller sees (SI units), over ``duration`` seconds.
 
-    control_rate = 1.0 / config.loop.Ts
+    A sample source read in blocks (:mod:`sim.streams`), so that memory does not grow with the
+    run; the samples and the random draws are those of ``sensor.measure`` on the whole run: a
+    trailing :class:`~sim.sensors.Upsample` stage (the 2-kHz playback) runs block by block on
+    the raw samples, and a sensor without stages samples the source block by block; other
+    sensors are measured whole.
+    """
+    from sim.sensors import SampleStream, Upsample, sensor_from_name
+    from sim.streams import ArraySamples, SampledSamples, UpsampledSamples
+
     if config.sensor == "recorded":
         if config.data is None:
             raise UsageError("sensor 'recorded' needs a recording (--data FILE)")
         t = origin.t - origin.t[0]
         stream = SampleStream(t, origin.z, t.copy(), origin.sample_rate)
-        return Upsample(control_rate).apply(stream, rng)
+        return UpsampledSamples(stream, Upsample(1.0 / config.loop.Ts))
     settings = dict(config.sensor_settings)
     if config.sensor == "sonomicrometry":
         settings.setdefault("rate", getattr(origin, "sensor_rate", None) or 257.0)
-        settings.setdefault("upsample", control_rate)  # the paper's 2-kHz streamed playback
+        settings.setdefault("upsample", 1.0 / config.loop.Ts)
     try:
         sensor = sensor_from_name(config.sensor, dim=source.dim, **settings)
     except TypeError as exc:
         raise UsageError(f"sensor {config.sensor!r}: {exc}") from None
-    return sensor.measure(source, duration, rng)
+    if not sensor.stages:
+        return SampledSamples(source, sensor.rate, sensor.sample_times(duration).size)
+    if isinstance(sensor.stages[-1], Upsample):
+        raw = dataclasses.replace(sensor, stages=sensor.stages[:-1]).measure(source, duration, rng)
+        if len(raw) >= 2:
+            return UpsampledSamples(raw, sensor.stages[-1])
+        return ArraySamples.of(sensor.stages[-1].apply(raw, rng))
+    return ArraySamples.of(sensor.measure(source, duration, rng))
 
 
 def build_run(config: RunConfig) -> Run:
@@ -263,7 +277,7 @@ def build_run(config: RunConfig) -> Run:
     from rhmpc.control.mpc import RecedingHorizonMPC
     from rhmpc.control.reference import ExactReference, PredictedReference
     from robots import linearize, load_robot
-    from sim.loop import poi_truth
+    from sim.streams import SourceTruth
 
     loop = config.loop
     if config.mpc.horizon != loop.horizon:
@@ -283,13 +297,10 @@ def build_run(config: RunConfig) -> Run:
         )
     margin = (loop.horizon + 1) * loop.Ts
     stream = build_stream(config, source, origin, loop.duration + margin, sensor_rng)
-    if config.ground_truth == "recorded":
-        from sim.heart import RecordedMotion
-
-        target = RecordedMotion(stream.t, stream.z, name="recorded stream")
-    else:
-        target = source
-    center, truth = poi_truth(target, loop.ticks + loop.horizon + 1, loop.Ts)
+    # the truth is read per window: the recorded stream interpolated at the ticks, or the motion
+    truth = SourceTruth(stream if config.ground_truth == "recorded" else source,
+                        loop.ticks + loop.horizon + 1, loop.Ts)
+    center = truth.center
     if config.predictor == "exact":
         reference = ExactReference(truth, loop.horizon)
     else:
@@ -305,13 +316,20 @@ def build_run(config: RunConfig) -> Run:
                loop.duration)
 
 
-def run_experiment(config: RunConfig, progress: bool = False) -> tuple[Any, dict]:
+def run_experiment(config: RunConfig, progress: bool = False,
+                   trace: str | None = None) -> tuple[Any, dict]:
     """Run ``config`` in closed loop; returns the :class:`~sim.loop.LoopResult` and its document.
 
     The document holds the settings, the metrics (``rms_error_mm``, ``max_error_mm``,
     ``rms_effort_mNm``, ``tick_us`` with ``p50``/``p99``/``max``, ``fallbacks`` …), the wall
-    time and the package versions.
+    time, the peak resident memory of the process so far (``peak_rss_mb``), the gain tick
+    timed in the same run (``gain_tick_us``) with the tick's ratios to its p50
+    (``tick_ratio_to_gain``), and the package versions. ``trace``: write every tick to this
+    NPZ file (:mod:`sim.trace`).
     """
+    import resource
+
+    from rhmpc.control.gain_tick import GainTick
     from sim.loop import run_closed_loop
 
     run = build_run(config)
@@ -331,7 +349,8 @@ def run_experiment(config: RunConfig, progress: bool = False) -> tuple[Any, dict
         result = run_closed_loop(
             run.robot, run.arm, run.controller, run.reference, run.truth, run.center, run.stream,
             config.loop, plant_settings=config.plant, mismatch=config.mismatch,
-            observer_settings=config.observer, progress=callback,
+            observer_settings=config.observer, progress=callback, trace_file=trace,
+            yardstick=_gain_tick(run.controller, GainTick),
         )
     finally:
         if bar is not None:
@@ -352,10 +371,23 @@ def run_experiment(config: RunConfig, progress: bool = False) -> tuple[Any, dict
         "predictor_counts": _jsonable(result.predictor_counts),
         "wall_s": wall,
         "real_time_factor": config.loop.duration / wall,
+        "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,  # Linux: KiB
+        "gain_tick_us": result.yardstick_us,
+        "tick_ratio_to_gain": {k: v / result.yardstick_us["p50"]
+                               for k, v in metrics["tick_us"].items() if k != "mean"},
         "settings": config.to_dict(),
         "versions": versions(),
     }
     return result, document
+
+
+def _gain_tick(controller, gain_tick):
+    """``yardstick(x, r)``: the controller's gain tick, or None if it has no gain to time."""
+    try:
+        gain = gain_tick(controller)
+    except AttributeError:  # a stand-in controller without the MPC's QP
+        return None
+    return lambda x, ref: gain(x, ref, controller.u_prev)
 
 
 def _jsonable(obj: Any) -> Any:

@@ -170,6 +170,7 @@ class LoopResult:
     stride: int  # ticks between traced samples before the full-rate tail
     tracking: dict  # tracking_metrics of every tick after settling
     tick_us: dict  # p50 / p99 / p999 / max / mean of the whole control tick [µs]
+    yardstick_us: dict  # the same of the yardstick (gain tick) timed in the run [µs]
     horizon_error: np.ndarray  # (N,) RMS error of the reference vs the truth per lead tick [m]
     controller_stats: dict = field(default_factory=dict)
     saturated_ticks: int = 0
@@ -215,6 +216,7 @@ def run_closed_loop(
     observer_settings: ObserverSettings | None = None,
     progress: Callable[[int], None] | None = None,
     trace_file: str | None = None,
+    yardstick: Callable[[np.ndarray, np.ndarray], object] | None = None,
 ) -> LoopResult:
     """Run the closed loop for ``settings.duration``, in chunks of ≈ 1 s of ticks.
 
@@ -238,6 +240,11 @@ def run_closed_loop(
         Called with the number of ticks done, every 2000 ticks.
     trace_file
         Write every tick to this NPZ file as the run goes (:class:`sim.trace.TraceFile`).
+    yardstick
+        A reference computation ``yardstick(x̂, r)`` (the gain tick of
+        :mod:`rhmpc.control.gain_tick`) timed after the controller on every 16th tick, with the
+        tick's own inputs, so that tick times can be stated as ratios to it measured in the same
+        run (``LoopResult.yardstick_us``); not part of the tick, its result is not used.
     """
     n, N, ds, Ts = settings.ticks, settings.horizon, settings.downsample, settings.Ts
     if not hasattr(truth, "window"):
@@ -291,7 +298,7 @@ def run_closed_loop(
                 period_ns.append(clock() - t_start)
                 horizons.append(period[0])
             log = record.start_chunk()
-            q_log, ref0, tau_mpc_log, tau_log, tick_ns = log
+            q_log, ref0, tau_mpc_log, tau_log, tick_ns, yard_ns = log
             for i in range(c0, c1):
                 t_start = clock()
                 ref = refs[i - c0]
@@ -305,6 +312,10 @@ def run_closed_loop(
                 tau = cancel.torque(q_meas, velocity, u)
                 elapsed = clock() - t_start
                 tick_ns.append(elapsed + period_ns[(i - c0) // ds] if i % ds == 0 else elapsed)
+                if yardstick is not None and i % 16 == 7:
+                    t_start = clock()
+                    yardstick(x_hat, ref)
+                    yard_ns.append(clock() - t_start)
                 applied = plant.step(tau)
                 # the MPC torque that really acted
                 observer.predict(u + (applied - tau) if plant.saturated else u)
@@ -339,6 +350,7 @@ class _Recorder:
         self.model, self.data, self.fid = robot.model, robot.create_data(), robot.ee_frame_id
         self.tracking = RunningTracking()
         self.ticks = TickHistogram()
+        self.yardstick = TickHistogram()
         self.trace = DecimatedTrace(settings.ticks)
         self.file = None if trace_file is None else TraceFile(trace_file)
         N = settings.horizon
@@ -347,13 +359,14 @@ class _Recorder:
         self.saturated_ticks = 0
 
     @staticmethod
-    def start_chunk() -> tuple[list, list, list, list, list]:
-        """Fresh per-tick lists: q, r_{i+1}, τ_mpc, commanded τ, tick [ns]."""
-        return [], [], [], [], []
+    def start_chunk() -> tuple[list, list, list, list, list, list]:
+        """Fresh per-tick lists: q, r_{i+1}, τ_mpc, commanded τ, tick [ns], yardstick [ns]."""
+        return [], [], [], [], [], []
 
     def end_chunk(self, c0: int, c1: int, log, horizons: list) -> None:
         settings, N, ds = self.settings, self.settings.horizon, self.settings.downsample
-        q_log, ref0, tau_mpc, tau_cmd, tick_ns = log
+        q_log, ref0, tau_mpc, tau_cmd, tick_ns, yard_ns = log
+        self.yardstick.add(np.array(yard_ns, dtype=np.int64))
         m = c1 - c0
         model, data, fid = self.model, self.data, self.fid
         ee = np.empty((m, 3))
@@ -399,6 +412,7 @@ class _Recorder:
         return LoopResult(
             settings=self.settings, trace=self.trace.arrays(), stride=self.trace.stride,
             tracking=self.tracking.result(), tick_us=self.ticks.stats_us(),
+            yardstick_us=self.yardstick.stats_us(),
             horizon_error=horizon_error, controller_stats=stats,
             saturated_ticks=self.saturated_ticks, predictor_counts=counts,
         )

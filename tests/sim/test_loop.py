@@ -164,5 +164,5 @@ def test_same_seed_same_numbers_other_seed_other_numbers():
 
 def test_truth_and_stream_start_together():
     run = build_run(small_config(ground_truth="true"))
-    assert run.stream.t[0] == 0.0
-    assert run.truth.shape[0] == run.config.loop.ticks + run.config.loop.horizon + 1
+    assert run.stream.block(0, 1)[0][0] == 0.0
+    assert run.truth.n_ticks == run.config.loop.ticks + run.config.loop.horizon + 1
