@@ -245,7 +245,7 @@ def build_stream(config: RunConfig, source, origin, duration: float, rng: np.ran
     sensors are measured whole.
     """
     from sim.sensors import SampleStream, Upsample, sensor_from_name
-    from sim.streams import ArraySamples, SampledSamples, UpsampledSamples
+    from sim.streams import ArraySamples, SampledSamples, UpsampledSamples, measure
 
     if config.sensor == "recorded":
         if config.data is None:
@@ -264,11 +264,12 @@ def build_stream(config: RunConfig, source, origin, duration: float, rng: np.ran
     if not sensor.stages:
         return SampledSamples(source, sensor.rate, sensor.sample_times(duration).size)
     if isinstance(sensor.stages[-1], Upsample):
-        raw = dataclasses.replace(sensor, stages=sensor.stages[:-1]).measure(source, duration, rng)
+        raw = measure(dataclasses.replace(sensor, stages=sensor.stages[:-1]), source, duration,
+                      rng)
         if len(raw) >= 2:
             return UpsampledSamples(raw, sensor.stages[-1])
         return ArraySamples.of(sensor.stages[-1].apply(raw, rng))
-    return ArraySamples.of(sensor.measure(source, duration, rng))
+    return ArraySamples.of(measure(sensor, source, duration, rng))
 
 
 def build_run(config: RunConfig) -> Run:

@@ -4,7 +4,10 @@ Time is integer ticks of ``Ts`` (seconds = tick·Ts). Each tick ``i``:
 
 1. the newest sensor sample that has *arrived* by ``i·Ts`` is known (``newest[i]``);
 2. every ``downsample`` ticks the reference is refreshed with it (the predictor runs; a tick
-   with no new sample since the last refresh is a missing sample for the predictor);
+   with no new sample since the last refresh is a missing sample for the predictor) — by default
+   pipelined: the gate and the predictor's update on the tick before, the forecast,
+   interpolation and guard on the refresh tick, so that no tick carries a whole refresh
+   (``LoopSettings.pipelined_refresh``);
 3. the reference gives the N points ``r_{i+1..i+N}``, placed in the robot's workspace:
    ``r = y0 + offset + E·r_c`` (``r_c`` centred heart coordinates);
 4. the encoders quantise ``q``, the observer estimates ``x̂ = [q − q0; q̇]``;
@@ -14,8 +17,13 @@ Time is integer ticks of ``Ts`` (seconds = tick·Ts). Each tick ``i``:
 Steps 1–3 are open-loop — the heart and its sensor do not see the robot — so the loop makes them
 for a chunk of ≈ 1 s of ticks ahead (same calls, same order, same results) and then runs steps
 4–6 for that chunk. Keeping the two working sets apart saves ≈ 15 µs of a ≈ 90 µs tick;
-each predictor period's time is charged to its refresh tick, so the per-tick timing still holds
-everything the controller does.
+each part of a refresh is timed and charged to the tick that would run it, so the per-tick
+timing still holds everything the controller does.
+
+Memory is flat in run length: the sensor stream and the POI truth are read per chunk
+(:mod:`sim.streams`), results accumulate as running statistics (:mod:`sim.metrics`) and a
+fixed-size decimated trace, and every tick can go to an NPZ file as the run goes
+(:mod:`sim.trace`). The garbage collector is frozen and disabled during the run.
 
 The POI trajectory is centred on its mean over the run and placed at the end-effector's home
 position plus ``poi_offset``. A 1-D motion moves along the x axis. The error is
@@ -75,6 +83,11 @@ class LoopSettings:
         Initial time excluded from the metrics while the predictors converge [s].
     poi_offset : tuple[float, float, float]
         Mean POI position relative to the end-effector's home position [m].
+    pipelined_refresh : bool
+        Split each predictor refresh over two ticks, so that no tick carries all of it: the tick
+        before a refresh tick runs the outlier gate and the predictor's update with the newest
+        sample arrived by then, the refresh tick the forecast, interpolation and guard. False:
+        the whole refresh on the refresh tick, with the newest sample arrived by that tick.
     """
 
     Ts: float = 0.5e-3
@@ -88,6 +101,7 @@ class LoopSettings:
     duration: float = 20.0
     settling: float = 5.0
     poi_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    pipelined_refresh: bool = True
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.Ts) and self.Ts > 0):
@@ -271,6 +285,9 @@ def run_closed_loop(
     hold = np.tile(anchor, (N, 1))  # before the first sample: the POI's mean position
     chunk = ds * max(1, 2000 // ds)  # ticks per open-loop pass (a multiple of ds, ≈ 1 s)
     last_j = -1
+    pipelined = settings.pipelined_refresh
+    if pipelined:  # the first refresh's update, on tick −1 (nothing has arrived yet)
+        last_j = _update(reference, cursor, -1, last_j, center, Ts)
     clock = time.perf_counter_ns
     gc_was_enabled = gc.isenabled()
     gc.collect()
@@ -282,21 +299,22 @@ def run_closed_loop(
             # Open-loop part: heart → sensor → predictor → reference does not depend on the
             # robot, so a chunk's references are made first, each predictor period timed and
             # charged to its refresh tick; the closed loop then runs with warm caches.
-            refs, period_ns, horizons = [], [], []
+            refs, horizons = [], []
+            charged = [0] * (c1 - c0)  # open-loop work [ns] charged to each tick
             for i in range(c0, c1, ds):  # c0 is a multiple of ds: every i refreshes
                 t_start = clock()
-                j = cursor.newest(i * Ts + 1e-12)
-                if j >= 0 and j != last_j:
-                    last_j = j
-                    t_j, z_j = cursor.sample(j)
-                    reference.refresh(i, z_j - center, t_j)
-                else:
-                    reference.refresh(i, None, i * Ts)
+                if not pipelined:
+                    last_j = _update(reference, cursor, i, last_j, center, Ts)
+                reference.forecast()
                 # views; later refreshes replace the arrays they view, never change them
                 period = reference.horizons(i, min(ds, c1 - i))
+                t_end = clock()
+                charged[i - c0] += t_end - t_start
+                if pipelined and i + ds - 1 < c1:  # the next refresh's update, on its own tick
+                    last_j = _update(reference, cursor, i + ds - 1, last_j, center, Ts)
+                    charged[i + ds - 1 - c0] += clock() - t_end
+                horizons.append(period[0])  # the refresh's forecast from tick i
                 refs.extend(hold if h is None else h for h in period)
-                period_ns.append(clock() - t_start)
-                horizons.append(period[0])
             log = record.start_chunk()
             q_log, ref0, tau_mpc_log, tau_log, tick_ns, yard_ns = log
             for i in range(c0, c1):
@@ -311,7 +329,7 @@ def run_closed_loop(
                 u = controller.step(x_hat, ref)
                 tau = cancel.torque(q_meas, velocity, u)
                 elapsed = clock() - t_start
-                tick_ns.append(elapsed + period_ns[(i - c0) // ds] if i % ds == 0 else elapsed)
+                tick_ns.append(elapsed + charged[i - c0])
                 if yardstick is not None and i % 16 == 7:
                     t_start = clock()
                     yardstick(x_hat, ref)
@@ -340,6 +358,17 @@ def run_closed_loop(
         stats = dict(stats_obj or {})
     counts = dict(getattr(getattr(reference, "predictor", None), "counts", {}) or {})
     return record.result(stats, counts)
+
+
+def _update(reference, cursor, tick: int, last_j: int, center, Ts: float) -> int:
+    """Feed the reference the newest sample arrived by ``tick`` (None if none is new)."""
+    j = cursor.newest(tick * Ts + 1e-12)
+    if j >= 0 and j != last_j:
+        t_j, z_j = cursor.sample(j)
+        reference.update(tick, z_j - center, t_j)
+        return j
+    reference.update(tick, None, tick * Ts)
+    return last_j
 
 
 class _Recorder:

@@ -179,7 +179,9 @@ class PredictedReference:
         if not math.isclose(predictor.dt, self.dt, rel_tol=1e-9):
             raise ValueError(f"predictor dt {predictor.dt} s != downsample·Ts = {self.dt} s")
         self.prediction_points = prediction_points
-        self._span = downsample - 1 + horizon  # ticks a refresh must cover
+        # ticks a refresh covers: its period, plus one so that a pipelined loop can read the
+        # next refresh tick's points from it while that refresh runs
+        self._span = downsample + horizon
         self._lead = np.arange(1, self._span + 1) * (Ts / self.dt)  # (τ − now)/dt per point
         # Interpolation matrices by (nodes, (now − t0)/Ts): with sensor stamps on the tick grid
         # only a few offsets occur, so a refresh is one small product instead of a rebuild.
@@ -197,6 +199,7 @@ class PredictedReference:
         self._dense: np.ndarray | None = None
         self._placed: np.ndarray | None = None
         self._first = 0
+        self._pending: tuple | None = None  # (tick, accepted z or None) between the halves
         self._anchor: float | None = None
         self._forecast: np.ndarray | None = None  # ẑ of the next sample, made one period ago
         self._held: np.ndarray | None = None  # the last accepted sample …
@@ -205,26 +208,47 @@ class PredictedReference:
             self.gate.reset()
 
     def refresh(self, tick: int, z: np.ndarray | None, stamp: float) -> None:
-        """Feed the newest sample ``z`` measured at ``stamp`` [s] (None = no new sample)."""
+        """Feed the newest sample ``z`` measured at ``stamp`` [s] (None = no new sample).
+
+        :meth:`update` then :meth:`forecast`, the two halves a pipelined loop runs on
+        consecutive ticks.
+        """
+        self.update(tick, z, stamp)
+        self.forecast()
+
+    def update(self, tick: int, z: np.ndarray | None, stamp: float) -> None:
+        """First half of a refresh: the outlier gate and the predictor's update with ``z``."""
         valid = z is not None and math.isfinite(float(np.dot(z, z)))
         if valid and self._forecast is not None and not self.gate.accept(
             z, self._forecast, self.predictor.counts
         ):
             z, valid = None, False
         self.predictor.update(z)
+        self._pending = None
         if valid:
             self._anchor, self._held, self._held_stamp = stamp, np.array(z, dtype=float), stamp
         elif self._anchor is None:
             return  # nothing measured yet: keep holding
         else:
             self._anchor += self.dt  # the predictor advanced one period open-loop
+        self._pending = (tick, z if valid else None)
+
+    def forecast(self) -> None:
+        """Second half: forecast, interpolate and guard the points of the last :meth:`update`.
+
+        The points are those of the update's tick; until this runs, :meth:`horizons` reads the
+        previous refresh's points.
+        """
+        if self._pending is None:
+            return
+        (tick, z), self._pending = self._pending, None
         now = tick * self.Ts
         latency = max(0.0, now - self._anchor)
         K = self.prediction_points + math.ceil(latency / self.dt - 1e-9)
         points = self.predictor.predict(K)
         if self.gate is not None:
             self._forecast = points[0] if getattr(self.predictor, "ready", True) else None
-        if valid:
+        if z is not None:
             nodes = np.concatenate((np.reshape(z, (1, -1)), points))
             t0 = self._anchor
         else:
@@ -375,6 +399,12 @@ class ExactReference:
         pass
 
     def refresh(self, tick: int, z: np.ndarray | None, stamp: float) -> None:
+        pass
+
+    def update(self, tick: int, z: np.ndarray | None, stamp: float) -> None:
+        pass
+
+    def forecast(self) -> None:
         pass
 
     def horizon(self, tick: int) -> np.ndarray:
