@@ -253,3 +253,73 @@ void chain_point(const chain_t *m, const double *q, int count, int joint, const 
                              R[joint][3 * k + 1] * point[1] + R[joint][3 * k + 2] * point[2];
     }
 }
+
+/* ---- The loop's tick around the MPC (sim/native.py NativeTick): encoders, observer,
+ * cancellation and plant, the same operations in the same order as sim/loop.py's Python path
+ * (sim.sensors encoder quantisation, sim.estimation.JointObserver, sim.plant). ---- */
+
+typedef struct {
+    const chain_t *plant;       /* the true arm */
+    const chain_t *model;       /* the controller's model (mismatch), for the cancellation */
+    double h;                   /* integration step [s] */
+    int substeps;
+    int quantise;               /* encoders present */
+    double resolution[MAXJ], inv_resolution[MAXJ];
+    double tau_max[MAXJ];
+    double correct[2 * MAXJ][3 * MAXJ + 1];  /* x = C [x_prior; q~; 1] */
+    double predict[2 * MAXJ][3 * MAXJ];      /* x_prior = P [x; u] */
+    double q[MAXJ], v[MAXJ];    /* plant state */
+    double prior[3 * MAXJ + 1]; /* [x_prior; q~; 1] */
+    double post[3 * MAXJ];      /* [x; u_applied] */
+    double u[MAXJ];             /* MPC torque, written by the caller */
+    double tau[MAXJ];           /* commanded torque (before the clip) */
+    int saturated;
+} tick_t;
+
+/* Encoders and the observer's correction: post[0:2n] = x_hat. */
+void tick_sense(tick_t *t) {
+    int n = t->plant->n, nx = 2 * n;
+    for (int i = 0; i < n; i++)
+        t->prior[nx + i] = t->quantise ? rint(t->q[i] * t->inv_resolution[i]) * t->resolution[i]
+                                       : t->q[i];
+    t->prior[3 * n] = 1.0;
+    for (int k = 0; k < nx; k++) {
+        double s = 0;
+        for (int l = 0; l <= 3 * n; l++) s += t->correct[k][l] * t->prior[l];
+        t->post[k] = s;
+    }
+}
+
+/* Commanded torque tau = u + RNEA_model(q~, v_hat, 0) + D v_hat + F_c tanh(v_hat / v_s). */
+void tick_actuate(tick_t *t) {
+    const chain_t *m = t->model;
+    int n = m->n;
+    double zero[MAXJ] = {0}, bias[MAXJ];
+    const double *q = t->prior + 2 * n, *v = t->post + n;
+    chain_rnea(m, q, v, zero, bias);
+    for (int i = 0; i < n; i++)
+        t->tau[i] = t->u[i] + bias[i] + m->damping[i] * v[i] +
+                    m->coulomb[i] * tanh(v[i] * m->inv_stiction);
+}
+
+/* Clip, integrate one tick, and predict the observer with the MPC torque that acted. */
+void tick_advance(tick_t *t) {
+    int n = t->plant->n, nx = 2 * n;
+    double applied[MAXJ];
+    t->saturated = 0;
+    for (int i = 0; i < n; i++) {
+        double a = t->tau[i];
+        if (a < -t->tau_max[i]) a = -t->tau_max[i];
+        if (a > t->tau_max[i]) a = t->tau_max[i];
+        applied[i] = a;
+        if (a != t->tau[i]) t->saturated = 1;
+    }
+    chain_midpoint(t->plant, t->q, t->v, applied, t->h, t->substeps);
+    for (int i = 0; i < n; i++)
+        t->post[nx + i] = t->saturated ? t->u[i] + (applied[i] - t->tau[i]) : t->u[i];
+    for (int k = 0; k < nx; k++) {
+        double s = 0;
+        for (int l = 0; l < 3 * n; l++) s += t->predict[k][l] * t->post[l];
+        t->prior[k] = s;
+    }
+}

@@ -282,6 +282,62 @@ def run_closed_loop(
     center = truth.center
 
     record = _Recorder(robot, settings, truth, anchor, trace_file)
+    native_tick = None
+    if plant.dynamics == "native":
+        from sim.native import NativeTick
+
+        native_tick = NativeTick(plant, cancel, observer, robot.encoder_resolution)
+
+    def closed_loop(c0: int, c1: int, refs: list, charged: list, log: tuple) -> None:
+        """Steps 4–6 for ticks c0 … c1 − 1, appending to the chunk's lists."""
+        q_log, _, tau_mpc_log, tau_log, tick_ns, yard_ns = log
+        if native_tick is not None:  # encoders, observer, cancellation and plant compiled
+            sense, actuate, advance = native_tick.sense, native_tick.actuate, native_tick.advance
+            x_hat, u_in, tau, q = native_tick.x, native_tick.u, native_tick.tau, native_tick.q
+            for i in range(c0, c1):
+                t_start = clock()
+                sense()
+                ref = refs[i - c0]
+                u = controller.step(x_hat, ref)
+                u_in[:] = u
+                actuate()
+                tick_ns.append(clock() - t_start + charged[i - c0])
+                if yardstick is not None and i % 16 == 7:
+                    t_start = clock()
+                    yardstick(x_hat, ref)
+                    yard_ns.append(clock() - t_start)
+                advance()
+                q_log.append(q.tolist())
+                tau_mpc_log.append(u.tolist())
+                tau_log.append(tau.tolist())
+                if progress is not None and (i + 1) % 2000 == 0:
+                    progress(i + 1)
+            return
+        for i in range(c0, c1):
+            t_start = clock()
+            ref = refs[i - c0]
+            q_meas = plant.q
+            if resolution is not None:  # encoders: q̃ = Δ·round(q/Δ)
+                q_meas = np.multiply(q_meas, inv_resolution, out=encoder)
+                np.rint(encoder, out=encoder)
+                np.multiply(encoder, resolution, out=encoder)
+            x_hat = observer.correct(q_meas)
+            u = controller.step(x_hat, ref)
+            tau = cancel.torque(q_meas, velocity, u)
+            tick_ns.append(clock() - t_start + charged[i - c0])
+            if yardstick is not None and i % 16 == 7:
+                t_start = clock()
+                yardstick(x_hat, ref)
+                yard_ns.append(clock() - t_start)
+            applied = plant.step(tau)
+            # the MPC torque that really acted
+            observer.predict(u + (applied - tau) if plant.saturated else u)
+            q_log.append(plant.q)
+            tau_mpc_log.append(u.tolist())
+            tau_log.append(tau.tolist())
+            if progress is not None and (i + 1) % 2000 == 0:
+                progress(i + 1)
+
     hold = np.tile(anchor, (N, 1))  # before the first sample: the POI's mean position
     chunk = ds * max(1, 2000 // ds)  # ticks per open-loop pass (a multiple of ds, ≈ 1 s)
     last_j = -1
@@ -315,33 +371,8 @@ def run_closed_loop(
                 horizons.append(period[0])  # the refresh's forecast from tick i
                 refs.extend(hold if h is None else h for h in period)
             log = record.start_chunk()
-            q_log, ref0, tau_mpc_log, tau_log, tick_ns, yard_ns = log
-            for i in range(c0, c1):
-                t_start = clock()
-                ref = refs[i - c0]
-                q_meas = plant.q
-                if resolution is not None:  # encoders: q̃ = Δ·round(q/Δ)
-                    q_meas = np.multiply(q_meas, inv_resolution, out=encoder)
-                    np.rint(encoder, out=encoder)
-                    encoder *= resolution
-                x_hat = observer.correct(q_meas)
-                u = controller.step(x_hat, ref)
-                tau = cancel.torque(q_meas, velocity, u)
-                elapsed = clock() - t_start
-                tick_ns.append(elapsed + charged[i - c0])
-                if yardstick is not None and i % 16 == 7:
-                    t_start = clock()
-                    yardstick(x_hat, ref)
-                    yard_ns.append(clock() - t_start)
-                applied = plant.step(tau)
-                # the MPC torque that really acted
-                observer.predict(u + (applied - tau) if plant.saturated else u)
-                q_log.append(plant.q)
-                ref0.append(ref[0].tolist())
-                tau_mpc_log.append(u.tolist())
-                tau_log.append(tau.tolist())
-                if progress is not None and (i + 1) % 2000 == 0:
-                    progress(i + 1)
+            log[1].extend(refs)  # r_{i+1..i+N} of every tick (views)
+            closed_loop(c0, c1, refs, charged, log)
             record.end_chunk(c0, c1, log, horizons)
     finally:
         if gc_was_enabled:
@@ -394,7 +425,7 @@ class _Recorder:
 
     @staticmethod
     def start_chunk() -> tuple[list, list, list, list, list, list]:
-        """Fresh per-tick lists: q, r_{i+1}, τ_mpc, commanded τ, tick [ns], yardstick [ns]."""
+        """Fresh per-tick lists: q, r, τ_mpc, commanded τ, tick [ns], yardstick [ns]."""
         return [], [], [], [], [], []
 
     def end_chunk(self, c0: int, c1: int, log, horizons: list) -> None:
@@ -432,7 +463,8 @@ class _Recorder:
                 self.n_horizons += finite
         ticks = np.arange(c0, c1)
         chunk = {"tick": ticks, "time": (ticks + 1) * settings.Ts, "ee": ee, "poi": poi,
-                 "reference0": np.array(ref0), "tau_mpc": tau_mpc, "tau_command": tau_cmd,
+                 "reference0": np.array([r[0] for r in ref0]), "tau_mpc": tau_mpc,
+                 "tau_command": tau_cmd,
                  "tau": tau, "tick_ns": tick_ns}
         self.trace.add(chunk)
         if self.file is not None:

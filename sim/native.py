@@ -18,6 +18,7 @@ uses Pinocchio.
 from __future__ import annotations
 
 import ctypes
+import functools
 import hashlib
 import os
 import shutil
@@ -182,3 +183,79 @@ def load_chain(model, damping=0.0, coulomb=0.0, stiction_velocity: float = 5e-3
     chain.gravity[:] = np.asarray(model.gravity.linear).tolist()
     unavailable_reason = None
     return NativeChain(library, chain, nv)
+
+
+class _Tick(ctypes.Structure):
+    """``tick_t`` of sim/chain.c."""
+
+    _fields_ = [
+        ("plant", ctypes.c_void_p), ("model", ctypes.c_void_p), ("h", _d), ("substeps", _i),
+        ("quantise", _i), ("resolution", _d * MAX_JOINTS), ("inv_resolution", _d * MAX_JOINTS),
+        ("tau_max", _d * MAX_JOINTS), ("correct", (_d * (3 * MAX_JOINTS + 1)) * (2 * MAX_JOINTS)),
+        ("predict", (_d * (3 * MAX_JOINTS)) * (2 * MAX_JOINTS)), ("q", _d * MAX_JOINTS),
+        ("v", _d * MAX_JOINTS), ("prior", _d * (3 * MAX_JOINTS + 1)),
+        ("post", _d * (3 * MAX_JOINTS)), ("u", _d * MAX_JOINTS), ("tau", _d * MAX_JOINTS),
+        ("saturated", _i),
+    ]
+
+
+class NativeTick:
+    """The loop's tick around the MPC in three compiled calls, one Python-level call each.
+
+    ``sense()`` quantises the plant's joint angles (encoders) and corrects the observer: ``x``
+    is then x̂ = [q − q0; q̇] (a view); the caller sets ``u`` (τ_mpc); ``actuate()`` computes the
+    commanded torque ``tau`` = u + ĝ + Ĉq̇ + f̂ at the estimate; ``advance()`` clips it, integrates
+    the plant one tick (explicit midpoint) and predicts the observer with the MPC torque that
+    acted. The same operations in the same order as the Python path of :mod:`sim.loop` with
+    :class:`~sim.plant.ArmPlant`, :class:`~sim.plant.NonlinearityCancellation` and
+    :class:`~sim.estimation.JointObserver` (whose settings and state it copies), up to rounding.
+    """
+
+    def __init__(self, plant, cancellation, observer, encoder_resolution) -> None:
+        nv = plant.robot.nv
+        s = plant.settings
+        self._plant = load_chain(plant.model, plant._damping, plant._coulomb, s.stiction_velocity)
+        self._model = load_chain(cancellation.model, cancellation._damping_list,
+                                 cancellation._coulomb_list, 1.0 / cancellation._inv_stiction)
+        if self._plant is None or self._model is None or s.integrator != "midpoint":
+            raise ValueError(f"no native tick: {unavailable_reason or s.integrator}")
+        lib = self._plant._lib
+        t = self._tick = _Tick()
+        t.plant, t.model = self._plant._ptr, self._model._ptr
+        t.h, t.substeps = plant.Ts / s.substeps, s.substeps
+        t.quantise = encoder_resolution is not None
+        if t.quantise:
+            res = np.broadcast_to(np.asarray(encoder_resolution, dtype=float), (nv,))
+            t.resolution[:nv] = res.tolist()
+            t.inv_resolution[:nv] = (1.0 / res).tolist()
+        t.tau_max[:nv] = plant.robot.torque_limit.tolist()
+        for k, row in enumerate(observer._correct_matrix):
+            t.correct[k][: row.size] = row.tolist()
+        for k, row in enumerate(observer._predict_matrix):
+            t.predict[k][: row.size] = row.tolist()
+        t.q[:nv], t.v[:nv] = plant.q.tolist(), plant.v.tolist()
+        t.prior[: 2 * nv] = observer.x_prior.tolist()
+        address = ctypes.addressof(t)
+
+        def view(name: str, count: int, offset: int = 0) -> np.ndarray:
+            field = getattr(_Tick, name)
+            return np.ctypeslib.as_array((_d * count).from_address(
+                address + field.offset + 8 * offset))
+
+        self.x = view("post", 2 * nv)  #: x̂ after ``sense`` (the observer's estimate)
+        self.u = view("u", nv)  #: τ_mpc, set by the caller before ``actuate``
+        self.tau = view("tau", nv)  #: commanded torque after ``actuate`` [N·m]
+        self.q = view("q", nv)  #: the plant's joint angles [rad] (changed in place)
+        self.v = view("v", nv)
+        self._ptr = ctypes.c_void_p(address)
+        for name in ("tick_sense", "tick_actuate", "tick_advance"):
+            getattr(lib, name).argtypes, getattr(lib, name).restype = [ctypes.c_void_p], None
+        # ``sense()`` etc.: the compiled functions bound to this tick (no Python frame)
+        self.sense = functools.partial(lib.tick_sense, self._ptr)
+        self.actuate = functools.partial(lib.tick_actuate, self._ptr)
+        self.advance = functools.partial(lib.tick_advance, self._ptr)
+
+    @property
+    def saturated(self) -> bool:
+        """Whether the last ``advance`` clipped the torque."""
+        return bool(self._tick.saturated)
