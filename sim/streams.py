@@ -73,7 +73,6 @@ class UpsampledSamples:
         self.rate, self.method, self.causal = float(upsample.rate), upsample.method, upsample.causal
         t_raw = self.raw_t
         self._n = int(np.floor((t_raw[-1] - t_raw[0]) * self.rate + 1e-9)) + 1
-        self._delay = self.raw_arrival - self.raw_t
         self._carry = {0: -math.inf}  # running max of the arrivals before sample j, by j
 
     def __len__(self) -> int:
@@ -94,7 +93,7 @@ class UpsampledSamples:
         if self.method == "hold":
             held = np.clip(np.searchsorted(t_raw, tau + 1e-12, side="right") - 1, 0,
                            t_raw.size - 1)
-            return tau, z_raw[held].copy(), tau + self._delay[held]
+            return tau, z_raw[held].copy(), tau + (self.raw_arrival[held] - t_raw[held])
         w = ((tau - t_raw[k]) / (t_raw[k + 1] - t_raw[k]))[:, None]
         with np.errstate(invalid="ignore"):
             z = (1.0 - w) * z_raw[k] + w * z_raw[k + 1]
@@ -103,7 +102,7 @@ class UpsampledSamples:
         if self.causal:
             arrival = np.where(exact0, self.raw_arrival[k], self.raw_arrival[k + 1])
         else:
-            arrival = tau + self._delay[k]
+            arrival = tau + (self.raw_arrival[k] - t_raw[k])
         return tau, z, arrival
 
     def _carry_before(self, a: int) -> float:
