@@ -40,15 +40,19 @@ class PlantSettings:
         Integration steps per control tick; the step is ``Ts / substeps`` [s]. The default,
         midpoint with 2 steps of 0.25 ms, has a local error per tick below 0.5 µm at the
         end-effector against RK4 with 500 steps (tests/sim/test_plant.py), at half the cost of RK4
-        with 2 steps.
+        with 2 steps. One step of 0.5 ms: 1.4 µm per tick (measured 1.36 against 0.36 µm, worst
+        of 100 random states), which moved a 20-s run's RMS error by 0.06 % and would save
+        ≈ 1.3 µs of a ≈ 20-µs tick with the native dynamics: not worth a 4× larger local error.
     stiction_velocity : float
         Velocity scale ``v_s`` of the smoothed Coulomb friction [rad/s].
     dynamics : str
         Who computes the midpoint steps: ``"pinocchio"`` (``pin.aba``, the reference),
         ``"native"`` (the same equations compiled from C, :mod:`sim.native`; ≈ 3× faster per
         tick, within 1e-15 relative of ``pin.aba``) or ``"auto"`` (native where a C compiler
-        is found and the robot is a revolute chain, else Pinocchio). Other integrators always
-        use Pinocchio.
+        is found and the robot is a revolute chain, else Pinocchio; ``dynamics_note`` says
+        why). Other integrators always use Pinocchio. With the native dynamics the closed loop
+        also runs the encoders, the observer and the cancellation compiled
+        (:class:`sim.native.NativeTick`), the MPC staying in Python.
     """
 
     integrator: str = "midpoint"
