@@ -372,6 +372,7 @@ def run_experiment(config: RunConfig, progress: bool = False,
         "predictor_counts": _jsonable(result.predictor_counts),
         "wall_s": wall,
         "real_time_factor": config.loop.duration / wall,
+        "plant_dynamics": result.plant_dynamics,
         "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,  # Linux: KiB
         "gain_tick_us": result.yardstick_us,
         "tick_ratio_to_gain": {k: v / result.yardstick_us["p50"]

@@ -331,7 +331,8 @@ def run_closed_loop(
     else:
         stats = dict(stats_obj or {})
     counts = dict(getattr(getattr(reference, "predictor", None), "counts", {}) or {})
-    return record.result(stats, counts)
+    note = f" ({plant.dynamics_note})" if plant.dynamics_note else ""
+    return record.result(stats, counts, plant.dynamics + note)
 
 
 def _update(reference, cursor, tick: int, last_j: int, center, Ts: float) -> int:

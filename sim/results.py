@@ -48,6 +48,7 @@ class LoopResult:
     controller_stats: dict = field(default_factory=dict)
     saturated_ticks: int = 0
     predictor_counts: dict = field(default_factory=dict)
+    plant_dynamics: str = "pinocchio"  # who integrated the plant (and why not native)
 
     time = property(lambda self: self.trace["time"])  # [s], the instant of the state (i+1)·Ts
     ee = property(lambda self: self.trace["ee"])  # (n, 3) end-effector position [m]
@@ -148,7 +149,7 @@ class Recorder:
             self.file.close()
             self.file = None
 
-    def result(self, stats: dict, counts: dict) -> LoopResult:
+    def result(self, stats: dict, counts: dict, dynamics: str = "pinocchio") -> LoopResult:
         with np.errstate(invalid="ignore", divide="ignore"):
             horizon_error = np.sqrt(self.horizon2 / self.n_horizons)  # NaN where no refresh
         return LoopResult(
@@ -157,4 +158,5 @@ class Recorder:
             yardstick_us=self.yardstick.stats_us(),
             horizon_error=horizon_error, controller_stats=stats,
             saturated_ticks=self.saturated_ticks, predictor_counts=counts,
+            plant_dynamics=dynamics,
         )
