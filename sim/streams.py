@@ -29,6 +29,17 @@ import numpy as np
 BLOCK = 4096
 
 
+def _grid_index(t: float, t0: float, rate: float, n: int) -> int:
+    """Index of the last of the samples t₀ + j/rate (j = 0 … n − 1) at or before ``t`` (−1 if
+    none), exact in floating point (the estimate from ⌊(t − t₀)·rate⌋ corrected either way)."""
+    j = int(np.floor((t - t0) * rate))
+    while j + 1 < n and t0 + (j + 1) / rate <= t:
+        j += 1
+    while j >= 0 and t0 + j / rate > t:
+        j -= 1
+    return min(j, n - 1)
+
+
 class ArraySamples:
     """A sample source over arrays in memory: ``t`` (n,), ``z`` (n, d) and ``arrival`` (n,)."""
 
@@ -79,12 +90,7 @@ class UpsampledSamples:
         return self._n
 
     def index_at(self, t: float) -> int:
-        j = int(np.floor((t - self.raw_t[0]) * self.rate))
-        while j + 1 < self._n and self.raw_t[0] + (j + 1) / self.rate <= t:
-            j += 1
-        while j >= 0 and self.raw_t[0] + j / self.rate > t:
-            j -= 1
-        return min(j, self._n - 1)
+        return _grid_index(t, float(self.raw_t[0]), self.rate, self._n)
 
     def _samples(self, a: int, b: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         t_raw, z_raw = self.raw_t, self.raw_z
@@ -141,12 +147,7 @@ class SampledSamples:
         return self._n
 
     def index_at(self, t: float) -> int:
-        j = int(np.floor((t - self.t0) * self.rate))
-        while j + 1 < self._n and self.t0 + (j + 1) / self.rate <= t:
-            j += 1
-        while j >= 0 and self.t0 + j / self.rate > t:
-            j -= 1
-        return min(j, self._n - 1)
+        return _grid_index(t, self.t0, self.rate, self._n)
 
     def block(self, a: int, b: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         a, b = max(a, 0), min(b, self._n)
