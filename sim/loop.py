@@ -188,9 +188,10 @@ def run_closed_loop(
         ``step(x, ref) -> τ_mpc`` and a ``stats`` mapping
         (:class:`rhmpc.control.mpc.RecedingHorizonMPC`).
     reference
-        ``place(origin)``, ``refresh(tick, z, stamp)`` and ``horizons(tick, count)`` → the
-        (N, 3) points of ticks tick … tick + count − 1, None before the first sample
-        (:mod:`rhmpc.control.reference`); the loop places it at the workspace anchor before the run.
+        ``place(origin)``, the two halves of a refresh ``update(tick, z, stamp)`` and
+        ``forecast()``, and ``horizons(tick, count)`` → the (N, 3) points of ticks tick … tick +
+        count − 1, None before the first sample (:mod:`rhmpc.control.reference`); the loop
+        places it at the workspace anchor before the run.
     truth, center
         The centred POI truth over at least ``ticks + horizon + 1`` ticks: an array from
         :func:`poi_truth` with its ``center``, or an object with ``window(i0, i1)``, ``n_ticks``
