@@ -317,20 +317,20 @@ def build_run(config: RunConfig) -> Run:
                loop.duration)
 
 
-def run_experiment(config: RunConfig, progress: bool = False,
-                   trace: str | None = None) -> tuple[Any, dict]:
+def run_experiment(config: RunConfig, progress: bool = False, trace: str | None = None,
+                   gain_tick=None) -> tuple[Any, dict]:
     """Run ``config`` in closed loop; returns the :class:`~sim.loop.LoopResult` and its document.
 
     The document holds the settings, the metrics (``rms_error_mm``, ``max_error_mm``,
     ``rms_effort_mNm``, ``tick_us`` with ``p50``/``p99``/``max``, ``fallbacks`` …), the wall
-    time, the peak resident memory of the process so far (``peak_rss_mb``), the gain tick
-    timed in the same run (``gain_tick_us``) with the tick's ratios to its p50
-    (``tick_ratio_to_gain``), and the package versions. ``trace``: write every tick to this
-    NPZ file (:mod:`sim.trace`).
+    time, the peak resident memory of the process so far (``peak_rss_mb``) and the package
+    versions. ``trace``: write every tick to this NPZ file (:mod:`sim.trace`). ``gain_tick``:
+    the class of ``rhmpc bench``'s gain tick (``GainTick(mpc)(x, r, u_prev)``), timed in the
+    run on every 16th tick so that the document has ``gain_tick_us`` and the tick's ratios to
+    its p50 (``tick_ratio_to_gain``).
     """
     import resource
 
-    from rhmpc.control.gain_tick import GainTick
     from sim.loop import run_closed_loop
 
     run = build_run(config)
@@ -351,7 +351,7 @@ def run_experiment(config: RunConfig, progress: bool = False,
             run.robot, run.arm, run.controller, run.reference, run.truth, run.center, run.stream,
             config.loop, plant_settings=config.plant, mismatch=config.mismatch,
             observer_settings=config.observer, progress=callback, trace_file=trace,
-            yardstick=_gain_tick(run.controller, GainTick),
+            yardstick=None if gain_tick is None else _gain_tick(run.controller, gain_tick),
         )
     finally:
         if bar is not None:
@@ -374,12 +374,13 @@ def run_experiment(config: RunConfig, progress: bool = False,
         "real_time_factor": config.loop.duration / wall,
         "plant_dynamics": result.plant_dynamics,
         "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,  # Linux: KiB
-        "gain_tick_us": result.yardstick_us,
-        "tick_ratio_to_gain": {k: v / result.yardstick_us["p50"]
-                               for k, v in metrics["tick_us"].items() if k != "mean"},
         "settings": config.to_dict(),
         "versions": versions(),
     }
+    if gain_tick is not None:
+        document["gain_tick_us"] = result.yardstick_us
+        document["tick_ratio_to_gain"] = {k: v / result.yardstick_us["p50"]
+                                          for k, v in metrics["tick_us"].items() if k != "mean"}
     return result, document
 
 

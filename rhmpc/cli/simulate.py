@@ -110,7 +110,10 @@ def run(args: argparse.Namespace) -> int:
     if trace and not Path(trace).resolve().parent.is_dir():
         raise UsageError(f"--trace {trace}: no such directory")
     try:
-        result, doc = run_experiment(config, progress=not args.json, trace=trace)
+        from rhmpc.studies.bench import GainTick  # the yardstick, timed in the same run
+
+        result, doc = run_experiment(config, progress=not args.json, trace=trace,
+                                     gain_tick=GainTick)
     except ValueError as exc:
         if trace and str(exc).startswith(f"{trace}:"):  # the trace file cannot be written
             raise UsageError(str(exc)) from None

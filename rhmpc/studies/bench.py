@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import dataclasses
 import gc
+import math
 import platform
 import time
 from collections.abc import Callable
@@ -27,7 +28,6 @@ from importlib.metadata import version as _version
 
 import numpy as np
 
-from rhmpc.control.gain_tick import GainTick
 from rhmpc.control.mpc import RecedingHorizonMPC
 from rhmpc.control.settings import MPCSettings, to_dict
 from robots import linearize, load_robot
@@ -83,6 +83,29 @@ def heart_like_reference(
             else:
                 out[k:] -= offset
     return np.asarray(center, dtype=float) + out
+
+
+class GainTick:
+    """Reference 1: the precomputed unconstrained gain, clipped (same parameter handling)."""
+
+    def __init__(self, mpc: RecedingHorizonMPC) -> None:
+        qp = mpc.qp
+        self._p = np.zeros(qp.npar)
+        self._nx, self._nr = qp.nx, qp.N * qp.ny
+        self._K, self._k0 = qp.gain, qp.gain0
+        self._lo, self._hi = -qp.u_max, qp.u_max
+
+    def __call__(self, x: np.ndarray, ref: np.ndarray, u_prev: np.ndarray) -> np.ndarray:
+        p = self._p
+        p[: self._nx] = x
+        p[self._nx : self._nx + self._nr] = ref.reshape(-1)
+        p[self._nx + self._nr :] = u_prev
+        if not math.isfinite(p.sum()):
+            return np.zeros_like(self._k0)
+        u = self._K @ p
+        u += self._k0
+        np.maximum(u, self._lo, out=u)
+        return np.minimum(u, self._hi, out=u)
 
 
 class ExactTick:
