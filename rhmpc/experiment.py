@@ -238,38 +238,28 @@ def heart_source(config: RunConfig, rng: np.random.Generator):
 def build_stream(config: RunConfig, source, origin, duration: float, rng: np.random.Generator):
     """The sensor samples the controller sees (SI units), over ``duration`` seconds.
 
-    A sample source read in blocks (:mod:`sim.streams`), so that memory does not grow with the
-    run; the samples and the random draws are those of ``sensor.measure`` on the whole run: a
-    trailing :class:`~sim.sensors.Upsample` stage (the 2-kHz playback) runs block by block on
-    the raw samples, and a sensor without stages samples the source block by block; other
-    sensors are measured whole.
+    A sample source read in blocks (:func:`sim.streams.sensor_samples`): the samples and random
+    draws of ``sensor.measure`` over the whole run, without holding the 2-kHz stream.
     """
     from sim.sensors import SampleStream, Upsample, sensor_from_name
-    from sim.streams import ArraySamples, SampledSamples, UpsampledSamples, measure
+    from sim.streams import UpsampledSamples, sensor_samples
 
+    control_rate = 1.0 / config.loop.Ts
     if config.sensor == "recorded":
         if config.data is None:
             raise UsageError("sensor 'recorded' needs a recording (--data FILE)")
         t = origin.t - origin.t[0]
         stream = SampleStream(t, origin.z, t.copy(), origin.sample_rate)
-        return UpsampledSamples(stream, Upsample(1.0 / config.loop.Ts))
+        return UpsampledSamples(stream, Upsample(control_rate))
     settings = dict(config.sensor_settings)
     if config.sensor == "sonomicrometry":
         settings.setdefault("rate", getattr(origin, "sensor_rate", None) or 257.0)
-        settings.setdefault("upsample", 1.0 / config.loop.Ts)
+        settings.setdefault("upsample", control_rate)  # the paper's 2-kHz streamed playback
     try:
         sensor = sensor_from_name(config.sensor, dim=source.dim, **settings)
     except TypeError as exc:
         raise UsageError(f"sensor {config.sensor!r}: {exc}") from None
-    if not sensor.stages:
-        return SampledSamples(source, sensor.rate, sensor.sample_times(duration).size)
-    if isinstance(sensor.stages[-1], Upsample):
-        raw = measure(dataclasses.replace(sensor, stages=sensor.stages[:-1]), source, duration,
-                      rng)
-        if len(raw) >= 2:
-            return UpsampledSamples(raw, sensor.stages[-1])
-        return ArraySamples.of(sensor.stages[-1].apply(raw, rng))
-    return ArraySamples.of(measure(sensor, source, duration, rng))
+    return sensor_samples(sensor, source, duration, rng)
 
 
 def build_run(config: RunConfig) -> Run:

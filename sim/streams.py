@@ -181,6 +181,28 @@ def measure(sensor, source, duration: float, rng: np.random.Generator,
     return stream
 
 
+def sensor_samples(sensor, source, duration: float, rng: np.random.Generator):
+    """``sensor.measure(source, duration, rng)`` as a sample source read in blocks.
+
+    Same samples, same random draws: a trailing :class:`~sim.sensors.Upsample` stage (the
+    2-kHz playback) runs block by block on the raw samples (:class:`UpsampledSamples`), a
+    sensor without stages samples the source block by block (:class:`SampledSamples`), other
+    sensors are measured whole (with the motion sampled in chunks, :func:`measure`).
+    """
+    from dataclasses import replace
+
+    from sim.sensors import Upsample
+
+    if not sensor.stages:
+        return SampledSamples(source, sensor.rate, sensor.sample_times(duration).size)
+    if isinstance(sensor.stages[-1], Upsample):
+        raw = measure(replace(sensor, stages=sensor.stages[:-1]), source, duration, rng)
+        if len(raw) >= 2:
+            return UpsampledSamples(raw, sensor.stages[-1])
+        return ArraySamples.of(sensor.stages[-1].apply(raw, rng))
+    return ArraySamples.of(measure(sensor, source, duration, rng))
+
+
 def as_samples(stream):
     """A sample source: ``stream`` itself if it has ``block``, else its arrays wrapped."""
     return stream if hasattr(stream, "block") else ArraySamples.of(stream)
