@@ -59,6 +59,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", metavar="FILE.json", help="write the result document")
     p.add_argument("--json", action="store_true", help="print the result document on stdout")
     p.add_argument("--plot", metavar="FILE.png", help="tracking figure (Tuna Figs 10-11 style)")
+    p.add_argument("--trace", metavar="FILE.npz", help="write every tick to an NPZ file as the "
+                   "run goes (chunked; read it with sim.trace.read_trace)")
     p.set_defaults(func=run)
 
 
@@ -112,7 +114,18 @@ def run(args: argparse.Namespace) -> int:
 
         if reason := missing_toolchain():
             raise UsageError(reason)
-    result, doc = run_experiment(config, progress=not args.json, implementation=args.controller)
+    trace = getattr(args, "trace", None)
+    if trace and not Path(trace).resolve().parent.is_dir():
+        raise UsageError(f"--trace {trace}: no such directory")
+    try:
+        from rhmpc.studies.bench import GainTick  # the yardstick, timed in the same run
+
+        result, doc = run_experiment(config, progress=not args.json, trace=trace,
+                                     gain_tick=GainTick, implementation=args.controller)
+    except ValueError as exc:
+        if trace and str(exc).startswith(f"{trace}:"):  # the trace file cannot be written
+            raise UsageError(str(exc)) from None
+        raise
     if args.out:
         Path(args.out).write_text(json.dumps(doc, indent=2) + "\n")
     if args.plot:
@@ -131,4 +144,6 @@ def run(args: argparse.Namespace) -> int:
             print(f"  result           {args.out}")
         if args.plot:
             print(f"  figure           {args.plot}")
+        if trace:
+            print(f"  trace            {trace} (every tick)")
     return 0
