@@ -389,7 +389,7 @@ def run_experiment(config: RunConfig, progress: bool = False, trace: str | None 
 def _gain_tick(controller, gain_tick):
     """``yardstick(x, r)``: the controller's gain tick, or None if it has no gain to time."""
     try:
-        gain = gain_tick(controller)
+        gain = gain_tick(getattr(controller, "twin", controller))  # compiled: its Python twin
     except AttributeError:  # a stand-in controller without the MPC's QP
         return None
     return lambda x, ref: gain(x, ref, controller.u_prev)

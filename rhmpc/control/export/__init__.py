@@ -31,4 +31,6 @@ def compiled_controller(mpc, robot: str, cache: str | None = None) -> CControlle
     """The compiled twin of ``mpc`` (exported and built once per distinct data, then cached)."""
     lib = build_cached(mpc, robot, cache)
     extra = getattr(mpc, "offset", None) if mpc.qp.npar > mpc.nx + mpc.N * mpc.ny + mpc.nu else None
-    return CController(lib, dims=(mpc.N, mpc.nx, mpc.nu, mpc.ny), extra_inputs=extra)
+    controller = CController(lib, dims=(mpc.N, mpc.nx, mpc.nu, mpc.ny), extra_inputs=extra)
+    controller.twin = mpc  # the Python controller it was generated from (its gain tick, its QP)
+    return controller
