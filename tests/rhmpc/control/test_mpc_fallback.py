@@ -71,7 +71,7 @@ def test_injected_failures_take_the_shifted_plan_then_lq(arm, mpc):
             np.testing.assert_allclose(tau, lq)
         x = arm.A @ x + arm.B @ tau
     assert mpc.stats.failures == {"injected": n_plan + 2}
-    assert mpc.stats.fallbacks == {"plan": n_plan, "lq": 2, "zero": 0}
+    assert mpc.stats.fallbacks == {"plan": n_plan, "lq": 2, "brake": 0, "zero": 0}
     assert mpc.stats.fallback_total == n_plan + 2
     # Back to normal afterwards.
     mpc.step(x, _moving_ref(arm, mpc.N, 60 + n_plan))
