@@ -48,6 +48,13 @@ _STATUS_REASON = {
     osqp.SolverStatus.OSQP_UNSOLVED: "unsolved",
 }
 _SOLVED = int(osqp.SolverStatus.OSQP_SOLVED)
+#: DAQP exit flags as the OSQP statuses of the same meaning.
+_DAQP_STATUS = {
+    -1: int(osqp.SolverStatus.OSQP_PRIMAL_INFEASIBLE),
+    -3: int(osqp.SolverStatus.OSQP_DUAL_INFEASIBLE),
+    -4: int(osqp.SolverStatus.OSQP_MAX_ITER_REACHED),
+    -5: int(osqp.SolverStatus.OSQP_NON_CVX),
+}
 #: Failures whose iterate is carried over to the next tick's warm start.
 _CONTINUE = frozenset({"max_iter", "time_limit", "solved_inaccurate", "injected"})
 
@@ -142,6 +149,9 @@ class RecedingHorizonMPC:
     # -- solver ------------------------------------------------------------------------------
     def _setup_solver(self) -> None:
         s, qp = self.settings, self.qp
+        self._daqp = None
+        if s.solver == "daqp":
+            self._daqp = _Daqp(qp, s.max_iter)
         self._osqp = osqp.OSQP()
         extra = {"time_limit": s.time_limit} if s.time_limit > 0 else {}
         self._osqp.setup(
@@ -158,7 +168,9 @@ class RecedingHorizonMPC:
         self._raw = getattr(self._osqp, "_solver", None)
 
     def _update_q(self) -> None:
-        if self._raw is not None:
+        if self._daqp is not None:
+            self._daqp.update(self._q, self._l, self._u, self.qp.param_bounds)
+        elif self._raw is not None:
             if self.qp.param_bounds:
                 self._raw.update_data_vec(q=self._q, l=self._l, u=self._u)
             else:
@@ -169,12 +181,16 @@ class RecedingHorizonMPC:
             self._osqp.update(q=self._q)
 
     def _warm_start(self, x: np.ndarray, y: np.ndarray | None) -> None:
+        if self._daqp is not None:
+            return  # DAQP hot-starts from its last working set
         if self._raw is not None:
             self._raw.warm_start(x, y)
         else:
             self._osqp.warm_start(x=x, y=y)
 
     def _solve(self) -> tuple[int, int, np.ndarray, np.ndarray | None]:
+        if self._daqp is not None:
+            return self._daqp.solve()
         if self._raw is not None:
             raw = self._raw
             raw.solve()
@@ -243,6 +259,8 @@ class RecedingHorizonMPC:
         """
         if self._last_screened:
             return self._z_star.copy(), self._y_zero.copy()
+        if self._daqp is not None:
+            return self._daqp.x.copy(), self._daqp.y.copy()
         if self._raw is not None:
             sol = self._raw.solution
             return np.array(sol.x, dtype=float), np.array(sol.y, dtype=float)
@@ -455,3 +473,38 @@ class RecedingHorizonMPC:
             self._ws_x = self._shift @ self._plan
             self._ws_y = self._y_zero
         return tau
+
+
+class _Daqp:
+    """The same QP solved by DAQP (dual active set; Arnström, Bemporad & Axehill, IEEE TAC 67(8),
+    2022): exact, hot-started from the last working set, at most ``iter_limit`` active-set
+    changes. The first nv rows of A (identity) are its simple bounds; the envelope rows its
+    general constraints."""
+
+    def __init__(self, qp: CondensedQP, iter_limit: int) -> None:
+        import daqp
+
+        self._model = daqp.Model()
+        self._A = np.ascontiguousarray(qp.A[qp.nv:])
+        self._bu = np.minimum(qp.u0, 1e30)  # DAQP's infinity
+        self._bl = np.maximum(qp.l0, -1e30)
+        flag, _ = self._model.setup(qp.P, qp.f0.copy(), self._A, self._bu, self._bl)
+        if flag < 0:
+            raise ValueError(f"DAQP setup failed with exit flag {flag}")
+        self._model.settings = {"iter_limit": int(iter_limit)}
+        self.x = np.zeros(qp.nv)
+        self.y = np.zeros(qp.A.shape[0])
+
+    def update(self, q: np.ndarray, lower: np.ndarray, upper: np.ndarray, bounds: bool) -> None:
+        if bounds:
+            np.minimum(upper, 1e30, out=self._bu)
+            np.maximum(lower, -1e30, out=self._bl)
+            self._model.update(f=q, bupper=self._bu, blower=self._bl)
+        else:
+            self._model.update(f=q)
+
+    def solve(self) -> tuple[int, int, np.ndarray, np.ndarray]:
+        x, _, flag, info = self._model.solve()
+        self.x, self.y = x, np.asarray(info["lam"], dtype=float)
+        return (_SOLVED if flag >= 1 else _DAQP_STATUS.get(flag, 10_000 + flag)), info[
+            "iterations"], x, self.y

@@ -21,6 +21,7 @@ DEFAULT_BLOCKS: tuple[int, ...] = (2, 2, 3, 3, 4, 5, 6, 7, 8, 10)
 
 WARM_STARTS: tuple[str, ...] = ("shift", "shift_primal", "keep", "none")
 CARTESIAN: tuple[str, ...] = ("none", "halfspace", "box")
+SOLVERS: tuple[str, ...] = ("osqp", "daqp")
 TERMINALS: tuple[str, ...] = ("none", "dare")
 
 
@@ -111,6 +112,10 @@ class MPCSettings:
         multipliers of the hard constraints.
     envelope_quadratic : float
         ρ₂, quadratic slack weight [-]; it keeps the Hessian positive definite in the slacks.
+    solver : str
+        ``"osqp"`` (ADMM; the eps_*, rho, … settings below) or ``"daqp"`` (dual active set, exact,
+        hot-started; ``max_iter`` caps its active-set changes). Both solve the same QP and only
+        on ticks that screening does not settle.
     eps_abs, eps_rel : float
         OSQP termination tolerances (on the scaled problem, inputs normalised by u_max) [-].
     max_iter : int
@@ -172,6 +177,7 @@ class MPCSettings:
     cartesian_half_width: tuple[float, float, float] = (5e-3, 5e-3, 5e-3)
     envelope_penalty: float = 1e3
     envelope_quadratic: float = 1e2
+    solver: str = "daqp"
     eps_abs: float = 1e-3
     eps_rel: float = 0.0
     max_iter: int = 100
@@ -250,6 +256,8 @@ class MPCSettings:
         _finite("cartesian_depth", self.cartesian_depth)
         _finite("envelope_penalty", self.envelope_penalty, positive=True)
         _finite("envelope_quadratic", self.envelope_quadratic, positive=True)
+        if self.solver not in SOLVERS:
+            raise ValueError(f"solver must be one of {SOLVERS}, got {self.solver!r}")
         _finite("eps_abs", self.eps_abs, nonneg=True)
         _finite("eps_rel", self.eps_rel, nonneg=True)
         if self.eps_abs == 0 and self.eps_rel == 0:

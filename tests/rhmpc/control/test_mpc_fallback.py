@@ -90,7 +90,7 @@ def test_failure_without_a_plan_uses_the_clipped_lq_input(arm, mpc):
 
 
 def test_real_solver_failure_max_iter_takes_the_fallback(arm):
-    mpc = RecedingHorizonMPC(arm, MPCSettings(max_iter=1, check_termination=1))
+    mpc = RecedingHorizonMPC(arm, MPCSettings(solver="osqp", max_iter=1, check_termination=1))
     x = np.zeros(6)
     for k in range(5):
         tau = mpc.step(x, _moving_ref(arm, mpc.N, k, amp=5e-3))
@@ -102,7 +102,7 @@ def test_real_solver_failure_max_iter_takes_the_fallback(arm):
 
 
 def test_time_limit_failure_takes_the_fallback(arm):
-    mpc = RecedingHorizonMPC(arm, MPCSettings(time_limit=1e-7))  # 0.1 µs: always exceeded
+    mpc = RecedingHorizonMPC(arm, MPCSettings(solver="osqp", time_limit=1e-7))  # 0.1 µs
     ref = np.tile(arm.y0 + np.array([3e-3, 0.0, 0.0]), (mpc.N, 1))
     for _ in range(3):
         tau = mpc.step(np.zeros(6), ref)
