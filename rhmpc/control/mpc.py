@@ -141,6 +141,7 @@ class RecedingHorizonMPC:
         self._y_zero[qp.nz:qp.nv] = -self.settings.envelope_penalty
         self._neg_umax = -qp.u_max
         self._nu_ = self.nu
+        self._v_cold = np.zeros(qp.nv)
 
         self._setup_solver()
         self.stats = MPCStats()
@@ -354,7 +355,11 @@ class RecedingHorizonMPC:
             if self._ws_pending:
                 self._ws_x, self._ws_y = self._shift @ self._plan, self._y_zero
                 self._ws_pending = False
-            if self._ws_x is not None:
+            if self._ws == "none":
+                # OSQP 1.x keeps its last iterate even with warm_starting=False (measured: the
+                # same iterations as "keep"); a cold start is an explicit start from v = 0.
+                self._warm_start(self._v_cold, self._y_zero)
+            elif self._ws_x is not None:
                 self._warm_start(self._ws_x, self._ws_y)
                 self._ws_x = self._ws_y = None
             t2 = clock()
