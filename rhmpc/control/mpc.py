@@ -1,6 +1,6 @@
-"""`RecedingHorizonMPC`: the condensed, move-blocked tracking QP solved by OSQP every tick.
+"""`RecedingHorizonMPC`: the condensed, move-blocked tracking QP solved every tick (DAQP or OSQP).
 
-Built once (:func:`rhmpc.control.qp.build_condensed_qp`: CasADi → numpy data → ``osqp.setup``);
+Built once (:func:`rhmpc.control.qp.build_condensed_qp`: CasADi → numpy data → solver setup);
 each tick then only does::
 
     d = p(q0 + x̂_q) − (C x̂ + y0)       (output offset: one forward-kinematics call)
@@ -8,7 +8,8 @@ each tick then only does::
     l, u = l0 − G p, u0 − G p           (envelope rows: only the state and offset columns)
     v* = [ẑ*; 0], ẑ* = −P_z⁻¹ q_z(p)    (screening: one mat-vec; if l ≤ A v* ≤ u, v = v*, done)
     q = F p + f0                        (one mat-vec)
-    solver.update(q, l, u) ; warm start (previous solution shifted one tick) ; solver.solve()
+    solver.update(q, l, u) ; warm start ; solver.solve()   (DAQP: hot-started working set;
+                                        OSQP: previous solution shifted one tick)
     τ = clip(u_max ∘ ẑ_0, −u_max, u_max)   if the status is "solved", else the fallback
 
 Screening is exact, not an approximation: with the slacks at 0 and every row satisfied, the
@@ -29,6 +30,7 @@ import numpy as np
 import osqp
 import scipy.sparse as sp
 
+from rhmpc.control.active_set import ActiveSetSolver
 from rhmpc.control.fallback import MPCStats, brake_torque, envelope_holds
 from rhmpc.control.offset import OutputOffset
 from rhmpc.control.qp import CondensedQP, build_condensed_qp
@@ -48,13 +50,6 @@ _STATUS_REASON = {
     osqp.SolverStatus.OSQP_UNSOLVED: "unsolved",
 }
 _SOLVED = int(osqp.SolverStatus.OSQP_SOLVED)
-#: DAQP exit flags as the OSQP statuses of the same meaning.
-_DAQP_STATUS = {
-    -1: int(osqp.SolverStatus.OSQP_PRIMAL_INFEASIBLE),
-    -3: int(osqp.SolverStatus.OSQP_DUAL_INFEASIBLE),
-    -4: int(osqp.SolverStatus.OSQP_MAX_ITER_REACHED),
-    -5: int(osqp.SolverStatus.OSQP_NON_CVX),
-}
 #: Failures whose iterate is carried over to the next tick's warm start.
 _CONTINUE = frozenset({"max_iter", "time_limit", "solved_inaccurate", "injected"})
 
@@ -152,7 +147,7 @@ class RecedingHorizonMPC:
         s, qp = self.settings, self.qp
         self._daqp = None
         if s.solver == "daqp":
-            self._daqp = _Daqp(qp, s.max_iter)
+            self._daqp = ActiveSetSolver(qp, s.max_iter)
         self._osqp = osqp.OSQP()
         extra = {"time_limit": s.time_limit} if s.time_limit > 0 else {}
         self._osqp.setup(
@@ -479,37 +474,3 @@ class RecedingHorizonMPC:
             self._ws_y = self._y_zero
         return tau
 
-
-class _Daqp:
-    """The same QP solved by DAQP (dual active set; Arnström, Bemporad & Axehill, IEEE TAC 67(8),
-    2022): exact, hot-started from the last working set, at most ``iter_limit`` active-set
-    changes. The first nv rows of A (identity) are its simple bounds; the envelope rows its
-    general constraints."""
-
-    def __init__(self, qp: CondensedQP, iter_limit: int) -> None:
-        import daqp
-
-        self._model = daqp.Model()
-        self._A = np.ascontiguousarray(qp.A[qp.nv:])
-        self._bu = np.minimum(qp.u0, 1e30)  # DAQP's infinity
-        self._bl = np.maximum(qp.l0, -1e30)
-        flag, _ = self._model.setup(qp.P, qp.f0.copy(), self._A, self._bu, self._bl)
-        if flag < 0:
-            raise ValueError(f"DAQP setup failed with exit flag {flag}")
-        self._model.settings = {"iter_limit": int(iter_limit)}
-        self.x = np.zeros(qp.nv)
-        self.y = np.zeros(qp.A.shape[0])
-
-    def update(self, q: np.ndarray, lower: np.ndarray, upper: np.ndarray, bounds: bool) -> None:
-        if bounds:
-            np.minimum(upper, 1e30, out=self._bu)
-            np.maximum(lower, -1e30, out=self._bl)
-            self._model.update(f=q, bupper=self._bu, blower=self._bl)
-        else:
-            self._model.update(f=q)
-
-    def solve(self) -> tuple[int, int, np.ndarray, np.ndarray]:
-        x, _, flag, info = self._model.solve()
-        self.x, self.y = x, np.asarray(info["lam"], dtype=float)
-        return (_SOLVED if flag >= 1 else _DAQP_STATUS.get(flag, 10_000 + flag)), info[
-            "iterations"], x, self.y

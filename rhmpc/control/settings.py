@@ -119,7 +119,10 @@ class MPCSettings:
     eps_abs, eps_rel : float
         OSQP termination tolerances (on the scaled problem, inputs normalised by u_max) [-].
     max_iter : int
-        OSQP iteration cap per tick [-].
+        Iteration cap per tick: OSQP's ADMM iterations, or DAQP's active-set changes [-].
+        Chosen by measurement (``rhmpc bench``, 3000 ticks, bound-active ticks): OSQP needs
+        p99 35 / max 40, DAQP p99 2 / max 5; 100 leaves headroom for both. A cap in iterations
+        rather than time keeps runs reproducible; past it the plan fallback applies.
     time_limit : float
         OSQP wall-clock limit per solve [s]; 0 disables.
     rho : float
