@@ -257,8 +257,12 @@ def build_stream(config: RunConfig, source, origin, duration: float, rng: np.ran
     return sensor.measure(source, duration, rng)
 
 
-def build_run(config: RunConfig) -> Run:
-    """Build robot, controller, heart motion, sensor stream and reference for ``config``."""
+def build_run(config: RunConfig, implementation: str = "python") -> Run:
+    """Build robot, controller, heart motion, sensor stream and reference for ``config``.
+
+    ``implementation="c"``: the controller is the compiled one of ``rhmpc export`` (built once
+    and cached, :func:`rhmpc.control.export.compiled_controller`) instead of the Python one.
+    """
     from predictors import make_predictor
     from rhmpc.control.mpc import RecedingHorizonMPC
     from rhmpc.control.reference import ExactReference, PredictedReference
@@ -275,6 +279,12 @@ def build_run(config: RunConfig) -> Run:
     robot = load_robot(config.robot)
     arm = linearize(robot, Ts=loop.Ts)
     controller = RecedingHorizonMPC(arm, config.mpc)
+    if implementation == "c":
+        from rhmpc.control.export import compiled_controller
+
+        controller = compiled_controller(controller, config.robot)
+    elif implementation != "python":
+        raise UsageError(f"implementation must be 'python' or 'c', got {implementation!r}")
     source, label, available, origin = heart_source(config, heart_rng)
     if config.data is not None and loop.duration > available:
         raise UsageError(
@@ -305,16 +315,18 @@ def build_run(config: RunConfig) -> Run:
                loop.duration)
 
 
-def run_experiment(config: RunConfig, progress: bool = False) -> tuple[Any, dict]:
+def run_experiment(
+    config: RunConfig, progress: bool = False, implementation: str = "python"
+) -> tuple[Any, dict]:
     """Run ``config`` in closed loop; returns the :class:`~sim.loop.LoopResult` and its document.
 
     The document holds the settings, the metrics (``rms_error_mm``, ``max_error_mm``,
     ``rms_effort_mNm``, ``tick_us`` with ``p50``/``p99``/``max``, ``fallbacks`` …), the wall
-    time and the package versions.
+    time and the package versions. ``implementation``: ``"python"`` or ``"c"`` (:func:`build_run`).
     """
     from sim.loop import run_closed_loop
 
-    run = build_run(config)
+    run = build_run(config, implementation)
     bar = None
     callback = None
     if progress:
@@ -349,6 +361,7 @@ def run_experiment(config: RunConfig, progress: bool = False) -> tuple[Any, dict
         **metrics,
         "fallbacks": int(stats.get("fallback_total", 0)),
         "controller": _jsonable(stats),
+        "implementation": implementation,
         "predictor_counts": _jsonable(result.predictor_counts),
         "wall_s": wall,
         "real_time_factor": config.loop.duration / wall,

@@ -52,6 +52,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                      "fixed-a2-top")
     src.add_argument("--data", metavar="FILE", help="a recording (CSV t,x,y,z in s and mm, or NPZ)")
     p.add_argument("--seed", type=int, help="seed of every random draw (default 0)")
+    p.add_argument("--controller", choices=("python", "c"), default="python",
+                   help="'c': the compiled controller of `rhmpc export` in the loop (built once, "
+                   "cached; needs cmake and a C compiler)")
     add_run_options(p)
     p.add_argument("--out", metavar="FILE.json", help="write the result document")
     p.add_argument("--json", action="store_true", help="print the result document on stdout")
@@ -104,7 +107,12 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
 
 def run(args: argparse.Namespace) -> int:
     config = config_from_args(args)
-    result, doc = run_experiment(config, progress=not args.json)
+    if args.controller == "c":
+        from rhmpc.control.export import missing_toolchain
+
+        if reason := missing_toolchain():
+            raise UsageError(reason)
+    result, doc = run_experiment(config, progress=not args.json, implementation=args.controller)
     if args.out:
         Path(args.out).write_text(json.dumps(doc, indent=2) + "\n")
     if args.plot:
