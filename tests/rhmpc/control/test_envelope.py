@@ -47,36 +47,48 @@ def _closed_loop(robot, arm, settings, reference, ticks):
 
 
 def _no_failures(mpc):
-    assert mpc.stats.failures == {}, mpc.stats.failures  # never infeasible, never a fallback
-    assert mpc.stats.fallback_total == 0
+    """DAQP: never infeasible, never a fallback. OSQP (ADMM) does not converge within max_iter
+    once envelope rows are active (measured 450–3900 iterations needed): its ticks fall back to
+    the plan or braking, which keep the envelope but stop the tracking; never infeasible."""
+    if mpc.settings.solver == "daqp":
+        assert mpc.stats.failures == {}, mpc.stats.failures
+        assert mpc.stats.fallback_total == 0
+    assert "primal_infeasible" not in mpc.stats.failures
 
 
-def test_joint_position_limits_hold_with_the_reference_past_them(robot, arm):
+SOLVERS = pytest.mark.parametrize("solver", ["daqp", "osqp"])
+
+
+@SOLVERS
+def test_joint_position_limits_hold_with_the_reference_past_them(robot, arm, solver):
     lo, hi = arm.q0 - np.radians(2.0), arm.q0 + np.radians(2.0)
     target = np.tile(arm.y0 + np.array([0.0, 20e-3, 5e-3]), (N, 1))  # needs ≈ 6° of motion
-    settings = MPCSettings(joint_lower=tuple(lo), joint_upper=tuple(hi))
+    settings = MPCSettings(solver=solver, joint_lower=tuple(lo), joint_upper=tuple(hi))
     mpc, q, _, y = _closed_loop(robot, arm, settings, lambda k: target, 1500)
     excess = np.max(np.maximum(q - hi, lo - q), axis=0) / (hi - lo)
     # Measured: −1.2e-4 (the yaw joint sits on its limit); the target is 1 % of the range.
     assert np.all(excess <= 0.01), excess
-    assert excess.max() > -0.01  # the run did reach a limit
-    assert np.linalg.norm(y[-1] - target[0]) > 5e-3  # …and could not follow the reference
+    assert np.linalg.norm(y[-1] - target[0]) > 5e-3  # it could not follow the reference
+    if solver == "daqp":
+        assert excess.max() > -0.01  # …and went up to the limit
     _no_failures(mpc)
 
 
-def test_joint_velocity_limits_hold_through_reference_steps(robot, arm):
+@SOLVERS
+def test_joint_velocity_limits_hold_through_reference_steps(robot, arm, solver):
     vmax = np.full(3, 0.3)
     step = np.array([10e-3, 10e-3, -10e-3])
 
     def reference(k):
         return np.tile(arm.y0 + (step if (k // 600) % 2 else 0.0), (N, 1))
 
-    mpc, _, v, _ = _closed_loop(robot, arm, MPCSettings(velocity_limit=tuple(vmax)), reference,
-                                1800)
+    settings = MPCSettings(solver=solver, velocity_limit=tuple(vmax))
+    mpc, _, v, _ = _closed_loop(robot, arm, settings, reference, 1800)
     speed = np.abs(v).max(axis=0)
     # Measured: at most 1.2e-4 of the range 2·q̇_max above the limit; target 1 %.
     assert np.all((speed - vmax) / (2 * vmax) <= 0.01), speed
-    assert np.any(speed >= 0.99 * vmax)  # the limit was reached
+    if solver == "daqp":
+        assert np.any(speed >= 0.99 * vmax)  # the limit was reached
     _no_failures(mpc)
 
 
@@ -85,25 +97,28 @@ def _swinging_reference(arm, ticks, amplitude=6e-3):
     return arm.y0 + np.outer(amplitude * np.sin(2 * np.pi * 1.2 * t), [1.0, 0.3, 0.0])
 
 
-def test_cartesian_half_space_holds(robot, arm):
+@SOLVERS
+def test_cartesian_half_space_holds(robot, arm, solver):
     ticks = 2500
     ref = _swinging_reference(arm, ticks)
-    settings = MPCSettings(cartesian="halfspace", cartesian_point=(1e-3, 0.0, 0.0),
+    settings = MPCSettings(solver=solver, cartesian="halfspace", cartesian_point=(1e-3, 0.0, 0.0),
                            cartesian_normal=(1.0, 0.0, 0.0), cartesian_depth=0.5e-3)
     mpc, _, _, y = _closed_loop(robot, arm, settings, lambda k: ref[k + 1:k + 1 + N], ticks)
     past = y[:, 0] - (arm.y0[0] + 1e-3)
     # Measured: 0.473 mm at most (the linear output model + offset keeps it inside); allowed
     # 0.5 mm + 1 % of the 12 mm reference swing.
     assert past.max() <= 0.5e-3 + 0.12e-3
-    assert past.max() > 0.4e-3  # the tool did go up to the limit
+    assert past.max() > 0.4e-3  # the tool did go up to the limit (OSQP: 0.476 mm, braking)
     assert (ref[:, 0] - arm.y0[0] - 1e-3).max() > 4e-3  # while the reference went far past it
     _no_failures(mpc)
 
 
-def test_cartesian_box_holds(robot, arm):
+@SOLVERS
+def test_cartesian_box_holds(robot, arm, solver):
     ticks = 2500
     ref = _swinging_reference(arm, ticks)
-    settings = MPCSettings(cartesian="box", cartesian_half_width=(3e-3, 3e-3, 3e-3))
+    settings = MPCSettings(solver=solver, cartesian="box",
+                           cartesian_half_width=(3e-3, 3e-3, 3e-3))
     mpc, _, _, y = _closed_loop(robot, arm, settings, lambda k: ref[k + 1:k + 1 + N], ticks)
     # Measured: 2.973 mm at most; allowed 3 mm + 1 % of the 6 mm box.
     assert np.abs(y - arm.y0).max() <= 3e-3 + 0.06e-3
@@ -180,7 +195,7 @@ def test_offset_free_tracking_on_the_nonlinear_plant(robot, arm, offset_correcti
     ticks = 3000
     traj = heart_like_reference(ticks + N + 1, arm.Ts, np.random.default_rng(3), arm.y0,
                                 heart_pp=12e-3)
-    settings = MPCSettings(offset_correction=offset_correction)
+    settings = MPCSettings(solver="daqp", offset_correction=offset_correction)
     mpc, _, _, y = _closed_loop(robot, arm, settings, lambda k: traj[k + 1:k + 1 + N], ticks)
     err = np.linalg.norm(y - traj[1:ticks + 1], axis=1)[500:]
     rms = float(np.sqrt(np.mean(err**2)))

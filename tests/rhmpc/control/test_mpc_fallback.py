@@ -171,7 +171,8 @@ def test_injected_solver_faults_apply_the_shifted_plan(arm, monkeypatch, solver,
 
 def test_unclipped_solutions_are_feasible_and_fallbacks_are_the_documented_torques(arm, mpc):
     """Random states and references (some non-finite, some forced failures): a solved tick's
-    raw solution (before the clip) satisfies the torque bounds to DAQP's tolerance; a fallback
+    raw solution (before the clip) satisfies the torque bounds to OSQP's primal tolerance
+    eps_abs = 1e-3 (normalised inputs); a fallback
     tick returns exactly its documented torque."""
     rng = np.random.default_rng(7)
     sources = set()
@@ -190,7 +191,7 @@ def test_unclipped_solutions_are_feasible_and_fallbacks_are_the_documented_torqu
         sources.add(src)
         if src == "qp":
             z, _ = mpc.last_solution()
-            assert np.max(np.abs(z[:mpc.qp.nz])) <= 1 + 1e-9, (i, z[:3])
+            assert np.max(np.abs(z[:mpc.qp.nz])) <= 1 + 1e-3, (i, z[:3])
             np.testing.assert_array_equal(tau, np.clip(z[:3] * mpc.u_max, -mpc.u_max, mpc.u_max))
         elif src == "plan":
             k = min(age + 1, mpc.N - 1)
