@@ -33,6 +33,7 @@ from importlib.metadata import version as _version
 import numpy as np
 
 from rhmpc.control.mpc import RecedingHorizonMPC
+from rhmpc.control.offset import OutputOffset
 from rhmpc.control.settings import MPCSettings, to_dict
 from robots import linearize, load_robot
 from robots.linearize import LinearArm
@@ -92,24 +93,42 @@ def heart_like_reference(
     return np.asarray(center, dtype=float) + out
 
 
+class _Params:
+    """p = [x; r_1..r_N; u_{−1}; d] in a preallocated buffer, d by forward kinematics as in the
+    controller (:class:`rhmpc.control.offset.OutputOffset`), so both references solve the QP the
+    controller solves."""
+
+    def __init__(self, mpc: RecedingHorizonMPC) -> None:
+        qp = mpc.qp
+        self.p = np.zeros(qp.npar)
+        self._nx, self._nr, self._nu = qp.nx, qp.N * qp.ny, qp.nu
+        self._d = self.p[self._nx + self._nr + self._nu :]
+        self._offset = OutputOffset(mpc.arm) if mpc.settings.offset_correction else None
+
+    def fill(self, x: np.ndarray, ref: np.ndarray, u_prev: np.ndarray) -> bool:
+        """Write p; False if it is not finite."""
+        p = self.p
+        p[: self._nx] = x
+        p[self._nx : self._nx + self._nr] = ref.reshape(-1)
+        p[self._nx + self._nr : self._nx + self._nr + self._nu] = u_prev
+        if self._offset is not None:
+            self._offset(x, out=self._d)
+        return math.isfinite(p.sum())
+
+
 class GainTick:
     """Reference 1: the precomputed unconstrained gain, clipped (same parameter handling)."""
 
     def __init__(self, mpc: RecedingHorizonMPC) -> None:
         qp = mpc.qp
-        self._p = np.zeros(qp.npar)
-        self._nx, self._nr = qp.nx, qp.N * qp.ny
+        self._params = _Params(mpc)
         self._K, self._k0 = qp.gain, qp.gain0
         self._lo, self._hi = -qp.u_max, qp.u_max
 
     def __call__(self, x: np.ndarray, ref: np.ndarray, u_prev: np.ndarray) -> np.ndarray:
-        p = self._p
-        p[: self._nx] = x
-        p[self._nx : self._nx + self._nr] = ref.reshape(-1)
-        p[self._nx + self._nr :] = u_prev
-        if not math.isfinite(p.sum()):
+        if not self._params.fill(x, ref, u_prev):
             return np.zeros_like(self._k0)
-        u = self._K @ p
+        u = self._K @ self._params.p
         u += self._k0
         np.maximum(u, self._lo, out=u)
         return np.minimum(u, self._hi, out=u)
@@ -126,34 +145,40 @@ class ExactTick:
                 "the exact reference needs the daqp package (an rhmpc dependency: pip install daqp)"
             ) from None
         qp = mpc.qp
-        if qp.param_bounds:
-            raise ValueError("the exact reference supports torque bounds only (no joint bounds)")
         self._qp = qp
-        self._p = np.zeros(qp.npar)
-        self._f = np.empty(qp.nz)
-        self._nx, self._nr, self._nu = qp.nx, qp.N * qp.ny, qp.nu
+        self._params = _Params(mpc)
+        self._f = np.empty(qp.nv)
+        self._nu, self._nv = qp.nu, qp.nv
         self._lo = -qp.u_max
         self._model = daqp.Model()
-        # All constraints are simple bounds on ẑ: DAQP takes them without a constraint matrix.
-        exitflag, _ = self._model.setup(
-            qp.P, qp.f0.copy(), np.zeros((0, qp.nz)), qp.u0.copy(), qp.l0.copy()
-        )
+        # The first nv rows of A are the identity (torque and slack bounds): DAQP takes them as
+        # simple bounds, the envelope rows as its general constraints.
+        self._A = np.ascontiguousarray(qp.A[qp.nv :])
+        self._bu, self._bl = self._bounds(qp.l0, qp.u0)
+        exitflag, _ = self._model.setup(qp.P, qp.f0.copy(), self._A, self._bu, self._bl)
         if exitflag < 0:
             raise ValueError(f"DAQP setup failed with exit flag {exitflag}")
         self.iterations = 0
         self.exitflag = 1
         self.zhat = np.zeros(qp.nz)
 
+    @staticmethod
+    def _bounds(lower: np.ndarray, upper: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return np.minimum(upper, 1e30), np.maximum(lower, -1e30)  # DAQP's infinity
+
     def __call__(self, x: np.ndarray, ref: np.ndarray, u_prev: np.ndarray) -> np.ndarray:
-        p = self._p
-        p[: self._nx] = x
-        p[self._nx : self._nx + self._nr] = ref.reshape(-1)
-        p[self._nx + self._nr :] = u_prev
+        self._params.fill(x, ref, u_prev)
+        p = self._params.p
         np.dot(self._qp.F, p, out=self._f)
         self._f += self._qp.f0
-        self._model.update(f=self._f)
+        if self._qp.param_bounds:
+            lower, upper = self._qp.bounds(p)
+            self._bu, self._bl = self._bounds(lower, upper)
+            self._model.update(f=self._f, bupper=self._bu, blower=self._bl)
+        else:
+            self._model.update(f=self._f)
         z, _, exitflag, info = self._model.solve()
-        self.exitflag, self.iterations, self.zhat = exitflag, info["iterations"], z
+        self.exitflag, self.iterations, self.zhat = exitflag, info["iterations"], z[: self._qp.nz]
         u = z[: self._nu] * self._qp.u_max
         np.maximum(u, self._lo, out=u)
         return np.minimum(u, self._qp.u_max, out=u)

@@ -45,7 +45,7 @@ def test_run_bench_reports_the_issue_fields():
                                                               "exact_tick_us")):
         assert r[key]["p50"] == pytest.approx(r["tick_us"]["p50"] / r[ref]["p50"], rel=1e-12)
     assert r["ticks"] == 400 and r["robot"] == "phantom"
-    assert set(r["fallbacks"]) == {"plan", "lq", "zero"}
+    assert set(r["fallbacks"]) == {"plan", "lq", "brake", "zero"}
     assert r["active_bound_ticks"] > 0  # the jumps saturate the torque
     assert r["u0_error_max_frac"] <= 0.01  # within 1 % of τ_max of the exact solve, every tick
     assert r["exact_failures"] == 0
