@@ -114,8 +114,8 @@ class EKFSettings(PredictorSettings):
         per sample at the predictor's own rate.  Otherwise they are rescaled by
         ``dt · q_rate_hz`` so that the random walks diffuse as fast per second as in
         the paper (Yuen tuned at 28 Hz; used at 133 Hz unscaled they are 4.75× looser).
-    unit : float
-        Metres per data unit (1.0 for samples in m, 1e-3 for mm).
+    unit : float or None
+        Metres per data unit (1.0 for samples in m, 1e-3 for mm); ``None``: inferred.
     """
 
     harmonics: int = 5
@@ -130,13 +130,13 @@ class EKFSettings(PredictorSettings):
     band_hz: tuple[float, float] = field(default=(0.5, 2.5))
     omega_limits_hz: tuple[float, float] = field(default=(0.5, 3.0))
     q_rate_hz: float | None = None
-    unit: float = 1.0
+    unit: float | None = None
 
     def __post_init__(self) -> None:
         super().__post_init__()
         if int(self.harmonics) != self.harmonics or self.harmonics < 1:
             raise ValueError(f"harmonics must be a positive integer, got {self.harmonics!r}")
-        for name in ("init_seconds", "sigma_r", "sigma1_sq", "sigma_omega_sq", "unit"):
+        for name in ("init_seconds", "sigma_r", "sigma1_sq", "sigma_omega_sq"):
             if not getattr(self, name) > 0.0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)!r}")
         for name in ("sigma_phase_sq", "q", "q_phase", "q_omega"):
@@ -207,12 +207,12 @@ class FourierEKF(Predictor):
         harm = np.arange(1, m + 1, dtype=float)
         self._g = np.zeros(self.nx)
         self._g[self.ith] = harm * self.dt  # ∂θ/∂ω per step
-        u2 = s.unit**2
+        u2 = self.unit**2
         q = np.full(self.nx, s.q / u2)
         q[self.ith] = s.q_phase
         q[self.iw] = s.q_omega
         self._q = q if s.q_rate_hz is None else q * (self.dt * s.q_rate_hz)
-        self._r = (s.sigma_r / s.unit) ** 2
+        self._r = (s.sigma_r / self.unit) ** 2
         self._harm = harm
         self._w_lo, self._w_hi = (_TWO_PI * f for f in s.omega_limits_hz)
         self.x = np.zeros(self.nx)
@@ -263,7 +263,7 @@ class FourierEKF(Predictor):
         s = self.settings
         p = np.empty(self.nx)
         p[self.ic] = self._r / self.n_init
-        p[self.ir] = (s.sigma1_sq / s.unit**2) / self._harm**2
+        p[self.ir] = (s.sigma1_sq / self.unit**2) / self._harm**2
         p[self.iw] = s.sigma_omega_sq
         p[self.ith] = s.sigma_phase_sq
         return np.diag(p)

@@ -50,8 +50,8 @@ class WFLCSettings(PredictorSettings):
         Heart-rate band searched by the FFT [Hz].
     omega_limits_hz : tuple of float
         ω₀ is clamped to this range [Hz].
-    unit : float
-        Metres per data unit.
+    unit : float or None
+        Metres per data unit; ``None``: inferred from the data (see ``predictors.base``).
     """
 
     harmonics: int = 8
@@ -61,7 +61,7 @@ class WFLCSettings(PredictorSettings):
     init_seconds: float = 10.0
     band_hz: tuple[float, float] = (0.5, 2.5)
     omega_limits_hz: tuple[float, float] = (0.3, 4.0)
-    unit: float = 1.0
+    unit: float | None = None
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -70,7 +70,7 @@ class WFLCSettings(PredictorSettings):
         for name in ("mu0", "mu1", "mu_bias"):
             if not getattr(self, name) >= 0.0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
-        for name in ("init_seconds", "unit"):
+        for name in ("init_seconds",):
             if not getattr(self, name) > 0.0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)!r}")
 
@@ -91,7 +91,7 @@ class WFLC(Predictor):
         self.bias = np.zeros(d)
         self.omega0 = 0.0  # rad/sample
         self.psi = 0.0
-        self._mu0 = s.mu0 * s.unit**2
+        self._mu0 = s.mu0 * self.unit**2
         self._lo, self._hi = (2 * math.pi * f * self.dt for f in s.omega_limits_hz)
 
     @property
