@@ -227,6 +227,11 @@ class DualFourierEKF(Predictor):
         return phi @ self._coef.T
 
     @property
+    def heart_rate_hz(self) -> float:
+        """Cardiac frequency estimate ω̂_c/2π [Hz]; NaN before the first sample."""
+        return float(self.x[self.iwc] / _TWO_PI) if self.ready else math.nan
+
+    @property
     def frequencies_hz(self) -> tuple[float, float]:
         """(respiratory, cardiac) frequency estimates [Hz]."""
         return float(self.x[self.iwr] / _TWO_PI), float(self.x[self.iwc] / _TWO_PI)

@@ -14,7 +14,13 @@ holds the newest sample.  A missing sample advances ψ only.
 
 Parameters (Yuen et al. 2009): m = 8, μ₀ = 7e-6, μ₁ = 0.03, tuned at 28 Hz on data in
 mm.  μ₀ multiplies ε·w (mm²), so it is stored in SI as 7e-6 rad/mm² = 7 rad/m² per
-sample, and converted to data units by unit².  Cost per update: O(m·d).
+sample, and converted to data units by unit².  Rate: at another sample rate the same
+gains adapt faster per second (more updates, and ω₀ in rad/sample), so with
+``gain_rate_hz`` = 28 they are rescaled to adapt as fast per second as at 28 Hz:
+μ₀ · (Δt·28)², μ₁ · (Δt·28).  (Unscaled at 128 Hz, ω̂ ran from 100 bpm to its clamp
+within seconds on fixed-a2-top.)  μ_b is not rescaled: the offset weight is what follows
+breathing (time constant 1/(2μ_b) ≈ 17 samples).  ω₀ is clamped to the heart band, a
+last resort counted ``omega_clamped``.  Cost per update: O(m·d).
 """
 
 from __future__ import annotations
@@ -49,7 +55,9 @@ class WFLCSettings(PredictorSettings):
     band_hz : tuple of float
         Heart-rate band searched by the FFT [Hz].
     omega_limits_hz : tuple of float
-        ω₀ is clamped to this range [Hz].
+        ω₀ is clamped to this range [Hz] (36–210 beats/min).
+    gain_rate_hz : float or None
+        Rate μ₀, μ₁ were tuned at [Hz] (Yuen: 28); ``None``: per own sample.
     unit : float or None
         Metres per data unit; ``None``: inferred from the data (see ``predictors.base``).
     """
@@ -59,8 +67,9 @@ class WFLCSettings(PredictorSettings):
     mu1: float = 0.03
     mu_bias: float = 0.03
     init_seconds: float = 10.0
-    band_hz: tuple[float, float] = (0.5, 2.5)
-    omega_limits_hz: tuple[float, float] = (0.3, 4.0)
+    band_hz: tuple[float, float] = (0.6, 3.0)
+    omega_limits_hz: tuple[float, float] = (0.6, 3.5)
+    gain_rate_hz: float | None = 28.0
     unit: float | None = None
 
     def __post_init__(self) -> None:
@@ -70,6 +79,8 @@ class WFLCSettings(PredictorSettings):
         for name in ("mu0", "mu1", "mu_bias"):
             if not getattr(self, name) >= 0.0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
+        if self.gain_rate_hz is not None and not self.gain_rate_hz > 0.0:
+            raise ValueError(f"gain_rate_hz must be > 0 or None, got {self.gain_rate_hz!r}")
         for name in ("init_seconds",):
             if not getattr(self, name) > 0.0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)!r}")
@@ -91,13 +102,20 @@ class WFLC(Predictor):
         self.bias = np.zeros(d)
         self.omega0 = 0.0  # rad/sample
         self.psi = 0.0
-        self._mu0 = s.mu0 * self.unit**2
+        rate = 1.0 if s.gain_rate_hz is None else self.dt * s.gain_rate_hz
+        self._mu0 = s.mu0 * self.unit**2 * rate**2
+        self._mu1 = s.mu1 * rate
         self._lo, self._hi = (2 * math.pi * f * self.dt for f in s.omega_limits_hz)
 
     @property
     def omega(self) -> float:
         """ω̂ [rad/s]."""
         return self.omega0 / self.dt
+
+    @property
+    def heart_rate_hz(self) -> float:
+        """ω̂/2π [Hz]; NaN until initialised."""
+        return self.omega0 / (2 * math.pi * self.dt) if self.ready else math.nan
 
     def _initialise(self) -> None:
         order = np.roll(np.arange(self.n_init), -(self._filled % self.n_init))
@@ -126,9 +144,13 @@ class WFLC(Predictor):
         ws, wc = self.w[:, :m], self.w[:, m:]
         eps = z - ws @ sn - wc @ cs - self.bias
         grad = float(eps @ ((ws * cs - wc * sn) @ self._r))
-        self.omega0 = min(max(self.omega0 + 2 * self._mu0 * grad, self._lo), self._hi)
-        ws += (2 * s.mu1) * np.multiply.outer(eps, sn)
-        wc += (2 * s.mu1) * np.multiply.outer(eps, cs)
+        w0 = self.omega0 + 2 * self._mu0 * grad
+        if not self._lo <= w0 <= self._hi:
+            self.counts["omega_clamped"] += 1
+            w0 = min(max(w0, self._lo), self._hi) if math.isfinite(w0) else self.omega0
+        self.omega0 = w0
+        ws += (2 * self._mu1) * np.multiply.outer(eps, sn)
+        wc += (2 * self._mu1) * np.multiply.outer(eps, cs)
         self.bias += (2 * s.mu_bias) * eps
 
     def _missing(self) -> None:
