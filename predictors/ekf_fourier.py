@@ -29,6 +29,12 @@ first and its fit removed, so ω̂₀ comes from the heart band only); then
 P(T|T) = diag[σ_R²/N, σ₁², σ₁²/2², …, σ₁²/m², σ_ω², σ_θ², …].  Until then the
 forecast holds the newest sample.  Forecast k steps: θ + iω̂kΔt in eq. (2).
 
+Outliers: a sample whose normalised innovation squared νᵀS⁻¹ν exceeds the χ²_d quantile
+``gate_probability`` is not used (the filter runs open-loop through it, counted
+``innovation_rejected``) — one 5 mm sonomicrometry echo outlier otherwise pulls ω̂ out of
+lock; after ``gate_seconds`` of consecutive rejections samples are used again, so a real
+change of the motion is followed.
+
 Numerics: P is symmetrised each step; phases are wrapped to (−π, π]; ω̂ is clamped
 to ``omega_limits_hz`` (counted ``omega_clamped``); a non-finite or non-positive
 innovation covariance restarts the initialisation (counted ``ekf_reinit``).
@@ -46,6 +52,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.linalg.lapack import dpotrf, dpotri
+from scipy.stats import chi2
 
 from predictors.base import Predictor, PredictorSettings
 from predictors.fourier_init import initial_dual_state, initial_fourier_state
@@ -121,6 +128,11 @@ class EKFSettings(PredictorSettings):
         95–152 beats/min pacemaker staircase of Tuna §III-B.
     omega_limits_hz : tuple of float
         ω̂ is clamped to this range [Hz] (a last resort, counted ``omega_clamped``).
+    gate_probability : float or None
+        Innovation gate: samples with NIS above the χ²_d quantile of this probability are
+        rejected [-]; ``None``: no gate (Yuen's filter).
+    gate_seconds : float
+        Longest run of rejected samples [s]; then samples are used again.
     breathing_harmonics : int
         H_b, respiratory harmonics in the state [-]; 0 = Yuen's model without breathing.
     breathing_band_hz : tuple of float
@@ -150,6 +162,8 @@ class EKFSettings(PredictorSettings):
     q_omega: float = 5e-3
     band_hz: tuple[float, float] = field(default=(0.6, 3.0))
     omega_limits_hz: tuple[float, float] = field(default=(0.5, 3.5))
+    gate_probability: float | None = 1.0 - 1e-6
+    gate_seconds: float = 0.1
     breathing_harmonics: int = 2
     breathing_band_hz: tuple[float, float] = field(default=(0.08, 0.5))
     q_breathing: float = 1e-5 * 1e-6
@@ -174,6 +188,12 @@ class EKFSettings(PredictorSettings):
         ):
             if not getattr(self, name) >= 0.0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
+        if self.gate_probability is not None and not 0.0 < self.gate_probability < 1.0:
+            raise ValueError(
+                f"gate_probability must be in (0, 1) or None, got {self.gate_probability!r}"
+            )
+        if not self.gate_seconds > 0.0:
+            raise ValueError(f"gate_seconds must be > 0, got {self.gate_seconds!r}")
         if self.q_rate_hz is not None and not self.q_rate_hz > 0.0:
             raise ValueError(f"q_rate_hz must be > 0 or None, got {self.q_rate_hz!r}")
         if (
@@ -207,6 +227,7 @@ PARAMETER_SETS: dict[str, EKFSettings] = {
         q_rate_hz=28.0,
         band_hz=(0.5, 2.5),
         breathing_harmonics=0,
+        gate_probability=None,
     ),
     "tuna2013": EKFSettings(
         harmonics=5,
@@ -262,6 +283,8 @@ class FourierEKF(Predictor):
         self._q = q
         self._hb = np.arange(1.0, hb + 1.0)
         self._wb_lo, self._wb_hi = (_TWO_PI * f for f in s.breathing_band_hz)
+        self._gate = math.inf if s.gate_probability is None else chi2.ppf(s.gate_probability, d)
+        self._max_reject, self._rejected = max(1, round(s.gate_seconds / self.dt)), 0
         self._r = (s.sigma_r / self.unit) ** 2
         self._harm = harm
         self._w_lo, self._w_hi = (_TWO_PI * f for f in s.omega_limits_hz)
@@ -401,9 +424,14 @@ class FourierEKF(Predictor):
         if Sinv is None:
             self._restart()
             return
-        K = PHt @ Sinv
         Sinv_nu = Sinv @ nu
         self.nis = float(nu @ Sinv_nu)
+        if self.nis > self._gate and self._rejected < self._max_reject:
+            self.counts["innovation_rejected"] += 1
+            self._rejected += 1
+            return
+        self._rejected = 0
+        K = PHt @ Sinv
         x += PHt @ Sinv_nu
         P -= K @ PHt.T
         P += P.T
