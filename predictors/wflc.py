@@ -27,10 +27,13 @@ clamp (4 of 4 seeds).  The weights, though, absorb the slip: the fundamental wei
 (w_{a,1}, w_{a,m+1}) = r_a(cos φ_a, sin φ_a) rotate by Δφ per sample, the phase error the
 frequency misses.  A phase-locked correction ω₀ ← ω₀ + κ Δφ (Δφ from the summed 2-D
 cross and dot products of the axes' fundamental weights before and after the update)
-turns that rotation into frequency; it cannot run away, since a slip in either
-direction rotates the weights the matching way.  κ = 0.01 per sample at 28 Hz (a time
-constant of 100 samples, 3.6 s).  ω₀ is clamped to the heart band, a
-last resort counted ``omega_clamped``.  Cost per update: O(m·d).
+turns that rotation into frequency, and the μ₀ gradient uses the fundamental only
+(``frequency_harmonics`` = 1: the r-th harmonic's phase error is r times the
+fundamental's, so after a step the high harmonics flip the gradient's sign first; on
+Yuen's ±10 bpm protocol the full gradient ran to the clamp).  The correction cannot
+run away, since a slip in either direction rotates the weights the matching way.
+κ = 0.01 per sample at 28 Hz (a time constant of 100 samples, 3.6 s).  ω₀ is clamped to
+the heart band, a last resort counted ``omega_clamped``.  Cost per update: O(m·d).
 """
 
 from __future__ import annotations
@@ -70,6 +73,8 @@ class WFLCSettings(PredictorSettings):
         Rate μ₀, μ₁, κ were tuned at [Hz] (Yuen: 28); ``None``: per own sample.
     phase_gain : float
         κ, gain of the phase-locked frequency correction [-] (ours; 0 = Riviere's WFLC).
+    frequency_harmonics : int
+        Harmonics whose phase errors drive the μ₀ gradient [-] (Riviere: all m; ours: 1).
     unit : float or None
         Metres per data unit; ``None``: inferred from the data (see ``predictors.base``).
     """
@@ -83,12 +88,15 @@ class WFLCSettings(PredictorSettings):
     omega_limits_hz: tuple[float, float] = (0.6, 3.5)
     gain_rate_hz: float | None = 28.0
     phase_gain: float = 0.01
+    frequency_harmonics: int = 1
     unit: float | None = None
 
     def __post_init__(self) -> None:
         super().__post_init__()
         if int(self.harmonics) != self.harmonics or self.harmonics < 1:
             raise ValueError(f"harmonics must be a positive integer, got {self.harmonics!r}")
+        if not 1 <= self.frequency_harmonics <= self.harmonics:
+            raise ValueError("frequency_harmonics must be in 1..harmonics")
         for name in ("mu0", "mu1", "mu_bias", "phase_gain"):
             if not getattr(self, name) >= 0.0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
@@ -157,7 +165,8 @@ class WFLC(Predictor):
         sn, cs = np.sin(ph), np.cos(ph)
         ws, wc = self.w[:, :m], self.w[:, m:]
         eps = z - ws @ sn - wc @ cs - self.bias
-        grad = float(eps @ ((ws * cs - wc * sn) @ self._r))
+        j = s.frequency_harmonics
+        grad = float(eps @ ((ws[:, :j] * cs[:j] - wc[:, :j] * sn[:j]) @ self._r[:j]))
         w1 = self.w[:, [0, m]].copy()  # fundamental weights (sin, cos) before adaptation
         w0 = self.omega0 + 2 * self._mu0 * grad
         if not self._lo <= w0 <= self._hi:
