@@ -59,6 +59,7 @@ class RangeEnvelope:
         self._k = 0
         self.known = False
         self._env = (np.zeros(d), np.zeros(d))
+        self._done = (np.full(d, np.inf), np.full(d, -np.inf))  # extrema of the full blocks
 
     def tick(self, x: np.ndarray | None) -> None:
         """Advance one update; ``x`` is the valid sample or ``None``."""
@@ -72,11 +73,13 @@ class RangeEnvelope:
             self._i = (self._i + 1) % self.lo.shape[0]
             self.lo[self._i] = np.inf
             self.hi[self._i] = -np.inf
+            self._done = (self.lo.min(axis=0), self.hi.max(axis=0))
 
     def envelope(self) -> tuple[np.ndarray, np.ndarray]:
         """(min, max) per axis of the window; the last known one through a long gap."""
-        lo, hi = self.lo.min(axis=0), self.hi.max(axis=0)
-        if np.isfinite(lo).all():
+        lo = np.minimum(self._done[0], self.lo[self._i])
+        hi = np.maximum(self._done[1], self.hi[self._i])
+        if lo[0] != np.inf:  # every axis is seen together
             self._env = (lo, hi)
         return self._env
 
@@ -104,6 +107,9 @@ class LeadErrorRMS:
         self.ms = np.zeros(K)
         self.count = np.zeros(K)
         self._leads = np.arange(1, K + 1)
+        self._k = self._leads - 1
+        # ring rows of the forecasts made 1…K updates before an update landing on row j
+        self._rows = (np.arange(K)[:, None] - self._leads[None, :]) % K
 
     def record(self, n: int, forecast: np.ndarray) -> None:
         K = forecast.shape[0]
@@ -115,17 +121,14 @@ class LeadErrorRMS:
         self.length[row] = K
 
     def observe(self, n: int, z: np.ndarray) -> None:
+        rows = self._rows[n % self.K]
         made = n - self._leads
-        rows = made % self.K
         ok = (self.made[rows] == made) & (self.length[rows] >= self._leads)
-        if not ok.any():
-            return
-        k = np.flatnonzero(ok)
-        miss = self.fc[rows[k], k] - z
+        miss = self.fc[rows, self._k] - z
         e2 = np.einsum("ij,ij->i", miss, miss)
-        self.count[k] += 1.0
-        a = np.maximum(self.alpha, 1.0 / self.count[k])
-        self.ms[k] += a * (e2 - self.ms[k])
+        self.count += ok
+        a = np.maximum(self.alpha, 1.0 / np.maximum(self.count, 1.0)) * ok
+        self.ms += a * (e2 - self.ms)
 
     def rms(self) -> np.ndarray:
         """(K,) RMS miss per lead (lead k at index k − 1); NaN where nothing was scored."""
