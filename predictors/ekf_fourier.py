@@ -38,8 +38,9 @@ change of the motion is followed.
 Numerics: P is symmetrised each step; phases are wrapped to (−π, π]; ω̂ is clamped
 to ``omega_limits_hz`` (counted ``omega_clamped``); a non-finite or non-positive
 innovation covariance restarts the initialisation (counted ``ekf_reinit``).
-Cost per update: O(n²) for the prediction (F is identity plus one column) and
-O(n² d) for the correction, n = d(2m + 1) + 1 (34 for d = 3, m = 5).
+Cost per update: O(n²) for the prediction (F is identity plus two columns) and
+O(n² d) for the correction, n = d(2m + 1) + 1 + 2dH_b + 2 (48 for d = 3, m = 5, H_b = 2;
+34 without breathing).
 
 Units: Q, σ_R and σ₁² are given in SI (the papers give mm, mm²; converted here),
 per sample at the predictor's own rate as in the papers.
