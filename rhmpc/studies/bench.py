@@ -13,7 +13,11 @@ bounds (so that the QP has active constraints). Every tick measures, with
   the floor of what any controller in Python costs here;
 * an *exact tick*: the same QP (same P, q, A, l, u) solved by the active-set solver DAQP,
   hot-started from its previous active set. Its u0 is the accuracy reference:
-  ``u0_error = |u0_mpc − u0_exact| / τ_max`` per joint (τ_max = the robot's torque limit).
+  ``u0_error = |u0_mpc − u0_exact| / τ_max`` per joint (τ_max = the robot's torque limit);
+* with ``controller="c"``, the compiled controller of ``rhmpc export`` (:mod:`rhmpc.control.
+  export`), fed the same state and reference and keeping its own u_{−1}: its tick measured inside
+  C (``clock_gettime(CLOCK_MONOTONIC)``) and as seen from Python (the ctypes call), and
+  ``c_vs_python_max_frac`` = max over the run of |τ_C − τ_Python| / τ_max.
 """
 
 from __future__ import annotations
@@ -32,6 +36,9 @@ from rhmpc.control.mpc import RecedingHorizonMPC
 from rhmpc.control.settings import MPCSettings, to_dict
 from robots import linearize, load_robot
 from robots.linearize import LinearArm
+
+#: Controllers :func:`run_bench` can time: the Python MPC alone, or with its compiled twin.
+CONTROLLERS: tuple[str, ...] = ("python", "c")
 
 
 def heart_like_reference(
@@ -180,6 +187,8 @@ def run_bench(
     warmup: int = 500,
     disable_gc: bool = True,
     progress: Callable[[int, int], None] | None = None,
+    controller: str = "python",
+    cache: str | None = None,
 ) -> dict:
     """Run the benchmark and return its results (JSON-serialisable ``dict``).
 
@@ -197,9 +206,14 @@ def run_bench(
         Reference jumps [m] every ``jump_every`` ticks (0 disables) to exercise active bounds.
     disable_gc : bool
         Disable Python's garbage collector during the loop.
+    controller : str
+        ``"python"``, or ``"c"`` to also run the exported C controller (built once into
+        ``cache``, default :func:`rhmpc.control.export.cache_root`) next to it.
     """
     if ticks < 1:
         raise ValueError(f"ticks must be >= 1, got {ticks}")
+    if controller not in CONTROLLERS:
+        raise ValueError(f"controller must be one of {CONTROLLERS}, got {controller!r}")
     arm = arm if arm is not None else linearize(load_robot(robot))
     settings = settings if settings is not None else MPCSettings()
     t_build = time.perf_counter()
@@ -207,6 +221,11 @@ def run_bench(
     build_s = time.perf_counter() - t_build
     every = RecedingHorizonMPC(arm, dataclasses.replace(settings, screening=False))
     gain, exact = GainTick(mpc), ExactTick(mpc)
+    compiled = None
+    if controller == "c":
+        from rhmpc.control.export import compiled_controller
+
+        compiled = compiled_controller(mpc, robot if arm is None else f"{robot}-custom", cache)
     N, nu = mpc.N, mpc.nu
     total = warmup + ticks
     rng = np.random.default_rng(seed)
@@ -230,6 +249,11 @@ def run_bench(
     active = np.zeros(total, dtype=bool)
     err = np.zeros(total)
     exact_fail = 0
+    c_ns = np.zeros(total, dtype=np.int64)
+    c_call_ns = np.zeros(total, dtype=np.int64)
+    c_err = np.zeros(total)
+    c_osqp = np.zeros(total, dtype=bool)
+    c_mismatch = 0
     clock = time.perf_counter_ns
     gc_was_enabled = gc.isenabled()
     if disable_gc:
@@ -250,6 +274,14 @@ def run_bench(
             every.u_prev = u_prev  # the same QP as the default controller's and DAQP's
             tau_every = every.step(x, ref)
             t4 = clock()
+            if compiled is not None:
+                c_screened = compiled.screened
+                tau_c = compiled.step(x, ref)
+                c_osqp[k] = compiled.screened == c_screened
+                c_ns[k], c_call_ns[k] = compiled.tick_ns, compiled.call_ns
+                c_err[k] = float(np.max(np.abs(tau_c - tau) / tau_max))
+                if compiled.source != mpc.stats.source or compiled.status != mpc.stats.status:
+                    c_mismatch += 1
             tick_ns[k], gain_ns[k], exact_ns[k], every_ns[k] = t1 - t0, t2 - t1, t3 - t2, t4 - t3
             screened[k] = mpc.stats.screened > n_screened
             parts_ns[k] = every.stats.parts_ns
@@ -296,6 +328,7 @@ def run_bench(
         "ratio_tick_to_gain": _ratio(tick, g),
         "ratio_tick_to_exact": _ratio(tick, e),
         "ratio_osqp_tick_to_gain": _ratio(every_ns[sl] * us, g),
+        "controller": "python",
         "fallbacks": dict(mpc.stats.fallbacks),
         "failures": dict(mpc.stats.failures),
         "osqp_fallbacks": dict(every.stats.fallbacks),
@@ -312,8 +345,25 @@ def run_bench(
             "daqp": _version("daqp"),
         },
     }
+    if compiled is not None:
+        c = c_ns[sl] * us
+        result.update({
+            "controller": "c",
+            "c_tick_us": _pct(c),
+            "c_tick_python_us": _pct(c_call_ns[sl] * us),
+            # the split that explains the tail: ticks on which OSQP ran vs screened ticks
+            "c_osqp_ticks": int(c_osqp[sl].sum()),
+            "c_osqp_tick_us": _pct(c[c_osqp[sl]]) if c_osqp[sl].any() else None,
+            "c_screened_tick_us": _pct(c[~c_osqp[sl]]) if (~c_osqp[sl]).any() else None,
+            "c_vs_python_max_frac": float(c_err.max()),  # warm-up included
+            "c_mismatched_ticks": c_mismatch,
+            "c_fallbacks": dict(compiled.stats.fallbacks),
+            "c_failures": dict(compiled.stats.failures),
+            "ratio_c_tick_to_python": _ratio(c, tick),
+            "ratio_c_tick_to_gain": _ratio(c, g),
+            "c_library": compiled.library,
+        })
     return result
-
 
 _ROWS = (
     ("MPC tick (screening, OSQP if bound)", "tick_us"),
@@ -336,7 +386,11 @@ def format_table(result: dict) -> str:
         f"{'':36s}{'p50 µs':>9s}{'p99 µs':>9s}{'max µs':>9s}{'p50 ×g':>8s}{'p99 ×g':>8s}",
     ]
     g = result["gain_tick_us"]
-    for label, key in _ROWS:
+    rows = list(_ROWS)
+    if "c_tick_us" in result:
+        rows[1:1] = [("C tick, inside C (CLOCK_MONOTONIC)", "c_tick_us"),
+                     ("C tick, seen from Python (ctypes)", "c_tick_python_us")]
+    for label, key in rows:
         row = result[key]
         ratio = ""
         if not label.startswith("  "):
@@ -358,4 +412,19 @@ def format_table(result: dict) -> str:
         f"tracking on the linear model: RMS {result['tracking_rms_mm']:.4f} mm, "
         f"max {result['tracking_max_mm']:.3f} mm (includes the reference jumps)",
     ]
+    if "c_tick_us" in result:
+        r = result["ratio_c_tick_to_python"]
+        lines += [
+            f"C controller: max |τ_C − τ_Python| = {result['c_vs_python_max_frac']:.1e} τ_max, "
+            f"status/source different on {result['c_mismatched_ticks']} ticks; fallbacks "
+            f"{result['c_fallbacks']}; C tick / Python tick: p50 {r['p50']:.3f}, "
+            f"p99 {r['p99']:.3f}",
+        ]
+        for label, key in (("OSQP", "c_osqp_tick_us"), ("screened", "c_screened_tick_us")):
+            row = result[key]
+            if row is not None:
+                n = result["c_osqp_ticks"]
+                n = n if label == "OSQP" else result["ticks"] - n
+                lines.append(f"  C tick on the {n} {label} ticks: p50 {row['p50']:.2f}, "
+                             f"p99 {row['p99']:.2f}, max {row['max']:.2f} µs")
     return "\n".join(lines)
