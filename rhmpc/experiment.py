@@ -313,6 +313,11 @@ def build_run(config: RunConfig, implementation: str = "python") -> Run:
             outlier_gate=loop.outlier_gate, max_rejections=loop.outlier_max_rejections,
             guard_speed=loop.guard_speed, guard_margin=loop.guard_margin,
         )
+        phase = getattr(source, "phase", None)
+        if hasattr(predictor, "heart_rate_hz") and hasattr(phase, "rate"):
+            from sim.metrics import HeartRateScore  # ω̂ against the true rate, as Yuen reports
+
+            reference.monitor = HeartRateScore(phase.rate, loop.settling)
     return Run(config, robot, arm, controller, reference, truth, center, stream, label,
                loop.duration)
 
@@ -379,6 +384,9 @@ def run_experiment(config: RunConfig, progress: bool = False, trace: str | None 
         "settings": config.to_dict(),
         "versions": versions(),
     }
+    monitor = getattr(run.reference, "monitor", None)
+    if monitor is not None:
+        document["heart_rate"] = monitor.summary()
     if gain_tick is not None:
         document["gain_tick_us"] = result.yardstick_us
         document["tick_ratio_to_gain"] = {k: v / result.yardstick_us["p50"]

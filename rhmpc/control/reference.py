@@ -179,6 +179,9 @@ class PredictedReference:
         if not math.isclose(predictor.dt, self.dt, rel_tol=1e-9):
             raise ValueError(f"predictor dt {predictor.dt} s != downsample·Ts = {self.dt} s")
         self.prediction_points = prediction_points
+        #: optional ``observe(t, heart_rate_hz)`` scorer of the predictor's heart-rate estimate
+        #: (:class:`sim.metrics.HeartRateScore`), called after every forecast
+        self.monitor = None
         # ticks a refresh covers: its period, plus one so that a pipelined loop can read the
         # next refresh tick's points from it while that refresh runs
         self._span = downsample + horizon
@@ -261,6 +264,8 @@ class PredictedReference:
                 self._diverged()
         if self._origin is not None:
             self._placed = self._origin + embed3(self._dense)
+        if self.monitor is not None:
+            self.monitor.observe(now, self.predictor.heart_rate_hz)
 
     def _interpolation(self, n_nodes: int, age: float) -> np.ndarray:
         """The matrix of :func:`interpolation_matrix` for nodes starting ``age`` s before now."""

@@ -40,6 +40,15 @@ def format_summary(doc: dict) -> str:
     if counts:  # what the predictor and the safety layers did (missing samples, outliers, …)
         events = ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in sorted(counts.items()))
         lines.insert(-1, f"  predictor        {events}")
+    hr = doc.get("heart_rate") or {}
+    if hr.get("observations"):  # ω̂ of the EKF/WFLC against the true heart rate
+        lock = hr["lock_time_s"]
+        lines.insert(-1, f"  heart rate       ω̂ − ω RMS {hr['rms_error_bpm']:.2f} bpm, max "
+                     f"{hr['max_error_bpm']:.2f} bpm; within {hr['tolerance_bpm']:g} bpm "
+                     f"{100 * hr['within_tolerance']:.1f} % of updates; "
+                     + f"estimate from {hr['ready_time_s']:.2f} s, "
+                     + (f"locked from {lock:.2f} s" if lock is not None else "unlocked at the end")
+                     + f" (true mean {hr['mean_true_bpm']:.1f} bpm)")
     return "\n".join(lines)
 
 
