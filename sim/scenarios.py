@@ -33,6 +33,14 @@ from sim.rr import (
     constant_phase,
     staircase_phase,
 )
+from sim.variability import (
+    VariabilitySettings,
+    ar1,
+    breathing_phase,
+    drift_knots,
+    modulated_phase,
+    smooth_knots,
+)
 
 #: The seed used when :func:`make_scenario` is given no generator, so that a named replica is
 #: the same everywhere unless a caller asks for another draw.
@@ -174,7 +182,7 @@ class Scenario:
 OVERRIDES: tuple[str, ...] = (
     "duration", "sensor_rate", "heart_rate", "peak_to_peak", "rms", "rr", "rr_start",
     "beat_times", "record", "staircase", "breathing_rate", "coupling", "beat_gain_std",
-    "breathing",
+    "breathing", "variability",
 )
 
 
@@ -194,7 +202,12 @@ def make_scenario(name: str, rng: np.random.Generator | None = None, **overrides
         ``rr_start`` (time of the first beat [s], default 0), ``beat_times`` [s], ``record``
         (PhysioNet record path: its annotated beat times, shifted so the first beat is at
         ``rr_start``), ``peak_to_peak`` [m], ``rms`` [m or None], ``breathing_rate`` [Hz],
-        ``coupling`` [-], ``beat_gain_std`` [-], ``breathing`` (False removes it).
+        ``coupling`` [-], ``beat_gain_std`` [-], ``breathing`` (False removes it),
+        ``variability`` (:class:`~sim.variability.VariabilitySettings`, or ``"clean"`` for
+        the periodic replica; default ``VariabilitySettings()``: HRV, beat-to-beat stroke and
+        timing, breath period and depth, drift, coupling). ``coupling`` and
+        ``beat_gain_std`` override the fields of the same name. Beat-time driven phases
+        (``rr``, ``beat_times``, ``record``) carry their own RR variability: no HRV is added.
 
     Returns
     -------
@@ -224,19 +237,41 @@ def make_scenario(name: str, rng: np.random.Generator | None = None, **overrides
     if not duration > 0 or not sensor_rate > 0:
         raise ValueError("duration and sensor_rate must be positive")
 
-    phase, beat_span = _phase_track(spec, overrides, rng, max(duration, nominal))
+    settings = _variability(spec, overrides)
+    horizon = max(duration, nominal)
+    breath = None
+    if not settings.is_clean:
+        breath = breathing_phase(rng, float(overrides.get("breathing_rate", 1.0 / 6.0)),
+                                 horizon, settings.breath_period_cv)
+    phase, beat_span = _phase_track(spec, overrides, rng, horizon, settings, breath)
     if beat_span is not None and "duration" not in overrides:
         duration = min(nominal, beat_span)
 
-    shape = _shape(spec, overrides, rng, phase, max(duration, nominal))
+    shape = _shape(spec, overrides, rng, phase, horizon, settings, breath)
     calib_t = np.arange(round(nominal * spec.sensor_rate) + 1) / spec.sensor_rate
     source = calibrate(shape, calib_t, spec.peak_to_peak, spec.rms)
     described = spec.description + (" [RR-driven]" if beat_span is not None else "")
     return Scenario(name, source, sensor_rate, duration, described, spec)
 
 
+def _variability(spec: ScenarioSpec, overrides: dict) -> VariabilitySettings:
+    """The variability settings with the ``coupling``/``beat_gain_std`` overrides applied."""
+    value = overrides.get("variability", VariabilitySettings())
+    if isinstance(value, str):
+        if value != "clean":
+            raise ValueError(f"variability must be a VariabilitySettings or 'clean', got {value!r}")
+        value = VariabilitySettings.clean()
+    if not isinstance(value, VariabilitySettings):
+        raise ValueError(f"variability must be a VariabilitySettings or 'clean', got {value!r}")
+    if spec.site == "mitral":
+        value = replace(value, coupling=0.0)
+    changes = {k: float(overrides[k]) for k in ("coupling", "beat_gain_std") if k in overrides}
+    return replace(value, **changes)
+
+
 def _phase_track(spec: ScenarioSpec, overrides: dict, rng: np.random.Generator,
-                 horizon: float) -> tuple[PhaseTrack, float | None]:
+                 horizon: float, settings: VariabilitySettings,
+                 breath: PhaseTrack | None) -> tuple[PhaseTrack, float | None]:
     """Heart phase for the scenario and, if driven by beat times, the time they span [s]."""
     start = float(overrides.get("rr_start", 0.0))
     beats = None
@@ -251,21 +286,28 @@ def _phase_track(spec: ScenarioSpec, overrides: dict, rng: np.random.Generator,
         track = PhaseTrack.from_beat_times(beats)
         return track, float(beats[-1] - max(beats[0], 0.0))
     phase0 = float(rng.random())
-    if "heart_rate" in overrides or spec.heart == "constant":
+    constant = "heart_rate" in overrides or spec.heart == "constant"
+    if constant:
         rate = float(spec.heart_rate)
         if not rate > 0:
             raise ValueError("heart_rate must be positive [Hz]")
-        return constant_phase(rate, phase0), None
-    profile = overrides.get("staircase", StaircaseProfile())
-    return staircase_phase(profile, horizon, phase0), None
+        knots = (np.array([0.0, 1.0]), np.array([rate, rate]))
+    else:
+        knots = overrides.get("staircase", StaircaseProfile()).knots(horizon)
+    if settings.hrv_cv > 0 and breath is not None:
+        return modulated_phase(rng, *knots, horizon, settings, breath, phase0), None
+    if constant:
+        return constant_phase(float(knots[1][0]), phase0), None
+    return staircase_phase(overrides.get("staircase", StaircaseProfile()), horizon, phase0), None
 
 
 def _shape(spec: ScenarioSpec, overrides: dict, rng: np.random.Generator, phase: PhaseTrack,
-           horizon: float) -> SyntheticHeartMotion:
+           horizon: float, settings: VariabilitySettings,
+           breath: PhaseTrack | None) -> SyntheticHeartMotion:
     """The uncalibrated motion for ``spec`` (unit-less shape, scaled later)."""
     breathing_rate = float(overrides.get("breathing_rate", 1.0 / 6.0))
-    coupling = float(overrides.get("coupling", 0.08 if spec.site != "mitral" else 0.0))
-    gain_std = float(overrides.get("beat_gain_std", 0.03))
+    coupling = settings.coupling
+    gain_std = settings.beat_gain_std
     with_breathing = bool(overrides.get("breathing", spec.site != "mitral"))
     if spec.site == "mitral":
         heart = fourier_from_bumps(MITRAL_BUMPS, _MITRAL_HARMONICS)[None, :]
@@ -287,9 +329,38 @@ def _shape(spec: ScenarioSpec, overrides: dict, rng: np.random.Generator, phase:
             breathing = np.zeros_like(breathing)
     first = int(np.floor(float(phase(-5.0))))
     last = int(np.ceil(float(phase(horizon + 5.0))))
-    gains = draw_beat_gains(rng, last - first + 1, heart.shape[0], gain_std)
-    return SyntheticHeartMotion(phase, heart, breathing, breathing_rate, coupling, gains, first,
-                                coupling_phase=2 * np.pi * rng.random())
+    if breath is None:  # the clean replica, drawn exactly as before the variability existed
+        gains = draw_beat_gains(rng, last - first + 1, heart.shape[0], gain_std)
+        return SyntheticHeartMotion(phase, heart, breathing, breathing_rate, coupling, gains,
+                                    first, coupling_phase=2 * np.pi * rng.random())
+    return _variable_shape(rng, phase, heart, breathing, breathing_rate, horizon, settings,
+                           breath, first, last - first + 1)
+
+
+def _variable_shape(rng: np.random.Generator, phase: PhaseTrack, heart: np.ndarray,
+                    breathing: np.ndarray, breathing_rate: float, horizon: float,
+                    settings: VariabilitySettings, breath: PhaseTrack, first: int,
+                    n_beats: int) -> SyntheticHeartMotion:
+    """The shape with the mechanisms of :mod:`sim.variability` (seeded by ``rng``)."""
+    dim = heart.shape[0]
+    rho = settings.beat_gain_correlation
+    gains = 1.0 + ar1(rng, n_beats, settings.beat_gain_std, rho, dim)
+    offsets = ar1(rng, n_beats, settings.beat_timing_std, rho)[:, 0]
+    first_breath = int(np.floor(float(breath(-5.0))))
+    n_breaths = int(np.ceil(float(breath(horizon + 5.0)))) - first_breath + 1
+    depths = 1.0 + settings.breath_depth_cv * np.clip(rng.standard_normal(n_breaths), -2.5, 2.5)
+    drift = None
+    if settings.drift_std > 0:
+        scale = settings.drift_std * max(_range_of(c) for c in heart)
+        drift = smooth_knots(*drift_knots(rng, horizon, dim, scale, settings.drift_cutoff))
+    return SyntheticHeartMotion(
+        phase, heart, breathing, breathing_rate, settings.coupling, gains, first,
+        coupling_phase=2 * np.pi * rng.random(),
+        breath_phase=breath if settings.coupling_follows_breath
+        or settings.breath_period_cv > 0 or settings.breath_depth_cv > 0 else None,
+        breath_depths=depths if settings.breath_depth_cv > 0 else None,
+        first_breath=first_breath,
+        beat_offsets=offsets if settings.beat_timing_std > 0 else None, drift=drift)
 
 
 def _range_of(coef: np.ndarray) -> float:
