@@ -1,8 +1,8 @@
 """One closed-loop run, from a :class:`RunConfig` to a JSON-ready result document.
 
 This is where the packages meet: ``robots`` (model, linearisation), ``sim`` (heart motion,
-sensor, plant, loop), ``predictors`` and the controller of :mod:`rhmpc.mpc`. ``rhmpc simulate``,
-``rhmpc compare`` and ``rhmpc tune`` all run through :func:`run_experiment`.
+sensor, plant, loop), ``predictors`` and the controller of :mod:`rhmpc.control`.
+``rhmpc simulate``, ``rhmpc compare`` and ``rhmpc tune`` all run through :func:`run_experiment`.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from rhmpc.config import MPCSettings, from_dict, to_dict
+from rhmpc.control.settings import MPCSettings, from_dict, to_dict
 from rhmpc.errors import UsageError
 from sim.estimation import ObserverSettings
 from sim.loop import LoopSettings
@@ -260,8 +260,8 @@ def build_stream(config: RunConfig, source, origin, duration: float, rng: np.ran
 def build_run(config: RunConfig) -> Run:
     """Build robot, controller, heart motion, sensor stream and reference for ``config``."""
     from predictors import make_predictor
-    from rhmpc.mpc import RecedingHorizonMPC
-    from rhmpc.reference import ExactReference, PredictedReference
+    from rhmpc.control.mpc import RecedingHorizonMPC
+    from rhmpc.control.reference import ExactReference, PredictedReference
     from robots import linearize, load_robot
     from sim.loop import poi_truth
 

@@ -207,11 +207,12 @@ def run_closed_loop(
     Parameters
     ----------
     controller
-        ``step(x, ref) -> τ_mpc`` and a ``stats`` mapping (:class:`rhmpc.mpc.RecedingHorizonMPC`).
+        ``step(x, ref) -> τ_mpc`` and a ``stats`` mapping
+        (:class:`rhmpc.control.mpc.RecedingHorizonMPC`).
     reference
         ``place(origin)``, ``refresh(tick, z, stamp)`` and ``horizons(tick, count)`` → the
         (N, 3) points of ticks tick … tick + count − 1, None before the first sample
-        (:mod:`rhmpc.reference`); the loop places it at the workspace anchor before the run.
+        (:mod:`rhmpc.control.reference`); the loop places it at the workspace anchor before the run.
     truth, center
         From :func:`poi_truth` over at least ``ticks + horizon + 1`` ticks.
     stream

@@ -1,4 +1,5 @@
-"""The URDF ships as package data: it is found after a non-editable install, not only in-tree."""
+"""The URDF ships as package data and every subpackage ships: found after a non-editable install,
+not only in-tree."""
 
 import subprocess
 import sys
@@ -16,7 +17,12 @@ def test_urdf_found_after_non_editable_install(tmp_path):
         check=True, capture_output=True, cwd=tmp_path,
     )
     (wheel,) = wheel_dir.glob("rhmpc-*.whl")
-    assert "robots/urdf/phantom_premium_1_5a.urdf" in zipfile.ZipFile(wheel).namelist()
+    names = set(zipfile.ZipFile(wheel).namelist())
+    assert "robots/urdf/phantom_premium_1_5a.urdf" in names
+    # every module of the four import packages ships, subpackages included
+    sources = {p.relative_to(REPO).as_posix() for top in ("rhmpc", "robots", "predictors", "sim")
+               for p in (REPO / top).rglob("*.py")}
+    assert sources - names == set()
     subprocess.run(
         [sys.executable, "-m", "pip", "install", "--no-deps", "-q", "--target", str(target),
          str(wheel)],

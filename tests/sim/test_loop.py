@@ -5,10 +5,10 @@ import dataclasses
 import numpy as np
 import pytest
 
-from rhmpc.config import MPCSettings
+from rhmpc.control.mpc import RecedingHorizonMPC
+from rhmpc.control.reference import ExactReference, PredictedReference
+from rhmpc.control.settings import MPCSettings
 from rhmpc.experiment import RunConfig, build_run, run_experiment
-from rhmpc.mpc import RecedingHorizonMPC
-from rhmpc.reference import ExactReference, PredictedReference
 from robots import linearize, load_robot
 from sim.loop import LoopSettings, poi_truth, run_closed_loop
 from tests.sim.stand_ins import HarmonicHeart, ideal_stream

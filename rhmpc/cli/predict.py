@@ -1,0 +1,149 @@
+"""`rhmpc predict`: the prediction studies of Yuen et al. 2008 and Tuna et al. 2013."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from pathlib import Path
+
+from predictors import PREDICTORS
+from rhmpc.errors import UsageError
+from rhmpc.studies.prediction import (
+    DEFAULT_PREDICTORS,
+    DEFAULT_TRIALS,
+    STUDIES,
+    StudySettings,
+    format_table,
+    parse_float_list,
+    plot_study,
+    run_study,
+)
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "predict",
+        help="prediction studies: noise, heart-rate step, RR-driven, horizon",
+        description="Monte Carlo prediction studies. noise / hr-step / rr reproduce Yuen et al. "
+        "2008 §III-D (Tuna et al. 2013 Figs 12-13) on mitral-1d at 28 Hz: 30 s to initialise, "
+        "then the RMS one-sample-ahead error against the truth over 10 s. horizon: RMS error "
+        "versus lead time (Tuna Fig. 8) on sonomicrometry replicas at 7.5 ms.",
+    )
+    p.add_argument("--study", required=True, choices=STUDIES, help="which study")
+    p.add_argument(
+        "--trials",
+        type=int,
+        default=None,
+        help="Monte Carlo trials per value (default 100; horizon 10)",
+    )
+    p.add_argument("--jobs", type=int, default=1, help="worker processes (default 1; 0 = all CPUs)")
+    p.add_argument("--seed", type=int, default=0, help="study seed (default 0)")
+    p.add_argument(
+        "--predictors",
+        default=None,
+        help="comma-separated predictor names (default: the study's set)",
+    )
+    p.add_argument(
+        "--noise-mm", default=None, help="σ_R values for --study noise [mm], e.g. 0.3,1,3"
+    )
+    p.add_argument("--delta-bpm", default=None, help="ΔHR values for --study hr-step [bpm]")
+    p.add_argument(
+        "--records",
+        default=None,
+        help="comma-separated PhysioNet records for --study rr (default: ../shared/data)",
+    )
+    p.add_argument("--scenarios", default=None, help="scenarios for --study horizon")
+    p.add_argument("--json", action="store_true", help="print machine-readable JSON")
+    p.add_argument("--out", type=Path, default=None, help="write the result JSON to this file")
+    p.add_argument("--plot", type=Path, default=None, help="draw the curves to this PNG file")
+    p.set_defaults(func=run)
+
+
+def _settings(args: argparse.Namespace) -> StudySettings:
+    trials = DEFAULT_TRIALS[args.study] if args.trials is None else args.trials
+    if trials < 1:
+        raise UsageError(f"--trials must be >= 1, got {trials}")
+    kw: dict = {"study": args.study, "trials": trials, "seed": args.seed}
+    if args.predictors:
+        names = tuple(n.strip() for n in args.predictors.split(",") if n.strip())
+        bad = [n for n in names if n not in PREDICTORS]
+        if bad:
+            raise UsageError(
+                f"unknown predictor(s) {', '.join(bad)}; valid: {', '.join(PREDICTORS)}"
+            )
+        if "exact" in names and args.study != "horizon":
+            raise UsageError("`exact` only makes sense in --study horizon")
+        kw["predictors"] = names
+    try:
+        if args.noise_mm:
+            kw["noise_mm"] = parse_float_list(args.noise_mm)
+        if args.delta_bpm:
+            kw["delta_bpm"] = parse_float_list(args.delta_bpm)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    if args.records:
+        recs = tuple(r.strip() for r in args.records.split(",") if r.strip())
+        missing = [
+            r for r in recs if not Path(r).with_suffix(".atr").exists() and not Path(r).is_dir()
+        ]
+        if missing:
+            raise UsageError(f"record(s) not found: {', '.join(missing)}")
+        kw["records"] = recs
+    if args.scenarios:
+        from sim.heart import SCENARIOS
+
+        scns = tuple(s.strip() for s in args.scenarios.split(",") if s.strip())
+        bad = [s for s in scns if s not in SCENARIOS]
+        if bad:
+            raise UsageError(f"unknown scenario(s) {', '.join(bad)}; valid: {', '.join(SCENARIOS)}")
+        kw["scenarios"] = scns
+    s = StudySettings(**kw)
+    if args.study == "rr" and not s.parameters():
+        raise UsageError("--study rr needs --records (nothing found in ../shared/data)")
+    return s
+
+
+def run(args: argparse.Namespace) -> int:
+    s = _settings(args)
+    jobs = (os.cpu_count() or 1) if args.jobs == 0 else args.jobs
+    if jobs < 1:
+        raise UsageError(f"--jobs must be >= 0, got {args.jobs}")
+    bar = None
+    if sys.stderr.isatty():
+        from tqdm import tqdm
+
+        bar = tqdm(
+            total=len(s.parameters()) * s.trials,
+            desc=f"predict {s.study}",
+            unit="trial",
+            file=sys.stderr,
+        )
+
+        def progress(done: int, total: int) -> None:
+            bar.update(done - bar.n)
+    else:
+
+        def progress(done: int, total: int) -> None:
+            if done == total or done % max(1, total // 10) == 0:
+                print(f"rhmpc predict: {done}/{total} trials", file=sys.stderr, flush=True)
+
+    result = run_study(s, jobs=jobs, progress=progress)
+    if bar is not None:
+        bar.close()
+    if args.out:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(json.dumps(result, indent=2))
+    if args.plot:
+        plot_study(result, args.plot)
+    if args.json:
+        print(json.dumps(result, indent=2))
+    else:
+        print(format_table(result))
+        print(
+            f"({result['elapsed_s']:.1f} s, {jobs} job(s); default predictors "
+            f"{','.join(DEFAULT_PREDICTORS[s.study])})",
+            file=sys.stderr,
+        )
+    return 0

@@ -1,1 +1,0 @@
-"""Command modules of the `rhmpc` console script, one module per subcommand."""

@@ -1,0 +1,33 @@
+"""The controller: the MPC's QP (formulated once with CasADi), the per-tick controller (OSQP,
+exact screening, fallbacks), the reference builder, and their settings.
+
+- :mod:`~rhmpc.control.settings` — :class:`MPCSettings` and the dataclass ↔ dict helpers;
+- :mod:`~rhmpc.control.qp` — the condensed QP, built once (CasADi);
+- :mod:`~rhmpc.control.mpc` — :class:`RecedingHorizonMPC`, the per-tick controller;
+- :mod:`~rhmpc.control.reference` — the N-point reference from a predictor or the true future.
+
+Imports only :mod:`robots`, :mod:`predictors`, :mod:`sim` and :mod:`rhmpc.errors`. The names
+below load on first use, so that ``rhmpc.control.settings`` stays cheap to import.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+_EXPORTS = {
+    "MPCSettings": "rhmpc.control.settings",
+    "CondensedQP": "rhmpc.control.qp",
+    "build_condensed_qp": "rhmpc.control.qp",
+    "RecedingHorizonMPC": "rhmpc.control.mpc",
+    "ExactReference": "rhmpc.control.reference",
+    "PredictedReference": "rhmpc.control.reference",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str) -> Any:
+    if name in _EXPORTS:
+        return getattr(importlib.import_module(_EXPORTS[name]), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -1,0 +1,451 @@
+"""`RecedingHorizonMPC`: the condensed, move-blocked tracking QP solved by OSQP every tick.
+
+Built once (:func:`rhmpc.control.qp.build_condensed_qp`: CasADi → numpy data → ``osqp.setup``); each
+tick then only does::
+
+    p = [x; r_1..r_N; u_{−1}]          (copy into a preallocated buffer, finiteness check)
+    ẑ* = −P⁻¹(F p + f0)                 (screening: one mat-vec; if l ≤ A ẑ* ≤ u, ẑ = ẑ*, done)
+    q = F p + f0                        (one mat-vec; l, u only if joint bounds are on)
+    solver.update(q) ; warm start (previous solution shifted one tick) ; solver.solve()
+    τ = clip(u_max ∘ ẑ_0, −u_max, u_max)   if the status is "solved", else the fallback
+
+Screening is exact, not an approximation: a minimiser of the unconstrained problem that is
+feasible satisfies the QP's KKT conditions with zero multipliers, and P ≻ 0 makes it unique.
+
+A tick whose solve is not "solved" never uses OSQP's ``x``: it applies the previous plan shifted
+to the current tick (for at most ``plan_fallback_ticks`` ticks), else the clipped unconstrained
+LQ input (precomputed gain), else zero torque, and counts the event in :attr:`stats`.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import osqp
+import scipy.sparse as sp
+
+from rhmpc.control.qp import CondensedQP, build_condensed_qp
+from rhmpc.control.settings import MPCSettings
+from robots.linearize import LinearArm
+
+_STATUS_REASON = {
+    osqp.SolverStatus.OSQP_SOLVED_INACCURATE: "solved_inaccurate",
+    osqp.SolverStatus.OSQP_PRIMAL_INFEASIBLE: "primal_infeasible",
+    osqp.SolverStatus.OSQP_PRIMAL_INFEASIBLE_INACCURATE: "primal_infeasible",
+    osqp.SolverStatus.OSQP_DUAL_INFEASIBLE: "dual_infeasible",
+    osqp.SolverStatus.OSQP_DUAL_INFEASIBLE_INACCURATE: "dual_infeasible",
+    osqp.SolverStatus.OSQP_MAX_ITER_REACHED: "max_iter",
+    osqp.SolverStatus.OSQP_TIME_LIMIT_REACHED: "time_limit",
+    osqp.SolverStatus.OSQP_NON_CVX: "non_convex",
+    osqp.SolverStatus.OSQP_SIGINT: "interrupted",
+    osqp.SolverStatus.OSQP_UNSOLVED: "unsolved",
+}
+_SOLVED = int(osqp.SolverStatus.OSQP_SOLVED)
+#: Failures whose iterate is carried over to the next tick's warm start.
+_CONTINUE = frozenset({"max_iter", "time_limit", "solved_inaccurate", "injected"})
+
+#: Failure reasons counted in :attr:`MPCStats.failures` besides OSQP's statuses.
+EXTRA_REASONS = ("nonfinite_input", "nonfinite_solution", "solver_error", "injected")
+
+
+@dataclass
+class MPCStats:
+    """What the controller did: the last tick, and counters since construction or :meth:`reset`.
+
+    Attributes
+    ----------
+    ticks : int
+        Number of :meth:`RecedingHorizonMPC.step` calls.
+    status : str
+        Last tick: ``"solved"`` or the failure reason (an OSQP status such as ``"max_iter"``,
+        ``"time_limit"``, ``"primal_infeasible"``, or ``"nonfinite_input"``,
+        ``"nonfinite_solution"``, ``"solver_error"``, ``"injected"``).
+    source : str
+        Where the last torque came from: ``"qp"``, ``"plan"``, ``"lq"`` or ``"zero"``.
+    iterations : int
+        OSQP iterations of the last tick (0 if no solve ran).
+    screened : int
+        Ticks solved by screening, without calling OSQP (their ``source`` is ``"qp"``).
+    solve_time : float
+        Wall time of the last ``solve()`` call [s].
+    parts_ns : list[int]
+        Last tick's phases [ns]: reference handling, vector update (incl. warm start), OSQP solve,
+        output (status check, clipping, bookkeeping).
+    failures : dict[str, int]
+        Ticks whose QP result was not used, by reason.
+    fallbacks : dict[str, int]
+        Ticks served by each fallback: ``"plan"``, ``"lq"``, ``"zero"``.
+    """
+
+    ticks: int = 0
+    status: str = "none"
+    source: str = "none"
+    iterations: int = 0
+    screened: int = 0
+    solve_time: float = 0.0
+    parts_ns: list[int] = field(default_factory=lambda: [0, 0, 0, 0])
+    failures: dict[str, int] = field(default_factory=dict)
+    fallbacks: dict[str, int] = field(
+        default_factory=lambda: {"plan": 0, "lq": 0, "zero": 0}
+    )
+
+    @property
+    def fallback_total(self) -> int:
+        """Ticks that did not apply the QP solution."""
+        return sum(self.fallbacks.values())
+
+
+class RecedingHorizonMPC:
+    """Receding-horizon MPC for the linearised arm, tracking N end-effector reference points.
+
+    Parameters
+    ----------
+    arm : LinearArm
+        Discrete model x⁺ = A x + B u, y = C x + y0 (``robots.linearize``).
+    settings : MPCSettings
+        Horizon, weights, bounds and solver settings (see
+        :class:`rhmpc.control.settings.MPCSettings` for the cost and constraints).
+
+    Raises
+    ------
+    ValueError
+        At build time, if the settings do not fit the arm (see :func:`build_condensed_qp`).
+
+    Notes
+    -----
+    ``step(x, ref)`` takes ``x`` (nx,) = [q − q0; q̇] [rad, rad/s] and ``ref`` (N, 3) absolute
+    end-effector positions r_1..r_N for the next N ticks [m], and returns τ_mpc (nu,) [N·m],
+    always finite and within ``±u_max``. Non-finite inputs raise nothing: they take the fallback.
+    """
+
+    def __init__(self, arm: LinearArm, settings: MPCSettings | None = None) -> None:
+        self.settings = settings if settings is not None else MPCSettings()
+        if not isinstance(self.settings, MPCSettings):
+            raise ValueError(f"settings must be MPCSettings, got {type(self.settings).__name__}")
+        self.arm = arm
+        self.qp: CondensedQP = build_condensed_qp(arm, self.settings)
+        qp = self.qp
+        self.N, self.nx, self.nu, self.ny = qp.N, qp.nx, qp.nu, qp.ny
+        self.u_max = qp.u_max.copy()
+        self.u_max.setflags(write=False)
+        self._ws = self.settings.warm_start
+        self._ws_dual = self._ws == "shift"
+
+        # -- per-tick buffers and views ------------------------------------------------------
+        # One mat-vec per tick gives q: p_ext = [p; 1], F_ext = [F, f0], q = F_ext p_ext. The
+        # finiteness check before it is p_extᵀp_ext (squares: no inf − inf, so no FP warning).
+        nx, N, ny, nz = self.nx, self.N, self.ny, qp.nz
+        self._p_ext = np.zeros(qp.npar + 1)
+        self._p_ext[-1] = 1.0
+        self._p = self._p_ext[:-1]
+        self._p_x = self._p_ext[:nx]
+        self._p_r = self._p_ext[nx:nx + N * ny]
+        self._p_r2 = self._p_r.reshape(N, ny)  # a view: ref is copied in without a reshape
+        self._p_u = self._p_ext[nx + N * ny:-1]
+        self._x_shape, self._ref_shape = (nx,), (N, ny)
+        self._F_ext = np.ascontiguousarray(np.column_stack([qp.F, qp.f0]))
+        self._q = np.empty(nz)
+        self._l = qp.l0.copy()
+        self._u = qp.u0.copy()
+        self._g = np.empty(qp.A.shape[0])
+        self._G = qp.G
+        self._shift, self._shift_dual = qp.shift, qp.shift_dual
+        self._scale0 = qp.u_max.copy()
+        self._gain, self._gain0 = qp.gain, qp.gain0
+        self._screen = self.settings.screening
+        self._Z_ext = np.ascontiguousarray(qp.minimiser)
+        self._z_star = np.empty(nz)
+        self._z_abs = np.empty(nz)
+        self._y_zero = np.zeros(qp.A.shape[0])
+        self._neg_umax = -qp.u_max
+        self._nu_ = self.nu
+
+        self._setup_solver()
+        self.stats = MPCStats()
+        self.reset()
+
+    # -- solver ------------------------------------------------------------------------------
+    def _setup_solver(self) -> None:
+        s, qp = self.settings, self.qp
+        self._osqp = osqp.OSQP()
+        extra = {"time_limit": s.time_limit} if s.time_limit > 0 else {}
+        self._osqp.setup(
+            sp.csc_matrix(np.triu(qp.P)), qp.f0.copy(), sp.csc_matrix(qp.A), qp.l0.copy(),
+            qp.u0.copy(), verbose=False, eps_abs=s.eps_abs, eps_rel=s.eps_rel,
+            max_iter=s.max_iter, rho=s.rho,
+            adaptive_rho=s.adaptive_rho, adaptive_rho_interval=s.adaptive_rho_interval,
+            adaptive_rho_tolerance=s.adaptive_rho_tolerance, check_termination=s.check_termination,
+            check_dualgap=s.check_dualgap,
+            polishing=s.polish, scaling=s.scaling, warm_starting=s.warm_start != "none", **extra,
+        )
+        # The public OSQP.solve() wraps every result in namespaces (~10 µs per call); the
+        # extension object underneath is used directly when it is there.
+        self._raw = getattr(self._osqp, "_solver", None)
+
+    def _update_q(self) -> None:
+        if self._raw is not None:
+            if self.qp.param_bounds:
+                self._raw.update_data_vec(q=self._q, l=self._l, u=self._u)
+            else:
+                self._raw.update_data_vec(q=self._q, l=None, u=None)
+        elif self.qp.param_bounds:
+            self._osqp.update(q=self._q, l=self._l, u=self._u)
+        else:
+            self._osqp.update(q=self._q)
+
+    def _warm_start(self, x: np.ndarray, y: np.ndarray | None) -> None:
+        if self._raw is not None:
+            self._raw.warm_start(x, y)
+        else:
+            self._osqp.warm_start(x=x, y=y)
+
+    def _solve(self) -> tuple[int, int, np.ndarray, np.ndarray | None]:
+        if self._raw is not None:
+            raw = self._raw
+            raw.solve()
+            info, sol = raw.info, raw.solution
+            return info.status_val, info.iter, sol.x, sol.y if self._ws_dual else None
+        res = self._osqp.solve(raise_error=False)
+        return res.info.status_val, res.info.iter, res.x, res.y
+
+    # -- public API --------------------------------------------------------------------------
+    def reset(self, u_prev: np.ndarray | None = None) -> None:
+        """Forget the plan and warm start, zero the counters, and set u_{−1} (default 0) [N·m].
+
+        A non-zero ``u_prev`` gives a bumpless start when the MPC takes over from another
+        controller (the rate term R_Δ penalises the change from it).
+        """
+        # u_{−1}: the last returned torque lives in the parameter buffer.
+        self._p_u[:] = 0.0 if u_prev is None else np.clip(u_prev, -self.u_max, self.u_max)
+        self._plan: np.ndarray | None = None  # (nz,) normalised block inputs of the last good solve
+        self._plan_age = 0
+        self._ws_x: np.ndarray | None = None
+        self._ws_y: np.ndarray | None = None
+        self._forced: list[str] = []
+        self._last_screened = False
+        self._ws_pending = False
+        self.stats = MPCStats()
+        zeros = np.zeros(self.qp.nz)
+        self._osqp.warm_start(x=zeros, y=self._y_zero)
+
+    def force_failures(self, count: int = 1, reason: str = "injected") -> None:
+        """Make the next ``count`` solves report failure ``reason`` (tests, fault injection).
+
+        The solve still runs (timing stays realistic); its result is discarded as for a real
+        failure and the fallback is applied.
+        """
+        if count < 0:
+            raise ValueError(f"count must be >= 0, got {count}")
+        self._forced.extend([reason] * int(count))
+
+    def params(
+        self, x: np.ndarray, ref: np.ndarray, u_prev: np.ndarray | None = None
+    ) -> np.ndarray:
+        """QP parameter vector p = [x; r_1..r_N; u_{−1}] (u_{−1} defaults to the last output)."""
+        up = self._p_u if u_prev is None else u_prev
+        return self.qp.params(np.asarray(x, float), np.asarray(ref, float), np.asarray(up, float))
+
+    def qp_vectors(
+        self, x: np.ndarray, ref: np.ndarray, u_prev: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(q, l, u) of the QP the controller would solve for ``x``, ``ref`` (P, A: ``self.qp``)."""
+        p = self.params(x, ref, u_prev)
+        return (self.qp.q(p), *self.qp.bounds(p))
+
+    def last_solution(self) -> tuple[np.ndarray, np.ndarray]:
+        """Primal ẑ and dual y of the last tick's QP, as copies.
+
+        After a screened tick: (ẑ*, 0); otherwise OSQP's last iterate, whatever its status.
+        """
+        if self._last_screened:
+            return self._z_star.copy(), self._y_zero.copy()
+        if self._raw is not None:
+            sol = self._raw.solution
+            return np.array(sol.x, dtype=float), np.array(sol.y, dtype=float)
+        res = self._osqp._derivative_cache.get("results")  # public API fallback
+        if res is None:
+            raise RuntimeError("no solve has run yet")
+        return np.array(res.x, dtype=float), np.array(res.y, dtype=float)
+
+    @property
+    def u_prev(self) -> np.ndarray:
+        """The torque returned by the last tick (u_{−1} of the next QP) [N·m].
+
+        Assign to it when another torque than the returned one acted (e.g. another controller
+        ran this tick); the value is clipped to ±u_max. Non-finite values raise ``ValueError``.
+        """
+        return self._p_u.copy()
+
+    @u_prev.setter
+    def u_prev(self, value: np.ndarray) -> None:
+        value = np.asarray(value, dtype=float)
+        if value.shape != (self.nu,) or not np.all(np.isfinite(value)):
+            raise ValueError(f"u_prev must be {self.nu} finite torques [N·m], got {value!r}")
+        self._p_u[:] = np.clip(value, -self.u_max, self.u_max)
+
+    def unconstrained(
+        self, x: np.ndarray, ref: np.ndarray, u_prev: np.ndarray | None = None
+    ) -> np.ndarray:
+        """First input of the unconstrained minimiser, not clipped [N·m] (the LQ fallback)."""
+        return self._gain @ self.params(x, ref, u_prev) + self._gain0
+
+    def step(self, x: np.ndarray, ref: np.ndarray) -> np.ndarray:
+        """One control tick: MPC torque τ_mpc (nu,) [N·m] for state ``x`` and reference ``ref``.
+
+        Raises
+        ------
+        ValueError
+            Only for wrong shapes (a programming error); never for non-finite values.
+        """
+        clock = time.perf_counter_ns
+        t0 = clock()
+        stats = self.stats
+        stats.ticks += 1
+        x = np.asarray(x, dtype=float)
+        ref = np.asarray(ref, dtype=float)
+        if x.shape != self._x_shape or ref.shape != self._ref_shape:
+            raise ValueError(
+                f"step expects x {self._x_shape} and ref {self._ref_shape}, "
+                f"got {x.shape}, {ref.shape}"
+            )
+        self._p_x[:] = x
+        self._p_r2[...] = ref
+        p_ext = self._p_ext
+        if not math.isfinite(np.dot(p_ext, p_ext)):  # NaN, ±inf (or absurd > 1e154)
+            t1 = clock()
+            stats.parts_ns[:] = [t1 - t0, 0, 0, 0]
+            stats.iterations = 0
+            stats.solve_time = 0.0
+            return self._fallback("nonfinite_input", inputs_finite=False)
+
+        if self.qp.param_bounds:
+            np.dot(self._G, self._p, out=self._g)
+            np.subtract(self.qp.l0, self._g, out=self._l)
+            np.subtract(self.qp.u0, self._g, out=self._u)
+        if self._screen and not self._forced and self._screened(p_ext):
+            return self._screened_output(t0)
+        self._last_screened = False
+        np.dot(self._F_ext, p_ext, out=self._q)
+        t1 = clock()
+        try:
+            self._update_q()
+            if self._ws_pending:
+                self._ws_x, self._ws_y = self._shift @ self._plan, self._y_zero
+                self._ws_pending = False
+            if self._ws_x is not None:
+                self._warm_start(self._ws_x, self._ws_y)
+                self._ws_x = self._ws_y = None
+            t2 = clock()
+            status, iters, z, y = self._solve()
+        except Exception:  # the loop must survive any solver error
+            t2 = clock()
+            stats.parts_ns[:] = [t1 - t0, t2 - t1, 0, 0]
+            stats.iterations = 0
+            stats.solve_time = 0.0
+            return self._fallback("solver_error", inputs_finite=True)
+        t3 = clock()
+        stats.iterations = iters
+        stats.solve_time = (t3 - t2) * 1e-9
+
+        if self._forced:
+            reason = self._forced.pop(0)
+        elif status != _SOLVED:
+            reason = _STATUS_REASON.get(status, f"status_{status}")
+        else:
+            reason = None
+        if reason is None:
+            tau = z[: self._nu_] * self._scale0
+            if not math.isfinite(np.dot(tau, tau)):
+                reason = "nonfinite_solution"
+        if reason is not None:
+            out = self._fallback(reason, inputs_finite=True)
+            if reason in _CONTINUE and self._ws != "none":
+                # An unfinished solve is a good start for the next, nearly identical QP: carry
+                # the ADMM iterate over instead of restarting from the old plan.
+                z, y = self.last_solution()
+                if not (np.isfinite(z).all() and np.isfinite(y).all()):
+                    pass
+                elif self._ws != "keep":
+                    self._ws_x = self._shift @ z
+                    self._ws_y = self._shift_dual @ y
+                else:
+                    self._ws_x = None  # "keep": OSQP's own iterate
+            stats.parts_ns[:] = [t1 - t0, t2 - t1, t3 - t2, clock() - t3]
+            return out
+
+        np.maximum(tau, self._neg_umax, out=tau)
+        np.minimum(tau, self.u_max, out=tau)
+        self._p_u[:] = tau  # u_{−1} of the next tick (a copy: the caller owns tau)
+        self._plan = z  # a fresh array from OSQP on every access of solution.x
+        self._plan_age = 0
+        ws = self._ws
+        if ws == "shift":
+            self._ws_x = self._shift @ z
+            self._ws_y = self._shift_dual @ y
+        elif ws == "shift_primal":
+            self._ws_x = self._shift @ z
+        stats.status = "solved"
+        stats.source = "qp"
+        stats.parts_ns[:] = [t1 - t0, t2 - t1, t3 - t2, clock() - t3]
+        return tau
+
+    def _screened_output(self, t0: int) -> np.ndarray:
+        """τ from the screened ẑ* (the QP's solution): bookkeeping of a tick without OSQP."""
+        z = self._z_star.copy()
+        tau = z[: self._nu_] * self._scale0
+        self._p_u[:] = tau
+        self._plan = z
+        self._plan_age = 0
+        # The next OSQP solve starts from this plan shifted (computed only when it runs); all
+        # multipliers are zero here.
+        self._ws_pending = self._ws != "none"
+        self._last_screened = True
+        stats = self.stats
+        stats.iterations = 0
+        stats.solve_time = 0.0
+        stats.screened += 1
+        stats.status = "solved"
+        stats.source = "qp"
+        stats.parts_ns[0] = time.perf_counter_ns() - t0
+        stats.parts_ns[1] = stats.parts_ns[2] = stats.parts_ns[3] = 0
+        return tau
+
+    def _screened(self, p_ext: np.ndarray) -> bool:
+        """Compute ẑ* = −P⁻¹ q(p); True if it satisfies every constraint (then it is the QP's ẑ)."""
+        z = np.dot(self._Z_ext, p_ext, out=self._z_star)
+        if not self.qp.param_bounds:  # A = I, l = −1, u = 1: the normalised torque bounds
+            return bool(np.abs(z, out=self._z_abs).max() <= 1.0)
+        g = np.dot(self.qp.A, z, out=self._g)
+        return bool((g - self._u).max() <= 0.0 and (self._l - g).max() <= 0.0)
+
+    # -- fallback ------------------------------------------------------------------------------
+    def _fallback(self, reason: str, *, inputs_finite: bool) -> np.ndarray:
+        stats = self.stats
+        stats.status = reason
+        stats.failures[reason] = stats.failures.get(reason, 0) + 1
+        self._plan_age += 1
+        tau = None
+        if self._plan is not None and self._plan_age <= self.settings.plan_fallback_ticks:
+            k = min(self._plan_age, self.N - 1)
+            b = self.qp.block_of_tick[k]
+            tau = self._plan[b * self.nu:(b + 1) * self.nu] * self._scale0
+            source = "plan"
+        if tau is None and inputs_finite:
+            tau = self._gain @ self._p + self._gain0
+            source = "lq"
+        if tau is None or not np.all(np.isfinite(tau)):
+            tau = np.zeros(self.nu)
+            source = "zero"
+        tau = np.clip(tau, self._neg_umax, self.u_max)
+        stats.source = source
+        stats.fallbacks[source] += 1
+        self._p_u[:] = tau
+        # Next warm start: the plan shifted to the next tick (or cold if there is none).
+        self._ws_pending = False
+        if self._plan is not None and self._ws != "none":
+            self._ws_x = self._shift @ self._plan
+            self._ws_y = self._y_zero
+        return tau

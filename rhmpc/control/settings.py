@@ -1,0 +1,240 @@
+"""Settings of the application: frozen dataclasses with their units, and TOML-friendly helpers.
+
+Every field carries its unit in the class docstring. Settings are validated when they are
+constructed (what can be checked without a robot) and again when a controller is built (what
+depends on the robot, e.g. the torque limits left after the cancellation margin).
+
+:func:`to_dict` / :func:`from_dict` convert a settings object to and from a plain ``dict`` of
+TOML-representable values (tuples become lists, ``None`` fields are left out).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import Any, TypeVar
+
+#: Default move-blocking of the MPC inputs [ticks]: short blocks first, longer ones towards the end
+#: of the 50-tick horizon; 10 blocks (30 QP variables for 3 joints), sum 50.
+DEFAULT_BLOCKS: tuple[int, ...] = (2, 2, 3, 3, 4, 5, 6, 7, 8, 10)
+
+WARM_STARTS: tuple[str, ...] = ("shift", "shift_primal", "keep", "none")
+TERMINALS: tuple[str, ...] = ("none", "dare")
+
+
+def _finite(name: str, value: float, *, positive: bool = False, nonneg: bool = False) -> None:
+    if not isinstance(value, int | float) or isinstance(value, bool) or not math.isfinite(value):
+        raise ValueError(f"{name} must be a finite number, got {value!r}")
+    if positive and not value > 0:
+        raise ValueError(f"{name} must be > 0, got {value!r}")
+    if nonneg and not value >= 0:
+        raise ValueError(f"{name} must be >= 0, got {value!r}")
+
+
+def _integer(name: str, value: int, minimum: int) -> None:
+    if not isinstance(value, int) or isinstance(value, bool) or value < minimum:
+        raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
+
+
+@dataclass(frozen=True)
+class MPCSettings:
+    """Settings of :class:`rhmpc.control.mpc.RecedingHorizonMPC`.
+
+    The QP solved every tick (``x`` = [q − q0; q̇], ``u`` = τ_mpc, ``y`` = C x + y0)::
+
+        min  Σ_{k=1..N} ‖y_k − r_k‖²_{Q_k} + Σ_{k=0..N−1} ‖u_k‖²_R + ‖u_k − u_{k−1}‖²_{R_Δ}
+             (+ ‖x_N − x_ss(r_N)‖²_{P_∞ − CᵀQ_N C}  if terminal == "dare")
+        s.t. x_{k+1} = A x_k + B u_k,  |u_k| ≤ u_max = (1 − torque_margin) τ_max,
+             u_k constant over each move block,  joint_lower ≤ q_k ≤ joint_upper (optional)
+
+    with ``Q_k = tracking_weight · w_k / position_scale² · I``, ``R = effort_weight ·
+    diag(u_max)⁻²``, ``R_Δ = rate_weight · diag(u_max)⁻²`` (all costs dimensionless).
+
+    Attributes
+    ----------
+    horizon : int
+        N, number of predicted ticks and of reference points [ticks].
+    blocks : tuple[int, ...] | None
+        Move-blocking: lengths of the intervals over which the input is held [ticks]; they must
+        sum to ``horizon``. ``None`` = no blocking (one free input per tick).
+    position_scale : float
+        Position error that costs 1 (per point, before weights) [m].
+    tracking_weight : float
+        Weight of the tracking term [-].
+    point_weights : tuple[float, ...] | None
+        Per-point multipliers w_1..w_N of Q_k (e.g. prediction confidence) [-]; ``None`` = all 1.
+    effort_weight : float
+        Weight of ‖u/u_max‖² per tick [-].
+    rate_weight : float
+        Weight of ‖(u_k − u_{k−1})/u_max‖² per tick; u_{−1} is the previous applied τ_mpc [-].
+    terminal : str
+        ``"none"`` or ``"dare"``: terminal weight that completes the infinite-horizon LQ cost-to-go
+        P_∞ (discrete algebraic Riccati equation for CᵀQ_N C, R), about the steady state
+        x_ss = [C_q⁺ (r_N − y0); 0].
+    torque_margin : float
+        Fraction of each joint's torque limit reserved for the nonlinearity cancellation [-].
+    joint_lower, joint_upper : tuple[float, ...] | None
+        Optional absolute joint position bounds [rad], imposed on the predicted q at the end of
+        each move block. Hard constraints: if they cannot be met the tick falls back.
+    eps_abs, eps_rel : float
+        OSQP termination tolerances (on the scaled problem, inputs normalised by u_max) [-].
+    max_iter : int
+        OSQP iteration cap per tick [-].
+    time_limit : float
+        OSQP wall-clock limit per solve [s]; 0 disables.
+    rho : float
+        OSQP ADMM step size [-].
+    adaptive_rho : bool
+        Let OSQP adapt rho (each change refactorises the KKT matrix inside the tick).
+    adaptive_rho_interval : int
+        Iterations between rho adaptations; 0 = OSQP's automatic choice, which depends on
+        measured setup time and so is not reproducible [-].
+    adaptive_rho_tolerance : float
+        Rho is only changed when the new estimate differs by more than this factor [-].
+    check_termination : int
+        OSQP checks its residuals every this many iterations [-].
+    check_dualgap : bool
+        OSQP also requires the duality gap to be below the tolerance to stop.
+    polish : bool
+        OSQP solution polishing (an extra reduced KKT factorisation per tick).
+    scaling : int
+        OSQP Ruiz equilibration iterations (0 = rely on the physical scaling) [-].
+    warm_start : str
+        ``"shift"`` (previous primal and dual shifted one tick), ``"shift_primal"`` (primal
+        shifted, OSQP's dual kept), ``"keep"`` (OSQP's previous iterate as is) or ``"none"``
+        (cold start every tick).
+    screening : bool
+        Try the unconstrained minimiser first: ẑ* = −P⁻¹ q(p) is one mat-vec with a matrix
+        factorised at build time, and if l ≤ A ẑ* ≤ u it *is* the QP's solution (the KKT
+        conditions hold with zero multipliers), so OSQP is not called. OSQP solves every tick on
+        which a constraint would be violated. ``False`` calls OSQP on every tick.
+    plan_fallback_ticks : int
+        After a failed solve, the previous plan (shifted) is used for at most this many ticks
+        since it was computed; later failures use the clipped unconstrained LQ solution [ticks].
+    """
+
+    horizon: int = 50
+    blocks: tuple[int, ...] | None = DEFAULT_BLOCKS
+    position_scale: float = 1e-3
+    tracking_weight: float = 1.0
+    point_weights: tuple[float, ...] | None = None
+    effort_weight: float = 1e-4
+    rate_weight: float = 0.1
+    terminal: str = "none"
+    torque_margin: float = 0.25
+    joint_lower: tuple[float, ...] | None = None
+    joint_upper: tuple[float, ...] | None = None
+    eps_abs: float = 1e-3
+    eps_rel: float = 0.0
+    max_iter: int = 100
+    time_limit: float = 0.0
+    rho: float = 3.0
+    adaptive_rho: bool = False
+    adaptive_rho_interval: int = 25
+    adaptive_rho_tolerance: float = 5.0
+    check_termination: int = 5
+    check_dualgap: bool = True
+    polish: bool = False
+    scaling: int = 0
+    warm_start: str = "shift_primal"
+    screening: bool = True
+    plan_fallback_ticks: int = 10
+
+    def __post_init__(self) -> None:
+        for name in ("blocks", "point_weights", "joint_lower", "joint_upper"):
+            value = getattr(self, name)
+            if value is not None:
+                object.__setattr__(self, name, tuple(value))
+        _integer("horizon", self.horizon, 1)
+        if self.blocks is not None:
+            if len(self.blocks) == 0:
+                raise ValueError("blocks must not be empty (use None for no blocking)")
+            for b in self.blocks:
+                _integer("each move block", b, 1)
+            if sum(self.blocks) != self.horizon:
+                raise ValueError(
+                    f"move blocks must sum to the horizon {self.horizon}, got {sum(self.blocks)}"
+                )
+        _finite("position_scale", self.position_scale, positive=True)
+        _finite("tracking_weight", self.tracking_weight, positive=True)
+        if self.point_weights is not None:
+            if len(self.point_weights) != self.horizon:
+                raise ValueError(
+                    f"point_weights must have {self.horizon} entries, got {len(self.point_weights)}"
+                )
+            for w in self.point_weights:
+                _finite("each point weight", w, nonneg=True)
+            if not any(w > 0 for w in self.point_weights):
+                raise ValueError("at least one point weight must be > 0")
+        _finite("effort_weight", self.effort_weight, nonneg=True)
+        _finite("rate_weight", self.rate_weight, nonneg=True)
+        if self.terminal not in TERMINALS:
+            raise ValueError(f"terminal must be one of {TERMINALS}, got {self.terminal!r}")
+        _finite("torque_margin", self.torque_margin, nonneg=True)
+        if self.torque_margin >= 1:
+            raise ValueError(f"torque_margin must be < 1 (a fraction), got {self.torque_margin}")
+        if (self.joint_lower is None) != (self.joint_upper is None):
+            raise ValueError("give both joint_lower and joint_upper, or neither")
+        if self.joint_lower is not None:
+            if len(self.joint_lower) != len(self.joint_upper):
+                raise ValueError("joint_lower and joint_upper must have the same length")
+            for lo, hi in zip(self.joint_lower, self.joint_upper, strict=True):
+                _finite("joint bound", lo)
+                _finite("joint bound", hi)
+                if not lo < hi:
+                    raise ValueError(f"joint_lower must be < joint_upper, got {lo} >= {hi}")
+        _finite("eps_abs", self.eps_abs, nonneg=True)
+        _finite("eps_rel", self.eps_rel, nonneg=True)
+        if self.eps_abs == 0 and self.eps_rel == 0:
+            raise ValueError("eps_abs and eps_rel cannot both be 0")
+        _integer("max_iter", self.max_iter, 1)
+        _finite("time_limit", self.time_limit, nonneg=True)
+        _finite("rho", self.rho, positive=True)
+        _integer("check_termination", self.check_termination, 1)
+        _integer("adaptive_rho_interval", self.adaptive_rho_interval, 0)
+        _finite("adaptive_rho_tolerance", self.adaptive_rho_tolerance, positive=True)
+        if self.adaptive_rho_tolerance < 1:
+            raise ValueError("adaptive_rho_tolerance must be >= 1")
+        _integer("scaling", self.scaling, 0)
+        if self.warm_start not in WARM_STARTS:
+            raise ValueError(f"warm_start must be one of {WARM_STARTS}, got {self.warm_start!r}")
+        _integer("plan_fallback_ticks", self.plan_fallback_ticks, 0)
+        for name in ("adaptive_rho", "check_dualgap", "polish", "screening"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"{name} must be true or false, got {getattr(self, name)!r}")
+
+    @property
+    def block_lengths(self) -> tuple[int, ...]:
+        """Move-block lengths [ticks]; all ones when blocking is off."""
+        return self.blocks if self.blocks is not None else (1,) * self.horizon
+
+
+S = TypeVar("S")
+
+
+def to_dict(settings: Any) -> dict[str, Any]:
+    """Settings dataclass → TOML-friendly ``dict`` (tuples → lists, ``None`` fields dropped)."""
+    out: dict[str, Any] = {}
+    for f in dataclasses.fields(settings):
+        value = getattr(settings, f.name)
+        if value is None:
+            continue
+        out[f.name] = list(value) if isinstance(value, tuple) else value
+    return out
+
+
+def from_dict(cls: type[S], data: dict[str, Any]) -> S:
+    """``dict`` (e.g. a parsed TOML table) → settings dataclass ``cls``.
+
+    Raises
+    ------
+    ValueError
+        On unknown keys or values the dataclass rejects.
+    """
+    names = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(data) - names)
+    if unknown:
+        raise ValueError(f"unknown {cls.__name__} setting(s): {', '.join(unknown)}")
+    kwargs = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items()}
+    return cls(**kwargs)

@@ -1,0 +1,361 @@
+"""Per-tick timing benchmark of the MPC, with two references measured in the same run.
+
+The controller runs alone, in closed loop with its own linear model (x⁺ = A x + B τ, not timed),
+on a moving heart-like reference with occasional reference jumps that saturate the torque
+bounds (so that the QP has active constraints). Every tick measures, with
+``time.perf_counter_ns``:
+
+* the MPC tick ``mpc.step(x, r)`` (whole call) with the given settings (by default screening
+  on: OSQP runs only on ticks where the unconstrained minimiser violates a bound);
+* the same MPC with OSQP on *every* tick (``screening=False``), whole call and its parts
+  (``mpc.stats.parts_ns``), fed the same state and reference;
+* a *gain tick*: the same parameter handling plus the precomputed unconstrained gain, clipped —
+  the floor of what any controller in Python costs here;
+* an *exact tick*: the same QP (same P, q, A, l, u) solved by the active-set solver DAQP,
+  hot-started from its previous active set. Its u0 is the accuracy reference:
+  ``u0_error = |u0_mpc − u0_exact| / τ_max`` per joint (τ_max = the robot's torque limit).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import gc
+import math
+import platform
+import time
+from collections.abc import Callable
+from importlib.metadata import version as _version
+
+import numpy as np
+
+from rhmpc.control.mpc import RecedingHorizonMPC
+from rhmpc.control.settings import MPCSettings, to_dict
+from robots import linearize, load_robot
+from robots.linearize import LinearArm
+
+
+def heart_like_reference(
+    n: int,
+    Ts: float,
+    rng: np.random.Generator,
+    center: np.ndarray,
+    *,
+    heart_pp: float = 8e-3,
+    heart_rate: float = 1.66,
+    harmonics: int = 4,
+    breathing_pp: float = 4e-3,
+    breathing_rate: float = 0.17,
+    jump: float = 0.0,
+    jump_every: int = 0,
+) -> np.ndarray:
+    """Synthetic point-of-interest positions p(k·Ts), shape (n, 3) [m].
+
+    Per axis a, with random phases φ from ``rng``::
+
+        p_a(t) = c_a + d_a · heart_pp · h_a(t) + breathing_a(t) + jumps_a(t)
+        h_a(t) ∝ Σ_{i=1..harmonics+1} i^−1.2 cos(2π i f t + φ_{a,i}),  scaled to 1 peak-to-peak
+
+    with d = (1, 0.6, 0.4), breathing (sinusoid at ``breathing_rate`` [Hz], ``breathing_pp`` [m]
+    on x, half of it on z) and, if ``jump_every`` > 0 [ticks], a step of ``jump`` [m] in a random
+    direction every ``jump_every`` ticks (alternating out and back).
+    """
+    t = np.arange(n) * Ts
+    amps = 1.0 / np.arange(1, harmonics + 2) ** 1.2
+    dirs = (1.0, 0.6, 0.4)
+    out = np.empty((n, 3))
+    for a in range(3):
+        phases = rng.uniform(0.0, 2 * np.pi, harmonics + 1)
+        s = sum(
+            amps[i] * np.cos(2 * np.pi * (i + 1) * heart_rate * t + phases[i])
+            for i in range(harmonics + 1)
+        )
+        out[:, a] = dirs[a] * heart_pp * s / (s.max() - s.min())
+    breath = 0.5 * breathing_pp * np.sin(2 * np.pi * breathing_rate * t)
+    out[:, 0] += breath
+    out[:, 2] += 0.5 * breath
+    if jump_every > 0 and jump > 0:
+        offset = np.zeros(3)
+        for i, k in enumerate(range(jump_every, n, jump_every)):
+            if i % 2 == 0:
+                d = rng.normal(size=3)
+                offset = jump * d / np.linalg.norm(d)
+                out[k:] += offset
+            else:
+                out[k:] -= offset
+    return np.asarray(center, dtype=float) + out
+
+
+class GainTick:
+    """Reference 1: the precomputed unconstrained gain, clipped (same parameter handling)."""
+
+    def __init__(self, mpc: RecedingHorizonMPC) -> None:
+        qp = mpc.qp
+        self._p = np.zeros(qp.npar)
+        self._nx, self._nr = qp.nx, qp.N * qp.ny
+        self._K, self._k0 = qp.gain, qp.gain0
+        self._lo, self._hi = -qp.u_max, qp.u_max
+
+    def __call__(self, x: np.ndarray, ref: np.ndarray, u_prev: np.ndarray) -> np.ndarray:
+        p = self._p
+        p[: self._nx] = x
+        p[self._nx : self._nx + self._nr] = ref.reshape(-1)
+        p[self._nx + self._nr :] = u_prev
+        if not math.isfinite(p.sum()):
+            return np.zeros_like(self._k0)
+        u = self._K @ p
+        u += self._k0
+        np.maximum(u, self._lo, out=u)
+        return np.minimum(u, self._hi, out=u)
+
+
+class ExactTick:
+    """Reference 2: the same QP solved exactly by DAQP (active set, hot-started)."""
+
+    def __init__(self, mpc: RecedingHorizonMPC) -> None:
+        try:
+            import daqp
+        except ImportError:
+            raise ValueError(
+                "the exact reference needs the daqp package (an rhmpc dependency: pip install daqp)"
+            ) from None
+        qp = mpc.qp
+        if qp.param_bounds:
+            raise ValueError("the exact reference supports torque bounds only (no joint bounds)")
+        self._qp = qp
+        self._p = np.zeros(qp.npar)
+        self._f = np.empty(qp.nz)
+        self._nx, self._nr, self._nu = qp.nx, qp.N * qp.ny, qp.nu
+        self._lo = -qp.u_max
+        self._model = daqp.Model()
+        # All constraints are simple bounds on ẑ: DAQP takes them without a constraint matrix.
+        exitflag, _ = self._model.setup(
+            qp.P, qp.f0.copy(), np.zeros((0, qp.nz)), qp.u0.copy(), qp.l0.copy()
+        )
+        if exitflag < 0:
+            raise ValueError(f"DAQP setup failed with exit flag {exitflag}")
+        self.iterations = 0
+        self.exitflag = 1
+        self.zhat = np.zeros(qp.nz)
+
+    def __call__(self, x: np.ndarray, ref: np.ndarray, u_prev: np.ndarray) -> np.ndarray:
+        p = self._p
+        p[: self._nx] = x
+        p[self._nx : self._nx + self._nr] = ref.reshape(-1)
+        p[self._nx + self._nr :] = u_prev
+        np.dot(self._qp.F, p, out=self._f)
+        self._f += self._qp.f0
+        self._model.update(f=self._f)
+        z, _, exitflag, info = self._model.solve()
+        self.exitflag, self.iterations, self.zhat = exitflag, info["iterations"], z
+        u = z[: self._nu] * self._qp.u_max
+        np.maximum(u, self._lo, out=u)
+        return np.minimum(u, self._qp.u_max, out=u)
+
+
+def _pct(values: np.ndarray) -> dict[str, float]:
+    return {
+        "p50": float(np.percentile(values, 50)),
+        "p99": float(np.percentile(values, 99)),
+        "max": float(np.max(values)),
+        "mean": float(np.mean(values)),
+    }
+
+
+def _ratio(a: np.ndarray, b: np.ndarray) -> dict[str, float]:
+    return {
+        "p50": float(np.median(a) / np.median(b)),
+        "p99": float(np.percentile(a, 99) / np.percentile(b, 99)),
+    }
+
+
+def run_bench(
+    robot: str = "phantom",
+    ticks: int = 20_000,
+    seed: int = 0,
+    settings: MPCSettings | None = None,
+    *,
+    arm: LinearArm | None = None,
+    jump: float = 2e-3,
+    jump_every: int = 1000,
+    warmup: int = 500,
+    disable_gc: bool = True,
+    progress: Callable[[int, int], None] | None = None,
+) -> dict:
+    """Run the benchmark and return its results (JSON-serialisable ``dict``).
+
+    Parameters
+    ----------
+    robot : str
+        Registered robot name (ignored if ``arm`` is given).
+    ticks : int
+        Timed ticks, after ``warmup`` untimed ones [ticks].
+    seed : int
+        Seed of the reference's random phases and jump directions.
+    settings : MPCSettings | None
+        Controller settings (default ``MPCSettings()``).
+    jump, jump_every : float, int
+        Reference jumps [m] every ``jump_every`` ticks (0 disables) to exercise active bounds.
+    disable_gc : bool
+        Disable Python's garbage collector during the loop.
+    """
+    if ticks < 1:
+        raise ValueError(f"ticks must be >= 1, got {ticks}")
+    arm = arm if arm is not None else linearize(load_robot(robot))
+    settings = settings if settings is not None else MPCSettings()
+    t_build = time.perf_counter()
+    mpc = RecedingHorizonMPC(arm, settings)
+    build_s = time.perf_counter() - t_build
+    every = RecedingHorizonMPC(arm, dataclasses.replace(settings, screening=False))
+    gain, exact = GainTick(mpc), ExactTick(mpc)
+    N, nu = mpc.N, mpc.nu
+    total = warmup + ticks
+    rng = np.random.default_rng(seed)
+    traj = heart_like_reference(
+        total + N + 1, arm.Ts, rng, arm.y0, jump=jump, jump_every=jump_every
+    )
+    x = np.zeros(arm.nx)
+    x[: nu] = np.linalg.pinv(arm.C[:, :nu]) @ (traj[0] - arm.y0)
+    tau_max = np.asarray(arm.torque_limit, dtype=float)
+
+    tick_ns = np.zeros(total, dtype=np.int64)
+    every_ns = np.zeros(total, dtype=np.int64)
+    every_err = np.zeros(total)
+    screened = np.zeros(total, dtype=bool)
+    parts_ns = np.zeros((total, 4), dtype=np.int64)
+    gain_ns = np.zeros(total, dtype=np.int64)
+    exact_ns = np.zeros(total, dtype=np.int64)
+    iters = np.zeros(total, dtype=np.int64)
+    exact_iters = np.zeros(total, dtype=np.int64)
+    u0_err = np.zeros(total)
+    active = np.zeros(total, dtype=bool)
+    err = np.zeros(total)
+    exact_fail = 0
+    clock = time.perf_counter_ns
+    gc_was_enabled = gc.isenabled()
+    if disable_gc:
+        gc.collect()
+        gc.disable()
+    try:
+        for k in range(total):
+            ref = traj[k + 1 : k + 1 + N]
+            u_prev = mpc.u_prev
+            n_screened = mpc.stats.screened
+            t0 = clock()
+            tau = mpc.step(x, ref)
+            t1 = clock()
+            gain(x, ref, u_prev)
+            t2 = clock()
+            u_exact = exact(x, ref, u_prev)
+            t3 = clock()
+            every.u_prev = u_prev  # the same QP as the default controller's and DAQP's
+            tau_every = every.step(x, ref)
+            t4 = clock()
+            tick_ns[k], gain_ns[k], exact_ns[k], every_ns[k] = t1 - t0, t2 - t1, t3 - t2, t4 - t3
+            screened[k] = mpc.stats.screened > n_screened
+            parts_ns[k] = every.stats.parts_ns
+            iters[k] = every.stats.iterations
+            exact_iters[k] = exact.iterations
+            if exact.exitflag < 0:
+                exact_fail += 1
+            active[k] = bool(np.any(np.abs(exact.zhat) >= 1.0 - 1e-9))
+            u0_err[k] = float(np.max(np.abs(tau - u_exact) / tau_max))
+            every_err[k] = float(np.max(np.abs(tau_every - u_exact) / tau_max))
+            x = arm.A @ x + arm.B @ tau
+            err[k] = float(np.linalg.norm(arm.C @ x + arm.y0 - traj[k + 1]))
+            if progress is not None and (k + 1) % 1000 == 0:
+                progress(k + 1, total)
+    finally:
+        if disable_gc and gc_was_enabled:
+            gc.enable()
+
+    sl = slice(warmup, total)
+    us = 1e-3
+    tick = tick_ns[sl] * us
+    g, e = gain_ns[sl] * us, exact_ns[sl] * us
+    result = {
+        "robot": robot,
+        "ticks": ticks,
+        "warmup_ticks": warmup,
+        "seed": seed,
+        "gc_disabled": disable_gc,
+        "build_s": build_s,
+        "nz": mpc.qp.nz,
+        "tick_us": _pct(tick),
+        "screened_ticks": int(screened[sl].sum()),
+        "osqp_tick_us": _pct(every_ns[sl] * us),
+        "osqp_u0_error_max_frac": float(every_err[sl].max()),
+        "reference_us": _pct(parts_ns[sl, 0] * us),
+        "update_us": _pct(parts_ns[sl, 1] * us),
+        "solve_us": _pct(parts_ns[sl, 2] * us),
+        "output_us": _pct(parts_ns[sl, 3] * us),
+        "iterations": _pct(iters[sl]),
+        "gain_tick_us": _pct(g),
+        "exact_tick_us": _pct(e),
+        "exact_iterations": _pct(exact_iters[sl]),
+        "exact_failures": exact_fail,
+        "ratio_tick_to_gain": _ratio(tick, g),
+        "ratio_tick_to_exact": _ratio(tick, e),
+        "ratio_osqp_tick_to_gain": _ratio(every_ns[sl] * us, g),
+        "fallbacks": dict(mpc.stats.fallbacks),
+        "failures": dict(mpc.stats.failures),
+        "osqp_fallbacks": dict(every.stats.fallbacks),
+        "u0_error_max_frac": float(u0_err[sl].max()),
+        "u0_error_p99_frac": float(np.percentile(u0_err[sl], 99)),
+        "active_bound_ticks": int(active[sl].sum()),
+        "tracking_rms_mm": float(1e3 * np.sqrt(np.mean(err[sl] ** 2))),
+        "tracking_max_mm": float(1e3 * err[sl].max()),
+        "settings": to_dict(settings),
+        "versions": {
+            "python": platform.python_version(),
+            "numpy": np.__version__,
+            "osqp": _version("osqp"),
+            "daqp": _version("daqp"),
+        },
+    }
+    return result
+
+
+_ROWS = (
+    ("MPC tick (screening, OSQP if bound)", "tick_us"),
+    ("MPC tick, OSQP every tick", "osqp_tick_us"),
+    ("  reference handling", "reference_us"),
+    ("  vector update + warm start", "update_us"),
+    ("  OSQP solve", "solve_us"),
+    ("  output", "output_us"),
+    ("gain tick (reference)", "gain_tick_us"),
+    ("exact tick, DAQP (reference)", "exact_tick_us"),
+)
+
+
+def format_table(result: dict) -> str:
+    """Human-readable table of :func:`run_bench` results."""
+    lines = [
+        f"rhmpc bench: {result['robot']}, {result['ticks']} ticks (+{result['warmup_ticks']} "
+        f"warm-up), seed {result['seed']}, nz = {result['nz']}, "
+        f"GC {'off' if result['gc_disabled'] else 'on'} during the loop",
+        f"{'':36s}{'p50 µs':>9s}{'p99 µs':>9s}{'max µs':>9s}{'p50 ×g':>8s}{'p99 ×g':>8s}",
+    ]
+    g = result["gain_tick_us"]
+    for label, key in _ROWS:
+        row = result[key]
+        ratio = ""
+        if not label.startswith("  "):
+            ratio = f"{row['p50'] / g['p50']:8.2f}{row['p99'] / g['p99']:8.2f}"
+        lines.append(f"{label:36s}{row['p50']:9.1f}{row['p99']:9.1f}{row['max']:9.1f}{ratio}")
+    it = result["iterations"]
+    lines += [
+        "(×g = time / gain-tick time of the same run; parts are those of the OSQP-every-tick "
+        "controller)",
+        f"screened ticks (OSQP not called): {result['screened_ticks']} of {result['ticks']}",
+        f"OSQP iterations: p50 {it['p50']:.0f}, p99 {it['p99']:.0f}, max {it['max']:.0f}; "
+        f"DAQP iterations p99 {result['exact_iterations']['p99']:.0f}",
+        f"fallbacks: {result['fallbacks']}  failures: {result['failures'] or 'none'}  "
+        f"(OSQP every tick: {result['osqp_fallbacks']})",
+        f"u0 error vs exact: max {100 * result['u0_error_max_frac']:.4f} % of τ_max, "
+        f"p99 {100 * result['u0_error_p99_frac']:.4f} % (OSQP every tick: max "
+        f"{100 * result['osqp_u0_error_max_frac']:.4f} %); ticks with an active bound: "
+        f"{result['active_bound_ticks']}",
+        f"tracking on the linear model: RMS {result['tracking_rms_mm']:.4f} mm, "
+        f"max {result['tracking_max_mm']:.3f} mm (includes the reference jumps)",
+    ]
+    return "\n".join(lines)

@@ -1,0 +1,385 @@
+"""Prediction studies: Yuen et al. 2008 §III-D (Tuna 2013 §VIII-C, Figs 12–13) and Tuna Fig. 8.
+
+``noise``    mitral-1d at 60 bpm, 28 Hz, white noise σ_R ∈ [0.3, 3] mm; 30 s to initialise,
+             then the RMS of the one-sample-ahead error against the truth over 10 s.
+``hr-step``  as ``noise`` with σ_R = 1.3 mm, but the last 10 s run at 60 + ΔHR bpm,
+             ΔHR ∈ [−10, 10] bpm (the trajectory compressed/dilated beat by beat).
+``rr``       as ``hr-step`` but the heart phase follows the beat annotations of PhysioNet
+             records (a random 45 s stretch per trial), the analogue of Yuen's Table I.
+``horizon``  RMS error versus lead time (Tuna Fig. 8) for sonomicrometry replicas sampled at
+             the MPC's predictor period 7.5 ms (σ = 0.25 mm/√3 per axis, no echo outliers),
+             40 s of warm-up (the EKF needs 10 s) and 20 s of evaluation.
+
+Each trial draws its scenario phase and its noise from its own generator, spawned from
+the study seed (``SeedSequence(seed).spawn``); every predictor and every parameter value of
+a trial sees the same draw (common random numbers), so differences between columns are
+not sampling noise.  Errors are Euclidean norms, reported in millimetres.
+
+EKF parameters follow Yuen: ``yuen2008`` with σ_R set to the simulated noise; in ``hr-step``
+and ``rr`` q_ω = 5e-3 (rad/s)² and σ_ω² = 1 (rad/s)² (Yuen §III-D).  The RLS predictors run
+with their defaults (Tuna do not state the settings of their 28 Hz simulations).
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from predictors import make_predictor
+
+__all__ = [
+    "DEFAULT_PREDICTORS",
+    "STUDIES",
+    "StudySettings",
+    "format_table",
+    "plot_study",
+    "run_study",
+]
+
+STUDIES: tuple[str, ...] = ("noise", "hr-step", "rr", "horizon")
+
+DEFAULT_PREDICTORS: dict[str, tuple[str, ...]] = {
+    "noise": ("ekf", "ar", "fading-ar", "last-cycle", "wflc", "one-step", "generalized"),
+    "hr-step": ("ekf", "ar", "fading-ar", "last-cycle", "wflc", "one-step", "generalized"),
+    "rr": ("ekf", "ar", "fading-ar", "last-cycle", "wflc", "one-step", "generalized"),
+    "horizon": ("one-step", "generalized", "ekf", "dual-ekf", "last-cycle", "hold", "exact"),
+}
+DEFAULT_TRIALS = {"noise": 100, "hr-step": 100, "rr": 100, "horizon": 10}
+
+MM = 1e-3
+YUEN_RATE = 28.0  # Hz, 3DUS
+YUEN_BPM = 60.0
+INIT_S, EVAL_S = 30.0, 10.0
+HORIZON_DT = 0.0075  # s, 2 kHz / 15
+HORIZON_LEADS = 8  # predictor samples: 7.5 … 60 ms
+HORIZON_WARM_S, HORIZON_EVAL_S = 40.0, 20.0
+
+
+def _default_data_dir() -> Path:
+    return Path(__file__).resolve().parents[3] / "shared" / "data"
+
+
+@dataclass(frozen=True)
+class StudySettings:
+    """One prediction study.
+
+    Attributes
+    ----------
+    study : str
+        One of :data:`STUDIES`.
+    trials : int
+        Monte Carlo trials per parameter value.
+    seed : int
+        Seed of the study's ``SeedSequence``.
+    predictors : tuple of str
+        Predictor names (:func:`predictors.make_predictor`).
+    noise_mm : tuple of float
+        σ_R values of the ``noise`` study [mm].
+    delta_bpm : tuple of float
+        ΔHR values of the ``hr-step`` study [bpm].
+    sigma_mm : float
+        Noise of ``hr-step`` and ``rr`` [mm].
+    records : tuple of str
+        PhysioNet records (paths without extension) driving ``rr``.
+    scenarios : tuple of str
+        Scenarios of the ``horizon`` study.
+    """
+
+    study: str
+    trials: int = 100
+    seed: int = 0
+    predictors: tuple[str, ...] = ()
+    noise_mm: tuple[float, ...] = (0.3, 0.6, 1.0, 1.3, 1.6, 2.0, 2.5, 3.0)
+    delta_bpm: tuple[float, ...] = (-10.0, -6.0, -2.0, 0.0, 2.0, 6.0, 10.0)
+    sigma_mm: float = 1.3
+    records: tuple[str, ...] = ()
+    scenarios: tuple[str, ...] = ("fixed-a2-top", "varying-a3-top")
+
+    def __post_init__(self) -> None:
+        if self.study not in STUDIES:
+            raise ValueError(f"unknown study {self.study!r}; valid: {', '.join(STUDIES)}")
+        if int(self.trials) != self.trials or self.trials < 1:
+            raise ValueError(f"trials must be a positive integer, got {self.trials!r}")
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return self.predictors or DEFAULT_PREDICTORS[self.study]
+
+    def parameters(self) -> list:
+        """The swept values: σ_R [mm], ΔHR [bpm], record paths, or scenario names."""
+        if self.study == "noise":
+            return list(self.noise_mm)
+        if self.study == "hr-step":
+            return list(self.delta_bpm)
+        if self.study == "rr":
+            return list(self.records or default_records())
+        return list(self.scenarios)
+
+
+def default_records() -> tuple[str, ...]:
+    """The PhysioNet annotation records shipped in ``../shared/data`` (may be empty)."""
+    root = _default_data_dir()
+    return tuple(str(p.with_suffix("")) for p in sorted(root.glob("*/*.atr")))
+
+
+# -- one trial ----------------------------------------------------------------------------
+def _yuen_predictor(name: str, dt: float, sigma: float, varying: bool):
+    if name == "ekf":
+        extra = {"q_omega": 5e-3, "sigma_omega_sq": 1.0} if varying else {}
+        return make_predictor(name, dt, params="yuen2008", sigma_r=sigma, **extra)
+    return make_predictor(name, dt)
+
+
+def _one_step_rms(pred, z: np.ndarray, truth: np.ndarray, first: int) -> tuple[float, float]:
+    """Feed ``z`` (T, d); RMS and max of ‖ẑ_{k+1|k} − p_{k+1}‖ for k + 1 ≥ first [m]."""
+    err = np.empty(len(z) - first)
+    for k in range(len(z) - 1):
+        pred.update(z[k])
+        if k + 1 >= first:
+            err[k + 1 - first] = np.linalg.norm(pred.predict(1)[0] - truth[k + 1])
+    return float(np.sqrt(np.mean(err**2))), float(err.max())
+
+
+def _mitral_trial(param, study: str, trial_seed: np.random.SeedSequence, s: StudySettings):
+    from sim.heart import beat_times_from_annotations, make_scenario
+    from sim.sensors import Sensor, WhiteNoise
+
+    rng_scn, rng_noise = (np.random.default_rng(c) for c in trial_seed.spawn(2))
+    dur = INIT_S + EVAL_S
+    if study == "noise":
+        sigma = float(param) * MM
+        scn = make_scenario("mitral-1d", rng=rng_scn, beat_gain_std=0.0, duration=dur)
+    elif study == "hr-step":
+        sigma = s.sigma_mm * MM
+        first = -rng_scn.random()  # random phase: a beat in (−1, 0] s
+        slow = first + np.arange(0.0, INIT_S + 2.0, 60.0 / YUEN_BPM)
+        slow = slow[slow <= INIT_S]
+        fast = slow[-1] + np.arange(1.0, 40.0) * 60.0 / (YUEN_BPM + float(param))
+        beats = np.concatenate([slow, fast[fast <= dur + 3.0]])
+        scn = make_scenario(
+            "mitral-1d", rng=rng_scn, beat_gain_std=0.0, beat_times=beats, duration=dur
+        )
+    else:  # rr: a random stretch of the record's beats
+        sigma = s.sigma_mm * MM
+        beats = beat_times_from_annotations(param)
+        span = dur + 5.0
+        start = rng_scn.uniform(beats[0], max(beats[0], beats[-1] - span))
+        sel = beats[(beats >= start - 3.0) & (beats <= start + span)]
+        scn = make_scenario(
+            "mitral-1d", rng=rng_scn, beat_gain_std=0.0, beat_times=sel - start, duration=dur
+        )
+    stream = Sensor(YUEN_RATE, (WhiteNoise(sigma),), "3DUS").measure(scn.source, dur, rng_noise)
+    truth = np.asarray(scn.source.position(stream.t)).reshape(len(stream), -1)
+    first = round(INIT_S * YUEN_RATE)
+    out = {}
+    for name in s.names:
+        pred = _yuen_predictor(name, 1.0 / YUEN_RATE, sigma, study != "noise")
+        rms, mx = _one_step_rms(pred, stream.z, truth, first)
+        out[name] = {"rms": rms, "max": mx}
+    return out
+
+
+def _horizon_trial(param, study: str, trial_seed: np.random.SeedSequence, s: StudySettings):
+    from sim.heart import make_scenario
+    from sim.sensors import SonomicrometrySettings, sonomicrometry
+
+    rng_scn, rng_noise = (np.random.default_rng(c) for c in trial_seed.spawn(2))
+    dur = HORIZON_WARM_S + HORIZON_EVAL_S
+    scn = make_scenario(str(param), rng=rng_scn, duration=dur + 1.0)
+    sensor = sonomicrometry(
+        SonomicrometrySettings(rate=1.0 / HORIZON_DT, outliers=None), dim=scn.dim
+    )
+    stream = sensor.measure(scn.source, dur, rng_noise)
+    K = HORIZON_LEADS
+    t_ext = stream.t[0] + HORIZON_DT * np.arange(len(stream) + K)
+    truth = np.asarray(scn.source.position(t_ext)).reshape(t_ext.size, -1)
+    first = round(HORIZON_WARM_S / HORIZON_DT)
+    out = {}
+    for name in s.names:
+        kw = {"source": scn.source} if name == "exact" else {}
+        pred = make_predictor(name, HORIZON_DT, **kw)
+        sq = np.zeros(K)
+        for k in range(len(stream)):
+            pred.update(stream.z[k])
+            if k >= first:
+                e = pred.predict(K) - truth[k + 1 : k + 1 + K]
+                sq += np.einsum("ij,ij->i", e, e)
+        rms = np.sqrt(sq / (len(stream) - first))
+        out[name] = {"rms_by_lead": rms.tolist()}
+    return out
+
+
+def _run_task(args: tuple) -> tuple[int, int, dict]:
+    i, j, param, study, trial_seed, s = args
+    fn = _horizon_trial if study == "horizon" else _mitral_trial
+    return i, j, fn(param, study, trial_seed, s)
+
+
+# -- the study -----------------------------------------------------------------------------
+def run_study(
+    s: StudySettings,
+    jobs: int = 1,
+    progress: Callable[[int, int], None] | None = None,
+) -> dict:
+    """Run all trials (in a process pool when ``jobs > 1``) and aggregate them.
+
+    Returns a JSON-ready dict: ``settings``, ``parameters``, ``unit``, ``rows`` (one per
+    parameter value and predictor: mean and standard deviation over trials of the RMS and
+    max error [mm], or the RMS per lead for ``horizon``), ``elapsed_s``, ``versions``.
+    """
+    params = s.parameters()
+    if not params:
+        raise ValueError(f"study {s.study!r} has nothing to run (no records found?)")
+    seeds = np.random.SeedSequence(s.seed).spawn(s.trials)
+    tasks = [(i, j, p, s.study, seeds[j], s) for i, p in enumerate(params) for j in range(s.trials)]
+    results: dict[tuple[int, int], dict] = {}
+    t0 = time.perf_counter()
+    if jobs > 1:
+        with ProcessPoolExecutor(max_workers=jobs) as pool:
+            for n, (i, j, r) in enumerate(pool.map(_run_task, tasks, chunksize=1), 1):
+                results[i, j] = r
+                if progress:
+                    progress(n, len(tasks))
+    else:
+        for n, task in enumerate(tasks, 1):
+            i, j, r = _run_task(task)
+            results[i, j] = r
+            if progress:
+                progress(n, len(tasks))
+    rows = []
+    for i, p in enumerate(params):
+        for name in s.names:
+            per = [results[i, j][name] for j in range(s.trials)]
+            row = {"parameter": p, "predictor": name}
+            if s.study == "horizon":
+                lead = np.array([r["rms_by_lead"] for r in per]) / MM
+                row["lead_ms"] = (HORIZON_DT * 1e3 * np.arange(1, HORIZON_LEADS + 1)).tolist()
+                row["rms_mm"] = lead.mean(axis=0).tolist()
+                row["rms_std_mm"] = lead.std(axis=0).tolist()
+            else:
+                rms = np.array([r["rms"] for r in per]) / MM
+                mx = np.array([r["max"] for r in per]) / MM
+                row.update(
+                    rms_mm=float(rms.mean()), rms_std_mm=float(rms.std()), max_mm=float(mx.mean())
+                )
+            rows.append(row)
+    settings = asdict(s)
+    settings["predictors"] = list(s.names)
+    return {
+        "study": s.study,
+        "settings": settings,
+        "parameters": [str(p) if s.study == "rr" else p for p in params],
+        "rows": rows,
+        "elapsed_s": time.perf_counter() - t0,
+        "versions": _versions(),
+    }
+
+
+def _versions() -> dict:
+    import scipy
+
+    import rhmpc
+
+    return {
+        "python": sys.version.split()[0],
+        "numpy": np.__version__,
+        "scipy": scipy.__version__,
+        "rhmpc": rhmpc.__version__,
+    }
+
+
+_PARAM_LABEL = {"noise": "σ_R [mm]", "hr-step": "ΔHR [bpm]", "rr": "record", "horizon": "lead [ms]"}
+
+
+def format_table(result: dict) -> str:
+    """Mean RMS error [mm] over trials: one row per parameter value, one column per predictor."""
+    study, rows = result["study"], result["rows"]
+    names = list(dict.fromkeys(r["predictor"] for r in rows))
+    w = max(11, *(len(n) + 1 for n in names))
+    lines = []
+    if study == "horizon":
+        for scn in dict.fromkeys(r["parameter"] for r in rows):
+            sub = {r["predictor"]: r for r in rows if r["parameter"] == scn}
+            lines.append(f"{scn}: RMS prediction error [mm] vs lead time")
+            lines.append(f"{'lead [ms]':>10}" + "".join(f"{n:>{w}}" for n in names))
+            for k, lead in enumerate(sub[names[0]]["lead_ms"]):
+                lines.append(
+                    f"{lead:>10.1f}" + "".join(f"{sub[n]['rms_mm'][k]:>{w}.3f}" for n in names)
+                )
+            lines.append("")
+        return "\n".join(lines).rstrip()
+    lines.append(f"mean RMS one-sample-ahead error [mm], {result['settings']['trials']} trials")
+    label = _PARAM_LABEL[study]
+    lines.append(f"{label:>10}" + "".join(f"{n:>{w}}" for n in names))
+    for p in dict.fromkeys(r["parameter"] for r in rows):
+        sub = {r["predictor"]: r for r in rows if r["parameter"] == p}
+        head = Path(p).name if study == "rr" else f"{p:g}"
+        lines.append(f"{head:>10}" + "".join(f"{sub[n]['rms_mm']:>{w}.3f}" for n in names))
+    return "\n".join(lines)
+
+
+def plot_study(result: dict, path: str | Path) -> Path:
+    """Draw the study's curves (one per predictor) to ``path`` (PNG)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    study, rows = result["study"], result["rows"]
+    names = list(dict.fromkeys(r["predictor"] for r in rows))
+    params = list(dict.fromkeys(r["parameter"] for r in rows))
+    if study == "horizon":
+        fig, axes = plt.subplots(1, len(params), figsize=(5.5 * len(params), 4), squeeze=False)
+        for ax, scn in zip(axes[0], params, strict=True):
+            for n in names:
+                r = next(r for r in rows if r["parameter"] == scn and r["predictor"] == n)
+                ax.plot(r["lead_ms"], r["rms_mm"], marker="o", label=n)
+            ax.set(title=scn, xlabel="lead time [ms]", ylabel="RMS error [mm]")
+            ax.grid(True, alpha=0.3)
+        axes[0][0].legend(fontsize=8)
+    else:
+        fig, ax = plt.subplots(figsize=(6.5, 4.5))
+        x = np.arange(len(params)) if study == "rr" else np.asarray(params, dtype=float)
+        for n in names:
+            y = [
+                next(r for r in rows if r["parameter"] == p and r["predictor"] == n)["rms_mm"]
+                for p in params
+            ]
+            ax.plot(x, y, marker="o", label=n)
+        if study == "noise":
+            ax.plot(x, x, "k--", lw=1, label="σ_R")
+        if study == "rr":
+            ax.set_xticks(x, [Path(p).name for p in params])
+        ax.set(
+            xlabel=_PARAM_LABEL[study],
+            ylabel="RMS one-sample-ahead error [mm]",
+            title=f"prediction study: {study} (28 Hz, mitral-1d)",
+        )
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def summarise(values: Sequence[float]) -> str:
+    """'mean ± std' of ``values``."""
+    v = np.asarray(values, dtype=float)
+    return f"{v.mean():.3f} ± {v.std():.3f}" if v.size else "n/a"
+
+
+def parse_float_list(text: str) -> tuple[float, ...]:
+    """'0.3,1,3' → (0.3, 1.0, 3.0); raises ValueError."""
+    vals = tuple(float(x) for x in text.split(",") if x.strip())
+    if not vals or not all(math.isfinite(v) for v in vals):
+        raise ValueError(f"expected a comma-separated list of numbers, got {text!r}")
+    return vals

@@ -1,0 +1,118 @@
+"""`rhmpc data list|show|export|plot`."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rhmpc.cli import main
+from sim.heart import SCENARIOS, load_recording
+
+DATA = Path(__file__).resolve().parents[3] / ".." / "shared" / "data"
+
+
+def test_list_json(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["data", "list", "--json", "--duration", "40"]) == 0
+    rows = json.loads(capsys.readouterr().out)
+    assert [r["name"] for r in rows] == list(SCENARIOS)
+    a2 = rows[0]
+    assert a2["target_peak_to_peak_mm"] == 8.39 and a2["target_rms_mm"] == 3.55
+    assert a2["rms_mm"] == pytest.approx(3.55, rel=0.03)
+    assert a2["heart_rate_bpm"] == [100.0, 100.0]
+    for r in rows:  # 40 s of the replica: nearly the whole record's p-p
+        assert 0.93 < r["peak_to_peak_mm"] / r["target_peak_to_peak_mm"] <= 1.0 + 1e-6
+
+
+def test_list_table(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["data", "list", "--duration", "10"]) == 0
+    out = capsys.readouterr().out
+    for name in SCENARIOS:
+        assert name in out
+    assert "p-p" in out and "target" in out
+
+
+def test_show(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["data", "show", "varying-a3-top", "--duration", "60"]) == 0
+    out = capsys.readouterr().out
+    assert "peak-to-peak" in out and "heart rate" in out and "spectral peaks" in out
+    assert main(["data", "show", "--json", "--bpm", "72", "--duration", "20"]) == 0
+    row = json.loads(capsys.readouterr().out)
+    assert row["name"] == "fixed-a2-top"
+    assert row["heart_rate_bpm"] == [72.0, 72.0]
+
+
+def test_show_with_record(capsys: pytest.CaptureFixture[str]) -> None:
+    record = DATA / "1003" / "1003"
+    if not record.with_suffix(".atr").is_file():
+        pytest.skip(f"{record}.atr not available (../shared/data is outside the repository)")
+    assert main(["data", "show", "fixed-a2-top", "--record", str(record), "--json",
+                 "--duration", "60"]) == 0
+    row = json.loads(capsys.readouterr().out)
+    lo, hi = row["heart_rate_bpm"]
+    assert 85 < lo < hi < 110
+
+
+def test_export_and_show_a_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "a2.csv"
+    assert main(["data", "export", "fixed-a2-top", str(out), "--duration", "5"]) == 0
+    assert "wrote 1286 samples" in capsys.readouterr().out
+    rec = load_recording(out)
+    assert rec.dim == 3 and rec.t.size == 1286
+    assert main(["data", "show", str(out), "--json"]) == 0
+    row = json.loads(capsys.readouterr().out)
+    assert row["dim"] == 3 and row["sensor_rate_hz"] == pytest.approx(257.0, rel=1e-3)
+    # refuses to overwrite, then does with --force
+    assert main(["data", "export", "fixed-a2-top", str(out), "--duration", "5"]) == 2
+    assert "exists" in capsys.readouterr().err
+    assert main(["data", "export", "mitral-1d", str(out), "--duration", "5", "--force",
+                 "--sensor", "ultrasound", "--seed", "3"]) == 0
+    noisy = load_recording(out)
+    assert noisy.dim == 1 and noisy.t.size == 141
+
+
+def test_export_npz(tmp_path: Path) -> None:
+    out = tmp_path / "v.npz"
+    assert main(["data", "export", "varying-a3-side", str(out), "--duration", "3",
+                 "--rate", "100"]) == 0
+    with np.load(out) as data:
+        assert data["position"].shape == (301, 3)
+        assert str(data["units"]) == "m"
+
+
+def test_plot(tmp_path: Path) -> None:
+    out = tmp_path / "f.png"
+    assert main(["data", "plot", "fixed-a2-top", str(out), "--duration", "30"]) == 0
+    assert out.stat().st_size > 20_000
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    one = tmp_path / "m.png"
+    assert main(["data", "plot", "mitral-1d", str(one), "--window", "4", "--duration", "8"]) == 0
+    assert one.is_file()
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["data", "show", "fixed-a9-top"], "unknown scenario 'fixed-a9-top'; valid names"),
+    (["data", "show", "missing.csv"], "missing.csv: no such file"),
+    (["data", "show", "--duration", "-1"], "--duration must be positive"),
+    (["data", "export", "fixed-a2-top", "out.txt"], "must end in .csv or .npz"),
+    (["data", "plot", "fixed-a2-top", "f.png", "--window", "0"], "--window must be positive"),
+    (["data"], "choose an action"),
+])
+def test_errors_are_one_line_exit_2(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                    capsys: pytest.CaptureFixture[str], argv: list[str],
+                                    message: str) -> None:
+    monkeypatch.chdir(tmp_path)
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert message in err
+    assert err.count("\n") == 1 and "Traceback" not in err
+
+
+def test_malformed_file_is_reported(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    bad = tmp_path / "bad.csv"
+    bad.write_text("t,x,y,z\n0,1,2,3\n0.1,1,2\n")
+    assert main(["data", "show", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert "bad.csv, line 3: expected 4 fields" in err

@@ -1,0 +1,230 @@
+"""Never trust a failed solve: fallbacks, non-finite inputs, torque bounds, bad settings."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from rhmpc.control.mpc import RecedingHorizonMPC
+from rhmpc.control.settings import MPCSettings, from_dict, to_dict
+from robots import linearize, load_robot
+
+
+@pytest.fixture(scope="module")
+def arm():
+    return linearize(load_robot("phantom"))
+
+
+@pytest.fixture
+def mpc(arm):
+    return RecedingHorizonMPC(arm)
+
+
+def _moving_ref(arm, N, k0=0, amp=2e-3):
+    t = (k0 + np.arange(1, N + 1))[:, None] * arm.Ts
+    return arm.y0 + amp * np.sin(2 * np.pi * 1.66 * t + np.array([0.0, 1.0, 2.0]))
+
+
+def _run(mpc, arm, ticks, k0=0, x=None):
+    x = np.zeros(arm.nx) if x is None else x
+    for k in range(ticks):
+        tau = mpc.step(x, _moving_ref(arm, mpc.N, k0 + k))
+        x = arm.A @ x + arm.B @ tau
+    return x
+
+
+def test_contract_shapes_and_reset(arm, mpc):
+    assert mpc.N == 50 and mpc.settings == MPCSettings()
+    assert np.allclose(mpc.u_max, 0.75 * arm.torque_limit)
+    tau = mpc.step(np.zeros(6), _moving_ref(arm, mpc.N))
+    assert tau.shape == (3,) and mpc.stats.status == "solved" and mpc.stats.source == "qp"
+    assert mpc.stats.iterations > 0 and mpc.stats.solve_time > 0
+    assert np.array_equal(mpc.u_prev, tau)
+    mpc.reset()
+    assert mpc.stats.ticks == 0 and np.all(mpc.u_prev == 0)
+    with pytest.raises(ValueError, match=r"shape|expects"):
+        mpc.step(np.zeros(5), _moving_ref(arm, mpc.N))
+    with pytest.raises(ValueError, match="expects"):
+        mpc.step(np.zeros(6), _moving_ref(arm, mpc.N)[:10])
+
+
+def test_injected_failures_take_the_shifted_plan_then_lq(arm, mpc):
+    x = _run(mpc, arm, 50)
+    plan, _ = mpc.last_solution()
+    planned = mpc.qp.inputs(plan)  # (N, nu) inputs of the last good solve
+    n_plan = mpc.settings.plan_fallback_ticks
+    mpc.force_failures(n_plan + 2)
+    for k in range(1, n_plan + 3):
+        ref = _moving_ref(arm, mpc.N, 50 + k)
+        u_prev = mpc.u_prev
+        tau = mpc.step(x, ref)
+        assert mpc.stats.status == "injected"
+        if k <= n_plan:
+            assert mpc.stats.source == "plan"
+            np.testing.assert_allclose(tau, np.clip(planned[k], -mpc.u_max, mpc.u_max))
+        else:
+            assert mpc.stats.source == "lq"
+            lq = np.clip(mpc.unconstrained(x, ref, u_prev), -mpc.u_max, mpc.u_max)
+            np.testing.assert_allclose(tau, lq)
+        x = arm.A @ x + arm.B @ tau
+    assert mpc.stats.failures == {"injected": n_plan + 2}
+    assert mpc.stats.fallbacks == {"plan": n_plan, "lq": 2, "zero": 0}
+    assert mpc.stats.fallback_total == n_plan + 2
+    # Back to normal afterwards.
+    mpc.step(x, _moving_ref(arm, mpc.N, 60 + n_plan))
+    assert mpc.stats.status == "solved" and mpc.stats.source == "qp"
+
+
+def test_failure_without_a_plan_uses_the_clipped_lq_input(arm, mpc):
+    mpc.force_failures(1, reason="injected")
+    x = np.array([1e-3, -1e-3, 2e-3, 0.0, 0.0, 0.0])
+    ref = _moving_ref(arm, mpc.N)
+    tau = mpc.step(x, ref)
+    assert mpc.stats.source == "lq"
+    np.testing.assert_allclose(
+        tau, np.clip(mpc.unconstrained(x, ref, np.zeros(3)), -mpc.u_max, mpc.u_max)
+    )
+
+
+def test_real_solver_failure_max_iter_takes_the_fallback(arm):
+    mpc = RecedingHorizonMPC(arm, MPCSettings(max_iter=1, check_termination=1))
+    x = np.zeros(6)
+    for k in range(5):
+        tau = mpc.step(x, _moving_ref(arm, mpc.N, k, amp=5e-3))
+        assert np.all(np.isfinite(tau)) and np.all(np.abs(tau) <= mpc.u_max)
+        x = arm.A @ x + arm.B @ tau
+    assert mpc.stats.failures.get("max_iter", 0) + mpc.stats.failures.get(
+        "solved_inaccurate", 0) >= 1
+    assert mpc.stats.fallback_total >= 1
+
+
+def test_time_limit_failure_takes_the_fallback(arm):
+    mpc = RecedingHorizonMPC(arm, MPCSettings(time_limit=1e-7))  # 0.1 µs: always exceeded
+    ref = np.tile(arm.y0 + np.array([3e-3, 0.0, 0.0]), (mpc.N, 1))
+    for _ in range(3):
+        tau = mpc.step(np.zeros(6), ref)
+        assert mpc.stats.status == "time_limit" and mpc.stats.source == "lq"
+        assert np.all(np.abs(tau) <= mpc.u_max)
+    assert mpc.stats.failures == {"time_limit": 3}
+
+
+@pytest.mark.parametrize("bad", ["x_nan", "x_inf", "ref_nan", "ref_inf", "ref_neg_inf"])
+def test_nonfinite_inputs_trigger_the_fallback_without_exception(arm, mpc, bad):
+    x = _run(mpc, arm, 20)
+    ref = _moving_ref(arm, mpc.N, 20)
+    if bad.startswith("x"):
+        x = x.copy()
+        x[2] = np.nan if bad == "x_nan" else np.inf
+    else:
+        ref = ref.copy()
+        ref[7, 1] = {"ref_nan": np.nan, "ref_inf": np.inf, "ref_neg_inf": -np.inf}[bad]
+    tau = mpc.step(x, ref)
+    assert np.all(np.isfinite(tau)) and np.all(np.abs(tau) <= mpc.u_max)
+    assert mpc.stats.status == "nonfinite_input" and mpc.stats.source == "plan"
+    assert mpc.stats.failures == {"nonfinite_input": 1}
+    # Without a plan, non-finite inputs give zero torque (the LQ input needs finite inputs).
+    mpc.reset()
+    tau = mpc.step(x, ref)
+    assert mpc.stats.source == "zero" and np.all(tau == 0)
+    # And the controller recovers on the next good tick.
+    mpc.step(np.zeros(6), _moving_ref(arm, mpc.N))
+    assert mpc.stats.status == "solved"
+
+
+def test_torque_always_within_the_bounds(arm, mpc):
+    rng = np.random.default_rng(7)
+    for i in range(300):
+        scale = 10.0 ** rng.uniform(-6, 1)
+        x = scale * rng.normal(size=6)
+        ref = arm.y0 + scale * rng.normal(size=(mpc.N, 3))
+        if i % 17 == 0:
+            ref[rng.integers(mpc.N), rng.integers(3)] = np.nan
+        if i % 29 == 0:
+            mpc.force_failures(1)
+        tau = mpc.step(x, ref)
+        assert tau.shape == (3,) and np.all(np.isfinite(tau))
+        assert np.all(np.abs(tau) <= mpc.u_max), (i, tau, mpc.stats.status)
+    assert mpc.stats.ticks == 300
+
+
+def test_returned_torque_is_not_aliased(arm, mpc):
+    tau = mpc.step(np.zeros(6), _moving_ref(arm, mpc.N))
+    tau[:] = 99.0
+    assert np.all(np.abs(mpc.u_prev) <= mpc.u_max)
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"tracking_weight": math.nan},
+        {"effort_weight": math.inf},
+        {"rate_weight": -1.0},
+        {"position_scale": 0.0},
+        {"point_weights": (1.0,) * 49},
+        {"point_weights": (math.nan,) * 50},
+        {"point_weights": (0.0,) * 50},
+        {"blocks": (10, 10)},
+        {"blocks": (0, 50)},
+        {"horizon": 0},
+        {"torque_margin": 1.0},
+        {"torque_margin": -0.1},
+        {"terminal": "lqr"},
+        {"warm_start": "hot"},
+        {"eps_abs": 0.0, "eps_rel": 0.0},
+        {"max_iter": 0},
+        {"rho": 0.0},
+        {"joint_lower": (0.0, 0.0, 0.0)},
+        {"joint_lower": (1.0,), "joint_upper": (0.0,)},
+        {"plan_fallback_ticks": -1},
+    ],
+)
+def test_bad_settings_raise_value_error(kwargs):
+    with pytest.raises(ValueError):
+        MPCSettings(**kwargs)
+
+
+def test_settings_that_do_not_fit_the_arm_raise_at_build_time(arm):
+    with pytest.raises(ValueError, match="torque limits"):
+        RecedingHorizonMPC(dataclasses.replace(arm, torque_limit=np.array([1.0, 0.0, 1.0])))
+    with pytest.raises(ValueError, match="torque limits"):
+        RecedingHorizonMPC(dataclasses.replace(arm, torque_limit=-np.ones(3)))
+    with pytest.raises(ValueError, match="shape"):
+        RecedingHorizonMPC(dataclasses.replace(arm, B=np.zeros((6, 2))))
+    with pytest.raises(ValueError, match="non-finite"):
+        bad_A = arm.A.copy()
+        bad_A[0, 0] = np.nan
+        RecedingHorizonMPC(dataclasses.replace(arm, A=bad_A))
+    with pytest.raises(ValueError, match="joint bounds must have"):
+        RecedingHorizonMPC(arm, MPCSettings(joint_lower=(-1.0,) * 2, joint_upper=(1.0,) * 2))
+    with pytest.raises(ValueError, match="contain"):
+        RecedingHorizonMPC(arm, MPCSettings(joint_lower=tuple(arm.q0 + 0.1),
+                                            joint_upper=tuple(arm.q0 + 0.2)))
+    with pytest.raises(ValueError, match="effort_weight"):
+        RecedingHorizonMPC(arm, MPCSettings(terminal="dare", effort_weight=0.0))
+    with pytest.raises(ValueError, match="positive definite"):
+        RecedingHorizonMPC(arm, MPCSettings(blocks=None, effort_weight=0.0, rate_weight=0.0,
+                                            point_weights=(0.0,) * 49 + (1.0,)))
+    with pytest.raises(ValueError, match="MPCSettings"):
+        RecedingHorizonMPC(arm, {"horizon": 50})
+
+
+def test_settings_round_trip_through_a_dict():
+    s = MPCSettings(point_weights=tuple(np.linspace(1, 0.5, 50)), rho=1.5)
+    d = to_dict(s)
+    assert isinstance(d["blocks"], list) and "joint_lower" not in d
+    assert from_dict(MPCSettings, d) == s
+    with pytest.raises(ValueError, match="unknown"):
+        from_dict(MPCSettings, {"horizon": 50, "rhoo": 1.0})
+
+
+@pytest.mark.parametrize("robot", ["finger_edu", "ur5"])
+def test_other_robots_build_and_track(robot):
+    arm = linearize(load_robot(robot))
+    mpc = RecedingHorizonMPC(arm)
+    x = _run(mpc, arm, 200)
+    assert mpc.stats.fallback_total == 0
+    err = np.linalg.norm(arm.C @ x + arm.y0 - _moving_ref(arm, 1, 199)[0])
+    assert err < 1e-4

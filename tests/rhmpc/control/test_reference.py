@@ -1,0 +1,206 @@
+"""Quadratic interpolation of the predictor's points into the N control-rate references."""
+
+import numpy as np
+import pytest
+
+from rhmpc.control.reference import ExactReference, PredictedReference, quadratic_weights
+
+TS, DS, N = 0.5e-3, 15, 50
+
+
+class Scripted:
+    """A 'predictor' that knows the signal f(t): its forecasts are exact at its own grid."""
+
+    def __init__(self, f, dt=DS * TS):
+        self.f, self.dt = f, dt
+        self.reset()
+
+    def reset(self):
+        self.t, self.calls = None, []
+
+    def update(self, z):
+        self.t = self.t + self.dt if self.t is not None else 0.0
+        if z is not None:
+            self.t = z[1]  # the test passes the sample time in the 2nd component
+
+    def predict(self, steps):
+        self.calls.append(steps)
+        t = self.t + self.dt * np.arange(1, steps + 1)
+        return np.column_stack([self.f(t), t])
+
+
+def test_weights_reproduce_quadratics_exactly():
+    s = np.linspace(-0.5, 6.5, 57)
+    m, w = quadratic_weights(s, 6)
+    nodes = 3.0 - 2.0 * np.arange(6) + 0.7 * np.arange(6) ** 2
+    got = w[:, 0] * nodes[m] + w[:, 1] * nodes[m + 1] + w[:, 2] * nodes[m + 2]
+    np.testing.assert_allclose(got, 3.0 - 2.0 * s + 0.7 * s**2, atol=1e-12)
+    with pytest.raises(ValueError):
+        quadratic_weights(s, 2)
+
+
+def build(f, latency_ticks=0, points=4):
+    pred = Scripted(f)
+    ref = PredictedReference(pred, TS, N, DS, points)
+    for k in range(4):
+        tick = k * DS
+        stamp = (tick - latency_ticks) * TS
+        ref.refresh(tick, np.array([f(stamp), stamp]), stamp)
+    return ref, pred, 3 * DS
+
+
+def test_quadratic_signal_is_reproduced_over_every_tick_of_the_cycle():
+    f = lambda t: 1e-3 + 0.2 * t - 3.0 * t**2  # noqa: E731
+    ref, _, tick0 = build(f)
+    for tick in range(tick0, tick0 + DS):
+        t = (tick + np.arange(1, N + 1)) * TS
+        np.testing.assert_allclose(ref.horizon(tick)[:, 0], f(t), atol=1e-15)
+
+
+def test_heart_like_sinusoid_is_interpolated_within_a_micrometre():
+    f = lambda t: 4e-3 * np.sin(2 * np.pi * 1.66 * t)  # noqa: E731
+    ref, _, tick0 = build(f)
+    worst = max(
+        np.abs(ref.horizon(tick)[:, 0] - f((tick + np.arange(1, N + 1)) * TS)).max()
+        for tick in range(tick0, tick0 + DS)
+    )
+    assert worst < 1e-6
+
+
+def test_latency_extends_the_forecast():
+    f = lambda t: 2.0 * t  # noqa: E731
+    ref, pred, tick0 = build(f, latency_ticks=136)  # 68 ms ultrasound latency
+    assert pred.calls[-1] == 4 + int(np.ceil(136 / DS))
+    t = (tick0 + np.arange(1, N + 1)) * TS
+    np.testing.assert_allclose(ref.horizon(tick0)[:, 0], f(t), atol=1e-12)
+
+
+def test_missing_samples_keep_a_finite_reference_and_none_before_data():
+    f = lambda t: np.sin(t)  # noqa: E731
+    ref = PredictedReference(Scripted(f), TS, N, DS)
+    ref.refresh(0, None, 0.0)
+    assert ref.horizon(0) is None
+    ref.refresh(DS, np.array([f(DS * TS), DS * TS]), DS * TS)
+    ref.refresh(2 * DS, None, 2 * DS * TS)
+    h = ref.horizon(2 * DS)
+    assert h.shape == (N, 2) and np.all(np.isfinite(h))
+
+
+def test_predictor_period_must_match():
+    with pytest.raises(ValueError, match="downsample"):
+        PredictedReference(Scripted(np.sin, dt=0.01), TS, N, DS)
+
+
+def test_exact_reference_slices_the_truth():
+    truth = np.arange(300.0)[:, None] * np.ones(3)
+    ref = ExactReference(truth, N)
+    np.testing.assert_array_equal(ref.horizon(10)[:, 0], np.arange(11, 11 + N))
+
+
+def test_outlier_gate_rejects_spikes_and_relocks_on_a_real_jump():
+    """A 4 mm spike lasting two samples is treated as missing; a lasting 4 mm step opens the
+    gate after ``max_rejections`` samples, and it locks again once the forecasts agree."""
+    from predictors import make_predictor
+
+    dt = DS * TS
+    pred = make_predictor("one-step", dt=dt)
+    ref = PredictedReference(pred, TS, N, DS, outlier_gate=1.5e-3, max_rejections=2, relock=20)
+    clean = PredictedReference(make_predictor("one-step", dt=dt), TS, N, DS)
+    f = lambda t: 2e-3 * np.sin(2 * np.pi * 1.5 * t)  # noqa: E731
+    n = 2000
+    spikes = {1500, 1501}
+    for k in range(n):
+        t = k * dt
+        z = np.array([f(t) + (4e-3 if k in spikes else 0.0)])
+        ref.refresh(k * DS, z, t)
+        clean.refresh(k * DS, np.array([f(t)]), t)
+        if k == 1502:
+            assert pred.counts["outliers_rejected"] == 2
+            # Two samples missing cost little: the horizons agree within 0.1 mm.
+            np.testing.assert_allclose(ref.horizon(k * DS), clean.horizon(k * DS), atol=1e-4)
+    # A lasting step: rejected max_rejections times, then the gate opens and every sample is
+    # taken; the predictor re-converges and the gate locks again.
+    for k in range(n, n + 1500):
+        t = k * dt
+        ref.refresh(k * DS, np.array([f(t) + 4e-3]), t)
+    assert pred.counts["outliers_rejected"] == 2 + 2
+    assert pred.counts["gate_unlocked"] == 1 and ref.locked
+    np.testing.assert_allclose(ref.horizon((n + 1499) * DS)[:, 0],
+                               f((n + 1499) * dt + TS * np.arange(1, N + 1)) + 4e-3, atol=2e-4)
+
+
+def test_exact_reference_bridges_gaps_of_a_recorded_truth():
+    truth = np.column_stack([np.arange(100.0), np.zeros(100), np.ones(100)])
+    truth[40:45, 0] = np.nan
+    ref = ExactReference(truth, N)
+    assert np.all(np.isfinite(ref.horizon(10)))
+    np.testing.assert_allclose(ref.horizon(30)[9:15, 0], np.arange(40.0, 46.0))
+    with pytest.raises(ValueError, match="no finite"):
+        ExactReference(np.full((100, 3), np.nan), N)
+
+
+class Diverging:
+    """A 'predictor' whose forecasts run away after ``after`` updates (like an unstable AR)."""
+
+    def __init__(self, dt=DS * TS, after=50):
+        from collections import Counter
+
+        self.dt, self.after, self.counts = dt, after, Counter()
+        self.reset()
+
+    def reset(self):
+        self.n, self.last, self.ready = 0, None, False
+        self.counts.clear()
+
+    def update(self, z):
+        if z is not None:
+            self.n, self.last, self.ready = self.n + 1, np.asarray(z, float), True
+
+    def predict(self, steps):
+        growth = np.ones(steps) if self.n < self.after else 3.0 ** np.arange(1, steps + 1)
+        return self.last[None, :] * growth[:, None]
+
+
+def test_reference_guard_holds_the_last_sample_when_the_predictor_diverges():
+    pred = Diverging()
+    ref = PredictedReference(pred, TS, N, DS, guard_speed=0.3, guard_margin=2e-3)
+    z = np.array([5e-3, -2e-3, 1e-3])
+    for k in range(49):
+        ref.refresh(k * DS, z, k * DS * TS)
+    assert pred.counts["reference_guard"] == 0
+    ref.refresh(49 * DS, z, 49 * DS * TS)  # the 50th update: forecasts ×3, ×9, … run away
+    assert pred.counts["reference_guard"] == 1
+    h = ref.horizon(49 * DS)
+    np.testing.assert_array_equal(h, np.broadcast_to(z, h.shape))  # holds the last sample
+    assert pred.n == 1  # restarted from the held sample
+    # Without the guard the same forecasts would be handed to the MPC.
+    free = PredictedReference(Diverging(), TS, N, DS)
+    for k in range(50):
+        free.refresh(k * DS, z, k * DS * TS)
+    assert np.abs(free.horizon(49 * DS)).max() > 0.01
+
+
+def test_placement_and_batched_horizons_match_single_lookups():
+    f = np.sin
+    origin = np.array([0.1, -0.2, 0.3])
+    ref = PredictedReference(Scripted(f), TS, N, DS, 4)
+    ref.place(origin)
+    for k in range(3):
+        t = k * DS * TS
+        ref.refresh(k * DS, np.array([f(t), t]), t)
+    tick = 2 * DS
+    batch = ref.horizons(tick, DS + 20)  # past the next refresh: the last points are held
+    for offset, h in enumerate(batch):
+        np.testing.assert_array_equal(h, ref.horizon(tick + offset))
+    assert batch[0].shape == (N, 3)
+    np.testing.assert_allclose(batch[0][:, 0] - origin[0], f((tick + np.arange(1, N + 1)) * TS),
+                               atol=1e-3)
+    np.testing.assert_array_equal(batch[0][:, 2], origin[2])  # 2-D sample: z axis is the origin
+    np.testing.assert_array_equal(batch[-1], batch[DS - 1 + 5])  # held
+
+    truth = np.arange(300.0)[:, None]
+    exact = ExactReference(truth, N)
+    exact.place(origin)
+    for offset, h in enumerate(exact.horizons(10, 5)):
+        np.testing.assert_array_equal(h, origin + np.c_[np.arange(11, 11 + N) + offset,
+                                                       np.zeros((N, 2))])

@@ -1,0 +1,141 @@
+"""`rhmpc predict` and the prediction studies (small, seeded runs)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rhmpc.cli import main
+from rhmpc.studies.prediction import StudySettings, default_records, format_table, run_study
+
+DATA = Path(__file__).resolve().parents[4] / "shared" / "data"
+
+
+def _rows(result):
+    return {(r["parameter"], r["predictor"]): r for r in result["rows"]}
+
+
+def test_noise_study_reproduces_yuen_ordering():
+    s = StudySettings(
+        "noise",
+        trials=3,
+        seed=1,
+        noise_mm=(1.3,),
+        predictors=("ekf", "ar", "fading-ar", "last-cycle"),
+    )
+    rows = _rows(run_study(s))
+    ekf, ar, far, lc = (rows[1.3, n]["rms_mm"] for n in ("ekf", "ar", "fading-ar", "last-cycle"))
+    assert ekf < ar < far < 1.3  # Yuen Fig. 3A: all three below σ_R, EKF best, AR < fading AR
+    assert lc == pytest.approx(1.3, rel=0.15)  # last cycle ≈ σ_R
+
+
+def test_hr_step_fading_ar_beats_ar_for_large_steps():
+    s = StudySettings(
+        "hr-step", trials=2, seed=2, delta_bpm=(10.0,), predictors=("ekf", "ar", "fading-ar")
+    )
+    rows = _rows(run_study(s))
+    assert rows[10.0, "fading-ar"]["rms_mm"] < rows[10.0, "ar"]["rms_mm"]
+    assert rows[10.0, "ekf"]["rms_mm"] < 1.3
+
+
+def test_studies_are_reproducible_and_parallel_equals_serial():
+    s = StudySettings("noise", trials=2, seed=3, noise_mm=(0.6,), predictors=("ar", "last-cycle"))
+    a, b = run_study(s), run_study(s, jobs=2)
+    assert [r["rms_mm"] for r in a["rows"]] == [r["rms_mm"] for r in b["rows"]]
+
+
+def test_horizon_study_error_grows_with_lead_and_exact_is_zero():
+    s = StudySettings(
+        "horizon",
+        trials=1,
+        seed=4,
+        scenarios=("fixed-a2-top",),
+        predictors=("generalized", "hold", "exact"),
+    )
+    result = run_study(s)
+    rows = _rows(result)
+    hold = np.array(rows["fixed-a2-top", "hold"]["rms_mm"])
+    assert np.all(np.diff(hold) > 0)
+    assert max(rows["fixed-a2-top", "exact"]["rms_mm"]) < 1e-9
+    assert rows["fixed-a2-top", "generalized"]["rms_mm"][3] < hold[3]
+    assert "lead [ms]" in format_table(result)
+
+
+@pytest.mark.skipif(not (DATA / "1003" / "1003.atr").exists(), reason="../shared/data/1003 absent")
+def test_rr_study_runs_on_a_physionet_record():
+    s = StudySettings(
+        "rr",
+        trials=1,
+        seed=5,
+        records=(str(DATA / "1003" / "1003"),),
+        predictors=("ekf", "last-cycle"),
+    )
+    rows = _rows(run_study(s))
+    assert all(np.isfinite(r["rms_mm"]) for r in rows.values())
+    assert str(DATA / "1003" / "1003") in default_records()
+
+
+def test_cli_predict_writes_json_table_and_plot(tmp_path, capsys):
+    out, png = tmp_path / "r.json", tmp_path / "r.png"
+    code = main(
+        [
+            "predict",
+            "--study",
+            "noise",
+            "--trials",
+            "1",
+            "--noise-mm",
+            "0.3,3",
+            "--predictors",
+            "ar,last-cycle",
+            "--seed",
+            "7",
+            "--out",
+            str(out),
+            "--plot",
+            str(png),
+        ]
+    )
+    assert code == 0
+    table = capsys.readouterr().out
+    assert "last-cycle" in table and "σ_R" in table
+    data = json.loads(out.read_text())
+    assert data["study"] == "noise" and len(data["rows"]) == 4
+    assert png.stat().st_size > 0
+    assert (
+        main(
+            [
+                "predict",
+                "--study",
+                "noise",
+                "--trials",
+                "1",
+                "--noise-mm",
+                "1",
+                "--predictors",
+                "hold",
+                "--json",
+            ]
+        )
+        == 0
+    )
+    assert json.loads(capsys.readouterr().out)["rows"][0]["predictor"] == "hold"
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["predict", "--study", "noise", "--predictors", "kalman"],
+        ["predict", "--study", "noise", "--trials", "0"],
+        ["predict", "--study", "noise", "--noise-mm", "a,b"],
+        ["predict", "--study", "noise", "--predictors", "exact"],
+        ["predict", "--study", "rr", "--records", "/nonexistent/rec"],
+        ["predict", "--study", "horizon", "--scenarios", "nope"],
+    ],
+)
+def test_cli_predict_rejects_bad_input(argv, capsys):
+    assert main(argv) == 2
+    assert "error" in capsys.readouterr().err

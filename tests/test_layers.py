@@ -1,0 +1,149 @@
+"""The import layering of the README's design map: an import may only point down.
+
+Layers, from the bottom (peers of one layer do not import each other):
+
+0. ``robots``, ``predictors``
+1. ``sim``
+2. ``rhmpc.control`` (with ``rhmpc.errors``, which every part of ``rhmpc`` may use)
+3. ``rhmpc.experiment``
+4. ``rhmpc.studies``, ``rhmpc.tuning``
+5. ``rhmpc.cli``
+
+Every ``import`` statement counts, including those inside functions (deferred imports are
+still dependencies). ``predictors`` also depends on nothing outside numpy, scipy and the standard
+library, so that a predictor can be lifted into another project.
+"""
+
+from __future__ import annotations
+
+import ast
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+
+#: (package prefix, layer, peer group); the longest matching prefix decides.
+LAYERS: tuple[tuple[str, int, str], ...] = (
+    ("robots", 0, "robots"),
+    ("predictors", 0, "predictors"),
+    ("sim", 1, "sim"),
+    ("rhmpc.errors", 2, "rhmpc.errors"),
+    ("rhmpc.control", 2, "rhmpc.control"),
+    ("rhmpc.experiment", 3, "rhmpc.experiment"),
+    ("rhmpc.studies", 4, "rhmpc.studies"),
+    ("rhmpc.tuning", 4, "rhmpc.tuning"),
+    ("rhmpc.cli", 5, "rhmpc.cli"),
+)
+PACKAGES = ("robots", "predictors", "sim", "rhmpc")
+#: What ``predictors`` may import besides itself and the standard library.
+PREDICTOR_DEPENDENCIES = ("numpy", "scipy")
+
+
+def layer_of(module: str) -> tuple[int, str] | None:
+    """(layer, peer group) of a first-party module, or None for third-party/stdlib ones."""
+    best = None
+    for prefix, layer, group in LAYERS:
+        if (module == prefix or module.startswith(prefix + ".")) and (
+                best is None or len(prefix) > len(best[0])):
+            best = (prefix, layer, group)
+    return None if best is None else best[1:]
+
+
+def module_name(path: Path, root: Path) -> str:
+    parts = list(path.relative_to(root).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def imports_of(path: Path, module: str) -> list[tuple[int, str]]:
+    """(line, absolute module) of every import in ``path`` (relative imports resolved)."""
+    tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+    package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+    out = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            out.extend((node.lineno, alias.name) for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                anchor = package.split(".")[: len(package.split(".")) - node.level + 1]
+                base = ".".join([*anchor, base] if base else anchor)
+            # ``from rhmpc.tuning import spec`` imports the submodule rhmpc.tuning.spec
+            out.extend((node.lineno, f"{base}.{alias.name}") for alias in node.names)
+    return out
+
+
+def violations(root: Path) -> list[str]:
+    """Every import under ``root`` that points up a layer or across to a peer."""
+    found = []
+    for top in PACKAGES:
+        for path in sorted((root / top).rglob("*.py")):
+            module = module_name(path, root)
+            if module == "rhmpc":
+                continue  # the facade: lazy re-exports only, resolved on first use
+            own = layer_of(module)
+            for line, target in imports_of(path, module):
+                if top == "predictors":
+                    first = target.split(".")[0]
+                    if first not in ("predictors", *PREDICTOR_DEPENDENCIES) and \
+                            first not in sys.stdlib_module_names:
+                        found.append(f"{path.relative_to(root)}:{line}: predictors imports "
+                                     f"{target} (numpy and scipy only)")
+                if target.split(".")[0] == "rhmpc" and layer_of(target) is None \
+                        and target not in ("rhmpc", "rhmpc.__version__"):
+                    found.append(f"{path.relative_to(root)}:{line}: {module} imports {target} "
+                                 "through the rhmpc facade; import it from its subpackage")
+                    continue
+                theirs = layer_of(target)
+                if own is None or theirs is None or theirs[1] == own[1]:
+                    continue
+                if theirs[0] > own[0] or (theirs[0] == own[0]
+                                          and theirs[1] != "rhmpc.errors"):
+                    found.append(f"{path.relative_to(root)}:{line}: {module} (layer {own[0]}) "
+                                 f"imports {target} (layer {theirs[0]})")
+    return found
+
+
+def test_no_import_points_up_a_layer() -> None:
+    assert violations(REPO) == []
+
+
+def test_every_module_has_a_layer() -> None:
+    unplaced = [module_name(p, REPO) for top in PACKAGES for p in (REPO / top).rglob("*.py")
+                if layer_of(module_name(p, REPO)) is None and module_name(p, REPO) != "rhmpc"]
+    assert unplaced == [], "add these modules' package to LAYERS and to the README's map"
+
+
+@pytest.mark.parametrize(("where", "source", "expected"), [
+    ("sim/bad.py", "from rhmpc.control.mpc import RecedingHorizonMPC\n", "layer 2"),
+    ("rhmpc/control/bad.py", "def f():\n    from rhmpc.experiment import run_experiment\n",
+     "layer 3"),
+    ("rhmpc/studies/bad.py", "from rhmpc.tuning import spec\n", "layer 4"),
+    ("rhmpc/tuning/bad.py", "from ..cli import main\n", "layer 5"),
+    ("robots/bad.py", "import predictors\n", "layer 0"),
+    ("predictors/bad.py", "import pinocchio\n", "numpy and scipy only"),
+    ("rhmpc/control/bad.py", "from rhmpc import run_experiment\n", "facade"),
+])
+def test_the_check_catches_an_upward_import(tmp_path: Path, where: str, source: str,
+                                            expected: str) -> None:
+    for top in PACKAGES:
+        (tmp_path / top).mkdir()
+    (tmp_path / where).parent.mkdir(parents=True, exist_ok=True)
+    (tmp_path / where).write_text(source)
+    (found,) = violations(tmp_path)
+    assert expected in found
+
+
+def test_allowed_imports_pass(tmp_path: Path) -> None:
+    for top in PACKAGES:
+        (tmp_path / top).mkdir()
+    (tmp_path / "rhmpc" / "cli").mkdir()
+    (tmp_path / "rhmpc" / "cli" / "ok.py").write_text(
+        "from rhmpc import __version__\nfrom rhmpc.errors import UsageError\n"
+        "from rhmpc.tuning.spec import load_spec\nfrom sim.loop import run_closed_loop\n")
+    (tmp_path / "predictors" / "ok.py").write_text("import math\nimport numpy as np\n"
+                                                   "from scipy import linalg\n")
+    assert violations(tmp_path) == []
