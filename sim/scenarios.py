@@ -30,6 +30,7 @@ from sim.rr import (
     StaircaseProfile,
     beat_times_from_annotations,
     beat_times_from_rr,
+    beats_from_annotations,
     constant_phase,
     staircase_phase,
 )
@@ -74,6 +75,11 @@ class ScenarioSpec:
     reported : tuple of str
         Which of ``peak_to_peak``, ``rms``, ``heart_rate``, ``sensor_rate``, ``duration`` come
         from the paper (the rest are assumptions).
+    record : str or None
+        For ``heart="record"``: the PhysioNet record (relative to the shared data folder) whose
+        annotated beats drive the heart phase.
+    record_start : float
+        Time in the record where the scenario starts [s].
     """
 
     name: str
@@ -86,7 +92,20 @@ class ScenarioSpec:
     heart_rate: float
     site: str
     reported: tuple[str, ...] = field(default=())
+    record: str | None = None
+    record_start: float = 0.0
 
+
+#: The shared real data (PhysioNet annotations), outside the repository: ../shared/data.
+SHARED_DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data"
+
+#: Premature beats: stroke gain = (coupling interval / median RR)^PREMATURE_STROKE_EXPONENT
+#: (a shortened filling time gives a smaller stroke, Frank–Starling; exponent 1 assumed), and
+#: the beat after the pause ×POST_PAUSE_POTENTIATION (post-extrasystolic potentiation;
+#: 1.15 assumed, of the order reported for the beat after a premature beat, Cooper 1993,
+#: Circulation 88:2962).
+PREMATURE_STROKE_EXPONENT = 1.0
+POST_PAUSE_POTENTIATION = 1.15
 
 _SPECS: tuple[ScenarioSpec, ...] = (
     ScenarioSpec(
@@ -119,6 +138,12 @@ _SPECS: tuple[ScenarioSpec, ...] = (
         "mitral-1d", "Yuen et al. mitral annulus along its axis, 1-D: 20 mm travel, "
         "60 bpm (210 mm/s and 3.8 m/s² peaks at 76 bpm; replica)", 20e-3, None, 28.0, 40.0,
         "constant", 1.0, "mitral", ("peak_to_peak",)),
+    ScenarioSpec(
+        "arrhythmia-apb", "fixed-a2-top's motion driven by MIT-BIH record 100 (1035–1275 s: "
+        "10 of its 33 atrial premature beats), premature beats with a smaller stroke and the "
+        "pause after them (replica; real annotations, synthetic motion)", 8.39e-3, 3.55e-3,
+        257.0, 240.0, "record", 100.0 / 60.0, "top", ("peak_to_peak", "rms", "sensor_rate"),
+        record="mitdb-100/100", record_start=1035.0),
 )
 
 SPECS: dict[str, ScenarioSpec] = {s.name: s for s in _SPECS}
@@ -126,6 +151,9 @@ SPECS: dict[str, ScenarioSpec] = {s.name: s for s in _SPECS}
 #: Scenario names, the default first.
 SCENARIOS: tuple[str, ...] = ("fixed-a2-top",
                               *(s.name for s in _SPECS if s.name != "fixed-a2-top"))
+
+#: The named scenarios that need the shared real data (skipped where it is absent).
+NEEDS_DATA: tuple[str, ...] = tuple(s.name for s in _SPECS if s.record is not None)
 
 DEFAULT_SCENARIO = "fixed-a2-top"
 
@@ -275,6 +303,10 @@ def _phase_track(spec: ScenarioSpec, overrides: dict, rng: np.random.Generator,
     """Heart phase for the scenario and, if driven by beat times, the time they span [s]."""
     start = float(overrides.get("rr_start", 0.0))
     beats = None
+    if spec.heart == "record" and not {"beat_times", "rr", "record"} & set(overrides):
+        times, _ = _record_beats(spec)
+        track = PhaseTrack.from_beat_times(times)
+        return track, float(times[-1] - max(times[0], 0.0))
     if "beat_times" in overrides:
         beats = np.asarray(overrides["beat_times"], dtype=float)
     elif "rr" in overrides:
@@ -306,8 +338,6 @@ def _shape(spec: ScenarioSpec, overrides: dict, rng: np.random.Generator, phase:
            breath: PhaseTrack | None) -> SyntheticHeartMotion:
     """The uncalibrated motion for ``spec`` (unit-less shape, scaled later)."""
     breathing_rate = float(overrides.get("breathing_rate", 1.0 / 6.0))
-    coupling = settings.coupling
-    gain_std = settings.beat_gain_std
     with_breathing = bool(overrides.get("breathing", spec.site != "mitral"))
     if spec.site == "mitral":
         heart = fourier_from_bumps(MITRAL_BUMPS, _MITRAL_HARMONICS)[None, :]
@@ -329,12 +359,33 @@ def _shape(spec: ScenarioSpec, overrides: dict, rng: np.random.Generator, phase:
             breathing = np.zeros_like(breathing)
     first = int(np.floor(float(phase(-5.0))))
     last = int(np.ceil(float(phase(horizon + 5.0))))
+    if spec.heart == "record" and not {"beat_times", "rr", "record"} & set(overrides):
+        times, premature = _record_beats(spec)
+        stroke = premature_stroke(times, premature)
+        motion = (_shape_clean if breath is None else _variable_shape)(
+            rng, phase, heart, breathing, breathing_rate, horizon, settings, breath, first,
+            last - first + 1)
+        beat = np.arange(first, last + 1)
+        factor = stroke[np.clip(beat, 0, stroke.size - 1)][:, None]
+        return SyntheticHeartMotion(
+            phase, motion.heart, motion.breathing, breathing_rate, motion.coupling,
+            motion.beat_gains * factor, first, coupling_phase=motion.coupling_phase,
+            drift=motion.drift, **motion._variations())
     if breath is None:  # the clean replica, drawn exactly as before the variability existed
-        gains = draw_beat_gains(rng, last - first + 1, heart.shape[0], gain_std)
-        return SyntheticHeartMotion(phase, heart, breathing, breathing_rate, coupling, gains,
-                                    first, coupling_phase=2 * np.pi * rng.random())
+        return _shape_clean(rng, phase, heart, breathing, breathing_rate, horizon, settings,
+                            breath, first, last - first + 1)
     return _variable_shape(rng, phase, heart, breathing, breathing_rate, horizon, settings,
                            breath, first, last - first + 1)
+
+
+def _shape_clean(rng: np.random.Generator, phase: PhaseTrack, heart: np.ndarray,
+                 breathing: np.ndarray, breathing_rate: float, horizon: float,
+                 settings: VariabilitySettings, breath: PhaseTrack | None, first: int,
+                 n_beats: int) -> SyntheticHeartMotion:
+    """The periodic shape (independent beat gains, coupling at the mean breathing rate)."""
+    gains = draw_beat_gains(rng, n_beats, heart.shape[0], settings.beat_gain_std)
+    return SyntheticHeartMotion(phase, heart, breathing, breathing_rate, settings.coupling,
+                                gains, first, coupling_phase=2 * np.pi * rng.random())
 
 
 def _variable_shape(rng: np.random.Generator, phase: PhaseTrack, heart: np.ndarray,
@@ -361,6 +412,36 @@ def _variable_shape(rng: np.random.Generator, phase: PhaseTrack, heart: np.ndarr
         breath_depths=depths if settings.breath_depth_cv > 0 else None,
         first_breath=first_breath,
         beat_offsets=offsets if settings.beat_timing_std > 0 else None, drift=drift)
+
+
+def _record_beats(spec: ScenarioSpec) -> tuple[np.ndarray, np.ndarray]:
+    """Beat times [s] (shifted so that ``record_start`` is t = 0, 10 s margins kept) and the
+    premature mask of the spec's record."""
+    path = SHARED_DATA / str(spec.record)
+    if not path.with_suffix(".atr").is_file():
+        raise ValueError(f"scenario {spec.name} needs the PhysioNet annotations "
+                         f"{path.with_suffix('.atr')} (the shared data folder is absent)")
+    times, premature = beats_from_annotations(path)
+    keep = (times >= spec.record_start - 10.0) & (times <= spec.record_start + spec.duration
+                                                  + 10.0)
+    return times[keep] - spec.record_start, premature[keep]
+
+
+def premature_stroke(times: np.ndarray, premature: np.ndarray) -> np.ndarray:
+    """Per-beat stroke gain of an annotated rhythm [-], one per beat time.
+
+    A premature beat i gets (RR_{i−1}/median RR)^PREMATURE_STROKE_EXPONENT (its shortened
+    filling time), the beat after it POST_PAUSE_POTENTIATION, every other beat 1.
+    """
+    gain = np.ones(times.size)
+    rr = np.diff(times)
+    median = float(np.median(rr))
+    for i in np.flatnonzero(premature):
+        if i > 0:
+            gain[i] = min(1.0, rr[i - 1] / median) ** PREMATURE_STROKE_EXPONENT
+        if i + 1 < gain.size and not premature[i + 1]:
+            gain[i + 1] = POST_PAUSE_POTENTIATION
+    return gain
 
 
 def _range_of(coef: np.ndarray) -> float:

@@ -12,13 +12,14 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from rhmpc.errors import UsageError
-from sim.analysis import fill_gaps, motion_stats, psd
+from sim.analysis import fill_gaps, motion_stats, predictability, psd
 from sim.heart import (
     DEFAULT_SCENARIO,
     SCENARIOS,
@@ -29,7 +30,7 @@ from sim.heart import (
 )
 from sim.motion import MotionSource
 from sim.recordings import export_source
-from sim.scenarios import DEFAULT_SEED
+from sim.scenarios import DEFAULT_SEED, NEEDS_DATA, SHARED_DATA
 from sim.sensors import SENSORS, sensor_from_name
 
 
@@ -125,6 +126,8 @@ def _stats_row(target: _Target) -> dict:
     row = {"name": target.name, "dim": int(target.source.dim),
            "sensor_rate_hz": target.rate, "duration_s": round(target.duration, 3)}
     row.update(stats.as_dict())
+    value = predictability(target.source, target.duration, target.start)
+    row["predictability"] = None if not np.isfinite(value) else round(value, 4)
     row["description"] = target.description
     return row
 
@@ -132,6 +135,11 @@ def _stats_row(target: _Target) -> dict:
 def _list(args: argparse.Namespace) -> int:
     rows = []
     for name in SCENARIOS:
+        if name in NEEDS_DATA and not (SHARED_DATA / str(SPECS[name].record)).with_suffix(
+                ".atr").is_file():
+            print(f"# {name}: skipped, needs {SHARED_DATA / str(SPECS[name].record)}.atr",
+                  file=sys.stderr)
+            continue
         row = _stats_row(_target(name, args))
         spec = SPECS[name]
         row["target_peak_to_peak_mm"] = round(spec.peak_to_peak * 1e3, 3)
@@ -141,17 +149,20 @@ def _list(args: argparse.Namespace) -> int:
         print(json.dumps(rows, indent=2))
         return 0
     head = (f"{'name':<16} {'dim':>3} {'rate':>6} {'dur':>6} {'p-p':>7} {'(target)':>9} "
-            f"{'RMS':>6} {'(target)':>9} {'HR bpm':>12}")
+            f"{'RMS':>6} {'(target)':>9} {'HR bpm':>12} {'predict.':>8}")
     print(head)
-    print(f"{'':<16} {'':>3} {'[Hz]':>6} {'[s]':>6} {'[mm]':>7} {'':>9} {'[mm]':>6}")
+    print(f"{'':<16} {'':>3} {'[Hz]':>6} {'[s]':>6} {'[mm]':>7} {'':>9} {'[mm]':>6} {'':>9} "
+          f"{'':>12} {'RLS/hold':>8}")
     for r in rows:
         hr = r["heart_rate_bpm"]
         hr_text = f"{hr[0]:.0f}" if abs(hr[1] - hr[0]) < 0.5 else f"{hr[0]:.0f}–{hr[1]:.0f}"
         rms_t = "—" if r["target_rms_mm"] is None else f"{r['target_rms_mm']:.2f}"
         print(f"{r['name']:<16} {r['dim']:>3} {r['sensor_rate_hz']:>6g} {r['duration_s']:>6g} "
               f"{r['peak_to_peak_mm']:>7.2f} {r['target_peak_to_peak_mm']:>9.2f} "
-              f"{r['rms_mm']:>6.2f} {rms_t:>9} {hr_text:>12}")
+              f"{r['rms_mm']:>6.2f} {rms_t:>9} {hr_text:>12} {_pred_text(r):>8}")
     print("All scenarios are synthetic replicas calibrated to the papers' reported statistics.")
+    print("predict.: one-step RLS / hold RMS error 120 ms (3 samples) ahead at 25 Hz on the "
+          "noise-free motion (line spectrum ≈ 0; mechanical phantom ≈ 0.12; in-vivo ≈ 0.69).")
     return 0
 
 
@@ -174,7 +185,14 @@ def _show(args: argparse.Namespace) -> int:
     print(f"  spectral peaks    {peaks or 'none'}" + (" Hz" if peaks else ""))
     if row["missing_fraction"]:
         print(f"  missing samples   {100 * row['missing_fraction']:.2f} %")
+    print(f"  predictability    {_pred_text(row)} (one-step RLS / hold RMS error, 120 ms ahead "
+          "at 25 Hz; phantom ≈ 0.12, in-vivo heart ≈ 0.69)")
     return 0
+
+
+def _pred_text(row: dict) -> str:
+    value = row.get("predictability")
+    return "—" if value is None else f"{value:.3f}"
 
 
 def _export(args: argparse.Namespace) -> int:
