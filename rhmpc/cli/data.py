@@ -59,6 +59,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     common.add_argument("--duration", type=float, help="seconds to use (default: the scenario's)")
     common.add_argument("--bpm", type=float, help="constant heart rate [beats/min]")
     common.add_argument("--record", help="PhysioNet record whose annotated beats drive the heart")
+    common.add_argument("--var", help="MATLAB variable holding the positions (.mat files)")
+    common.add_argument("--rows", type=_indices, help="0-based rows holding x,y,z (.mat)")
+    common.add_argument("--cols", type=_indices, help="0-based columns holding x,y,z (.mat)")
+    common.add_argument("--units", choices=("mm", "m", "um", "cm"),
+                        help="length unit when the file does not state it (default mm)")
 
     p_list = actions.add_parser("list", parents=[common], help="scenarios and their statistics")
     p_list.add_argument("--json", action="store_true", help="machine-readable output")
@@ -67,11 +72,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p_show.add_argument("name", nargs="?", default=DEFAULT_SCENARIO,
                         help=f"scenario or recording file (default {DEFAULT_SCENARIO})")
     p_show.add_argument("--json", action="store_true", help="machine-readable output")
+    p_show.add_argument("--rate", type=float, help="sample rate of a .mat file without a time "
+                        "vector [Hz]")
 
     p_exp = actions.add_parser("export", parents=[common], help="write a scenario to .csv/.npz")
     p_exp.add_argument("name", help="scenario or recording file")
     p_exp.add_argument("file", help="output .csv (s, mm) or .npz (s, m)")
-    p_exp.add_argument("--rate", type=float, help="sample rate [Hz] (default: the sensor's)")
+    p_exp.add_argument("--rate", type=float, help="sample rate [Hz] (default: the sensor's; for "
+                       "a .mat file without a time vector also its rate)")
     p_exp.add_argument("--sensor", choices=SENSORS,
                        help="write this sensor's noisy samples instead of the true motion")
     p_exp.add_argument("--force", action="store_true", help="overwrite an existing file")
@@ -79,6 +87,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p_plot = actions.add_parser("plot", parents=[common], help="figure: position and PSD")
     p_plot.add_argument("name", help="scenario or recording file")
     p_plot.add_argument("file", help="output image (.png, .pdf, .svg)")
+    p_plot.add_argument("--rate", type=float, help="sample rate of a .mat file without a time "
+                        "vector [Hz]")
     p_plot.add_argument("--window", type=float, default=10.0,
                         help="length of the zoomed time window [s] (default %(default)s)")
     p_plot.add_argument("--start", type=float, default=0.0,
@@ -110,15 +120,35 @@ def _target(name: str, args: argparse.Namespace) -> _Target:
         sc = make_scenario(name, np.random.default_rng(args.seed), **overrides)
         return _Target(sc.name, sc.source, sc.sensor_rate, sc.duration, sc.description)
     path = Path(name)
-    if path.suffix.lower() in {".csv", ".npz", ".txt"} or path.exists():
+    if path.suffix.lower() in {".csv", ".npz", ".txt", ".mat"} or path.exists():
         if args.bpm is not None or args.record is not None:
             raise UsageError("--bpm and --record apply to scenarios, not recordings")
-        rec = load_recording(path)
+        rec = load_recording(path, **_read_options(args, path))
         duration = rec.duration if args.duration is None else min(args.duration, rec.duration)
         return _Target(path.name, rec, rec.sample_rate, duration, f"recording {path}",
                        float(rec.t[0]))
     raise UsageError(f"unknown scenario {name!r}; valid names: {', '.join(SCENARIOS)} "
                      "(or the path of a .csv/.npz recording)")
+
+
+def _indices(text: str) -> list[int]:
+    try:
+        return [int(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected comma-separated indices, got {text!r}") from None
+
+
+def _read_options(args: argparse.Namespace, path: Path) -> dict:
+    """``load_recording`` keywords: --units always, --var/--rows/--cols/--rate for .mat."""
+    out = {"units": args.units} if getattr(args, "units", None) else {}
+    if path.suffix.lower() == ".mat":
+        for key in ("var", "rows", "cols", "rate"):
+            if getattr(args, key, None) is not None:
+                out[key] = getattr(args, key)
+    elif any(getattr(args, k, None) is not None for k in ("var", "rows", "cols")):
+        raise UsageError("--var, --rows and --cols apply to .mat files")
+    return out
 
 
 def _stats_row(target: _Target) -> dict:
