@@ -80,6 +80,9 @@ class ScenarioSpec:
         annotated beats drive the heart phase.
     record_start : float
         Time in the record where the scenario starts [s].
+    variable : bool
+        Whether the default is the physiological variability of :mod:`sim.variability`
+        (True) or the periodic replica (False).
     """
 
     name: str
@@ -94,6 +97,7 @@ class ScenarioSpec:
     reported: tuple[str, ...] = field(default=())
     record: str | None = None
     record_start: float = 0.0
+    variable: bool = True
 
 
 #: The shared real data (PhysioNet annotations), outside the repository: ../shared/data.
@@ -137,7 +141,7 @@ _SPECS: tuple[ScenarioSpec, ...] = (
     ScenarioSpec(
         "mitral-1d", "Yuen et al. mitral annulus along its axis, 1-D: 20 mm travel, "
         "60 bpm (210 mm/s and 3.8 m/s² peaks at 76 bpm; replica)", 20e-3, None, 28.0, 40.0,
-        "constant", 1.0, "mitral", ("peak_to_peak",)),
+        "constant", 1.0, "mitral", ("peak_to_peak",), variable=False),
     ScenarioSpec(
         "arrhythmia-apb", "fixed-a2-top's motion driven by MIT-BIH record 100 (1035–1275 s: "
         "10 of its 33 atrial premature beats), premature beats with a smaller stroke and the "
@@ -233,7 +237,9 @@ def make_scenario(name: str, rng: np.random.Generator | None = None, **overrides
         ``coupling`` [-], ``beat_gain_std`` [-], ``breathing`` (False removes it),
         ``variability`` (:class:`~sim.variability.VariabilitySettings`, or ``"clean"`` for
         the periodic replica; default ``VariabilitySettings()``: HRV, beat-to-beat stroke and
-        timing, breath period and depth, drift, coupling). ``coupling`` and
+        timing, breath period and depth, drift, coupling — except ``mitral-1d``, periodic by
+        default because Yuen et al.'s §III-D studies perturb that signal themselves: noise,
+        heart-rate steps, RR intervals). ``coupling`` and
         ``beat_gain_std`` override the fields of the same name. Beat-time driven phases
         (``rr``, ``beat_times``, ``record``) carry their own RR variability: no HRV is added.
 
@@ -284,7 +290,8 @@ def make_scenario(name: str, rng: np.random.Generator | None = None, **overrides
 
 def _variability(spec: ScenarioSpec, overrides: dict) -> VariabilitySettings:
     """The variability settings with the ``coupling``/``beat_gain_std`` overrides applied."""
-    value = overrides.get("variability", VariabilitySettings())
+    value = overrides.get("variability",
+                          VariabilitySettings() if spec.variable else "clean")
     if isinstance(value, str):
         if value != "clean":
             raise ValueError(f"variability must be a VariabilitySettings or 'clean', got {value!r}")

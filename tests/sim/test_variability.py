@@ -157,3 +157,13 @@ def test_variable_replica_seeds_reproduce_and_differ() -> None:
     c = make_scenario("varying-a3-top", np.random.default_rng(8)).source.position(t)
     np.testing.assert_array_equal(a, b)
     assert np.max(np.abs(a - c)) > 1e-4
+
+
+def test_mitral_1d_is_periodic_by_default() -> None:
+    """Yuen's §III-D studies add their own perturbations to mitral-1d: clean by default."""
+    t = np.linspace(0, 20, 501)
+    a = make_scenario("mitral-1d").source.position(t)
+    b = make_scenario("mitral-1d", variability="clean").source.position(t)
+    np.testing.assert_array_equal(a, b)
+    c = make_scenario("mitral-1d", variability=VariabilitySettings()).source.position(t)
+    assert np.max(np.abs(a - c)) > 1e-4
