@@ -24,6 +24,17 @@ TIME_NAMES = ("t", "time", "timestamps", "t_s")
 MIN_SAMPLES = 2
 
 
+def parse_indices(text: str) -> list[int]:
+    """``"0,1,2"`` → [0, 1, 2] (the command lines' ``--rows``/``--cols``)."""
+    import argparse
+
+    try:
+        return [int(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected comma-separated indices, got {text!r}") from None
+
+
 def _read_variables(path: Path) -> dict[str, object]:
     """Every variable of a .mat file: numeric arrays (MATLAB's shape) and strings."""
     import scipy.io

@@ -28,6 +28,7 @@ from sim.heart import (
     make_scenario,
     save_recording,
 )
+from sim.matfile import parse_indices
 from sim.motion import MotionSource
 from sim.recordings import export_source
 from sim.scenarios import DEFAULT_SEED, NEEDS_DATA, SHARED_DATA
@@ -60,8 +61,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     common.add_argument("--bpm", type=float, help="constant heart rate [beats/min]")
     common.add_argument("--record", help="PhysioNet record whose annotated beats drive the heart")
     common.add_argument("--var", help="MATLAB variable holding the positions (.mat files)")
-    common.add_argument("--rows", type=_indices, help="0-based rows holding x,y,z (.mat)")
-    common.add_argument("--cols", type=_indices, help="0-based columns holding x,y,z (.mat)")
+    common.add_argument("--rows", type=parse_indices, help="0-based rows holding x,y,z (.mat)")
+    common.add_argument("--cols", type=parse_indices, help="0-based columns holding x,y,z (.mat)")
     common.add_argument("--units", choices=("mm", "m", "um", "cm"),
                         help="length unit when the file does not state it (default mm)")
 
@@ -130,13 +131,6 @@ def _target(name: str, args: argparse.Namespace) -> _Target:
     raise UsageError(f"unknown scenario {name!r}; valid names: {', '.join(SCENARIOS)} "
                      "(or the path of a .csv/.npz recording)")
 
-
-def _indices(text: str) -> list[int]:
-    try:
-        return [int(v) for v in text.split(",") if v.strip()]
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"expected comma-separated indices, got {text!r}") from None
 
 
 def _read_options(args: argparse.Namespace, path: Path) -> dict:

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from rhmpc.errors import UsageError
 from rhmpc.experiment import RunConfig, load_config, run_experiment
+from sim.matfile import parse_indices
 
 #: Default run length [s] and settling window [s] of ``rhmpc simulate``.
 DEFAULT_DURATION = 30.0
@@ -65,22 +66,15 @@ def add_recording_options(p: argparse.ArgumentParser) -> None:
     """``--var``, ``--rows``, ``--cols``, ``--rate``, ``--units``: how to read a recording."""
     g = p.add_argument_group("reading a recording (.mat)")
     g.add_argument("--var", help="MATLAB variable holding the positions")
-    g.add_argument("--rows", type=_indices, help="0-based rows holding x,y,z (samples along "
+    g.add_argument("--rows", type=parse_indices, help="0-based rows holding x,y,z (samples along "
                    "columns), e.g. 0,1,2")
-    g.add_argument("--cols", type=_indices, help="0-based columns holding x,y,z (samples along "
-                   "rows)")
+    g.add_argument("--cols", type=parse_indices,
+                   help="0-based columns holding x,y,z (samples along rows)")
     g.add_argument("--rate", type=float, dest="data_rate", metavar="HZ",
                    help="sample rate when the file has no time vector [Hz]")
     g.add_argument("--units", choices=("mm", "m", "um", "cm"),
                    help="length unit when the file does not state it (default mm)")
 
-
-def _indices(text: str) -> list[int]:
-    try:
-        return [int(v) for v in text.split(",") if v.strip()]
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"expected comma-separated indices, got {text!r}") from None
 
 
 def recording_options(args: argparse.Namespace) -> dict:
