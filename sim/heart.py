@@ -8,6 +8,7 @@ This is the public entry point; the work is split over small modules:
   p(t) = p₀ + b(t) + (1 + κ cos(2π f_r t + ψ))·g(φ)⊙h(φ(t));
 * :mod:`sim.variability` — the physiological variability (HRV with RSA, beat-to-beat stroke and
   timing, breath period and depth, drift, breathing–heartbeat coupling), seeded, switchable;
+* :mod:`sim.arrhythmia` — an annotated real rhythm with premature-beat strokes (arrhythmia-apb);
 * :mod:`sim.scenarios` — the named replicas of the papers' data sets and their calibration;
 * :mod:`sim.recordings` — CSV/NPZ recordings users bring, and export;
 * :mod:`sim.analysis` — peak-to-peak, RMS, spectra.

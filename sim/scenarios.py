@@ -17,6 +17,11 @@ from pathlib import Path
 
 import numpy as np
 
+from sim.arrhythmia import (
+    SHARED_DATA,
+    premature_stroke,
+    record_beats,
+)
 from sim.motion import (
     EPICARDIAL_BUMPS,
     MITRAL_BUMPS,
@@ -30,7 +35,6 @@ from sim.rr import (
     StaircaseProfile,
     beat_times_from_annotations,
     beat_times_from_rr,
-    beats_from_annotations,
     constant_phase,
     staircase_phase,
 )
@@ -99,17 +103,6 @@ class ScenarioSpec:
     record_start: float = 0.0
     variable: bool = True
 
-
-#: The shared real data (PhysioNet annotations), outside the repository: ../shared/data.
-SHARED_DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data"
-
-#: Premature beats: stroke gain = (coupling interval / median RR)^PREMATURE_STROKE_EXPONENT
-#: (a shortened filling time gives a smaller stroke, Frank–Starling; exponent 1 assumed), and
-#: the beat after the pause ×POST_PAUSE_POTENTIATION (post-extrasystolic potentiation;
-#: 1.15 assumed, of the order reported for the beat after a premature beat, Cooper 1993,
-#: Circulation 88:2962).
-PREMATURE_STROKE_EXPONENT = 1.0
-POST_PAUSE_POTENTIATION = 1.15
 
 _SPECS: tuple[ScenarioSpec, ...] = (
     ScenarioSpec(
@@ -311,7 +304,7 @@ def _phase_track(spec: ScenarioSpec, overrides: dict, rng: np.random.Generator,
     start = float(overrides.get("rr_start", 0.0))
     beats = None
     if spec.heart == "record" and not {"beat_times", "rr", "record"} & set(overrides):
-        times, _ = _record_beats(spec)
+        times, _ = _spec_beats(spec)
         track = PhaseTrack.from_beat_times(times)
         return track, float(times[-1] - max(times[0], 0.0))
     if "beat_times" in overrides:
@@ -367,7 +360,7 @@ def _shape(spec: ScenarioSpec, overrides: dict, rng: np.random.Generator, phase:
     first = int(np.floor(float(phase(-5.0))))
     last = int(np.ceil(float(phase(horizon + 5.0))))
     if spec.heart == "record" and not {"beat_times", "rr", "record"} & set(overrides):
-        times, premature = _record_beats(spec)
+        times, premature = _spec_beats(spec)
         stroke = premature_stroke(times, premature)
         motion = (_shape_clean if breath is None else _variable_shape)(
             rng, phase, heart, breathing, breathing_rate, horizon, settings, breath, first,
@@ -421,34 +414,10 @@ def _variable_shape(rng: np.random.Generator, phase: PhaseTrack, heart: np.ndarr
         beat_offsets=offsets if settings.beat_timing_std > 0 else None, drift=drift)
 
 
-def _record_beats(spec: ScenarioSpec) -> tuple[np.ndarray, np.ndarray]:
-    """Beat times [s] (shifted so that ``record_start`` is t = 0, 10 s margins kept) and the
-    premature mask of the spec's record."""
-    path = SHARED_DATA / str(spec.record)
-    if not path.with_suffix(".atr").is_file():
-        raise ValueError(f"scenario {spec.name} needs the PhysioNet annotations "
-                         f"{path.with_suffix('.atr')} (the shared data folder is absent)")
-    times, premature = beats_from_annotations(path)
-    keep = (times >= spec.record_start - 10.0) & (times <= spec.record_start + spec.duration
-                                                  + 10.0)
-    return times[keep] - spec.record_start, premature[keep]
-
-
-def premature_stroke(times: np.ndarray, premature: np.ndarray) -> np.ndarray:
-    """Per-beat stroke gain of an annotated rhythm [-], one per beat time.
-
-    A premature beat i gets (RR_{i−1}/median RR)^PREMATURE_STROKE_EXPONENT (its shortened
-    filling time), the beat after it POST_PAUSE_POTENTIATION, every other beat 1.
-    """
-    gain = np.ones(times.size)
-    rr = np.diff(times)
-    median = float(np.median(rr))
-    for i in np.flatnonzero(premature):
-        if i > 0:
-            gain[i] = min(1.0, rr[i - 1] / median) ** PREMATURE_STROKE_EXPONENT
-        if i + 1 < gain.size and not premature[i + 1]:
-            gain[i + 1] = POST_PAUSE_POTENTIATION
-    return gain
+def _spec_beats(spec: ScenarioSpec) -> tuple[np.ndarray, np.ndarray]:
+    """Beat times [s] from the spec's record (``record_start`` at t = 0) and premature mask."""
+    return record_beats(SHARED_DATA / str(spec.record), spec.record_start, spec.duration,
+                        spec.name)
 
 
 def _range_of(coef: np.ndarray) -> float:

@@ -20,6 +20,7 @@ import numpy as np
 
 from rhmpc.errors import UsageError
 from sim.analysis import fill_gaps, motion_stats, predictability, psd
+from sim.arrhythmia import SHARED_DATA
 from sim.heart import (
     DEFAULT_SCENARIO,
     SCENARIOS,
@@ -31,7 +32,7 @@ from sim.heart import (
 from sim.matfile import parse_indices
 from sim.motion import MotionSource
 from sim.recordings import export_source
-from sim.scenarios import DEFAULT_SEED, NEEDS_DATA, SHARED_DATA
+from sim.scenarios import DEFAULT_SEED, NEEDS_DATA
 from sim.sensors import SENSORS, sensor_from_name
 
 

@@ -5,14 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from sim.arrhythmia import POST_PAUSE_POTENTIATION, SHARED_DATA, premature_stroke
 from sim.heart import make_scenario
 from sim.rr import beats_from_annotations
-from sim.scenarios import (
-    POST_PAUSE_POTENTIATION,
-    SHARED_DATA,
-    SPECS,
-    premature_stroke,
-)
+from sim.scenarios import SPECS
 
 RECORD = SHARED_DATA / "mitdb-100" / "100"
 
