@@ -12,17 +12,26 @@ Conventions (see ``../shared/DESIGN.md``):
 * The dimension ``d`` is taken from the first valid sample, or from the ``dim``
   setting.  The loop feeds 3-D samples in metres, the Yuen studies 1-D.
 * Units.  Parameters that the papers give in millimetres are stored in SI (m, m²)
-  in the settings dataclasses.  A predictor does not know the unit of its samples,
-  so each dimensional predictor has a ``unit`` setting = metres per data unit
-  (1.0 for samples in metres, 1e-3 for samples in millimetres) and converts its
-  SI parameters to data units once, at construction: a variance σ² [m²] becomes
-  σ²/unit², a gain per m² becomes gain·unit².  With that setting a predictor fed
-  the same motion in m or in mm produces the same forecasts (×1000).
+  in the settings dataclasses.  Each dimensional predictor has a ``unit`` setting =
+  metres per data unit (1.0 for samples in metres, 1e-3 for samples in millimetres)
+  and converts its SI parameters to data units once: a variance σ² [m²] becomes
+  σ²/unit², a gain per m² becomes gain·unit².  ``unit=None`` (the default) infers it
+  from the first ``SCALE_SECONDS`` of data (:func:`predictors.monitor.infer_unit`,
+  a power of 1000): the predictor serves the hold forecast meanwhile, then allocates
+  its state and replays the window.  Fed the same motion in m or in mm, a predictor
+  produces the same forecasts (×1000) either way.
 * A missing sample (``None``, or any NaN/inf component) never touches the learnt
   state: the model runs open-loop through it and the event is counted in
   :attr:`Predictor.counts`.
 * Numerical guards (covariance resets and bounds) are counted in
   :attr:`Predictor.counts` under the name of their reason.
+* Divergence guard (every predictor): a forecast is clipped per axis to
+  [lo − G·r, hi + G·r], with [lo, hi] the range of the valid samples of the last
+  ``RANGE_SECONDS`` and r = hi − lo (floored at 10 % of the widest axis), G =
+  ``GUARD_MULTIPLE``; clipped forecasts are counted (``forecast_clamped``).  A
+  non-finite forecast is replaced by the hold forecast, the learnt state is dropped and
+  relearnt from the next samples (``forecast_nonfinite``).
+* ``forecast_error_rms``: the running RMS of past forecast misses at each lead.
 """
 
 from __future__ import annotations
@@ -32,6 +41,8 @@ from collections import Counter
 from dataclasses import dataclass
 
 import numpy as np
+
+from predictors.monitor import LeadErrorRMS, RangeEnvelope, infer_unit
 
 __all__ = ["Predictor", "PredictorSettings", "as_sample"]
 
@@ -51,6 +62,9 @@ class PredictorSettings:
     def __post_init__(self) -> None:
         if self.dim is not None and (int(self.dim) != self.dim or self.dim < 1):
             raise ValueError(f"dim must be a positive integer or None, got {self.dim!r}")
+        unit = getattr(self, "unit", None)  # metres per data unit, where a subclass has one
+        if unit is not None and not (unit > 0.0 and np.isfinite(unit)):
+            raise ValueError(f"unit must be > 0 [m per data unit] or None, got {unit!r}")
 
 
 def as_sample(z, d: int | None) -> np.ndarray | None:
@@ -74,14 +88,15 @@ class Predictor(ABC):
 
     Subclasses implement
 
-    ``_allocate(d)``  allocate state once the dimension is known,
+    ``_allocate(d)``  allocate state once the dimension (and ``self.unit``) is known,
     ``_update(z)``    absorb a valid sample z_n (a (d,) float array, not to be kept by reference),
     ``_missing()``    advance one period open-loop (no measurement),
     ``_predict(K)``   return (K, d) forecasts ẑ_{n+1..n+K}.
 
-    The base class validates input, infers ``d``, counts events, and serves the
-    *hold* forecast (the newest valid sample repeated) while a subclass is not yet
-    ready (``self.ready`` is False), e.g. during an initialisation window.
+    The base class validates input, infers ``d`` and the unit, counts events, guards
+    forecasts against divergence, scores them per lead, and serves the *hold* forecast
+    (the newest valid sample repeated) while a subclass is not yet ready (``self.ready``
+    is False), e.g. during an initialisation window.
 
     Attributes
     ----------
@@ -91,6 +106,9 @@ class Predictor(ABC):
         The frozen settings it was built with.
     d : int or None
         Sample dimension (``None`` until known).
+    unit : float or None
+        Metres per data unit of a dimensional predictor (``None`` until inferred, and
+        always for the scale-free ones: hold, last cycle, exact).
     n : int
         Number of ``update`` calls since the last reset (valid or missing).
     counts : collections.Counter
@@ -98,6 +116,14 @@ class Predictor(ABC):
     """
 
     Settings: type[PredictorSettings] = PredictorSettings
+    #: G: forecasts are clipped to G recent ranges beyond the recent [min, max] [-]
+    GUARD_MULTIPLE = 2.0
+    #: window of the recent signal range [s]
+    RANGE_SECONDS = 2.0
+    #: initialisation window of the unit inference (``unit=None``) [s]
+    SCALE_SECONDS = 0.5
+    #: memory of the running forecast-error RMS [s]
+    ERROR_MEMORY_SECONDS = 10.0
 
     def __init__(self, dt: float, settings: PredictorSettings | None = None) -> None:
         dt = float(dt)
@@ -117,6 +143,10 @@ class Predictor(ABC):
         self.ready = False
         self._last: np.ndarray | None = None
         self.d = None
+        self.unit = getattr(self.settings, "unit", None)
+        infer = hasattr(self.settings, "unit") and self.unit is None
+        self._pending: list | None = [] if infer else None
+        self._allocated = False
         if self.settings.dim is not None:
             self._set_dim(int(self.settings.dim))
 
@@ -127,13 +157,16 @@ class Predictor(ABC):
         if x is None:
             self.counts["missing"] += 1
             if self.d is not None:
-                self._missing()
+                self._envelope.tick(None)
+                self._absorb(None)
             return
         if self.d is None:
             self._set_dim(x.shape[0])
         self.counts["updates"] += 1
         self._last = x
-        self._update(x)
+        self._envelope.tick(x)
+        self._errors.observe(self.n, x)
+        self._absorb(x)
 
     def predict(self, steps: int) -> np.ndarray:
         """Forecast ẑ_{n+1} … ẑ_{n+steps} at this predictor's ``dt``; returns (steps, d)."""
@@ -143,16 +176,72 @@ class Predictor(ABC):
         if not self.ready:
             if self._last is None:
                 raise RuntimeError(f"{type(self).__name__}: predict() before any valid sample")
-            return np.repeat(self._last[None, :], steps, axis=0)
-        return self._predict(steps)
+            out = np.repeat(self._last[None, :], steps, axis=0)
+        else:
+            out = self._guard(self._predict(steps))
+        self._errors.record(self.n, out)
+        return out
+
+    @property
+    def forecast_error_rms(self) -> np.ndarray:
+        """(K,) running RMS of past misses ‖ẑ_{n+k|n} − z_{n+k}‖ per lead k = 1…K [data units].
+
+        K is the longest horizon asked of ``predict``; NaN where no forecast has been
+        scored yet.  Exponentially weighted, memory ``ERROR_MEMORY_SECONDS``.
+        """
+        if self.d is None:
+            return np.full(0, np.nan)
+        return self._errors.rms()
 
     # -- for subclasses -----------------------------------------------------------
     def _set_dim(self, d: int) -> None:
         self.d = d
-        self._allocate(d)
+        self._envelope = RangeEnvelope(d, round(self.RANGE_SECONDS / 8 / self.dt))
+        self._errors = LeadErrorRMS(d, self.ERROR_MEMORY_SECONDS / self.dt)
+        self._bounds_n = -1
+        if self._pending is None:
+            self._allocate(d)
+            self._allocated = True
+
+    def _absorb(self, x: np.ndarray | None) -> None:
+        """Pass a sample (``None`` = missing) on, or keep it until the unit is known."""
+        if self._pending is None:
+            self._update(x) if x is not None else self._missing()
+            return
+        self._pending.append((self.n, x))
+        if sum(v is not None for _, v in self._pending) >= max(
+            8, round(self.SCALE_SECONDS / self.dt)
+        ):
+            pending, self._pending = self._pending, None
+            self.unit = infer_unit(np.array([v for _, v in pending if v is not None]))
+            self._allocate(self.d)
+            self._allocated = True
+            n = self.n
+            for self.n, v in pending:  # replay on the subclass's own clock
+                self._update(v) if v is not None else self._missing()
+            self.n = n
+
+    def _guard(self, f: np.ndarray) -> np.ndarray:
+        """Clip a forecast to the recent range (``forecast_clamped``); relearn if non-finite."""
+        if not np.isfinite(f).all():
+            self.counts["forecast_nonfinite"] += 1
+            self.ready = False
+            self._allocate(self.d)
+            return np.repeat(self._last[None, :], f.shape[0], axis=0)
+        if not self._envelope.known:
+            return f
+        if self._bounds_n != self.n:  # once per update
+            lo, hi = self._envelope.envelope()
+            r = hi - lo
+            r = self.GUARD_MULTIPLE * np.maximum(r, 0.1 * r.max())
+            self._bounds, self._bounds_n = (lo - r, hi + r), self.n
+        g = np.minimum(np.maximum(f, self._bounds[0]), self._bounds[1])  # np.clip: slower
+        if (g != f).any():
+            self.counts["forecast_clamped"] += 1
+        return g
 
     def _allocate(self, d: int) -> None:  # noqa: B027 - optional hook
-        """Allocate the state for dimension ``d`` (called once per reset)."""
+        """Allocate (and reset) the learnt state for dimension ``d``."""
 
     @abstractmethod
     def _update(self, z: np.ndarray) -> None: ...

@@ -66,8 +66,8 @@ class DualEKFSettings(PredictorSettings):
         Rate the process variances are given at [Hz] (Richa: 83.3); ``None`` = per own sample.
     omega_limits_hz : tuple of float
         Both frequencies are clamped to this range [Hz].
-    unit : float
-        Metres per data unit.
+    unit : float or None
+        Metres per data unit; ``None``: inferred from the data (see ``predictors.base``).
     """
 
     respiratory_harmonics: int = 3
@@ -85,7 +85,7 @@ class DualEKFSettings(PredictorSettings):
     p0_omega_cardiac: float = (_TWO_PI * 0.05) ** 2
     q_rate_hz: float | None = 83.3
     omega_limits_hz: tuple[float, float] = (0.02, 5.0)
-    unit: float = 1.0
+    unit: float | None = None
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -93,7 +93,7 @@ class DualEKFSettings(PredictorSettings):
             v = getattr(self, name)
             if int(v) != v or v < 1:
                 raise ValueError(f"{name} must be a positive integer, got {v!r}")
-        for name in ("respiratory_hz", "cardiac_hz", "r", "p0_coefficient", "p0_offset", "unit"):
+        for name in ("respiratory_hz", "cardiac_hz", "r", "p0_coefficient", "p0_offset"):
             if not getattr(self, name) > 0.0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)!r}")
         for name in (
@@ -124,7 +124,7 @@ class DualFourierEKF(Predictor):
         self._hr = np.arange(1.0, hr + 1.0)
         self._hc = np.arange(1.0, hc + 1.0)
         scale = 1.0 if s.q_rate_hz is None else self.dt * s.q_rate_hz
-        u2 = s.unit**2
+        u2 = self.unit**2
         qa = np.concatenate(
             [np.full(2 * hr, s.q_respiratory), [s.q_offset], np.full(2 * hc, s.q_cardiac)]
         )
@@ -225,6 +225,11 @@ class DualFourierEKF(Predictor):
             x[self.itr] + k * x[self.iwr] * self.dt, x[self.itc] + k * x[self.iwc] * self.dt
         )
         return phi @ self._coef.T
+
+    @property
+    def heart_rate_hz(self) -> float:
+        """Cardiac frequency estimate ω̂_c/2π [Hz]; NaN before the first sample."""
+        return float(self.x[self.iwc] / _TWO_PI) if self.ready else math.nan
 
     @property
     def frequencies_hz(self) -> tuple[float, float]:

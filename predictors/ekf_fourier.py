@@ -5,7 +5,17 @@ Model, per axis a (eq. 2), one heart rate ω shared by all axes:
     y_a(t) = c_a(t) + Σ_{i=1}^{m} r_{a,i}(t) sin θ_{a,i}(t),   θ_{a,i} = i ∫ω dt + φ_{a,i}(t),
 
 state x = [c_a, r_{a,1..m} (for each a), ω, θ_{a,1..m} (for each a)], random walks
-on c, r, ω, φ.  Discrete model x⁺ = F x + μ, F = I except ∂θ_{a,i}/∂ω = iΔt,
+on c, r, ω, φ.
+
+Breathing (``breathing_harmonics`` = H_b > 0; an extension for 3-D motion with
+breathing, Richa et al. 2010 eq. 1): each axis adds Σ_{h=1}^{H_b} a_{a,h} sin hθ_b +
+b_{a,h} cos hθ_b with one respiratory rate ω_b and accumulated phase θ_b (θ_b += ω_bΔt)
+shared by the axes; a, b, ω_b are random walks with Richa's process variances, appended
+to the state as [a_{a,1..H_b}, b_{a,1..H_b} (for each a), ω_b, θ_b].  Without it the
+offset random walk cannot follow breathing, whose residual pulls ω̂ to the low end of
+its range (issue 18: on fixed-a2-top ω̂ sat at its 0.5 Hz clamp on 42 % of updates).
+
+Discrete model x⁺ = F x + μ, F = I except ∂θ_{a,i}/∂ω = iΔt,
 μ ~ N(0, Q), z = h(x) + ν, ν ~ N(0, σ_R² I).  EKF recursion (Yuen, §III-A):
 
     P⁻ = F P Fᵀ + Q,   S = H P⁻ Hᵀ + σ_R² I,   K = P⁻ Hᵀ S⁻¹,
@@ -14,15 +24,23 @@ on c, r, ω, φ.  Discrete model x⁺ = F x + μ, F = I except ∂θ_{a,i}/∂ω
 with H = ∂h/∂x: ∂y_a/∂c_a = 1, ∂y_a/∂r_{a,i} = sin θ_{a,i}, ∂y_a/∂θ_{a,i} = r_{a,i} cos θ_{a,i}.
 
 Initialisation (Yuen): the first ``init_seconds`` of samples give ω̂₀ by FFT and
-c, r, θ by least squares (:mod:`predictors.fourier_init`); then
+c, r, θ by least squares (:mod:`predictors.fourier_init`; with breathing, ω̂_b is found
+first and its fit removed, so ω̂₀ comes from the heart band only); then
 P(T|T) = diag[σ_R²/N, σ₁², σ₁²/2², …, σ₁²/m², σ_ω², σ_θ², …].  Until then the
 forecast holds the newest sample.  Forecast k steps: θ + iω̂kΔt in eq. (2).
+
+Outliers: a sample whose normalised innovation squared νᵀS⁻¹ν exceeds the χ²_d quantile
+``gate_probability`` is not used (the filter runs open-loop through it, counted
+``innovation_rejected``) — one 5 mm sonomicrometry echo outlier otherwise pulls ω̂ out of
+lock; after ``gate_seconds`` of consecutive rejections samples are used again, so a real
+change of the motion is followed.
 
 Numerics: P is symmetrised each step; phases are wrapped to (−π, π]; ω̂ is clamped
 to ``omega_limits_hz`` (counted ``omega_clamped``); a non-finite or non-positive
 innovation covariance restarts the initialisation (counted ``ekf_reinit``).
-Cost per update: O(n²) for the prediction (F is identity plus one column) and
-O(n² d) for the correction, n = d(2m + 1) + 1 (34 for d = 3, m = 5).
+Cost per update: O(n²) for the prediction (F is identity plus two columns) and
+O(n² d) for the correction, n = d(2m + 1) + 1 + 2dH_b + 2 (48 for d = 3, m = 5, H_b = 2;
+34 without breathing).
 
 Units: Q, σ_R and σ₁² are given in SI (the papers give mm, mm²; converted here),
 per sample at the predictor's own rate as in the papers.
@@ -35,9 +53,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.linalg.lapack import dpotrf, dpotri
+from scipy.stats import chi2
 
 from predictors.base import Predictor, PredictorSettings
-from predictors.fourier_init import initial_fourier_state
+from predictors.fourier_init import initial_dual_state, initial_fourier_state
 
 __all__ = ["PARAMETER_SETS", "EKFSettings", "FourierEKF"]
 
@@ -106,16 +125,31 @@ class EKFSettings(PredictorSettings):
     q_omega : float
         Process noise of ω, q_ω [(rad/s)² per sample].
     band_hz : tuple of float
-        Heart-rate band searched by the FFT [Hz].
+        Heart-rate band searched by the FFT [Hz]: 36–180 beats/min, which holds the
+        95–152 beats/min pacemaker staircase of Tuna §III-B.
     omega_limits_hz : tuple of float
-        ω̂ is clamped to this range [Hz].
+        ω̂ is clamped to this range [Hz] (a last resort, counted ``omega_clamped``).
+    gate_probability : float or None
+        Innovation gate: samples with NIS above the χ²_d quantile of this probability are
+        rejected [-]; ``None``: no gate (Yuen's filter).
+    gate_seconds : float
+        Longest run of rejected samples [s]; then samples are used again.
+    breathing_harmonics : int
+        H_b, respiratory harmonics in the state [-]; 0 = Yuen's model without breathing.
+    breathing_band_hz : tuple of float
+        Respiratory band [Hz] (6–30 breaths/min): FFT search and clamp of ω̂_b.
+    q_breathing : float
+        Process noise of the respiratory coefficients [m² per sample at 83.3 Hz]
+        (Richa §I-D: 1e-5 mm²).
+    q_omega_breathing : float
+        Process noise of ω_b [(rad/s)² per sample at 83.3 Hz] (Richa: 1e-8 (rad/sample)²).
     q_rate_hz : float or None
         Sample rate at which q, q_phase, q_omega were tuned [Hz].  ``None``: they are
         per sample at the predictor's own rate.  Otherwise they are rescaled by
         ``dt · q_rate_hz`` so that the random walks diffuse as fast per second as in
         the paper (Yuen tuned at 28 Hz; used at 133 Hz unscaled they are 4.75× looser).
-    unit : float
-        Metres per data unit (1.0 for samples in m, 1e-3 for mm).
+    unit : float or None
+        Metres per data unit (1.0 for samples in m, 1e-3 for mm); ``None``: inferred.
     """
 
     harmonics: int = 5
@@ -127,24 +161,48 @@ class EKFSettings(PredictorSettings):
     q: float = 1e-3 * 1e-6
     q_phase: float = 1e-3
     q_omega: float = 5e-3
-    band_hz: tuple[float, float] = field(default=(0.5, 2.5))
-    omega_limits_hz: tuple[float, float] = field(default=(0.5, 3.0))
+    band_hz: tuple[float, float] = field(default=(0.6, 3.0))
+    omega_limits_hz: tuple[float, float] = field(default=(0.5, 3.5))
+    gate_probability: float | None = 1.0 - 1e-6
+    gate_seconds: float = 0.1
+    breathing_harmonics: int = 2
+    breathing_band_hz: tuple[float, float] = field(default=(0.08, 0.5))
+    q_breathing: float = 1e-5 * 1e-6
+    q_omega_breathing: float = 1e-8 * 83.3**2
     q_rate_hz: float | None = None
-    unit: float = 1.0
+    unit: float | None = None
 
     def __post_init__(self) -> None:
         super().__post_init__()
         if int(self.harmonics) != self.harmonics or self.harmonics < 1:
             raise ValueError(f"harmonics must be a positive integer, got {self.harmonics!r}")
-        for name in ("init_seconds", "sigma_r", "sigma1_sq", "sigma_omega_sq", "unit"):
+        for name in ("init_seconds", "sigma_r", "sigma1_sq", "sigma_omega_sq"):
             if not getattr(self, name) > 0.0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)!r}")
-        for name in ("sigma_phase_sq", "q", "q_phase", "q_omega"):
+        for name in (
+            "sigma_phase_sq",
+            "q",
+            "q_phase",
+            "q_omega",
+            "q_breathing",
+            "q_omega_breathing",
+        ):
             if not getattr(self, name) >= 0.0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
+        if self.gate_probability is not None and not 0.0 < self.gate_probability < 1.0:
+            raise ValueError(
+                f"gate_probability must be in (0, 1) or None, got {self.gate_probability!r}"
+            )
+        if not self.gate_seconds > 0.0:
+            raise ValueError(f"gate_seconds must be > 0, got {self.gate_seconds!r}")
         if self.q_rate_hz is not None and not self.q_rate_hz > 0.0:
             raise ValueError(f"q_rate_hz must be > 0 or None, got {self.q_rate_hz!r}")
-        for name in ("band_hz", "omega_limits_hz"):
+        if (
+            int(self.breathing_harmonics) != self.breathing_harmonics
+            or self.breathing_harmonics < 0
+        ):
+            raise ValueError(f"breathing_harmonics must be >= 0, got {self.breathing_harmonics!r}")
+        for name in ("band_hz", "omega_limits_hz", "breathing_band_hz"):
             lo, hi = getattr(self, name)
             if not 0.0 < lo < hi:
                 raise ValueError(f"{name} must be (low, high) with 0 < low < high [Hz]")
@@ -168,6 +226,9 @@ PARAMETER_SETS: dict[str, EKFSettings] = {
         q_phase=1e-4,
         q_omega=1e-3,
         q_rate_hz=28.0,
+        band_hz=(0.5, 2.5),
+        breathing_harmonics=0,
+        gate_probability=None,
     ),
     "tuna2013": EKFSettings(
         harmonics=5,
@@ -199,20 +260,33 @@ class FourierEKF(Predictor):
         self.n_init = max(round(s.init_seconds / self.dt), 2 * (2 * m + 1))
         self._window = np.full((self.n_init, d), np.nan)
         self._filled = 0
-        self.nx = d * (2 * m + 1) + 1
+        hb = s.breathing_harmonics
+        n0 = d * (2 * m + 1) + 1
+        self.nx = n0 + (d * 2 * hb + 2 if hb else 0)
         self.iw = d * (m + 1)  # index of ω
+        self.ib = n0 + np.arange(d * 2 * hb).reshape(d, 2 * hb)  # breathing a, b per axis
+        self.iwb, self.itb = n0 + d * 2 * hb, n0 + d * 2 * hb + 1  # ω_b, θ_b
         cr = np.arange(d * (m + 1)).reshape(d, m + 1)
         self.ic, self.ir = cr[:, 0], cr[:, 1:]
         self.ith = self.iw + 1 + np.arange(d * m).reshape(d, m)
         harm = np.arange(1, m + 1, dtype=float)
         self._g = np.zeros(self.nx)
         self._g[self.ith] = harm * self.dt  # ∂θ/∂ω per step
-        u2 = s.unit**2
+        u2 = self.unit**2
         q = np.full(self.nx, s.q / u2)
         q[self.ith] = s.q_phase
         q[self.iw] = s.q_omega
-        self._q = q if s.q_rate_hz is None else q * (self.dt * s.q_rate_hz)
-        self._r = (s.sigma_r / s.unit) ** 2
+        q = q if s.q_rate_hz is None else q * (self.dt * s.q_rate_hz)
+        if hb:  # Richa's variances are per sample at 83.3 Hz
+            q[self.ib] = s.q_breathing / u2 * (self.dt * 83.3)
+            q[self.iwb] = s.q_omega_breathing * (self.dt * 83.3)
+            q[self.itb] = 0.0
+        self._q = q
+        self._hb = np.arange(1.0, hb + 1.0)
+        self._wb_lo, self._wb_hi = (_TWO_PI * f for f in s.breathing_band_hz)
+        self._gate = math.inf if s.gate_probability is None else chi2.ppf(s.gate_probability, d)
+        self._max_reject, self._rejected = max(1, round(s.gate_seconds / self.dt)), 0
+        self._r = (s.sigma_r / self.unit) ** 2
         self._harm = harm
         self._w_lo, self._w_hi = (_TWO_PI * f for f in s.omega_limits_hz)
         self.x = np.zeros(self.nx)
@@ -222,20 +296,35 @@ class FourierEKF(Predictor):
         self._H[np.arange(d), self.ic] = 1.0
         # views of the block-diagonal Jacobian: H_r[a] = sin θ_a, H_θ[a] = r_a cos θ_a
         self._H_r = np.einsum("aaj->aj", self._H[:, : self.iw].reshape(d, d, m + 1))[:, 1:]
-        self._H_th = np.einsum("aaj->aj", self._H[:, self.iw + 1 :].reshape(d, d, m))
+        self._H_th = np.einsum("aaj->aj", self._H[:, self.iw + 1 : n0].reshape(d, d, m))
+        self._H_b = np.einsum("aaj->aj", self._H[:, n0 : self.iwb].reshape(d, d, 2 * hb))
         self._bind_views()
 
     def _bind_views(self) -> None:
         """Reshaped views of ``self.x``: c (d,), r (d, m), θ (d, m)."""
         d, m = self.d, self.settings.harmonics
         cr = self.x[: self.iw].reshape(d, m + 1)
-        self._c, self._rr, self._th = cr[:, 0], cr[:, 1:], self.x[self.iw + 1 :].reshape(d, m)
+        n0 = self.iw + 1 + d * m
+        self._c, self._rr, self._th = cr[:, 0], cr[:, 1:], self.x[self.iw + 1 : n0].reshape(d, m)
+        self._ab = self.x[n0 : self.iwb].reshape(d, -1)  # [a_1..H_b, b_1..H_b] per axis
 
     # -- public state access ----------------------------------------------------
     @property
     def omega(self) -> float:
         """ω̂ [rad/s]."""
         return float(self.x[self.iw])
+
+    @property
+    def heart_rate_hz(self) -> float:
+        """ω̂/2π [Hz]; NaN until initialised."""
+        return float(self.x[self.iw]) / _TWO_PI if self.ready else math.nan
+
+    @property
+    def breathing_rate_hz(self) -> float:
+        """ω̂_b/2π [Hz]; NaN without breathing model or until initialised."""
+        if not (self.ready and self.settings.breathing_harmonics):
+            return math.nan
+        return float(self.x[self.iwb]) / _TWO_PI
 
     @property
     def offsets(self) -> np.ndarray:
@@ -263,19 +352,33 @@ class FourierEKF(Predictor):
         s = self.settings
         p = np.empty(self.nx)
         p[self.ic] = self._r / self.n_init
-        p[self.ir] = (s.sigma1_sq / s.unit**2) / self._harm**2
+        p[self.ir] = (s.sigma1_sq / self.unit**2) / self._harm**2
         p[self.iw] = s.sigma_omega_sq
         p[self.ith] = s.sigma_phase_sq
+        if s.breathing_harmonics:
+            p[self.ib] = s.sigma1_sq / self.unit**2
+            p[self.iwb] = (_TWO_PI * 0.01) ** 2  # as the dual EKF's respiratory prior
+            p[self.itb] = 0.0
         return np.diag(p)
 
     # -- the filter -------------------------------------------------------------
     def _initialise(self) -> None:
         order = np.roll(np.arange(self.n_init), -(self._filled % self.n_init))
         window = self._window[order]  # oldest first
-        omega, c, r, th = initial_fourier_state(
-            window, self.dt, self.settings.harmonics, self.settings.band_hz
-        )
+        s = self.settings
         x = np.zeros(self.nx)
+        if s.breathing_harmonics:
+            omega, c, r, th, wb, a, b = initial_dual_state(
+                window,
+                self.dt,
+                s.harmonics,
+                s.band_hz,
+                s.breathing_harmonics,
+                s.breathing_band_hz,
+            )
+            x[self.ib], x[self.iwb], x[self.itb] = np.hstack([a, b]), wb, 0.0
+        else:
+            omega, c, r, th = initial_fourier_state(window, self.dt, s.harmonics, s.band_hz)
         x[self.ic], x[self.ir], x[self.iw], x[self.ith] = c, r, omega, th
         self.set_state(x, self.initial_covariance())
 
@@ -283,12 +386,17 @@ class FourierEKF(Predictor):
         x, P, g, iw = self.x, self.P, self._g, self.iw
         w = x[iw]
         x[iw + 1 :] += g[iw + 1 :] * w
-        wrap_phase(x[iw + 1 :])
+        wrap_phase(x[iw + 1 :])  # (g is zero on the breathing block: θ_b is advanced below)
         # F P Fᵀ with F = I + g e_ωᵀ:  P + g vᵀ + v gᵀ,  v = P e_ω + ½ P_ωω g
         v = P[:, iw] + (0.5 * P[iw, iw]) * g
         gv = np.multiply.outer(g, v)
         P += gv
         P += gv.T
+        if self._hb.size:  # θ_b += ω_b Δt:  F = I + Δt e_θb e_ωbᵀ
+            it, ib, dt = self.itb, self.iwb, self.dt
+            x[it] = math.remainder(x[it] + dt * x[ib], _TWO_PI)
+            P[it, :] += dt * P[ib, :]
+            P[:, it] += dt * P[:, ib]
         self._Pdiag += self._q
 
     def _update(self, z: np.ndarray) -> None:
@@ -301,6 +409,15 @@ class FourierEKF(Predictor):
         self._H_r[:] = sin
         np.multiply(self._rr, np.cos(self._th), out=self._H_th)
         nu = z - self._c - (self._rr * sin).sum(axis=1)  # innovation z − h(x⁻)
+        hb = self._hb
+        if hb.size:
+            ph = hb * x[self.itb]
+            sb, cb = np.sin(ph), np.cos(ph)
+            a, b = self._ab[:, : hb.size], self._ab[:, hb.size :]
+            self._H_b[:, : hb.size] = sb
+            self._H_b[:, hb.size :] = cb
+            H[:, self.itb] = (a * cb - b * sb) @ hb
+            nu -= a @ sb + b @ cb
         PHt = P @ H.T
         S = H @ PHt
         S.flat[:: self.d + 1] += self._r
@@ -308,14 +425,22 @@ class FourierEKF(Predictor):
         if Sinv is None:
             self._restart()
             return
-        K = PHt @ Sinv
         Sinv_nu = Sinv @ nu
         self.nis = float(nu @ Sinv_nu)
+        if self.nis > self._gate and self._rejected < self._max_reject:
+            self.counts["innovation_rejected"] += 1
+            self._rejected += 1
+            return
+        self._rejected = 0
+        K = PHt @ Sinv
         x += PHt @ Sinv_nu
         P -= K @ PHt.T
         P += P.T
         P *= 0.5
         wrap_phase(x[self.iw + 1 :])
+        if hb.size and not self._wb_lo <= x[self.iwb] <= self._wb_hi:
+            self.counts["breathing_clamped"] += 1
+            x[self.iwb] = min(max(x[self.iwb], self._wb_lo), self._wb_hi)
         w = x[self.iw]
         if not math.isfinite(w):
             self._restart()
@@ -346,4 +471,9 @@ class FourierEKF(Predictor):
     def _predict(self, steps: int) -> np.ndarray:
         k = np.arange(1.0, steps + 1.0)[:, None, None]
         th = self._th[None] + (self._harm * (self.x[self.iw] * self.dt)) * k
-        return self._c[None, :] + (self._rr[None] * np.sin(th)).sum(axis=2)
+        out = self._c[None, :] + (self._rr[None] * np.sin(th)).sum(axis=2)
+        hb = self._hb
+        if hb.size:
+            ph = np.multiply.outer(self.x[self.itb] + self.x[self.iwb] * self.dt * k[:, 0, 0], hb)
+            out += np.sin(ph) @ self._ab[:, : hb.size].T + np.cos(ph) @ self._ab[:, hb.size :].T
+        return out

@@ -9,13 +9,24 @@
    the newest sample (t = 0 there), so r_i = √(a_i² + b_i²) and
    θ_i = atan2(b_i, a_i) are directly the state at the end of the window.
    Harmonics at or above 0.45·f_s (aliased) are left out (amplitude 0).
+3. Breathing (:func:`initial_dual_state`): the respiratory fundamental ω_b is the FFT
+   peak in the breathing band; its harmonics are fitted by least squares and removed
+   before the heart rate is searched in the heart band, so that breathing harmonics
+   cannot capture ω̂₀; then heart and breathing series are fitted jointly (eq. 3 with
+   both sums, as Richa et al. 2010 eq. 1).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["fit_harmonics", "fundamental_frequency", "initial_fourier_state"]
+__all__ = [
+    "fit_fourier",
+    "fit_harmonics",
+    "fundamental_frequency",
+    "initial_dual_state",
+    "initial_fourier_state",
+]
 
 
 def fundamental_frequency(
@@ -28,7 +39,9 @@ def fundamental_frequency(
     mean = np.nanmean(x, axis=0)
     x = np.where(np.isfinite(x), x - mean, 0.0)
     T = x.shape[0]
-    nfft = int(2 ** np.ceil(np.log2(T * pad)))
+    # zero-padded to at least 4 bins across the band, so a short window still has a peak
+    width = band_hz[1] - band_hz[0]
+    nfft = int(2 ** np.ceil(np.log2(max(T * pad, 4.0 / (dt * width)))))
     spec = np.abs(np.fft.rfft(x * np.hamming(T)[:, None], n=nfft, axis=0)) ** 2
     power = spec.sum(axis=1)
     f = np.fft.rfftfreq(nfft, dt)
@@ -45,13 +58,14 @@ def fundamental_frequency(
     return 2 * np.pi * float(fk)
 
 
-def fit_harmonics(
-    window: np.ndarray, dt: float, omega: float, m: int, ridge: float = 1e-9
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Least-squares c₀ (d,), a (d, m), b (d, m) of eq. (3) on ``window`` (T, d), t = 0 at the end.
+def fit_fourier(
+    window: np.ndarray, dt: float, series: list[tuple[float, int]], ridge: float = 1e-9
+) -> tuple[np.ndarray, list[tuple[np.ndarray, np.ndarray]]]:
+    """Least squares c₀ (d,) and, per (ω, m) in ``series``, a (d, m), b (d, m), t = 0 at the end.
 
-    A tiny ridge (``ridge`` × mean diagonal of AᵀA) keeps the normal equations
-    regular; rows with NaN are dropped; aliased harmonics get a = b = 0.
+    y(t) = c₀ + Σ_series Σ_i a_i sin(iωt) + b_i cos(iωt) on ``window`` (T, d).  A tiny
+    ridge (``ridge`` × mean diagonal of AᵀA) keeps the normal equations regular; rows
+    with NaN are dropped; aliased harmonics (≥ 0.45 f_s) get a = b = 0.
     """
     x = np.array(window, dtype=float)
     if x.ndim == 1:
@@ -59,19 +73,32 @@ def fit_harmonics(
     T, d = x.shape
     t = (np.arange(T) - (T - 1)) * dt
     keep = np.isfinite(x).all(axis=1)
-    usable = np.arange(1, m + 1) * omega / (2 * np.pi) < 0.45 / dt
-    i = np.arange(1, m + 1)[usable]
-    ph = np.outer(t[keep], i * omega)
-    A = np.hstack([np.ones((ph.shape[0], 1)), np.sin(ph), np.cos(ph)])
+    cols, usable = [np.ones((int(keep.sum()), 1))], []
+    for omega, m in series:
+        ok = np.arange(1, m + 1) * omega / (2 * np.pi) < 0.45 / dt
+        ph = np.outer(t[keep], np.arange(1, m + 1)[ok] * omega)
+        cols += [np.sin(ph), np.cos(ph)]
+        usable.append(ok)
+    A = np.hstack(cols)
     G = A.T @ A
     G[np.diag_indices_from(G)] += ridge * np.trace(G) / G.shape[0]
-    coef = np.linalg.solve(G, A.T @ x[keep])  # (1 + 2k, d)
-    k = i.size
-    a = np.zeros((d, m))
-    b = np.zeros((d, m))
-    a[:, usable] = coef[1 : 1 + k].T
-    b[:, usable] = coef[1 + k :].T
-    return coef[0].copy(), a, b
+    coef = np.linalg.solve(G, A.T @ x[keep])  # (1 + 2Σk, d)
+    out, j = [], 1
+    for (_, m), ok in zip(series, usable, strict=True):
+        k = int(ok.sum())
+        a, b = np.zeros((d, m)), np.zeros((d, m))
+        a[:, ok], b[:, ok] = coef[j : j + k].T, coef[j + k : j + 2 * k].T
+        out.append((a, b))
+        j += 2 * k
+    return coef[0].copy(), out
+
+
+def fit_harmonics(
+    window: np.ndarray, dt: float, omega: float, m: int, ridge: float = 1e-9
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """c₀ (d,), a (d, m), b (d, m) of eq. (3) alone (one series), t = 0 at the end."""
+    c, [(a, b)] = fit_fourier(window, dt, [(omega, m)], ridge)
+    return c, a, b
 
 
 def initial_fourier_state(
@@ -81,3 +108,29 @@ def initial_fourier_state(
     omega = fundamental_frequency(window, dt, band_hz)
     c, a, b = fit_harmonics(window, dt, omega, m)
     return omega, c, np.hypot(a, b), np.arctan2(b, a)
+
+
+def initial_dual_state(
+    window: np.ndarray,
+    dt: float,
+    m: int,
+    band_hz: tuple[float, float],
+    breathing_harmonics: int,
+    breathing_band_hz: tuple[float, float],
+) -> tuple[float, np.ndarray, np.ndarray, np.ndarray, float, np.ndarray, np.ndarray]:
+    """(ω̂₀, c, r, θ, ω̂_b, a_b, b_b) at the newest sample: heart series as in
+    :func:`initial_fourier_state`, breathing series y_b = Σ_h a_h sin hθ_b + b_h cos hθ_b
+    with θ_b = 0 at the newest sample.  ω̂₀ is searched after the breathing fit is removed.
+    """
+    x = np.array(window, dtype=float)
+    if x.ndim == 1:
+        x = x[:, None]
+    T = x.shape[0]
+    t = (np.arange(T) - (T - 1)) * dt
+    omega_b = fundamental_frequency(x, dt, breathing_band_hz)
+    c, [(a, b)] = fit_fourier(x, dt, [(omega_b, breathing_harmonics)])
+    ph = np.multiply.outer(t, np.arange(1, breathing_harmonics + 1) * omega_b)
+    heart_only = x - c - np.sin(ph) @ a.T - np.cos(ph) @ b.T
+    omega = fundamental_frequency(heart_only, dt, band_hz)
+    c, [(ah, bh), (a, b)] = fit_fourier(x, dt, [(omega, m), (omega_b, breathing_harmonics)])
+    return omega, c, np.hypot(ah, bh), np.arctan2(bh, ah), omega_b, a, b

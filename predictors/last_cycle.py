@@ -3,7 +3,8 @@
     ẑ_{n+k} = z(t_n + kΔt − T),
 
 with T the current cardiac period and z(·) linearly interpolated between samples
-(applied repeatedly when kΔt > T).  T comes from
+(applied repeatedly when kΔt > T: the lag is (T − k) mod T).  T is clamped to the
+band's lags (at least 2 samples), so the lag is bounded by construction.  T comes from
 
 * the signal: the lag in [1/f_max, 1/f_min] maximising the (biased) autocorrelation
   of the last ``window_seconds`` of samples, refined by a parabola, re-estimated
@@ -74,14 +75,13 @@ class LastCycle(Predictor):
     def _allocate(self, d: int) -> None:
         s = self.settings
         self.L = int(np.ceil(s.window_seconds / self.dt)) + 2
-        self.hist = np.zeros((self.L, d))  # newest first
         self.filled = 0
         self.period = np.nan  # in samples
         self._every = max(1, round(s.period_every / self.dt))
-        self._lags = (
-            int(np.floor(1.0 / (s.band_hz[1] * self.dt))),
-            int(np.ceil(1.0 / (s.band_hz[0] * self.dt))),
-        )
+        lo = max(2, int(np.floor(1.0 / (s.band_hz[1] * self.dt))))
+        self._lags = (lo, max(lo + 2, int(np.ceil(1.0 / (s.band_hz[0] * self.dt)))))
+        self.L = max(self.L, 2 * self._lags[1] + 3)
+        self.hist = np.zeros((self.L, d))  # newest first
         self._beats = None if s.beat_times is None else np.asarray(s.beat_times, dtype=float)
 
     def _push(self, z: np.ndarray) -> None:
@@ -95,10 +95,18 @@ class LastCycle(Predictor):
             t = self.settings.t0 + (self.n - 1) * self.dt
             i = np.searchsorted(self._beats, t, side="right")
             if i >= 2:
-                self.period = (self._beats[i - 1] - self._beats[i - 2]) / self.dt
+                self.period = self._in_band((self._beats[i - 1] - self._beats[i - 2]) / self.dt)
         elif self.filled >= min(self.L, 2 * self._lags[1] + 1) and self.n % self._every == 0:
-            self.period = self._estimate_period()
+            self.period = self._in_band(self._estimate_period())
         self.ready = np.isfinite(self.period) and self.period + 1 < self.filled
+
+    def _in_band(self, T: float) -> float:
+        """T clamped to the band's lags [samples] (counted ``period_clamped``)."""
+        lo, hi = self._lags
+        if not lo <= T <= hi:
+            self.counts["period_clamped"] += 1
+            T = float(np.clip(T, lo, hi)) if np.isfinite(T) else float(hi)
+        return T
 
     def _estimate_period(self) -> float:
         x = self.hist[: self.filled][::-1]
@@ -114,7 +122,7 @@ class LastCycle(Predictor):
         k = lo + int(np.argmax(ac[lo : hi + 1]))
         a, b, c = ac[k - 1], ac[k], ac[k + 1]
         den = a - 2 * b + c
-        return k + (0.5 * (a - c) / den if den < 0 else 0.0)
+        return k + (float(np.clip(0.5 * (a - c) / den, -1.0, 1.0)) if den < 0 else 0.0)
 
     def _missing(self) -> None:
         self._push(self._predict(1)[0] if self.ready else self.hist[0].copy())
@@ -130,8 +138,5 @@ class LastCycle(Predictor):
         T = self.period
         out = np.empty((steps, self.d))
         for k in range(1, steps + 1):
-            back = T - k
-            while back < 0:
-                back += T
-            out[k - 1] = self._value_at(back)
+            out[k - 1] = self._value_at((T - k) % T)  # T ≥ 2 samples: in [0, T)
         return out

@@ -63,7 +63,7 @@ class GeneralizedRLS(Predictor):
         N, M = s.order, s.points
         batch, n, q = (1, N * d, M * d) if s.correlated else (d, N, M)
         self.rls = RecursiveLeastSquares(
-            batch, n, q, s.forgetting_factor, s.delta / s.unit**2, s.p_max_factor, self.counts
+            batch, n, q, s.forgetting_factor, s.delta / self.unit**2, s.p_max_factor, self.counts
         )
         # target rows are newest-first: block j predicts M − j steps ahead
         if s.init == "hold":

@@ -44,8 +44,8 @@ class RLSCommon(PredictorSettings):
         signal power so that the prior W₀ is forgotten within ~N samples.
     init : str
         W₀: ``"hold"`` (ẑ_{n+1} = z_n until data say otherwise) or ``"zeros"``.
-    unit : float
-        Metres per data unit (1.0 for samples in m, 1e-3 for samples in mm).
+    unit : float or None
+        Metres per data unit (1.0 for samples in m, 1e-3 for mm); ``None``: inferred.
     p_max_factor : float
         Wind-up bound: max diag P ≤ p_max_factor · P₀ [-].
     """
@@ -54,7 +54,7 @@ class RLSCommon(PredictorSettings):
     correlated: bool = True
     delta: float = 1e-8
     init: str = "hold"
-    unit: float = 1.0
+    unit: float | None = None
     p_max_factor: float = 10.0
 
     def __post_init__(self) -> None:
@@ -65,8 +65,6 @@ class RLSCommon(PredictorSettings):
             raise ValueError(f"delta must be > 0 [m²], got {self.delta}")
         if self.init not in _INITS:
             raise ValueError(f"init must be one of {_INITS}, got {self.init!r}")
-        if not self.unit > 0.0:
-            raise ValueError(f"unit must be > 0 [m per data unit], got {self.unit}")
         if not self.p_max_factor >= 1.0:
             raise ValueError(f"p_max_factor must be >= 1, got {self.p_max_factor}")
 
@@ -99,7 +97,7 @@ class OneStepRLS(Predictor):
         N = s.order
         batch, n, q = (1, N * d, d) if s.correlated else (d, N, 1)
         self.rls = RecursiveLeastSquares(
-            batch, n, q, s.forgetting_factor, s.delta / s.unit**2, s.p_max_factor, self.counts
+            batch, n, q, s.forgetting_factor, s.delta / self.unit**2, s.p_max_factor, self.counts
         )
         if s.init == "hold":  # A_1 = I
             if s.correlated:

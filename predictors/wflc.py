@@ -14,7 +14,26 @@ holds the newest sample.  A missing sample advances ψ only.
 
 Parameters (Yuen et al. 2009): m = 8, μ₀ = 7e-6, μ₁ = 0.03, tuned at 28 Hz on data in
 mm.  μ₀ multiplies ε·w (mm²), so it is stored in SI as 7e-6 rad/mm² = 7 rad/m² per
-sample, and converted to data units by unit².  Cost per update: O(m·d).
+sample, and converted to data units by unit².  Rate: at another sample rate the same
+gains adapt faster per second (more updates, and ω₀ in rad/sample), so with
+``gain_rate_hz`` = 28 they are rescaled to adapt as fast per second as at 28 Hz:
+μ₀ · (Δt·28)², μ₁ · (Δt·28).  (Unscaled at 128 Hz, ω̂ ran from 100 bpm to its clamp
+within seconds on fixed-a2-top.)  μ_b is not rescaled: the offset weight is what follows
+breathing (time constant 1/(2μ_b) ≈ 17 samples).
+
+Frequency lock (ours, issue 18): after a ±10 bpm step the phase error grows past π/2
+before the gradient update catches up, the μ₀ gradient changes sign and ω₀ ran to its
+clamp (4 of 4 seeds).  The weights, though, absorb the slip: the fundamental weights
+(w_{a,1}, w_{a,m+1}) = r_a(cos φ_a, sin φ_a) rotate by Δφ per sample, the phase error the
+frequency misses.  A phase-locked correction ω₀ ← ω₀ + κ Δφ (Δφ from the summed 2-D
+cross and dot products of the axes' fundamental weights before and after the update)
+turns that rotation into frequency, and the μ₀ gradient uses the fundamental only
+(``frequency_harmonics`` = 1: the r-th harmonic's phase error is r times the
+fundamental's, so after a step the high harmonics flip the gradient's sign first; on
+Yuen's ±10 bpm protocol the full gradient ran to the clamp).  The correction cannot
+run away, since a slip in either direction rotates the weights the matching way.
+κ = 0.01 per sample at 28 Hz (a time constant of 100 samples, 3.6 s).  ω₀ is clamped to
+the heart band, a last resort counted ``omega_clamped``.  Cost per update: O(m·d).
 """
 
 from __future__ import annotations
@@ -49,9 +68,15 @@ class WFLCSettings(PredictorSettings):
     band_hz : tuple of float
         Heart-rate band searched by the FFT [Hz].
     omega_limits_hz : tuple of float
-        ω₀ is clamped to this range [Hz].
-    unit : float
-        Metres per data unit.
+        ω₀ is clamped to this range [Hz] (36–210 beats/min).
+    gain_rate_hz : float or None
+        Rate μ₀, μ₁, κ were tuned at [Hz] (Yuen: 28); ``None``: per own sample.
+    phase_gain : float
+        κ, gain of the phase-locked frequency correction [-] (ours; 0 = Riviere's WFLC).
+    frequency_harmonics : int
+        Harmonics whose phase errors drive the μ₀ gradient [-] (Riviere: all m; ours: 1).
+    unit : float or None
+        Metres per data unit; ``None``: inferred from the data (see ``predictors.base``).
     """
 
     harmonics: int = 8
@@ -59,18 +84,25 @@ class WFLCSettings(PredictorSettings):
     mu1: float = 0.03
     mu_bias: float = 0.03
     init_seconds: float = 10.0
-    band_hz: tuple[float, float] = (0.5, 2.5)
-    omega_limits_hz: tuple[float, float] = (0.3, 4.0)
-    unit: float = 1.0
+    band_hz: tuple[float, float] = (0.6, 3.0)
+    omega_limits_hz: tuple[float, float] = (0.6, 3.5)
+    gain_rate_hz: float | None = 28.0
+    phase_gain: float = 0.01
+    frequency_harmonics: int = 1
+    unit: float | None = None
 
     def __post_init__(self) -> None:
         super().__post_init__()
         if int(self.harmonics) != self.harmonics or self.harmonics < 1:
             raise ValueError(f"harmonics must be a positive integer, got {self.harmonics!r}")
-        for name in ("mu0", "mu1", "mu_bias"):
+        if not 1 <= self.frequency_harmonics <= self.harmonics:
+            raise ValueError("frequency_harmonics must be in 1..harmonics")
+        for name in ("mu0", "mu1", "mu_bias", "phase_gain"):
             if not getattr(self, name) >= 0.0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
-        for name in ("init_seconds", "unit"):
+        if self.gain_rate_hz is not None and not self.gain_rate_hz > 0.0:
+            raise ValueError(f"gain_rate_hz must be > 0 or None, got {self.gain_rate_hz!r}")
+        for name in ("init_seconds",):
             if not getattr(self, name) > 0.0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)!r}")
 
@@ -91,13 +123,21 @@ class WFLC(Predictor):
         self.bias = np.zeros(d)
         self.omega0 = 0.0  # rad/sample
         self.psi = 0.0
-        self._mu0 = s.mu0 * s.unit**2
+        rate = 1.0 if s.gain_rate_hz is None else self.dt * s.gain_rate_hz
+        self._mu0 = s.mu0 * self.unit**2 * rate**2
+        self._mu1 = s.mu1 * rate
+        self._kappa = s.phase_gain * rate
         self._lo, self._hi = (2 * math.pi * f * self.dt for f in s.omega_limits_hz)
 
     @property
     def omega(self) -> float:
         """ω̂ [rad/s]."""
         return self.omega0 / self.dt
+
+    @property
+    def heart_rate_hz(self) -> float:
+        """ω̂/2π [Hz]; NaN until initialised."""
+        return self.omega0 / (2 * math.pi * self.dt) if self.ready else math.nan
 
     def _initialise(self) -> None:
         order = np.roll(np.arange(self.n_init), -(self._filled % self.n_init))
@@ -125,11 +165,22 @@ class WFLC(Predictor):
         sn, cs = np.sin(ph), np.cos(ph)
         ws, wc = self.w[:, :m], self.w[:, m:]
         eps = z - ws @ sn - wc @ cs - self.bias
-        grad = float(eps @ ((ws * cs - wc * sn) @ self._r))
-        self.omega0 = min(max(self.omega0 + 2 * self._mu0 * grad, self._lo), self._hi)
-        ws += (2 * s.mu1) * np.multiply.outer(eps, sn)
-        wc += (2 * s.mu1) * np.multiply.outer(eps, cs)
+        j = s.frequency_harmonics
+        grad = float(eps @ ((ws[:, :j] * cs[:j] - wc[:, :j] * sn[:j]) @ self._r[:j]))
+        w1 = self.w[:, [0, m]].copy()  # fundamental weights (sin, cos) before adaptation
+        w0 = self.omega0 + 2 * self._mu0 * grad
+        if not self._lo <= w0 <= self._hi:
+            self.counts["omega_clamped"] += 1
+            w0 = min(max(w0, self._lo), self._hi) if math.isfinite(w0) else self.omega0
+        self.omega0 = w0
+        ws += (2 * self._mu1) * np.multiply.outer(eps, sn)
+        wc += (2 * self._mu1) * np.multiply.outer(eps, cs)
         self.bias += (2 * s.mu_bias) * eps
+        if self._kappa:  # phase-locked correction: the rotation the weights made, Δφ
+            w2 = self.w[:, [0, m]]
+            cross = float(np.sum(w1[:, 0] * w2[:, 1] - w1[:, 1] * w2[:, 0]))
+            dphi = math.atan2(cross, float(np.sum(w1 * w2)))
+            self.omega0 = min(max(self.omega0 + self._kappa * dphi, self._lo), self._hi)
 
     def _missing(self) -> None:
         if self.ready:

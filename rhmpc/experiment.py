@@ -218,9 +218,9 @@ class Run:
     arm: Any
     controller: Any
     reference: Any
-    truth: np.ndarray
+    truth: Any  # sim.streams.SourceTruth: the centred POI truth, read per window
     center: np.ndarray
-    stream: Any
+    stream: Any  # a sample source of sim.streams
     label: str
     duration: float
 
@@ -240,8 +240,13 @@ def heart_source(config: RunConfig, rng: np.random.Generator):
 
 
 def build_stream(config: RunConfig, source, origin, duration: float, rng: np.random.Generator):
-    """The sensor samples the controller sees (SI units), over ``duration`` seconds."""
+    """The sensor samples the controller sees (SI units), over ``duration`` seconds.
+
+    A sample source read in blocks (:func:`sim.streams.sensor_samples`): the samples and random
+    draws of ``sensor.measure`` over the whole run, without holding the 2-kHz stream.
+    """
     from sim.sensors import SampleStream, Upsample, sensor_from_name
+    from sim.streams import UpsampledSamples, sensor_samples
 
     control_rate = 1.0 / config.loop.Ts
     if config.sensor == "recorded":
@@ -249,7 +254,7 @@ def build_stream(config: RunConfig, source, origin, duration: float, rng: np.ran
             raise UsageError("sensor 'recorded' needs a recording (--data FILE)")
         t = origin.t - origin.t[0]
         stream = SampleStream(t, origin.z, t.copy(), origin.sample_rate)
-        return Upsample(control_rate).apply(stream, rng)
+        return UpsampledSamples(stream, Upsample(control_rate))
     settings = dict(config.sensor_settings)
     if config.sensor == "sonomicrometry":
         settings.setdefault("rate", getattr(origin, "sensor_rate", None) or 257.0)
@@ -258,16 +263,20 @@ def build_stream(config: RunConfig, source, origin, duration: float, rng: np.ran
         sensor = sensor_from_name(config.sensor, dim=source.dim, **settings)
     except TypeError as exc:
         raise UsageError(f"sensor {config.sensor!r}: {exc}") from None
-    return sensor.measure(source, duration, rng)
+    return sensor_samples(sensor, source, duration, rng)
 
 
-def build_run(config: RunConfig) -> Run:
-    """Build robot, controller, heart motion, sensor stream and reference for ``config``."""
+def build_run(config: RunConfig, implementation: str = "python") -> Run:
+    """Build robot, controller, heart motion, sensor stream and reference for ``config``.
+
+    ``implementation="c"``: the controller is the compiled one of ``rhmpc export`` (built once
+    and cached, :func:`rhmpc.control.export.compiled_controller`) instead of the Python one.
+    """
     from predictors import make_predictor
     from rhmpc.control.mpc import RecedingHorizonMPC
     from rhmpc.control.reference import ExactReference, PredictedReference
     from robots import linearize, load_robot
-    from sim.loop import poi_truth
+    from sim.streams import SourceTruth
 
     loop = config.loop
     if config.mpc.horizon != loop.horizon:
@@ -279,6 +288,12 @@ def build_run(config: RunConfig) -> Run:
     robot = load_robot(config.robot)
     arm = linearize(robot, Ts=loop.Ts)
     controller = RecedingHorizonMPC(arm, config.mpc)
+    if implementation == "c":
+        from rhmpc.control.export import compiled_controller
+
+        controller = compiled_controller(controller, config.robot)
+    elif implementation != "python":
+        raise UsageError(f"implementation must be 'python' or 'c', got {implementation!r}")
     source, label, available, origin = heart_source(config, heart_rng)
     if config.data is not None and loop.duration > available:
         digits = next((d for d in range(2, 10) if f"{available:.{d}f}" != f"{loop.duration:.{d}f}"),
@@ -289,13 +304,10 @@ def build_run(config: RunConfig) -> Run:
         )
     margin = (loop.horizon + 1) * loop.Ts
     stream = build_stream(config, source, origin, loop.duration + margin, sensor_rng)
-    if config.ground_truth == "recorded":
-        from sim.heart import RecordedMotion
-
-        target = RecordedMotion(stream.t, stream.z, name="recorded stream")
-    else:
-        target = source
-    center, truth = poi_truth(target, loop.ticks + loop.horizon + 1, loop.Ts)
+    # the truth is read per window: the recorded stream interpolated at the ticks, or the motion
+    truth = SourceTruth(stream if config.ground_truth == "recorded" else source,
+                        loop.ticks + loop.horizon + 1, loop.Ts)
+    center = truth.center
     if config.predictor == "exact":
         reference = ExactReference(truth, loop.horizon)
     else:
@@ -311,16 +323,24 @@ def build_run(config: RunConfig) -> Run:
                loop.duration)
 
 
-def run_experiment(config: RunConfig, progress: bool = False) -> tuple[Any, dict]:
+def run_experiment(config: RunConfig, progress: bool = False, trace: str | None = None,
+                   gain_tick=None, implementation: str = "python") -> tuple[Any, dict]:
     """Run ``config`` in closed loop; returns the :class:`~sim.loop.LoopResult` and its document.
 
     The document holds the settings, the metrics (``rms_error_mm``, ``max_error_mm``,
     ``rms_effort_mNm``, ``tick_us`` with ``p50``/``p99``/``max``, ``fallbacks`` …), the wall
-    time and the package versions.
+    time, the peak resident memory of the process so far (``peak_rss_mb``) and the package
+    versions. ``trace``: write every tick to this NPZ file (:mod:`sim.trace`). ``gain_tick``:
+    the class of ``rhmpc bench``'s gain tick (``GainTick(mpc)(x, r, u_prev)``), timed in the
+    run on every 16th tick so that the document has ``gain_tick_us`` and the tick's ratios to
+    its p50 (``tick_ratio_to_gain``).
+    ``implementation``: ``"python"`` or ``"c"`` (:func:`build_run`).
     """
+    import resource
+
     from sim.loop import run_closed_loop
 
-    run = build_run(config)
+    run = build_run(config, implementation)
     bar = None
     callback = None
     if progress:
@@ -337,7 +357,8 @@ def run_experiment(config: RunConfig, progress: bool = False) -> tuple[Any, dict
         result = run_closed_loop(
             run.robot, run.arm, run.controller, run.reference, run.truth, run.center, run.stream,
             config.loop, plant_settings=config.plant, mismatch=config.mismatch,
-            observer_settings=config.observer, progress=callback,
+            observer_settings=config.observer, progress=callback, trace_file=trace,
+            yardstick=None if gain_tick is None else _gain_tick(run.controller, gain_tick),
         )
     finally:
         if bar is not None:
@@ -355,13 +376,29 @@ def run_experiment(config: RunConfig, progress: bool = False) -> tuple[Any, dict
         **metrics,
         "fallbacks": int(stats.get("fallback_total", 0)),
         "controller": _jsonable(stats),
+        "implementation": implementation,
         "predictor_counts": _jsonable(result.predictor_counts),
         "wall_s": wall,
         "real_time_factor": config.loop.duration / wall,
+        "plant_dynamics": result.plant_dynamics,
+        "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,  # Linux: KiB
         "settings": config.to_dict(),
         "versions": versions(),
     }
+    if gain_tick is not None:
+        document["gain_tick_us"] = result.yardstick_us
+        document["tick_ratio_to_gain"] = {k: v / result.yardstick_us["p50"]
+                                          for k, v in metrics["tick_us"].items() if k != "mean"}
     return result, document
+
+
+def _gain_tick(controller, gain_tick):
+    """``yardstick(x, r)``: the controller's gain tick, or None if it has no gain to time."""
+    try:
+        gain = gain_tick(getattr(controller, "twin", controller))  # compiled: its Python twin
+    except AttributeError:  # a stand-in controller without the MPC's QP
+        return None
+    return lambda x, ref: gain(x, ref, controller.u_prev)
 
 
 def _jsonable(obj: Any) -> Any:

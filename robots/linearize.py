@@ -34,6 +34,9 @@ class LinearArm:
     M0 : (n, n) joint-space inertia at q0 including armature [kg·m²]
     Ts : sample period [s]
     torque_limit : (n,) actuator saturation [N·m]
+    robot : Robot | None
+        The robot it was made from (forward kinematics for the MPC's output offset, joint limits
+        for its envelope); ``None`` for a model given by its matrices only.
     """
 
     A: np.ndarray
@@ -46,6 +49,7 @@ class LinearArm:
     M0: np.ndarray
     Ts: float
     torque_limit: np.ndarray
+    robot: Robot | None = None
 
     @property
     def nx(self) -> int:
@@ -58,6 +62,16 @@ class LinearArm:
     @property
     def ny(self) -> int:
         return self.C.shape[0]
+
+    @property
+    def position_limits(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The robot's lower and upper joint limits [rad], or None without a robot."""
+        return None if self.robot is None else self.robot.position_limits
+
+    @property
+    def velocity_limit(self) -> np.ndarray | None:
+        """The robot's joint speed limits [rad/s], or None without a robot."""
+        return None if self.robot is None else self.robot.velocity_limit
 
     def output(self, x: np.ndarray) -> np.ndarray:
         """Linearised end-effector position y = C x + y0 [m]."""
@@ -94,5 +108,5 @@ def linearize(robot: Robot, q0: np.ndarray | None = None, Ts: float = 0.5e-3) ->
     C = np.hstack([J, np.zeros((3, n))])
     return LinearArm(
         A=A, B=B, C=C, y0=robot.ee_position(q0), Ac=Ac, Bc=Bc, q0=q0.copy(), M0=M0, Ts=float(Ts),
-        torque_limit=robot.torque_limit.copy(),
+        torque_limit=robot.torque_limit.copy(), robot=robot,
     )

@@ -91,6 +91,11 @@ class Robot:
             np.asarray(self.model.upperPositionLimit).copy(),
         )
 
+    @property
+    def velocity_limit(self) -> np.ndarray:
+        """Joint speed limits [rad/s] (the URDF's ``<limit velocity=…>``)."""
+        return np.asarray(self.model.velocityLimit).copy()
+
     def create_data(self) -> pin.Data:
         """Fresh Pinocchio work data for this model."""
         return self.model.createData()

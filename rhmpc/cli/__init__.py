@@ -22,7 +22,9 @@ from rhmpc import __version__
 from rhmpc.errors import UsageError
 
 #: Subcommand modules, in the order ``rhmpc --help`` lists them.
-COMMANDS: tuple[str, ...] = ("simulate", "compare", "robots", "data", "bench", "predict", "tune")
+COMMANDS: tuple[str, ...] = (
+    "simulate", "compare", "robots", "data", "bench", "predict", "tune", "export",
+)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -31,6 +31,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="reference jump size [mm] every --jump-every ticks (default 2; 0 = no jumps)",
     )
     p.add_argument("--jump-every", type=int, default=1000, help="ticks between jumps (1000)")
+    p.add_argument(
+        "--controller", choices=("python", "c"), default="python",
+        help="'c' also runs the compiled controller of `rhmpc export` (built once, cached; needs "
+        "cmake and a C compiler) next to the Python one, timed inside C and from Python",
+    )
     p.add_argument("--gc", action="store_true", help="leave the garbage collector on in the loop")
     p.add_argument("--json", action="store_true", help="print machine-readable JSON")
     p.set_defaults(func=run)
@@ -43,6 +48,12 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--warmup must be >= 0, got {args.warmup}")
     if args.jump_mm < 0 or args.jump_every < 0:
         raise UsageError("--jump-mm and --jump-every must be >= 0")
+    if args.controller == "c":
+        from rhmpc.control.export import missing_toolchain
+
+        reason = missing_toolchain()
+        if reason:
+            raise UsageError(reason)
 
     def progress(done: int, total: int) -> None:
         print(f"\rrhmpc bench: {done}/{total} ticks", end="", file=sys.stderr, flush=True)
@@ -51,6 +62,7 @@ def run(args: argparse.Namespace) -> int:
         robot=args.robot, ticks=args.ticks, seed=args.seed, settings=MPCSettings(),
         jump=args.jump_mm * 1e-3, jump_every=args.jump_every, warmup=args.warmup,
         disable_gc=not args.gc, progress=progress if sys.stderr.isatty() else None,
+        controller=args.controller,
     )
     if sys.stderr.isatty():
         print(file=sys.stderr)

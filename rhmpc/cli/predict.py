@@ -11,6 +11,7 @@ from pathlib import Path
 from predictors import PREDICTORS
 from rhmpc.errors import UsageError
 from rhmpc.studies.prediction import (
+    BASE_BPM,
     DEFAULT_PREDICTORS,
     DEFAULT_TRIALS,
     STUDIES,
@@ -55,6 +56,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="comma-separated PhysioNet records for --study rr (default: ../shared/data)",
     )
     p.add_argument("--scenarios", default=None, help="scenarios for --study horizon")
+    p.add_argument(
+        "--paper",
+        choices=tuple(BASE_BPM),
+        default="yuen2008",
+        help="hr-step protocol: yuen2008 (base 60 bpm, default) or tuna2013 (base 103 bpm)",
+    )
     p.add_argument("--json", action="store_true", help="print machine-readable JSON")
     p.add_argument("--out", type=Path, default=None, help="write the result JSON to this file")
     p.add_argument("--plot", type=Path, default=None, help="draw the curves to this PNG file")
@@ -65,7 +72,7 @@ def _settings(args: argparse.Namespace) -> StudySettings:
     trials = DEFAULT_TRIALS[args.study] if args.trials is None else args.trials
     if trials < 1:
         raise UsageError(f"--trials must be >= 1, got {trials}")
-    kw: dict = {"study": args.study, "trials": trials, "seed": args.seed}
+    kw: dict = {"study": args.study, "trials": trials, "seed": args.seed, "paper": args.paper}
     if args.predictors:
         names = tuple(n.strip() for n in args.predictors.split(",") if n.strip())
         bad = [n for n in names if n not in PREDICTORS]

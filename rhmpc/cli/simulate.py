@@ -55,10 +55,15 @@ def register(sub: argparse._SubParsersAction) -> None:
                      "or MATLAB .mat v5/v7.3); runs the whole recording unless --duration")
     add_recording_options(p)
     p.add_argument("--seed", type=int, help="seed of every random draw (default 0)")
+    p.add_argument("--controller", choices=("python", "c"), default="python",
+                   help="'c': the compiled controller of `rhmpc export` in the loop (built once, "
+                   "cached; needs cmake and a C compiler)")
     add_run_options(p)
     p.add_argument("--out", metavar="FILE.json", help="write the result document")
     p.add_argument("--json", action="store_true", help="print the result document on stdout")
     p.add_argument("--plot", metavar="FILE.png", help="tracking figure (Tuna Figs 10-11 style)")
+    p.add_argument("--trace", metavar="FILE.npz", help="write every tick to an NPZ file as the "
+                   "run goes (chunked; read it with sim.trace.read_trace)")
     p.set_defaults(func=run)
 
 
@@ -138,7 +143,23 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
 
 def run(args: argparse.Namespace) -> int:
     config = config_from_args(args)
-    result, doc = run_experiment(config, progress=not args.json)
+    if args.controller == "c":
+        from rhmpc.control.export import missing_toolchain
+
+        if reason := missing_toolchain():
+            raise UsageError(reason)
+    trace = getattr(args, "trace", None)
+    if trace and not Path(trace).resolve().parent.is_dir():
+        raise UsageError(f"--trace {trace}: no such directory")
+    try:
+        from rhmpc.studies.bench import GainTick  # the yardstick, timed in the same run
+
+        result, doc = run_experiment(config, progress=not args.json, trace=trace,
+                                     gain_tick=GainTick, implementation=args.controller)
+    except ValueError as exc:
+        if trace and str(exc).startswith(f"{trace}:"):  # the trace file cannot be written
+            raise UsageError(str(exc)) from None
+        raise
     if args.out:
         Path(args.out).write_text(json.dumps(doc, indent=2) + "\n")
     if args.plot:
@@ -157,4 +178,6 @@ def run(args: argparse.Namespace) -> int:
             print(f"  result           {args.out}")
         if args.plot:
             print(f"  figure           {args.plot}")
+        if trace:
+            print(f"  trace            {trace} (every tick)")
     return 0

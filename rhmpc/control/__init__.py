@@ -3,6 +3,10 @@ exact screening, fallbacks), the reference builder, and their settings.
 
 - :mod:`~rhmpc.control.settings` — :class:`MPCSettings` and the dataclass ↔ dict helpers;
 - :mod:`~rhmpc.control.qp` — the condensed QP, built once (CasADi);
+- :mod:`~rhmpc.control.envelope` — joint position/velocity and Cartesian limits as soft rows;
+- :mod:`~rhmpc.control.offset` — the output offset from forward kinematics (offset-free MPC);
+- :mod:`~rhmpc.control.active_set` — DAQP behind the solver interface;
+- :mod:`~rhmpc.control.fallback` — :class:`MPCStats`, the fallback torques;
 - :mod:`~rhmpc.control.mpc` — :class:`RecedingHorizonMPC`, the per-tick controller;
 - :mod:`~rhmpc.control.reference` — the N-point reference from a predictor or the true future.
 

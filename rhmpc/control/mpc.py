@@ -1,32 +1,38 @@
-"""`RecedingHorizonMPC`: the condensed, move-blocked tracking QP solved by OSQP every tick.
+"""`RecedingHorizonMPC`: the condensed, move-blocked tracking QP solved every tick (DAQP or OSQP).
 
-Built once (:func:`rhmpc.control.qp.build_condensed_qp`: CasADi → numpy data → ``osqp.setup``); each
-tick then only does::
+Built once (:func:`rhmpc.control.qp.build_condensed_qp`: CasADi → numpy data → solver setup);
+each tick then only does::
 
-    p = [x; r_1..r_N; u_{−1}]          (copy into a preallocated buffer, finiteness check)
-    ẑ* = −P⁻¹(F p + f0)                 (screening: one mat-vec; if l ≤ A ẑ* ≤ u, ẑ = ẑ*, done)
-    q = F p + f0                        (one mat-vec; l, u only if joint bounds are on)
-    solver.update(q) ; warm start (previous solution shifted one tick) ; solver.solve()
+    d = p(q0 + x̂_q) − (C x̂ + y0)       (output offset: one forward-kinematics call)
+    p = [x; r_1..r_N; u_{−1}; d]        (copy into a preallocated buffer, finiteness check)
+    l, u = l0 − G p, u0 − G p           (envelope rows: only the state and offset columns)
+    v* = [ẑ*; 0], ẑ* = −P_z⁻¹ q_z(p)    (screening: one mat-vec; if l ≤ A v* ≤ u, v = v*, done)
+    q = F p + f0                        (one mat-vec)
+    solver.update(q, l, u) ; warm start ; solver.solve()   (DAQP: hot-started working set;
+                                        OSQP: previous solution shifted one tick)
     τ = clip(u_max ∘ ẑ_0, −u_max, u_max)   if the status is "solved", else the fallback
 
-Screening is exact, not an approximation: a minimiser of the unconstrained problem that is
-feasible satisfies the QP's KKT conditions with zero multipliers, and P ≻ 0 makes it unique.
+Screening is exact, not an approximation: with the slacks at 0 and every row satisfied, the
+point satisfies the QP's KKT conditions (zero multipliers on the envelope and torque rows,
+multiplier ρ₁ on each slack's bound s ≥ 0), and P ≻ 0 makes it unique. It checks every row.
 
-A tick whose solve is not "solved" never uses OSQP's ``x``: it applies the previous plan shifted
-to the current tick (for at most ``plan_fallback_ticks`` ticks), else the clipped unconstrained
-LQ input (precomputed gain), else zero torque, and counts the event in :attr:`stats`.
+A tick whose solve is not "solved" never uses OSQP's ``x``: it takes a fallback of
+:mod:`rhmpc.control.fallback` (the shifted plan, the clipped LQ input if it keeps the envelope,
+braking, zero torque) and counts the event in :attr:`stats`.
 """
 
 from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
 
 import numpy as np
 import osqp
 import scipy.sparse as sp
 
+from rhmpc.control.active_set import ActiveSetSolver
+from rhmpc.control.fallback import MPCStats, brake_torque, envelope_holds
+from rhmpc.control.offset import OutputOffset
 from rhmpc.control.qp import CondensedQP, build_condensed_qp
 from rhmpc.control.settings import MPCSettings
 from robots.linearize import LinearArm
@@ -49,53 +55,10 @@ _CONTINUE = frozenset({"max_iter", "time_limit", "solved_inaccurate", "injected"
 
 #: Failure reasons counted in :attr:`MPCStats.failures` besides OSQP's statuses.
 EXTRA_REASONS = ("nonfinite_input", "nonfinite_solution", "solver_error", "injected")
+#: A slack above this [its unit] counts the tick as relaxing the envelope (``stats.relaxed``).
+RELAXED_SLACK = 1e-2
 
-
-@dataclass
-class MPCStats:
-    """What the controller did: the last tick, and counters since construction or :meth:`reset`.
-
-    Attributes
-    ----------
-    ticks : int
-        Number of :meth:`RecedingHorizonMPC.step` calls.
-    status : str
-        Last tick: ``"solved"`` or the failure reason (an OSQP status such as ``"max_iter"``,
-        ``"time_limit"``, ``"primal_infeasible"``, or ``"nonfinite_input"``,
-        ``"nonfinite_solution"``, ``"solver_error"``, ``"injected"``).
-    source : str
-        Where the last torque came from: ``"qp"``, ``"plan"``, ``"lq"`` or ``"zero"``.
-    iterations : int
-        OSQP iterations of the last tick (0 if no solve ran).
-    screened : int
-        Ticks solved by screening, without calling OSQP (their ``source`` is ``"qp"``).
-    solve_time : float
-        Wall time of the last ``solve()`` call [s].
-    parts_ns : list[int]
-        Last tick's phases [ns]: reference handling, vector update (incl. warm start), OSQP solve,
-        output (status check, clipping, bookkeeping).
-    failures : dict[str, int]
-        Ticks whose QP result was not used, by reason.
-    fallbacks : dict[str, int]
-        Ticks served by each fallback: ``"plan"``, ``"lq"``, ``"zero"``.
-    """
-
-    ticks: int = 0
-    status: str = "none"
-    source: str = "none"
-    iterations: int = 0
-    screened: int = 0
-    solve_time: float = 0.0
-    parts_ns: list[int] = field(default_factory=lambda: [0, 0, 0, 0])
-    failures: dict[str, int] = field(default_factory=dict)
-    fallbacks: dict[str, int] = field(
-        default_factory=lambda: {"plan": 0, "lq": 0, "zero": 0}
-    )
-
-    @property
-    def fallback_total(self) -> int:
-        """Ticks that did not apply the QP solution."""
-        return sum(self.fallbacks.values())
+__all__ = ["EXTRA_REASONS", "MPCStats", "RecedingHorizonMPC"]
 
 
 class RecedingHorizonMPC:
@@ -104,7 +67,8 @@ class RecedingHorizonMPC:
     Parameters
     ----------
     arm : LinearArm
-        Discrete model x⁺ = A x + B u, y = C x + y0 (``robots.linearize``).
+        Discrete model x⁺ = A x + B u, y = C x + y0 (``robots.linearize``); its robot gives the
+        output offset and the joint limits.
     settings : MPCSettings
         Horizon, weights, bounds and solver settings (see
         :class:`rhmpc.control.settings.MPCSettings` for the cost and constraints).
@@ -119,6 +83,7 @@ class RecedingHorizonMPC:
     ``step(x, ref)`` takes ``x`` (nx,) = [q − q0; q̇] [rad, rad/s] and ``ref`` (N, 3) absolute
     end-effector positions r_1..r_N for the next N ticks [m], and returns τ_mpc (nu,) [N·m],
     always finite and within ``±u_max``. Non-finite inputs raise nothing: they take the fallback.
+    With ``offset_correction`` the output offset d is computed from ``x`` inside ``step``.
     """
 
     def __init__(self, arm: LinearArm, settings: MPCSettings | None = None) -> None:
@@ -137,31 +102,41 @@ class RecedingHorizonMPC:
         # -- per-tick buffers and views ------------------------------------------------------
         # One mat-vec per tick gives q: p_ext = [p; 1], F_ext = [F, f0], q = F_ext p_ext. The
         # finiteness check before it is p_extᵀp_ext (squares: no inf − inf, so no FP warning).
-        nx, N, ny, nz = self.nx, self.N, self.ny, qp.nz
+        nx, N, ny = self.nx, self.N, self.ny
         self._p_ext = np.zeros(qp.npar + 1)
         self._p_ext[-1] = 1.0
         self._p = self._p_ext[:-1]
         self._p_x = self._p_ext[:nx]
         self._p_r = self._p_ext[nx:nx + N * ny]
         self._p_r2 = self._p_r.reshape(N, ny)  # a view: ref is copied in without a reshape
-        self._p_u = self._p_ext[nx + N * ny:-1]
+        self._p_u = self._p_ext[nx + N * ny:nx + N * ny + self.nu]
+        self._p_d = self._p_ext[nx + N * ny + self.nu:-1]
+        self._offset = OutputOffset(arm) if self.settings.offset_correction else None
         self._x_shape, self._ref_shape = (nx,), (N, ny)
         self._F_ext = np.ascontiguousarray(np.column_stack([qp.F, qp.f0]))
-        self._q = np.empty(nz)
+        self._q = np.empty(qp.nv)
         self._l = qp.l0.copy()
         self._u = qp.u0.copy()
         self._g = np.empty(qp.A.shape[0])
-        self._G = qp.G
+        self._G_cols = qp.bound_columns
+        self._G = np.ascontiguousarray(qp.G[:, qp.bound_columns])
+        self._p_cols = np.empty(len(qp.bound_columns))
+        self._nz, self._nv = qp.nz, qp.nv
         self._shift, self._shift_dual = qp.shift, qp.shift_dual
         self._scale0 = qp.u_max.copy()
         self._gain, self._gain0 = qp.gain, qp.gain0
         self._screen = self.settings.screening
         self._Z_ext = np.ascontiguousarray(qp.minimiser)
-        self._z_star = np.empty(nz)
-        self._z_abs = np.empty(nz)
+        self._z_star = np.zeros(qp.nv)
+        self._z_abs = np.empty(qp.nv)
+        # Multipliers of a screened solution: 0 on every row but the slack bounds s ≥ 0, whose
+        # multiplier is −ρ₁ (stationarity in s at s = 0). Starting ADMM from them matters: from
+        # 0 it needs thousands of iterations to build up ρ₁ (measured: > 4000 vs 25–75).
         self._y_zero = np.zeros(qp.A.shape[0])
+        self._y_zero[qp.nz:qp.nv] = -self.settings.envelope_penalty
         self._neg_umax = -qp.u_max
         self._nu_ = self.nu
+        self._v_cold = np.zeros(qp.nv)
 
         self._setup_solver()
         self.stats = MPCStats()
@@ -170,6 +145,9 @@ class RecedingHorizonMPC:
     # -- solver ------------------------------------------------------------------------------
     def _setup_solver(self) -> None:
         s, qp = self.settings, self.qp
+        self._daqp = None
+        if s.solver == "daqp":
+            self._daqp = ActiveSetSolver(qp, s.max_iter)
         self._osqp = osqp.OSQP()
         extra = {"time_limit": s.time_limit} if s.time_limit > 0 else {}
         self._osqp.setup(
@@ -186,7 +164,9 @@ class RecedingHorizonMPC:
         self._raw = getattr(self._osqp, "_solver", None)
 
     def _update_q(self) -> None:
-        if self._raw is not None:
+        if self._daqp is not None:
+            self._daqp.update(self._q, self._l, self._u, self.qp.param_bounds)
+        elif self._raw is not None:
             if self.qp.param_bounds:
                 self._raw.update_data_vec(q=self._q, l=self._l, u=self._u)
             else:
@@ -197,12 +177,16 @@ class RecedingHorizonMPC:
             self._osqp.update(q=self._q)
 
     def _warm_start(self, x: np.ndarray, y: np.ndarray | None) -> None:
+        if self._daqp is not None:
+            return  # DAQP hot-starts from its last working set
         if self._raw is not None:
             self._raw.warm_start(x, y)
         else:
             self._osqp.warm_start(x=x, y=y)
 
     def _solve(self) -> tuple[int, int, np.ndarray, np.ndarray | None]:
+        if self._daqp is not None:
+            return self._daqp.solve()
         if self._raw is not None:
             raw = self._raw
             raw.solve()
@@ -220,7 +204,7 @@ class RecedingHorizonMPC:
         """
         # u_{−1}: the last returned torque lives in the parameter buffer.
         self._p_u[:] = 0.0 if u_prev is None else np.clip(u_prev, -self.u_max, self.u_max)
-        self._plan: np.ndarray | None = None  # (nz,) normalised block inputs of the last good solve
+        self._plan: np.ndarray | None = None  # (nv,) [ẑ; s] of the last good solve
         self._plan_age = 0
         self._ws_x: np.ndarray | None = None
         self._ws_y: np.ndarray | None = None
@@ -228,7 +212,7 @@ class RecedingHorizonMPC:
         self._last_screened = False
         self._ws_pending = False
         self.stats = MPCStats()
-        zeros = np.zeros(self.qp.nz)
+        zeros = np.zeros(self.qp.nv)
         self._osqp.warm_start(x=zeros, y=self._y_zero)
 
     def force_failures(self, count: int = 1, reason: str = "injected") -> None:
@@ -241,12 +225,21 @@ class RecedingHorizonMPC:
             raise ValueError(f"count must be >= 0, got {count}")
         self._forced.extend([reason] * int(count))
 
+    def offset(self, x: np.ndarray) -> np.ndarray:
+        """Output offset d = p(q0 + x_q) − (C x + y0) [m] the controller uses at ``x`` (0 when
+        ``offset_correction`` is off)."""
+        if self._offset is None:
+            return np.zeros(self.ny)
+        return self._offset(np.asarray(x, dtype=float))
+
     def params(
         self, x: np.ndarray, ref: np.ndarray, u_prev: np.ndarray | None = None
     ) -> np.ndarray:
-        """QP parameter vector p = [x; r_1..r_N; u_{−1}] (u_{−1} defaults to the last output)."""
+        """QP parameter vector p = [x; r_1..r_N; u_{−1}; d] (u_{−1} defaults to the last output,
+        d is :meth:`offset` at ``x``)."""
         up = self._p_u if u_prev is None else u_prev
-        return self.qp.params(np.asarray(x, float), np.asarray(ref, float), np.asarray(up, float))
+        x = np.asarray(x, float)
+        return self.qp.params(x, np.asarray(ref, float), np.asarray(up, float), self.offset(x))
 
     def qp_vectors(
         self, x: np.ndarray, ref: np.ndarray, u_prev: np.ndarray | None = None
@@ -258,10 +251,12 @@ class RecedingHorizonMPC:
     def last_solution(self) -> tuple[np.ndarray, np.ndarray]:
         """Primal ẑ and dual y of the last tick's QP, as copies.
 
-        After a screened tick: (ẑ*, 0); otherwise OSQP's last iterate, whatever its status.
+        After a screened tick: ([ẑ*; 0], 0); otherwise OSQP's last iterate, whatever its status.
         """
         if self._last_screened:
             return self._z_star.copy(), self._y_zero.copy()
+        if self._daqp is not None:
+            return self._daqp.x.copy(), self._daqp.y.copy()
         if self._raw is not None:
             sol = self._raw.solution
             return np.array(sol.x, dtype=float), np.array(sol.y, dtype=float)
@@ -285,6 +280,17 @@ class RecedingHorizonMPC:
         if value.shape != (self.nu,) or not np.all(np.isfinite(value)):
             raise ValueError(f"u_prev must be {self.nu} finite torques [N·m], got {value!r}")
         self._p_u[:] = np.clip(value, -self.u_max, self.u_max)
+
+    def _lq_or_brake(self) -> tuple[np.ndarray, str]:
+        """The clipped LQ input if its whole clipped plan keeps the envelope, else braking."""
+        v = np.dot(self._Z_ext, self._p_ext)
+        np.clip(v, -1.0, 1.0, out=v)
+        v[self._nz:] = 0.0
+        if not self.qp.param_bounds or envelope_holds(self.qp.A, v, self._l, self._u, self._nz):
+            return v[: self.nu] * self._scale0, "lq"
+        velocity = self._p_x[self.nx // 2:]
+        ticks = self.settings.block_lengths[0]
+        return brake_torque(self.arm.M0, velocity, ticks, self.arm.Ts, self.u_max), "brake"
 
     def unconstrained(
         self, x: np.ndarray, ref: np.ndarray, u_prev: np.ndarray | None = None
@@ -321,8 +327,17 @@ class RecedingHorizonMPC:
             stats.solve_time = 0.0
             return self._fallback("nonfinite_input", inputs_finite=False)
 
+        if self._offset is not None:
+            self._offset(x, out=self._p_d)
+            if not math.isfinite(np.dot(self._p_d, self._p_d)):
+                t1 = clock()
+                stats.parts_ns[:] = [t1 - t0, 0, 0, 0]
+                stats.iterations = 0
+                stats.solve_time = 0.0
+                return self._fallback("nonfinite_input", inputs_finite=False)
         if self.qp.param_bounds:
-            np.dot(self._G, self._p, out=self._g)
+            np.take(self._p, self._G_cols, out=self._p_cols)
+            np.dot(self._G, self._p_cols, out=self._g)
             np.subtract(self.qp.l0, self._g, out=self._l)
             np.subtract(self.qp.u0, self._g, out=self._u)
         if self._screen and not self._forced and self._screened(p_ext):
@@ -335,7 +350,11 @@ class RecedingHorizonMPC:
             if self._ws_pending:
                 self._ws_x, self._ws_y = self._shift @ self._plan, self._y_zero
                 self._ws_pending = False
-            if self._ws_x is not None:
+            if self._ws == "none":
+                # OSQP 1.x keeps its last iterate even with warm_starting=False (measured: the
+                # same iterations as "keep"); a cold start is an explicit start from v = 0.
+                self._warm_start(self._v_cold, self._y_zero)
+            elif self._ws_x is not None:
                 self._warm_start(self._ws_x, self._ws_y)
                 self._ws_x = self._ws_y = None
             t2 = clock()
@@ -378,6 +397,12 @@ class RecedingHorizonMPC:
 
         np.maximum(tau, self._neg_umax, out=tau)
         np.minimum(tau, self.u_max, out=tau)
+        if self._nv > self._nz:
+            slack = float(z[self._nz:].max())
+            if slack > RELAXED_SLACK:
+                stats.relaxed += 1
+            if slack > stats.slack_max:
+                stats.slack_max = slack
         self._p_u[:] = tau  # u_{−1} of the next tick (a copy: the caller owns tau)
         self._plan = z  # a fresh array from OSQP on every access of solution.x
         self._plan_age = 0
@@ -434,8 +459,7 @@ class RecedingHorizonMPC:
             tau = self._plan[b * self.nu:(b + 1) * self.nu] * self._scale0
             source = "plan"
         if tau is None and inputs_finite:
-            tau = self._gain @ self._p + self._gain0
-            source = "lq"
+            tau, source = self._lq_or_brake()
         if tau is None or not np.all(np.isfinite(tau)):
             tau = np.zeros(self.nu)
             source = "zero"
@@ -449,3 +473,4 @@ class RecedingHorizonMPC:
             self._ws_x = self._shift @ self._plan
             self._ws_y = self._y_zero
         return tau
+

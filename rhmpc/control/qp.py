@@ -1,15 +1,17 @@
 """The MPC's condensed, move-blocked QP: formulated once with CasADi, extracted as numpy data.
 
 The states are eliminated (``x_k`` is an affine function of ``x0`` and the inputs) and the
-inputs are held over move blocks, so the decision vector is the block inputs, normalised by the
-torque bounds::
+inputs are held over move blocks. The decision vector is the block inputs normalised by the
+torque bounds, followed by the envelope's slacks (:mod:`rhmpc.control.envelope`)::
 
-    u_k = u_max ∘ ẑ_{b(k)},   ẑ ∈ [−1, 1]^{nu·nb}
+    v = [ẑ (nz); s (ns)],   u_k = u_max ∘ ẑ_{b(k)},   ẑ ∈ [−1, 1]^{nu·nb},   s ≥ 0
 
-The parameter vector is ``p = [x0 (nx); r_1..r_N (N·ny, point after point); u_{−1} (nu)]``.
+The parameter vector is ``p = [x0 (nx); r_1..r_N (N·ny, point after point); u_{−1} (nu);
+d (ny)]``, with ``d`` the output offset: the model's output is ``y_k = C x_k + y0 + d``
+(offset-free MPC; ``d = p(q̂) − (C x̂ + y0)`` is measured each tick by forward kinematics).
 The QP, in OSQP's form, is::
 
-    min ½ ẑᵀ P ẑ + q(p)ᵀ ẑ   s.t.   l(p) ≤ A ẑ ≤ u(p),
+    min ½ vᵀ P v + q(p)ᵀ v   s.t.   l(p) ≤ A v ≤ u(p),
     q(p) = F p + f0,   l(p) = l0 − G p,   u(p) = u0 − G p
 
 CasADi builds the cost and constraints symbolically (``x_{k+1} = A x_k + B u_k`` rolled out over
@@ -25,6 +27,7 @@ import casadi as ca
 import numpy as np
 import scipy.linalg
 
+from rhmpc.control.envelope import EnvelopeRows, envelope_rows
 from rhmpc.control.settings import MPCSettings
 from robots.linearize import LinearArm
 
@@ -33,27 +36,45 @@ from robots.linearize import LinearArm
 class CondensedQP:
     """Numeric data of the condensed QP (see the module docstring for the equations).
 
+    The per-tick update is affine in the parameters and nothing else changes::
+
+        p = [x (nx); r_1..r_N (N·ny); u_{−1} (nu); d (ny)]          (npar = nx + N·ny + nu + ny)
+        q = F p + f0                  F: (nv, npar), f0: (nv,)
+        l = l0 − G p,  u = u0 − G p   G: (m, npar), l0, u0: (m,)  (±inf entries stay infinite)
+
+    with ``P`` (nv, nv) and ``A`` (m, nv) fixed. Only the columns ``G[:, bound_columns]`` are
+    non-zero (the state and the offset), so ``G p = G[:, bound_columns] p[bound_columns]``.
+    The rows of ``A`` are: ``nz`` torque rows (identity on ẑ, bounds ±1), ``ns`` slack rows
+    (identity on s, bounds [0, inf)), then the envelope rows, block after block.
+
     Attributes
     ----------
-    P : (nz, nz) constant Hessian of the cost in the normalised inputs ẑ [-]
-    F, f0 : (nz, npar), (nz,) affine map p → q [-]
-    A : (m, nz) constraint matrix; its first nz rows are the identity (the torque bounds) [-]
+    P : (nv, nv) constant Hessian of the cost [-]
+    F, f0 : (nv, npar), (nv,) affine map p → q [-]
+    A : (m, nv) constraint matrix [-]
     G : (m, npar) parameter part of the constraint rows; l = l0 − G p, u = u0 − G p
     l0, u0 : (m,) constant parts of the bounds [-]
     param_bounds : bool
-        True when some bound depends on p (joint position bounds); else l and u are constant.
+        True when some bound depends on p (an envelope is on); else l and u are constant.
+    bound_columns : (k,) indices of the non-zero columns of G
     u_max : (nu,) MPC torque bounds [N·m]
     scale : (nz,) u_max tiled over the blocks: z = scale ∘ ẑ [N·m]
     blocking : (N·nu, nz) input sequence from the normalised block inputs, u = blocking @ ẑ [N·m]
     block_of_tick : (N,) block index of each tick
-    shift : (nz, nz) ẑ of the plan shifted by one tick (projected back onto the blocks)
+    shift : (nv, nv) v of the plan shifted by one tick (projected back onto the blocks; slacks
+        kept)
     shift_dual : (m, m) the same shift applied to the constraint multipliers
-    minimiser : (nz, npar + 1)
-        the unconstrained minimiser ẑ* = −P⁻¹ q(p) = minimiser @ [p; 1] [-]
+    minimiser : (nv, npar + 1)
+        the screening candidate [ẑ*; 0] = minimiser @ [p; 1], ẑ* the unconstrained minimiser
+        over ẑ with s = 0 [-]
     gain, gain0 : (nu, npar), (nu,)
         first input of the unconstrained minimiser, u0 = gain p + gain0 [N·m]
     terminal_weight : (nx, nx) | None
         P_∞ − CᵀQ_N C when ``terminal == "dare"`` [-]
+    envelope : EnvelopeRows
+        The envelope's rows per block end (directions, bounds, slack groups).
+    slack_names : tuple[str, ...]
+        Name of each slack (``"position[0]"``, ``"velocity[2]"``, ``"cartesian"``).
     """
 
     P: np.ndarray
@@ -64,6 +85,7 @@ class CondensedQP:
     l0: np.ndarray
     u0: np.ndarray
     param_bounds: bool
+    bound_columns: np.ndarray
     u_max: np.ndarray
     scale: np.ndarray
     blocking: np.ndarray
@@ -74,13 +96,22 @@ class CondensedQP:
     gain: np.ndarray
     gain0: np.ndarray
     terminal_weight: np.ndarray | None
+    envelope: EnvelopeRows
+    slack_names: tuple[str, ...]
     N: int
     nx: int
     nu: int
     ny: int
+    nz: int
 
     @property
-    def nz(self) -> int:
+    def ns(self) -> int:
+        """Number of slacks."""
+        return len(self.slack_names)
+
+    @property
+    def nv(self) -> int:
+        """Number of decision variables nz + ns."""
         return self.P.shape[0]
 
     @property
@@ -96,13 +127,16 @@ class CondensedQP:
         g = self.G @ p
         return self.l0 - g, self.u0 - g
 
-    def params(self, x: np.ndarray, ref: np.ndarray, u_prev: np.ndarray) -> np.ndarray:
-        """Parameter vector p = [x0; r_1..r_N; u_{−1}]."""
-        return np.concatenate([np.ravel(x), np.ravel(ref), np.ravel(u_prev)])
+    def params(
+        self, x: np.ndarray, ref: np.ndarray, u_prev: np.ndarray, offset: np.ndarray | None = None
+    ) -> np.ndarray:
+        """Parameter vector p = [x0; r_1..r_N; u_{−1}; d] (d defaults to 0)."""
+        d = np.zeros(self.ny) if offset is None else np.ravel(offset)
+        return np.concatenate([np.ravel(x), np.ravel(ref), np.ravel(u_prev), d])
 
-    def inputs(self, zhat: np.ndarray) -> np.ndarray:
-        """Input sequence (N, nu) [N·m] of a normalised block solution ẑ."""
-        return (self.blocking @ zhat).reshape(self.N, self.nu)
+    def inputs(self, v: np.ndarray) -> np.ndarray:
+        """Input sequence (N, nu) [N·m] of a normalised block solution ẑ (or v = [ẑ; s])."""
+        return (self.blocking @ v[: self.nz]).reshape(self.N, self.nu)
 
 
 def _check_arm(arm: LinearArm) -> None:
@@ -141,10 +175,13 @@ def build_condensed_qp(arm: LinearArm, settings: MPCSettings) -> CondensedQP:
     u_max = (1.0 - s.torque_margin) * np.asarray(arm.torque_limit, dtype=float)
     if not np.all(u_max > 0):
         raise ValueError(f"MPC torque bounds must be > 0, got {u_max}")
+    env = envelope_rows(arm, s, u_max)
 
     blocks = s.block_lengths
     nb = len(blocks)
     nz = nu * nb
+    ns = env.ns
+    nv = nz + ns
     block_of_tick = np.repeat(np.arange(nb), blocks)
     blocking = np.zeros((N * nu, nz))
     for k, b in enumerate(block_of_tick):
@@ -165,73 +202,62 @@ def build_condensed_qp(arm: LinearArm, settings: MPCSettings) -> CondensedQP:
         terminal_weight = 0.5 * ((P_inf - Qx) + (P_inf - Qx).T)
         Cq_pinv = np.linalg.pinv(C[:, :nq])
 
-    q_lo = q_hi = None
-    if s.joint_lower is not None:
-        if len(s.joint_lower) != nq:
-            raise ValueError(f"joint bounds must have {nq} entries, got {len(s.joint_lower)}")
-        q_lo = np.asarray(s.joint_lower, dtype=float) - arm.q0
-        q_hi = np.asarray(s.joint_upper, dtype=float) - arm.q0
-        if np.any(q_lo > 0) or np.any(q_hi < 0):
-            raise ValueError("the joint bounds must contain the linearisation posture q0")
-
     # -- symbolic formulation ----------------------------------------------------------------
-    npar = nx + N * ny + nu
+    npar = nx + N * ny + nu + ny
     z = ca.SX.sym("z", nz)
     p = ca.SX.sym("p", npar)
     x = p[:nx]
     r = ca.reshape(p[nx:nx + N * ny], ny, N)  # column k = r_{k+1}
-    u_prev = p[nx + N * ny:]
+    u_prev = p[nx + N * ny:nx + N * ny + nu]
+    d = p[nx + N * ny + nu:]
     u_seq = ca.mtimes(ca.DM(blocking), z)
     Ad, Bd, Cd, Rd, R_dd = ca.DM(A), ca.DM(B), ca.DM(C), ca.DM(R), ca.DM(R_d)
+    Dq, Dv, Dy = ca.DM(env.Dq), ca.DM(env.Dv), ca.DM(env.Dy)
     cost = 0
-    q_rows = []
+    env_rows = []
     for k in range(N):
         u = u_seq[k * nu:(k + 1) * nu]
         du = u - u_prev
         cost += ca.bilin(Rd, u, u) + ca.bilin(R_dd, du, du)
         x = ca.mtimes(Ad, x) + ca.mtimes(Bd, u)
-        e = ca.mtimes(Cd, x) + ca.DM(y0) - r[:, k]
+        y_rel = ca.mtimes(Cd, x) + d  # y − y0
+        e = y_rel + ca.DM(y0) - r[:, k]
         cost += q_scale * w[k] * ca.dot(e, e)
-        if q_lo is not None and (k + 1) in block_ends:
-            q_rows.append(x[:nq])
+        if env.m and (k + 1) in block_ends:
+            env_rows.append(ca.mtimes(Dq, x[:nq]) + ca.mtimes(Dv, x[nq:]) + ca.mtimes(Dy, y_rel))
         u_prev = u
     if terminal_weight is not None:
-        x_ss = ca.vertcat(ca.mtimes(ca.DM(Cq_pinv), r[:, N - 1] - ca.DM(y0)), ca.DM.zeros(nq))
+        x_ss = ca.vertcat(ca.mtimes(ca.DM(Cq_pinv), r[:, N - 1] - ca.DM(y0) - d),
+                          ca.DM.zeros(nq))
         cost += ca.bilin(ca.DM(terminal_weight), x - x_ss, x - x_ss)
-    g = ca.vertcat(z, *q_rows)
+    g = ca.vertcat(*env_rows) if env_rows else ca.SX.zeros(0, 1)
 
     hess, grad = ca.hessian(cost, z)
     outputs = [hess, ca.jacobian(grad, p), grad, ca.jacobian(g, z), ca.jacobian(g, p), g]
     extract = ca.Function("extract", [z, p], outputs)
     values = extract(np.zeros(nz), np.zeros(npar))
-    H, F, f0, Acon, G, g0 = (np.array(v, dtype=float) for v in values)
+    H, F, f0, Jz, Jp, g0 = (np.array(v, dtype=float) for v in values)
     H = 0.5 * (H + H.T)
     f0, g0 = f0.ravel(), g0.ravel()
     if not (np.all(np.isfinite(H)) and np.all(np.isfinite(F)) and np.all(np.isfinite(f0))):
         raise ValueError("the QP data are not finite; check the weights and the arm")
-
-    lb = [-np.ones(nz)]
-    ub = [np.ones(nz)]
-    if q_rows:
-        lb.append(np.tile(q_lo, len(q_rows)))
-        ub.append(np.tile(q_hi, len(q_rows)))
-    l0 = np.concatenate(lb) - g0
-    u0 = np.concatenate(ub) - g0
-    # Joint-bound rows (rad per normalised input, ~1e-4…1e-2) are scaled to unit norm like the
-    # torque rows, so that one ADMM step size rho suits every constraint.
-    row_scale = np.ones(len(l0))
-    row_scale[nz:] = 1.0 / np.maximum(np.linalg.norm(Acon[nz:], axis=1), 1e-12)
-    Acon, G = Acon * row_scale[:, None], G * row_scale[:, None]
-    l0, u0 = l0 * row_scale, u0 * row_scale
-
-    # -- unconstrained minimiser (the fallback gain) ---------------------------------------------
     try:
         chol = scipy.linalg.cho_factor(H)
     except np.linalg.LinAlgError:
         raise ValueError(
             "the QP Hessian is not positive definite; raise effort_weight or rate_weight"
         ) from None
-    Z = -scipy.linalg.cho_solve(chol, np.column_stack([F, f0]))
+
+    # -- the soft envelope: slacks, rows, bounds -------------------------------------------------
+    Amat, G, l0, u0 = _constraints(env, Jz.reshape(-1, nz), Jp.reshape(-1, npar), g0, blocks,
+                                   arm.Ts, nz)
+    P = scipy.linalg.block_diag(H, s.envelope_quadratic * np.eye(ns))
+    F_all = np.vstack([F, np.zeros((ns, npar))])
+    f0_all = np.concatenate([f0, np.full(ns, s.envelope_penalty)])
+
+    # -- unconstrained minimiser over ẑ with s = 0 (screening, LQ fallback) ----------------------
+    Z = np.zeros((nv, npar + 1))
+    Z[:nz] = -scipy.linalg.cho_solve(chol, np.column_stack([F, f0]))
     gain = u_max[:, None] * Z[:nu, :-1]
     gain0 = u_max * Z[:nu, -1]
 
@@ -240,16 +266,54 @@ def build_condensed_qp(arm: LinearArm, settings: MPCSettings) -> CondensedQP:
     for k in range(N):
         S_b[block_of_tick[k], block_of_tick[min(k + 1, N - 1)]] += 1.0
     S_b /= np.asarray(blocks, dtype=float)[:, None]
-    shift = np.kron(S_b, np.eye(nu))
-    m = Acon.shape[0]
+    shift = scipy.linalg.block_diag(np.kron(S_b, np.eye(nu)), np.eye(ns))
+    m = Amat.shape[0]
     shift_dual = np.zeros((m, m))
-    shift_dual[:nz, :nz] = shift
-    if q_rows:
-        shift_dual[nz:, nz:] = np.kron(S_b, np.eye(nq))
+    shift_dual[:nv, :nv] = shift
+    if env.m:
+        shift_dual[nv:, nv:] = np.kron(S_b, np.eye(2 * env.m))
 
+    cols = np.flatnonzero(np.any(G != 0, axis=0))
     return CondensedQP(
-        P=H, F=F, f0=f0, A=Acon, G=G, l0=l0, u0=u0, param_bounds=bool(np.any(G != 0)),
-        u_max=u_max, scale=np.tile(u_max, nb), blocking=blocking, block_of_tick=block_of_tick,
-        shift=shift, shift_dual=shift_dual, minimiser=Z, gain=gain, gain0=gain0,
-        terminal_weight=terminal_weight, N=N, nx=nx, nu=nu, ny=ny,
+        P=P, F=F_all, f0=f0_all, A=Amat, G=G, l0=l0, u0=u0, param_bounds=bool(cols.size),
+        bound_columns=cols, u_max=u_max, scale=np.tile(u_max, nb), blocking=blocking,
+        block_of_tick=block_of_tick, shift=shift, shift_dual=shift_dual, minimiser=Z,
+        gain=gain, gain0=gain0, terminal_weight=terminal_weight, envelope=env,
+        slack_names=env.names, N=N, nx=nx, nu=nu, ny=ny, nz=nz,
     )
+
+
+def _constraints(
+    env: EnvelopeRows, Jz: np.ndarray, Jp: np.ndarray, g0: np.ndarray, blocks, Ts: float,
+    nz: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A, G, l0, u0: torque rows, slack rows, then per block end the upper and lower envelope
+    rows ``c·x_k − s ≤ hi − margin`` and ``c·x_k + s ≥ lo + margin`` (margin = curvature·T²/8).
+    """
+    ns, me = env.ns, env.m
+    nv = nz + ns
+    nb = len(blocks)
+    m = nv + 2 * me * nb
+    A = np.zeros((m, nv))
+    A[:nv, :nv] = np.eye(nv)
+    G = np.zeros((m, Jp.shape[1]))
+    l0 = np.concatenate([-np.ones(nz), np.zeros(ns), np.zeros(m - nv)])
+    u0 = np.concatenate([np.ones(nz), np.full(ns, np.inf), np.zeros(m - nv)])
+    for b in range(nb):
+        margin = env.curvature * (blocks[b] * Ts) ** 2 / 8.0
+        src = slice(b * me, (b + 1) * me)
+        up = slice(nv + 2 * b * me, nv + (2 * b + 1) * me)
+        lo = slice(nv + (2 * b + 1) * me, nv + (2 * b + 2) * me)
+        for rows, sign in ((up, -1.0), (lo, 1.0)):
+            A[rows, :nz] = Jz[src]
+            A[np.arange(rows.start, rows.stop), nz + env.slack] = sign  # the row's slack
+            G[rows] = Jp[src]
+        u0[up] = env.hi - margin - g0[src]
+        l0[up] = -np.inf
+        l0[lo] = env.lo + margin - g0[src]
+        u0[lo] = np.inf
+    # Envelope rows are scaled to unit norm (in [ẑ; s]) like the torque rows, so that one ADMM
+    # step size rho suits every constraint.
+    row_scale = np.ones(m)
+    row_scale[nv:] = 1.0 / np.linalg.norm(A[nv:], axis=1)
+    return A * row_scale[:, None], G * row_scale[:, None], l0 * row_scale, u0 * row_scale

@@ -179,7 +179,9 @@ class PredictedReference:
         if not math.isclose(predictor.dt, self.dt, rel_tol=1e-9):
             raise ValueError(f"predictor dt {predictor.dt} s != downsample·Ts = {self.dt} s")
         self.prediction_points = prediction_points
-        self._span = downsample - 1 + horizon  # ticks a refresh must cover
+        # ticks a refresh covers: its period, plus one so that a pipelined loop can read the
+        # next refresh tick's points from it while that refresh runs
+        self._span = downsample + horizon
         self._lead = np.arange(1, self._span + 1) * (Ts / self.dt)  # (τ − now)/dt per point
         # Interpolation matrices by (nodes, (now − t0)/Ts): with sensor stamps on the tick grid
         # only a few offsets occur, so a refresh is one small product instead of a rebuild.
@@ -197,6 +199,7 @@ class PredictedReference:
         self._dense: np.ndarray | None = None
         self._placed: np.ndarray | None = None
         self._first = 0
+        self._pending: tuple | None = None  # (tick, accepted z or None) between the halves
         self._anchor: float | None = None
         self._forecast: np.ndarray | None = None  # ẑ of the next sample, made one period ago
         self._held: np.ndarray | None = None  # the last accepted sample …
@@ -205,26 +208,47 @@ class PredictedReference:
             self.gate.reset()
 
     def refresh(self, tick: int, z: np.ndarray | None, stamp: float) -> None:
-        """Feed the newest sample ``z`` measured at ``stamp`` [s] (None = no new sample)."""
+        """Feed the newest sample ``z`` measured at ``stamp`` [s] (None = no new sample).
+
+        :meth:`update` then :meth:`forecast`, the two halves a pipelined loop runs on
+        consecutive ticks.
+        """
+        self.update(tick, z, stamp)
+        self.forecast()
+
+    def update(self, tick: int, z: np.ndarray | None, stamp: float) -> None:
+        """First half of a refresh: the outlier gate and the predictor's update with ``z``."""
         valid = z is not None and math.isfinite(float(np.dot(z, z)))
         if valid and self._forecast is not None and not self.gate.accept(
             z, self._forecast, self.predictor.counts
         ):
             z, valid = None, False
         self.predictor.update(z)
+        self._pending = None
         if valid:
             self._anchor, self._held, self._held_stamp = stamp, np.array(z, dtype=float), stamp
         elif self._anchor is None:
             return  # nothing measured yet: keep holding
         else:
             self._anchor += self.dt  # the predictor advanced one period open-loop
+        self._pending = (tick, z if valid else None)
+
+    def forecast(self) -> None:
+        """Second half: forecast, interpolate and guard the points of the last :meth:`update`.
+
+        The points are those of the update's tick; until this runs, :meth:`horizons` reads the
+        previous refresh's points.
+        """
+        if self._pending is None:
+            return
+        (tick, z), self._pending = self._pending, None
         now = tick * self.Ts
         latency = max(0.0, now - self._anchor)
         K = self.prediction_points + math.ceil(latency / self.dt - 1e-9)
         points = self.predictor.predict(K)
         if self.gate is not None:
             self._forecast = points[0] if getattr(self.predictor, "ready", True) else None
-        if valid:
+        if z is not None:
             nodes = np.concatenate((np.reshape(z, (1, -1)), points))
             t0 = self._anchor
         else:
@@ -287,27 +311,89 @@ class PredictedReference:
 class ExactReference:
     """"Exact reference information" (Tuna et al.): the true future, no predictor.
 
-    ``truth`` holds the centred POI position at every tick of the run plus a horizon's margin.
-    Gaps in it (NaN: dropouts of a recorded stream used as the truth) are bridged linearly for the
-    reference, so that the MPC is never handed NaN; the metrics still skip those ticks.
+    ``truth`` is the centred POI position at every tick of the run plus a horizon's margin: an
+    array (n, d), or a truth read in windows (``window(i0, i1)``, ``n_ticks``:
+    :class:`sim.streams.SourceTruth`), which keeps memory flat in run length. Gaps in it (NaN:
+    dropouts of a recorded stream used as the truth) are bridged linearly between the finite
+    ticks around them (constant before the first and after the last), so that the MPC is never
+    handed NaN; the metrics still skip those ticks. Read in windows of ``window`` ticks, forward
+    in time (reading backwards restarts from tick 0), the points are those of the whole array.
     """
 
-    def __init__(self, truth: np.ndarray, horizon: int) -> None:
-        truth = np.array(truth, dtype=float)
-        missing = ~np.isfinite(truth)
-        if missing.any():
-            ticks = np.arange(truth.shape[0])
-            for axis in range(truth.shape[1]):
-                bad = missing[:, axis]
-                if bad.all():
-                    raise ValueError("the exact reference has no finite sample on some axis")
-                truth[bad, axis] = np.interp(ticks[bad], ticks[~bad], truth[~bad, axis])
-        self.truth, self.N = truth, horizon
-        self._points = truth
+    def __init__(self, truth, horizon: int, window: int = 8192) -> None:
+        if not hasattr(truth, "window"):
+            from sim.streams import ArrayTruth
+
+            array = np.array(truth, dtype=float)
+            if not np.all(np.isfinite(array).any(axis=0)):
+                raise ValueError("the exact reference has no finite sample on some axis")
+            truth = ArrayTruth(array, np.zeros(array.shape[1]))
+        self._truth, self.N, self._size = truth, horizon, int(window)
+        self._origin: np.ndarray | None = None
+        self._restart()
+
+    def _restart(self) -> None:
+        self._w0 = 0  # tick of self._points[0]
+        self._points = np.empty((0, 3 if self._origin is not None else self._truth.dim))
+        self._last: list[tuple[int, float] | None] = [None] * self._truth.dim  # finite, before
+
+    def _bridged(self, a: int, b: int) -> np.ndarray:
+        """Truth of ticks a … b − 1 with its gaps bridged (windows are read in order)."""
+        truth, n = self._truth, self._truth.n_ticks
+        raw = np.array(truth.window(a, b), dtype=float)
+        ticks = np.arange(a, b)
+        for axis in range(raw.shape[1]):
+            column = raw[:, axis]
+            good = np.isfinite(column)
+            previous = self._last[axis]
+            if good.any():
+                k = np.flatnonzero(good)[-1]
+                self._last[axis] = (a + int(k), float(column[k]))
+            if good.all():
+                continue
+            xs, fs = list(ticks[good]), list(column[good])
+            if previous is not None:
+                xs.insert(0, previous[0])
+                fs.insert(0, previous[1])
+            c = b
+            while not good[-1] and c < n:  # the gap runs past the window: find its end
+                ahead = np.asarray(truth.window(c, min(c + self._size, n)))[:, axis]
+                found = np.flatnonzero(np.isfinite(ahead))
+                if found.size:
+                    xs.append(c + int(found[0]))
+                    fs.append(float(ahead[found[0]]))
+                    break
+                c += self._size
+            if not xs:
+                raise ValueError("the exact reference has no finite sample on some axis")
+            column[~good] = np.interp(ticks[~good], xs, fs)
+        return raw
+
+    def _cover(self, start: int, stop: int) -> np.ndarray:
+        """Points of ticks start … stop − 1 (fewer at the end of the truth)."""
+        if start < self._w0:
+            self._restart()
+        stop = min(stop, self._truth.n_ticks)
+        end = self._w0 + self._points.shape[0]
+        if stop > end:
+            parts = [self._points[start - self._w0 :]] if start < end else []
+            if start > end:  # skipped ahead: read (and drop) the ticks in between, in order
+                while end < start:
+                    self._bridged(end, min(end + self._size, start))
+                    end = min(end + self._size, start)
+            self._w0 = min(start, end)
+            while end < stop:
+                b = min(end + self._size, self._truth.n_ticks)
+                new = self._bridged(end, b)
+                parts.append(new if self._origin is None else self._origin + embed3(new))
+                end = b
+            self._points = np.concatenate(parts)
+        return self._points
 
     def place(self, origin) -> None:
         """From now on ``horizon`` returns workspace points origin + E r_c, shape (N, 3) [m]."""
-        self._points = _origin(origin) + embed3(self.truth)
+        self._origin = _origin(origin)
+        self._restart()
 
     def reset(self) -> None:
         pass
@@ -315,11 +401,18 @@ class ExactReference:
     def refresh(self, tick: int, z: np.ndarray | None, stamp: float) -> None:
         pass
 
+    def update(self, tick: int, z: np.ndarray | None, stamp: float) -> None:
+        pass
+
+    def forecast(self) -> None:
+        pass
+
     def horizon(self, tick: int) -> np.ndarray:
         """r_{tick+1} … r_{tick+N}: (N, d) centred, or (N, 3) in the workspace after ``place``."""
-        return self._points[tick + 1 : tick + 1 + self.N]
+        return self.horizons(tick, 1)[0]
 
     def horizons(self, tick: int, count: int) -> list[np.ndarray]:
-        """``[horizon(tick), …, horizon(tick + count − 1)]`` (views)."""
-        points, N = self._points, self.N
-        return [points[k : k + N] for k in range(tick + 1, tick + 1 + count)]
+        """``[horizon(tick), …, horizon(tick + count − 1)]`` (views of arrays never changed)."""
+        points = self._cover(tick + 1, tick + count + self.N)
+        N, w0 = self.N, self._w0
+        return [points[k - w0 : k - w0 + N] for k in range(tick + 1, tick + 1 + count)]

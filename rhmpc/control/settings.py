@@ -20,6 +20,8 @@ from typing import Any, TypeVar
 DEFAULT_BLOCKS: tuple[int, ...] = (2, 2, 3, 3, 4, 5, 6, 7, 8, 10)
 
 WARM_STARTS: tuple[str, ...] = ("shift", "shift_primal", "keep", "none")
+CARTESIAN: tuple[str, ...] = ("none", "halfspace", "box")
+SOLVERS: tuple[str, ...] = ("osqp", "daqp")
 TERMINALS: tuple[str, ...] = ("none", "dare")
 
 
@@ -41,12 +43,18 @@ def _integer(name: str, value: int, minimum: int) -> None:
 class MPCSettings:
     """Settings of :class:`rhmpc.control.mpc.RecedingHorizonMPC`.
 
-    The QP solved every tick (``x`` = [q − q0; q̇], ``u`` = τ_mpc, ``y`` = C x + y0)::
+    The QP solved every tick (``x`` = [q − q0; q̇], ``u`` = τ_mpc, ``y`` = C x + y0 + d)::
 
         min  Σ_{k=1..N} ‖y_k − r_k‖²_{Q_k} + Σ_{k=0..N−1} ‖u_k‖²_R + ‖u_k − u_{k−1}‖²_{R_Δ}
              (+ ‖x_N − x_ss(r_N)‖²_{P_∞ − CᵀQ_N C}  if terminal == "dare")
-        s.t. x_{k+1} = A x_k + B u_k,  |u_k| ≤ u_max = (1 − torque_margin) τ_max,
-             u_k constant over each move block,  joint_lower ≤ q_k ≤ joint_upper (optional)
+             + Σ_groups ρ₁ s_g + ½ ρ₂ s_g²
+        s.t. x_{k+1} = A x_k + B u_k,  |u_k| ≤ u_max = (1 − torque_margin) τ_max  (hard),
+             u_k constant over each move block,
+             q_lo − s ≤ q_k ≤ q_hi + s,  |q̇_k| ≤ q̇_max + s,  Cartesian set (+ s)  (soft, s ≥ 0)
+
+    ``d = p(q̂) − (C x̂ + y0)`` is the output offset from forward kinematics
+    (:mod:`rhmpc.control.offset`); the envelope rows and their slacks are described in
+    :mod:`rhmpc.control.envelope`.
 
     with ``Q_k = tracking_weight · w_k / position_scale² · I``, ``R = effort_weight ·
     diag(u_max)⁻²``, ``R_Δ = rate_weight · diag(u_max)⁻²`` (all costs dimensionless).
@@ -74,13 +82,50 @@ class MPCSettings:
         x_ss = [C_q⁺ (r_N − y0); 0].
     torque_margin : float
         Fraction of each joint's torque limit reserved for the nonlinearity cancellation [-].
+    offset_correction : bool
+        Correct the linearised output by the offset ``d`` computed by forward kinematics at the
+        estimated joint state every tick (offset-free MPC). Needs the arm's robot.
+    joint_envelope : bool
+        Enforce the joint position and velocity limits (soft, exact L1 penalty) at every move
+        block's end, certified in between (:mod:`rhmpc.control.envelope`).
     joint_lower, joint_upper : tuple[float, ...] | None
-        Optional absolute joint position bounds [rad], imposed on the predicted q at the end of
-        each move block. Hard constraints: if they cannot be met the tick falls back.
+        Absolute joint position limits [rad]; ``None`` = the robot model's (URDF) limits.
+    velocity_limit : tuple[float, ...] | None
+        Joint speed limits [rad/s]; ``None`` = the robot model's (URDF) limits.
+    cartesian : str
+        Optional Cartesian envelope of the end-effector position: ``"none"``, ``"halfspace"``
+        (the tool may not go more than ``cartesian_depth`` past the plane through
+        ``cartesian_point`` with normal ``cartesian_normal``, the normal pointing into the
+        forbidden side) or ``"box"`` (``|y − y0 − cartesian_point| ≤ cartesian_half_width`` per
+        axis).
+    cartesian_point : tuple[float, float, float]
+        A point of the plane, or the box centre, relative to the end-effector's home position y0
+        (where the loop puts the mean POI when ``poi_offset`` is 0) [m].
+    cartesian_normal : tuple[float, float, float]
+        Plane normal, pointing into the forbidden side (normalised when used) [-].
+    cartesian_depth : float
+        How far past the plane the tool may go [m] (negative: must stay that far in front).
+    cartesian_half_width : tuple[float, float, float]
+        Half-widths of the box [m].
+    envelope_penalty : float
+        ρ₁, exact L1 penalty per slack unit [-]; the envelope is exact when ρ₁ exceeds the
+        multipliers of the hard constraints.
+    envelope_quadratic : float
+        ρ₂, quadratic slack weight [-]; it keeps the Hessian positive definite in the slacks.
+    solver : str
+        ``"osqp"`` (ADMM; the eps_*, rho, … settings below; what ``rhmpc export`` generates as
+        C) or ``"daqp"`` (dual active set, exact, hot-started; ``max_iter`` caps its active-set
+        changes). Both solve the same QP, only on ticks that screening does not settle. Measured:
+        once envelope rows are active OSQP needs 450–3900 iterations, so those ticks fall back
+        (plan, braking: safe, but the arm stops tracking); DAQP solves them exactly in ≤ 5.
+        Choose ``"daqp"`` when the envelope is expected to bind.
     eps_abs, eps_rel : float
         OSQP termination tolerances (on the scaled problem, inputs normalised by u_max) [-].
     max_iter : int
-        OSQP iteration cap per tick [-].
+        Iteration cap per tick: OSQP's ADMM iterations, or DAQP's active-set changes [-].
+        Chosen by measurement (``rhmpc bench``, 3000 ticks, bound-active ticks): OSQP needs
+        p99 35 / max 40, DAQP p99 2 / max 5; 100 leaves headroom for both. A cap in iterations
+        rather than time keeps runs reproducible; past it the plan fallback applies.
     time_limit : float
         OSQP wall-clock limit per solve [s]; 0 disables.
     rho : float
@@ -95,7 +140,10 @@ class MPCSettings:
     check_termination : int
         OSQP checks its residuals every this many iterations [-].
     check_dualgap : bool
-        OSQP also requires the duality gap to be below the tolerance to stop.
+        OSQP also requires the duality gap to be below the tolerance to stop. Off by default:
+        the envelope's slack penalty ρ₁ s turns slack noise of ~1e-6 into a gap of ~1e-3, so
+        with the gap check OSQP ran into ``max_iter`` on every bound tick (measured with
+        ``rhmpc bench``); without it the first input is within 0.13 % of τ_max of DAQP's.
     polish : bool
         OSQP solution polishing (an extra reduced KKT factorisation per tick).
     scaling : int
@@ -123,8 +171,19 @@ class MPCSettings:
     rate_weight: float = 0.1
     terminal: str = "none"
     torque_margin: float = 0.25
+    offset_correction: bool = True
+    joint_envelope: bool = True
     joint_lower: tuple[float, ...] | None = None
     joint_upper: tuple[float, ...] | None = None
+    velocity_limit: tuple[float, ...] | None = None
+    cartesian: str = "none"
+    cartesian_point: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    cartesian_normal: tuple[float, float, float] = (0.0, 0.0, -1.0)
+    cartesian_depth: float = 2e-3
+    cartesian_half_width: tuple[float, float, float] = (5e-3, 5e-3, 5e-3)
+    envelope_penalty: float = 1e3
+    envelope_quadratic: float = 1e2
+    solver: str = "osqp"
     eps_abs: float = 1e-3
     eps_rel: float = 0.0
     max_iter: int = 100
@@ -134,7 +193,7 @@ class MPCSettings:
     adaptive_rho_interval: int = 25
     adaptive_rho_tolerance: float = 5.0
     check_termination: int = 5
-    check_dualgap: bool = True
+    check_dualgap: bool = False
     polish: bool = False
     scaling: int = 0
     warm_start: str = "shift_primal"
@@ -142,7 +201,8 @@ class MPCSettings:
     plan_fallback_ticks: int = 10
 
     def __post_init__(self) -> None:
-        for name in ("blocks", "point_weights", "joint_lower", "joint_upper"):
+        for name in ("blocks", "point_weights", "joint_lower", "joint_upper", "velocity_limit",
+                     "cartesian_point", "cartesian_normal", "cartesian_half_width"):
             value = getattr(self, name)
             if value is not None:
                 object.__setattr__(self, name, tuple(value))
@@ -184,6 +244,26 @@ class MPCSettings:
                 _finite("joint bound", hi)
                 if not lo < hi:
                     raise ValueError(f"joint_lower must be < joint_upper, got {lo} >= {hi}")
+        if self.velocity_limit is not None:
+            for v in self.velocity_limit:
+                _finite("each velocity limit", v, positive=True)
+        if self.cartesian not in CARTESIAN:
+            raise ValueError(f"cartesian must be one of {CARTESIAN}, got {self.cartesian!r}")
+        for name in ("cartesian_point", "cartesian_normal", "cartesian_half_width"):
+            value = getattr(self, name)
+            if len(value) != 3:
+                raise ValueError(f"{name} must have 3 entries [m], got {value!r}")
+            for v in value:
+                _finite(name, v)
+        if not any(v != 0 for v in self.cartesian_normal):
+            raise ValueError("cartesian_normal must not be zero")
+        for v in self.cartesian_half_width:
+            _finite("cartesian_half_width", v, positive=True)
+        _finite("cartesian_depth", self.cartesian_depth)
+        _finite("envelope_penalty", self.envelope_penalty, positive=True)
+        _finite("envelope_quadratic", self.envelope_quadratic, positive=True)
+        if self.solver not in SOLVERS:
+            raise ValueError(f"solver must be one of {SOLVERS}, got {self.solver!r}")
         _finite("eps_abs", self.eps_abs, nonneg=True)
         _finite("eps_rel", self.eps_rel, nonneg=True)
         if self.eps_abs == 0 and self.eps_rel == 0:
@@ -200,7 +280,8 @@ class MPCSettings:
         if self.warm_start not in WARM_STARTS:
             raise ValueError(f"warm_start must be one of {WARM_STARTS}, got {self.warm_start!r}")
         _integer("plan_fallback_ticks", self.plan_fallback_ticks, 0)
-        for name in ("adaptive_rho", "check_dualgap", "polish", "screening"):
+        for name in ("adaptive_rho", "check_dualgap", "polish", "screening", "offset_correction",
+                     "joint_envelope"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name} must be true or false, got {getattr(self, name)!r}")
 

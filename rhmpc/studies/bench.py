@@ -13,7 +13,11 @@ bounds (so that the QP has active constraints). Every tick measures, with
   the floor of what any controller in Python costs here;
 * an *exact tick*: the same QP (same P, q, A, l, u) solved by the active-set solver DAQP,
   hot-started from its previous active set. Its u0 is the accuracy reference:
-  ``u0_error = |u0_mpc − u0_exact| / τ_max`` per joint (τ_max = the robot's torque limit).
+  ``u0_error = |u0_mpc − u0_exact| / τ_max`` per joint (τ_max = the robot's torque limit);
+* with ``controller="c"``, the compiled controller of ``rhmpc export`` (:mod:`rhmpc.control.
+  export`), fed the same state and reference and keeping its own u_{−1}: its tick measured inside
+  C (``clock_gettime(CLOCK_MONOTONIC)``) and as seen from Python (the ctypes call), and
+  ``c_vs_python_max_frac`` = max over the run of |τ_C − τ_Python| / τ_max.
 """
 
 from __future__ import annotations
@@ -29,9 +33,13 @@ from importlib.metadata import version as _version
 import numpy as np
 
 from rhmpc.control.mpc import RecedingHorizonMPC
+from rhmpc.control.offset import OutputOffset
 from rhmpc.control.settings import MPCSettings, to_dict
 from robots import linearize, load_robot
 from robots.linearize import LinearArm
+
+#: Controllers :func:`run_bench` can time: the Python MPC alone, or with its compiled twin.
+CONTROLLERS: tuple[str, ...] = ("python", "c")
 
 
 def heart_like_reference(
@@ -85,24 +93,42 @@ def heart_like_reference(
     return np.asarray(center, dtype=float) + out
 
 
+class _Params:
+    """p = [x; r_1..r_N; u_{−1}; d] in a preallocated buffer, d by forward kinematics as in the
+    controller (:class:`rhmpc.control.offset.OutputOffset`), so both references solve the QP the
+    controller solves."""
+
+    def __init__(self, mpc: RecedingHorizonMPC) -> None:
+        qp = mpc.qp
+        self.p = np.zeros(qp.npar)
+        self._nx, self._nr, self._nu = qp.nx, qp.N * qp.ny, qp.nu
+        self._d = self.p[self._nx + self._nr + self._nu :]
+        self._offset = OutputOffset(mpc.arm) if mpc.settings.offset_correction else None
+
+    def fill(self, x: np.ndarray, ref: np.ndarray, u_prev: np.ndarray) -> bool:
+        """Write p; False if it is not finite."""
+        p = self.p
+        p[: self._nx] = x
+        p[self._nx : self._nx + self._nr] = ref.reshape(-1)
+        p[self._nx + self._nr : self._nx + self._nr + self._nu] = u_prev
+        if self._offset is not None:
+            self._offset(x, out=self._d)
+        return math.isfinite(p.sum())
+
+
 class GainTick:
     """Reference 1: the precomputed unconstrained gain, clipped (same parameter handling)."""
 
     def __init__(self, mpc: RecedingHorizonMPC) -> None:
         qp = mpc.qp
-        self._p = np.zeros(qp.npar)
-        self._nx, self._nr = qp.nx, qp.N * qp.ny
+        self._params = _Params(mpc)
         self._K, self._k0 = qp.gain, qp.gain0
         self._lo, self._hi = -qp.u_max, qp.u_max
 
     def __call__(self, x: np.ndarray, ref: np.ndarray, u_prev: np.ndarray) -> np.ndarray:
-        p = self._p
-        p[: self._nx] = x
-        p[self._nx : self._nx + self._nr] = ref.reshape(-1)
-        p[self._nx + self._nr :] = u_prev
-        if not math.isfinite(p.sum()):
+        if not self._params.fill(x, ref, u_prev):
             return np.zeros_like(self._k0)
-        u = self._K @ p
+        u = self._K @ self._params.p
         u += self._k0
         np.maximum(u, self._lo, out=u)
         return np.minimum(u, self._hi, out=u)
@@ -119,34 +145,40 @@ class ExactTick:
                 "the exact reference needs the daqp package (an rhmpc dependency: pip install daqp)"
             ) from None
         qp = mpc.qp
-        if qp.param_bounds:
-            raise ValueError("the exact reference supports torque bounds only (no joint bounds)")
         self._qp = qp
-        self._p = np.zeros(qp.npar)
-        self._f = np.empty(qp.nz)
-        self._nx, self._nr, self._nu = qp.nx, qp.N * qp.ny, qp.nu
+        self._params = _Params(mpc)
+        self._f = np.empty(qp.nv)
+        self._nu, self._nv = qp.nu, qp.nv
         self._lo = -qp.u_max
         self._model = daqp.Model()
-        # All constraints are simple bounds on ẑ: DAQP takes them without a constraint matrix.
-        exitflag, _ = self._model.setup(
-            qp.P, qp.f0.copy(), np.zeros((0, qp.nz)), qp.u0.copy(), qp.l0.copy()
-        )
+        # The first nv rows of A are the identity (torque and slack bounds): DAQP takes them as
+        # simple bounds, the envelope rows as its general constraints.
+        self._A = np.ascontiguousarray(qp.A[qp.nv :])
+        self._bu, self._bl = self._bounds(qp.l0, qp.u0)
+        exitflag, _ = self._model.setup(qp.P, qp.f0.copy(), self._A, self._bu, self._bl)
         if exitflag < 0:
             raise ValueError(f"DAQP setup failed with exit flag {exitflag}")
         self.iterations = 0
         self.exitflag = 1
         self.zhat = np.zeros(qp.nz)
 
+    @staticmethod
+    def _bounds(lower: np.ndarray, upper: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return np.minimum(upper, 1e30), np.maximum(lower, -1e30)  # DAQP's infinity
+
     def __call__(self, x: np.ndarray, ref: np.ndarray, u_prev: np.ndarray) -> np.ndarray:
-        p = self._p
-        p[: self._nx] = x
-        p[self._nx : self._nx + self._nr] = ref.reshape(-1)
-        p[self._nx + self._nr :] = u_prev
+        self._params.fill(x, ref, u_prev)
+        p = self._params.p
         np.dot(self._qp.F, p, out=self._f)
         self._f += self._qp.f0
-        self._model.update(f=self._f)
+        if self._qp.param_bounds:
+            lower, upper = self._qp.bounds(p)
+            self._bu, self._bl = self._bounds(lower, upper)
+            self._model.update(f=self._f, bupper=self._bu, blower=self._bl)
+        else:
+            self._model.update(f=self._f)
         z, _, exitflag, info = self._model.solve()
-        self.exitflag, self.iterations, self.zhat = exitflag, info["iterations"], z
+        self.exitflag, self.iterations, self.zhat = exitflag, info["iterations"], z[: self._qp.nz]
         u = z[: self._nu] * self._qp.u_max
         np.maximum(u, self._lo, out=u)
         return np.minimum(u, self._qp.u_max, out=u)
@@ -180,6 +212,8 @@ def run_bench(
     warmup: int = 500,
     disable_gc: bool = True,
     progress: Callable[[int, int], None] | None = None,
+    controller: str = "python",
+    cache: str | None = None,
 ) -> dict:
     """Run the benchmark and return its results (JSON-serialisable ``dict``).
 
@@ -197,9 +231,14 @@ def run_bench(
         Reference jumps [m] every ``jump_every`` ticks (0 disables) to exercise active bounds.
     disable_gc : bool
         Disable Python's garbage collector during the loop.
+    controller : str
+        ``"python"``, or ``"c"`` to also run the exported C controller (built once into
+        ``cache``, default :func:`rhmpc.control.export.cache_root`) next to it.
     """
     if ticks < 1:
         raise ValueError(f"ticks must be >= 1, got {ticks}")
+    if controller not in CONTROLLERS:
+        raise ValueError(f"controller must be one of {CONTROLLERS}, got {controller!r}")
     arm = arm if arm is not None else linearize(load_robot(robot))
     settings = settings if settings is not None else MPCSettings()
     t_build = time.perf_counter()
@@ -207,6 +246,11 @@ def run_bench(
     build_s = time.perf_counter() - t_build
     every = RecedingHorizonMPC(arm, dataclasses.replace(settings, screening=False))
     gain, exact = GainTick(mpc), ExactTick(mpc)
+    compiled = None
+    if controller == "c":
+        from rhmpc.control.export import compiled_controller
+
+        compiled = compiled_controller(mpc, robot if arm is None else f"{robot}-custom", cache)
     N, nu = mpc.N, mpc.nu
     total = warmup + ticks
     rng = np.random.default_rng(seed)
@@ -230,6 +274,11 @@ def run_bench(
     active = np.zeros(total, dtype=bool)
     err = np.zeros(total)
     exact_fail = 0
+    c_ns = np.zeros(total, dtype=np.int64)
+    c_call_ns = np.zeros(total, dtype=np.int64)
+    c_err = np.zeros(total)
+    c_osqp = np.zeros(total, dtype=bool)
+    c_mismatch = 0
     clock = time.perf_counter_ns
     gc_was_enabled = gc.isenabled()
     if disable_gc:
@@ -250,6 +299,14 @@ def run_bench(
             every.u_prev = u_prev  # the same QP as the default controller's and DAQP's
             tau_every = every.step(x, ref)
             t4 = clock()
+            if compiled is not None:
+                c_screened = compiled.screened
+                tau_c = compiled.step(x, ref)
+                c_osqp[k] = compiled.screened == c_screened
+                c_ns[k], c_call_ns[k] = compiled.tick_ns, compiled.call_ns
+                c_err[k] = float(np.max(np.abs(tau_c - tau) / tau_max))
+                if compiled.source != mpc.stats.source or compiled.status != mpc.stats.status:
+                    c_mismatch += 1
             tick_ns[k], gain_ns[k], exact_ns[k], every_ns[k] = t1 - t0, t2 - t1, t3 - t2, t4 - t3
             screened[k] = mpc.stats.screened > n_screened
             parts_ns[k] = every.stats.parts_ns
@@ -296,6 +353,7 @@ def run_bench(
         "ratio_tick_to_gain": _ratio(tick, g),
         "ratio_tick_to_exact": _ratio(tick, e),
         "ratio_osqp_tick_to_gain": _ratio(every_ns[sl] * us, g),
+        "controller": "python",
         "fallbacks": dict(mpc.stats.fallbacks),
         "failures": dict(mpc.stats.failures),
         "osqp_fallbacks": dict(every.stats.fallbacks),
@@ -312,8 +370,25 @@ def run_bench(
             "daqp": _version("daqp"),
         },
     }
+    if compiled is not None:
+        c = c_ns[sl] * us
+        result.update({
+            "controller": "c",
+            "c_tick_us": _pct(c),
+            "c_tick_python_us": _pct(c_call_ns[sl] * us),
+            # the split that explains the tail: ticks on which OSQP ran vs screened ticks
+            "c_osqp_ticks": int(c_osqp[sl].sum()),
+            "c_osqp_tick_us": _pct(c[c_osqp[sl]]) if c_osqp[sl].any() else None,
+            "c_screened_tick_us": _pct(c[~c_osqp[sl]]) if (~c_osqp[sl]).any() else None,
+            "c_vs_python_max_frac": float(c_err.max()),  # warm-up included
+            "c_mismatched_ticks": c_mismatch,
+            "c_fallbacks": dict(compiled.stats.fallbacks),
+            "c_failures": dict(compiled.stats.failures),
+            "ratio_c_tick_to_python": _ratio(c, tick),
+            "ratio_c_tick_to_gain": _ratio(c, g),
+            "c_library": compiled.library,
+        })
     return result
-
 
 _ROWS = (
     ("MPC tick (screening, OSQP if bound)", "tick_us"),
@@ -336,7 +411,11 @@ def format_table(result: dict) -> str:
         f"{'':36s}{'p50 µs':>9s}{'p99 µs':>9s}{'max µs':>9s}{'p50 ×g':>8s}{'p99 ×g':>8s}",
     ]
     g = result["gain_tick_us"]
-    for label, key in _ROWS:
+    rows = list(_ROWS)
+    if "c_tick_us" in result:
+        rows[1:1] = [("C tick, inside C (CLOCK_MONOTONIC)", "c_tick_us"),
+                     ("C tick, seen from Python (ctypes)", "c_tick_python_us")]
+    for label, key in rows:
         row = result[key]
         ratio = ""
         if not label.startswith("  "):
@@ -358,4 +437,19 @@ def format_table(result: dict) -> str:
         f"tracking on the linear model: RMS {result['tracking_rms_mm']:.4f} mm, "
         f"max {result['tracking_max_mm']:.3f} mm (includes the reference jumps)",
     ]
+    if "c_tick_us" in result:
+        r = result["ratio_c_tick_to_python"]
+        lines += [
+            f"C controller: max |τ_C − τ_Python| = {result['c_vs_python_max_frac']:.1e} τ_max, "
+            f"status/source different on {result['c_mismatched_ticks']} ticks; fallbacks "
+            f"{result['c_fallbacks']}; C tick / Python tick: p50 {r['p50']:.3f}, "
+            f"p99 {r['p99']:.3f}",
+        ]
+        for label, key in (("OSQP", "c_osqp_tick_us"), ("screened", "c_screened_tick_us")):
+            row = result[key]
+            if row is not None:
+                n = result["c_osqp_ticks"]
+                n = n if label == "OSQP" else result["ticks"] - n
+                lines.append(f"  C tick on the {n} {label} ticks: p50 {row['p50']:.2f}, "
+                             f"p99 {row['p99']:.2f}, max {row['max']:.2f} µs")
     return "\n".join(lines)

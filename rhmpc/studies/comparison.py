@@ -27,17 +27,27 @@ def format_summary(doc: dict) -> str:
         f"  prediction       horizon RMS error {pred['lead_1']:.3f} mm at {1e3 * Ts:g} ms, "
         f"{pred['lead_N']:.3f} mm at {1e3 * N * Ts:g} ms",
         f"  controller tick  p50 {tick['p50']:.1f} µs   p99 {tick['p99']:.1f} µs   "
-        f"max {tick['max']:.1f} µs   (budget {1e6 * Ts:.0f} µs)",
+        + (f"p99.9 {tick['p999']:.1f} µs   " if "p999" in tick else "")
+        + f"max {tick['max']:.1f} µs   (budget {1e6 * Ts:.0f} µs)"
+        + (_in_gain_ticks(doc) if "gain_tick_us" in doc else ""),
         f"  QP               {ctrl.get('ticks', 0)} ticks, fallbacks {doc['fallbacks']} "
         f"(plan {fb.get('plan', 0)}, lq {fb.get('lq', 0)}, zero {fb.get('zero', 0)})"
         + (f", failures {fails}" if fails else ""),
-        f"  wall time        {doc['wall_s']:.1f} s ({doc['real_time_factor']:.1f}× real time)",
+        f"  wall time        {doc['wall_s']:.1f} s ({doc['real_time_factor']:.1f}× real time)"
+        + (f", peak memory {doc['peak_rss_mb']:.0f} MB" if "peak_rss_mb" in doc else ""),
     ]
     counts = doc.get("predictor_counts") or {}
     if counts:  # what the predictor and the safety layers did (missing samples, outliers, …)
         events = ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in sorted(counts.items()))
         lines.insert(-1, f"  predictor        {events}")
     return "\n".join(lines)
+
+
+def _in_gain_ticks(doc: dict) -> str:
+    """The tick percentiles as multiples of the gain tick timed in the same run (×g)."""
+    r, g = doc["tick_ratio_to_gain"], doc["gain_tick_us"]["p50"]
+    return (f"\n                   = {r['p50']:.1f} / {r['p99']:.1f} / {r.get('p999', 0):.1f} / "
+            f"{r['max']:.0f} g   (g = gain tick p50 {g:.1f} µs, same run)")
 
 
 def plot_run(result, path: str, title: str = "", zoom: tuple[float, float] | None = None) -> None:

@@ -2,8 +2,10 @@
 
 ``noise``    mitral-1d at 60 bpm, 28 Hz, white noise σ_R ∈ [0.3, 3] mm; 30 s to initialise,
              then the RMS of the one-sample-ahead error against the truth over 10 s.
-``hr-step``  as ``noise`` with σ_R = 1.3 mm, but the last 10 s run at 60 + ΔHR bpm,
-             ΔHR ∈ [−10, 10] bpm (the trajectory compressed/dilated beat by beat).
+``hr-step``  as ``noise`` with σ_R = 1.3 mm, but the last 10 s run at base + ΔHR bpm,
+             ΔHR ∈ [−10, 10] bpm (the trajectory compressed/dilated beat by beat); base
+             60 bpm (Yuen's protocol, ``paper="yuen2008"``, the default) or 103 bpm
+             (Tuna §VIII-D, ``paper="tuna2013"``).
 ``rr``       as ``hr-step`` but the heart phase follows the beat annotations of PhysioNet
              records (a random 45 s stretch per trial), the analogue of Yuen's Table I.
 ``horizon``  RMS error versus lead time (Tuna Fig. 8) for sonomicrometry replicas sampled at
@@ -17,7 +19,11 @@ not sampling noise.  Errors are Euclidean norms, reported in millimetres.
 
 EKF parameters follow Yuen: ``yuen2008`` with σ_R set to the simulated noise; in ``hr-step``
 and ``rr`` q_ω = 5e-3 (rad/s)² and σ_ω² = 1 (rad/s)² (Yuen §III-D).  The RLS predictors run
-with their defaults (Tuna do not state the settings of their 28 Hz simulations).
+with order N = 30 at 28 Hz (Tuna Figs 12–13 compare them at the AR filter's order 30; their
+133 Hz orders 16/10 span too short a history at 28 Hz).  ``last-cycle`` is synchronised on
+the beat times of the simulated heart (Yuen and Bebek synchronise it on the ECG).  In
+``horizon`` the predictors that estimate the heart rate (``heart_rate_hz``) are also scored
+on |ω̂/2π − f_h| [beats/min] against the scenario's true rate after the warm-up.
 """
 
 from __future__ import annotations
@@ -35,6 +41,7 @@ import numpy as np
 from predictors import make_predictor
 
 __all__ = [
+    "BASE_BPM",
     "DEFAULT_PREDICTORS",
     "STUDIES",
     "StudySettings",
@@ -44,6 +51,10 @@ __all__ = [
 ]
 
 STUDIES: tuple[str, ...] = ("noise", "hr-step", "rr", "horizon")
+#: hr-step base rate by protocol [beats/min]: Yuen 2008 §III-D, Tuna 2013 §VIII-D
+BASE_BPM: dict[str, float] = {"yuen2008": 60.0, "tuna2013": 103.0}
+#: RLS order at the 28 Hz of the Yuen studies (Tuna Figs 12–13)
+ORDER_28HZ = 30
 
 DEFAULT_PREDICTORS: dict[str, tuple[str, ...]] = {
     "noise": ("ekf", "ar", "fading-ar", "last-cycle", "wflc", "one-step", "generalized"),
@@ -55,7 +66,6 @@ DEFAULT_TRIALS = {"noise": 100, "hr-step": 100, "rr": 100, "horizon": 10}
 
 MM = 1e-3
 YUEN_RATE = 28.0  # Hz, 3DUS
-YUEN_BPM = 60.0
 INIT_S, EVAL_S = 30.0, 10.0
 HORIZON_DT = 0.0075  # s, 2 kHz / 15
 HORIZON_LEADS = 8  # predictor samples: 7.5 … 60 ms
@@ -90,6 +100,8 @@ class StudySettings:
         PhysioNet records (paths without extension) driving ``rr``.
     scenarios : tuple of str
         Scenarios of the ``horizon`` study.
+    paper : str
+        hr-step protocol, a key of :data:`BASE_BPM` (base heart rate 60 or 103 bpm).
     """
 
     study: str
@@ -101,8 +113,11 @@ class StudySettings:
     sigma_mm: float = 1.3
     records: tuple[str, ...] = ()
     scenarios: tuple[str, ...] = ("fixed-a2-top", "varying-a3-top")
+    paper: str = "yuen2008"
 
     def __post_init__(self) -> None:
+        if self.paper not in BASE_BPM:
+            raise ValueError(f"unknown paper {self.paper!r}; valid: {', '.join(BASE_BPM)}")
         if self.study not in STUDIES:
             raise ValueError(f"unknown study {self.study!r}; valid: {', '.join(STUDIES)}")
         if int(self.trials) != self.trials or self.trials < 1:
@@ -130,10 +145,16 @@ def default_records() -> tuple[str, ...]:
 
 
 # -- one trial ----------------------------------------------------------------------------
-def _yuen_predictor(name: str, dt: float, sigma: float, varying: bool):
+def _yuen_predictor(
+    name: str, dt: float, sigma: float, varying: bool, beats: np.ndarray, t0: float
+):
     if name == "ekf":
         extra = {"q_omega": 5e-3, "sigma_omega_sq": 1.0} if varying else {}
         return make_predictor(name, dt, params="yuen2008", sigma_r=sigma, **extra)
+    if name in ("one-step", "generalized"):
+        return make_predictor(name, dt, order=ORDER_28HZ)
+    if name == "last-cycle":
+        return make_predictor(name, dt, beat_times=tuple(beats), t0=t0)
     return make_predictor(name, dt)
 
 
@@ -159,9 +180,10 @@ def _mitral_trial(param, study: str, trial_seed: np.random.SeedSequence, s: Stud
     elif study == "hr-step":
         sigma = s.sigma_mm * MM
         first = -rng_scn.random()  # random phase: a beat in (−1, 0] s
-        slow = first + np.arange(0.0, INIT_S + 2.0, 60.0 / YUEN_BPM)
+        base = BASE_BPM[s.paper]
+        slow = first + np.arange(0.0, INIT_S + 2.0, 60.0 / base)
         slow = slow[slow <= INIT_S]
-        fast = slow[-1] + np.arange(1.0, 40.0) * 60.0 / (YUEN_BPM + float(param))
+        fast = slow[-1] + np.arange(1.0, 80.0) * 60.0 / (base + float(param))
         beats = np.concatenate([slow, fast[fast <= dur + 3.0]])
         scn = make_scenario(
             "mitral-1d", rng=rng_scn, beat_gain_std=0.0, beat_times=beats, duration=dur
@@ -176,11 +198,12 @@ def _mitral_trial(param, study: str, trial_seed: np.random.SeedSequence, s: Stud
             "mitral-1d", rng=rng_scn, beat_gain_std=0.0, beat_times=sel - start, duration=dur
         )
     stream = Sensor(YUEN_RATE, (WhiteNoise(sigma),), "3DUS").measure(scn.source, dur, rng_noise)
+    beats = scn.source.phase.beat_times(-5.0, dur + 5.0)  # the simulated ECG's R waves
     truth = np.asarray(scn.source.position(stream.t)).reshape(len(stream), -1)
     first = round(INIT_S * YUEN_RATE)
     out = {}
     for name in s.names:
-        pred = _yuen_predictor(name, 1.0 / YUEN_RATE, sigma, study != "noise")
+        pred = _yuen_predictor(name, 1.0 / YUEN_RATE, sigma, study != "noise", beats, stream.t[0])
         rms, mx = _one_step_rms(pred, stream.z, truth, first)
         out[name] = {"rms": rms, "max": mx}
     return out
@@ -201,18 +224,26 @@ def _horizon_trial(param, study: str, trial_seed: np.random.SeedSequence, s: Stu
     t_ext = stream.t[0] + HORIZON_DT * np.arange(len(stream) + K)
     truth = np.asarray(scn.source.position(t_ext)).reshape(t_ext.size, -1)
     first = round(HORIZON_WARM_S / HORIZON_DT)
+    true_rate = np.asarray(scn.source.phase.rate(stream.t), dtype=float)
     out = {}
     for name in s.names:
         kw = {"source": scn.source} if name == "exact" else {}
         pred = make_predictor(name, HORIZON_DT, **kw)
         sq = np.zeros(K)
+        hr_err = []
         for k in range(len(stream)):
             pred.update(stream.z[k])
             if k >= first:
                 e = pred.predict(K) - truth[k + 1 : k + 1 + K]
                 sq += np.einsum("ij,ij->i", e, e)
+                hr = getattr(pred, "heart_rate_hz", None)
+                if hr is not None:
+                    hr_err.append(60.0 * abs(hr - true_rate[k]))
         rms = np.sqrt(sq / (len(stream) - first))
         out[name] = {"rms_by_lead": rms.tolist()}
+        if hr_err:
+            out[name]["hr_err_bpm_max"] = float(np.max(hr_err))
+            out[name]["hr_err_bpm_rms"] = float(np.sqrt(np.mean(np.square(hr_err))))
     return out
 
 
@@ -263,6 +294,9 @@ def run_study(
                 row["lead_ms"] = (HORIZON_DT * 1e3 * np.arange(1, HORIZON_LEADS + 1)).tolist()
                 row["rms_mm"] = lead.mean(axis=0).tolist()
                 row["rms_std_mm"] = lead.std(axis=0).tolist()
+                if "hr_err_bpm_max" in per[0]:
+                    row["hr_err_bpm_max"] = float(max(r["hr_err_bpm_max"] for r in per))
+                    row["hr_err_bpm_rms"] = float(np.mean([r["hr_err_bpm_rms"] for r in per]))
             else:
                 rms = np.array([r["rms"] for r in per]) / MM
                 mx = np.array([r["max"] for r in per]) / MM
@@ -313,6 +347,13 @@ def format_table(result: dict) -> str:
                 lines.append(
                     f"{lead:>10.1f}" + "".join(f"{sub[n]['rms_mm'][k]:>{w}.3f}" for n in names)
                 )
+            hr = [
+                f"{n} {sub[n]['hr_err_bpm_rms']:.1f} (max {sub[n]['hr_err_bpm_max']:.1f})"
+                for n in names
+                if "hr_err_bpm_rms" in sub[n]
+            ]
+            if hr:
+                lines.append("|ω̂ − ω| [beats/min], RMS (max) after warm-up: " + ", ".join(hr))
             lines.append("")
         return "\n".join(lines).rstrip()
     lines.append(f"mean RMS one-sample-ahead error [mm], {result['settings']['trials']} trials")

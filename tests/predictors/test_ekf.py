@@ -45,6 +45,7 @@ def test_ekf_nis_within_chi2_bounds_on_its_own_model():
         q_omega=1e-4,
         q_rate_hz=None,
         dim=d,
+        unit=1.0,
     )
     rng = np.random.default_rng(6)
     x = np.zeros(p.nx)
@@ -71,14 +72,14 @@ def test_ekf_same_forecasts_in_metres_and_millimetres():
     dt = 1 / 28
     t = np.arange(int(15 / dt)) * dt
     z = HarmonicSource().position(t) + 1e-4 * np.random.default_rng(7).standard_normal((t.size, 3))
-    f_m = run(make_predictor("ekf", dt), z, 4)
+    f_m = run(make_predictor("ekf", dt, unit=1.0), z, 4)
     f_mm = run(make_predictor("ekf", dt, unit=1e-3), 1e3 * z, 4)
     np.testing.assert_allclose(f_mm, 1e3 * f_m, rtol=1e-7, atol=1e-7)
 
 
 def test_yuen_process_noise_is_rescaled_to_the_predictor_rate():
-    slow = make_predictor("ekf", 1 / 28, params="yuen2008", dim=1)
-    fast = make_predictor("ekf", 1 / 280, params="yuen2008", dim=1)
+    slow = make_predictor("ekf", 1 / 28, params="yuen2008", dim=1, unit=1.0)
+    fast = make_predictor("ekf", 1 / 280, params="yuen2008", dim=1, unit=1.0)
     np.testing.assert_allclose(fast._q, slow._q / 10)
 
 
@@ -87,7 +88,7 @@ def test_fourier_predictors_same_forecasts_in_metres_and_millimetres(name):
     dt = 1 / 28
     t = np.arange(int(15 / dt)) * dt
     z = HarmonicSource().position(t) + 1e-4 * np.random.default_rng(8).standard_normal((t.size, 3))
-    f_m = run(make_predictor(name, dt), z, 4)
+    f_m = run(make_predictor(name, dt, unit=1.0), z, 4)
     f_mm = run(make_predictor(name, dt, unit=1e-3), 1e3 * z, 4)
     np.testing.assert_allclose(f_mm, 1e3 * f_m, rtol=1e-6, atol=1e-6)
 

@@ -33,6 +33,7 @@ def test_lambda_one_equals_batch_least_squares(correlated):
         delta=delta,
         init="zeros",
         correlated=correlated,
+        unit=1.0,
     )
     for zk in z:
         p.update(zk)
@@ -46,7 +47,9 @@ def test_lambda_one_equals_batch_least_squares(correlated):
             W[a] = np.linalg.solve(Xa.T @ Xa + delta * np.eye(N), Xa.T @ Y[:, a])
     assert np.abs(p.weights - W).max() <= 1e-8 * np.abs(W).max()
     # the prior is the only difference from ordinary least squares: as δ → 0 they agree
-    q = make_predictor("one-step", 0.01, order=N, forgetting_factor=1.0, delta=1e-7, init="zeros")
+    q = make_predictor(
+        "one-step", 0.01, order=N, forgetting_factor=1.0, delta=1e-7, init="zeros", unit=1.0
+    )
     for zk in z:
         q.update(zk)
     W_ls = np.linalg.lstsq(X, Y, rcond=None)[0].T
@@ -87,7 +90,14 @@ def test_one_step_matches_padasip_rls():
     N, lam, eps = 6, 0.99, 0.1
     z = np.sin(0.3 * np.arange(600)) + 0.3 * rng.standard_normal(600)
     ours = make_predictor(
-        "one-step", 0.01, order=N, forgetting_factor=lam, delta=eps, init="zeros", p_max_factor=1e12
+        "one-step",
+        0.01,
+        order=N,
+        forgetting_factor=lam,
+        delta=eps,
+        init="zeros",
+        p_max_factor=1e12,
+        unit=1.0,
     )
     ref = pa.filters.FilterRLS(N, mu=lam, eps=eps, w="zeros")
     for n, zn in enumerate(z):

@@ -1,5 +1,7 @@
 """The MPC's linear model against expm, a closed form, and an ODE integration."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 import scipy.linalg
@@ -60,3 +62,24 @@ def test_bad_inputs_raise():
         linearize(robot, Ts=0.0)
     with pytest.raises(ValueError, match="outside its limits"):
         linearize(robot, q0=np.radians([100.0, 0.0, 90.0]))
+
+
+def test_linear_arm_carries_the_robot_and_its_limits():
+    """The envelope's limits are the URDF's: PHANToM joint ranges and velocity limit."""
+    import xml.etree.ElementTree as ET
+
+    from robots.registry import urdf_path
+
+    robot = load_robot("phantom")
+    arm = linearize(robot)
+    assert arm.robot is robot
+    joints = ET.parse(urdf_path("phantom_premium_1_5a.urdf")).iter("joint")
+    limits = [j.find("limit") for j in joints if j.get("type") == "revolute"]
+    lower = np.array([float(e.get("lower")) for e in limits])
+    upper = np.array([float(e.get("upper")) for e in limits])
+    velocity = np.array([float(e.get("velocity")) for e in limits])
+    np.testing.assert_array_equal(arm.position_limits[0], lower)
+    np.testing.assert_array_equal(arm.position_limits[1], upper)
+    np.testing.assert_array_equal(arm.velocity_limit, velocity)
+    bare = dataclasses.replace(arm, robot=None)
+    assert bare.position_limits is None and bare.velocity_limit is None

@@ -1,7 +1,6 @@
-"""Stand-ins for loop tests: a harmonic heart, an ideal stream, an unconstrained LQ tracker.
+"""Stand-ins for loop tests: a harmonic heart and an ideal stream.
 
-They are independent of the project's heart models and MPC, so the loop's plumbing is tested on
-its own.
+They are independent of the project's heart models, so the loop's plumbing is tested on its own.
 """
 
 from __future__ import annotations
@@ -37,26 +36,3 @@ class Stream:
 def ideal_stream(source, duration: float, rate: float = 2000.0, latency: float = 0.0) -> Stream:
     t = np.arange(int(duration * rate) + 1) / rate
     return Stream(t=t, z=source.position(t), arrival=t + latency)
-
-
-class LQTracker:
-    """Unconstrained finite-horizon LQ tracking: u0 of argmin Σ‖y_k − r_k‖²/s² + ‖u_k‖²·w."""
-
-    def __init__(self, arm, N: int = 50, position_scale: float = 1e-4, effort: float = 1e-2):
-        _nx, nu = arm.B.shape
-        Phi = np.vstack([arm.C @ np.linalg.matrix_power(arm.A, k) for k in range(1, N + 1)])
-        Gam = np.zeros((3 * N, nu * N))
-        for k in range(1, N + 1):
-            for j in range(k):
-                Gam[3 * (k - 1) : 3 * k, nu * j : nu * (j + 1)] = (
-                    arm.C @ np.linalg.matrix_power(arm.A, k - 1 - j) @ arm.B
-                )
-        W = np.diag(1 / arm.torque_limit**2)
-        H = Gam.T @ Gam / position_scale**2 + effort * np.kron(np.eye(N), W)
-        self.K = -np.linalg.solve(H, Gam.T / position_scale**2)[:nu]
-        self.Phi, self.y0, self.N = Phi, arm.y0, N
-        self.stats = {"fallbacks": 0}
-
-    def step(self, x, ref):
-        e = (self.Phi @ x + np.tile(self.y0, self.N)) - ref.reshape(-1)
-        return self.K @ e

@@ -42,7 +42,7 @@ def test_default_integrator_local_error_against_fine_rk4(phantom):
 
 def test_unrolled_three_joint_midpoint_is_bit_identical_to_the_general_one(phantom):
     rng = np.random.default_rng(11)
-    fast = ArmPlant(phantom, TS)
+    fast = ArmPlant(phantom, TS, PlantSettings(dynamics="pinocchio"))
     assert fast._advance == fast._midpoint_steps_3
     for _ in range(50):
         q, v, tau = phantom.q0 + rng.normal(size=3) * 0.3, rng.normal(size=3), rng.normal(size=3)

@@ -14,12 +14,24 @@ from rhmpc.studies.bench import heart_like_reference
 from robots import linearize, load_robot
 
 #: OSQP run to (near) machine accuracy, for comparisons at 1e-6.
-TIGHT = {"eps_abs": 1e-10, "eps_rel": 0.0, "max_iter": 100_000, "check_termination": 1}
+TIGHT = {"eps_abs": 1e-10, "eps_rel": 0.0, "max_iter": 100_000, "check_termination": 1,
+         "solver": "osqp"}
 
 
 @pytest.fixture(scope="module")
 def arm():
     return linearize(load_robot("phantom"))
+
+
+@pytest.fixture(scope="module")
+def fk():
+    """Forward kinematics p(q) [m] of an independent robot instance (its own Pinocchio data)."""
+    return load_robot("phantom").ee_position
+
+
+def _y0_seen(arm, fk, x):
+    """y0 + d: the output the offset-corrected model starts from, d = p(q) − (C x + y0)."""
+    return arm.y0 + fk(arm.q0 + x[:3]) - (arm.C @ x + arm.y0)
 
 
 def _small_problem(arm, rng, N=50):
@@ -41,13 +53,14 @@ def _weights(mpc):
     return Q, R, Rd
 
 
-def riccati_first_input(arm, Q, R, Rd, x0, ref, u_prev, terminal=None):
+def riccati_first_input(arm, Q, R, Rd, x0, ref, u_prev, terminal=None, y0=None):
     """Finite-horizon LQ tracking by the backward Riccati recursion (independent of the MPC).
 
     Augmented state ξ_k = [x_k; u_{k−1}], ξ⁺ = Â ξ + B̂ u; stage cost uᵀRu + (u − Eξ)ᵀR_Δ(u − Eξ),
     output cost (Ĉξ_k + y0 − r_k)ᵀ Q_k (…) at k = 1..N, optional terminal (x_N − x_s)ᵀW(x_N − x_s).
-    Value function V_k(ξ) = ξᵀ S ξ + 2 sᵀ ξ + const.
+    Value function V_k(ξ) = ξᵀ S ξ + 2 sᵀ ξ + const. ``y0`` replaces ``arm.y0`` (the offset).
     """
+    y0 = arm.y0 if y0 is None else y0
     nx, nu = arm.nx, arm.nu
     N = len(ref)
     Ah = np.zeros((nx + nu, nx + nu))
@@ -56,7 +69,7 @@ def riccati_first_input(arm, Q, R, Rd, x0, ref, u_prev, terminal=None):
     Ch = np.hstack([arm.C, np.zeros((arm.ny, nu))])
     E = np.hstack([np.zeros((nu, nx)), np.eye(nu)])
     S = Ch.T @ Q[N - 1] @ Ch
-    s = Ch.T @ Q[N - 1] @ (arm.y0 - ref[N - 1])
+    s = Ch.T @ Q[N - 1] @ (y0 - ref[N - 1])
     if terminal is not None:
         W, x_s = terminal
         Ex = np.hstack([np.eye(nx), np.zeros((nx, nu))])
@@ -72,12 +85,13 @@ def riccati_first_input(arm, Q, R, Rd, x0, ref, u_prev, terminal=None):
         S = E.T @ Rd @ E + Ah.T @ S @ Ah - G.T @ np.linalg.solve(Hu, G)
         s = Ah.T @ s - G.T @ np.linalg.solve(Hu, g)
         S = S + Ch.T @ Q[k - 1] @ Ch
-        s = s + Ch.T @ Q[k - 1] @ (arm.y0 - ref[k - 1])
+        s = s + Ch.T @ Q[k - 1] @ (y0 - ref[k - 1])
     raise AssertionError("unreachable")
 
 
-def blocked_lstsq_first_input(arm, blocks, Q, R, Rd, x0, ref, u_prev):
+def blocked_lstsq_first_input(arm, blocks, Q, R, Rd, x0, ref, u_prev, y0=None):
     """The blocked problem as a weighted least-squares fit, built by forward simulation."""
+    y0 = arm.y0 if y0 is None else y0
     nu, N = arm.nu, len(ref)
     nz = nu * len(blocks)
     tick_block = np.repeat(np.arange(len(blocks)), blocks)
@@ -89,7 +103,7 @@ def blocked_lstsq_first_input(arm, blocks, Q, R, Rd, x0, ref, u_prev):
             u = z[b * nu:(b + 1) * nu]
             res += [scipy.linalg.sqrtm(R).real @ u, scipy.linalg.sqrtm(Rd).real @ (u - up)]
             x = arm.A @ x + arm.B @ u
-            res.append(scipy.linalg.sqrtm(Q[k]).real @ (arm.C @ x + arm.y0 - ref[k]))
+            res.append(scipy.linalg.sqrtm(Q[k]).real @ (arm.C @ x + y0 - ref[k]))
             up = u
         return np.concatenate(res)
 
@@ -105,7 +119,7 @@ def _rel(a, b):
 
 
 @pytest.mark.parametrize("point_weights", [None, "ramp"])
-def test_unblocked_first_input_equals_backward_riccati(arm, point_weights):
+def test_unblocked_first_input_equals_backward_riccati(arm, fk, point_weights):
     rng = np.random.default_rng(1)
     pw = None if point_weights is None else tuple(np.linspace(1.0, 0.2, 50))
     settings = MPCSettings(blocks=None, point_weights=pw, effort_weight=1e-3, rate_weight=0.05,
@@ -114,7 +128,7 @@ def test_unblocked_first_input_equals_backward_riccati(arm, point_weights):
     Q, R, Rd = _weights(mpc)
     for _ in range(3):
         x, ref, u_prev = _small_problem(arm, rng)
-        u_lq = riccati_first_input(arm, Q, R, Rd, x, ref, u_prev)
+        u_lq = riccati_first_input(arm, Q, R, Rd, x, ref, u_prev, y0=_y0_seen(arm, fk, x))
         assert np.all(np.abs(u_lq) < 0.5 * mpc.u_max)  # the bounds are inactive
         assert _rel(mpc.unconstrained(x, ref, u_prev), u_lq) < 1e-6  # the QP data
         mpc.reset(u_prev)
@@ -123,24 +137,45 @@ def test_unblocked_first_input_equals_backward_riccati(arm, point_weights):
         assert _rel(u, u_lq) < 1e-6  # the OSQP solution
 
 
-def test_blocked_first_input_equals_blocked_least_squares(arm):
+def test_blocked_first_input_equals_blocked_least_squares(arm, fk):
     rng = np.random.default_rng(2)
     settings = MPCSettings(**TIGHT)
     mpc = RecedingHorizonMPC(arm, settings)
     Q, R, Rd = _weights(mpc)
     x, ref, u_prev = _small_problem(arm, rng)
-    u_ls = blocked_lstsq_first_input(arm, settings.blocks, Q, R, Rd, x, ref, u_prev)
+    y0 = _y0_seen(arm, fk, x)
+    u_ls = blocked_lstsq_first_input(arm, settings.blocks, Q, R, Rd, x, ref, u_prev, y0=y0)
     assert _rel(mpc.unconstrained(x, ref, u_prev), u_ls) < 1e-6
     mpc.reset(u_prev)
     assert _rel(mpc.step(x, ref), u_ls) < 1e-6
     # …and blocking really changes the problem: the unblocked solution differs.
-    u_free = riccati_first_input(arm, Q, R, Rd, x, ref, u_prev)
+    u_free = riccati_first_input(arm, Q, R, Rd, x, ref, u_prev, y0=y0)
     assert _rel(u_free, u_ls) > 1e-3
+
+
+@pytest.mark.parametrize("displacement_deg", [2.0, 10.0])
+def test_output_offset_is_the_forward_kinematics_residual(arm, fk, displacement_deg):
+    """At rest at a posture q ≠ q0 with the reference on the tip (r_k = p(q)), the corrected
+    controller's optimum is exactly u = 0 (zero cost); the uncorrected one moves the arm."""
+    x = np.zeros(6)
+    x[:3] = np.radians(displacement_deg) * np.array([1.0, -0.7, 0.5])
+    d = fk(arm.q0 + x[:3]) - (arm.C @ x + arm.y0)
+    mpc = RecedingHorizonMPC(arm)
+    np.testing.assert_allclose(mpc.offset(x), d, rtol=0, atol=1e-15)
+    assert np.linalg.norm(d) > 1e-4  # 0.1 mm or more: the linearisation's floor
+    ref = np.tile(fk(arm.q0 + x[:3]), (mpc.N, 1))
+    u = mpc.unconstrained(x, ref, np.zeros(3))
+    # |u| is rounding only: F p cancels terms of ~1e3 (absolute positions [m] times the gain);
+    # measured 1.1e-11 of u_max, asserted at 1e-9.
+    assert np.max(np.abs(u) / mpc.u_max) <= 1e-9
+    plain = RecedingHorizonMPC(arm, MPCSettings(offset_correction=False))
+    u_lin = plain.unconstrained(x, ref, np.zeros(3))
+    assert np.max(np.abs(u_lin) / mpc.u_max) > 1e-3
 
 
 def test_dare_terminal_weight_gives_the_lqr_action(arm):
     settings = MPCSettings(blocks=None, terminal="dare", effort_weight=1e-2, rate_weight=0.0,
-                           horizon=20, **TIGHT)
+                           horizon=20, offset_correction=False, **TIGHT)
     mpc = RecedingHorizonMPC(arm, settings)
     Q, R, _ = _weights(mpc)
     Qx = arm.C.T @ Q[-1] @ arm.C
@@ -162,7 +197,8 @@ def test_dare_terminal_weight_gives_the_lqr_action(arm):
     x = np.array([1e-5, -1e-5, 1e-5, 0.0, 0.0, 0.0])
     for terminal, differs in (("none", True), ("dare", False)):
         short = RecedingHorizonMPC(arm, MPCSettings(
-            blocks=None, effort_weight=1e-2, rate_weight=0.0, horizon=3, terminal=terminal))
+            blocks=None, effort_weight=1e-2, rate_weight=0.0, horizon=3, terminal=terminal,
+            offset_correction=False))
         u3 = short.unconstrained(x, np.tile(arm.y0, (3, 1)), np.zeros(3))
         assert (_rel(u3, -K @ x) > 1e-2) == differs
 
@@ -170,9 +206,8 @@ def test_dare_terminal_weight_gives_the_lqr_action(arm):
 def _daqp_solve(mpc, q, lo, up):
     """Exact active-set solution of the same QP (simple bounds first, then general rows)."""
     qp = mpc.qp
-    nz = qp.nz
-    A_gen = qp.A[nz:]
-    x, _, exitflag, info = daqp.solve(qp.P, q, A_gen, up, lo)
+    A_gen = qp.A[qp.nv:]  # the first nv rows are the identity: DAQP's simple bounds
+    x, _, exitflag, info = daqp.solve(qp.P, q, A_gen, np.minimum(up, 1e30), np.maximum(lo, -1e30))
     assert exitflag == 1, exitflag
     return x, info["lam"]
 
@@ -195,9 +230,10 @@ def _saturating_problem(arm, mpc, jump):
     return x, ref
 
 
-@pytest.mark.parametrize("settings_kind", ["default", "tight"])
+@pytest.mark.parametrize("settings_kind", ["default", "tight", "daqp"])
 def test_active_torque_bounds_agree_with_daqp(arm, settings_kind):
-    settings = MPCSettings() if settings_kind == "default" else MPCSettings(**TIGHT)
+    settings = {"default": MPCSettings(), "tight": MPCSettings(**TIGHT),
+                "daqp": MPCSettings(solver="daqp")}[settings_kind]
     mpc = RecedingHorizonMPC(arm, settings)
     x, ref = _saturating_problem(arm, mpc, np.array([3e-3, -2e-3, 2e-3]))
     q, lo, up = mpc.qp_vectors(x, ref)
@@ -211,6 +247,9 @@ def test_active_torque_bounds_agree_with_daqp(arm, settings_kind):
     tau_max = arm.torque_limit
     if settings_kind == "default":
         assert np.max(np.abs(tau - u0_exact) / tau_max) <= 0.01
+    elif settings_kind == "daqp":  # DAQP in the controller: exact, checked by its KKT system
+        assert np.max(np.abs(tau - u0_exact) / tau_max) <= 1e-9
+        _check_kkt(mpc, q, lo, up, z, y, tol=1e-9)
     else:
         assert np.max(np.abs(z - z_ex)) <= 1e-6
         assert np.max(np.abs(tau - u0_exact) / tau_max) <= 1e-6
@@ -234,16 +273,22 @@ def test_active_joint_bounds_agree_with_daqp(arm):
     z, y = mpc.last_solution()
     z_ex, _ = _daqp_solve(mpc, q, lo, up)
     Az = mpc.qp.A @ z_ex
-    nz = mpc.qp.nz
-    assert np.any(np.isclose(Az[nz:], up[nz:], atol=1e-8) | np.isclose(Az[nz:], lo[nz:], atol=1e-8))
+    nv = mpc.qp.nv
+    assert np.any(np.isclose(Az[nv:], up[nv:], atol=1e-8) | np.isclose(Az[nv:], lo[nv:], atol=1e-8))
+    assert np.max(z_ex[mpc.qp.nz:]) <= 1e-9  # the soft envelope holds as the hard one would
     assert np.max(np.abs(z - z_ex)) <= 1e-6
     assert np.max(np.abs(tau - z_ex[:3] * mpc.u_max)) <= 1e-6
     _check_kkt(mpc, q, lo, up, z, y, tol=1e-6)
 
 
 def test_ten_thousand_warm_started_ticks_stay_feasible(arm):
-    """Default settings, closed loop on the linear model, heart-like reference with jumps."""
-    mpc = RecedingHorizonMPC(arm)
+    """Default settings, closed loop on the linear model, heart-like reference with jumps.
+
+    The plant is the linear model itself, so the output offset is off (it would be the FK's).
+    OSQP's raw primal (before the clip) is checked against the torque bounds to its primal
+    tolerance eps_abs = 1e-3 on the normalised inputs.
+    """
+    mpc = RecedingHorizonMPC(arm, MPCSettings(offset_correction=False))
     ticks = 10_000
     traj = heart_like_reference(ticks + mpc.N + 1, arm.Ts, np.random.default_rng(5), arm.y0,
                                 jump=2e-3, jump_every=1000)
@@ -252,7 +297,8 @@ def test_ten_thousand_warm_started_ticks_stay_feasible(arm):
     saturated = 0
     for k in range(ticks):
         tau = mpc.step(x, traj[k + 1:k + 1 + mpc.N])
-        assert np.all(np.abs(tau) <= mpc.u_max)
+        z, _ = mpc.last_solution()
+        assert np.max(np.abs(z[:mpc.qp.nz])) <= 1 + 1e-3, (k, z)
         saturated += bool(np.any(np.abs(tau) >= mpc.u_max * (1 - 1e-6)))
         x = arm.A @ x + arm.B @ tau
     assert mpc.stats.ticks == ticks
@@ -261,8 +307,10 @@ def test_ten_thousand_warm_started_ticks_stay_feasible(arm):
 
 
 def test_exact_reference_tracking_on_the_linear_model(arm):
-    """Heart-like motion (8 mm p-p, 1.66 Hz + 4 harmonics, 0.17 Hz breathing), exact future."""
-    mpc = RecedingHorizonMPC(arm)
+    """Heart-like motion (8 mm p-p, 1.66 Hz + 4 harmonics, 0.17 Hz breathing), exact future.
+
+    The plant is the linear model: no output offset."""
+    mpc = RecedingHorizonMPC(arm, MPCSettings(offset_correction=False))
     ticks = 4000
     traj = heart_like_reference(ticks + mpc.N + 1, arm.Ts, np.random.default_rng(0), arm.y0)
     x = np.zeros(arm.nx)
@@ -282,7 +330,7 @@ def test_exact_reference_tracking_on_the_linear_model(arm):
 def test_screening_is_exact_and_hands_binding_ticks_to_osqp(arm, joint_bounds):
     """A screened tick returns the exact QP solution (DAQP, to 1e-9 of τ_max); ticks whose
     unconstrained minimiser violates a bound go to OSQP (checked against DAQP too)."""
-    extra = {}
+    extra = {"joint_envelope": False}
     if joint_bounds:
         extra = {"joint_lower": tuple(arm.q0 - np.radians(5.0)),
                  "joint_upper": tuple(arm.q0 + np.radians(5.0))}

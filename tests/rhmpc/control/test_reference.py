@@ -204,3 +204,29 @@ def test_placement_and_batched_horizons_match_single_lookups():
     for offset, h in enumerate(exact.horizons(10, 5)):
         np.testing.assert_array_equal(h, origin + np.c_[np.arange(11, 11 + N) + offset,
                                                        np.zeros((N, 2))])
+
+
+def test_exact_reference_read_in_windows_is_the_whole_array():
+    """Gaps longer than a window, at window edges and at both ends, bridged as on the array."""
+    from sim.streams import ArrayTruth
+
+    rng = np.random.default_rng(3)
+    truth = rng.normal(size=(3000, 3))
+    truth[:7, 0] = np.nan  # before the first finite tick
+    truth[100:700, 1] = np.nan  # longer than a window
+    truth[255:257, 2] = np.nan  # across a window edge
+    truth[-40:, 2] = np.nan  # after the last finite tick
+    origin = np.array([0.1, 0.2, 0.3])
+    bridged = truth.copy()  # the independent reference: np.interp over the whole array
+    ticks = np.arange(3000)
+    for axis in range(3):
+        bad = np.isnan(truth[:, axis])
+        bridged[bad, axis] = np.interp(ticks[bad], ticks[~bad], truth[~bad, axis])
+    bridged += origin
+    windowed = ExactReference(ArrayTruth(truth, np.zeros(3)), N, window=128)
+    windowed.place(origin)
+    for tick in range(0, 3000 - N - 15, 15):
+        for k, h in enumerate(windowed.horizons(tick, 15)):
+            np.testing.assert_array_equal(h, bridged[tick + k + 1 : tick + k + 1 + N])
+    np.testing.assert_array_equal(windowed.horizon(5), bridged[6 : 6 + N])  # backwards: restarts
+    assert np.all(np.isfinite(windowed.horizon(120)))

@@ -8,8 +8,11 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 
 from rhmpc.cli import main
+from rhmpc.control.export import missing_toolchain
+from rhmpc.control.settings import MPCSettings
 from rhmpc.studies.bench import format_table, heart_like_reference, run_bench
 
 
@@ -28,12 +31,21 @@ def test_heart_like_reference_amplitude_and_jumps():
 
 def test_run_bench_reports_the_issue_fields():
     r = run_bench(ticks=400, warmup=50, seed=1, jump_every=150)
-    for key in ("tick_us", "solve_us", "gain_tick_us", "exact_tick_us", "reference_us",
-                "update_us", "output_us", "iterations"):
-        assert {"p50", "p99", "max"} <= set(r[key]), key
-        assert r[key]["p50"] > 0
+    for key in ("tick_us", "osqp_tick_us", "solve_us", "gain_tick_us", "exact_tick_us",
+                "reference_us", "update_us", "output_us", "iterations"):
+        row = r[key]
+        assert 0 < row["p50"] <= row["p99"] <= row["max"], key
+        assert row["mean"] <= row["max"], key
+    # Both paths of the tick ran: screened ticks and OSQP ticks (the jumps saturate).
+    assert 0 < r["screened_ticks"] < r["ticks"]
+    # OSQP on every tick: at least one iteration, never more than the cap.
+    assert 1 <= r["iterations"]["p50"] and r["iterations"]["max"] <= MPCSettings().max_iter
+    # The ratios are those of the reported percentiles (same run, same ticks).
+    for key, ref in (("ratio_tick_to_gain", "gain_tick_us"), ("ratio_tick_to_exact",
+                                                              "exact_tick_us")):
+        assert r[key]["p50"] == pytest.approx(r["tick_us"]["p50"] / r[ref]["p50"], rel=1e-12)
     assert r["ticks"] == 400 and r["robot"] == "phantom"
-    assert set(r["fallbacks"]) == {"plan", "lq", "zero"}
+    assert set(r["fallbacks"]) == {"plan", "lq", "brake", "zero"}
     assert r["active_bound_ticks"] > 0  # the jumps saturate the torque
     assert r["u0_error_max_frac"] <= 0.01  # within 1 % of τ_max of the exact solve, every tick
     assert r["exact_failures"] == 0
@@ -50,3 +62,25 @@ def test_cli_bench_json_and_table(capsys):
     assert "p99" in capsys.readouterr().out
     assert main(["bench", "--ticks", "0"]) == 2
     assert "--ticks" in capsys.readouterr().err
+
+
+@pytest.mark.skipif(missing_toolchain() is not None, reason=missing_toolchain() or "")
+def test_run_bench_with_the_compiled_controller(tmp_path_factory):
+    """`--controller c`: the C tick (inside C and via ctypes) and its agreement with Python."""
+    cache = tmp_path_factory.getbasetemp() / "rhmpc-cache"  # shared with test_export.py
+    r = run_bench(ticks=1500, warmup=50, seed=1, jump_every=400, controller="c", cache=cache)
+    for key in ("c_tick_us", "c_tick_python_us"):
+        row = r[key]
+        assert 0 < row["p50"] <= row["p99"] <= row["max"], key
+    assert r["controller"] == "c"
+    # The ctypes call contains the C tick, tick by tick, so its percentiles are not smaller.
+    assert r["c_tick_python_us"]["p50"] >= r["c_tick_us"]["p50"]
+    assert r["c_vs_python_max_frac"] <= 1e-6  # measured ≈ 2e-11
+    assert r["c_mismatched_ticks"] == 0
+    assert r["c_fallbacks"] == r["fallbacks"]
+    # OSQP ran in C on exactly the ticks the Python controller did not screen
+    assert 0 < r["c_osqp_ticks"] == r["ticks"] - r["screened_ticks"]
+    assert r["c_osqp_tick_us"]["p50"] > 0 and r["c_screened_tick_us"]["p50"] > 0
+    text = format_table(r)
+    assert "C tick, inside C" in text and "C tick / Python tick" in text
+    json.dumps(r)

@@ -139,3 +139,49 @@ def test_cli_predict_writes_json_table_and_plot(tmp_path, capsys):
 def test_cli_predict_rejects_bad_input(argv, capsys):
     assert main(argv) == 2
     assert "error" in capsys.readouterr().err
+
+
+def test_hr_step_protocols_and_synchronised_last_cycle():
+    """Yuen (60 bpm) stays the default; tuna2013 runs at 103 bpm.  Last cycle synchronised on
+    the beat times: issue 18 measured 1.7/2.7 mm at ΔHR = ∓10 with them, 4.0–4.5 mm without."""
+    with pytest.raises(ValueError, match="paper"):
+        StudySettings("hr-step", paper="nope")
+    assert StudySettings("hr-step").paper == "yuen2008"
+    s = StudySettings(
+        "hr-step",
+        trials=1,
+        seed=2,
+        delta_bpm=(-10.0,),
+        predictors=("last-cycle",),
+        paper="tuna2013",
+    )
+    result = run_study(s)
+    assert result["settings"]["paper"] == "tuna2013"
+    assert _rows(result)[-10.0, "last-cycle"]["rms_mm"] < 3.0
+
+
+def test_28hz_rls_predictors_run_at_order_30():
+    from rhmpc.studies.prediction import ORDER_28HZ, _yuen_predictor
+
+    beats = np.arange(0.0, 50.0)
+    for name in ("one-step", "generalized"):
+        assert _yuen_predictor(name, 1 / 28, 1.3e-3, False, beats, 0.0).settings.order == 30
+    lc = _yuen_predictor("last-cycle", 1 / 28, 1.3e-3, False, beats, 0.0)
+    assert lc.settings.beat_times == tuple(beats) and ORDER_28HZ == 30
+
+
+def test_horizon_study_reports_heart_rate_error():
+    s = StudySettings(
+        "horizon", trials=1, seed=4, scenarios=("fixed-a2-top",), predictors=("ekf", "hold")
+    )
+    result = run_study(s)
+    rows = _rows(result)
+    assert rows["fixed-a2-top", "ekf"]["hr_err_bpm_rms"] < 5.0  # measured 1.1 bpm
+    assert "hr_err_bpm_rms" not in rows["fixed-a2-top", "hold"]
+    assert "|ω̂ − ω|" in format_table(result)
+
+
+def test_cli_predict_rejects_an_unknown_paper(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["predict", "--study", "hr-step", "--paper", "nope"])
+    assert exc.value.code == 2

@@ -1,0 +1,135 @@
+"""Bookkeeping shared by every predictor: the unit of the data, the recent signal range, and
+the running forecast error per lead.
+
+* :func:`infer_unit` — metres per data unit from an initialisation window, snapped to a
+  power of 1000 (m, mm, µm), so that the SI parameters of the papers meet the data in
+  the unit it was recorded in, and a predictor fed mm forecasts exactly 1000 × what it
+  forecasts when fed m.
+* :class:`RangeEnvelope` — the per-axis [min, max] of the valid samples of the last
+  ``window`` samples, kept as block extrema (O(d) per sample, O(blocks·d) per query).
+* :class:`LeadErrorRMS` — the exponentially weighted RMS of past forecast misses at each
+  lead, e_k = ‖ẑ_{n+k|n} − z_{n+k}‖, from the forecasts the owner recorded.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = ["LeadErrorRMS", "RangeEnvelope", "infer_unit"]
+
+#: typical peak-to-peak heart-surface motion [m]: ≈ 10 mm (Tuna 2013 §VIII: 5–15 mm;
+#: Yuen 2008: mitral annulus ≈ 10–15 mm)
+TYPICAL_RANGE_M = 10e-3
+#: typical distance of a sample from the origin when it does not move [m]
+TYPICAL_POSITION_M = 0.1
+
+
+def infer_unit(window: np.ndarray) -> float:
+    """Metres per data unit, 1000^−k, for samples ``window`` (T, d) (NaN rows ignored).
+
+    k = round(log₁₀₀₀(r / r₀)) with r the largest per-axis peak-to-peak range and
+    r₀ = :data:`TYPICAL_RANGE_M` (10 mm): a range between 0.3 mm and 0.3 m is read as
+    metres, 0.3 mm–0.3 m ×1000 as mm, and so on.  A window that does not move is
+    judged by its largest magnitude against :data:`TYPICAL_POSITION_M`; all zeros → 1.
+    """
+    x = np.asarray(window, dtype=float)
+    x = x[np.isfinite(x).all(axis=1)]
+    if x.size == 0:
+        return 1.0
+    r = float(np.max(x.max(axis=0) - x.min(axis=0)))
+    ref = TYPICAL_RANGE_M
+    if not r > 0.0:
+        r, ref = float(np.max(np.abs(x))), TYPICAL_POSITION_M
+        if not r > 0.0:
+            return 1.0
+    k = round(math.log10(r / ref) / 3.0)
+    return 1000.0 ** (-max(-3, min(5, k)))
+
+
+class RangeEnvelope:
+    """Per-axis extrema of the valid samples among the last ``blocks × block`` updates."""
+
+    def __init__(self, d: int, block: int, blocks: int = 8) -> None:
+        self.block = max(1, int(block))
+        self.lo = np.full((blocks, d), np.inf)
+        self.hi = np.full((blocks, d), -np.inf)
+        self._i = 0
+        self._k = 0
+        self.known = False
+        self._env = (np.zeros(d), np.zeros(d))
+        self._done = (np.full(d, np.inf), np.full(d, -np.inf))  # extrema of the full blocks
+
+    def tick(self, x: np.ndarray | None) -> None:
+        """Advance one update; ``x`` is the valid sample or ``None``."""
+        if x is not None:
+            np.minimum(self.lo[self._i], x, out=self.lo[self._i])
+            np.maximum(self.hi[self._i], x, out=self.hi[self._i])
+            self.known = True
+        self._k += 1
+        if self._k == self.block:
+            self._k = 0
+            self._i = (self._i + 1) % self.lo.shape[0]
+            self.lo[self._i] = np.inf
+            self.hi[self._i] = -np.inf
+            self._done = (self.lo.min(axis=0), self.hi.max(axis=0))
+
+    def envelope(self) -> tuple[np.ndarray, np.ndarray]:
+        """(min, max) per axis of the window; the last known one through a long gap."""
+        lo = np.minimum(self._done[0], self.lo[self._i])
+        hi = np.maximum(self._done[1], self.hi[self._i])
+        if lo[0] != np.inf:  # every axis is seen together
+            self._env = (lo, hi)
+        return self._env
+
+
+class LeadErrorRMS:
+    """Running RMS of forecast misses per lead, e_k = ‖ẑ_{n+k|n} − z_{n+k}‖ (data units).
+
+    ``record(n, f)`` keeps the forecast f (K, d) made after update n (the latest one per
+    n); ``observe(n, z)`` scores every recorded forecast that reaches sample n.  Each lead
+    has its own exponentially weighted mean square with memory ``memory`` samples:
+    m_k ← m_k + α (e_k² − m_k), α = max(1/memory, 1/count_k) (a plain mean at first).
+    """
+
+    def __init__(self, d: int, memory: float) -> None:
+        self.d = d
+        self.alpha = 1.0 / max(1.0, float(memory))
+        self.K = 0
+        self._alloc(1)
+
+    def _alloc(self, K: int) -> None:
+        self.K = K
+        self.fc = np.zeros((K, K, self.d))
+        self.made = np.full(K, -1, dtype=np.int64)
+        self.length = np.zeros(K, dtype=np.int64)
+        self.ms = np.zeros(K)
+        self.count = np.zeros(K)
+        self._leads = np.arange(1, K + 1)
+        self._k = self._leads - 1
+        # ring rows of the forecasts made 1…K updates before an update landing on row j
+        self._rows = (np.arange(K)[:, None] - self._leads[None, :]) % K
+
+    def record(self, n: int, forecast: np.ndarray) -> None:
+        K = forecast.shape[0]
+        if K > self.K:
+            self._alloc(K)
+        row = n % self.K
+        self.fc[row, :K] = forecast
+        self.made[row] = n
+        self.length[row] = K
+
+    def observe(self, n: int, z: np.ndarray) -> None:
+        rows = self._rows[n % self.K]
+        made = n - self._leads
+        ok = (self.made[rows] == made) & (self.length[rows] >= self._leads)
+        miss = self.fc[rows, self._k] - z
+        e2 = np.einsum("ij,ij->i", miss, miss)
+        self.count += ok
+        a = np.maximum(self.alpha, 1.0 / np.maximum(self.count, 1.0)) * ok
+        self.ms += a * (e2 - self.ms)
+
+    def rms(self) -> np.ndarray:
+        """(K,) RMS miss per lead (lead k at index k − 1); NaN where nothing was scored."""
+        return np.where(self.count > 0, np.sqrt(self.ms), np.nan)

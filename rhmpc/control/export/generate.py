@@ -1,0 +1,263 @@
+"""`rhmpc export`: the controller as a self-contained C library (OSQP codegen + the tick).
+
+What is written to ``OUTDIR``::
+
+    rhmpc.h          the API, units and array layouts (sizes baked in as macros)
+    rhmpc.c          the per-tick logic of RecedingHorizonMPC.step (screening, vector update,
+                     shifted warm start, fallback chain plan → LQ → zero, torque clipping)
+    rhmpc_data.h/.c  the numbers, as ``const`` arrays, from the controller's own CondensedQP:
+                     F_ext = [F, f0] (p → q), the screening map Z = −P⁻¹[F, f0], A, G, l0, u0,
+                     the LQ gain, the one-tick shift (primal and dual), block of each tick, u_max
+    osqp/            OSQP's embedded code (``OSQP.codegen``, ``parameters="vectors"``), generated
+                     from the controller's own solver object: P, A, settings and KKT factorisation
+    CMakeLists.txt   builds librhmpc.a and librhmpc_shared.so
+
+Everything numeric is read from a built :class:`RecedingHorizonMPC`, so the C code solves the
+same QP as the Python controller; the equivalence tests compare the two tick for tick.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import re
+import shutil
+import tempfile
+from dataclasses import dataclass
+from importlib.metadata import PackageNotFoundError, version
+from importlib.resources import files
+from pathlib import Path
+
+import numpy as np
+
+from rhmpc.control.mpc import MPCStats, RecedingHorizonMPC
+from rhmpc.control.settings import to_dict
+
+#: Prefix of OSQP's generated globals (``rhmpc_osqp_solver``) and workspace files.
+OSQP_PREFIX = "rhmpc_osqp_"
+_WARM_STARTS = {"shift": 0, "shift_primal": 1, "keep": 2, "none": 3}
+_TEMPLATES = ("rhmpc.h", "rhmpc.c", "rhmpc_data.h", "CMakeLists.txt")
+
+
+class ExportError(ValueError):
+    """The controller cannot be exported as it is configured (the message says why)."""
+
+
+@dataclass(frozen=True)
+class ExportInfo:
+    """What :func:`export_controller` wrote.
+
+    Attributes
+    ----------
+    outdir : Path
+        The library's source directory (give it to ``cmake -S``).
+    key : str
+        Hash of everything the generated code depends on (QP data, settings, versions).
+    files : tuple[str, ...]
+        Files written, relative to ``outdir``.
+    notes : tuple[str, ...]
+        Settings the C code does not reproduce exactly (also written into ``rhmpc.h``).
+    """
+
+    outdir: Path
+    key: str
+    files: tuple[str, ...]
+    notes: tuple[str, ...] = ()
+
+
+def _version(name: str) -> str:
+    try:
+        return version(name)
+    except PackageNotFoundError:
+        return "unknown"
+
+
+def _n_extra(mpc: RecedingHorizonMPC) -> int:
+    """Per-tick inputs of p after [x; r_1..r_N; u_{−1}] (e.g. an output offset)."""
+    qp = mpc.qp
+    return qp.npar - (qp.nx + qp.N * qp.ny + qp.nu)
+
+
+def _brakes(mpc: RecedingHorizonMPC) -> bool:
+    """True if the controller's fallback chain has a braking step (then its LQ step is checked
+    against the constraint rows): read from its statistics' fallback sources."""
+    return "brake" in MPCStats().fallbacks
+
+
+def _check(mpc: RecedingHorizonMPC) -> None:
+    """Raise ExportError for what the generated code does not reproduce."""
+    qp, s = mpc.qp, mpc.settings
+    if _n_extra(mpc) < 0:
+        raise ExportError(f"the QP has {qp.npar} parameters, fewer than x, ref and u_prev")
+    if _n_extra(mpc) > 0 and not callable(getattr(mpc, "offset", None)):
+        raise ExportError(f"the QP has {_n_extra(mpc)} per-tick inputs besides x, ref, u_prev "
+                          "and the controller does not say how to compute them (offset(x))")
+    unknown = set(MPCStats().fallbacks) - {"plan", "lq", "brake", "zero"}
+    if unknown:
+        raise ExportError(f"fallback source(s) {sorted(unknown)} are not exported yet")
+    if s.adaptive_rho:
+        raise ExportError("adaptive_rho needs OSQP's KKT refactorisation, which the vectors-mode "
+                          "embedded code does not have; set mpc.adaptive_rho = false")
+    if s.polish:
+        raise ExportError("OSQP's embedded code does not polish; set mpc.polish = false")
+    if s.warm_start not in _WARM_STARTS:
+        raise ExportError(f"warm start {s.warm_start!r} is not exported")
+    m, nv = qp.A.shape
+    arrays = {"P": qp.P, "F": qp.F, "f0": qp.f0, "A": qp.A, "G": qp.G,
+              "minimiser": qp.minimiser, "gain": qp.gain, "gain0": qp.gain0}
+    for name, a in arrays.items():
+        if not np.all(np.isfinite(a)):
+            raise ExportError(f"the QP's {name} has non-finite entries")
+    for name, a in (("l0", qp.l0), ("u0", qp.u0)):  # ±inf: a row bounded on one side only
+        if np.any(np.isnan(a)):
+            raise ExportError(f"the QP's {name} has NaN entries")
+    if qp.shift.shape != (nv, nv) or qp.shift_dual.shape != (m, m):
+        raise ExportError("unexpected shapes of the warm-start shift")
+
+
+def _data_arrays(mpc: RecedingHorizonMPC) -> dict[str, np.ndarray]:
+    """The const arrays of rhmpc_data.c, row-major, from the controller's CondensedQP."""
+    qp = mpc.qp
+    return {
+        "F_ext": np.column_stack([qp.F, qp.f0]),
+        "minimiser": np.asarray(qp.minimiser),
+        "l0": np.asarray(qp.l0),
+        "u0": np.asarray(qp.u0),
+        "gain": np.asarray(qp.gain),
+        "gain0": np.asarray(qp.gain0),
+        "u_max": np.asarray(qp.u_max),
+        "q0": np.asarray(mpc.arm.q0, dtype=float),
+        "y0": np.asarray(mpc.arm.y0, dtype=float),
+        "M0": np.asarray(mpc.arm.M0, dtype=float),
+        # the dual the controller pairs with a primal plan in its warm starts
+        "y_plan": np.asarray(getattr(mpc, "_y_zero", np.zeros(qp.A.shape[0])), dtype=float),
+    }
+
+
+def _c_double(v: float) -> str:
+    """A C literal that reads back as the same double (Python's repr round-trips)."""
+    v = float(v)
+    if np.isinf(v):
+        return "HUGE_VAL" if v > 0 else "-HUGE_VAL"
+    return repr(v)
+
+
+def _c_array(name: str, values: np.ndarray, ctype: str = "double") -> str:
+    flat = np.ascontiguousarray(values, dtype=float if ctype == "double" else np.int64).ravel()
+    # repr of a Python float is the shortest string that round-trips: the C compiler reads back
+    # the same double.
+    if not np.any(flat):  # e.g. G without joint bounds: C zero-fills the rest
+        return f"const {ctype} rhmpc_{name}[{max(flat.size, 1)}] = {{0}};\n"
+    items = [_c_double(v) if ctype == "double" else str(int(v)) for v in flat]
+    lines = [", ".join(items[i:i + 6]) for i in range(0, len(items), 6)]
+    body = ",\n  ".join(lines)
+    return f"const {ctype} rhmpc_{name}[{len(items)}] = {{\n  {body}\n}};\n"
+
+
+#: Matrices written in CSR form (mostly zeros: identity rows, a few parameter columns).
+_SPARSE = ("A", "G", "shift", "shift_dual")
+
+
+def _csr(values: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(row pointers, column indices, values) of the non-zero entries, row after row."""
+    values = np.asarray(values, dtype=float)
+    rows, cols = np.nonzero(values)
+    ptr = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=values.shape[0]))])
+    return ptr, cols, values[rows, cols]
+
+
+def export_key(mpc: RecedingHorizonMPC, robot: str) -> str:
+    """Hash of the QP data, the settings and the versions the generated code depends on."""
+    h = hashlib.sha256()
+    meta = {"robot": robot, "settings": to_dict(mpc.settings), "rhmpc": _version("rhmpc"),
+            "osqp": _version("osqp"), "Ts": float(mpc.arm.Ts)}
+    h.update(json.dumps(meta, sort_keys=True).encode())
+    qp = mpc.qp
+    sparse = [getattr(qp, name) for name in _SPARSE]
+    for a in (qp.P, *(_data_arrays(mpc).values()), *sparse, qp.block_of_tick):
+        h.update(np.ascontiguousarray(a, dtype=float).tobytes())
+    for name in _TEMPLATES:
+        h.update(files(__package__).joinpath("templates", name).read_bytes())
+    return h.hexdigest()[:16]
+
+
+def export_controller(mpc: RecedingHorizonMPC, outdir: str | Path, *, robot: str) -> ExportInfo:
+    """Write the C library of ``mpc`` (a freshly built or reset controller) to ``outdir``.
+
+    Raises
+    ------
+    ExportError
+        If the controller uses something the generated code does not reproduce.
+    """
+    _check(mpc)
+    qp, s = mpc.qp, mpc.settings
+    if not hasattr(mpc, "_osqp"):
+        raise ExportError("the controller has no OSQP solver object to generate code from")
+    outdir = Path(outdir)
+    outdir.mkdir(parents=True, exist_ok=True)
+    key = export_key(mpc, robot)
+    notes = []
+    if s.time_limit > 0:
+        # OSQP 1.1's embedded sources have no timer (no timing.c; the generated workspace has
+        # no timer object), so the wall-clock limit cannot be generated.
+        notes.append(f"time_limit = {s.time_limit:g} s is not enforced in C (OSQP's embedded "
+                     f"code has no timer); a solve is bounded by max_iter = {s.max_iter}")
+    subs = {
+        "ROBOT": robot, "ROBOT_ID": "".join(c if c.isalnum() else "_" for c in robot),
+        "HASH": key, "VERSION": _version("rhmpc"), "OSQP_VERSION": _version("osqp"),
+        "TS_US": f"{mpc.arm.Ts * 1e6:g}", "TS": repr(float(mpc.arm.Ts)),
+        "N": qp.N, "NX": qp.nx, "NU": qp.nu, "NY": qp.ny,
+        "NV": qp.P.shape[0], "NZ": int(qp.nz), "M": qp.A.shape[0], "NPAR": qp.npar,
+        "NEXTRA": _n_extra(mpc),
+        "EXTRA_DOC": ("none" if _n_extra(mpc) == 0 else
+                      f"{_n_extra(mpc)} values, RecedingHorizonMPC.offset(x): the output offset "
+                      "d = p(q0 + x_q) - (C x + y0) [m] from forward kinematics"),
+        "BRAKE": int(_brakes(mpc)), "BRAKE_TICKS": s.block_lengths[0],
+        "LQ_DOC": ("used only if its clipped plan keeps every constraint row, else the braking "
+                   "torque -M0 qdot / (RHMPC_BRAKE_TICKS Ts), clipped" if _brakes(mpc) else
+                   "clipped to +-u_max"),
+        "PLAN_FALLBACK_TICKS": s.plan_fallback_ticks, "MAX_ITER": s.max_iter,
+        "WARM_START": _WARM_STARTS[s.warm_start], "WARM_START_NAME": s.warm_start,
+        "SCREENING": int(s.screening), "PARAM_BOUNDS": int(qp.param_bounds),
+        "OSQP_PREFIX": OSQP_PREFIX,
+        "NOTES": "".join(f"\n * Not exported: {n}." for n in notes) or "\n * (Nothing left out.)",
+    }
+    written = []
+    for name in _TEMPLATES:
+        text = files(__package__).joinpath("templates", name).read_text()
+        for k, v in subs.items():
+            text = text.replace(f"@{k}@", str(v))
+        leftover = re.search(r"@[A-Z_]+@", text)
+        if leftover:
+            raise RuntimeError(f"template {name}: unreplaced placeholder {leftover.group()}")
+        (outdir / name).write_text(text)
+        written.append(name)
+
+    data = _data_arrays(mpc)
+    parts = [f"/* Generated by `rhmpc export` (robot \"{robot}\", hash {key}): the controller's "
+             "numbers, from its CondensedQP. Row-major. */\n"
+             "#include \"rhmpc_data.h\"\n#include <math.h>\n\n"]
+    for name, values in data.items():
+        parts.append(_c_array(name, values))
+    for name in _SPARSE:
+        ptr, col, val = _csr(getattr(qp, name))
+        parts += [_c_array(f"{name}_p", ptr, ctype="int"), _c_array(f"{name}_i", col, ctype="int"),
+                  _c_array(f"{name}_x", val)]
+    parts.append(_c_array("block_of_tick", qp.block_of_tick, ctype="int"))
+    (outdir / "rhmpc_data.c").write_text("".join(parts))
+    written.append("rhmpc_data.c")
+
+    osqp_dir = outdir / "osqp"
+    if osqp_dir.exists():
+        shutil.rmtree(osqp_dir)
+    with tempfile.TemporaryDirectory() as tmp:
+        solver = mpc._osqp  # the controller's own solver: same P, A, settings
+        solver.codegen(
+            str(Path(tmp) / "osqp"), parameters="vectors", extension_name=None,
+            force_rewrite=True, prefix=OSQP_PREFIX,
+        )
+        shutil.copytree(Path(tmp) / "osqp", osqp_dir)
+    for leftover in ("emosqp.c", "Makefile"):  # OSQP's example program (printf, main)
+        (osqp_dir / leftover).unlink(missing_ok=True)
+    written += sorted(str(p.relative_to(outdir)) for p in osqp_dir.rglob("*") if p.is_file())
+    return ExportInfo(outdir=outdir, key=key, files=tuple(written), notes=tuple(notes))

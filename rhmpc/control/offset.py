@@ -1,0 +1,62 @@
+"""Output offset of the linearised arm, measured each tick by forward kinematics.
+
+The MPC's output model is linear about the home posture, ``y = C x + y0``. Offset-free MPC
+(Muske & Badgwell, J. Process Control 12(5), 2002; Pannocchia & Rawlings, AIChE J. 49(2), 2003)
+adds a disturbance ``d`` to the output, ``y_k = C x_k + y0 + d``, held constant over the horizon.
+Here the disturbance is not estimated from measurements of ``y`` but computed exactly from the
+estimated joint state, since the output is a known function of it::
+
+    d = p(q0 + x̂_q) − (C x̂ + y0)
+
+so the predicted output starts on the true forward kinematics every tick. What is left is the
+change of the Jacobian over the horizon's motion (second order in the planned motion).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+
+
+class OutputOffset:
+    """``d(x̂) = p(q0 + x̂_q) − (C x̂ + y0)`` [m], one forward-kinematics call per evaluation.
+
+    Parameters
+    ----------
+    arm : robots.LinearArm
+        The linearised arm; ``arm.robot`` gives the forward kinematics.
+
+    Raises
+    ------
+    ValueError
+        If the arm does not carry its robot (``robots.linearize`` keeps it).
+    """
+
+    def __init__(self, arm) -> None:
+        robot = getattr(arm, "robot", None)
+        if robot is None:
+            raise ValueError(
+                "offset_correction needs the arm's robot for forward kinematics "
+                "(robots.linearize(robot) keeps it); set offset_correction = false otherwise"
+            )
+        self._model = robot.model
+        self._data = robot.create_data()  # our own work data: no sharing with other users
+        self._fid = robot.ee_frame_id
+        nq = arm.nx // 2
+        self._q0 = np.asarray(arm.q0, dtype=float).copy()
+        self._q = np.empty(nq)
+        self._nq = nq
+        self._C = np.ascontiguousarray(arm.C)
+        self._y0 = np.asarray(arm.y0, dtype=float).copy()
+        self._y = np.empty(3)
+
+    def __call__(self, x: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """The offset d (3,) [m] at the state ``x`` = [q − q0; q̇] (written to ``out`` if given)."""
+        q = np.add(self._q0, x[: self._nq], out=self._q)
+        pin.forwardKinematics(self._model, self._data, q)
+        p = pin.updateFramePlacement(self._model, self._data, self._fid).translation
+        lin = np.dot(self._C, x, out=self._y)
+        lin += self._y0
+        if out is None:
+            return p - lin
+        return np.subtract(p, lin, out=out)
