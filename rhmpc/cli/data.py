@@ -1,11 +1,12 @@
 """`rhmpc data`: list, show, export and plot heart-motion scenarios and recordings.
 
 ``rhmpc data list``                 the named scenarios with their statistics
-``rhmpc data show NAME``            p-p, RMS, heart-rate range, spectral peaks
+``rhmpc data show NAME``            p-p, RMS, heart-rate range, spectral peaks, predictability
 ``rhmpc data export NAME FILE``     write the motion (or a sensor's samples) to .csv/.npz
 ``rhmpc data plot NAME FILE.png``   position per axis over time and its PSD (Tuna Fig. 2)
 
-NAME is a scenario name or the path of a recording (.csv/.npz). Millimetres appear only here.
+NAME is a scenario name or the path of a recording (.csv/.npz/.mat; for .mat: ``--var``,
+``--rows``/``--cols``, ``--rate``, ``--units``). Millimetres appear only here.
 """
 
 from __future__ import annotations
