@@ -48,7 +48,10 @@ class RunConfig:
     scenario : str
         Named heart-motion scenario (``rhmpc data list``); ignored when ``data`` is given.
     data : str | None
-        A recording (CSV/NPZ, see ``sim.recordings``) to track instead of a scenario.
+        A recording (CSV/NPZ/MAT, see ``sim.recordings``) to track instead of a scenario.
+    data_read : dict
+        How to read it: ``load_recording`` keywords ``var``, ``rows``, ``cols``, ``rate`` [Hz],
+        ``units`` (MATLAB files).
     rr : str | None
         PhysioNet record (path without extension) whose beat annotations drive the heart phase.
     sensor : str
@@ -73,6 +76,7 @@ class RunConfig:
     robot: str = "phantom"
     scenario: str = "fixed-a2-top"
     data: str | None = None
+    data_read: dict = field(default_factory=dict)
     rr: str | None = None
     sensor: str = "sonomicrometry"
     sensor_settings: dict = field(default_factory=dict)
@@ -226,7 +230,7 @@ def heart_source(config: RunConfig, rng: np.random.Generator):
     from sim.heart import load_recording, make_scenario
 
     if config.data is not None:
-        recording = load_recording(config.data)
+        recording = load_recording(config.data, **config.data_read)
         source = _Shifted(recording, recording.t[0]) if recording.t[0] != 0 else recording
         return source, f"file:{Path(config.data).name}", recording.duration, recording
     overrides = {"record": config.rr} if config.rr else {}
@@ -292,9 +296,11 @@ def build_run(config: RunConfig, implementation: str = "python") -> Run:
         raise UsageError(f"implementation must be 'python' or 'c', got {implementation!r}")
     source, label, available, origin = heart_source(config, heart_rng)
     if config.data is not None and loop.duration > available:
+        digits = next((d for d in range(2, 10) if f"{available:.{d}f}" != f"{loop.duration:.{d}f}"),
+                      9)
         raise UsageError(
-            f"{config.data}: the recording lasts {available:.2f} s, the run asks for "
-            f"{loop.duration:.2f} s (set --duration)"
+            f"{config.data}: the recording lasts {available:.{digits}f} s, the run asks for "
+            f"{loop.duration:.{digits}f} s (set --duration)"
         )
     margin = (loop.horizon + 1) * loop.Ts
     stream = build_stream(config, source, origin, loop.duration + margin, sensor_rng)

@@ -6,6 +6,9 @@ This is the public entry point; the work is split over small modules:
   annotations, the synthetic RR generator;
 * :mod:`sim.motion` — the quasi-periodic motion model
   p(t) = p₀ + b(t) + (1 + κ cos(2π f_r t + ψ))·g(φ)⊙h(φ(t));
+* :mod:`sim.variability` — the physiological variability (HRV with RSA, beat-to-beat stroke and
+  timing, breath period and depth, drift, breathing–heartbeat coupling), seeded, switchable;
+* :mod:`sim.arrhythmia` — an annotated real rhythm with premature-beat strokes (arrhythmia-apb);
 * :mod:`sim.scenarios` — the named replicas of the papers' data sets and their calibration;
 * :mod:`sim.recordings` — CSV/NPZ recordings users bring, and export;
 * :mod:`sim.analysis` — peak-to-peak, RMS, spectra.
@@ -47,6 +50,7 @@ from sim.scenarios import (
     ScenarioSpec,
     make_scenario,
 )
+from sim.variability import VariabilitySettings
 
 __all__ = [
     "BEAT_SYMBOLS",
@@ -63,6 +67,7 @@ __all__ = [
     "ScenarioSpec",
     "StaircaseProfile",
     "SyntheticHeartMotion",
+    "VariabilitySettings",
     "beat_times_from_annotations",
     "beat_times_from_rr",
     "export_scenario",

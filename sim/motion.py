@@ -12,6 +12,10 @@ with
 * g(φ), a per-axis gain that varies from beat to beat (seeded, interpolated linearly in φ),
 * κ, the breathing–heartbeat amplitude coupling.
 
+The physiological variability of :mod:`sim.variability` enters through optional terms: a
+breathing phase φ_r(t) of varying period replacing f_r·t, per-breath depths d(φ_r) scaling b,
+per-beat timing offsets δ(φ) (h is evaluated at φ + δ), and a slow drift added to p.
+
 All vectors are in metres. Every term is evaluated vectorised, so a whole run (10⁵ samples)
 takes a few tens of milliseconds.
 """
@@ -22,6 +26,7 @@ from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
 import numpy as np
+from scipy.interpolate import PPoly
 
 from sim.rr import PhaseTrack
 
@@ -140,12 +145,28 @@ class SyntheticHeartMotion:
         p₀ [m].
     coupling_phase : float
         ψ_κ [rad].
+    breath_phase : PhaseTrack, optional
+        Breathing phase φ_r(t) [cycles] of a breathing with varying period; the breathing and
+        the coupling then use φ_r(t) instead of f_r·t (:mod:`sim.variability`).
+    breath_depths : ndarray, shape (n_breaths,), optional
+        Depth d_j of breaths ``first_breath`` …: b(t) is multiplied by d(φ_r), interpolated
+        like the beat gains (needs ``breath_phase``).
+    first_breath : int
+        Breath number of ``breath_depths[0]``.
+    beat_offsets : ndarray, shape (n_beats,), optional
+        Per-beat timing offset δ_i of the wall motion [cycles], indexed like ``beat_gains``:
+        the morphology is evaluated at φ + δ(φ).
+    drift : scipy.interpolate.PPoly, optional
+        Slow baseline drift [m], t → (dim,).
     """
 
     def __init__(self, phase: PhaseTrack, heart: np.ndarray, breathing: np.ndarray,
                  breathing_rate: float, coupling: float = 0.0,
                  beat_gains: np.ndarray | None = None, first_beat: int = 0,
-                 offset: np.ndarray | None = None, coupling_phase: float = 0.0) -> None:
+                 offset: np.ndarray | None = None, coupling_phase: float = 0.0, *,
+                 breath_phase: PhaseTrack | None = None,
+                 breath_depths: np.ndarray | None = None, first_breath: int = 0,
+                 beat_offsets: np.ndarray | None = None, drift: PPoly | None = None) -> None:
         self.phase = phase
         self.heart = np.atleast_2d(np.asarray(heart, dtype=complex))
         self.dim = self.heart.shape[0]
@@ -160,15 +181,30 @@ class SyntheticHeartMotion:
         self.beat_gains = np.asarray(beat_gains, dtype=float).reshape(-1, self.dim)
         self.first_beat = int(first_beat)
         self.offset = np.zeros(self.dim) if offset is None else np.asarray(offset, dtype=float)
+        self.breath_phase = breath_phase
+        self.breath_depths = None if breath_depths is None else np.asarray(breath_depths, float)
+        if self.breath_depths is not None and breath_phase is None:
+            raise ValueError("breath_depths need a breath_phase")
+        self.first_breath = int(first_breath)
+        self.beat_offsets = None if beat_offsets is None else np.asarray(beat_offsets, float)
+        self.drift = drift
         self._heart = _Series(self.heart)
         self._breath = _Series(self.breathing)
+
+    def _variations(self) -> dict:
+        return dict(breath_phase=self.breath_phase, breath_depths=self.breath_depths,
+                    first_breath=self.first_breath, beat_offsets=self.beat_offsets)
 
     def scaled(self, factor: float | np.ndarray) -> SyntheticHeartMotion:
         """The same motion with its displacement about p₀ multiplied by ``factor`` (per axis)."""
         f = np.broadcast_to(np.asarray(factor, dtype=float), (self.dim,))[:, None]
+        drift = None
+        if self.drift is not None:
+            drift = PPoly(self.drift.c * f[:, 0], self.drift.x, extrapolate=True)
         return SyntheticHeartMotion(self.phase, self.heart * f, self.breathing * f,
                                     self.breathing_rate, self.coupling, self.beat_gains,
-                                    self.first_beat, self.offset, self.coupling_phase)
+                                    self.first_beat, self.offset, self.coupling_phase,
+                                    drift=drift, **self._variations())
 
     def heartbeat(self, t: float | np.ndarray) -> np.ndarray:
         """The cardiac part (1 + κ cos(2π f_r t + ψ_κ))·g(φ)⊙h(φ(t)) [m], shape like position."""
@@ -179,31 +215,61 @@ class SyntheticHeartMotion:
     def breathing_motion(self, t: float | np.ndarray) -> np.ndarray:
         """The breathing part b(t) [m], shape like position."""
         ts, scalar = as_time_array(t)
-        out = self._breath(self.breathing_rate * ts)
+        out = self._breathing(ts)
         return out[0] if scalar else out
+
+    def _breath_cycles(self, ts: np.ndarray) -> np.ndarray:
+        if self.breath_phase is None:
+            return self.breathing_rate * ts
+        return self.breath_phase(ts)
+
+    def _breathing(self, ts: np.ndarray) -> np.ndarray:
+        cycles = self._breath_cycles(ts)
+        out = self._breath(cycles)
+        if self.breath_depths is not None:
+            out *= per_cycle(self.breath_depths, self.first_breath, cycles)
+        return out
 
     def _heartbeat(self, ts: np.ndarray) -> np.ndarray:
         phi = self.phase(ts)
+        if self.beat_offsets is not None:
+            phi = phi + per_cycle(self.beat_offsets, self.first_beat, phi)[:, 0]
         h = self._heart(phi)
-        n_beats = self.beat_gains.shape[0]
-        if n_beats > 1:
-            # Beat i's gain applies at mid-beat φ = i + ½, linear in φ in between, held
-            # beyond the first and last beats.
-            u = np.clip(phi - self.first_beat - 0.5, 0.0, n_beats - 1.0)
-            i = np.minimum(u.astype(np.int64), n_beats - 2)
-            w = (u - i)[:, None]
-            g = (1.0 - w) * self.beat_gains[i] + w * self.beat_gains[i + 1]
+        if self.beat_gains.shape[0] > 1:
+            g = per_cycle(self.beat_gains, self.first_beat, phi)
         else:
             g = self.beat_gains[0]
-        mod = 1.0 + self.coupling * np.cos(2 * np.pi * self.breathing_rate * ts
-                                           + self.coupling_phase)
+        if self.breath_phase is None:
+            arg = 2 * np.pi * self.breathing_rate * ts
+        else:
+            arg = 2 * np.pi * self.breath_phase(ts)
+        mod = 1.0 + self.coupling * np.cos(arg + self.coupling_phase)
         return mod[:, None] * g * h
 
     def position(self, t: float | np.ndarray) -> np.ndarray:
         """p(t) [m]: shape (dim,) for a float, (n, dim) for an array of n times."""
         ts, scalar = as_time_array(t)
-        out = self.offset + self._breath(self.breathing_rate * ts) + self._heartbeat(ts)
+        out = self.offset + self._breathing(ts) + self._heartbeat(ts)
+        if self.drift is not None:
+            out += self.drift(ts)
         return out[0] if scalar else out
+
+
+def per_cycle(values: np.ndarray, first: int, cycles: np.ndarray) -> np.ndarray:
+    """Per-cycle values v_i at cycle position ``cycles``: shape (n, k).
+
+    Cycle i's value applies at mid-cycle i + ½, linear in the cycle count in between and held
+    beyond the first and last cycles (``values`` (n_cycles,) or (n_cycles, k), cycle numbers
+    ``first`` … ``first + n_cycles − 1``).
+    """
+    v = np.asarray(values, dtype=float).reshape(len(values), -1)
+    n = v.shape[0]
+    if n == 1:
+        return np.broadcast_to(v[0], (cycles.shape[0], v.shape[1]))
+    u = np.clip(cycles - first - 0.5, 0.0, n - 1.0)
+    i = np.minimum(u.astype(np.int64), n - 2)
+    w = (u - i)[:, None]
+    return (1.0 - w) * v[i] + w * v[i + 1]
 
 
 class _Series:

@@ -1,4 +1,6 @@
-"""Recorded heart motion: load CSV/NPZ files users bring, and export any source to them.
+"""Recorded heart motion: load CSV/NPZ/MAT files users bring, and export any source to them.
+
+MATLAB ``.mat`` files (v5 and v7.3) are read by :mod:`sim.matfile`.
 
 CSV format
 ----------
@@ -249,8 +251,9 @@ def _read_npz(path: Path, units: str | None) -> RecordedMotion:
     return RecordedMotion(t, z * LENGTH_UNITS[unit], name=str(path))
 
 
-def load_recording(path: str | Path, units: str | None = None) -> RecordedMotion:
-    """Load a heart-motion recording (CSV or NPZ, see the module docstring).
+def load_recording(path: str | Path, units: str | None = None, var: str | None = None,
+                   rows=None, cols=None, rate: float | None = None) -> RecordedMotion:
+    """Load a heart-motion recording (CSV, NPZ, or MATLAB .mat: see :mod:`sim.matfile`).
 
     Parameters
     ----------
@@ -259,6 +262,9 @@ def load_recording(path: str | Path, units: str | None = None) -> RecordedMotion
     units : str, optional
         Length unit of the positions when the file does not state it (``"m"``, ``"mm"``,
         ``"um"``, ``"cm"``). A CSV without units is in millimetres.
+    var, rows, cols, rate : optional
+        For ``.mat`` files: the variable, its 0-based rows or columns holding the coordinates,
+        and the sample rate [Hz] when the file has no time vector (:func:`sim.matfile.load_mat`).
 
     Returns
     -------
@@ -276,11 +282,22 @@ def load_recording(path: str | Path, units: str | None = None) -> RecordedMotion
     if not path.is_file():
         raise RecordingError(f"{path}: not a file")
     suffix = path.suffix.lower()
+    if suffix == ".mat":
+        from sim.matfile import load_mat
+
+        return load_mat(path, var=var, rows=rows, cols=cols, rate=rate, units=units)
+    if var is not None or rows is not None or cols is not None or rate is not None:
+        raise RecordingError(f"{path}: --var, --rows, --cols and --rate apply to .mat files")
     if suffix in {".csv", ".txt"}:
-        return _read_csv(path, units)
-    if suffix == ".npz":
-        return _read_npz(path, units)
-    raise RecordingError(f"{path}: unsupported file type {path.suffix!r} (use .csv or .npz)")
+        rec = _read_csv(path, units)
+    elif suffix == ".npz":
+        rec = _read_npz(path, units)
+    else:
+        raise RecordingError(f"{path}: unsupported file type {path.suffix!r} "
+                             "(use .csv, .npz or .mat)")
+    if not np.any(np.all(np.isfinite(rec.z), axis=1)):
+        raise RecordingError(f"{path}: no complete sample (all positions missing)")
+    return rec
 
 
 def save_recording(path: str | Path, t: np.ndarray, z: np.ndarray,

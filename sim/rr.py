@@ -245,6 +245,25 @@ def beat_times_from_annotations(record_path: str | Path) -> np.ndarray:
     return samples / float(ann.fs)
 
 
+#: Symbols of premature (ectopic) beats: atrial (A), aberrated atrial (a), nodal (J), supra-
+#: ventricular (S), ventricular (V), fusion (F) and ventricular escape (E).
+PREMATURE_SYMBOLS: frozenset[str] = frozenset("AaJSVFE")
+
+
+def beats_from_annotations(record_path: str | Path) -> tuple[np.ndarray, np.ndarray]:
+    """Beat times [s] and a mask of premature beats (:data:`PREMATURE_SYMBOLS`) of a record."""
+    base = _record_base(record_path)
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", module=r"wfdb(\.|$)")
+        import wfdb
+
+        ann = wfdb.rdann(str(base), "atr")
+    symbols = [s for s in ann.symbol if s in BEAT_SYMBOLS]
+    keep = np.array([s in BEAT_SYMBOLS for s in ann.symbol], dtype=bool)
+    times = np.asarray(ann.sample)[keep] / float(ann.fs)
+    return times, np.array([s in PREMATURE_SYMBOLS for s in symbols], dtype=bool)
+
+
 def rr_from_annotations(record_path: str | Path) -> np.ndarray:
     """RR intervals RR_i = t_{i+1} − t_i [s] between the annotated beats of a record.
 

@@ -17,6 +17,11 @@ from pathlib import Path
 
 import numpy as np
 
+from sim.arrhythmia import (
+    SHARED_DATA,
+    premature_stroke,
+    record_beats,
+)
 from sim.motion import (
     EPICARDIAL_BUMPS,
     MITRAL_BUMPS,
@@ -32,6 +37,14 @@ from sim.rr import (
     beat_times_from_rr,
     constant_phase,
     staircase_phase,
+)
+from sim.variability import (
+    VariabilitySettings,
+    ar1,
+    breathing_phase,
+    drift_knots,
+    modulated_phase,
+    smooth_knots,
 )
 
 #: The seed used when :func:`make_scenario` is given no generator, so that a named replica is
@@ -66,6 +79,14 @@ class ScenarioSpec:
     reported : tuple of str
         Which of ``peak_to_peak``, ``rms``, ``heart_rate``, ``sensor_rate``, ``duration`` come
         from the paper (the rest are assumptions).
+    record : str or None
+        For ``heart="record"``: the PhysioNet record (relative to the shared data folder) whose
+        annotated beats drive the heart phase.
+    record_start : float
+        Time in the record where the scenario starts [s].
+    variable : bool
+        Whether the default is the physiological variability of :mod:`sim.variability`
+        (True) or the periodic replica (False).
     """
 
     name: str
@@ -78,6 +99,9 @@ class ScenarioSpec:
     heart_rate: float
     site: str
     reported: tuple[str, ...] = field(default=())
+    record: str | None = None
+    record_start: float = 0.0
+    variable: bool = True
 
 
 _SPECS: tuple[ScenarioSpec, ...] = (
@@ -110,7 +134,13 @@ _SPECS: tuple[ScenarioSpec, ...] = (
     ScenarioSpec(
         "mitral-1d", "Yuen et al. mitral annulus along its axis, 1-D: 20 mm travel, "
         "60 bpm (210 mm/s and 3.8 m/s² peaks at 76 bpm; replica)", 20e-3, None, 28.0, 40.0,
-        "constant", 1.0, "mitral", ("peak_to_peak",)),
+        "constant", 1.0, "mitral", ("peak_to_peak",), variable=False),
+    ScenarioSpec(
+        "arrhythmia-apb", "fixed-a2-top's motion driven by MIT-BIH record 100 (1035–1275 s: "
+        "10 of its 33 atrial premature beats), premature beats with a smaller stroke and the "
+        "pause after them (replica; real annotations, synthetic motion)", 8.39e-3, 3.55e-3,
+        257.0, 240.0, "record", 100.0 / 60.0, "top", ("peak_to_peak", "rms", "sensor_rate"),
+        record="mitdb-100/100", record_start=1035.0),
 )
 
 SPECS: dict[str, ScenarioSpec] = {s.name: s for s in _SPECS}
@@ -118,6 +148,9 @@ SPECS: dict[str, ScenarioSpec] = {s.name: s for s in _SPECS}
 #: Scenario names, the default first.
 SCENARIOS: tuple[str, ...] = ("fixed-a2-top",
                               *(s.name for s in _SPECS if s.name != "fixed-a2-top"))
+
+#: The named scenarios that need the shared real data (skipped where it is absent).
+NEEDS_DATA: tuple[str, ...] = tuple(s.name for s in _SPECS if s.record is not None)
 
 DEFAULT_SCENARIO = "fixed-a2-top"
 
@@ -174,7 +207,7 @@ class Scenario:
 OVERRIDES: tuple[str, ...] = (
     "duration", "sensor_rate", "heart_rate", "peak_to_peak", "rms", "rr", "rr_start",
     "beat_times", "record", "staircase", "breathing_rate", "coupling", "beat_gain_std",
-    "breathing",
+    "breathing", "variability",
 )
 
 
@@ -194,7 +227,14 @@ def make_scenario(name: str, rng: np.random.Generator | None = None, **overrides
         ``rr_start`` (time of the first beat [s], default 0), ``beat_times`` [s], ``record``
         (PhysioNet record path: its annotated beat times, shifted so the first beat is at
         ``rr_start``), ``peak_to_peak`` [m], ``rms`` [m or None], ``breathing_rate`` [Hz],
-        ``coupling`` [-], ``beat_gain_std`` [-], ``breathing`` (False removes it).
+        ``coupling`` [-], ``beat_gain_std`` [-], ``breathing`` (False removes it),
+        ``variability`` (:class:`~sim.variability.VariabilitySettings`, or ``"clean"`` for
+        the periodic replica; default ``VariabilitySettings()``: HRV, beat-to-beat stroke and
+        timing, breath period and depth, drift, coupling — except ``mitral-1d``, periodic by
+        default because Yuen et al.'s §III-D studies perturb that signal themselves: noise,
+        heart-rate steps, RR intervals). ``coupling`` and
+        ``beat_gain_std`` override the fields of the same name. Beat-time driven phases
+        (``rr``, ``beat_times``, ``record``) carry their own RR variability: no HRV is added.
 
     Returns
     -------
@@ -224,22 +264,49 @@ def make_scenario(name: str, rng: np.random.Generator | None = None, **overrides
     if not duration > 0 or not sensor_rate > 0:
         raise ValueError("duration and sensor_rate must be positive")
 
-    phase, beat_span = _phase_track(spec, overrides, rng, max(duration, nominal))
+    settings = _variability(spec, overrides)
+    horizon = max(duration, nominal)
+    breath = None
+    if not settings.is_clean:
+        breath = breathing_phase(rng, float(overrides.get("breathing_rate", 1.0 / 6.0)),
+                                 horizon, settings.breath_period_cv)
+    phase, beat_span = _phase_track(spec, overrides, rng, horizon, settings, breath)
     if beat_span is not None and "duration" not in overrides:
         duration = min(nominal, beat_span)
 
-    shape = _shape(spec, overrides, rng, phase, max(duration, nominal))
+    shape = _shape(spec, overrides, rng, phase, horizon, settings, breath)
     calib_t = np.arange(round(nominal * spec.sensor_rate) + 1) / spec.sensor_rate
     source = calibrate(shape, calib_t, spec.peak_to_peak, spec.rms)
     described = spec.description + (" [RR-driven]" if beat_span is not None else "")
     return Scenario(name, source, sensor_rate, duration, described, spec)
 
 
+def _variability(spec: ScenarioSpec, overrides: dict) -> VariabilitySettings:
+    """The variability settings with the ``coupling``/``beat_gain_std`` overrides applied."""
+    value = overrides.get("variability",
+                          VariabilitySettings() if spec.variable else "clean")
+    if isinstance(value, str):
+        if value != "clean":
+            raise ValueError(f"variability must be a VariabilitySettings or 'clean', got {value!r}")
+        value = VariabilitySettings.clean()
+    if not isinstance(value, VariabilitySettings):
+        raise ValueError(f"variability must be a VariabilitySettings or 'clean', got {value!r}")
+    if spec.site == "mitral":
+        value = replace(value, coupling=0.0)
+    changes = {k: float(overrides[k]) for k in ("coupling", "beat_gain_std") if k in overrides}
+    return replace(value, **changes)
+
+
 def _phase_track(spec: ScenarioSpec, overrides: dict, rng: np.random.Generator,
-                 horizon: float) -> tuple[PhaseTrack, float | None]:
+                 horizon: float, settings: VariabilitySettings,
+                 breath: PhaseTrack | None) -> tuple[PhaseTrack, float | None]:
     """Heart phase for the scenario and, if driven by beat times, the time they span [s]."""
     start = float(overrides.get("rr_start", 0.0))
     beats = None
+    if spec.heart == "record" and not {"beat_times", "rr", "record"} & set(overrides):
+        times, _ = _spec_beats(spec)
+        track = PhaseTrack.from_beat_times(times)
+        return track, float(times[-1] - max(times[0], 0.0))
     if "beat_times" in overrides:
         beats = np.asarray(overrides["beat_times"], dtype=float)
     elif "rr" in overrides:
@@ -251,21 +318,26 @@ def _phase_track(spec: ScenarioSpec, overrides: dict, rng: np.random.Generator,
         track = PhaseTrack.from_beat_times(beats)
         return track, float(beats[-1] - max(beats[0], 0.0))
     phase0 = float(rng.random())
-    if "heart_rate" in overrides or spec.heart == "constant":
+    constant = "heart_rate" in overrides or spec.heart == "constant"
+    if constant:
         rate = float(spec.heart_rate)
         if not rate > 0:
             raise ValueError("heart_rate must be positive [Hz]")
-        return constant_phase(rate, phase0), None
-    profile = overrides.get("staircase", StaircaseProfile())
-    return staircase_phase(profile, horizon, phase0), None
+        knots = (np.array([0.0, 1.0]), np.array([rate, rate]))
+    else:
+        knots = overrides.get("staircase", StaircaseProfile()).knots(horizon)
+    if settings.hrv_cv > 0 and breath is not None:
+        return modulated_phase(rng, *knots, horizon, settings, breath, phase0), None
+    if constant:
+        return constant_phase(float(knots[1][0]), phase0), None
+    return staircase_phase(overrides.get("staircase", StaircaseProfile()), horizon, phase0), None
 
 
 def _shape(spec: ScenarioSpec, overrides: dict, rng: np.random.Generator, phase: PhaseTrack,
-           horizon: float) -> SyntheticHeartMotion:
+           horizon: float, settings: VariabilitySettings,
+           breath: PhaseTrack | None) -> SyntheticHeartMotion:
     """The uncalibrated motion for ``spec`` (unit-less shape, scaled later)."""
     breathing_rate = float(overrides.get("breathing_rate", 1.0 / 6.0))
-    coupling = float(overrides.get("coupling", 0.08 if spec.site != "mitral" else 0.0))
-    gain_std = float(overrides.get("beat_gain_std", 0.03))
     with_breathing = bool(overrides.get("breathing", spec.site != "mitral"))
     if spec.site == "mitral":
         heart = fourier_from_bumps(MITRAL_BUMPS, _MITRAL_HARMONICS)[None, :]
@@ -287,9 +359,65 @@ def _shape(spec: ScenarioSpec, overrides: dict, rng: np.random.Generator, phase:
             breathing = np.zeros_like(breathing)
     first = int(np.floor(float(phase(-5.0))))
     last = int(np.ceil(float(phase(horizon + 5.0))))
-    gains = draw_beat_gains(rng, last - first + 1, heart.shape[0], gain_std)
-    return SyntheticHeartMotion(phase, heart, breathing, breathing_rate, coupling, gains, first,
-                                coupling_phase=2 * np.pi * rng.random())
+    if spec.heart == "record" and not {"beat_times", "rr", "record"} & set(overrides):
+        times, premature = _spec_beats(spec)
+        stroke = premature_stroke(times, premature)
+        motion = (_shape_clean if breath is None else _variable_shape)(
+            rng, phase, heart, breathing, breathing_rate, horizon, settings, breath, first,
+            last - first + 1)
+        beat = np.arange(first, last + 1)
+        factor = stroke[np.clip(beat, 0, stroke.size - 1)][:, None]
+        return SyntheticHeartMotion(
+            phase, motion.heart, motion.breathing, breathing_rate, motion.coupling,
+            motion.beat_gains * factor, first, coupling_phase=motion.coupling_phase,
+            drift=motion.drift, **motion._variations())
+    if breath is None:  # the clean replica, drawn exactly as before the variability existed
+        return _shape_clean(rng, phase, heart, breathing, breathing_rate, horizon, settings,
+                            breath, first, last - first + 1)
+    return _variable_shape(rng, phase, heart, breathing, breathing_rate, horizon, settings,
+                           breath, first, last - first + 1)
+
+
+def _shape_clean(rng: np.random.Generator, phase: PhaseTrack, heart: np.ndarray,
+                 breathing: np.ndarray, breathing_rate: float, horizon: float,
+                 settings: VariabilitySettings, breath: PhaseTrack | None, first: int,
+                 n_beats: int) -> SyntheticHeartMotion:
+    """The periodic shape (independent beat gains, coupling at the mean breathing rate)."""
+    gains = draw_beat_gains(rng, n_beats, heart.shape[0], settings.beat_gain_std)
+    return SyntheticHeartMotion(phase, heart, breathing, breathing_rate, settings.coupling,
+                                gains, first, coupling_phase=2 * np.pi * rng.random())
+
+
+def _variable_shape(rng: np.random.Generator, phase: PhaseTrack, heart: np.ndarray,
+                    breathing: np.ndarray, breathing_rate: float, horizon: float,
+                    settings: VariabilitySettings, breath: PhaseTrack, first: int,
+                    n_beats: int) -> SyntheticHeartMotion:
+    """The shape with the mechanisms of :mod:`sim.variability` (seeded by ``rng``)."""
+    dim = heart.shape[0]
+    rho = settings.beat_gain_correlation
+    gains = 1.0 + ar1(rng, n_beats, settings.beat_gain_std, rho, dim)
+    offsets = ar1(rng, n_beats, settings.beat_timing_std, rho)[:, 0]
+    first_breath = int(np.floor(float(breath(-5.0))))
+    n_breaths = int(np.ceil(float(breath(horizon + 5.0)))) - first_breath + 1
+    depths = 1.0 + settings.breath_depth_cv * np.clip(rng.standard_normal(n_breaths), -2.5, 2.5)
+    drift = None
+    if settings.drift_std > 0:
+        scale = settings.drift_std * max(_range_of(c) for c in heart)
+        drift = smooth_knots(*drift_knots(rng, horizon, dim, scale, settings.drift_cutoff))
+    return SyntheticHeartMotion(
+        phase, heart, breathing, breathing_rate, settings.coupling, gains, first,
+        coupling_phase=2 * np.pi * rng.random(),
+        breath_phase=breath if settings.coupling_follows_breath
+        or settings.breath_period_cv > 0 or settings.breath_depth_cv > 0 else None,
+        breath_depths=depths if settings.breath_depth_cv > 0 else None,
+        first_breath=first_breath,
+        beat_offsets=offsets if settings.beat_timing_std > 0 else None, drift=drift)
+
+
+def _spec_beats(spec: ScenarioSpec) -> tuple[np.ndarray, np.ndarray]:
+    """Beat times [s] from the spec's record (``record_start`` at t = 0) and premature mask."""
+    return record_beats(SHARED_DATA / str(spec.record), spec.record_start, spec.duration,
+                        spec.name)
 
 
 def _range_of(coef: np.ndarray) -> float:

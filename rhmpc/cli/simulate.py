@@ -9,6 +9,7 @@ from pathlib import Path
 
 from rhmpc.errors import UsageError
 from rhmpc.experiment import RunConfig, load_config, run_experiment
+from sim.matfile import parse_indices
 
 #: Default run length [s] and settling window [s] of ``rhmpc simulate``.
 DEFAULT_DURATION = 30.0
@@ -50,7 +51,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     src = p.add_mutually_exclusive_group()
     src.add_argument("--scenario", help="heart-motion scenario (rhmpc data list); default "
                      "fixed-a2-top")
-    src.add_argument("--data", metavar="FILE", help="a recording (CSV t,x,y,z in s and mm, or NPZ)")
+    src.add_argument("--data", metavar="FILE", help="a recording (CSV t,x,y,z in s and mm, NPZ, "
+                     "or MATLAB .mat v5/v7.3); runs the whole recording unless --duration")
+    add_recording_options(p)
     p.add_argument("--seed", type=int, help="seed of every random draw (default 0)")
     p.add_argument("--controller", choices=("python", "c"), default="python",
                    help="'c': the compiled controller of `rhmpc export` in the loop (built once, "
@@ -62,6 +65,27 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--trace", metavar="FILE.npz", help="write every tick to an NPZ file as the "
                    "run goes (chunked; read it with sim.trace.read_trace)")
     p.set_defaults(func=run)
+
+
+def add_recording_options(p: argparse.ArgumentParser) -> None:
+    """``--var``, ``--rows``, ``--cols``, ``--rate``, ``--units``: how to read a recording."""
+    g = p.add_argument_group("reading a recording (.mat)")
+    g.add_argument("--var", help="MATLAB variable holding the positions")
+    g.add_argument("--rows", type=parse_indices, help="0-based rows holding x,y,z (samples along "
+                   "columns), e.g. 0,1,2")
+    g.add_argument("--cols", type=parse_indices,
+                   help="0-based columns holding x,y,z (samples along rows)")
+    g.add_argument("--rate", type=float, dest="data_rate", metavar="HZ",
+                   help="sample rate when the file has no time vector [Hz]")
+    g.add_argument("--units", choices=("mm", "m", "um", "cm"),
+                   help="length unit when the file does not state it (default mm)")
+
+
+
+def recording_options(args: argparse.Namespace) -> dict:
+    """The ``load_recording`` keywords given on the command line."""
+    keys = {"var": "var", "rows": "rows", "cols": "cols", "data_rate": "rate", "units": "units"}
+    return {v: getattr(args, k) for k, v in keys.items() if getattr(args, k, None) is not None}
 
 
 def parse_value(text: str):
@@ -93,6 +117,16 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
             raise UsageError(f"{args.data}: no such file")
         if args.sensor is None:
             changes["sensor"] = "recorded"
+        changes["data_read"] = recording_options(args)
+        if args.duration is None and not args.config:  # default: the whole recording
+            from sim.heart import load_recording
+
+            whole = load_recording(args.data, **changes["data_read"]).duration
+            changes["loop.duration"] = whole
+            changes["loop.settling"] = min(DEFAULT_SETTLING, whole / 3)
+    elif any(getattr(args, k, None) is not None
+             for k in ("var", "rows", "cols", "data_rate", "units")):
+        raise UsageError("--var, --rows, --cols, --rate and --units need --data FILE")
     if args.duration is not None:
         changes["loop.duration"] = args.duration
         if args.settling is None and not args.config:

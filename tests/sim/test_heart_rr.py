@@ -97,7 +97,7 @@ def test_rr_driven_motion_repeats_with_each_beat() -> None:
     """Beat-by-beat time warping: same phase within a beat → same cardiac displacement."""
     rr = np.array([0.8, 0.6, 1.0, 0.7, 0.9, 0.75])
     sc = make_scenario("fixed-a2-top", rr=rr, breathing=False, coupling=0.0,
-                       beat_gain_std=0.0)
+                       beat_gain_std=0.0, variability="clean")
     tb = beat_times_from_rr(rr)
     ph = sc.source.phase
     np.testing.assert_allclose(ph(tb), np.arange(tb.size), atol=1e-12)

@@ -92,7 +92,9 @@ def test_malformed_csv_errors_name_file_line_and_problem(tmp_path: Path, kind: s
 def test_file_level_errors(tmp_path: Path) -> None:
     with pytest.raises(RecordingError, match="no such file"):
         load_recording(tmp_path / "absent.csv")
-    with pytest.raises(RecordingError, match=r"unsupported file type '\.mat'"):
+    with pytest.raises(RecordingError, match=r"unsupported file type '\.xlsx'"):
+        load_recording(_write(tmp_path, GOOD, "rec.xlsx"))
+    with pytest.raises(RecordingError, match="not a readable MATLAB file"):
         load_recording(_write(tmp_path, GOOD, "rec.mat"))
     with pytest.raises(RecordingError, match="not a file"):
         load_recording(tmp_path)

@@ -1,0 +1,78 @@
+"""Recordings on the command line: MATLAB flags, default duration, refusals (one line, exit 2)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.io
+
+from rhmpc.cli import main
+from rhmpc.cli.simulate import config_from_args, register
+
+T = np.arange(0, 20, 0.01)
+X = np.vstack([4 * np.sin(2 * np.pi * 1.3 * T), 2 * np.sin(2 * np.pi * 2.6 * T),
+               3 * np.cos(2 * np.pi * 1.3 * T)])
+
+
+def _args(*argv: str) -> argparse.Namespace:
+    parser = argparse.ArgumentParser()
+    register(parser.add_subparsers())
+    return parser.parse_args(["simulate", *argv])
+
+
+def test_default_duration_is_the_recording(tmp_path: Path) -> None:
+    path = tmp_path / "rec.mat"
+    scipy.io.savemat(path, {"X": X})
+    config = config_from_args(_args("--data", str(path), "--var", "X", "--rate", "100"))
+    assert config.loop.duration == pytest.approx(19.99)
+    assert config.data_read == {"var": "X", "rate": 100.0}
+    csv = tmp_path / "rec.csv"
+    t = np.arange(0, 20, 1 / 400)  # spans 19.9975 s
+    csv.write_text("t,x,y,z\n" + "".join(f"{ti:.4f},1,2,3\n" for ti in t))
+    assert config_from_args(_args("--data", str(csv))).loop.duration == pytest.approx(19.9975)
+
+
+def test_too_long_request_names_both_lengths(tmp_path: Path,
+                                             capsys: pytest.CaptureFixture[str]) -> None:
+    csv = tmp_path / "rec.csv"
+    t = np.arange(0, 20, 1 / 400)
+    csv.write_text("t,x,y,z\n" + "".join(f"{ti:.4f},1,2,3\n" for ti in t))
+    assert main(["simulate", "--data", str(csv), "--duration", "20"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert "lasts 19.99" in err and "asks for 20.00" in err  # digits enough to differ
+
+
+@pytest.mark.parametrize(("variables", "flags", "message"), [
+    ({"Y": X}, ["--var", "X", "--rate", "100"], "no numeric variable 'X'"),
+    ({"X": np.zeros((3, 3))}, ["--var", "X", "--rate", "100"], "ambiguous"),
+    ({"X": X, "t": T[::-1]}, ["--var", "X"], "does not increase"),
+    ({"X": np.full((3, 40), np.nan)}, ["--var", "X", "--rate", "100"], "all NaN"),
+])
+def test_simulate_refuses_bad_mat(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                  variables: dict, flags: list, message: str) -> None:
+    path = tmp_path / "bad.mat"
+    scipy.io.savemat(path, variables)
+    assert main(["simulate", "--data", str(path), *flags]) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and len(err.splitlines()) == 1
+
+
+def test_data_show_and_export_a_mat_file(tmp_path: Path,
+                                         capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "rec.mat"
+    scipy.io.savemat(path, {"M": X.T * 1e-3, "units": "m"})
+    assert main(["data", "show", str(path), "--cols", "0,1,2", "--rate", "100", "--json"]) == 0
+    row = json.loads(capsys.readouterr().out)
+    assert row["dim"] == 3 and row["sensor_rate_hz"] == pytest.approx(100.0)
+    assert row["peak_to_peak_mm"] == pytest.approx(8.0, rel=0.01)
+    assert 0 <= row["predictability"] < 0.2  # two sines: a line spectrum
+    out = tmp_path / "rec.csv"
+    assert main(["data", "export", str(path), str(out), "--rate", "100"]) == 0
+    assert "wrote 2000 samples" in capsys.readouterr().out
+    assert main(["simulate", "--var", "X"]) == 2
+    assert "--data" in capsys.readouterr().err
