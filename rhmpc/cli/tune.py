@@ -123,6 +123,8 @@ def sweep(args: argparse.Namespace, spec_path: Path) -> int:
     if todo:
         outcome = _execute(args, spec, todo, results_path, run_sweep, process_pool,
                            ResultsWriter)
+        print(f"rhmpc tune: {outcome.written} evaluation(s) in {outcome.elapsed_s:.1f} s = "
+              f"{outcome.evaluations_per_minute:.1f} evaluations per minute", file=log)
     code = report_records(args, read_results(results_path).records, spec.objective, points,
                           str(results_path), title=f"sweep '{spec.name}'")
     if outcome is not None and outcome.interrupted:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import multiprocessing
 import signal
+import time
 from collections import deque
 from collections.abc import Callable, Iterable
 from concurrent.futures import (
@@ -43,6 +44,8 @@ class SweepOutcome:
         Stopped by ``KeyboardInterrupt`` (the unfinished ones are left for a resume).
     pool_restarts : int
         Times a broken executor was replaced.
+    elapsed_s : float
+        Wall time of the sweep, from the first submission to the last result [s].
     records : list[dict]
         The records written, in completion order.
     """
@@ -52,11 +55,17 @@ class SweepOutcome:
     failed: int = 0
     interrupted: bool = False
     pool_restarts: int = 0
+    elapsed_s: float = 0.0
     records: list[dict] = field(default_factory=list)
 
     @property
     def written(self) -> int:
         return self.ok + self.failed
+
+    @property
+    def evaluations_per_minute(self) -> float:
+        """Throughput ``60 · written / elapsed_s`` [1/min] (0 before anything was written)."""
+        return 60.0 * self.written / self.elapsed_s if self.elapsed_s > 0 else 0.0
 
 
 def pending(tasks: Iterable[Task], results: ResultsFile, retry_failed: bool = False
@@ -150,6 +159,7 @@ def run_sweep(
     inflight: dict[Future, Task] = {}
     attempts: dict[str, int] = {}
     window = max(1, int(window))
+    start = time.perf_counter()
 
     def finish(record: dict) -> None:
         writer.append(record)
@@ -222,6 +232,8 @@ def run_sweep(
             outcome.ok += record.get("status") == "ok"
             outcome.failed += record.get("status") != "ok"
         _stop(executor, inflight)
+        outcome.elapsed_s = time.perf_counter() - start
         return outcome
     executor.shutdown(wait=True)
+    outcome.elapsed_s = time.perf_counter() - start
     return outcome

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from pathlib import Path
 
 import pytest
@@ -37,7 +38,10 @@ def test_local_pool_report_and_best_toml(tmp_path: Path, capsys: pytest.CaptureF
     best = tmp_path / "best.toml"
     assert main(["tune", str(spec), "--jobs", "2", "--best-toml", str(best),
                  "--plot", str(tmp_path / "tune.png")]) == 0
-    out = capsys.readouterr().out
+    captured = capsys.readouterr()
+    out = captured.out
+    assert re.search(r"2 evaluation\(s\) in \d+\.\d s = \d+\.\d evaluations per minute",
+                     captured.err)
     results = tmp_path / "tiny.results.jsonl"
     records = read_results(results).records
     assert len(records) == 2 and all(r["status"] == "ok" for r in records)

@@ -83,6 +83,8 @@ def test_interrupt_then_resume_gives_the_union(tmp_path: Path) -> None:
     with ResultsWriter(results) as w:
         out = run_sweep(todo, w, threads, window=2, evaluate=fake_evaluate)
     assert not out.interrupted and out.written == len(todo)
+    assert out.elapsed_s > 0  # throughput as `rhmpc tune` prints it
+    assert out.evaluations_per_minute == pytest.approx(60 * len(todo) / out.elapsed_s, rel=1e-12)
     final = keys_in(results)
     assert Counter(final) == Counter(t.key for t in all_tasks)  # the union, no duplicates
     # a third run has nothing to do
