@@ -101,6 +101,13 @@ def test_guard_clips_and_counts_a_diverging_forecast(name):
     assert np.isfinite(type(p)._predict(p, 3)).all()
 
 
+#: Relative tolerance of the m-vs-mm comparison. The AR fits solve normal equations of a smooth
+#: signal's autocorrelation (condition number ≈ 1e10 here), so the rounding of the ×1000 scale
+#: comes back amplified: measured up to 1.3e-6 for ``ar``/``fading-ar`` (on this machine's
+#: BLAS), ≤ 2e-9 for the others (1e-6 kept). Margin ×7.7 on the measured value.
+SCALE_RTOL = {"ar": 1e-5, "fading-ar": 1e-5}
+
+
 @pytest.mark.parametrize("name", NAMES)
 def test_same_forecasts_in_metres_and_millimetres_without_unit(name):
     dt = 1 / 100
@@ -114,7 +121,8 @@ def test_same_forecasts_in_metres_and_millimetres_without_unit(name):
         p_mm.update(1e3 * z[k])
         if k % 37 == 0:
             np.testing.assert_allclose(
-                p_mm.predict(6), 1e3 * p_m.predict(6), rtol=1e-6, atol=1e-9 * 1e3
+                p_mm.predict(6), 1e3 * p_m.predict(6), rtol=SCALE_RTOL.get(name, 1e-6),
+                atol=1e-9 * 1e3,
             )
     if hasattr(p_m.settings, "unit"):
         assert (p_m.unit, p_mm.unit) == (1.0, 1e-3)
