@@ -102,7 +102,7 @@ def test_guard_clips_and_counts_a_diverging_forecast(name):
 
 
 #: Relative tolerance of the m-vs-mm comparison. The AR fits solve normal equations of a smooth
-#: signal's autocorrelation (condition number ≈ 1e10 here), so the rounding of the ×1000 scale
+#: signal's autocorrelation, which are ill-conditioned, so the rounding of the ×1000 scale
 #: comes back amplified: measured up to 1.3e-6 for ``ar``/``fading-ar`` (on this machine's
 #: BLAS), ≤ 2e-9 for the others (1e-6 kept). Margin ×7.7 on the measured value.
 SCALE_RTOL = {"ar": 1e-5, "fading-ar": 1e-5}
