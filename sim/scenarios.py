@@ -152,6 +152,19 @@ SCENARIOS: tuple[str, ...] = ("fixed-a2-top",
 #: The named scenarios that need the shared real data (skipped where it is absent).
 NEEDS_DATA: tuple[str, ...] = tuple(s.name for s in _SPECS if s.record is not None)
 
+
+def missing_data(name: str) -> Path | None:
+    """The annotation file scenario ``name`` needs and cannot find, or ``None`` if it can run."""
+    if name not in NEEDS_DATA:
+        return None
+    path = (SHARED_DATA / str(SPECS[name].record)).with_suffix(".atr")
+    return None if path.is_file() else path
+
+
+def available_scenarios() -> tuple[str, ...]:
+    """The named scenarios that can run here (those needing absent shared data left out)."""
+    return tuple(name for name in SCENARIOS if missing_data(name) is None)
+
 DEFAULT_SCENARIO = "fixed-a2-top"
 
 #: Per-site geometry: heartbeat axis weights (x, y, z), breathing direction (x, y, z), the

@@ -21,7 +21,6 @@ import numpy as np
 
 from rhmpc.errors import UsageError
 from sim.analysis import fill_gaps, motion_stats, predictability, psd
-from sim.arrhythmia import SHARED_DATA
 from sim.heart import (
     DEFAULT_SCENARIO,
     SCENARIOS,
@@ -33,7 +32,7 @@ from sim.heart import (
 from sim.matfile import parse_indices
 from sim.motion import MotionSource
 from sim.recordings import export_source
-from sim.scenarios import DEFAULT_SEED, NEEDS_DATA
+from sim.scenarios import DEFAULT_SEED, missing_data
 from sim.sensors import SENSORS, sensor_from_name
 
 
@@ -161,10 +160,8 @@ def _stats_row(target: _Target) -> dict:
 def _list(args: argparse.Namespace) -> int:
     rows = []
     for name in SCENARIOS:
-        if name in NEEDS_DATA and not (SHARED_DATA / str(SPECS[name].record)).with_suffix(
-                ".atr").is_file():
-            print(f"# {name}: skipped, needs {SHARED_DATA / str(SPECS[name].record)}.atr",
-                  file=sys.stderr)
+        if (missing := missing_data(name)) is not None:
+            print(f"# {name}: skipped, needs {missing}", file=sys.stderr)
             continue
         row = _stats_row(_target(name, args))
         spec = SPECS[name]

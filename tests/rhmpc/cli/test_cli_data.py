@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from rhmpc.cli import main
-from sim.heart import SCENARIOS, load_recording
+from sim.heart import load_recording
+from sim.scenarios import available_scenarios
 
 DATA = Path(__file__).resolve().parents[3] / ".." / "shared" / "data"
 
@@ -17,7 +18,7 @@ DATA = Path(__file__).resolve().parents[3] / ".." / "shared" / "data"
 def test_list_json(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["data", "list", "--json", "--duration", "40"]) == 0
     rows = json.loads(capsys.readouterr().out)
-    assert [r["name"] for r in rows] == list(SCENARIOS)
+    assert [r["name"] for r in rows] == list(available_scenarios())
     a2 = rows[0]
     assert a2["target_peak_to_peak_mm"] == 8.39 and a2["target_rms_mm"] == 3.55
     assert a2["rms_mm"] == pytest.approx(3.55, rel=0.03)
@@ -31,7 +32,7 @@ def test_list_json(capsys: pytest.CaptureFixture[str]) -> None:
 def test_list_table(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["data", "list", "--duration", "10"]) == 0
     out = capsys.readouterr().out
-    for name in SCENARIOS:
+    for name in available_scenarios():  # arrhythmia-apb only where ../shared/data is
         assert name in out
     assert "p-p" in out and "target" in out
 
@@ -121,3 +122,19 @@ def test_malformed_file_is_reported(tmp_path: Path, capsys: pytest.CaptureFixtur
     assert main(["data", "show", str(bad)]) == 2
     err = capsys.readouterr().err
     assert "bad.csv, line 3: expected 4 fields" in err
+
+
+def test_list_without_the_shared_data(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """Where ../shared/data is absent (a clean clone in CI), arrhythmia-apb is skipped with a
+    note, never an error."""
+    import sim.scenarios
+
+    monkeypatch.setattr(sim.scenarios, "SHARED_DATA", tmp_path)
+    assert sim.scenarios.missing_data("arrhythmia-apb") == tmp_path / "mitdb-100" / "100.atr"
+    assert sim.scenarios.missing_data("fixed-a2-top") is None
+    assert "arrhythmia-apb" not in available_scenarios()
+    assert main(["data", "list", "--json", "--duration", "5"]) == 0
+    captured = capsys.readouterr()
+    assert "arrhythmia-apb" not in captured.out
+    assert "# arrhythmia-apb: skipped, needs" in captured.err
