@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from rhmpc.errors import UsageError
-from rhmpc.experiment import RunConfig, load_config, run_experiment
+from rhmpc.experiment import RunConfig, check_sensor, load_config, run_experiment
 from sim.matfile import parse_indices
 
 #: Default run length [s] and settling window [s] of ``rhmpc simulate``.
@@ -24,8 +24,10 @@ def add_run_options(
     """Options shared by ``simulate`` and ``compare`` (``duration``/``settling``: for the help)."""
     p.add_argument("--config", metavar="FILE.toml", help="every setting of the run (TOML)")
     p.add_argument("--robot", help="robot name (rhmpc robots); default phantom")
-    p.add_argument("--sensor", help="sonomicrometry (default), ultrasound, ideal; 'recorded' "
-                   "uses a --data file's samples as they are")
+    p.add_argument("--sensor", help="sonomicrometry (default; the instrument from its "
+                   "physics), white (additive white noise), ultrasound, ideal; 'recorded' uses a "
+                   "--data file's samples as they are. Settings: --set sensor_settings.KEY=VALUE "
+                   "(e.g. playback=\"offline\", noise=5e-5 for white, crystals=6)")
     p.add_argument("--duration", type=float,
                    help=f"simulated seconds (default {duration:g})")
     p.add_argument("--settling", type=float,
@@ -138,7 +140,9 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
         if not sep or not key:
             raise UsageError(f"--set {item!r}: expected SECTION.KEY=VALUE")
         changes[key.strip()] = parse_value(value.strip())
-    return config.replace(**changes)
+    config = config.replace(**changes)
+    check_sensor(config)
+    return config
 
 
 def run(args: argparse.Namespace) -> int:
