@@ -7,6 +7,7 @@ import json
 import sys
 from pathlib import Path
 
+from rhmpc.cli.presets import add_preset_option, apply_preset
 from rhmpc.errors import UsageError
 from rhmpc.experiment import RunConfig, check_sensor, load_config, run_experiment
 from sim.matfile import parse_indices
@@ -37,6 +38,7 @@ def add_run_options(
                    "noise-free motion")
     p.add_argument("--rr", metavar="RECORD", help="PhysioNet record (path without extension) "
                    "whose beat annotations drive the heart phase")
+    add_preset_option(p)
     p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
                    help="override one setting, e.g. --set mpc.effort_weight=1e-3 (repeatable)")
 
@@ -101,12 +103,13 @@ def parse_value(text: str):
 
 
 def config_from_args(args: argparse.Namespace) -> RunConfig:
-    """The run's settings: defaults < --config file < explicit options < --set overrides."""
+    """The run's settings: defaults < --config file < --preset < explicit options < --set."""
     if args.config:
         config = load_config(args.config)
     else:
         config = RunConfig().replace(**{"loop.duration": DEFAULT_DURATION,
                                         "loop.settling": DEFAULT_SETTLING})
+    config = apply_preset(config, getattr(args, "preset", None))
     changes: dict = {}
     for name in ("predictor", "scenario", "data", "seed", "robot", "sensor", "rr"):
         value = getattr(args, name, None)
