@@ -70,7 +70,7 @@ def paper_table(docs: Sequence[dict], predictors: Sequence[str],
     Cells of predictors or scenarios that were not run show ``-``; ours is the mean over seeds.
     """
     cols = [s for s in COLUMNS if s in scenarios]
-    width = 22
+    width = 25
     out: list[str] = []
     for (table, metric), rows in TUNA2013.items():
         out += ["", f"{_TITLES[table]}: {_METRICS[metric]} — paper / ours / ours÷paper",
