@@ -55,18 +55,24 @@ class RunConfig:
     rr : str | None
         PhysioNet record (path without extension) whose beat annotations drive the heart phase.
     sensor : str
-        Sensor model name, or ``"recorded"`` to use a recording's samples as they are.
+        Sensor model name (``sim.sensors.SENSORS``: the physical ``sonomicrometry`` by
+        default, ``white``, ``ultrasound``, ``ideal``), or ``"recorded"`` to use a recording's
+        samples as they are.
     sensor_settings : dict
-        Keyword settings of the sensor model (SI units).
+        Keyword settings of the sensor model (SI units, ``sim.sensors.sensor_from_name``),
+        among them ``playback``: how the samples reach the 2-kHz loop, ``"linear"`` (causal
+        interpolation one raw period late, default), ``"hold"`` (causal zero-order hold) or
+        ``"offline"`` (the non-causal interpolation of a
+        prerecorded file, Tuna et al.'s protocol).
     predictor : str
         Predictor name (``predictors.PREDICTORS``), or ``"exact"`` for the true future.
     predictor_settings : dict
         Keyword settings passed to ``predictors.make_predictor``.
     ground_truth : str
         What the error is measured against and what ``exact`` reads: ``"recorded"`` — the
-        sensor's samples as streamed to the controller (Tuna et al.'s protocol: the prerecorded
-        data are the target, noise and echo outliers included) — or ``"true"`` — the noise-free
-        motion.
+        sensor's samples as recorded, linearly interpolated at the ticks (Tuna et al.'s
+        protocol: the prerecorded data are the target, sensor errors and echo outliers
+        included) — or ``"true"`` — the noise-free motion.
     seed : int
         Seed of the run's ``numpy.random.Generator`` (heart variability, sensor noise).
     loop, mpc, plant, mismatch, observer
@@ -245,25 +251,47 @@ def build_stream(config: RunConfig, source, origin, duration: float, rng: np.ran
     A sample source read in blocks (:func:`sim.streams.sensor_samples`): the samples and random
     draws of ``sensor.measure`` over the whole run, without holding the 2-kHz stream.
     """
-    from sim.sensors import SampleStream, Upsample, sensor_from_name
+    from sim.sensors import DEFAULT_PLAYBACK, SampleStream, playback
     from sim.streams import UpsampledSamples, sensor_samples
 
     control_rate = 1.0 / config.loop.Ts
+    settings = dict(config.sensor_settings)
     if config.sensor == "recorded":
         if config.data is None:
             raise UsageError("sensor 'recorded' needs a recording (--data FILE)")
+        unknown = sorted(set(settings) - {"playback"})
+        if unknown:
+            raise UsageError(f"sensor 'recorded' has no setting(s) {', '.join(unknown)} "
+                             "(only playback)")
         t = origin.t - origin.t[0]
         stream = SampleStream(t, origin.z, t.copy(), origin.sample_rate)
-        return UpsampledSamples(stream, Upsample(control_rate))
-    settings = dict(config.sensor_settings)
-    if config.sensor == "sonomicrometry":
+        try:
+            delivery = playback(settings.get("playback", DEFAULT_PLAYBACK), control_rate)
+        except ValueError as exc:
+            raise UsageError(f"sensor 'recorded': {exc}") from None
+        return UpsampledSamples(stream, delivery)
+    if config.sensor in ("sonomicrometry", "white"):
         settings.setdefault("rate", getattr(origin, "sensor_rate", None) or 257.0)
-        settings.setdefault("upsample", control_rate)  # the paper's 2-kHz streamed playback
-    try:
-        sensor = sensor_from_name(config.sensor, dim=source.dim, **settings)
-    except TypeError as exc:
-        raise UsageError(f"sensor {config.sensor!r}: {exc}") from None
+        settings.setdefault("upsample", control_rate)  # delivered to the 2-kHz loop
+    sensor = make_sensor(config.sensor, source.dim, settings)
     return sensor_samples(sensor, source, duration, rng)
+
+
+def make_sensor(name: str, dim: int, settings: dict):
+    """``sim.sensors.sensor_from_name(name, dim=dim, **settings)``; a bad setting raises
+    ``UsageError`` naming the sensor (one line)."""
+    from sim.sensors import sensor_from_name
+
+    try:
+        return sensor_from_name(name, dim=dim, **settings)
+    except (TypeError, ValueError) as exc:
+        raise UsageError(f"sensor {name!r}: {exc}") from None
+
+
+def check_sensor(config: RunConfig) -> None:
+    """Build the run's sensor once (no sampling) so that bad settings fail before any run."""
+    if config.sensor != "recorded":
+        make_sensor(config.sensor, 3, dict(config.sensor_settings))
 
 
 def build_run(config: RunConfig, implementation: str = "python") -> Run:
@@ -305,7 +333,10 @@ def build_run(config: RunConfig, implementation: str = "python") -> Run:
     margin = (loop.horizon + 1) * loop.Ts
     stream = build_stream(config, source, origin, loop.duration + margin, sensor_rng)
     # the truth is read per window: the recorded stream interpolated at the ticks, or the motion
-    truth = SourceTruth(stream if config.ground_truth == "recorded" else source,
+    # "recorded": the sensor's samples as recorded (before the delivery to the loop), linearly
+    # interpolated at the ticks, as the paper's prerecorded data
+    recorded = getattr(stream, "recorded", stream)
+    truth = SourceTruth(recorded if config.ground_truth == "recorded" else source,
                         loop.ticks + loop.horizon + 1, loop.Ts)
     center = truth.center
     if config.predictor == "exact":

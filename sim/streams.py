@@ -89,27 +89,19 @@ class UpsampledSamples:
     def __len__(self) -> int:
         return self._n
 
+    @property
+    def recorded(self) -> ArraySamples:
+        """The raw samples (as recorded, before the delivery to the control rate)."""
+        return ArraySamples(self.raw_t, self.raw_z, self.raw_arrival)
+
     def index_at(self, t: float) -> int:
         return _grid_index(t, float(self.raw_t[0]), self.rate, self._n)
 
     def _samples(self, a: int, b: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        t_raw, z_raw = self.raw_t, self.raw_z
-        tau = t_raw[0] + np.arange(a, b) / self.rate
-        k = np.clip(np.searchsorted(t_raw, tau, side="right") - 1, 0, t_raw.size - 2)
-        if self.method == "hold":
-            held = np.clip(np.searchsorted(t_raw, tau + 1e-12, side="right") - 1, 0,
-                           t_raw.size - 1)
-            return tau, z_raw[held].copy(), tau + (self.raw_arrival[held] - t_raw[held])
-        w = ((tau - t_raw[k]) / (t_raw[k + 1] - t_raw[k]))[:, None]
-        with np.errstate(invalid="ignore"):
-            z = (1.0 - w) * z_raw[k] + w * z_raw[k + 1]
-        exact0 = w[:, 0] == 0.0
-        z[exact0] = z_raw[k][exact0]
-        if self.causal:
-            arrival = np.where(exact0, self.raw_arrival[k], self.raw_arrival[k + 1])
-        else:
-            arrival = tau + (self.raw_arrival[k] - t_raw[k])
-        return tau, z, arrival
+        from sim.sensors.playback import deliver
+
+        tau = self.raw_t[0] + np.arange(a, b) / self.rate
+        return deliver(self.raw_t, self.raw_z, self.raw_arrival, tau, self.method, self.causal)
 
     def _carry_before(self, a: int) -> float:
         """max(arrival_0 … arrival_{a−1}) (−inf for a = 0), from the nearest known point."""

@@ -31,13 +31,20 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="comma-separated predictor names (default %(default)s)")
     p.add_argument("--scenarios", default=",".join(TABLE_SCENARIOS),
                    help="comma-separated scenario names (default: the six Table-I replicas)")
-    p.add_argument("--seeds", type=int, default=1, help="seeds 0..S-1 per cell (default 1)")
+    p.add_argument("--seeds", type=int, default=1,
+                   help="seeds per cell: SEED..SEED+S-1 (default 1)")
+    p.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
+    p.add_argument("--paper", action="store_true",
+                   help="also print Tuna et al. 2013 Tables I and III beside ours: paper, ours "
+                   "and their ratio for every cell (RMS, max, effort)")
     p.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
                    help="parallel processes (default: the number of cores)")
     p.add_argument("--full", action="store_true",
                    help="use each scenario's full duration (235-472 s) instead of --duration")
     add_run_options(p, DEFAULT_DURATION, DEFAULT_SETTLING)
-    p.add_argument("--json", action="store_true", help="print all result documents as JSON")
+    p.add_argument("--json", action="store_true", help="print all result documents as JSON: "
+                   "one per scenario, predictor and seed, each with rms_error_mm, max_error_mm "
+                   "and rms_effort_mNm")
     p.add_argument("--out", metavar="FILE.json", help="write all result documents")
     p.set_defaults(func=run)
 
@@ -66,6 +73,7 @@ def configs(args: argparse.Namespace) -> list[RunConfig]:
         raise UsageError(f"unknown predictor(s) {', '.join(bad)}; valid: {', '.join(PREDICTORS)}")
     if args.seeds < 1 or args.jobs < 1:
         raise UsageError("--seeds and --jobs must be >= 1")
+    first_seed = args.seed
     args.predictor = args.scenario = args.data = args.seed = None
     duration, settling = args.duration, args.settling
     args.duration = args.settling = None
@@ -85,7 +93,7 @@ def configs(args: argparse.Namespace) -> list[RunConfig]:
         if args.full:
             run_base = run_base.replace(**{"loop.duration": SPECS[scenario].duration})
         for predictor in predictors:
-            for seed in range(args.seeds):
+            for seed in range(first_seed, first_seed + args.seeds):
                 out.append(run_base.replace(predictor=predictor, seed=seed))
     return out
 
@@ -116,6 +124,11 @@ def run(args: argparse.Namespace) -> int:
     print(f"rhmpc compare: {len(runs)} runs on robot {runs[0].robot}, {s.duration:g} s each "
           f"(metrics after {s.settling:g} s), error against the {runs[0].ground_truth} motion")
     print(comparison_table(docs, predictors, scenarios))
+    if args.paper:
+        from rhmpc.studies.paper import paper_table
+
+        print()
+        print(paper_table(docs, predictors, scenarios))
     failed = [d for d in docs if "error" in d]
     for d in failed:
         print(f"failed: {d['predictor']} on {d['scenario']} seed {d['seed']}: {d['error']}")

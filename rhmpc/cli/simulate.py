@@ -7,8 +7,9 @@ import json
 import sys
 from pathlib import Path
 
+from rhmpc.cli.presets import add_preset_option, apply_preset
 from rhmpc.errors import UsageError
-from rhmpc.experiment import RunConfig, load_config, run_experiment
+from rhmpc.experiment import RunConfig, check_sensor, load_config, run_experiment
 from sim.matfile import parse_indices
 
 #: Default run length [s] and settling window [s] of ``rhmpc simulate``.
@@ -24,8 +25,10 @@ def add_run_options(
     """Options shared by ``simulate`` and ``compare`` (``duration``/``settling``: for the help)."""
     p.add_argument("--config", metavar="FILE.toml", help="every setting of the run (TOML)")
     p.add_argument("--robot", help="robot name (rhmpc robots); default phantom")
-    p.add_argument("--sensor", help="sonomicrometry (default), ultrasound, ideal; 'recorded' "
-                   "uses a --data file's samples as they are")
+    p.add_argument("--sensor", help="sonomicrometry (default; the instrument from its "
+                   "physics), white (additive white noise), ultrasound, ideal; 'recorded' uses a "
+                   "--data file's samples as they are. Settings: --set sensor_settings.KEY=VALUE "
+                   "(e.g. playback=\"offline\", noise=5e-5 for white, crystals=6)")
     p.add_argument("--duration", type=float,
                    help=f"simulated seconds (default {duration:g})")
     p.add_argument("--settling", type=float,
@@ -35,6 +38,7 @@ def add_run_options(
                    "noise-free motion")
     p.add_argument("--rr", metavar="RECORD", help="PhysioNet record (path without extension) "
                    "whose beat annotations drive the heart phase")
+    add_preset_option(p)
     p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
                    help="override one setting, e.g. --set mpc.effort_weight=1e-3 (repeatable)")
 
@@ -99,12 +103,13 @@ def parse_value(text: str):
 
 
 def config_from_args(args: argparse.Namespace) -> RunConfig:
-    """The run's settings: defaults < --config file < explicit options < --set overrides."""
+    """The run's settings: defaults < --config file < --preset < explicit options < --set."""
     if args.config:
         config = load_config(args.config)
     else:
         config = RunConfig().replace(**{"loop.duration": DEFAULT_DURATION,
                                         "loop.settling": DEFAULT_SETTLING})
+    config = apply_preset(config, getattr(args, "preset", None))
     changes: dict = {}
     for name in ("predictor", "scenario", "data", "seed", "robot", "sensor", "rr"):
         value = getattr(args, name, None)
@@ -138,7 +143,9 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
         if not sep or not key:
             raise UsageError(f"--set {item!r}: expected SECTION.KEY=VALUE")
         changes[key.strip()] = parse_value(value.strip())
-    return config.replace(**changes)
+    config = config.replace(**changes)
+    check_sensor(config)
+    return config
 
 
 def run(args: argparse.Namespace) -> int:

@@ -24,7 +24,7 @@ USAGE = ("rhmpc tune SPEC.toml [--jobs N | --scheduler ADDRESS] [--results FILE.
          "       rhmpc tune report RESULTS.jsonl [--spec SPEC.toml] [report options]")
 
 #: Options of one mode only (their argparse dest), to reject them in the other.
-RUN_ONLY = ("jobs", "scheduler", "results", "retry_failed", "dry_run", "seed")
+RUN_ONLY = ("jobs", "scheduler", "results", "retry_failed", "dry_run", "seed", "preset")
 REPORT_ONLY = ("spec",)
 
 
@@ -56,6 +56,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     run.add_argument("--seed", type=int, default=None,
                      help="seed of the random/lhs sampler (overrides sampler.seed; the run "
                      "seeds are evaluate.seeds)")
+    run.add_argument("--preset", default=None, metavar="NAME",
+                     help="apply a named operating point to the spec's base settings "
+                     "(tuna2013: Tuna et al. 2013 Tables I-III)")
     run.add_argument("--dry-run", action="store_true", default=None,
                      help="list the points and what is left to run, run nothing")
     rep = p.add_argument_group("report options")
@@ -100,6 +103,12 @@ def sweep(args: argparse.Namespace, spec_path: Path) -> int:
     from rhmpc.tuning.store import ResultsWriter, read_results
 
     spec = load_spec(spec_path)
+    if args.preset is not None:
+        import dataclasses
+
+        from rhmpc.cli.presets import apply_preset
+
+        spec = dataclasses.replace(spec, base=apply_preset(spec.base, args.preset))
     if args.seed is not None:
         spec = with_sampler_seed(spec, args.seed, where=str(spec_path))
     if args.jobs is not None and args.jobs < 1:

@@ -217,7 +217,7 @@ def _horizon_trial(param, study: str, trial_seed: np.random.SeedSequence, s: Stu
     dur = HORIZON_WARM_S + HORIZON_EVAL_S
     scn = make_scenario(str(param), rng=rng_scn, duration=dur + 1.0)
     sensor = sonomicrometry(
-        SonomicrometrySettings(rate=1.0 / HORIZON_DT, outliers=None), dim=scn.dim
+        SonomicrometrySettings(rate=1.0 / HORIZON_DT, slip_rate=0.0), dim=scn.dim
     )
     stream = sensor.measure(scn.source, dur, rng_noise)
     K = HORIZON_LEADS

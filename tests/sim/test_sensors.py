@@ -14,14 +14,15 @@ from sim.sensors import (
     Latency,
     SampleStream,
     Sensor,
-    SonomicrometrySettings,
     UltrasoundSettings,
     Upsample,
     WhiteNoise,
+    WhiteSettings,
     ideal,
     sensor_from_name,
     sonomicrometry,
     ultrasound,
+    white,
 )
 
 
@@ -35,8 +36,8 @@ def _error(stream: SampleStream, source) -> np.ndarray:
 
 
 @pytest.mark.parametrize("rate", [257.0, 404.0])
-def test_sonomicrometry_rate_and_accuracy(source, rate: float) -> None:
-    sensor = sonomicrometry(SonomicrometrySettings(rate=rate, outliers=None))
+def test_white_rate_and_accuracy(source, rate: float) -> None:
+    sensor = white(WhiteSettings(rate=rate, outliers=None))
     s = sensor.measure(source, 60.0, np.random.default_rng(0))
     assert len(s) == int(60 * rate) + 1
     np.testing.assert_allclose(np.diff(s.t), 1 / rate, rtol=1e-9)
@@ -50,8 +51,7 @@ def test_sonomicrometry_rate_and_accuracy(source, rate: float) -> None:
 
 def test_echo_outliers_are_short_jumps_of_millimetres(source) -> None:
     outliers = EchoOutliers(rate=0.5, amplitude=(3e-3, 5e-3), duration=(2e-3, 8e-3))
-    sensor = sonomicrometry(SonomicrometrySettings(rate=404.0, accuracy=0.0,
-                                                   outliers=outliers))
+    sensor = white(WhiteSettings(rate=404.0, accuracy=0.0, outliers=outliers))
     s = sensor.measure(source, 100.0, np.random.default_rng(1))
     jump = np.linalg.norm(_error(s, source), axis=1)
     hit = jump > 1e-6
@@ -63,8 +63,8 @@ def test_echo_outliers_are_short_jumps_of_millimetres(source) -> None:
     assert 0.001 < hit.mean() < 0.02  # occasional
 
 
-def test_default_sonomicrometry_has_occasional_outliers(source) -> None:
-    s = sonomicrometry().measure(source, 120.0, np.random.default_rng(5))
+def test_default_white_has_occasional_outliers(source) -> None:
+    s = white().measure(source, 120.0, np.random.default_rng(5))
     big = np.linalg.norm(_error(s, source), axis=1) > 1.5e-3
     assert 0 < big.sum() < 0.01 * len(s)
 
@@ -158,7 +158,7 @@ def test_sensor_from_name() -> None:
     us = sensor_from_name("ultrasound", latency=0.1, noise=2e-3)
     assert us.rate == 28.0 and us.latency == pytest.approx(0.1)
     assert ideal().rate == sensor_from_name("ideal").rate == 2000.0
-    with pytest.raises(ValueError, match="sonomicrometry, ultrasound, ideal"):
+    with pytest.raises(ValueError, match="sonomicrometry, white, ultrasound, ideal"):
         sensor_from_name("lidar")
 
 
@@ -166,7 +166,7 @@ def test_one_dimensional_source() -> None:
     src = make_scenario("mitral-1d").source
     s = ultrasound().measure(src, 10.0, np.random.default_rng(0))
     assert s.z.shape == (281, 1)
-    sono = sonomicrometry(SonomicrometrySettings(outliers=None), dim=1)
+    sono = white(WhiteSettings(outliers=None), dim=1)
     err = sono.measure(src, 30.0, np.random.default_rng(0))
     assert np.std(_error(err, src)) == pytest.approx(0.25e-3, rel=0.05)
 

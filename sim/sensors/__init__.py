@@ -1,0 +1,39 @@
+"""Sensor models: the instruments, their errors and the delivery of their samples.
+
+A :class:`Sensor` samples the truth of a motion source at its rate and passes the samples
+through stages, each a frozen settings dataclass with ``apply(stream, rng)``. All randomness
+comes from the injected ``numpy.random.Generator``.
+
+=====================  ===================================================================
+``stream``             :class:`SampleStream`, :class:`Sensor` (the sampler), :class:`Latency`
+``sonomicrometry``     the physical sonomicrometer (time of flight, quantisation, speed of
+                       sound, leading-edge error, cycle slips), :func:`sonomicrometry`
+``crystals``           :class:`CrystalArray`, the reference base and POI crystal geometry
+``trilateration``      :func:`trilaterate`, 3-D positions from ranges
+``white``              additive white Gaussian noise (:class:`WhiteNoise`, :func:`white`)
+``events``             :class:`EchoOutliers`, :class:`Dropouts`
+``playback``           delivery to the control rate: :class:`Upsample`, :data:`PLAYBACKS`
+``ultrasound``         3-D ultrasound (Yuen et al.): 28 Hz, σ = 1.3 mm, 68 ms latency
+``encoder``            :class:`Encoder`, quantised joint angles
+``names``              :func:`sensor_from_name`, :data:`SENSORS`
+=====================  ===================================================================
+"""
+
+from sim.sensors.crystals import CrystalArray
+from sim.sensors.encoder import Encoder
+from sim.sensors.events import Dropouts, EchoOutliers
+from sim.sensors.names import DEFAULT_PLAYBACK, SENSORS, ideal, sensor_from_name
+from sim.sensors.playback import PLAYBACKS, Upsample, playback
+from sim.sensors.sonomicrometry import Sonomicrometer, SonomicrometrySettings, sonomicrometry
+from sim.sensors.stream import Latency, SampleStream, Sensor, Stage
+from sim.sensors.trilateration import dilution, trilaterate
+from sim.sensors.ultrasound import UltrasoundSettings, ultrasound
+from sim.sensors.white import WhiteNoise, WhiteSettings, white
+
+__all__ = [
+    "DEFAULT_PLAYBACK", "PLAYBACKS", "SENSORS", "CrystalArray", "Dropouts", "EchoOutliers",
+    "Encoder", "Latency", "SampleStream", "Sensor", "Sonomicrometer", "SonomicrometrySettings",
+    "Stage", "UltrasoundSettings", "Upsample", "WhiteNoise", "WhiteSettings", "dilution",
+    "ideal", "playback", "sensor_from_name", "sonomicrometry", "trilaterate", "ultrasound",
+    "white",
+]

@@ -1,0 +1,121 @@
+"""Delivery of a sensor's samples to the 2-kHz control loop (playback).
+
+The loop reads, at tick τ_j = j·Ts, the newest *delivered* sample whose arrival ≤ τ_j. Named
+playbacks (:data:`PLAYBACKS`, the setting ``playback`` of a sensor):
+
+``"hold"`` (causal)
+    zero-order hold of the newest arrived raw sample: z(τ_j) = z_k with k the newest raw
+    sample, stamped with its measurement time t_k, arrival(τ_j) = τ_j + (arrival_k − t_k) ≥
+    arrival_k. The samples the loop reads are 0 … 1 raw period old, varying from read to read.
+``"linear"`` (causal, the default of the sensors)
+    linear interpolation between raw samples k and k + 1, delivered one raw period after τ_j
+    (after sample k + 1 has arrived): every sample the loop reads is one raw period old
+    (3.9 ms at 257 Hz), on a uniform grid.
+``"offline"`` (non-causal)
+    linear interpolation delivered at τ_j, as when a prerecorded file is played back (the
+    protocol of Tuna et al. 2013 §VIII): at τ_j the loop reads a value interpolated toward the
+    *next* raw sample, up to one raw period (3.9 ms at 257 Hz) of the future.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from sim.sensors.stream import SampleStream
+
+
+@dataclass(frozen=True)
+class Upsample:
+    """Resample the stream to a faster rate (the delivery of the samples to the 2-kHz loop).
+
+    ``"linear"``: z(τ_j) = z_k + (τ_j − t_k)/(t_{k+1} − t_k)·(z_{k+1} − z_k), NaN if either
+    neighbour is missing; ``"hold"``: z(τ_j) = z_k (zero-order hold). With ``causal`` the
+    interpolated sample arrives one raw period after τ_j (after its newer neighbour); without,
+    it arrives at τ_j + (arrival_k − t_k), as when a prerecorded file is played back
+    (:func:`deliver`).
+
+    The class's defaults are the offline playback; the sensors' default is the causal
+    ``"hold"`` (:func:`playback`).
+
+    Attributes
+    ----------
+    rate : float
+        Output rate [Hz].
+    method : str
+        ``"linear"`` or ``"hold"``.
+    causal : bool
+        Whether linear interpolation waits for the next raw sample.
+    """
+
+    rate: float = 2000.0
+    method: str = "linear"
+    causal: bool = False
+
+    def __post_init__(self) -> None:
+        if not self.rate > 0:
+            raise ValueError("upsample rate must be > 0 [Hz]")
+        if self.method not in ("linear", "hold"):
+            raise ValueError("upsample method must be 'linear' or 'hold'")
+
+    def apply(self, stream: SampleStream, rng: np.random.Generator) -> SampleStream:
+        t_raw = stream.t
+        if t_raw.size < 2:
+            return stream
+        n = int(np.floor((t_raw[-1] - t_raw[0]) * self.rate + 1e-9)) + 1
+        tau = t_raw[0] + np.arange(n) / self.rate
+        t, z, arrival = deliver(t_raw, stream.z, stream.arrival, tau, self.method, self.causal)
+        return SampleStream(t, z, np.maximum.accumulate(arrival), self.rate)
+
+
+def deliver(t_raw: np.ndarray, z_raw: np.ndarray, arrival_raw: np.ndarray, tau: np.ndarray,
+            method: str, causal: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(t, z, arrival) of the delivered samples at the output times ``tau`` [s].
+
+    ``"hold"``: z = z_k, t = t_k (the sample keeps its measurement time), arrival = τ_j +
+    (arrival_k − t_k), k the newest raw sample with t_k ≤ τ_j.
+    ``"linear"``: z(τ_j) = z_k + w (z_{k+1} − z_k), w = (τ_j − t_k)/(t_{k+1} − t_k), t = τ_j;
+    causal: arrival = max(arrival_{k+1}, τ_j + (t_{k+1} − t_k) + (arrival_k − t_k)), i.e. one raw
+    period after τ_j (every delivered sample is equally old, and never read before its newer
+    neighbour has arrived); non-causal: arrival = τ_j + (arrival_k − t_k).
+    """
+    k = np.clip(np.searchsorted(t_raw, tau, side="right") - 1, 0, t_raw.size - 2)
+    if method == "hold":
+        held = np.clip(np.searchsorted(t_raw, tau + 1e-12, side="right") - 1, 0,
+                       t_raw.size - 1)
+        return t_raw[held].copy(), z_raw[held].copy(), tau + (arrival_raw[held] - t_raw[held])
+    period = t_raw[k + 1] - t_raw[k]
+    w = ((tau - t_raw[k]) / period)[:, None]
+    with np.errstate(invalid="ignore"):
+        z = (1.0 - w) * z_raw[k] + w * z_raw[k + 1]
+    exact0 = w[:, 0] == 0.0
+    z[exact0] = z_raw[k][exact0]
+    delay = arrival_raw[k] - t_raw[k]
+    if causal:
+        arrival = np.maximum(arrival_raw[k + 1], tau + period + delay)
+    else:
+        arrival = tau + delay
+    return tau, z, arrival
+
+
+#: Named playbacks: (method, causal) of :class:`Upsample`.
+PLAYBACKS: dict[str, tuple[str, bool]] = {
+    "hold": ("hold", True),
+    "linear": ("linear", True),
+    "offline": ("linear", False),
+}
+
+
+def playback(name: str, rate: float) -> Upsample:
+    """The named playback (:data:`PLAYBACKS`) to ``rate`` [Hz].
+
+    Raises
+    ------
+    ValueError
+        Unknown name (the message lists the valid ones).
+    """
+    if name not in PLAYBACKS:
+        raise ValueError(f"unknown playback {name!r}; valid: {', '.join(PLAYBACKS)}")
+    method, causal = PLAYBACKS[name]
+    return Upsample(float(rate), method, causal)
