@@ -3,10 +3,13 @@
 What is written to ``OUTDIR``::
 
     rhmpc.h          the API, units and array layouts (sizes baked in as macros)
-    rhmpc.c          the per-tick logic of RecedingHorizonMPC.step (screening, vector update,
-                     shifted warm start, fallback chain plan → LQ → zero, torque clipping)
+    rhmpc.c          the per-tick logic of RecedingHorizonMPC.step (the screening cascade:
+                     level 1 unconstrained minimiser, level 2 torque-box QP by active set; then
+                     vector update, shifted warm start, OSQP, fallback chain plan → LQ → zero,
+                     torque clipping)
     rhmpc_data.h/.c  the numbers, as ``const`` arrays, from the controller's own CondensedQP:
-                     F_ext = [F, f0] (p → q), the screening map Z = −P⁻¹[F, f0], A, G, l0, u0,
+                     F_ext = [F, f0] (p → q), the screening map Z = −P⁻¹[F, f0], the cascade's
+                     W = P_zz⁻¹, H = P_zz, F_z and the envelope rows (dense), A, G, l0, u0,
                      the LQ gain, the one-tick shift (primal and dual), block of each tick, u_max
     osqp/            OSQP's embedded code (``OSQP.codegen``, ``parameters="vectors"``), generated
                      from the controller's own solver object: P, A, settings and KKT factorisation
@@ -115,12 +118,40 @@ def _check(mpc: RecedingHorizonMPC) -> None:
         raise ExportError("unexpected shapes of the warm-start shift")
 
 
+def _envelope_rows(mpc: RecedingHorizonMPC) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The envelope rows' distinct (z part of A, G on the bound columns) pairs: an upper and a
+    lower row of a limit differ only in their slack's sign and bounds. Returns (A_u (n_u, nz),
+    G_u (n_u, nbc), row → distinct-row index (m − nv,)), distinct rows in order of appearance.
+    """
+    qp = mpc.qp
+    nv, nz = qp.nv, qp.nz
+    if np.any(qp.G[:nv]):
+        raise ExportError("the QP's torque or slack rows depend on the parameters; the generated "
+                          "code assumes constant torque and slack bounds")
+    rows = np.hstack([qp.A[nv:, :nz], qp.G[nv:][:, qp.bound_columns]])
+    if rows.shape[0] == 0:
+        return np.zeros((0, nz)), np.zeros((0, len(qp.bound_columns))), np.zeros(0, dtype=int)
+    _, first, inverse = np.unique(rows, axis=0, return_index=True, return_inverse=True)
+    order = np.argsort(first)  # distinct rows in order of first appearance
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    distinct = rows[np.sort(first)]
+    return distinct[:, :nz], distinct[:, nz:], rank[np.ravel(inverse)]
+
+
 def _data_arrays(mpc: RecedingHorizonMPC) -> dict[str, np.ndarray]:
     """The const arrays of rhmpc_data.c, row-major, from the controller's CondensedQP."""
     qp = mpc.qp
     return {
         "F_ext": np.column_stack([qp.F, qp.f0]),
         "minimiser": np.asarray(qp.minimiser),
+        # the screening cascade (levels 1 and 2), column-major: the controller's own arrays
+        "F_z_T": np.asarray(mpc._F_z).T,
+        "neg_W": np.asarray(mpc.box._negW).T,
+        "W": np.asarray(mpc.box.W).T,
+        "H": np.asarray(mpc.box.H).T,
+        "A_env_T": _envelope_rows(mpc)[0].T,
+        "G_env_T": _envelope_rows(mpc)[1].T,
         "l0": np.asarray(qp.l0),
         "u0": np.asarray(qp.u0),
         "gain": np.asarray(qp.gain),
@@ -208,7 +239,8 @@ def export_controller(mpc: RecedingHorizonMPC, outdir: str | Path, *, robot: str
         "TS_US": f"{mpc.arm.Ts * 1e6:g}", "TS": repr(float(mpc.arm.Ts)),
         "N": qp.N, "NX": qp.nx, "NU": qp.nu, "NY": qp.ny,
         "NV": qp.P.shape[0], "NZ": int(qp.nz), "M": qp.A.shape[0], "NPAR": qp.npar,
-        "NEXTRA": _n_extra(mpc),
+        "NEXTRA": _n_extra(mpc), "NENV_U": len(_envelope_rows(mpc)[0]),
+        "NBC": len(qp.bound_columns),
         "EXTRA_DOC": ("none" if _n_extra(mpc) == 0 else
                       f"{_n_extra(mpc)} values, RecedingHorizonMPC.offset(x): the output offset "
                       "d = p(q0 + x_q) - (C x + y0) [m] from forward kinematics"),
@@ -219,6 +251,10 @@ def export_controller(mpc: RecedingHorizonMPC, outdir: str | Path, *, robot: str
         "PLAN_FALLBACK_TICKS": s.plan_fallback_ticks, "MAX_ITER": s.max_iter,
         "WARM_START": _WARM_STARTS[s.warm_start], "WARM_START_NAME": s.warm_start,
         "SCREENING": int(s.screening), "PARAM_BOUNDS": int(qp.param_bounds),
+        "BOX_SCREENING": int(s.box_screening), "BOX_MAX_ITER": mpc.box.settings.max_iter,
+        "BOX_PRIMAL_TOL": repr(float(mpc.box.settings.primal_tol)),
+        "BOX_DUAL_TOL": repr(float(mpc.box.settings.dual_tol)),
+        "BOX_KKT_TOL": repr(float(mpc.box.settings.kkt_tol)),
         "OSQP_PREFIX": OSQP_PREFIX,
         "NOTES": "".join(f"\n * Not exported: {n}." for n in notes) or "\n * (Nothing left out.)",
     }
@@ -244,6 +280,8 @@ def export_controller(mpc: RecedingHorizonMPC, outdir: str | Path, *, robot: str
         parts += [_c_array(f"{name}_p", ptr, ctype="int"), _c_array(f"{name}_i", col, ctype="int"),
                   _c_array(f"{name}_x", val)]
     parts.append(_c_array("block_of_tick", qp.block_of_tick, ctype="int"))
+    parts.append(_c_array("bound_columns", qp.bound_columns, ctype="int"))
+    parts.append(_c_array("env_row", _envelope_rows(mpc)[2], ctype="int"))
     (outdir / "rhmpc_data.c").write_text("".join(parts))
     written.append("rhmpc_data.c")
 

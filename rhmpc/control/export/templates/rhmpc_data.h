@@ -9,12 +9,30 @@
 #define RHMPC_WS_NONE 3
 #define RHMPC_WARM_START @WARM_START@ /* settings.warm_start = "@WARM_START_NAME@" */
 #define RHMPC_SCREENING @SCREENING@
+#define RHMPC_BOX_SCREENING @BOX_SCREENING@ /* level 2 of the cascade (settings.box_screening) */
+#define RHMPC_BOX_MAX_ITER @BOX_MAX_ITER@
+#define RHMPC_BOX_PRIMAL_TOL @BOX_PRIMAL_TOL@
+#define RHMPC_BOX_DUAL_TOL @BOX_DUAL_TOL@
+#define RHMPC_BOX_KKT_TOL @BOX_KKT_TOL@
 #define RHMPC_PARAM_BOUNDS @PARAM_BOUNDS@ /* 1: l, u depend on p (joint bounds, envelope) */
 #define RHMPC_BRAKE @BRAKE@ /* 1: LQ fallback only if it keeps the constraint rows, else brake */
 #define RHMPC_BRAKE_TICKS @BRAKE_TICKS@ /* brake: stop the joints in this many ticks */
 
 extern const double rhmpc_F_ext[RHMPC_NV * (RHMPC_NPAR + 1)];
 extern const double rhmpc_minimiser[RHMPC_NV * (RHMPC_NPAR + 1)];
+/* The screening cascade's dense data, column-major (transposed): F_z_T = [F, f0][:NZ]^T
+ * ((NPAR+1) x NZ), neg_W = -P_zz^-1 and W = P_zz^-1, H = P_zz (NZ x NZ, symmetric), A_env_T =
+ * the envelope rows' z part transposed (NZ x (M - NV)). */
+extern const double rhmpc_F_z_T[(RHMPC_NPAR + 1) * RHMPC_NZ];
+extern const double rhmpc_neg_W[RHMPC_NZ * RHMPC_NZ];
+extern const double rhmpc_W[RHMPC_NZ * RHMPC_NZ];
+extern const double rhmpc_H[RHMPC_NZ * RHMPC_NZ];
+extern const double rhmpc_A_env_T[]; /* NZ x NENV_U: the distinct envelope rows' z part */
+/* The envelope rows' G on the bound columns, distinct rows, column-major (NBC x NENV_U); the
+ * bound columns of p; the distinct row of each envelope row (M - NV entries). */
+extern const double rhmpc_G_env_T[];
+extern const int rhmpc_bound_columns[];
+extern const int rhmpc_env_row[];
 /* Sparse matrices in CSR form (row pointers _p, column indices _i, values _x): A (M x NV),
  * G (M x NPAR), shift (NV x NV), shift_dual (M x M). */
 #define RHMPC_CSR(name) extern const int rhmpc_##name##_p[]; extern const int rhmpc_##name##_i[]; \
