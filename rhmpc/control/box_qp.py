@@ -55,6 +55,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg.lapack import dpotrf as _potrf
+from scipy.linalg.lapack import dpotrs as _potrs
 
 
 @dataclass(frozen=True)
@@ -140,53 +142,48 @@ class BoxQP:
         itself: if level 1 rejected it, an envelope row is the reason).
         """
         s = self.settings
-        W = self.W
-        sign = self.active
-        np.sign(z_star, out=sign, casting="unsafe")
-        sign[np.abs(z_star) <= 1.0] = 0
         self.iterations = 0
-        if not sign.any():
+        act = np.flatnonzero(np.abs(z_star) > 1.0)
+        if act.size == 0:
             return False
+        W = self.W
         scale = 1.0 + float(np.abs(q).max())
         dual_tol = s.dual_tol * scale
         upper = 1.0 + s.primal_tol
-        converged = False
+        b = np.copysign(1.0, z_star[act])
         for it in range(1, s.max_iter + 1):
-            idx = np.flatnonzero(sign)
-            b = sign[idx].astype(float)
-            S = W[np.ix_(idx, idx)]
-            try:
-                L = np.linalg.cholesky(S)
-            except np.linalg.LinAlgError:
-                self.iterations = it
-                return False
-            mu = np.linalg.solve(L.T, np.linalg.solve(L, z_star[idx] - b))
-            z = z_star - W[:, idx] @ mu
-            z[idx] = b
             self.iterations = it
-            changed = False
-            # drop active bounds with a wrong-sign multiplier
-            wrong = b * mu < -dual_tol
-            if wrong.any():
-                sign[idx[wrong]] = 0
-                changed = True
-            free = np.ones(self.n, dtype=bool)
-            free[idx] = False
-            up = free & (z > upper)
-            lo = free & (z < -upper)
-            if up.any() or lo.any():
-                sign[up] = 1
-                sign[lo] = -1
-                changed = True
-            if not changed:
-                converged = True
+            W_a = W[act]  # rows 𝒜 = columns 𝒜 (W symmetric)
+            L, info = _potrf(W_a[:, act], lower=1)
+            if info != 0:
+                return False
+            mu, info = _potrs(L, z_star[act] - b, lower=1)
+            if info != 0:
+                return False
+            z = z_star - mu @ W_a
+            z[act] = b  # exactly ±1: never counted as past a bound below
+            bmu = b * mu
+            join = np.flatnonzero(np.abs(z) > upper)  # free variables past a bound join
+            if join.size == 0 and bmu.min() >= -dual_tol:
                 break
-        if not converged:
+            sign = self.active
+            sign[:] = 0
+            keep = bmu >= -dual_tol  # active bounds with a wrong-sign multiplier leave
+            sign[act[keep]] = b[keep]
+            sign[join] = np.where(z[join] > 0.0, 1, -1)
+            act = np.flatnonzero(sign)
+            if act.size == 0:  # every bound left: the minimiser is ẑ*, which violates them
+                return False
+            b = sign[act].astype(float)
+        else:
             return False
-        self.mu[:] = 0.0
-        self.mu[idx] = mu
+        self.active[:] = 0
+        self.active[act] = b
+        mu_full = self.mu
+        mu_full[:] = 0.0
+        mu_full[act] = mu
         self.z[:] = z
         r = np.dot(self.H, z, out=self._r)
         r += q
-        r += self.mu
+        r[act] += mu
         return bool(np.abs(r).max() <= s.kkt_tol * scale)

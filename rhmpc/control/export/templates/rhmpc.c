@@ -318,6 +318,9 @@ static int box_solved(rhmpc_t *ctl) {
       if ((double)act[i] * mu[a] < -dual_tol) { act[i] = 0; changed = 1; }
     }
     if (!changed) { converged = 1; break; }
+    n_act = 0;
+    for (int i = 0; i < RHMPC_NZ; ++i) n_act += act[i] != 0;
+    if (n_act == 0) return 0; /* every bound left: the minimiser is z*, which violates them */
   }
   if (!converged) return 0;
   /* KKT certificate from H and q (not W): r = H z + q + E_A mu */
