@@ -252,6 +252,7 @@ def export_controller(mpc: RecedingHorizonMPC, outdir: str | Path, *, robot: str
         "WARM_START": _WARM_STARTS[s.warm_start], "WARM_START_NAME": s.warm_start,
         "SCREENING": int(s.screening), "PARAM_BOUNDS": int(qp.param_bounds),
         "BOX_SCREENING": int(s.box_screening), "BOX_MAX_ITER": mpc.box.settings.max_iter,
+        "BOX_PDAS_ITER": mpc.box.settings.pdas_iter,
         "BOX_PRIMAL_TOL": repr(float(mpc.box.settings.primal_tol)),
         "BOX_DUAL_TOL": repr(float(mpc.box.settings.dual_tol)),
         "BOX_KKT_TOL": repr(float(mpc.box.settings.kkt_tol)),

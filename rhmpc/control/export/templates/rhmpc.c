@@ -250,65 +250,68 @@ static int screened(rhmpc_t *ctl) {
 }
 
 #if RHMPC_BOX_SCREENING
-/* Level 2: min 1/2 z'Hz + q'z s.t. -1 <= z <= 1 by the primal-dual active-set method in
- * range-space form (rhmpc/control/box_qp.py, the same steps in the same order):
- *   W_AA mu_A = z*_A - b_A (Cholesky),  z = z* - W_:A mu_A,  z_A = b_A,
+/* Cholesky W_AA = L L' of the rows/columns idx[0..k) of W (L lower, row-major, stride NZ);
+ * 0 if a pivot is not positive. */
+static int chol_active(const int *idx, int k, double *L) {
+  for (int a = 0; a < k; ++a) {
+    for (int b = 0; b <= a; ++b) {
+      double s = rhmpc_W[idx[a] * RHMPC_NZ + idx[b]];
+      for (int c = 0; c < b; ++c) s -= L[a * RHMPC_NZ + c] * L[b * RHMPC_NZ + c];
+      if (a == b) {
+        if (!(s > 0.0)) return 0;
+        L[a * RHMPC_NZ + a] = sqrt(s);
+      } else {
+        L[a * RHMPC_NZ + b] = s / L[b * RHMPC_NZ + b];
+      }
+    }
+  }
+  return 1;
+}
+
+/* out = (L L')^-1 rhs (k entries); tmp: k scratch entries. */
+static void chol_solve(const double *L, int k, const double *rhs, double *tmp, double *out) {
+  for (int a = 0; a < k; ++a) {
+    double s = rhs[a];
+    for (int c = 0; c < a; ++c) s -= L[a * RHMPC_NZ + c] * tmp[c];
+    tmp[a] = s / L[a * RHMPC_NZ + a];
+  }
+  for (int a = k - 1; a >= 0; --a) {
+    double s = tmp[a];
+    for (int c = a + 1; c < k; ++c) s -= L[c * RHMPC_NZ + a] * out[c];
+    out[a] = s / L[a * RHMPC_NZ + a];
+  }
+}
+
+/* Phase 1, primal-dual active set (at most RHMPC_BOX_PDAS_ITER solves):
+ *   W_AA mu_A = z*_A - b_A,  z = z* - W_:A mu_A,  z_A = b_A,
  *   A+ = {i in A: b_i mu_i >= -eps_d (1 + |q|_inf)} u {i not in A: |z_i| > 1 + eps_p},
- * until A+ = A (at most RHMPC_BOX_MAX_ITER solves); then accepted iff
- * |H z + q + mu|_inf <= eps_kkt (1 + |q|_inf) and every envelope row holds at [z; 0]. */
-static int box_solved(rhmpc_t *ctl) {
-  const double *zs = ctl->z_star, *q = ctl->q;
+ * until A+ = A. 1 with box_z, box_mu (full length) set; 0 if it did not converge. */
+static int box_pdas(rhmpc_t *ctl, double dual_tol) {
+  const double *zs = ctl->z_star;
   signed char *act = ctl->box_act;
   int *idx = ctl->box_idx;
-  double *L = ctl->box_L, *y = ctl->box_y, *mu = ctl->box_mu, *z = ctl->box_z;
-  int n_act = 0, k = 0, converged = 0;
-  ctl->box_iterations = 0;
-  for (int i = 0; i < RHMPC_NZ; ++i) {
-    act[i] = zs[i] > 1.0 ? 1 : (zs[i] < -1.0 ? -1 : 0);
-    n_act += act[i] != 0;
-  }
-  if (n_act == 0) return 0; /* z* is the box QP's minimiser: an envelope row rejected it */
-  double qmax = 0.0;
-  for (int i = 0; i < RHMPC_NZ; ++i) qmax = fabs(q[i]) > qmax ? fabs(q[i]) : qmax;
-  const double scale = 1.0 + qmax;
-  const double dual_tol = RHMPC_BOX_DUAL_TOL * scale;
+  double *L = ctl->box_L, *y = ctl->box_y, *mu = ctl->box_rhs, *z = ctl->box_z;
   const double upper = 1.0 + RHMPC_BOX_PRIMAL_TOL;
-  for (int it = 1; it <= RHMPC_BOX_MAX_ITER; ++it) {
-    k = 0;
+  const int limit = RHMPC_BOX_PDAS_ITER < RHMPC_BOX_MAX_ITER ? RHMPC_BOX_PDAS_ITER
+                                                             : RHMPC_BOX_MAX_ITER;
+  for (int i = 0; i < RHMPC_NZ; ++i) act[i] = zs[i] > 1.0 ? 1 : (zs[i] < -1.0 ? -1 : 0);
+  for (int it = 1; it <= limit; ++it) {
+    int k = 0;
     for (int i = 0; i < RHMPC_NZ; ++i)
       if (act[i]) idx[k++] = i;
     ctl->box_iterations = it;
-    /* Cholesky W_AA = L L' (lower, row-major with stride NZ) */
-    for (int a = 0; a < k; ++a) {
-      for (int b = 0; b <= a; ++b) {
-        double s = rhmpc_W[idx[a] * RHMPC_NZ + idx[b]];
-        for (int c = 0; c < b; ++c) s -= L[a * RHMPC_NZ + c] * L[b * RHMPC_NZ + c];
-        if (a == b) {
-          if (!(s > 0.0)) return 0;
-          L[a * RHMPC_NZ + a] = sqrt(s);
-        } else {
-          L[a * RHMPC_NZ + b] = s / L[b * RHMPC_NZ + b];
-        }
-      }
-    }
-    for (int a = 0; a < k; ++a) { /* L y = z*_A - b_A */
-      double s = zs[idx[a]] - (double)act[idx[a]];
-      for (int c = 0; c < a; ++c) s -= L[a * RHMPC_NZ + c] * y[c];
-      y[a] = s / L[a * RHMPC_NZ + a];
-    }
-    for (int a = k - 1; a >= 0; --a) { /* L' mu = y */
-      double s = y[a];
-      for (int c = a + 1; c < k; ++c) s -= L[c * RHMPC_NZ + a] * mu[c];
-      mu[a] = s / L[a * RHMPC_NZ + a];
-    }
-    for (int r = 0; r < RHMPC_NZ; ++r) z[r] = zs[r];
-    for (int a = 0; a < k; ++a) { /* z -= W_:a mu_a (W symmetric: row idx[a]) */
+    if (!chol_active(idx, k, L)) return 0;
+    for (int a = 0; a < k; ++a) ctl->box_step[a] = zs[idx[a]] - (double)act[idx[a]];
+    chol_solve(L, k, ctl->box_step, y, mu);
+    for (int r = 0; r < RHMPC_NZ; ++r) ctl->box_tmp[r] = 0.0;
+    for (int a = 0; a < k; ++a) { /* mu' W_A (W symmetric: rows idx[a]) */
       const double m = mu[a], *w = rhmpc_W + idx[a] * RHMPC_NZ;
-      for (int r = 0; r < RHMPC_NZ; ++r) z[r] -= w[r] * m;
+      for (int r = 0; r < RHMPC_NZ; ++r) ctl->box_tmp[r] += m * w[r];
     }
+    for (int r = 0; r < RHMPC_NZ; ++r) z[r] = zs[r] - ctl->box_tmp[r];
     for (int a = 0; a < k; ++a) z[idx[a]] = (double)act[idx[a]];
     int changed = 0;
-    for (int i = 0; i < RHMPC_NZ; ++i) { /* free variables past a bound join (set before drops) */
+    for (int i = 0; i < RHMPC_NZ; ++i) { /* free variables past a bound join */
       if (act[i]) continue;
       if (z[i] > upper) { act[i] = 1; changed = 1; }
       else if (z[i] < -upper) { act[i] = -1; changed = 1; }
@@ -317,21 +320,125 @@ static int box_solved(rhmpc_t *ctl) {
       int i = idx[a];
       if ((double)act[i] * mu[a] < -dual_tol) { act[i] = 0; changed = 1; }
     }
-    if (!changed) { converged = 1; break; }
-    n_act = 0;
+    if (!changed) {
+      for (int i = 0; i < RHMPC_NZ; ++i) ctl->box_mu[i] = 0.0;
+      for (int a = 0; a < k; ++a) ctl->box_mu[idx[a]] = mu[a];
+      return 1;
+    }
+    int n_act = 0;
     for (int i = 0; i < RHMPC_NZ; ++i) n_act += act[i] != 0;
-    if (n_act == 0) return 0; /* every bound left: the minimiser is z*, which violates them */
+    if (n_act == 0) return 0; /* every bound left: z*, which violates them */
   }
-  if (!converged) return 0;
-  /* KKT certificate from H and q (not W): r = H z + q + E_A mu */
-  double *r = ctl->box_r;
-  matvec_cm(rhmpc_H, z, RHMPC_NZ, RHMPC_NZ, r); /* H symmetric */
-  for (int i = 0; i < RHMPC_NZ; ++i) r[i] += q[i];
-  for (int a = 0; a < k; ++a) r[idx[a]] += mu[a];
+  return 0;
+}
+
+static int argmax_violation(const double *z, double *viol) {
+  int p = 0;
+  double best = fabs(z[0]) - 1.0;
+  for (int i = 1; i < RHMPC_NZ; ++i) {
+    double v = fabs(z[i]) - 1.0;
+    if (v > best) { best = v; p = i; }
+  }
+  *viol = best;
+  return p;
+}
+
+/* Phase 2, the Goldfarb-Idnani dual active set from z* (A empty), bounds added in order of
+ * largest violation: raise lambda_p of bound p (sigma_p z_p <= 1) along
+ *   s = W n_p - W N r,  r = (N'WN)^-1 N'W n_p,  z -= t s,  lambda_A -= t r,  lambda_p += t,
+ * t = min(full step to z_p = sigma_p, first active lambda reaching 0 (that bound leaves)).
+ * Solves of phase 1 count towards RHMPC_BOX_MAX_ITER. 1 with box_z, box_mu set. */
+static int box_dual(rhmpc_t *ctl, double dual_tol) {
+  double *z = ctl->box_z, *sig = ctl->box_sig, *lam = ctl->box_lam, *step = ctl->box_step;
+  double *L = ctl->box_L, *y = ctl->box_y, *rhs = ctl->box_rhs, *tmp = ctl->box_tmp;
+  int *act = ctl->box_idx;
+  int k = 0, it = ctl->box_iterations;
+  double viol;
+  for (int r = 0; r < RHMPC_NZ; ++r) z[r] = ctl->z_star[r];
+  int p = argmax_violation(z, &viol);
+  while (viol > RHMPC_BOX_PRIMAL_TOL) {
+    const double sp = z[p] > 0.0 ? 1.0 : -1.0;
+    const double *wp = rhmpc_W + p * RHMPC_NZ;
+    double lam_p = 0.0;
+    for (;;) {
+      if (++it > RHMPC_BOX_MAX_ITER) return 0;
+      ctl->box_iterations = it;
+      int j = -1;
+      double t;
+      if (k) {
+        if (!chol_active(act, k, L)) return 0;
+        for (int a = 0; a < k; ++a) rhs[a] = rhmpc_W[act[a] * RHMPC_NZ + p] * sp;
+        chol_solve(L, k, rhs, tmp, y);
+        for (int r = 0; r < RHMPC_NZ; ++r) tmp[r] = 0.0;
+        for (int a = 0; a < k; ++a) { /* y' W_A */
+          const double m = y[a], *w = rhmpc_W + act[a] * RHMPC_NZ;
+          for (int r = 0; r < RHMPC_NZ; ++r) tmp[r] += m * w[r];
+        }
+        for (int r = 0; r < RHMPC_NZ; ++r) step[r] = sp * wp[r] - tmp[r];
+        for (int a = 0; a < k; ++a) rhs[a] = sig[a] * y[a]; /* r, the dual direction */
+        t = (sp * z[p] - 1.0) / (sp * step[p]);
+        for (int a = 0; a < k; ++a) {
+          if (rhs[a] > 0.0) {
+            const double ratio = lam[a] / rhs[a];
+            if (ratio < t) { t = ratio; j = a; }
+          }
+        }
+        for (int r = 0; r < RHMPC_NZ; ++r) z[r] -= t * step[r];
+        for (int a = 0; a < k; ++a) lam[a] -= t * rhs[a];
+        for (int a = 0; a < k; ++a) z[act[a]] = sig[a];
+      } else {
+        for (int r = 0; r < RHMPC_NZ; ++r) step[r] = sp * wp[r];
+        t = (sp * z[p] - 1.0) / (sp * step[p]);
+        for (int r = 0; r < RHMPC_NZ; ++r) z[r] -= t * step[r];
+      }
+      lam_p += t;
+      if (j < 0) break;
+      for (int a = j; a < k - 1; ++a) { /* bound j leaves; p is still the target */
+        act[a] = act[a + 1];
+        sig[a] = sig[a + 1];
+        lam[a] = lam[a + 1];
+      }
+      k -= 1;
+    }
+    act[k] = p;
+    sig[k] = sp;
+    lam[k] = lam_p;
+    k += 1;
+    z[p] = sp;
+    p = argmax_violation(z, &viol);
+  }
+  for (int a = 0; a < k; ++a)
+    if (lam[a] < -dual_tol) return 0;
+  for (int i = 0; i < RHMPC_NZ; ++i) ctl->box_mu[i] = 0.0;
+  for (int a = 0; a < k; ++a) ctl->box_mu[act[a]] = sig[a] * lam[a];
+  return 1;
+}
+
+/* Level 2: min 1/2 z'Hz + q'z s.t. -1 <= z <= 1, exactly (rhmpc/control/box_qp.py: the same
+ * steps in the same order): phase 1 PDAS, else phase 2 the dual active set, at most
+ * RHMPC_BOX_MAX_ITER Cholesky solves in all; then accepted iff
+ * |H z + q + mu|_inf <= eps_kkt (1 + |q|_inf) and every envelope row holds at [z; 0]. */
+static int box_solved(rhmpc_t *ctl) {
+  const double *q = ctl->q;
+  double zmax = 0.0, qmax = 0.0;
+  ctl->box_iterations = 0;
+  for (int i = 0; i < RHMPC_NZ; ++i) zmax = fabs(ctl->z_star[i]) > zmax ? fabs(ctl->z_star[i]) : zmax;
+  if (!(zmax > 1.0)) return 0; /* z* is the box QP's minimiser: an envelope row rejected it */
+  for (int i = 0; i < RHMPC_NZ; ++i) qmax = fabs(q[i]) > qmax ? fabs(q[i]) : qmax;
+  const double scale = 1.0 + qmax;
+  const double dual_tol = RHMPC_BOX_DUAL_TOL * scale;
+  if (!box_pdas(ctl, dual_tol) && !box_dual(ctl, dual_tol)) return 0;
+  /* KKT certificate from H and q (not W): r = H z + q + mu */
+  double *r = ctl->box_tmp;
+  matvec_cm(rhmpc_H, ctl->box_z, RHMPC_NZ, RHMPC_NZ, r); /* H symmetric */
   double rmax = 0.0;
-  for (int i = 0; i < RHMPC_NZ; ++i) rmax = fabs(r[i]) > rmax ? fabs(r[i]) : rmax;
+  for (int i = 0; i < RHMPC_NZ; ++i) {
+    r[i] += q[i];
+    r[i] += ctl->box_mu[i];
+    rmax = fabs(r[i]) > rmax ? fabs(r[i]) : rmax;
+  }
   if (!(rmax <= RHMPC_BOX_KKT_TOL * scale)) return 0;
-  return envelope_holds_at(ctl, z);
+  return envelope_holds_at(ctl, ctl->box_z);
 }
 #endif
 

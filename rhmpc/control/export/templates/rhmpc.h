@@ -108,7 +108,8 @@ typedef struct {
   double z_star[RHMPC_NV], plan[RHMPC_NV];
   double ws_x[RHMPC_NV], ws_y[RHMPC_M];
   double box_L[RHMPC_NZ * RHMPC_NZ], box_y[RHMPC_NZ], box_mu[RHMPC_NZ], box_z[RHMPC_NZ];
-  double box_r[RHMPC_NZ];
+  double box_rhs[RHMPC_NZ], box_step[RHMPC_NZ], box_tmp[RHMPC_NZ], box_sig[RHMPC_NZ];
+  double box_lam[RHMPC_NZ];
   double g_env[RHMPC_NENV_U + 1], p_bc[RHMPC_NBC + 1];
   int box_idx[RHMPC_NZ];
   signed char box_act[RHMPC_NZ];
