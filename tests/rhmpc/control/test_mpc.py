@@ -370,3 +370,50 @@ def test_screening_is_exact_and_hands_binding_ticks_to_osqp(arm, joint_bounds):
     assert mpc.stats.screened == levels[1] and mpc.stats.boxed == levels[2]
     assert max(screened_err) <= 1e-9
     assert mpc.stats.fallback_total == 0 and every.stats.fallback_total == 0
+
+
+def test_level_2_checks_every_envelope_row_it_skips(arm):
+    """Tight joint bounds and reference jumps: the torque-box QP's minimiser (an independent
+    BVLS solve, scipy ``lsq_linear``) sometimes breaks an envelope row. Those ticks go to the
+    solver (level 3), never to level 2; ticks whose box minimiser keeps every row (margin
+    1e-7 of a row's unit, so that rounding cannot decide) and has an active bound are level 2;
+    each accepted level-2 point satisfies every row and is DAQP's solution of the full QP."""
+    from scipy.optimize import lsq_linear
+
+    q0 = arm.q0
+    mpc = RecedingHorizonMPC(arm, MPCSettings(
+        joint_lower=tuple(q0 - np.array([0.015, 0.01, 0.03])),
+        joint_upper=tuple(q0 + np.array([0.015, 0.01, 0.03])), solver="daqp"))
+    qp, nz = mpc.qp, mpc.qp.nz
+    Lc = np.linalg.cholesky(qp.P[:nz, :nz])
+    ticks = 3000
+    traj = heart_like_reference(ticks + mpc.N + 1, arm.Ts, np.random.default_rng(3), arm.y0,
+                                jump=2e-3, jump_every=400)
+    x = np.zeros(arm.nx)
+    seen = {"level2": 0, "envelope_breaks": 0}
+    for k in range(ticks):
+        ref = traj[k + 1:k + 1 + mpc.N]
+        q, lo, up = mpc.qp_vectors(x, ref)
+        tau = mpc.step(x, ref)
+        level = mpc.stats.level
+        if level != 1:
+            d = -scipy.linalg.solve_triangular(Lc, q[:nz], lower=True)
+            zb = lsq_linear(Lc.T, d, bounds=(-1.0, 1.0), method="bvls", tol=1e-14).x
+            v = np.concatenate([zb, np.zeros(qp.ns)])
+            g = (qp.A @ v)[qp.nv:]
+            margin = np.minimum(up[qp.nv:] - g, g - lo[qp.nv:]).min()
+            if margin < -1e-7:
+                assert level == 3
+                seen["envelope_breaks"] += 1
+            elif margin > 1e-7 and np.abs(zb).max() >= 1 - 1e-9:
+                assert level == 2
+            if level == 2:
+                seen["level2"] += 1
+                z, _ = mpc.last_solution()
+                assert np.max(np.abs(z[:nz] - zb)) <= 1e-8
+                Az = qp.A @ z
+                assert np.all(Az >= lo - 1e-9) and np.all(Az <= up + 1e-9)
+                z_ex, _ = _daqp_solve(mpc, q, lo, up)
+                assert np.max(np.abs(z - z_ex)) <= 1e-8
+        x = arm.A @ x + arm.B @ tau
+    assert seen["level2"] > 0 and seen["envelope_breaks"] > 0, seen
