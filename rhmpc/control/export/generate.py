@@ -139,6 +139,16 @@ def _envelope_rows(mpc: RecedingHorizonMPC) -> tuple[np.ndarray, np.ndarray, np.
     return distinct[:, :nz], distinct[:, nz:], rank[np.ravel(inverse)]
 
 
+def _column_major(M: np.ndarray) -> np.ndarray:
+    """M (rows, cols) as C's ``matvec_cm`` reads it: column after column, each zero-padded to a
+    multiple of 8 entries (so that every block of 8 rows is full)."""
+    M = np.asarray(M, dtype=float)
+    rows = -(-M.shape[0] // 8) * 8
+    out = np.zeros((M.shape[1], rows))
+    out[:, : M.shape[0]] = M.T
+    return out
+
+
 def _data_arrays(mpc: RecedingHorizonMPC) -> dict[str, np.ndarray]:
     """The const arrays of rhmpc_data.c, row-major, from the controller's CondensedQP."""
     qp = mpc.qp
@@ -146,12 +156,12 @@ def _data_arrays(mpc: RecedingHorizonMPC) -> dict[str, np.ndarray]:
         "F_ext": np.column_stack([qp.F, qp.f0]),
         "minimiser": np.asarray(qp.minimiser),
         # the screening cascade (levels 1 and 2), column-major: the controller's own arrays
-        "F_z_T": np.asarray(mpc._F_z).T,
-        "neg_W": np.asarray(mpc.box._negW).T,
-        "W": np.asarray(mpc.box.W).T,
-        "H": np.asarray(mpc.box.H).T,
-        "A_env_T": _envelope_rows(mpc)[0].T,
-        "G_env_T": _envelope_rows(mpc)[1].T,
+        "F_z_T": _column_major(mpc._F_z),
+        "neg_W": _column_major(mpc.box._negW),
+        "W": np.asarray(mpc.box.W),  # symmetric, read by rows
+        "H": _column_major(mpc.box.H),
+        "A_env_T": _column_major(_envelope_rows(mpc)[0]),
+        "G_env_T": _column_major(_envelope_rows(mpc)[1]),
         "l0": np.asarray(qp.l0),
         "u0": np.asarray(qp.u0),
         "gain": np.asarray(qp.gain),

@@ -68,28 +68,20 @@ static void spmv(const int *ptr, const int *col, const double *val, int rows, co
   for (int r = 0; r < rows; ++r) out[r] = row_dot(ptr, col, val, r, v);
 }
 
-/* out = M v with M (rows x cols) stored column-major as MT[c * rows + r]: blocks of 8 rows
- * accumulate over all columns in registers (vectorisable; each entry sums in column order). */
+/* out = M v with M (rows x cols) stored column-major with a column stride of `stride` >= rows
+ * entries, a multiple of 8 (zero padding): MT[c * stride + r]. Blocks of 8 rows accumulate
+ * over all columns in registers (vectorised, no scalar tail); each entry sums in column
+ * order; only the first `rows` entries are written. */
 static inline void matvec_cm(const double *restrict MT, const double *restrict v, int rows,
-                             int cols, double *restrict out) {
-  int r0 = 0;
-  for (; r0 + 8 <= rows; r0 += 8) {
+                             int stride, int cols, double *restrict out) {
+  for (int r0 = 0; r0 < rows; r0 += 8) {
     double acc[8] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
     const double *col = MT + r0;
-    for (int c = 0; c < cols; ++c, col += rows) {
+    for (int c = 0; c < cols; ++c, col += stride) {
       const double vc = v[c];
       for (int j = 0; j < 8; ++j) acc[j] += col[j] * vc;
     }
-    for (int j = 0; j < 8; ++j) out[r0 + j] = acc[j];
-  }
-  if (r0 < rows) {
-    double acc[8] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
-    const int nr = rows - r0;
-    const double *col = MT + r0;
-    for (int c = 0; c < cols; ++c, col += rows) {
-      const double vc = v[c];
-      for (int j = 0; j < nr; ++j) acc[j] += col[j] * vc;
-    }
+    const int nr = rows - r0 < 8 ? rows - r0 : 8;
     for (int j = 0; j < nr; ++j) out[r0 + j] = acc[j];
   }
 }
@@ -226,7 +218,7 @@ static int fallback(rhmpc_t *ctl, int status, int inputs_finite, double tau[RHMP
 static int envelope_holds_at(rhmpc_t *ctl, const double *z) {
 #if RHMPC_M > RHMPC_NV
   double *g = ctl->g_env;
-  matvec_cm(rhmpc_A_env_T, z, RHMPC_NENV_U, RHMPC_NZ, g);
+  matvec_cm(rhmpc_A_env_T, z, RHMPC_NENV_U, RHMPC_PAD8(RHMPC_NENV_U), RHMPC_NZ, g);
   for (int i = 0; i < RHMPC_M - RHMPC_NV; ++i) {
     const double gi = g[rhmpc_env_row[i]];
     if (!(gi - ctl->u[RHMPC_NV + i] <= 0.0 && ctl->l[RHMPC_NV + i] - gi <= 0.0)) return 0;
@@ -241,7 +233,7 @@ static int envelope_holds_at(rhmpc_t *ctl, const double *z) {
 /* Level 1: z* = -W q_z (slacks 0); 1 if [z*; 0] satisfies every row: torque rows |z*_i| <= 1,
  * slack rows l <= 0 <= u, envelope rows. */
 static int screened(rhmpc_t *ctl) {
-  matvec_cm(rhmpc_neg_W, ctl->q, RHMPC_NZ, RHMPC_NZ, ctl->z_star); /* W symmetric */
+  matvec_cm(rhmpc_neg_W, ctl->q, RHMPC_NZ, RHMPC_PAD8(RHMPC_NZ), RHMPC_NZ, ctl->z_star);
   for (int i = 0; i < RHMPC_NZ; ++i)
     if (!(ctl->z_star[i] - ctl->u[i] <= 0.0 && ctl->l[i] - ctl->z_star[i] <= 0.0)) return 0;
   for (int i = RHMPC_NZ; i < RHMPC_NV; ++i)
@@ -430,7 +422,7 @@ static int box_solved(rhmpc_t *ctl) {
   if (!box_pdas(ctl, dual_tol) && !box_dual(ctl, dual_tol)) return 0;
   /* KKT certificate from H and q (not W): r = H z + q + mu */
   double *r = ctl->box_tmp;
-  matvec_cm(rhmpc_H, ctl->box_z, RHMPC_NZ, RHMPC_NZ, r); /* H symmetric */
+  matvec_cm(rhmpc_H, ctl->box_z, RHMPC_NZ, RHMPC_PAD8(RHMPC_NZ), RHMPC_NZ, r);
   double rmax = 0.0;
   for (int i = 0; i < RHMPC_NZ; ++i) {
     r[i] += q[i];
@@ -477,7 +469,8 @@ int rhmpc_tick_ext(rhmpc_t *ctl, const double x[RHMPC_NX], const double ref[RHMP
   /* l, u = l0 - G p, u0 - G p: G is zero but on the envelope rows and the bound columns, and
    * an upper and a lower row of a limit share it (one product per distinct row). */
   for (int j = 0; j < RHMPC_NBC; ++j) ctl->p_bc[j] = p[rhmpc_bound_columns[j]];
-  matvec_cm(rhmpc_G_env_T, ctl->p_bc, RHMPC_NENV_U, RHMPC_NBC, ctl->g_env);
+  matvec_cm(rhmpc_G_env_T, ctl->p_bc, RHMPC_NENV_U, RHMPC_PAD8(RHMPC_NENV_U), RHMPC_NBC,
+            ctl->g_env);
   for (int i = 0; i < RHMPC_M - RHMPC_NV; ++i) {
     const double gi = ctl->g_env[rhmpc_env_row[i]];
     ctl->l[RHMPC_NV + i] = rhmpc_l0[RHMPC_NV + i] - gi;
@@ -486,7 +479,7 @@ int rhmpc_tick_ext(rhmpc_t *ctl, const double x[RHMPC_NX], const double ref[RHMP
 #endif
   if (RHMPC_SCREENING && ctl->forced == 0) {
     const double *zsol = NULL;
-    matvec_cm(rhmpc_F_z_T, p, RHMPC_NZ, NPE, ctl->q); /* q[NZ..NV) = rho_1 since init */
+    matvec_cm(rhmpc_F_z_T, p, RHMPC_NZ, RHMPC_PAD8(RHMPC_NZ), NPE, ctl->q); /* q[NZ..NV): rho_1 */
     if (screened(ctl)) {
       zsol = ctl->z_star;
       ctl->level = 1;

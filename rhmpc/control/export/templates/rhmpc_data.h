@@ -21,16 +21,18 @@
 
 extern const double rhmpc_F_ext[RHMPC_NV * (RHMPC_NPAR + 1)];
 extern const double rhmpc_minimiser[RHMPC_NV * (RHMPC_NPAR + 1)];
-/* The screening cascade's dense data, column-major (transposed): F_z_T = [F, f0][:NZ]^T
- * ((NPAR+1) x NZ), neg_W = -P_zz^-1 and W = P_zz^-1, H = P_zz (NZ x NZ, symmetric), A_env_T =
- * the envelope rows' z part transposed (NZ x (M - NV)). */
-extern const double rhmpc_F_z_T[(RHMPC_NPAR + 1) * RHMPC_NZ];
-extern const double rhmpc_neg_W[RHMPC_NZ * RHMPC_NZ];
+/* The screening cascade's dense data, column-major with each column zero-padded to
+ * RHMPC_PAD8(rows) entries: F_z_T = [F, f0][:NZ] ((NPAR+1) columns), neg_W = -P_zz^-1 and
+ * H = P_zz (NZ columns), A_env_T = the distinct envelope rows' z part (NZ columns).
+ * W = P_zz^-1 (NZ x NZ, symmetric, not padded). */
+#define RHMPC_PAD8(n) ((((n) + 7) / 8) * 8)
+extern const double rhmpc_F_z_T[(RHMPC_NPAR + 1) * RHMPC_PAD8(RHMPC_NZ)];
+extern const double rhmpc_neg_W[RHMPC_NZ * RHMPC_PAD8(RHMPC_NZ)];
 extern const double rhmpc_W[RHMPC_NZ * RHMPC_NZ];
-extern const double rhmpc_H[RHMPC_NZ * RHMPC_NZ];
-extern const double rhmpc_A_env_T[]; /* NZ x NENV_U: the distinct envelope rows' z part */
-/* The envelope rows' G on the bound columns, distinct rows, column-major (NBC x NENV_U); the
- * bound columns of p; the distinct row of each envelope row (M - NV entries). */
+extern const double rhmpc_H[RHMPC_NZ * RHMPC_PAD8(RHMPC_NZ)];
+extern const double rhmpc_A_env_T[];
+/* The envelope rows' G on the bound columns, distinct rows, column-major (NBC columns,
+ * padded like A_env_T); the bound columns of p; the distinct row of each envelope row. */
 extern const double rhmpc_G_env_T[];
 extern const int rhmpc_bound_columns[];
 extern const int rhmpc_env_row[];
