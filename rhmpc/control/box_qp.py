@@ -1,4 +1,4 @@
-"""Level 2 of the screening cascade: the torque-box QP, solved exactly by a primal-dual active set.
+"""Level 2 of the screening cascade: the torque-box QP, solved exactly by active-set methods.
 
 The MPC's QP (:mod:`rhmpc.control.qp`) over ``v = [ẑ; s]`` has torque boxes ``−1 ≤ ẑ ≤ 1``,
 slack bounds ``s ≥ 0`` and the envelope rows. With the slacks fixed at 0 and the envelope rows
@@ -18,20 +18,33 @@ Range-space (Schur-complement) step
     Cholesky; it has |𝒜| rows (1–4 on the bench's saturated ticks). An active upper bound needs
     ``μ_i ≥ 0``, an active lower bound ``μ_i ≤ 0`` (OSQP's sign convention for ``z ≤ 1``).
 
-Active-set update
-    The primal-dual active-set method (Hintermüller, Ito & Kunisch, *SIAM J. Optim.* 13(3),
-    865–888, 2002; Kunisch & Rendl, *ESAIM: M2AN* 37(6), 2003), i.e. a semismooth Newton method
-    on the KKT conditions: the next set keeps the active bounds whose multiplier has the right
-    sign and adds every free variable that violates its bound::
+Phase 1: primal-dual active set (PDAS)
+    Hintermüller, Ito & Kunisch, *SIAM J. Optim.* 13(3), 865–888, 2002 (a semismooth Newton
+    method on the KKT conditions): the next set keeps the active bounds whose multiplier has
+    the right sign and adds every free variable that violates its bound::
 
-        𝒜⁺ = {i ∈ 𝒜 : b_i μ_i ≥ −ε_d} ∪ {i ∉ 𝒜 : |z_i| > 1 + ε_p}   (b_i = sign z_i)
+        𝒜⁺ = {i ∈ 𝒜 : b_i μ_i ≥ −ε_d} ∪ {i ∉ 𝒜 : |z_i| > 1 + ε_p}
 
-    It stops when 𝒜⁺ = 𝒜: then every KKT condition of the box QP holds (within the tolerances
-    below). It starts from the bounds the unconstrained minimiser ẑ* violates — measured on
-    ``rhmpc bench`` (120 saturated ticks): 1 / 2 / 3 solves on 101 / 17 / 2 ticks, against
-    64 / 40 / 13 / 2 solves (1 / 2 / 3 / 4) when started from the previous tick's final set, so
-    the cold start from ẑ* is both stateless and faster. PDAS can cycle on a general SPD H, so
-    the number of solves is capped (``max_iter``); past the cap the tick goes to level 3.
+    It stops when 𝒜⁺ = 𝒜: then every KKT condition of the box QP holds (within the
+    tolerances). It starts from the bounds the unconstrained minimiser ẑ* violates. Measured on
+    ``rhmpc bench`` (≈ 120 saturated ticks of 5000): 1 / 2 / 3 solves on 101 / 17 / 2 ticks; a
+    start from the previous tick's final set needed 1 / 2 / 3 / 4 solves on 64 / 40 / 13 / 2, so
+    the stateless start from ẑ* is also the faster one. PDAS can cycle when H is not an
+    M-matrix (Kunisch & Rendl, *ESAIM: M2AN* 37(6), 2003) — this H couples neighbouring
+    blocks strongly, and it does cycle on targets with many saturated blocks — so it gets
+    ``pdas_iter`` solves.
+
+Phase 2: dual active set (Goldfarb & Idnani, *Math. Program.* 27, 1–33, 1983)
+    If PDAS has not converged, the dual method starts again from ẑ* (𝒜 = ∅, dual feasible)
+    and adds the most violated bound p (``σ_p z_p ≤ 1``), raising its multiplier λ_p along::
+
+        r = (Nᵀ W N)⁻¹ Nᵀ W n_p,   s = W n_p − W N r,   z ← z − t s,   λ_𝒜 ← λ_𝒜 − t r,
+        λ_p ← λ_p + t,   t = min(full step to z_p = σ_p, first λ_j reaching 0)
+
+    (``N`` the active bounds' normals σ_i e_i; a partial step drops bound j and continues
+    with p). The dual objective rises at every step, so no active set repeats: it terminates
+    in finitely many steps in exact arithmetic. Each step is one Cholesky of ``W_𝒜𝒜``.
+    Solves of both phases count towards ``max_iter``; past it the tick goes to level 3.
 
 Certificate
     A result is accepted only if the stationarity residual, computed from ``H`` and ``q`` (not

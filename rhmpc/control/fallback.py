@@ -49,7 +49,8 @@ class MPCStats:
         Last tick: the cascade level that produced the QP solution (1, 2, or 3 = the configured
         solver), 0 if the tick never reached the QP (non-finite inputs).
     box_iterations : int
-        Last tick: active-set solves of level 2 if it produced the solution, else 0.
+        Last tick: level 2's active-set solves (also when it was tried and the tick went on to
+        level 3), else 0.
     solve_time : float
         Wall time of the last ``solve()`` call [s].
     parts_ns : list[int]

@@ -335,6 +335,7 @@ class RecedingHorizonMPC:
         stats = self.stats
         stats.ticks += 1
         stats.level = 0
+        stats.box_iterations = 0
         x = np.asarray(x, dtype=float)
         ref = np.asarray(ref, dtype=float)
         if x.shape != self._x_shape or ref.shape != self._ref_shape:
@@ -373,8 +374,10 @@ class RecedingHorizonMPC:
                 v = np.zeros(self._nv)
                 v[: self._nz] = self.box.z
                 return self._screened_output(t0, v, 2)
+            stats.box_iterations = self.box.iterations if self._box_on else 0
         else:
             np.dot(self._F_ext, p_ext, out=self._q)
+            stats.box_iterations = 0
         self._last_screened = False
         self._level = 3
         stats.level = 3

@@ -98,7 +98,8 @@ typedef struct {
   long long boxed;                      /* ticks solved by level 2 (the torque-box QP) */
   int level;                            /* cascade level of the last tick's QP solution: 1
                                            screened, 2 box QP, 3 OSQP; 0 = no QP (bad input) */
-  int box_iterations;                   /* level 2's active-set solves in the last tick */
+  int box_iterations;                   /* level 2's active-set solves in the last tick (also
+                                           when the tick went on to level 3) */
   /* -- internal state (do not touch) ------------------------------------------------------- */
   long long forced;                     /* pending injected failures */
   int plan_valid, plan_age, ws_x_set, ws_y_set, ws_pending, last_screened;
