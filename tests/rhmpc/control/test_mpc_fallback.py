@@ -270,6 +270,8 @@ def test_returned_torque_is_not_aliased(arm, mpc):
         {"joint_lower": (0.0, 0.0, 0.0)},
         {"joint_lower": (1.0,), "joint_upper": (0.0,)},
         {"plan_fallback_ticks": -1},
+        {"box_max_iter": 0},
+        {"box_screening": 1},
     ],
 )
 def test_bad_settings_raise_value_error(kwargs):
