@@ -149,6 +149,50 @@ def _column_major(M: np.ndarray) -> np.ndarray:
     return out
 
 
+def _blocked(M: np.ndarray, perm: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """M (rows, cols) for C's ``matvec_blocks``: its rows reordered by ``perm``, column-major
+    and padded (:func:`_column_major`), with each block of 8 rows' non-zero columns listed
+    (``cptr``, ``cols``: all-zero columns of a block are skipped; adding 0 changes no sum, so the
+    result is the same to the bit). ``out[perm[r]]`` receives row r of the reordered matrix."""
+    M = np.asarray(M, dtype=float)
+    rows = M.shape[0]
+    perm = np.arange(rows) if perm is None else np.asarray(perm, dtype=int)
+    Mp = M[perm]
+    cptr, cols = [0], []
+    for r0 in range(0, rows, 8):
+        cols.extend(np.flatnonzero(np.any(Mp[r0:r0 + 8] != 0, axis=0)).tolist())
+        cptr.append(len(cols))
+    return {"T": _column_major(Mp), "cptr": np.array(cptr), "cols": np.array(cols, dtype=int),
+            "perm": perm}
+
+
+def _q_row_order(mpc: RecedingHorizonMPC) -> np.ndarray:
+    """Rows of F_z grouped by the reference axes they read, then by their first reference
+    point: a joint moves only some end-effector axes at q0 and a block only the points after
+    its start, so blocks of 8 such rows share many all-zero columns (measured on the PHANToM:
+    48 % of the block columns skipped against 26 % in the natural order)."""
+    qp = mpc.qp
+    nx, N, ny = qp.nx, qp.N, qp.ny
+    F = np.asarray(mpc._F_z)
+
+    def key(i: int) -> tuple:
+        rc = np.flatnonzero(F[i, nx:nx + N * ny])
+        return (tuple(sorted(set((rc % ny).tolist()))), int(rc[0]) if rc.size else N * ny, i)
+
+    return np.array(sorted(range(F.shape[0]), key=key), dtype=int)
+
+
+def _blocked_arrays(mpc: RecedingHorizonMPC) -> dict[str, tuple[np.ndarray, str]]:
+    """The block-sparse maps of the screening cascade: F_z (q_z = F_z [p; 1]) and the distinct
+    envelope rows' z part, as (array, C type) per name."""
+    out: dict[str, tuple[np.ndarray, str]] = {}
+    for name, blocked in (("F_z", _blocked(mpc._F_z, _q_row_order(mpc))),
+                          ("A_env", _blocked(_envelope_rows(mpc)[0]))):
+        for part, values in blocked.items():
+            out[f"{name}_{part}"] = (values, "double" if part == "T" else "int")
+    return out
+
+
 def _data_arrays(mpc: RecedingHorizonMPC) -> dict[str, np.ndarray]:
     """The const arrays of rhmpc_data.c, row-major, from the controller's CondensedQP."""
     qp = mpc.qp
@@ -156,11 +200,9 @@ def _data_arrays(mpc: RecedingHorizonMPC) -> dict[str, np.ndarray]:
         "F_ext": np.column_stack([qp.F, qp.f0]),
         "minimiser": np.asarray(qp.minimiser),
         # the screening cascade (levels 1 and 2), column-major: the controller's own arrays
-        "F_z_T": _column_major(mpc._F_z),
         "neg_W": _column_major(mpc.box._negW),
         "W": np.asarray(mpc.box.W),  # symmetric, read by rows
         "H": _column_major(mpc.box.H),
-        "A_env_T": _column_major(_envelope_rows(mpc)[0]),
         "G_env_T": _column_major(_envelope_rows(mpc)[1]),
         "l0": np.asarray(qp.l0),
         "u0": np.asarray(qp.u0),
@@ -215,7 +257,8 @@ def export_key(mpc: RecedingHorizonMPC, robot: str) -> str:
     h.update(json.dumps(meta, sort_keys=True).encode())
     qp = mpc.qp
     sparse = [getattr(qp, name) for name in _SPARSE]
-    for a in (qp.P, *(_data_arrays(mpc).values()), *sparse, qp.block_of_tick):
+    blocked = [v for v, _ in _blocked_arrays(mpc).values()]
+    for a in (qp.P, *(_data_arrays(mpc).values()), *sparse, *blocked, qp.block_of_tick):
         h.update(np.ascontiguousarray(a, dtype=float).tobytes())
     for name in _TEMPLATES:
         h.update(files(__package__).joinpath("templates", name).read_bytes())
@@ -292,6 +335,8 @@ def export_controller(mpc: RecedingHorizonMPC, outdir: str | Path, *, robot: str
                   _c_array(f"{name}_x", val)]
     parts.append(_c_array("block_of_tick", qp.block_of_tick, ctype="int"))
     parts.append(_c_array("bound_columns", qp.bound_columns, ctype="int"))
+    for name, (values, ctype) in _blocked_arrays(mpc).items():
+        parts.append(_c_array(name, values, ctype=ctype))
     parts.append(_c_array("env_row", _envelope_rows(mpc)[2], ctype="int"))
     (outdir / "rhmpc_data.c").write_text("".join(parts))
     written.append("rhmpc_data.c")

@@ -86,6 +86,25 @@ static inline void matvec_cm(const double *restrict MT, const double *restrict v
   }
 }
 
+/* out[perm[r]] = (M v)_r for a block-sparse M (rhmpc_data.h): per block of 8 rows only the
+ * listed columns, which hold every non-zero of the block; each entry sums in column order. */
+static inline void matvec_blocks(const double *restrict MT, const int *restrict cptr,
+                                 const int *restrict cols, const int *restrict perm,
+                                 const double *restrict v, int rows, double *restrict out) {
+  const int stride = RHMPC_PAD8(rows);
+  for (int r0 = 0, b = 0; r0 < rows; r0 += 8, ++b) {
+    double acc[8] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
+    for (int ci = cptr[b]; ci < cptr[b + 1]; ++ci) {
+      const int c = cols[ci];
+      const double vc = v[c];
+      const double *col = MT + (long)c * stride + r0;
+      for (int j = 0; j < 8; ++j) acc[j] += col[j] * vc;
+    }
+    const int nr = rows - r0 < 8 ? rows - r0 : 8;
+    for (int j = 0; j < nr; ++j) out[perm[r0 + j]] = acc[j];
+  }
+}
+
 static double clip(double v, double hi) { return v > hi ? hi : (v < -hi ? -hi : v); }
 
 static int status_of(OSQPInt status_val) {
@@ -218,7 +237,8 @@ static int fallback(rhmpc_t *ctl, int status, int inputs_finite, double tau[RHMP
 static int envelope_holds_at(rhmpc_t *ctl, const double *z) {
 #if RHMPC_M > RHMPC_NV
   double *g = ctl->g_env;
-  matvec_cm(rhmpc_A_env_T, z, RHMPC_NENV_U, RHMPC_PAD8(RHMPC_NENV_U), RHMPC_NZ, g);
+  matvec_blocks(rhmpc_A_env_T, rhmpc_A_env_cptr, rhmpc_A_env_cols, rhmpc_A_env_perm, z,
+                RHMPC_NENV_U, g);
   for (int i = 0; i < RHMPC_M - RHMPC_NV; ++i) {
     const double gi = g[rhmpc_env_row[i]];
     if (!(gi - ctl->u[RHMPC_NV + i] <= 0.0 && ctl->l[RHMPC_NV + i] - gi <= 0.0)) return 0;
@@ -479,7 +499,9 @@ int rhmpc_tick_ext(rhmpc_t *ctl, const double x[RHMPC_NX], const double ref[RHMP
 #endif
   if (RHMPC_SCREENING && ctl->forced == 0) {
     const double *zsol = NULL;
-    matvec_cm(rhmpc_F_z_T, p, RHMPC_NZ, RHMPC_PAD8(RHMPC_NZ), NPE, ctl->q); /* q[NZ..NV): rho_1 */
+    /* q_z; q[NZ..NV) = rho_1 since rhmpc_init */
+    matvec_blocks(rhmpc_F_z_T, rhmpc_F_z_cptr, rhmpc_F_z_cols, rhmpc_F_z_perm, p, RHMPC_NZ,
+                  ctl->q);
     if (screened(ctl)) {
       zsol = ctl->z_star;
       ctl->level = 1;

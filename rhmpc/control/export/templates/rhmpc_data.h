@@ -22,17 +22,19 @@
 extern const double rhmpc_F_ext[RHMPC_NV * (RHMPC_NPAR + 1)];
 extern const double rhmpc_minimiser[RHMPC_NV * (RHMPC_NPAR + 1)];
 /* The screening cascade's dense data, column-major with each column zero-padded to
- * RHMPC_PAD8(rows) entries: F_z_T = [F, f0][:NZ] ((NPAR+1) columns), neg_W = -P_zz^-1 and
- * H = P_zz (NZ columns), A_env_T = the distinct envelope rows' z part (NZ columns).
- * W = P_zz^-1 (NZ x NZ, symmetric, not padded). */
+ * RHMPC_PAD8(rows) entries: neg_W = -P_zz^-1 and H = P_zz (NZ columns); G_env_T the envelope
+ * rows' G on the bound columns (distinct rows, NBC columns). W = P_zz^-1 (NZ x NZ, symmetric,
+ * not padded). Block-sparse (matvec_blocks in rhmpc.c): F_z = [F, f0][:NZ] (rows reordered by
+ * F_z_perm) and A_env = the distinct envelope rows' z part: _T the padded column-major values,
+ * _cptr/_cols the non-zero columns of each block of 8 rows, _perm where each row goes. */
 #define RHMPC_PAD8(n) ((((n) + 7) / 8) * 8)
-extern const double rhmpc_F_z_T[(RHMPC_NPAR + 1) * RHMPC_PAD8(RHMPC_NZ)];
 extern const double rhmpc_neg_W[RHMPC_NZ * RHMPC_PAD8(RHMPC_NZ)];
 extern const double rhmpc_W[RHMPC_NZ * RHMPC_NZ];
 extern const double rhmpc_H[RHMPC_NZ * RHMPC_PAD8(RHMPC_NZ)];
+extern const double rhmpc_F_z_T[];
+extern const int rhmpc_F_z_cptr[], rhmpc_F_z_cols[], rhmpc_F_z_perm[];
 extern const double rhmpc_A_env_T[];
-/* The envelope rows' G on the bound columns, distinct rows, column-major (NBC columns,
- * padded like A_env_T); the bound columns of p; the distinct row of each envelope row. */
+extern const int rhmpc_A_env_cptr[], rhmpc_A_env_cols[], rhmpc_A_env_perm[];
 extern const double rhmpc_G_env_T[];
 extern const int rhmpc_bound_columns[];
 extern const int rhmpc_env_row[];
