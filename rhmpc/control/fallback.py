@@ -40,7 +40,17 @@ class MPCStats:
     iterations : int
         OSQP iterations of the last tick (0 if no solve ran).
     screened : int
-        Ticks solved by screening, without calling OSQP (their ``source`` is ``"qp"``).
+        Ticks solved by level 1 of the screening cascade (the unconstrained minimiser holds
+        every row), without calling the solver (their ``source`` is ``"qp"``).
+    boxed : int
+        Ticks solved by level 2 (the torque-box QP by active set, every envelope row holding:
+        :mod:`rhmpc.control.box_qp`), without calling the solver (``source`` ``"qp"``).
+    level : int
+        Last tick: the cascade level that produced the QP solution (1, 2, or 3 = the configured
+        solver), 0 if the tick never reached the QP (non-finite inputs).
+    box_iterations : int
+        Last tick: level 2's active-set solves (also when it was tried and the tick went on to
+        level 3), else 0.
     solve_time : float
         Wall time of the last ``solve()`` call [s].
     parts_ns : list[int]
@@ -62,6 +72,9 @@ class MPCStats:
     source: str = "none"
     iterations: int = 0
     screened: int = 0
+    boxed: int = 0
+    level: int = 0
+    box_iterations: int = 0
     solve_time: float = 0.0
     parts_ns: list[int] = field(default_factory=lambda: [0, 0, 0, 0])
     failures: dict[str, int] = field(default_factory=dict)

@@ -6,15 +6,21 @@ each tick then only does::
     d = p(q0 + x̂_q) − (C x̂ + y0)       (output offset: one forward-kinematics call)
     p = [x; r_1..r_N; u_{−1}; d]        (copy into a preallocated buffer, finiteness check)
     l, u = l0 − G p, u0 − G p           (envelope rows: only the state and offset columns)
-    v* = [ẑ*; 0], ẑ* = −P_z⁻¹ q_z(p)    (screening: one mat-vec; if l ≤ A v* ≤ u, v = v*, done)
-    q = F p + f0                        (one mat-vec)
-    solver.update(q, l, u) ; warm start ; solver.solve()   (DAQP: hot-started working set;
-                                        OSQP: previous solution shifted one tick)
+    q_z = F_z p + f0_z                  (one mat-vec; the slacks' q is the constant ρ₁)
+    level 1: ẑ* = −W q_z (W = P_zz⁻¹)   if l ≤ A [ẑ*; 0] ≤ u (every row): v = [ẑ*; 0], done
+    level 2: the torque-box QP by active set (:mod:`rhmpc.control.box_qp`); if it converges, its
+             KKT certificate holds and every envelope row holds at [z; 0]: v = [z; 0], done
+    level 3: solver.update(q, l, u) ; warm start ; solver.solve()   (DAQP: hot-started working
+             set; OSQP: previous solution shifted one tick)
     τ = clip(u_max ∘ ẑ_0, −u_max, u_max)   if the status is "solved", else the fallback
 
-Screening is exact, not an approximation: with the slacks at 0 and every row satisfied, the
-point satisfies the QP's KKT conditions (zero multipliers on the envelope and torque rows,
-multiplier ρ₁ on each slack's bound s ≥ 0), and P ≻ 0 makes it unique. It checks every row.
+The screening cascade is exact, not an approximation. Level 1: with the slacks at 0 and every
+row satisfied, the point satisfies the QP's KKT conditions (zero multipliers on the envelope and
+torque rows, multiplier ρ₁ on each slack's bound s ≥ 0), and P ≻ 0 makes it unique. It checks
+every row. Level 2 is the same argument with the torque rows' multipliers of the box QP: the
+envelope rows' multipliers are zero, so the box QP's KKT conditions are the full QP's (proof in
+:mod:`rhmpc.control.box_qp`). It checks every envelope row; the torque rows are its own
+constraints.
 
 A tick whose solve is not "solved" never uses OSQP's ``x``: it takes a fallback of
 :mod:`rhmpc.control.fallback` (the shifted plan, the clipped LQ input if it keeps the envelope,
@@ -31,6 +37,7 @@ import osqp
 import scipy.sparse as sp
 
 from rhmpc.control.active_set import ActiveSetSolver
+from rhmpc.control.box_qp import BoxQP, BoxQPSettings
 from rhmpc.control.fallback import MPCStats, brake_torque, envelope_holds
 from rhmpc.control.offset import OutputOffset
 from rhmpc.control.qp import CondensedQP, build_condensed_qp
@@ -128,7 +135,19 @@ class RecedingHorizonMPC:
         self._screen = self.settings.screening
         self._Z_ext = np.ascontiguousarray(qp.minimiser)
         self._z_star = np.zeros(qp.nv)
+        self._z_star_z = self._z_star[: qp.nz]  # a view: the slacks stay 0
         self._z_abs = np.empty(qp.nv)
+        # The screening cascade works on q_z (the slacks' part of q is the constant ρ₁):
+        # level 1 ẑ* = −W q_z, level 2 the box QP on the same W (rhmpc.control.box_qp).
+        self._q[qp.nz:] = qp.f0[qp.nz:]
+        self._q_z = self._q[: qp.nz]
+        self._F_z = np.ascontiguousarray(self._F_ext[: qp.nz])
+        self.box = BoxQP(qp.P[: qp.nz, : qp.nz],
+                         BoxQPSettings(max_iter=self.settings.box_max_iter))
+        self._box_on = self.settings.box_screening
+        self._A_env = np.ascontiguousarray(qp.A[qp.nv:, : qp.nz])
+        self._g_env = np.empty(qp.A.shape[0] - qp.nv)
+        self._level = 0
         # Multipliers of a screened solution: 0 on every row but the slack bounds s ≥ 0, whose
         # multiplier is −ρ₁ (stationarity in s at s = 0). Starting ADMM from them matters: from
         # 0 it needs thousands of iterations to build up ρ₁ (measured: > 4000 vs 25–75).
@@ -251,10 +270,15 @@ class RecedingHorizonMPC:
     def last_solution(self) -> tuple[np.ndarray, np.ndarray]:
         """Primal ẑ and dual y of the last tick's QP, as copies.
 
-        After a screened tick: ([ẑ*; 0], 0); otherwise OSQP's last iterate, whatever its status.
+        After a screened tick: ([ẑ*; 0], y) with y = 0 but −ρ₁ on the slack bounds (level 1),
+        or the box multipliers on the torque rows (level 2); otherwise the solver's last
+        iterate, whatever its status.
         """
         if self._last_screened:
-            return self._z_star.copy(), self._y_zero.copy()
+            y = self._y_zero.copy()
+            if self._level == 2:
+                y[: self._nz] = self.box.mu
+            return self._plan.copy(), y
         if self._daqp is not None:
             return self._daqp.x.copy(), self._daqp.y.copy()
         if self._raw is not None:
@@ -310,6 +334,8 @@ class RecedingHorizonMPC:
         t0 = clock()
         stats = self.stats
         stats.ticks += 1
+        stats.level = 0
+        stats.box_iterations = 0
         x = np.asarray(x, dtype=float)
         ref = np.asarray(ref, dtype=float)
         if x.shape != self._x_shape or ref.shape != self._ref_shape:
@@ -340,10 +366,21 @@ class RecedingHorizonMPC:
             np.dot(self._G, self._p_cols, out=self._g)
             np.subtract(self.qp.l0, self._g, out=self._l)
             np.subtract(self.qp.u0, self._g, out=self._u)
-        if self._screen and not self._forced and self._screened(p_ext):
-            return self._screened_output(t0)
+        if self._screen and not self._forced:
+            np.dot(self._F_z, p_ext, out=self._q_z)
+            if self._screened():
+                return self._screened_output(t0, self._z_star, 1)
+            if self._box_on and self._box_solved():
+                v = np.zeros(self._nv)
+                v[: self._nz] = self.box.z
+                return self._screened_output(t0, v, 2)
+            stats.box_iterations = self.box.iterations if self._box_on else 0
+        else:
+            np.dot(self._F_ext, p_ext, out=self._q)
+            stats.box_iterations = 0
         self._last_screened = False
-        np.dot(self._F_ext, p_ext, out=self._q)
+        self._level = 3
+        stats.level = 3
         t1 = clock()
         try:
             self._update_q()
@@ -417,10 +454,14 @@ class RecedingHorizonMPC:
         stats.parts_ns[:] = [t1 - t0, t2 - t1, t3 - t2, clock() - t3]
         return tau
 
-    def _screened_output(self, t0: int) -> np.ndarray:
-        """τ from the screened ẑ* (the QP's solution): bookkeeping of a tick without OSQP."""
-        z = self._z_star.copy()
+    def _screened_output(self, t0: int, v: np.ndarray, level: int) -> np.ndarray:
+        """τ from a screened solution v = [ẑ; 0] of level 1 or 2 (the QP's solution, exactly):
+        bookkeeping of a tick without the solver."""
+        z = v.copy() if level == 1 else v
         tau = z[: self._nu_] * self._scale0
+        if level == 2:  # |ẑ_i| ≤ 1 + primal_tol
+            np.maximum(tau, self._neg_umax, out=tau)
+            np.minimum(tau, self.u_max, out=tau)
         self._p_u[:] = tau
         self._plan = z
         self._plan_age = 0
@@ -428,23 +469,43 @@ class RecedingHorizonMPC:
         # multipliers are zero here.
         self._ws_pending = self._ws != "none"
         self._last_screened = True
+        self._level = level
         stats = self.stats
         stats.iterations = 0
         stats.solve_time = 0.0
-        stats.screened += 1
+        stats.level = level
+        stats.box_iterations = self.box.iterations if level == 2 else 0
+        if level == 1:
+            stats.screened += 1
+        else:
+            stats.boxed += 1
         stats.status = "solved"
         stats.source = "qp"
         stats.parts_ns[0] = time.perf_counter_ns() - t0
         stats.parts_ns[1] = stats.parts_ns[2] = stats.parts_ns[3] = 0
         return tau
 
-    def _screened(self, p_ext: np.ndarray) -> bool:
-        """Compute ẑ* = −P⁻¹ q(p); True if it satisfies every constraint (then it is the QP's ẑ)."""
-        z = np.dot(self._Z_ext, p_ext, out=self._z_star)
+    def _screened(self) -> bool:
+        """Level 1: ẑ* = −W q_z (in ``_z_star``, slacks 0); True if [ẑ*; 0] satisfies every
+        constraint row (then it is the QP's solution)."""
+        np.dot(self.box._negW, self._q_z, out=self._z_star_z)
+        z = self._z_star
         if not self.qp.param_bounds:  # A = I, l = −1, u = 1: the normalised torque bounds
             return bool(np.abs(z, out=self._z_abs).max() <= 1.0)
         g = np.dot(self.qp.A, z, out=self._g)
         return bool((g - self._u).max() <= 0.0 and (self._l - g).max() <= 0.0)
+
+    def _box_solved(self) -> bool:
+        """Level 2: the torque-box QP solved exactly (KKT certificate), and every envelope row
+        holds at [z; 0] (then it is the full QP's solution; :mod:`rhmpc.control.box_qp`)."""
+        box = self.box
+        if not box.solve(self._q_z, self._z_star_z):
+            return False
+        if self._g_env.size == 0:
+            return True
+        g = np.dot(self._A_env, box.z, out=self._g_env)
+        nv = self._nv
+        return bool((g - self._u[nv:]).max() <= 0.0 and (self._l[nv:] - g).max() <= 0.0)
 
     # -- fallback ------------------------------------------------------------------------------
     def _fallback(self, reason: str, *, inputs_finite: bool) -> np.ndarray:

@@ -278,6 +278,9 @@ def run_bench(
     c_call_ns = np.zeros(total, dtype=np.int64)
     c_err = np.zeros(total)
     c_osqp = np.zeros(total, dtype=bool)
+    level = np.zeros(total, dtype=np.int64)
+    box_iters = np.zeros(total, dtype=np.int64)
+    c_level = np.zeros(total, dtype=np.int64)
     c_mismatch = 0
     clock = time.perf_counter_ns
     gc_was_enabled = gc.isenabled()
@@ -300,15 +303,17 @@ def run_bench(
             tau_every = every.step(x, ref)
             t4 = clock()
             if compiled is not None:
-                c_screened = compiled.screened
                 tau_c = compiled.step(x, ref)
-                c_osqp[k] = compiled.screened == c_screened
+                c_osqp[k] = compiled.level == 3
+                c_level[k] = compiled.level
                 c_ns[k], c_call_ns[k] = compiled.tick_ns, compiled.call_ns
                 c_err[k] = float(np.max(np.abs(tau_c - tau) / tau_max))
                 if compiled.source != mpc.stats.source or compiled.status != mpc.stats.status:
                     c_mismatch += 1
             tick_ns[k], gain_ns[k], exact_ns[k], every_ns[k] = t1 - t0, t2 - t1, t3 - t2, t4 - t3
             screened[k] = mpc.stats.screened > n_screened
+            level[k] = mpc.stats.level
+            box_iters[k] = mpc.stats.box_iterations
             parts_ns[k] = every.stats.parts_ns
             iters[k] = every.stats.iterations
             exact_iters[k] = exact.iterations
@@ -339,6 +344,13 @@ def run_bench(
         "nz": mpc.qp.nz,
         "tick_us": _pct(tick),
         "screened_ticks": int(screened[sl].sum()),
+        # the screening cascade: ticks settled by each level (1 unconstrained minimiser, 2 the
+        # torque-box QP, 3 the configured solver; 0 = no QP) and the MPC tick per level
+        "levels": {str(v): int(np.sum(level[sl] == v)) for v in (0, 1, 2, 3)},
+        "level_tick_us": {str(v): _pct(tick[level[sl] == v]) for v in (1, 2, 3)
+                          if np.any(level[sl] == v)},
+        "box_iterations": _pct(box_iters[sl][level[sl] == 2]) if np.any(level[sl] == 2)
+        else None,
         "osqp_tick_us": _pct(every_ns[sl] * us),
         "osqp_u0_error_max_frac": float(every_err[sl].max()),
         "reference_us": _pct(parts_ns[sl, 0] * us),
@@ -359,6 +371,9 @@ def run_bench(
         "osqp_fallbacks": dict(every.stats.fallbacks),
         "u0_error_max_frac": float(u0_err[sl].max()),
         "u0_error_p99_frac": float(np.percentile(u0_err[sl], 99)),
+        # on the ticks levels 1 and 2 settled (exact, so rounding only against DAQP)
+        "u0_error_cascade_max_frac": float(u0_err[sl][(level[sl] == 1) | (level[sl] == 2)].max(
+            initial=0.0)),
         "active_bound_ticks": int(active[sl].sum()),
         "tracking_rms_mm": float(1e3 * np.sqrt(np.mean(err[sl] ** 2))),
         "tracking_max_mm": float(1e3 * err[sl].max()),
@@ -376,8 +391,12 @@ def run_bench(
             "controller": "c",
             "c_tick_us": _pct(c),
             "c_tick_python_us": _pct(c_call_ns[sl] * us),
-            # the split that explains the tail: ticks on which OSQP ran vs screened ticks
+            # the split that explains the tail: ticks on which OSQP ran (level 3) vs ticks the
+            # screening cascade settled (levels 1 and 2)
             "c_osqp_ticks": int(c_osqp[sl].sum()),
+            "c_levels": {str(v): int(np.sum(c_level[sl] == v)) for v in (0, 1, 2, 3)},
+            "c_level_tick_us": {str(v): _pct(c[c_level[sl] == v]) for v in (1, 2, 3)
+                                if np.any(c_level[sl] == v)},
             "c_osqp_tick_us": _pct(c[c_osqp[sl]]) if c_osqp[sl].any() else None,
             "c_screened_tick_us": _pct(c[~c_osqp[sl]]) if (~c_osqp[sl]).any() else None,
             "c_vs_python_max_frac": float(c_err.max()),  # warm-up included
@@ -391,7 +410,7 @@ def run_bench(
     return result
 
 _ROWS = (
-    ("MPC tick (screening, OSQP if bound)", "tick_us"),
+    ("MPC tick (screening cascade)", "tick_us"),
     ("MPC tick, OSQP every tick", "osqp_tick_us"),
     ("  reference handling", "reference_us"),
     ("  vector update + warm start", "update_us"),
@@ -400,6 +419,24 @@ _ROWS = (
     ("gain tick (reference)", "gain_tick_us"),
     ("exact tick, DAQP (reference)", "exact_tick_us"),
 )
+
+
+_LEVELS = {"1": "1 screened", "2": "2 box QP", "3": "3 solver"}
+
+
+def _level_line(result: dict, counts: str, times: str) -> list[str]:
+    out = []
+    for v, name in _LEVELS.items():
+        n = result[counts][v]
+        t = result[times].get(v)
+        out.append(f"{name} {n}" + (f" ({t['p50']:.1f} / {t['p99']:.1f} / {t['max']:.1f})"
+                                    if t else ""))
+    return out
+
+
+def _iters(row: dict | None) -> str:
+    return "none" if row is None else f"p50 {row['p50']:.0f}, p99 {row['p99']:.0f}, max " \
+        f"{row['max']:.0f}"
 
 
 def format_table(result: dict) -> str:
@@ -425,13 +462,16 @@ def format_table(result: dict) -> str:
     lines += [
         "(×g = time / gain-tick time of the same run; parts are those of the OSQP-every-tick "
         "controller)",
-        f"screened ticks (OSQP not called): {result['screened_ticks']} of {result['ticks']}",
+        "screening cascade, ticks per level (MPC tick p50 / p99 / max µs): "
+        + "; ".join(_level_line(result, "levels", "level_tick_us")),
+        f"  level 2 active-set solves: {_iters(result['box_iterations'])}",
         f"OSQP iterations: p50 {it['p50']:.0f}, p99 {it['p99']:.0f}, max {it['max']:.0f}; "
         f"DAQP iterations p99 {result['exact_iterations']['p99']:.0f}",
         f"fallbacks: {result['fallbacks']}  failures: {result['failures'] or 'none'}  "
         f"(OSQP every tick: {result['osqp_fallbacks']})",
         f"u0 error vs exact: max {100 * result['u0_error_max_frac']:.4f} % of τ_max, "
-        f"p99 {100 * result['u0_error_p99_frac']:.4f} % (OSQP every tick: max "
+        f"p99 {100 * result['u0_error_p99_frac']:.4f} %, levels 1-2 max "
+        f"{result['u0_error_cascade_max_frac']:.1e} τ_max (OSQP every tick: max "
         f"{100 * result['osqp_u0_error_max_frac']:.4f} %); ticks with an active bound: "
         f"{result['active_bound_ticks']}",
         f"tracking on the linear model: RMS {result['tracking_rms_mm']:.4f} mm, "
@@ -445,11 +485,9 @@ def format_table(result: dict) -> str:
             f"{result['c_fallbacks']}; C tick / Python tick: p50 {r['p50']:.3f}, "
             f"p99 {r['p99']:.3f}",
         ]
-        for label, key in (("OSQP", "c_osqp_tick_us"), ("screened", "c_screened_tick_us")):
-            row = result[key]
+        for v, name in _LEVELS.items():
+            row = result["c_level_tick_us"].get(v)
             if row is not None:
-                n = result["c_osqp_ticks"]
-                n = n if label == "OSQP" else result["ticks"] - n
-                lines.append(f"  C tick on the {n} {label} ticks: p50 {row['p50']:.2f}, "
-                             f"p99 {row['p99']:.2f}, max {row['max']:.2f} µs")
+                lines.append(f"  C tick on the {result['c_levels'][v]} level-{name} ticks: "
+                             f"p50 {row['p50']:.2f}, p99 {row['p99']:.2f}, max {row['max']:.2f} µs")
     return "\n".join(lines)

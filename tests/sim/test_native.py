@@ -71,7 +71,11 @@ def test_native_tick_is_the_pinocchio_tick(phantom, chain):
 def test_a_closed_loop_run_on_the_native_tick_matches_pinocchio(chain, changes):
     """A whole 6-s run with the compiled tick (encoders, observer, cancellation with its own
     model, plant) against the Python tick on Pinocchio: the metrics agree to 1e-9 relative
-    (measured ≤ 1.4e-10: rounding differences, now and then one encoder count apart)."""
+    (measured ≤ 1.4e-10: rounding differences, now and then one encoder count apart), or to
+    1e-8 absolute (10 pm, 1e-8 mN·m): with the exact screening cascade (issue 15) the MPC
+    answers a 1e-15 state difference in full rather than through OSQP's warm-started iterate,
+    and the two runs' states part by ≈ 3e-11 (measured: max_error_mm 7.7e-10 mm apart,
+    1.0e-9 relative)."""
     from rhmpc.experiment import RunConfig, run_experiment
     from sim.loop import LoopSettings
 
@@ -79,7 +83,8 @@ def test_a_closed_loop_run_on_the_native_tick_matches_pinocchio(chain, changes):
     docs = [run_experiment(base.replace(**{"plant.dynamics": d}))[1]
             for d in ("pinocchio", "native")]
     for key in ("rms_error_mm", "max_error_mm", "rms_effort_mNm", "rms_total_torque_mNm"):
-        np.testing.assert_allclose(docs[1][key], docs[0][key], rtol=1e-9, err_msg=key)
+        np.testing.assert_allclose(docs[1][key], docs[0][key], rtol=1e-9, atol=1e-8,
+                                   err_msg=key)
     assert docs[0]["predictor_counts"] == docs[1]["predictor_counts"]
     assert docs[0]["saturated_ticks"] == docs[1]["saturated_ticks"]
 

@@ -39,6 +39,9 @@ class _Public(ctypes.Structure):
         ("source", ctypes.c_int),
         ("iterations", ctypes.c_int),
         ("tick_ns", ctypes.c_longlong),
+        ("boxed", ctypes.c_longlong),
+        ("level", ctypes.c_int),
+        ("box_iterations", ctypes.c_int),
     )
 
 
@@ -180,6 +183,16 @@ class CController:
         return int(self._pub.screened)
 
     @property
+    def boxed(self) -> int:
+        """Ticks solved by level 2 of the screening cascade (the torque-box QP)."""
+        return int(self._pub.boxed)
+
+    @property
+    def level(self) -> int:
+        """Cascade level of the last tick's QP solution (1, 2, 3; 0 = no QP)."""
+        return int(self._pub.level)
+
+    @property
     def source(self) -> str:
         """Where the last torque came from: ``"qp"``, ``"plan"``, ``"lq"`` or ``"zero"``."""
         return SOURCE_NAMES[self._pub.source] if self._pub.ticks else "none"
@@ -199,6 +212,7 @@ class CController:
                      for name in MPCStats().fallbacks}
         return MPCStats(
             ticks=int(pub.ticks), status=self.status, source=self.source,
-            iterations=int(pub.iterations), screened=int(pub.screened), solve_time=0.0,
+            iterations=int(pub.iterations), screened=int(pub.screened), boxed=int(pub.boxed),
+            level=int(pub.level), box_iterations=int(pub.box_iterations), solve_time=0.0,
             parts_ns=[int(pub.tick_ns), 0, 0, 0], failures=failures, fallbacks=fallbacks,
         )

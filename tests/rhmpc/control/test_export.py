@@ -35,9 +35,9 @@ needs_cc = pytest.mark.skipif(NO_TOOLCHAIN is not None, reason=NO_TOOLCHAIN or "
 TOL = 1e-6  # of τ_max, every tick
 
 #: Settings variants that exercise the other code paths of the tick: parameter-dependent
-#: bounds (joint limits, active on the bench trajectory) with the general screening test, too
-#: few iterations (max_iter failures: plan fallback and the carried-over iterate), every warm
-#: start mode, and OSQP on every tick.
+#: bounds (joint limits, active on the bench trajectory: levels 1, 2 and 3 of the screening
+#: cascade), too few iterations (max_iter failures: plan fallback and the carried-over
+#: iterate), every warm start mode, and OSQP on every tick.
 VARIANTS = {
     "default": {},
     "joint-bounds-shift": dict(
@@ -45,7 +45,9 @@ VARIANTS = {
         joint_upper=(0.015, 0.01, 1.57079633 + 0.03), warm_start="shift", max_iter=10,
     ),
     "keep-no-screening": dict(warm_start="keep", screening=False, max_iter=15),
-    "none-few-iterations": dict(warm_start="none", max_iter=5, plan_fallback_ticks=3),
+    # level 2 off: the saturated ticks reach OSQP, whose 5 iterations are not enough
+    "none-few-iterations": dict(warm_start="none", max_iter=5, plan_fallback_ticks=3,
+                                box_screening=False),
 }
 
 
@@ -100,8 +102,9 @@ def lockstep(arm, py, c, traj, ticks, faults=None):
         tp = py.step(xk, ref)
         tc = c.step(xk, ref)
         err[k] = np.max(np.abs(tc - tp) / tau_max)
-        if (py.stats.status, py.stats.source) != (c.status, c.source):
-            differ.append((k, py.stats.status, py.stats.source, c.status, c.source))
+        if (py.stats.status, py.stats.source, py.stats.level) != (c.status, c.source, c.level):
+            differ.append((k, py.stats.status, py.stats.source, py.stats.level, c.status,
+                           c.source, c.level))
         x = arm.A @ x + arm.B @ tp
     return err, differ
 
@@ -110,6 +113,7 @@ def assert_same_counters(py, c):
     cs, ps = c.stats, py.stats
     assert cs.ticks == ps.ticks
     assert cs.screened == ps.screened
+    assert cs.boxed == ps.boxed
     assert cs.fallbacks == ps.fallbacks
     assert cs.failures == ps.failures
 
@@ -124,7 +128,8 @@ def test_bench_trajectory_torques_and_fallbacks_match_python(arm, built):
     assert differ == []
     assert err.max() <= TOL
     assert_same_counters(py, c)
-    assert 100 < ticks - py.stats.screened < 2000  # OSQP ran on the saturated ticks
+    # the saturated ticks went to level 2 of the screening cascade (the torque-box QP), in C too
+    assert 100 < py.stats.boxed < 2000 and c.stats.boxed == py.stats.boxed
 
 
 @needs_cc
@@ -151,6 +156,8 @@ def test_other_paths_match_python(arm, built, variant):
     assert py.stats.failures["injected"] > 0 and py.stats.failures["nonfinite_input"] > 0
     if variant != "keep-no-screening":
         assert py.stats.failures.get("max_iter", 0) > 0  # the carried-over iterate was used
+    if variant == "joint-bounds-shift":  # all three levels, the envelope rows checked in C too
+        assert py.stats.screened > 0 and py.stats.boxed > 0
 
 
 class Lockstep:
@@ -228,7 +235,8 @@ def test_two_controllers_on_one_library_do_not_share_the_solver(arm, built):
 
 @needs_cc
 def test_library_uses_no_heap_io_or_locks(built):
-    """The static library's external symbols: only the monotonic clock and memset/memcpy."""
+    """The static library's external symbols: only the monotonic clock, memset/memcpy/memmove
+    (the level-2 active set's shifts) and libm."""
     nm = shutil.which("nm")
     if nm is None:
         pytest.skip("nm (binutils) not found")
@@ -239,8 +247,8 @@ def test_library_uses_no_heap_io_or_locks(built):
     und = {ln.split()[-1] for ln in undefined.stdout.splitlines() if ln.strip() and ":" not in ln}
     dfn = {ln.split()[-1] for ln in defined.stdout.splitlines() if len(ln.split()) == 3}
     external = und - dfn
-    assert external <= {"clock_gettime", "memset", "memcpy", "_GLOBAL_OFFSET_TABLE_", "fabs",
-                        "sqrt", "__stack_chk_fail"}, external
+    assert external <= {"clock_gettime", "memset", "memcpy", "memmove", "_GLOBAL_OFFSET_TABLE_",
+                        "fabs", "sqrt", "__stack_chk_fail"}, external
     assert "clock_gettime" in external  # the tick times itself
 
 
@@ -363,3 +371,27 @@ def test_cli_simulate_with_the_c_controller(monkeypatch, cache, capsys):
         # measured: equal to ~1e-11 relative (rounding in the QP data path); margin 100×
         assert docs["c"][key] == pytest.approx(docs["python"][key], rel=1e-9), key
     assert docs["c"]["controller"]["ticks"] == 2000
+
+
+@needs_cc
+def test_level_2_matches_python_under_heavy_saturation(arm, cache):
+    """Far references from moving states saturate many of the 30 block torques: level 2's
+    second phase (the dual active set, up to 16 solves) runs in C as in Python: the same
+    level, the same number of solves and the same torque (1e-6 τ_max) on every tick."""
+    py = RecedingHorizonMPC(arm, MPCSettings(joint_envelope=False))
+    c = twin(py, build_cached(py, "phantom", cache))
+    rng = np.random.default_rng(0)
+    tau_max = np.asarray(arm.torque_limit)
+    solves = []
+    for _ in range(300):
+        x = np.zeros(arm.nx)
+        x[3:] = rng.normal(scale=0.3, size=3)
+        ref = np.tile(arm.y0 + rng.normal(scale=rng.uniform(1e-3, 2e-2), size=3), (py.N, 1))
+        py.reset()
+        c.reset()
+        tp, tc = py.step(x, ref), c.step(x, ref)
+        assert (py.stats.level, py.stats.box_iterations) == (c.level, c.stats.box_iterations)
+        assert np.max(np.abs(tp - tc) / tau_max) <= TOL
+        if py.stats.level == 2:
+            solves.append(py.stats.box_iterations)
+    assert len(solves) > 30 and max(solves) >= 10  # the dual active set was needed and ran

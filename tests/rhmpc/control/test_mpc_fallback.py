@@ -42,7 +42,8 @@ def test_contract_shapes_and_reset(arm, mpc):
     assert np.allclose(mpc.u_max, 0.75 * arm.torque_limit)
     tau = mpc.step(np.zeros(6), _moving_ref(arm, mpc.N))
     assert tau.shape == (3,) and mpc.stats.status == "solved" and mpc.stats.source == "qp"
-    assert mpc.stats.iterations > 0 and mpc.stats.solve_time > 0
+    # the first tick saturates the torques: level 2 of the screening cascade settles it
+    assert mpc.stats.level == 2 and mpc.stats.box_iterations > 0 and mpc.stats.boxed == 1
     assert np.array_equal(mpc.u_prev, tau)
     mpc.reset()
     assert mpc.stats.ticks == 0 and np.all(mpc.u_prev == 0)
@@ -91,7 +92,8 @@ def test_failure_without_a_plan_uses_the_clipped_lq_input(arm, mpc):
 
 
 def test_real_solver_failure_max_iter_takes_the_fallback(arm):
-    mpc = RecedingHorizonMPC(arm, MPCSettings(solver="osqp", max_iter=1, check_termination=1))
+    mpc = RecedingHorizonMPC(arm, MPCSettings(solver="osqp", max_iter=1, check_termination=1,
+                                              box_screening=False))  # level 3 on bound ticks
     x = np.zeros(6)
     for k in range(5):
         tau = mpc.step(x, _moving_ref(arm, mpc.N, k, amp=5e-3))
@@ -103,7 +105,8 @@ def test_real_solver_failure_max_iter_takes_the_fallback(arm):
 
 
 def test_time_limit_failure_takes_the_fallback(arm):
-    mpc = RecedingHorizonMPC(arm, MPCSettings(solver="osqp", time_limit=1e-7))  # 0.1 µs
+    mpc = RecedingHorizonMPC(arm, MPCSettings(solver="osqp", time_limit=1e-7,  # 0.1 µs
+                                              box_screening=False))  # level 3 on bound ticks
     ref = np.tile(arm.y0 + np.array([3e-3, 0.0, 0.0]), (mpc.N, 1))
     for _ in range(3):
         tau = mpc.step(np.zeros(6), ref)
@@ -267,6 +270,8 @@ def test_returned_torque_is_not_aliased(arm, mpc):
         {"joint_lower": (0.0, 0.0, 0.0)},
         {"joint_lower": (1.0,), "joint_upper": (0.0,)},
         {"plan_fallback_ticks": -1},
+        {"box_max_iter": 0},
+        {"box_screening": 1},
     ],
 )
 def test_bad_settings_raise_value_error(kwargs):

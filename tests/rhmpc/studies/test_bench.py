@@ -36,8 +36,13 @@ def test_run_bench_reports_the_issue_fields():
         row = r[key]
         assert 0 < row["p50"] <= row["p99"] <= row["max"], key
         assert row["mean"] <= row["max"], key
-    # Both paths of the tick ran: screened ticks and OSQP ticks (the jumps saturate).
-    assert 0 < r["screened_ticks"] < r["ticks"]
+    # Both levels of the screening cascade ran: the unconstrained minimiser, and the torque-box
+    # QP on the saturated ticks (the jumps saturate); levels 1 and 2 are exact: their u0 is
+    # DAQP's to rounding (measured ≈ 1e-12 τ_max; bound 1e-8).
+    assert 0 < r["screened_ticks"] == r["levels"]["1"] < r["ticks"]
+    assert r["levels"]["2"] > 0 and sum(r["levels"].values()) == r["ticks"]
+    assert r["box_iterations"]["max"] <= MPCSettings().box_max_iter
+    assert r["u0_error_cascade_max_frac"] <= 1e-8
     # OSQP on every tick: at least one iteration, never more than the cap.
     assert 1 <= r["iterations"]["p50"] and r["iterations"]["max"] <= MPCSettings().max_iter
     # The ratios are those of the reported percentiles (same run, same ticks).
@@ -78,9 +83,12 @@ def test_run_bench_with_the_compiled_controller(tmp_path_factory):
     assert r["c_vs_python_max_frac"] <= 1e-6  # measured ≈ 2e-11
     assert r["c_mismatched_ticks"] == 0
     assert r["c_fallbacks"] == r["fallbacks"]
-    # OSQP ran in C on exactly the ticks the Python controller did not screen
-    assert 0 < r["c_osqp_ticks"] == r["ticks"] - r["screened_ticks"]
-    assert r["c_osqp_tick_us"]["p50"] > 0 and r["c_screened_tick_us"]["p50"] > 0
+    # Each level of the screening cascade settled the same ticks in C as in Python; the
+    # saturated ticks went to level 2 (the torque-box QP), none to OSQP on this trajectory.
+    assert r["c_levels"] == r["levels"]
+    assert r["levels"]["2"] > 0 and r["levels"]["1"] + r["levels"]["2"] == r["ticks"]
+    assert r["c_osqp_ticks"] == r["levels"]["3"]
+    assert r["c_screened_tick_us"]["p50"] > 0 and r["c_level_tick_us"]["2"]["p50"] > 0
     text = format_table(r)
     assert "C tick, inside C" in text and "C tick / Python tick" in text
     json.dumps(r)

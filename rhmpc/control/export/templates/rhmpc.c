@@ -5,9 +5,14 @@
  *
  *   p = [x; r_1..r_N; u_prev]                    (finiteness check: sum of squares)
  *   l, u = l0 - G p, u0 - G p                    (only with parameter-dependent bounds)
- *   z* = Z [p; 1]; if l <= A z* <= u: tau = u_max o z*_0, done       (screening, exact)
- *   q = F [p; 1]; osqp_update_data_vec; warm start (plan shifted one tick); osqp_solve
+ *   q_z = F_z [p; 1]                             (the slacks' part of q is the constant rho_1)
+ *   level 1: z* = -W q_z; if l <= A [z*; 0] <= u: tau = u_max o z*_0, done    (exact)
+ *   level 2: the torque-box QP by a primal-dual active set on W (rhmpc.control.box_qp): if it
+ *            converges, its KKT residual is small and every envelope row holds: done (exact)
+ *   level 3: osqp_update_data_vec; warm start (plan shifted one tick); osqp_solve
  *   solved: tau = clip(u_max o z_0)   else: plan shifted -> clipped LQ -> zero
+ * Dense maps used every tick are stored column-major (transposed), so that each mat-vec is a
+ * sequence of vectorisable axpy's; the sum order per entry is the plain column order.
  */
 #include "rhmpc.h"
 #include "rhmpc_data.h"
@@ -63,6 +68,43 @@ static void spmv(const int *ptr, const int *col, const double *val, int rows, co
   for (int r = 0; r < rows; ++r) out[r] = row_dot(ptr, col, val, r, v);
 }
 
+/* out = M v with M (rows x cols) stored column-major with a column stride of `stride` >= rows
+ * entries, a multiple of 8 (zero padding): MT[c * stride + r]. Blocks of 8 rows accumulate
+ * over all columns in registers (vectorised, no scalar tail); each entry sums in column
+ * order; only the first `rows` entries are written. */
+static inline void matvec_cm(const double *restrict MT, const double *restrict v, int rows,
+                             int stride, int cols, double *restrict out) {
+  for (int r0 = 0; r0 < rows; r0 += 8) {
+    double acc[8] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
+    const double *col = MT + r0;
+    for (int c = 0; c < cols; ++c, col += stride) {
+      const double vc = v[c];
+      for (int j = 0; j < 8; ++j) acc[j] += col[j] * vc;
+    }
+    const int nr = rows - r0 < 8 ? rows - r0 : 8;
+    for (int j = 0; j < nr; ++j) out[r0 + j] = acc[j];
+  }
+}
+
+/* out[perm[r]] = (M v)_r for a block-sparse M (rhmpc_data.h): per block of 8 rows only the
+ * listed columns, which hold every non-zero of the block; each entry sums in column order. */
+static inline void matvec_blocks(const double *restrict MT, const int *restrict cptr,
+                                 const int *restrict cols, const int *restrict perm,
+                                 const double *restrict v, int rows, double *restrict out) {
+  const int stride = RHMPC_PAD8(rows);
+  for (int r0 = 0, b = 0; r0 < rows; r0 += 8, ++b) {
+    double acc[8] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
+    for (int ci = cptr[b]; ci < cptr[b + 1]; ++ci) {
+      const int c = cols[ci];
+      const double vc = v[c];
+      const double *col = MT + (long)c * stride + r0;
+      for (int j = 0; j < 8; ++j) acc[j] += col[j] * vc;
+    }
+    const int nr = rows - r0 < 8 ? rows - r0 : 8;
+    for (int j = 0; j < nr; ++j) out[perm[r0 + j]] = acc[j];
+  }
+}
+
 static double clip(double v, double hi) { return v > hi ? hi : (v < -hi ? -hi : v); }
 
 static int status_of(OSQPInt status_val) {
@@ -112,6 +154,7 @@ void rhmpc_init(rhmpc_t *ctl) {
   ctl->p_ext[RHMPC_NPAR] = 1.0;
   memcpy(ctl->l, rhmpc_l0, sizeof(ctl->l));
   memcpy(ctl->u, rhmpc_u0, sizeof(ctl->u));
+  for (int i = RHMPC_NZ; i < RHMPC_NV; ++i) ctl->q[i] = rhmpc_F_ext[i * NPE + RHMPC_NPAR];
   osqp_warm_start(SOLVER, zeros_z, rhmpc_y_plan);
 }
 
@@ -189,19 +232,227 @@ static int fallback(rhmpc_t *ctl, int status, int inputs_finite, double tau[RHMP
   return status;
 }
 
-static int screened(rhmpc_t *ctl) {
-  matvec(rhmpc_minimiser, ctl->p_ext, RHMPC_NV, NPE, ctl->z_star);
-#if !RHMPC_PARAM_BOUNDS
-  for (int i = 0; i < RHMPC_NV; ++i)
-    if (!(fabs(ctl->z_star[i]) <= 1.0)) return 0;
-  return 1;
+/* Every envelope row (rows NV..M) at [z; 0]: l <= A_env z <= u. The upper and lower row of a
+ * limit share their z part, so A_env z is computed once per distinct row (RHMPC_NENV_U). */
+static int envelope_holds_at(rhmpc_t *ctl, const double *z) {
+#if RHMPC_M > RHMPC_NV
+  double *g = ctl->g_env;
+  matvec_blocks(rhmpc_A_env_T, rhmpc_A_env_cptr, rhmpc_A_env_cols, rhmpc_A_env_perm, z,
+                RHMPC_NENV_U, g);
+  for (int i = 0; i < RHMPC_M - RHMPC_NV; ++i) {
+    const double gi = g[rhmpc_env_row[i]];
+    if (!(gi - ctl->u[RHMPC_NV + i] <= 0.0 && ctl->l[RHMPC_NV + i] - gi <= 0.0)) return 0;
+  }
 #else
-  spmv(CSR(A), RHMPC_M, ctl->z_star, ctl->g);
-  for (int i = 0; i < RHMPC_M; ++i)
-    if (!(ctl->g[i] - ctl->u[i] <= 0.0 && ctl->l[i] - ctl->g[i] <= 0.0)) return 0;
-  return 1;
+  (void)ctl;
+  (void)z;
 #endif
+  return 1;
 }
+
+/* Level 1: z* = -W q_z (slacks 0); 1 if [z*; 0] satisfies every row: torque rows |z*_i| <= 1,
+ * slack rows l <= 0 <= u, envelope rows. */
+static int screened(rhmpc_t *ctl) {
+  matvec_cm(rhmpc_neg_W, ctl->q, RHMPC_NZ, RHMPC_PAD8(RHMPC_NZ), RHMPC_NZ, ctl->z_star);
+  for (int i = 0; i < RHMPC_NZ; ++i)
+    if (!(ctl->z_star[i] - ctl->u[i] <= 0.0 && ctl->l[i] - ctl->z_star[i] <= 0.0)) return 0;
+  for (int i = RHMPC_NZ; i < RHMPC_NV; ++i)
+    if (!(0.0 <= ctl->u[i] && ctl->l[i] <= 0.0)) return 0;
+  return envelope_holds_at(ctl, ctl->z_star);
+}
+
+#if RHMPC_BOX_SCREENING
+/* Cholesky W_AA = L L' of the rows/columns idx[0..k) of W (L lower, row-major, stride NZ);
+ * 0 if a pivot is not positive. */
+static int chol_active(const int *idx, int k, double *L) {
+  for (int a = 0; a < k; ++a) {
+    for (int b = 0; b <= a; ++b) {
+      double s = rhmpc_W[idx[a] * RHMPC_NZ + idx[b]];
+      for (int c = 0; c < b; ++c) s -= L[a * RHMPC_NZ + c] * L[b * RHMPC_NZ + c];
+      if (a == b) {
+        if (!(s > 0.0)) return 0;
+        L[a * RHMPC_NZ + a] = sqrt(s);
+      } else {
+        L[a * RHMPC_NZ + b] = s / L[b * RHMPC_NZ + b];
+      }
+    }
+  }
+  return 1;
+}
+
+/* out = (L L')^-1 rhs (k entries); tmp: k scratch entries. */
+static void chol_solve(const double *L, int k, const double *rhs, double *tmp, double *out) {
+  for (int a = 0; a < k; ++a) {
+    double s = rhs[a];
+    for (int c = 0; c < a; ++c) s -= L[a * RHMPC_NZ + c] * tmp[c];
+    tmp[a] = s / L[a * RHMPC_NZ + a];
+  }
+  for (int a = k - 1; a >= 0; --a) {
+    double s = tmp[a];
+    for (int c = a + 1; c < k; ++c) s -= L[c * RHMPC_NZ + a] * out[c];
+    out[a] = s / L[a * RHMPC_NZ + a];
+  }
+}
+
+/* Phase 1, primal-dual active set (at most RHMPC_BOX_PDAS_ITER solves):
+ *   W_AA mu_A = z*_A - b_A,  z = z* - W_:A mu_A,  z_A = b_A,
+ *   A+ = {i in A: b_i mu_i >= -eps_d (1 + |q|_inf)} u {i not in A: |z_i| > 1 + eps_p},
+ * until A+ = A. 1 with box_z, box_mu (full length) set; 0 if it did not converge. */
+static int box_pdas(rhmpc_t *ctl, double dual_tol) {
+  const double *zs = ctl->z_star;
+  signed char *act = ctl->box_act;
+  int *idx = ctl->box_idx;
+  double *L = ctl->box_L, *y = ctl->box_y, *mu = ctl->box_rhs, *z = ctl->box_z;
+  const double upper = 1.0 + RHMPC_BOX_PRIMAL_TOL;
+  const int limit = RHMPC_BOX_PDAS_ITER < RHMPC_BOX_MAX_ITER ? RHMPC_BOX_PDAS_ITER
+                                                             : RHMPC_BOX_MAX_ITER;
+  for (int i = 0; i < RHMPC_NZ; ++i) act[i] = zs[i] > 1.0 ? 1 : (zs[i] < -1.0 ? -1 : 0);
+  for (int it = 1; it <= limit; ++it) {
+    int k = 0;
+    for (int i = 0; i < RHMPC_NZ; ++i)
+      if (act[i]) idx[k++] = i;
+    ctl->box_iterations = it;
+    if (!chol_active(idx, k, L)) return 0;
+    for (int a = 0; a < k; ++a) ctl->box_step[a] = zs[idx[a]] - (double)act[idx[a]];
+    chol_solve(L, k, ctl->box_step, y, mu);
+    for (int r = 0; r < RHMPC_NZ; ++r) ctl->box_tmp[r] = 0.0;
+    for (int a = 0; a < k; ++a) { /* mu' W_A (W symmetric: rows idx[a]) */
+      const double m = mu[a], *w = rhmpc_W + idx[a] * RHMPC_NZ;
+      for (int r = 0; r < RHMPC_NZ; ++r) ctl->box_tmp[r] += m * w[r];
+    }
+    for (int r = 0; r < RHMPC_NZ; ++r) z[r] = zs[r] - ctl->box_tmp[r];
+    for (int a = 0; a < k; ++a) z[idx[a]] = (double)act[idx[a]];
+    int changed = 0;
+    for (int i = 0; i < RHMPC_NZ; ++i) { /* free variables past a bound join */
+      if (act[i]) continue;
+      if (z[i] > upper) { act[i] = 1; changed = 1; }
+      else if (z[i] < -upper) { act[i] = -1; changed = 1; }
+    }
+    for (int a = 0; a < k; ++a) { /* active bounds with a wrong-sign multiplier leave */
+      int i = idx[a];
+      if ((double)act[i] * mu[a] < -dual_tol) { act[i] = 0; changed = 1; }
+    }
+    if (!changed) {
+      for (int i = 0; i < RHMPC_NZ; ++i) ctl->box_mu[i] = 0.0;
+      for (int a = 0; a < k; ++a) ctl->box_mu[idx[a]] = mu[a];
+      return 1;
+    }
+    int n_act = 0;
+    for (int i = 0; i < RHMPC_NZ; ++i) n_act += act[i] != 0;
+    if (n_act == 0) return 0; /* every bound left: z*, which violates them */
+  }
+  return 0;
+}
+
+static int argmax_violation(const double *z, double *viol) {
+  int p = 0;
+  double best = fabs(z[0]) - 1.0;
+  for (int i = 1; i < RHMPC_NZ; ++i) {
+    double v = fabs(z[i]) - 1.0;
+    if (v > best) { best = v; p = i; }
+  }
+  *viol = best;
+  return p;
+}
+
+/* Phase 2, the Goldfarb-Idnani dual active set from z* (A empty), bounds added in order of
+ * largest violation: raise lambda_p of bound p (sigma_p z_p <= 1) along
+ *   s = W n_p - W N r,  r = (N'WN)^-1 N'W n_p,  z -= t s,  lambda_A -= t r,  lambda_p += t,
+ * t = min(full step to z_p = sigma_p, first active lambda reaching 0 (that bound leaves)).
+ * Solves of phase 1 count towards RHMPC_BOX_MAX_ITER. 1 with box_z, box_mu set. */
+static int box_dual(rhmpc_t *ctl, double dual_tol) {
+  double *z = ctl->box_z, *sig = ctl->box_sig, *lam = ctl->box_lam, *step = ctl->box_step;
+  double *L = ctl->box_L, *y = ctl->box_y, *rhs = ctl->box_rhs, *tmp = ctl->box_tmp;
+  int *act = ctl->box_idx;
+  int k = 0, it = ctl->box_iterations;
+  double viol;
+  for (int r = 0; r < RHMPC_NZ; ++r) z[r] = ctl->z_star[r];
+  int p = argmax_violation(z, &viol);
+  while (viol > RHMPC_BOX_PRIMAL_TOL) {
+    const double sp = z[p] > 0.0 ? 1.0 : -1.0;
+    const double *wp = rhmpc_W + p * RHMPC_NZ;
+    double lam_p = 0.0;
+    for (;;) {
+      if (++it > RHMPC_BOX_MAX_ITER) return 0;
+      ctl->box_iterations = it;
+      int j = -1;
+      double t;
+      if (k) {
+        if (!chol_active(act, k, L)) return 0;
+        for (int a = 0; a < k; ++a) rhs[a] = rhmpc_W[act[a] * RHMPC_NZ + p] * sp;
+        chol_solve(L, k, rhs, tmp, y);
+        for (int r = 0; r < RHMPC_NZ; ++r) tmp[r] = 0.0;
+        for (int a = 0; a < k; ++a) { /* y' W_A */
+          const double m = y[a], *w = rhmpc_W + act[a] * RHMPC_NZ;
+          for (int r = 0; r < RHMPC_NZ; ++r) tmp[r] += m * w[r];
+        }
+        for (int r = 0; r < RHMPC_NZ; ++r) step[r] = sp * wp[r] - tmp[r];
+        for (int a = 0; a < k; ++a) rhs[a] = sig[a] * y[a]; /* r, the dual direction */
+        t = (sp * z[p] - 1.0) / (sp * step[p]);
+        for (int a = 0; a < k; ++a) {
+          if (rhs[a] > 0.0) {
+            const double ratio = lam[a] / rhs[a];
+            if (ratio < t) { t = ratio; j = a; }
+          }
+        }
+        for (int r = 0; r < RHMPC_NZ; ++r) z[r] -= t * step[r];
+        for (int a = 0; a < k; ++a) lam[a] -= t * rhs[a];
+        for (int a = 0; a < k; ++a) z[act[a]] = sig[a];
+      } else {
+        for (int r = 0; r < RHMPC_NZ; ++r) step[r] = sp * wp[r];
+        t = (sp * z[p] - 1.0) / (sp * step[p]);
+        for (int r = 0; r < RHMPC_NZ; ++r) z[r] -= t * step[r];
+      }
+      lam_p += t;
+      if (j < 0) break;
+      for (int a = j; a < k - 1; ++a) { /* bound j leaves; p is still the target */
+        act[a] = act[a + 1];
+        sig[a] = sig[a + 1];
+        lam[a] = lam[a + 1];
+      }
+      k -= 1;
+    }
+    act[k] = p;
+    sig[k] = sp;
+    lam[k] = lam_p;
+    k += 1;
+    z[p] = sp;
+    p = argmax_violation(z, &viol);
+  }
+  for (int a = 0; a < k; ++a)
+    if (lam[a] < -dual_tol) return 0;
+  for (int i = 0; i < RHMPC_NZ; ++i) ctl->box_mu[i] = 0.0;
+  for (int a = 0; a < k; ++a) ctl->box_mu[act[a]] = sig[a] * lam[a];
+  return 1;
+}
+
+/* Level 2: min 1/2 z'Hz + q'z s.t. -1 <= z <= 1, exactly (rhmpc/control/box_qp.py: the same
+ * steps in the same order): phase 1 PDAS, else phase 2 the dual active set, at most
+ * RHMPC_BOX_MAX_ITER Cholesky solves in all; then accepted iff
+ * |H z + q + mu|_inf <= eps_kkt (1 + |q|_inf) and every envelope row holds at [z; 0]. */
+static int box_solved(rhmpc_t *ctl) {
+  const double *q = ctl->q;
+  double zmax = 0.0, qmax = 0.0;
+  ctl->box_iterations = 0;
+  for (int i = 0; i < RHMPC_NZ; ++i) zmax = fabs(ctl->z_star[i]) > zmax ? fabs(ctl->z_star[i]) : zmax;
+  if (!(zmax > 1.0)) return 0; /* z* is the box QP's minimiser: an envelope row rejected it */
+  for (int i = 0; i < RHMPC_NZ; ++i) qmax = fabs(q[i]) > qmax ? fabs(q[i]) : qmax;
+  const double scale = 1.0 + qmax;
+  const double dual_tol = RHMPC_BOX_DUAL_TOL * scale;
+  if (!box_pdas(ctl, dual_tol) && !box_dual(ctl, dual_tol)) return 0;
+  /* KKT certificate from H and q (not W): r = H z + q + mu */
+  double *r = ctl->box_tmp;
+  matvec_cm(rhmpc_H, ctl->box_z, RHMPC_NZ, RHMPC_PAD8(RHMPC_NZ), RHMPC_NZ, r);
+  double rmax = 0.0;
+  for (int i = 0; i < RHMPC_NZ; ++i) {
+    r[i] += q[i];
+    r[i] += ctl->box_mu[i];
+    rmax = fabs(r[i]) > rmax ? fabs(r[i]) : rmax;
+  }
+  if (!(rmax <= RHMPC_BOX_KKT_TOL * scale)) return 0;
+  return envelope_holds_at(ctl, ctl->box_z);
+}
+#endif
 
 static int finish(rhmpc_t *ctl, long long t0, int status) {
   ctl->tick_ns = now_ns() - t0;
@@ -229,31 +480,59 @@ int rhmpc_tick_ext(rhmpc_t *ctl, const double x[RHMPC_NX], const double ref[RHMP
     for (int i = 0; i < RHMPC_NEXTRA; ++i) p_extra[i] = extra[i];
   for (int i = 0; i < NPE; ++i) ss += p[i] * p[i];
   ctl->iterations = 0;
+  ctl->level = 0;
+  ctl->box_iterations = 0;
   if (!isfinite(ss)) /* NaN, +-inf (or absurd > 1e154) */
     return finish(ctl, t0, fallback(ctl, RHMPC_NONFINITE_INPUT, 0, tau));
 
 #if RHMPC_PARAM_BOUNDS
-  spmv(CSR(G), RHMPC_M, p, ctl->g);
-  for (int i = 0; i < RHMPC_M; ++i) {
-    ctl->l[i] = rhmpc_l0[i] - ctl->g[i];
-    ctl->u[i] = rhmpc_u0[i] - ctl->g[i];
+  /* l, u = l0 - G p, u0 - G p: G is zero but on the envelope rows and the bound columns, and
+   * an upper and a lower row of a limit share it (one product per distinct row). */
+  for (int j = 0; j < RHMPC_NBC; ++j) ctl->p_bc[j] = p[rhmpc_bound_columns[j]];
+  matvec_cm(rhmpc_G_env_T, ctl->p_bc, RHMPC_NENV_U, RHMPC_PAD8(RHMPC_NENV_U), RHMPC_NBC,
+            ctl->g_env);
+  for (int i = 0; i < RHMPC_M - RHMPC_NV; ++i) {
+    const double gi = ctl->g_env[rhmpc_env_row[i]];
+    ctl->l[RHMPC_NV + i] = rhmpc_l0[RHMPC_NV + i] - gi;
+    ctl->u[RHMPC_NV + i] = rhmpc_u0[RHMPC_NV + i] - gi;
   }
 #endif
-  if (RHMPC_SCREENING && ctl->forced == 0 && screened(ctl)) {
-    for (int i = 0; i < RHMPC_NU; ++i) tau[i] = ctl->z_star[i] * rhmpc_u_max[i];
-    for (int i = 0; i < RHMPC_NU; ++i) p_u[i] = tau[i];
-    memcpy(ctl->plan, ctl->z_star, sizeof(ctl->plan));
-    ctl->plan_valid = 1;
-    ctl->plan_age = 0;
-    ctl->ws_pending = RHMPC_WARM_START != RHMPC_WS_NONE;
-    ctl->last_screened = 1;
-    ctl->screened += 1;
-    ctl->status = RHMPC_SOLVED;
-    ctl->source = RHMPC_SOURCE_QP;
-    return finish(ctl, t0, RHMPC_SOLVED);
+  if (RHMPC_SCREENING && ctl->forced == 0) {
+    const double *zsol = NULL;
+    /* q_z; q[NZ..NV) = rho_1 since rhmpc_init */
+    matvec_blocks(rhmpc_F_z_T, rhmpc_F_z_cptr, rhmpc_F_z_cols, rhmpc_F_z_perm, p, RHMPC_NZ,
+                  ctl->q);
+    if (screened(ctl)) {
+      zsol = ctl->z_star;
+      ctl->level = 1;
+      ctl->screened += 1;
+#if RHMPC_BOX_SCREENING
+    } else if (box_solved(ctl)) {
+      zsol = ctl->box_z;
+      ctl->level = 2;
+      ctl->boxed += 1;
+#endif
+    }
+    if (zsol != NULL) {
+      for (int i = 0; i < RHMPC_NU; ++i) {
+        tau[i] = clip(zsol[i] * rhmpc_u_max[i], rhmpc_u_max[i]); /* level 2: |z| <= 1 + eps_p */
+        p_u[i] = tau[i];
+      }
+      memcpy(ctl->plan, zsol, RHMPC_NZ * sizeof(double));
+      for (int i = RHMPC_NZ; i < RHMPC_NV; ++i) ctl->plan[i] = 0.0;
+      ctl->plan_valid = 1;
+      ctl->plan_age = 0;
+      ctl->ws_pending = RHMPC_WARM_START != RHMPC_WS_NONE;
+      ctl->last_screened = 1;
+      ctl->status = RHMPC_SOLVED;
+      ctl->source = RHMPC_SOURCE_QP;
+      return finish(ctl, t0, RHMPC_SOLVED);
+    }
+  } else {
+    matvec(rhmpc_F_ext, p, RHMPC_NV, NPE, ctl->q);
   }
   ctl->last_screened = 0;
-  matvec(rhmpc_F_ext, p, RHMPC_NV, NPE, ctl->q);
+  ctl->level = 3;
 #if RHMPC_PARAM_BOUNDS
   OSQPInt err = osqp_update_data_vec(SOLVER, ctl->q, ctl->l, ctl->u);
 #else

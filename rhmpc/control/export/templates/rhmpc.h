@@ -20,14 +20,17 @@
  *   tau[RHMPC_NU]        out: MPC torque tau_mpc (N*m), always finite, |tau_i| <= u_max_i. The
  *                        caller adds its nonlinearity cancellation (gravity, Coriolis, friction).
  *
- * Return value: RHMPC_SOLVED (0) if the QP's solution (OSQP's or the screened unconstrained
- * minimiser) was applied; otherwise the reason the QP result was not used (RHMPC_MAX_ITER_REACHED, ...),
+ * Return value: RHMPC_SOLVED (0) if the QP's solution was applied: level 1, the unconstrained
+ * minimiser when it satisfies every row; level 2, the torque-box QP solved exactly by a
+ * primal-dual active set (at most RHMPC_BOX_MAX_ITER Cholesky solves of at most NZ x NZ) when
+ * its KKT residual is small and every envelope row holds; level 3, OSQP's solution; otherwise the reason the QP result was not used (RHMPC_MAX_ITER_REACHED, ...),
  * and tau came from the fallback chain: the previous plan shifted to this tick (at most
  * RHMPC_PLAN_FALLBACK_TICKS ticks after it was computed), else the clipped unconstrained LQ input
  * (@LQ_DOC@), else zero (non-finite inputs). ctl.source says which (RHMPC_SOURCE_*); the counters in rhmpc_t count every event.
  *
  * Real time: rhmpc_tick allocates nothing, does no I/O and takes no lock. Its work is bounded:
- * a few dense mat-vecs and at most RHMPC_MAX_ITER OSQP iterations. It reads the monotonic clock
+ * a few dense mat-vecs, at most RHMPC_BOX_MAX_ITER small Cholesky solves and at most
+ * RHMPC_MAX_ITER OSQP iterations. It reads the monotonic clock
  * twice (clock_gettime(CLOCK_MONOTONIC), a vDSO call on Linux) to record its own duration in
  * ctl.tick_ns; build with -DRHMPC_NO_TIMING to leave that out.
  *
@@ -51,6 +54,8 @@ extern "C" {
 #define RHMPC_NZ @NZ@    /* of which normalised block inputs */
 #define RHMPC_M @M@     /* QP constraint rows */
 #define RHMPC_NPAR @NPAR@  /* QP parameters p = [x; r_1..r_N; u_prev; extra] */
+#define RHMPC_NENV_U @NENV_U@  /* distinct envelope rows (an upper and a lower row share one) */
+#define RHMPC_NBC @NBC@  /* parameters the bounds depend on (the state and the offset) */
 #define RHMPC_NEXTRA @NEXTRA@  /* extra per-tick inputs at the end of p: @EXTRA_DOC@ */
 #define RHMPC_PLAN_FALLBACK_TICKS @PLAN_FALLBACK_TICKS@
 #define RHMPC_MAX_ITER @MAX_ITER@
@@ -82,7 +87,7 @@ enum rhmpc_source {
 typedef struct {
   /* -- counters since rhmpc_init (read them freely) ---------------------------------------- */
   long long ticks;                      /* rhmpc_tick calls */
-  long long screened;                   /* ticks solved by screening, without OSQP */
+  long long screened;                   /* ticks solved by level 1 (screening), without OSQP */
   long long failures[RHMPC_N_STATUS];   /* ticks whose QP result was not used, by status */
   long long fallbacks[RHMPC_N_SOURCES]; /* ticks served by each source; [0] (QP) stays 0 */
   /* -- the last tick ----------------------------------------------------------------------- */
@@ -90,6 +95,11 @@ typedef struct {
   int source;                           /* enum rhmpc_source */
   int iterations;                       /* OSQP iterations (0: screened or no solve) */
   long long tick_ns;                    /* duration inside rhmpc_tick [ns], CLOCK_MONOTONIC */
+  long long boxed;                      /* ticks solved by level 2 (the torque-box QP) */
+  int level;                            /* cascade level of the last tick's QP solution: 1
+                                           screened, 2 box QP, 3 OSQP; 0 = no QP (bad input) */
+  int box_iterations;                   /* level 2's active-set solves in the last tick (also
+                                           when the tick went on to level 3) */
   /* -- internal state (do not touch) ------------------------------------------------------- */
   long long forced;                     /* pending injected failures */
   int plan_valid, plan_age, ws_x_set, ws_y_set, ws_pending, last_screened;
@@ -98,6 +108,12 @@ typedef struct {
   double q[RHMPC_NV], l[RHMPC_M], u[RHMPC_M], g[RHMPC_M];
   double z_star[RHMPC_NV], plan[RHMPC_NV];
   double ws_x[RHMPC_NV], ws_y[RHMPC_M];
+  double box_L[RHMPC_NZ * RHMPC_NZ], box_y[RHMPC_NZ], box_mu[RHMPC_NZ], box_z[RHMPC_NZ];
+  double box_rhs[RHMPC_NZ], box_step[RHMPC_NZ], box_tmp[RHMPC_NZ], box_sig[RHMPC_NZ];
+  double box_lam[RHMPC_NZ];
+  double g_env[RHMPC_NENV_U + 1], p_bc[RHMPC_NBC + 1];
+  int box_idx[RHMPC_NZ];
+  signed char box_act[RHMPC_NZ];
 } rhmpc_t;
 
 /* Reset the controller: no plan, zero counters, u_prev = 0, OSQP warm start at zero. */

@@ -9,12 +9,35 @@
 #define RHMPC_WS_NONE 3
 #define RHMPC_WARM_START @WARM_START@ /* settings.warm_start = "@WARM_START_NAME@" */
 #define RHMPC_SCREENING @SCREENING@
+#define RHMPC_BOX_SCREENING @BOX_SCREENING@ /* level 2 of the cascade (settings.box_screening) */
+#define RHMPC_BOX_MAX_ITER @BOX_MAX_ITER@ /* Cholesky solves of level 2 per tick, in all */
+#define RHMPC_BOX_PDAS_ITER @BOX_PDAS_ITER@ /* of which the primal-dual active set's */
+#define RHMPC_BOX_PRIMAL_TOL @BOX_PRIMAL_TOL@
+#define RHMPC_BOX_DUAL_TOL @BOX_DUAL_TOL@
+#define RHMPC_BOX_KKT_TOL @BOX_KKT_TOL@
 #define RHMPC_PARAM_BOUNDS @PARAM_BOUNDS@ /* 1: l, u depend on p (joint bounds, envelope) */
 #define RHMPC_BRAKE @BRAKE@ /* 1: LQ fallback only if it keeps the constraint rows, else brake */
 #define RHMPC_BRAKE_TICKS @BRAKE_TICKS@ /* brake: stop the joints in this many ticks */
 
 extern const double rhmpc_F_ext[RHMPC_NV * (RHMPC_NPAR + 1)];
 extern const double rhmpc_minimiser[RHMPC_NV * (RHMPC_NPAR + 1)];
+/* The screening cascade's dense data, column-major with each column zero-padded to
+ * RHMPC_PAD8(rows) entries: neg_W = -P_zz^-1 and H = P_zz (NZ columns); G_env_T the envelope
+ * rows' G on the bound columns (distinct rows, NBC columns). W = P_zz^-1 (NZ x NZ, symmetric,
+ * not padded). Block-sparse (matvec_blocks in rhmpc.c): F_z = [F, f0][:NZ] (rows reordered by
+ * F_z_perm) and A_env = the distinct envelope rows' z part: _T the padded column-major values,
+ * _cptr/_cols the non-zero columns of each block of 8 rows, _perm where each row goes. */
+#define RHMPC_PAD8(n) ((((n) + 7) / 8) * 8)
+extern const double rhmpc_neg_W[RHMPC_NZ * RHMPC_PAD8(RHMPC_NZ)];
+extern const double rhmpc_W[RHMPC_NZ * RHMPC_NZ];
+extern const double rhmpc_H[RHMPC_NZ * RHMPC_PAD8(RHMPC_NZ)];
+extern const double rhmpc_F_z_T[];
+extern const int rhmpc_F_z_cptr[], rhmpc_F_z_cols[], rhmpc_F_z_perm[];
+extern const double rhmpc_A_env_T[];
+extern const int rhmpc_A_env_cptr[], rhmpc_A_env_cols[], rhmpc_A_env_perm[];
+extern const double rhmpc_G_env_T[];
+extern const int rhmpc_bound_columns[];
+extern const int rhmpc_env_row[];
 /* Sparse matrices in CSR form (row pointers _p, column indices _i, values _x): A (M x NV),
  * G (M x NPAR), shift (NV x NV), shift_dual (M x M). */
 #define RHMPC_CSR(name) extern const int rhmpc_##name##_p[]; extern const int rhmpc_##name##_i[]; \
