@@ -33,30 +33,16 @@ import math
 import time
 
 import numpy as np
-import osqp
-import scipy.sparse as sp
 
 from rhmpc.control.active_set import ActiveSetSolver
 from rhmpc.control.box_qp import BoxQP, BoxQPSettings
 from rhmpc.control.fallback import MPCStats, brake_torque, envelope_holds
 from rhmpc.control.offset import OutputOffset
+from rhmpc.control.osqp_solver import SOLVED, STATUS_REASON, OSQPSolver
 from rhmpc.control.qp import CondensedQP, build_condensed_qp
 from rhmpc.control.settings import MPCSettings
 from robots.linearize import LinearArm
 
-_STATUS_REASON = {
-    osqp.SolverStatus.OSQP_SOLVED_INACCURATE: "solved_inaccurate",
-    osqp.SolverStatus.OSQP_PRIMAL_INFEASIBLE: "primal_infeasible",
-    osqp.SolverStatus.OSQP_PRIMAL_INFEASIBLE_INACCURATE: "primal_infeasible",
-    osqp.SolverStatus.OSQP_DUAL_INFEASIBLE: "dual_infeasible",
-    osqp.SolverStatus.OSQP_DUAL_INFEASIBLE_INACCURATE: "dual_infeasible",
-    osqp.SolverStatus.OSQP_MAX_ITER_REACHED: "max_iter",
-    osqp.SolverStatus.OSQP_TIME_LIMIT_REACHED: "time_limit",
-    osqp.SolverStatus.OSQP_NON_CVX: "non_convex",
-    osqp.SolverStatus.OSQP_SIGINT: "interrupted",
-    osqp.SolverStatus.OSQP_UNSOLVED: "unsolved",
-}
-_SOLVED = int(osqp.SolverStatus.OSQP_SOLVED)
 #: Failures whose iterate is carried over to the next tick's warm start.
 _CONTINUE = frozenset({"max_iter", "time_limit", "solved_inaccurate", "injected"})
 
@@ -164,55 +150,21 @@ class RecedingHorizonMPC:
     # -- solver ------------------------------------------------------------------------------
     def _setup_solver(self) -> None:
         s, qp = self.settings, self.qp
-        self._daqp = None
-        if s.solver == "daqp":
-            self._daqp = ActiveSetSolver(qp, s.max_iter)
-        self._osqp = osqp.OSQP()
-        extra = {"time_limit": s.time_limit} if s.time_limit > 0 else {}
-        self._osqp.setup(
-            sp.csc_matrix(np.triu(qp.P)), qp.f0.copy(), sp.csc_matrix(qp.A), qp.l0.copy(),
-            qp.u0.copy(), verbose=False, eps_abs=s.eps_abs, eps_rel=s.eps_rel,
-            max_iter=s.max_iter, rho=s.rho,
-            adaptive_rho=s.adaptive_rho, adaptive_rho_interval=s.adaptive_rho_interval,
-            adaptive_rho_tolerance=s.adaptive_rho_tolerance, check_termination=s.check_termination,
-            check_dualgap=s.check_dualgap,
-            polishing=s.polish, scaling=s.scaling, warm_starting=s.warm_start != "none", **extra,
-        )
-        # The public OSQP.solve() wraps every result in namespaces (~10 µs per call); the
-        # extension object underneath is used directly when it is there.
-        self._raw = getattr(self._osqp, "_solver", None)
+        # OSQP is always set up: the C export generates its code, and reset() seeds it.
+        self._osqp_solver = OSQPSolver(qp, s, want_dual=self._ws_dual)
+        self._osqp = self._osqp_solver.osqp
+        self._solver = (ActiveSetSolver(qp, s.max_iter) if s.solver == "daqp"
+                        else self._osqp_solver)
 
     def _update_q(self) -> None:
-        if self._daqp is not None:
-            self._daqp.update(self._q, self._l, self._u, self.qp.param_bounds)
-        elif self._raw is not None:
-            if self.qp.param_bounds:
-                self._raw.update_data_vec(q=self._q, l=self._l, u=self._u)
-            else:
-                self._raw.update_data_vec(q=self._q, l=None, u=None)
-        elif self.qp.param_bounds:
-            self._osqp.update(q=self._q, l=self._l, u=self._u)
-        else:
-            self._osqp.update(q=self._q)
+        self._solver.update(self._q, self._l, self._u, self.qp.param_bounds)
 
     def _warm_start(self, x: np.ndarray, y: np.ndarray | None) -> None:
-        if self._daqp is not None:
-            return  # DAQP hot-starts from its last working set
-        if self._raw is not None:
-            self._raw.warm_start(x, y)
-        else:
-            self._osqp.warm_start(x=x, y=y)
+        if self._solver is self._osqp_solver:  # DAQP hot-starts from its last working set
+            self._osqp_solver.warm_start(x, y)
 
     def _solve(self) -> tuple[int, int, np.ndarray, np.ndarray | None]:
-        if self._daqp is not None:
-            return self._daqp.solve()
-        if self._raw is not None:
-            raw = self._raw
-            raw.solve()
-            info, sol = raw.info, raw.solution
-            return info.status_val, info.iter, sol.x, sol.y if self._ws_dual else None
-        res = self._osqp.solve(raise_error=False)
-        return res.info.status_val, res.info.iter, res.x, res.y
+        return self._solver.solve()
 
     # -- public API --------------------------------------------------------------------------
     def reset(self, u_prev: np.ndarray | None = None) -> None:
@@ -231,8 +183,7 @@ class RecedingHorizonMPC:
         self._last_screened = False
         self._ws_pending = False
         self.stats = MPCStats()
-        zeros = np.zeros(self.qp.nv)
-        self._osqp.warm_start(x=zeros, y=self._y_zero)
+        self._osqp_solver.warm_start(np.zeros(self.qp.nv), self._y_zero)
 
     def force_failures(self, count: int = 1, reason: str = "injected") -> None:
         """Make the next ``count`` solves report failure ``reason`` (tests, fault injection).
@@ -279,15 +230,9 @@ class RecedingHorizonMPC:
             if self._level == 2:
                 y[: self._nz] = self.box.mu
             return self._plan.copy(), y
-        if self._daqp is not None:
-            return self._daqp.x.copy(), self._daqp.y.copy()
-        if self._raw is not None:
-            sol = self._raw.solution
-            return np.array(sol.x, dtype=float), np.array(sol.y, dtype=float)
-        res = self._osqp._derivative_cache.get("results")  # public API fallback
-        if res is None:
-            raise RuntimeError("no solve has run yet")
-        return np.array(res.x, dtype=float), np.array(res.y, dtype=float)
+        if self._solver is not self._osqp_solver:
+            return self._solver.x.copy(), self._solver.y.copy()
+        return self._osqp_solver.last_solution()
 
     @property
     def u_prev(self) -> np.ndarray:
@@ -408,8 +353,8 @@ class RecedingHorizonMPC:
 
         if self._forced:
             reason = self._forced.pop(0)
-        elif status != _SOLVED:
-            reason = _STATUS_REASON.get(status, f"status_{status}")
+        elif status != SOLVED:
+            reason = STATUS_REASON.get(status, f"status_{status}")
         else:
             reason = None
         if reason is None:
