@@ -89,6 +89,13 @@ class WFLCSettings(PredictorSettings):
     gain_rate_hz: float | None = 28.0
     phase_gain: float = 0.01
     frequency_harmonics: int = 1
+    loop: str = "pll"
+    pll_natural_hz: float = 0.5
+    pll_damping: float = 1.0 / math.sqrt(2.0)
+    pll_harmonics: int = 1
+    pll_max_phase_error: float = 0.5
+    offset_natural_hz: float | None = None
+    offset_damping: float = 1.0
     unit: float | None = None
 
     def __post_init__(self) -> None:
@@ -97,6 +104,13 @@ class WFLCSettings(PredictorSettings):
             raise ValueError(f"harmonics must be a positive integer, got {self.harmonics!r}")
         if not 1 <= self.frequency_harmonics <= self.harmonics:
             raise ValueError("frequency_harmonics must be in 1..harmonics")
+        if self.loop not in ("pll", "gradient"):
+            raise ValueError(f"loop must be 'pll' or 'gradient', got {self.loop!r}")
+        if not 1 <= self.pll_harmonics <= self.harmonics:
+            raise ValueError("pll_harmonics must be in 1..harmonics")
+        for name in ("pll_natural_hz", "pll_damping", "pll_max_phase_error"):
+            if not getattr(self, name) > 0.0:
+                raise ValueError(f"{name} must be > 0, got {getattr(self, name)!r}")
         for name in ("mu0", "mu1", "mu_bias", "phase_gain"):
             if not getattr(self, name) >= 0.0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
@@ -121,6 +135,7 @@ class WFLC(Predictor):
         self._r = np.arange(1.0, m + 1.0)
         self.w = np.zeros((d, 2 * m))  # [sin weights, cos weights] per axis
         self.bias = np.zeros(d)
+        self.bias_rate = np.zeros(d)  # offset velocity [data units per sample]
         self.omega0 = 0.0  # rad/sample
         self.psi = 0.0
         rate = 1.0 if s.gain_rate_hz is None else self.dt * s.gain_rate_hz
@@ -128,6 +143,14 @@ class WFLC(Predictor):
         self._mu1 = s.mu1 * rate
         self._kappa = s.phase_gain * rate
         self._lo, self._hi = (2 * math.pi * f * self.dt for f in s.omega_limits_hz)
+        wn = 2 * math.pi * s.pll_natural_hz * self.dt  # ω_n [rad/sample]
+        self._kp, self._ki = 2 * s.pll_damping * wn, wn * wn
+        self.phase_error = 0.0  # δ of the last update [rad]
+        if s.offset_natural_hz is None:
+            self._kb1, self._kb2 = 2 * s.mu_bias, 0.0
+        else:
+            wb = 2 * math.pi * s.offset_natural_hz * self.dt
+            self._kb1, self._kb2 = 2 * s.offset_damping * wb, wb * wb
 
     @property
     def omega(self) -> float:
@@ -161,10 +184,18 @@ class WFLC(Predictor):
             return
         s, m = self.settings, self.settings.harmonics
         self.psi = math.remainder(self.psi + self.omega0, 2 * math.pi)
+        self.bias += self.bias_rate
         ph = self._r * self.psi
         sn, cs = np.sin(ph), np.cos(ph)
         ws, wc = self.w[:, :m], self.w[:, m:]
         eps = z - ws @ sn - wc @ cs - self.bias
+        if s.loop == "pll":
+            self._pll(eps, sn, cs)
+            ws += (2 * self._mu1) * np.multiply.outer(eps, sn)
+            wc += (2 * self._mu1) * np.multiply.outer(eps, cs)
+            self.bias += self._kb1 * eps
+            self.bias_rate += self._kb2 * eps
+            return
         j = s.frequency_harmonics
         grad = float(eps @ ((ws[:, :j] * cs[:j] - wc[:, :j] * sn[:j]) @ self._r[:j]))
         w1 = self.w[:, [0, m]].copy()  # fundamental weights (sin, cos) before adaptation
@@ -182,9 +213,28 @@ class WFLC(Predictor):
             dphi = math.atan2(cross, float(np.sum(w1 * w2)))
             self.omega0 = min(max(self.omega0 + self._kappa * dphi, self._lo), self._hi)
 
+    def _pll(self, eps: np.ndarray, sn: np.ndarray, cs: np.ndarray) -> None:
+        """Second-order phase-locked loop on ψ and ω₀ (module docstring, eqs. P1–P3)."""
+        j = self.settings.pll_harmonics
+        ws, wc, r = self.w[:, :j], self.w[:, self.settings.harmonics :][:, :j], self._r[:j]
+        g = (ws * cs[:j] - wc * sn[:j]) @ r  # ∂ŷ_a/∂ψ, (d,)
+        power = 0.5 * float(np.sum((ws * ws + wc * wc) @ (r * r)))  # cycle mean of Σ_a g_a²
+        if not power > 0.0 or not math.isfinite(power):
+            return
+        lim = self.settings.pll_max_phase_error
+        delta = min(max(float(eps @ g) / power, -lim), lim)
+        self.phase_error = delta
+        self.psi = math.remainder(self.psi + self._kp * delta, 2 * math.pi)
+        w0 = self.omega0 + self._ki * delta
+        if not self._lo <= w0 <= self._hi:
+            self.counts["omega_clamped"] += 1
+            w0 = min(max(w0, self._lo), self._hi)
+        self.omega0 = w0
+
     def _missing(self) -> None:
         if self.ready:
             self.psi = math.remainder(self.psi + self.omega0, 2 * math.pi)
+            self.bias += self.bias_rate
         else:
             self._window[self._filled % self.n_init] = np.nan
             self._filled += 1
@@ -192,4 +242,5 @@ class WFLC(Predictor):
     def _predict(self, steps: int) -> np.ndarray:
         m = self.settings.harmonics
         ph = np.multiply.outer(self.psi + self.omega0 * np.arange(1.0, steps + 1.0), self._r)
-        return np.sin(ph) @ self.w[:, :m].T + np.cos(ph) @ self.w[:, m:].T + self.bias
+        trend = self.bias + np.multiply.outer(np.arange(1.0, steps + 1.0), self.bias_rate)
+        return np.sin(ph) @ self.w[:, :m].T + np.cos(ph) @ self.w[:, m:].T + trend
