@@ -44,7 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from predictors.base import Predictor, PredictorSettings
-from predictors.fourier_init import initial_fourier_state
+from predictors.fourier_init import initial_dual_state, initial_fourier_state
 
 __all__ = ["WFLC", "WFLCSettings"]
 
@@ -96,6 +96,9 @@ class WFLCSettings(PredictorSettings):
     pll_max_phase_error: float = 0.5
     offset_natural_hz: float | None = None
     offset_damping: float = 1.0
+    breathing_harmonics: int = 2
+    breathing_band_hz: tuple[float, float] = (0.08, 0.5)
+    breathing_natural_hz: float = 0.02
     unit: float | None = None
 
     def __post_init__(self) -> None:
@@ -135,6 +138,14 @@ class WFLC(Predictor):
         self._r = np.arange(1.0, m + 1.0)
         self.w = np.zeros((d, 2 * m))  # [sin weights, cos weights] per axis
         self.bias = np.zeros(d)
+        hb = s.breathing_harmonics
+        self._rb = np.arange(1.0, hb + 1.0)
+        self.wb = np.zeros((d, 2 * hb))  # breathing [sin, cos] weights per axis
+        self.omega_b = 0.0  # rad/sample
+        self.psi_b = 0.0
+        self._blo, self._bhi = (2 * math.pi * f * self.dt for f in s.breathing_band_hz)
+        wnb = 2 * math.pi * s.breathing_natural_hz * self.dt
+        self._kpb, self._kib = 2 * s.pll_damping * wnb, wnb * wnb
         self.bias_rate = np.zeros(d)  # offset velocity [data units per sample]
         self.omega0 = 0.0  # rad/sample
         self.psi = 0.0
@@ -164,9 +175,18 @@ class WFLC(Predictor):
 
     def _initialise(self) -> None:
         order = np.roll(np.arange(self.n_init), -(self._filled % self.n_init))
-        omega, c, r, th = initial_fourier_state(
-            self._window[order], self.dt, self.settings.harmonics, self.settings.band_hz
-        )
+        s = self.settings
+        if s.breathing_harmonics:
+            omega, c, r, th, omega_b, a, b = initial_dual_state(
+                self._window[order], self.dt, s.harmonics, s.band_hz,
+                s.breathing_harmonics, s.breathing_band_hz,
+            )
+            self.wb[:] = np.hstack([a, b])
+            self.omega_b, self.psi_b = omega_b * self.dt, 0.0
+        else:
+            omega, c, r, th = initial_fourier_state(
+                self._window[order], self.dt, self.settings.harmonics, self.settings.band_hz
+            )
         m = self.settings.harmonics
         self.w[:, :m] = r * np.cos(th)  # a_i: r sin(iψ + θ) = a sin iψ + b cos iψ
         self.w[:, m:] = r * np.sin(th)
@@ -189,6 +209,15 @@ class WFLC(Predictor):
         sn, cs = np.sin(ph), np.cos(ph)
         ws, wc = self.w[:, :m], self.w[:, m:]
         eps = z - ws @ sn - wc @ cs - self.bias
+        hb = self._rb.size
+        if hb:
+            self.psi_b = math.remainder(self.psi_b + self.omega_b, 2 * math.pi)
+            phb = self._rb * self.psi_b
+            xb = np.concatenate([np.sin(phb), np.cos(phb)])
+            eps -= self.wb @ xb
+            if s.loop == "pll":
+                self._breathing_pll(eps, xb)
+            self.wb += (2 * self._mu1) * np.multiply.outer(eps, xb)
         if s.loop == "pll":
             self._pll(eps, sn, cs)
             ws += (2 * self._mu1) * np.multiply.outer(eps, sn)
@@ -231,6 +260,23 @@ class WFLC(Predictor):
             w0 = min(max(w0, self._lo), self._hi)
         self.omega0 = w0
 
+    def _breathing_pll(self, eps: np.ndarray, xb: np.ndarray) -> None:
+        """The loop of :meth:`_pll` on the respiratory phase ψ_b and rate ω_b."""
+        hb = self._rb.size
+        a, b = self.wb[:, :hb], self.wb[:, hb:]
+        g = (a * xb[hb:] - b * xb[:hb]) @ self._rb
+        power = 0.5 * float(np.sum((a * a + b * b) @ (self._rb**2)))
+        if not power > 0.0 or not math.isfinite(power):
+            return
+        lim = self.settings.pll_max_phase_error
+        delta = min(max(float(eps @ g) / power, -lim), lim)
+        self.psi_b = math.remainder(self.psi_b + self._kpb * delta, 2 * math.pi)
+        w = self.omega_b + self._kib * delta
+        if not self._blo <= w <= self._bhi:
+            self.counts["breathing_clamped"] += 1
+            w = min(max(w, self._blo), self._bhi)
+        self.omega_b = w
+
     def _missing(self) -> None:
         if self.ready:
             self.psi = math.remainder(self.psi + self.omega0, 2 * math.pi)
@@ -243,4 +289,10 @@ class WFLC(Predictor):
         m = self.settings.harmonics
         ph = np.multiply.outer(self.psi + self.omega0 * np.arange(1.0, steps + 1.0), self._r)
         trend = self.bias + np.multiply.outer(np.arange(1.0, steps + 1.0), self.bias_rate)
-        return np.sin(ph) @ self.w[:, :m].T + np.cos(ph) @ self.w[:, m:].T + trend
+        out = np.sin(ph) @ self.w[:, :m].T + np.cos(ph) @ self.w[:, m:].T + trend
+        hb = self._rb.size
+        if hb:
+            k = np.arange(1.0, steps + 1.0)
+            phb = np.multiply.outer(self.psi_b + self.omega_b * k, self._rb)
+            out += np.sin(phb) @ self.wb[:, :hb].T + np.cos(phb) @ self.wb[:, hb:].T
+        return out
