@@ -82,7 +82,7 @@ class WFLCSettings(PredictorSettings):
     harmonics: int = 8
     mu0: float = 7e-6 / 1e-6
     mu1: float = 0.03
-    mu_bias: float = 0.03
+    mu_bias: float = 0.01
     init_seconds: float = 10.0
     band_hz: tuple[float, float] = (0.6, 3.0)
     omega_limits_hz: tuple[float, float] = (0.6, 3.5)
@@ -93,7 +93,7 @@ class WFLCSettings(PredictorSettings):
     pll_natural_hz: float = 0.5
     pll_damping: float = 1.0 / math.sqrt(2.0)
     pll_harmonics: int = 1
-    pll_max_phase_error: float = 0.5
+    pll_max_phase_error: float = 1.0
     offset_natural_hz: float | None = None
     offset_damping: float = 1.0
     breathing_harmonics: int = 2
