@@ -21,19 +21,43 @@ gains adapt faster per second (more updates, and ω₀ in rad/sample), so with
 within seconds on fixed-a2-top.)  μ_b is not rescaled: the offset weight is what follows
 breathing (time constant 1/(2μ_b) ≈ 17 samples).
 
-Frequency lock (ours, issue 18): after a ±10 bpm step the phase error grows past π/2
-before the gradient update catches up, the μ₀ gradient changes sign and ω₀ ran to its
-clamp (4 of 4 seeds).  The weights, though, absorb the slip: the fundamental weights
-(w_{a,1}, w_{a,m+1}) = r_a(cos φ_a, sin φ_a) rotate by Δφ per sample, the phase error the
-frequency misses.  A phase-locked correction ω₀ ← ω₀ + κ Δφ (Δφ from the summed 2-D
-cross and dot products of the axes' fundamental weights before and after the update)
-turns that rotation into frequency, and the μ₀ gradient uses the fundamental only
-(``frequency_harmonics`` = 1: the r-th harmonic's phase error is r times the
-fundamental's, so after a step the high harmonics flip the gradient's sign first; on
-Yuen's ±10 bpm protocol the full gradient ran to the clamp).  The correction cannot
-run away, since a slip in either direction rotates the weights the matching way.
-κ = 0.01 per sample at 28 Hz (a time constant of 100 samples, 3.6 s).  ω₀ is clamped to
-the heart band, a last resort counted ``omega_clamped``.  Cost per update: O(m·d).
+Phase-locked loop (ours, issue 18; ``loop="pll"``, the default).  With physiological
+heart-rate variability (RSA swings the rate by several bpm within one 4–6 s breath) the
+μ₀ gradient is too slow: on fixed-a2-top ω̂ lagged by up to 14 bpm and the 23 ms forecast
+(1.72 mm) lost to ``hold`` (0.87 mm).  ψ and ω₀ are instead driven by a normalised phase
+detector, a second-order (type-2) phase-locked loop (Gardner, *Phaselock Techniques*, 3rd
+ed., 2005, ch. 2–4; the PLL view of the WFLC's frequency adaptation):
+
+    (P1) δ_k = Σ_a ε_{a,k} g_{a,k} / P_k,  g_a = Σ_{r≤j} r (w_{a,r} cos rψ − w_{a,m+r} sin rψ),
+         P = ½ Σ_a Σ_{r≤j} r² (w_{a,r}² + w_{a,m+r}²)   (cycle mean of Σ_a g_a²),
+    (P2) ψ ← ψ + 2ζω_nΔt · clip(δ, ±δ_max),
+    (P3) ω₀ ← ω₀ + (ω_nΔt)² · clip(δ, ±δ_max),   then clamped to the heart band (counted).
+
+δ is the least-squares phase error (z ≈ ŷ(ψ + δ) linearised), dimensionless, so the loop
+is independent of the data unit and, with ω_n in Hz, of the sample rate.  j =
+``pll_harmonics`` = 1: the fundamental only, as ``frequency_harmonics`` for μ₀.  ω_n =
+2π·0.5 Hz, ζ = 1/√2: measured on the six replicas (ω_n = 0.3 Hz lags the RSA, 0.8 Hz
+follows beat-to-beat waveform changes; docs/notes/issue-18.md).  δ_max = 1 rad bounds the
+step an echo outlier can make (0.5 rad is worse on the replicas).  A ±10 bpm step is a
+phase ramp, which a type-2 loop follows with no steady-state error, so ω̂ cannot run away.
+
+Respiration (ours, issue 18; Richa et al. 2010 eq. 1, the model the EKF also carries):
+``breathing_harmonics`` = H_b = 2 terms Σ_h a_{a,h} sin hψ_b + b_{a,h} cos hψ_b with their
+own accumulated phase ψ_b, initialised with the heart series (FFT in the breathing band,
+joint least squares, :func:`predictors.fourier_init.initial_dual_state`), adapted by LMS
+with μ₁ and a slow loop (P1–P3 on ψ_b, ω_n = 2π·0.02 Hz) clamped to
+``breathing_band_hz``.  Without it the offset weight, which follows breathing with a lag
+of 1/(2μ_b) samples, was the largest error even with the true heart phase given (0.74 mm,
+oracle test, fixed-a2-top).  With breathing modelled the offset only follows drift:
+μ_b = 0.01 (Riviere's 0.03 is worse: it absorbs heartbeat error).
+
+``loop="gradient"`` with ``breathing_harmonics=0`` keeps the previous update: the μ₀
+gradient on the fundamental plus the phase-locked correction ω₀ += κΔφ (Δφ the rotation
+of the fundamental weights, κ = 0.01 per sample at 28 Hz); with ``phase_gain=0,
+frequency_harmonics=8, mu_bias=0.03`` it is Riviere's WFLC, which runs to its clamp at
+60 → 70 bpm (tested).  ``offset_natural_hz`` (default off) replaces the offset weight by a
+second-order tracker b ← b + v + k₁ε, v ← v + k₂ε (tried, not used: it competes with the
+loop).  Cost per update: O((m + H_b)·d).
 """
 
 from __future__ import annotations
@@ -51,7 +75,7 @@ __all__ = ["WFLC", "WFLCSettings"]
 
 @dataclass(frozen=True)
 class WFLCSettings(PredictorSettings):
-    """WFLC settings (defaults: Yuen et al. 2009).
+    """WFLC settings (m, μ₀, μ₁: Yuen et al. 2009; loop, respiration, μ_b: ours, issue 18).
 
     Attributes
     ----------
@@ -62,7 +86,7 @@ class WFLCSettings(PredictorSettings):
     mu1 : float
         Weight adaptation gain μ₁ [-].
     mu_bias : float
-        Offset adaptation gain μ_b [-] (Riviere; we use μ₁).
+        Offset adaptation gain μ_b [-] (Riviere: 0.03; ours 0.01, see above).
     init_seconds : float
         FFT + least-squares initialisation window [s].
     band_hz : tuple of float
@@ -72,9 +96,31 @@ class WFLCSettings(PredictorSettings):
     gain_rate_hz : float or None
         Rate μ₀, μ₁, κ were tuned at [Hz] (Yuen: 28); ``None``: per own sample.
     phase_gain : float
-        κ, gain of the phase-locked frequency correction [-] (ours; 0 = Riviere's WFLC).
+        κ, gain of the phase-locked frequency correction [-] (``loop="gradient"``; 0 =
+        Riviere's WFLC).
     frequency_harmonics : int
         Harmonics whose phase errors drive the μ₀ gradient [-] (Riviere: all m; ours: 1).
+    loop : str
+        ``"pll"`` (P1–P3, ours) or ``"gradient"`` (μ₀ gradient + κ correction).
+    pll_natural_hz : float
+        Natural frequency ω_n/2π of the heart-phase loop [Hz].
+    pll_damping : float
+        Damping ratio ζ of the loops [-].
+    pll_harmonics : int
+        Harmonics j in the phase detector (P1) [-].
+    pll_max_phase_error : float
+        δ_max, clip of the phase detector output [rad].
+    offset_natural_hz : float or None
+        Natural frequency of the second-order offset tracker [Hz]; ``None``: Riviere's
+        first-order offset weight with μ_b.
+    offset_damping : float
+        Damping ratio of that tracker [-].
+    breathing_harmonics : int
+        H_b, respiratory harmonics [-]; 0 = no respiratory series (Riviere/Yuen).
+    breathing_band_hz : tuple of float
+        Respiratory band [Hz]: FFT search and clamp of ω_b.
+    breathing_natural_hz : float
+        Natural frequency of the respiratory-phase loop [Hz].
     unit : float or None
         Metres per data unit; ``None``: inferred from the data (see ``predictors.base``).
     """

@@ -47,12 +47,13 @@ def one(job):
     for p_name in names:
         s = dict(sets.get(p_name, {}))
         p = make_predictor(p_name, dt, **s)
-        hr = HeartRateScore(scn.source.phase.rate, settling=init) if hasattr(p, "heart_rate_hz") else None
+        has_hr = hasattr(p, "heart_rate_hz")
+        hr = HeartRateScore(scn.source.phase.rate, settling=init) if has_hr else None
         em, et = [], []
         for n in range(len(z) - H):
             p.update(z[n])
             if hr is not None:
-                hr.observe(t[n] - t[0], p.heart_rate_hz) if False else hr.observe(t[n], p.heart_rate_hz)
+                hr.observe(t[n], p.heart_rate_hz)
             if n >= warm:
                 f = np.asarray(p.predict(H))[H - 1]
                 if np.all(np.isfinite(z[n + H])):
@@ -97,13 +98,15 @@ def main():
     for n in names:
         if "hr" not in next(iter(res.values()))[n]:
             continue
-        print(f"\n{n}: heart rate vs truth (lock = last entry within 5 bpm; from t = {a.settling:g} s)")
-        print(f"{'replica':<16}{'ready s':>8}{'lock s':>8}{'rms bpm':>9}{'max bpm':>9}{'within':>8}{'clamp':>6}")
+        print(f"\n{n}: HR vs truth (lock: within 5 bpm from then on; t ≥ {a.settling:g} s)")
+        cols = ("ready s", "lock s", "rms bpm", "max bpm", "within")
+        print(f"{'replica':<16}" + "".join(f"{c:>9}" for c in cols) + f"{'clamp':>6}")
         for r, row in res.items():
             h = row[n]["hr"]
-            print(f"{r:<16}{h.get('ready_time_s') or math.nan:>8.2f}{h.get('lock_time_s') or math.nan:>8.2f}"
-                  f"{h.get('rms_error_bpm', math.nan):>9.2f}{h.get('max_error_bpm', math.nan):>9.2f}"
-                  f"{h.get('within_tolerance', math.nan):>8.3f}{row[n]['clamped']:>6}")
+            vals = (h.get("ready_time_s"), h.get("lock_time_s"), h.get("rms_error_bpm"),
+                    h.get("max_error_bpm"), h.get("within_tolerance"))
+            print(f"{r:<16}" + "".join(f"{v if v is not None else math.nan:>9.2f}" for v in vals)
+                  + f"{row[n]['clamped']:>6}")
 
 
 if __name__ == "__main__":
