@@ -224,9 +224,12 @@ MM, MM2 = 1e-3, 1e-6  # metres per millimetre, m² per mm²
 #: mean heart rate [Hz] (≈ 96 bpm; Tuna §III-B 95–152 bpm) over one ventilator breath [s]
 #: (0.17 Hz, Tuna/Richa's ventilated animals).
 HRV_CV, HRV_HEART_HZ, HRV_BREATH_S = 0.06, 1.6, 1.0 / 0.17
+#: RSA takes the rate from its trough to its peak within half a breath [s].
+HRV_RISE_S = 0.5 * HRV_BREATH_S
 #: q_ω [(rad/s)²/s] such that the random walk of ω spreads by one HRV standard deviation
-#: σ_ω = 2π·CV·f_h over one breath: q_ω·T_b = σ_ω² (≈ 0.062; 4.8e-4 per sample at 128.5 Hz).
-Q_OMEGA_HRV = (_TWO_PI * HRV_CV * HRV_HEART_HZ) ** 2 / HRV_BREATH_S
+#: σ_ω = 2π·CV·f_h in the time RSA takes to swing the rate from trough to peak (half a
+#: breath): q_ω·T_b/2 = σ_ω² (≈ 0.124 (rad/s)²/s; 9.6e-4 per sample at 128.5 Hz).
+Q_OMEGA_HRV = (_TWO_PI * HRV_CV * HRV_HEART_HZ) ** 2 / HRV_RISE_S
 
 #: Parameter sets.  ``yuen2008``: Yuen et al. 2008 §III-A/D (noise study; σ_R is
 #: the 3DUS uncertainty 1.3 mm, set it to the simulated noise).  ``tuna2013``: Tuna et al.

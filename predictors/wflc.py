@@ -170,9 +170,32 @@ class WFLCSettings(PredictorSettings):
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)!r}")
 
 
+    @classmethod
+    def yuen2009(cls, **overrides) -> WFLCSettings:
+        """Yuen et al. 2009's WFLC, as rhmpc ran it before issue 18 (the 28 Hz studies).
+
+        The μ₀ gradient frequency update with the κ phase-locked correction
+        (``loop="gradient"``), no respiratory series (Yuen's 1-D mitral signal has no
+        breathing) and Riviere's offset gain μ_b = 0.03; m, μ₀, μ₁ are Yuen's.  At 28 Hz and
+        σ_R = 1.3 mm it gives 0.85 mm at ΔHR = 0 in the hr-step study, where the PLL's
+        fixed 0.5 Hz bandwidth passes the phase detector's noise (2.16 mm).  The default
+        (``loop="pll"`` with breathing) is for 3-D motion with breathing (issue 18).
+        """
+        base = {"loop": "gradient", "breathing_harmonics": 0, "mu_bias": 0.03}
+        return cls(**{**base, **overrides})
+
+
+#: Named settings for ``make_predictor("wflc", dt, params=...)``; the default is the PLL.
+PARAMETER_SETS: dict[str, WFLCSettings] = {
+    "pll": WFLCSettings(),
+    "yuen2009": WFLCSettings.yuen2009(),
+}
+
+
 class WFLC(Predictor):
     """Weighted-frequency Fourier linear combiner with accumulated phase."""
 
+    PRESETS = PARAMETER_SETS
     Settings = WFLCSettings
 
     def _allocate(self, d: int) -> None:
