@@ -142,7 +142,9 @@ class DualEKFSettings(PredictorSettings):
         if self.q_rate_hz is not None and not self.q_rate_hz > 0.0:
             raise ValueError(f"q_rate_hz must be > 0 or None, got {self.q_rate_hz!r}")
         if self.q_omega_respiratory is not None and not self.q_omega_respiratory >= 0.0:
-            raise ValueError(f"q_omega_respiratory must be >= 0 or None, got {self.q_omega_respiratory!r}")
+            raise ValueError(
+                f"q_omega_respiratory must be >= 0 or None, got {self.q_omega_respiratory!r}"
+            )
         if self.init_seconds is not None and not self.init_seconds > 0.0:
             raise ValueError(f"init_seconds must be > 0 or None, got {self.init_seconds!r}")
         for name in ("respiratory_band_hz", "cardiac_band_hz"):

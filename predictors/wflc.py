@@ -169,7 +169,6 @@ class WFLCSettings(PredictorSettings):
             if not getattr(self, name) > 0.0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)!r}")
 
-
     @classmethod
     def yuen2009(cls, **overrides) -> WFLCSettings:
         """Yuen et al. 2009's WFLC, as rhmpc ran it before issue 18 (the 28 Hz studies).
@@ -247,8 +246,12 @@ class WFLC(Predictor):
         s = self.settings
         if s.breathing_harmonics:
             omega, c, r, th, omega_b, a, b = initial_dual_state(
-                self._window[order], self.dt, s.harmonics, s.band_hz,
-                s.breathing_harmonics, s.breathing_band_hz,
+                self._window[order],
+                self.dt,
+                s.harmonics,
+                s.band_hz,
+                s.breathing_harmonics,
+                s.breathing_band_hz,
             )
             self.wb[:] = np.hstack([a, b])
             self.omega_b, self.psi_b = omega_b * self.dt, 0.0
