@@ -44,7 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from predictors.base import Predictor, PredictorSettings
-from predictors.ekf_fourier import spd_inverse, wrap_phase
+from predictors.ekf_fourier import Q_OMEGA_HRV, spd_inverse, wrap_phase
 from predictors.fourier_init import initial_dual_state
 
 __all__ = ["DualEKFSettings", "DualFourierEKF"]
@@ -68,8 +68,16 @@ class DualEKFSettings(PredictorSettings):
         Process variance of each frequency [(rad/s)² per sample at ``q_rate_hz``].
     q_omega_respiratory : float or None
         Process variance of ω_r alone [(rad/s)² per sample at ``q_rate_hz``]; ``None``:
-        ``q_omega`` (Richa).  A ventilator holds the rate constant, so the default is 0:
-        ω̂_r converges from the initialisation (prior ``p0_omega_respiratory``) and stays.
+        ``q_omega`` (Richa).  Default 1e-10 (rad/sample)² at 83.3 Hz, 1 % of Richa's: a
+        ventilator holds the rate constant, so ω̂_r need only converge from the
+        initialisation (prior ``p0_omega_respiratory``); the walk spreads by 0.6
+        breaths/min in a minute.  With Richa's value ω̂_r wanders to 1–6 breaths/min on
+        varying-a3-top (clamped 430 times).
+    q_omega_cardiac_per_second : float or None
+        Process noise intensity of ω_c [(rad/s)² per second], replacing ``q_omega`` for
+        ω_c; ``None``: ``q_omega`` (Richa).  Default: heart-rate variability,
+        :data:`predictors.ekf_fourier.Q_OMEGA_HRV` (≈ 0.124 (rad/s)²/s, 21× Richa's), as
+        the ``ekf``'s ``tuna2013-hrv``.
     r : float
         Measurement variance per axis [m²].
     p0_coefficient : float
@@ -106,7 +114,8 @@ class DualEKFSettings(PredictorSettings):
     q_offset: float = 1e-6 * 1e-6
     q_cardiac: float = 1e-5 * 1e-6
     q_omega: float = 1e-8 * 83.3**2
-    q_omega_respiratory: float | None = None
+    q_omega_respiratory: float | None = 1e-10 * 83.3**2
+    q_omega_cardiac_per_second: float | None = Q_OMEGA_HRV
     r: float = 0.1 * 1e-6
     p0_coefficient: float = 25e-6
     p0_offset: float = 1e-6
@@ -141,10 +150,10 @@ class DualEKFSettings(PredictorSettings):
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
         if self.q_rate_hz is not None and not self.q_rate_hz > 0.0:
             raise ValueError(f"q_rate_hz must be > 0 or None, got {self.q_rate_hz!r}")
-        if self.q_omega_respiratory is not None and not self.q_omega_respiratory >= 0.0:
-            raise ValueError(
-                f"q_omega_respiratory must be >= 0 or None, got {self.q_omega_respiratory!r}"
-            )
+        for name in ("q_omega_respiratory", "q_omega_cardiac_per_second"):
+            v = getattr(self, name)
+            if v is not None and not v >= 0.0:
+                raise ValueError(f"{name} must be >= 0 or None, got {v!r}")
         if self.init_seconds is not None and not self.init_seconds > 0.0:
             raise ValueError(f"init_seconds must be > 0 or None, got {self.init_seconds!r}")
         for name in ("respiratory_band_hz", "cardiac_band_hz"):
@@ -173,6 +182,8 @@ class DualFourierEKF(Predictor):
         )
         q_wr = s.q_omega if s.q_omega_respiratory is None else s.q_omega_respiratory
         self._q = np.concatenate([np.tile(qa / u2, d), [q_wr, s.q_omega, 0.0, 0.0]]) * scale
+        if s.q_omega_cardiac_per_second is not None:
+            self._q[self.iwc] = s.q_omega_cardiac_per_second * self.dt
         self._r = s.r / u2
         p0 = np.full(k, s.p0_coefficient / u2)
         p0[2 * hr] = s.p0_offset / u2
