@@ -33,6 +33,12 @@ m², and (rad/s)² for the frequencies (1e-8·83.3² = 6.94e-5), rescaled to the
 predictor's rate by ``dt · q_rate_hz``.  Initial covariance: not given by Richa;
 ours is ``p0_coefficient``, ``p0_offset`` and ``p0_omega_*``.
 
+Outliers (issue 18, as :mod:`predictors.ekf_fourier`): a sample whose normalised innovation
+squared exceeds the χ²_d quantile ``gate_probability`` is not used (counted
+``innovation_rejected``); after ``gate_seconds`` of consecutive rejections samples are used
+again.  With the HRV-sized q_ω of ω_c an ungated 5 mm echo outlier pulls ω̂_c to its clamp
+(varying-a1-side, sensor seed 5).
+
 Cost per update: O(n²·d) with n = d(2H_r + 2H_c + 1) + 4 (55 for d = 3).
 """
 
@@ -42,6 +48,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.stats import chi2
 
 from predictors.base import Predictor, PredictorSettings
 from predictors.ekf_fourier import Q_OMEGA_HRV, spd_inverse, wrap_phase
@@ -91,6 +98,10 @@ class DualEKFSettings(PredictorSettings):
         Rate the process variances are given at [Hz] (Richa: 83.3); ``None`` = per own sample.
     omega_limits_hz : tuple of float
         Both frequencies are clamped to this range [Hz].
+    gate_probability : float or None
+        Innovation gate probability [-] (χ²_d quantile); ``None``: no gate (Richa).
+    gate_seconds : float
+        Longest run of rejected samples [s]; then samples are used again.
     init_seconds : float or None
         Length of the FFT + least-squares initialisation window [s] (≥ one breath);
         ``None``: Richa's start (zero coefficients, the given frequencies).
@@ -123,6 +134,8 @@ class DualEKFSettings(PredictorSettings):
     p0_omega_cardiac: float = (_TWO_PI * 0.05) ** 2
     q_rate_hz: float | None = 83.3
     omega_limits_hz: tuple[float, float] = (0.02, 5.0)
+    gate_probability: float | None = 1.0 - 1e-6
+    gate_seconds: float = 0.1
     init_seconds: float | None = 10.0
     respiratory_known: bool = False
     respiratory_band_hz: tuple[float, float] = (0.08, 0.5)
@@ -154,6 +167,12 @@ class DualEKFSettings(PredictorSettings):
             v = getattr(self, name)
             if v is not None and not v >= 0.0:
                 raise ValueError(f"{name} must be >= 0 or None, got {v!r}")
+        if self.gate_probability is not None and not 0.0 < self.gate_probability < 1.0:
+            raise ValueError(
+                f"gate_probability must be in (0, 1) or None, got {self.gate_probability!r}"
+            )
+        if not self.gate_seconds > 0.0:
+            raise ValueError(f"gate_seconds must be > 0, got {self.gate_seconds!r}")
         if self.init_seconds is not None and not self.init_seconds > 0.0:
             raise ValueError(f"init_seconds must be > 0 or None, got {self.init_seconds!r}")
         for name in ("respiratory_band_hz", "cardiac_band_hz"):
@@ -198,6 +217,8 @@ class DualFourierEKF(Predictor):
         self._H = np.zeros((d, self.nx))
         self._Hblk = np.einsum("aaj->aj", self._H[:, : d * k].reshape(d, d, k))
         self.nis = math.nan
+        self._gate = math.inf if s.gate_probability is None else chi2.ppf(s.gate_probability, d)
+        self._max_reject, self._rejected = max(1, round(s.gate_seconds / self.dt)), 0
         if s.init_seconds is not None:
             n = max(round(s.init_seconds / self.dt), 2 * k)
             self._window, self._filled = np.full((n, d), np.nan), 0
@@ -283,6 +304,11 @@ class DualFourierEKF(Predictor):
             return
         Sinv_nu = Sinv @ nu
         self.nis = float(nu @ Sinv_nu)
+        if self.nis > self._gate and self._rejected < self._max_reject:
+            self.counts["innovation_rejected"] += 1
+            self._rejected += 1
+            return
+        self._rejected = 0
         x += PHt @ Sinv_nu
         P -= (PHt @ Sinv) @ PHt.T
         P += P.T
