@@ -12,7 +12,19 @@ are carried as (noise-free) states, so that the frequency enters through the
 transition F (θ += ωΔt) and its Jacobian is exact; with the phases held outside the
 state Richa's identity transition is recovered.  The offset c_r starts at the first
 sample instead of 0 (samples in a robot frame are far from 0); everything else
-starts at zero and the frequencies at their given initial values, as in Richa.
+starts at zero and the frequencies at their given initial values, as in Richa
+(``init_seconds=None``).
+
+Initialisation (issue 18, default ``init_seconds`` = 10 s): as Yuen's EKF
+(:func:`predictors.fourier_init.initial_dual_state`), the first ``init_seconds`` of samples
+give ω̂_r by FFT in ``respiratory_band_hz``, then (the respiratory fit removed) ω̂_c in
+``cardiac_band_hz``, and c_r, a, b, d, e by least squares with θ_r = θ_c = 0 at the newest
+sample; the forecast holds the newest sample until then.  Richa's zero start fails on
+3-D replicas: over the first breath the respiratory sin/cos are nearly collinear with the
+offset, the coefficients grow to ±10–18 mm in opposite signs and their phase
+sensitivity drags ω̂_r to 40 breaths/min and ω̂_c to its clamp within 4 s
+(varying-a1-top, varying-a3-top).  A window of at least one breath makes them
+identifiable.
 
 Parameters (Richa §I-D): H_r = 3, H_c = 5; process variances 1e-5 mm² (respiratory
 coefficients), 1e-6 mm² (offset), 1e-5 mm² (cardiac coefficients), 1e-8 (rad/sample)²
@@ -20,6 +32,12 @@ coefficients), 1e-6 mm² (offset), 1e-5 mm² (cardiac coefficients), 1e-8 (rad/s
 m², and (rad/s)² for the frequencies (1e-8·83.3² = 6.94e-5), rescaled to the
 predictor's rate by ``dt · q_rate_hz``.  Initial covariance: not given by Richa;
 ours is ``p0_coefficient``, ``p0_offset`` and ``p0_omega_*``.
+
+Outliers (issue 18, as :mod:`predictors.ekf_fourier`): a sample whose normalised innovation
+squared exceeds the χ²_d quantile ``gate_probability`` is not used (counted
+``innovation_rejected``); after ``gate_seconds`` of consecutive rejections samples are used
+again.  With the HRV-sized q_ω of ω_c an ungated 5 mm echo outlier pulls ω̂_c to its clamp
+(varying-a1-side, sensor seed 5).
 
 Cost per update: O(n²·d) with n = d(2H_r + 2H_c + 1) + 4 (55 for d = 3).
 """
@@ -30,9 +48,11 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.stats import chi2
 
 from predictors.base import Predictor, PredictorSettings
-from predictors.ekf_fourier import spd_inverse, wrap_phase
+from predictors.ekf_fourier import Q_OMEGA_HRV, spd_inverse, wrap_phase
+from predictors.fourier_init import initial_dual_state
 
 __all__ = ["DualEKFSettings", "DualFourierEKF"]
 
@@ -53,6 +73,18 @@ class DualEKFSettings(PredictorSettings):
         Process variances of the coefficients [m² per sample at ``q_rate_hz``].
     q_omega : float
         Process variance of each frequency [(rad/s)² per sample at ``q_rate_hz``].
+    q_omega_respiratory : float or None
+        Process variance of ω_r alone [(rad/s)² per sample at ``q_rate_hz``]; ``None``:
+        ``q_omega`` (Richa).  Default 1e-10 (rad/sample)² at 83.3 Hz, 1 % of Richa's: a
+        ventilator holds the rate constant, so ω̂_r need only converge from the
+        initialisation (prior ``p0_omega_respiratory``); the walk spreads by 0.6
+        breaths/min in a minute.  With Richa's value ω̂_r wanders to 1–6 breaths/min on
+        varying-a3-top (clamped 430 times).
+    q_omega_cardiac_per_second : float or None
+        Process noise intensity of ω_c [(rad/s)² per second], replacing ``q_omega`` for
+        ω_c; ``None``: ``q_omega`` (Richa).  Default: heart-rate variability,
+        :data:`predictors.ekf_fourier.Q_OMEGA_HRV` (≈ 0.124 (rad/s)²/s, 21× Richa's), as
+        the ``ekf``'s ``tuna2013-hrv``.
     r : float
         Measurement variance per axis [m²].
     p0_coefficient : float
@@ -66,6 +98,21 @@ class DualEKFSettings(PredictorSettings):
         Rate the process variances are given at [Hz] (Richa: 83.3); ``None`` = per own sample.
     omega_limits_hz : tuple of float
         Both frequencies are clamped to this range [Hz].
+    gate_probability : float or None
+        Innovation gate probability [-] (χ²_d quantile); ``None``: no gate (Richa).
+    gate_seconds : float
+        Longest run of rejected samples [s]; then samples are used again.
+    init_seconds : float or None
+        Length of the FFT + least-squares initialisation window [s] (≥ one breath);
+        ``None``: Richa's start (zero coefficients, the given frequencies).
+    respiratory_known : bool
+        The initialisation takes ω_r = 2π·``respiratory_hz`` (the ventilator's set rate, as
+        Richa) instead of the FFT peak in ``respiratory_band_hz``, which a 10 s window of
+        1.7 breaths resolves only to ±0.05 Hz (14.7 instead of 10 breaths/min on
+        varying-a1-side).
+    respiratory_band_hz, cardiac_band_hz : tuple of float
+        FFT search bands of the initialisation [Hz] (6–30 breaths/min; 36–180 beats/min,
+        as the EKF's).
     unit : float or None
         Metres per data unit; ``None``: inferred from the data (see ``predictors.base``).
     """
@@ -78,6 +125,8 @@ class DualEKFSettings(PredictorSettings):
     q_offset: float = 1e-6 * 1e-6
     q_cardiac: float = 1e-5 * 1e-6
     q_omega: float = 1e-8 * 83.3**2
+    q_omega_respiratory: float | None = 1e-10 * 83.3**2
+    q_omega_cardiac_per_second: float | None = Q_OMEGA_HRV
     r: float = 0.1 * 1e-6
     p0_coefficient: float = 25e-6
     p0_offset: float = 1e-6
@@ -85,6 +134,12 @@ class DualEKFSettings(PredictorSettings):
     p0_omega_cardiac: float = (_TWO_PI * 0.05) ** 2
     q_rate_hz: float | None = 83.3
     omega_limits_hz: tuple[float, float] = (0.02, 5.0)
+    gate_probability: float | None = 1.0 - 1e-6
+    gate_seconds: float = 0.1
+    init_seconds: float | None = 10.0
+    respiratory_known: bool = False
+    respiratory_band_hz: tuple[float, float] = (0.08, 0.5)
+    cardiac_band_hz: tuple[float, float] = (0.6, 3.0)
     unit: float | None = None
 
     def __post_init__(self) -> None:
@@ -108,6 +163,22 @@ class DualEKFSettings(PredictorSettings):
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
         if self.q_rate_hz is not None and not self.q_rate_hz > 0.0:
             raise ValueError(f"q_rate_hz must be > 0 or None, got {self.q_rate_hz!r}")
+        for name in ("q_omega_respiratory", "q_omega_cardiac_per_second"):
+            v = getattr(self, name)
+            if v is not None and not v >= 0.0:
+                raise ValueError(f"{name} must be >= 0 or None, got {v!r}")
+        if self.gate_probability is not None and not 0.0 < self.gate_probability < 1.0:
+            raise ValueError(
+                f"gate_probability must be in (0, 1) or None, got {self.gate_probability!r}"
+            )
+        if not self.gate_seconds > 0.0:
+            raise ValueError(f"gate_seconds must be > 0, got {self.gate_seconds!r}")
+        if self.init_seconds is not None and not self.init_seconds > 0.0:
+            raise ValueError(f"init_seconds must be > 0 or None, got {self.init_seconds!r}")
+        for name in ("respiratory_band_hz", "cardiac_band_hz"):
+            lo, hi = getattr(self, name)
+            if not 0.0 < lo < hi:
+                raise ValueError(f"{name} must be (low, high) with 0 < low < high [Hz]")
 
 
 class DualFourierEKF(Predictor):
@@ -128,7 +199,10 @@ class DualFourierEKF(Predictor):
         qa = np.concatenate(
             [np.full(2 * hr, s.q_respiratory), [s.q_offset], np.full(2 * hc, s.q_cardiac)]
         )
-        self._q = np.concatenate([np.tile(qa / u2, d), [s.q_omega, s.q_omega, 0.0, 0.0]]) * scale
+        q_wr = s.q_omega if s.q_omega_respiratory is None else s.q_omega_respiratory
+        self._q = np.concatenate([np.tile(qa / u2, d), [q_wr, s.q_omega, 0.0, 0.0]]) * scale
+        if s.q_omega_cardiac_per_second is not None:
+            self._q[self.iwc] = s.q_omega_cardiac_per_second * self.dt
         self._r = s.r / u2
         p0 = np.full(k, s.p0_coefficient / u2)
         p0[2 * hr] = s.p0_offset / u2
@@ -143,6 +217,46 @@ class DualFourierEKF(Predictor):
         self._H = np.zeros((d, self.nx))
         self._Hblk = np.einsum("aaj->aj", self._H[:, : d * k].reshape(d, d, k))
         self.nis = math.nan
+        self._gate = math.inf if s.gate_probability is None else chi2.ppf(s.gate_probability, d)
+        self._max_reject, self._rejected = max(1, round(s.gate_seconds / self.dt)), 0
+        if s.init_seconds is not None:
+            n = max(round(s.init_seconds / self.dt), 2 * k)
+            self._window, self._filled = np.full((n, d), np.nan), 0
+
+    def _start(self, z: np.ndarray) -> None:
+        """Richa's start at the first sample, or collect Yuen's window and fit it."""
+        s, hr = self.settings, self.settings.respiratory_harmonics
+        self.x[:] = 0.0
+        self.P[:] = 0.0
+        self._Pdiag[:] = self._p0
+        if s.init_seconds is None:  # Richa: zeros, given frequencies; the offset at z
+            self._coef[:, 2 * hr] = z
+            self.x[self.iwr] = _TWO_PI * s.respiratory_hz
+            self.x[self.iwc] = _TWO_PI * s.cardiac_hz
+            self.ready = True
+            return
+        n = self._window.shape[0]
+        self._window[self._filled % n] = z
+        self._filled += 1
+        if self._filled < n or np.isfinite(self._window).all(axis=1).mean() < 0.8:
+            return
+        window = self._window[np.roll(np.arange(n), -(self._filled % n))]  # oldest first
+        wc, c, r, th, wr, a, b = initial_dual_state(
+            window,
+            self.dt,
+            s.cardiac_harmonics,
+            s.cardiac_band_hz,
+            hr,
+            s.respiratory_band_hz,
+            _TWO_PI * s.respiratory_hz if s.respiratory_known else None,
+        )
+        coef = self._coef  # θ_r = θ_c = 0 at the newest sample: r sin(hθ_c + φ) → d, e
+        coef[:, :hr], coef[:, hr : 2 * hr], coef[:, 2 * hr] = a, b, c
+        coef[:, 2 * hr + 1 : 2 * hr + 1 + r.shape[1]] = r * np.cos(th)
+        coef[:, 2 * hr + 1 + r.shape[1] :] = r * np.sin(th)
+        self.x[self.iwr], self.x[self.iwc] = wr, wc
+        self._filled = 0
+        self.ready = True
 
     def _basis(self, th_r: np.ndarray, th_c: np.ndarray) -> np.ndarray:
         """[sin hθ_r, cos hθ_r, 1, sin hθ_c, cos hθ_c] for phases of shape (K,) → (K, k)."""
@@ -159,14 +273,8 @@ class DualFourierEKF(Predictor):
 
     def _update(self, z: np.ndarray) -> None:
         s = self.settings
-        if not self.ready:  # Richa: zeros, given frequencies; the offset at the first sample
-            self.x[:] = 0.0
-            self._coef[:, 2 * s.respiratory_harmonics] = z
-            self.x[self.iwr] = _TWO_PI * s.respiratory_hz
-            self.x[self.iwc] = _TWO_PI * s.cardiac_hz
-            self.P[:] = 0.0
-            self._Pdiag[:] = self._p0
-            self.ready = True
+        if not self.ready:
+            self._start(z)
             return
         self._time_update()
         x, P, H, hr = self.x, self.P, self._H, s.respiratory_harmonics
@@ -191,9 +299,16 @@ class DualFourierEKF(Predictor):
         if Sinv is None:
             self.counts["ekf_reinit"] += 1
             self.ready = False
+            if s.init_seconds is not None:
+                self._window[:], self._filled = np.nan, 0
             return
         Sinv_nu = Sinv @ nu
         self.nis = float(nu @ Sinv_nu)
+        if self.nis > self._gate and self._rejected < self._max_reject:
+            self.counts["innovation_rejected"] += 1
+            self._rejected += 1
+            return
+        self._rejected = 0
         x += PHt @ Sinv_nu
         P -= (PHt @ Sinv) @ PHt.T
         P += P.T
@@ -217,6 +332,8 @@ class DualFourierEKF(Predictor):
     def _missing(self) -> None:
         if self.ready:
             self._time_update()
+        elif self.settings.init_seconds is not None:
+            self._start(np.full(self.d, np.nan))
 
     def _predict(self, steps: int) -> np.ndarray:
         k = np.arange(1.0, steps + 1.0)

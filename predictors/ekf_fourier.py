@@ -58,7 +58,7 @@ from scipy.stats import chi2
 from predictors.base import Predictor, PredictorSettings
 from predictors.fourier_init import initial_dual_state, initial_fourier_state
 
-__all__ = ["PARAMETER_SETS", "EKFSettings", "FourierEKF"]
+__all__ = ["PARAMETER_SETS", "Q_OMEGA_HRV", "EKFSettings", "FourierEKF"]
 
 _TWO_PI = 2.0 * math.pi
 
@@ -143,6 +143,10 @@ class EKFSettings(PredictorSettings):
         (Richa §I-D: 1e-5 mm²).
     q_omega_breathing : float
         Process noise of ω_b [(rad/s)² per sample at 83.3 Hz] (Richa: 1e-8 (rad/sample)²).
+    q_omega_per_second : float or None
+        Process noise intensity of ω [(rad/s)² per second]; if given it replaces
+        ``q_omega`` by ``q_omega_per_second · Δt`` (rate-independent).  ``tuna2013-hrv``
+        derives it from heart-rate variability (see ``PARAMETER_SETS``).
     q_rate_hz : float or None
         Sample rate at which q, q_phase, q_omega were tuned [Hz].  ``None``: they are
         per sample at the predictor's own rate.  Otherwise they are rescaled by
@@ -169,6 +173,7 @@ class EKFSettings(PredictorSettings):
     breathing_band_hz: tuple[float, float] = field(default=(0.08, 0.5))
     q_breathing: float = 1e-5 * 1e-6
     q_omega_breathing: float = 1e-8 * 83.3**2
+    q_omega_per_second: float | None = None
     q_rate_hz: float | None = None
     unit: float | None = None
 
@@ -197,6 +202,10 @@ class EKFSettings(PredictorSettings):
             raise ValueError(f"gate_seconds must be > 0, got {self.gate_seconds!r}")
         if self.q_rate_hz is not None and not self.q_rate_hz > 0.0:
             raise ValueError(f"q_rate_hz must be > 0 or None, got {self.q_rate_hz!r}")
+        if self.q_omega_per_second is not None and not self.q_omega_per_second >= 0.0:
+            raise ValueError(
+                f"q_omega_per_second must be >= 0 or None, got {self.q_omega_per_second!r}"
+            )
         if (
             int(self.breathing_harmonics) != self.breathing_harmonics
             or self.breathing_harmonics < 0
@@ -210,10 +219,27 @@ class EKFSettings(PredictorSettings):
 
 MM, MM2 = 1e-3, 1e-6  # metres per millimetre, m² per mm²
 
-#: Published parameter sets.  ``yuen2008``: Yuen et al. 2008 §III-A/D (noise study; σ_R is
+#: HRV magnitude used for ``tuna2013-hrv``: short-term RR coefficient of variation [-]
+#: (6 %, the variability of ``sim/variability.py``; resting humans 3–7 %), at the replicas'
+#: mean heart rate [Hz] (≈ 96 bpm; Tuna §III-B 95–152 bpm) over one ventilator breath [s]
+#: (0.17 Hz, Tuna/Richa's ventilated animals).
+HRV_CV, HRV_HEART_HZ, HRV_BREATH_S = 0.06, 1.6, 1.0 / 0.17
+#: RSA takes the rate from its trough to its peak within half a breath [s].
+HRV_RISE_S = 0.5 * HRV_BREATH_S
+#: q_ω [(rad/s)²/s] such that the random walk of ω spreads by one HRV standard deviation
+#: σ_ω = 2π·CV·f_h in the time RSA takes to swing the rate from trough to peak (half a
+#: breath): q_ω·T_b/2 = σ_ω² (≈ 0.124 (rad/s)²/s; 9.6e-4 per sample at 128.5 Hz).
+Q_OMEGA_HRV = (_TWO_PI * HRV_CV * HRV_HEART_HZ) ** 2 / HRV_RISE_S
+
+#: Parameter sets.  ``yuen2008``: Yuen et al. 2008 §III-A/D (noise study; σ_R is
 #: the 3DUS uncertainty 1.3 mm, set it to the simulated noise).  ``tuna2013``: Tuna et al.
 #: 2013 §VIII-C, tuned for the 3-D sonomicrometry tracking experiments; Tuna do not give the
 #: rate, we take it to be per sample of the 133 Hz predictor (``q_rate_hz=None``).
+#: ``tuna2013-hrv`` (the ``ekf`` default): Tuna's set with q_ω from heart-rate variability,
+#: ``Q_OMEGA_HRV`` (issue 18).  Tuna's q_ω = 5e-3 (rad/s)² per 128.5 Hz sample (0.64
+#: (rad/s)²/s, 10× the HRV value) lets the breathing residual walk ω̂ to its 0.5 Hz clamp
+#: within 3 s on fixed-a1-top and varying-a3-side; the HRV value keeps lock on all six
+#: replicas (|ω̂ − ω| RMS 2.4–3.1 bpm), and anything in 2e-4–2e-3 per sample does.
 PARAMETER_SETS: dict[str, EKFSettings] = {
     "yuen2008": EKFSettings(
         harmonics=8,
@@ -242,6 +268,7 @@ PARAMETER_SETS: dict[str, EKFSettings] = {
         q_omega=5e-3,
     ),
 }
+PARAMETER_SETS["tuna2013-hrv"] = EKFSettings(q_omega_per_second=Q_OMEGA_HRV)
 
 
 class FourierEKF(Predictor):
@@ -277,6 +304,8 @@ class FourierEKF(Predictor):
         q[self.ith] = s.q_phase
         q[self.iw] = s.q_omega
         q = q if s.q_rate_hz is None else q * (self.dt * s.q_rate_hz)
+        if s.q_omega_per_second is not None:
+            q[self.iw] = s.q_omega_per_second * self.dt
         if hb:  # Richa's variances are per sample at 83.3 Hz
             q[self.ib] = s.q_breathing / u2 * (self.dt * 83.3)
             q[self.iwb] = s.q_omega_breathing * (self.dt * 83.3)

@@ -117,17 +117,23 @@ def initial_dual_state(
     band_hz: tuple[float, float],
     breathing_harmonics: int,
     breathing_band_hz: tuple[float, float],
+    breathing_omega: float | None = None,
 ) -> tuple[float, np.ndarray, np.ndarray, np.ndarray, float, np.ndarray, np.ndarray]:
     """(ω̂₀, c, r, θ, ω̂_b, a_b, b_b) at the newest sample: heart series as in
     :func:`initial_fourier_state`, breathing series y_b = Σ_h a_h sin hθ_b + b_h cos hθ_b
     with θ_b = 0 at the newest sample.  ω̂₀ is searched after the breathing fit is removed.
+    ``breathing_omega`` [rad/s]: a known respiratory rate (a ventilator's setting) used
+    instead of the FFT peak, which a window of 1–2 breaths resolves only to ±0.05 Hz.
     """
     x = np.array(window, dtype=float)
     if x.ndim == 1:
         x = x[:, None]
     T = x.shape[0]
     t = (np.arange(T) - (T - 1)) * dt
-    omega_b = fundamental_frequency(x, dt, breathing_band_hz)
+    if breathing_omega is None:
+        omega_b = fundamental_frequency(x, dt, breathing_band_hz)
+    else:
+        omega_b = float(breathing_omega)
     c, [(a, b)] = fit_fourier(x, dt, [(omega_b, breathing_harmonics)])
     ph = np.multiply.outer(t, np.arange(1, breathing_harmonics + 1) * omega_b)
     heart_only = x - c - np.sin(ph) @ a.T - np.cos(ph) @ b.T

@@ -33,7 +33,7 @@ PREDICTORS: dict[str, tuple[type[Predictor], dict[str, Any]]] = {
 }
 
 #: the ``ekf`` parameter set used when ``params`` is not given
-DEFAULT_PARAMS = {"ekf": "tuna2013"}
+DEFAULT_PARAMS = {"ekf": "tuna2013-hrv"}
 
 
 def settings_for(name: str, **settings: Any):
@@ -66,7 +66,8 @@ def make_predictor(name: str, dt: float, **settings: Any) -> Predictor:
     """Build the predictor ``name`` running at period ``dt`` [s] with ``settings``.
 
     Unknown names and settings raise ``ValueError`` listing the valid ones.  ``ekf``
-    takes ``params="tuna2013"`` (default) or ``"yuen2008"``; other settings override it.
+    takes ``params="tuna2013-hrv"`` (default: Tuna's set, q_ω from HRV), ``"tuna2013"``
+    or ``"yuen2008"``; other settings override it.
     """
     cls = PREDICTORS[name][0] if name in PREDICTORS else None
     s = settings_for(name, **settings)

@@ -21,19 +21,43 @@ gains adapt faster per second (more updates, and ω₀ in rad/sample), so with
 within seconds on fixed-a2-top.)  μ_b is not rescaled: the offset weight is what follows
 breathing (time constant 1/(2μ_b) ≈ 17 samples).
 
-Frequency lock (ours, issue 18): after a ±10 bpm step the phase error grows past π/2
-before the gradient update catches up, the μ₀ gradient changes sign and ω₀ ran to its
-clamp (4 of 4 seeds).  The weights, though, absorb the slip: the fundamental weights
-(w_{a,1}, w_{a,m+1}) = r_a(cos φ_a, sin φ_a) rotate by Δφ per sample, the phase error the
-frequency misses.  A phase-locked correction ω₀ ← ω₀ + κ Δφ (Δφ from the summed 2-D
-cross and dot products of the axes' fundamental weights before and after the update)
-turns that rotation into frequency, and the μ₀ gradient uses the fundamental only
-(``frequency_harmonics`` = 1: the r-th harmonic's phase error is r times the
-fundamental's, so after a step the high harmonics flip the gradient's sign first; on
-Yuen's ±10 bpm protocol the full gradient ran to the clamp).  The correction cannot
-run away, since a slip in either direction rotates the weights the matching way.
-κ = 0.01 per sample at 28 Hz (a time constant of 100 samples, 3.6 s).  ω₀ is clamped to
-the heart band, a last resort counted ``omega_clamped``.  Cost per update: O(m·d).
+Phase-locked loop (ours, issue 18; ``loop="pll"``, the default).  With physiological
+heart-rate variability (RSA swings the rate by several bpm within one 4–6 s breath) the
+μ₀ gradient is too slow: on fixed-a2-top ω̂ lagged by up to 14 bpm and the 23 ms forecast
+(1.72 mm) lost to ``hold`` (0.87 mm).  ψ and ω₀ are instead driven by a normalised phase
+detector, a second-order (type-2) phase-locked loop (Gardner, *Phaselock Techniques*, 3rd
+ed., 2005, ch. 2–4; the PLL view of the WFLC's frequency adaptation):
+
+    (P1) δ_k = Σ_a ε_{a,k} g_{a,k} / P_k,  g_a = Σ_{r≤j} r (w_{a,r} cos rψ − w_{a,m+r} sin rψ),
+         P = ½ Σ_a Σ_{r≤j} r² (w_{a,r}² + w_{a,m+r}²)   (cycle mean of Σ_a g_a²),
+    (P2) ψ ← ψ + 2ζω_nΔt · clip(δ, ±δ_max),
+    (P3) ω₀ ← ω₀ + (ω_nΔt)² · clip(δ, ±δ_max),   then clamped to the heart band (counted).
+
+δ is the least-squares phase error (z ≈ ŷ(ψ + δ) linearised), dimensionless, so the loop
+is independent of the data unit and, with ω_n in Hz, of the sample rate.  j =
+``pll_harmonics`` = 1: the fundamental only, as ``frequency_harmonics`` for μ₀.  ω_n =
+2π·0.5 Hz, ζ = 1/√2: measured on the six replicas (ω_n = 0.3 Hz lags the RSA, 0.8 Hz
+follows beat-to-beat waveform changes; docs/notes/issue-18.md).  δ_max = 1 rad bounds the
+step an echo outlier can make (0.5 rad is worse on the replicas).  A ±10 bpm step is a
+phase ramp, which a type-2 loop follows with no steady-state error, so ω̂ cannot run away.
+
+Respiration (ours, issue 18; Richa et al. 2010 eq. 1, the model the EKF also carries):
+``breathing_harmonics`` = H_b = 2 terms Σ_h a_{a,h} sin hψ_b + b_{a,h} cos hψ_b with their
+own accumulated phase ψ_b, initialised with the heart series (FFT in the breathing band,
+joint least squares, :func:`predictors.fourier_init.initial_dual_state`), adapted by LMS
+with μ₁ and a slow loop (P1–P3 on ψ_b, ω_n = 2π·0.02 Hz) clamped to
+``breathing_band_hz``.  Without it the offset weight, which follows breathing with a lag
+of 1/(2μ_b) samples, was the largest error even with the true heart phase given (0.74 mm,
+oracle test, fixed-a2-top).  With breathing modelled the offset only follows drift:
+μ_b = 0.01 (Riviere's 0.03 is worse: it absorbs heartbeat error).
+
+``loop="gradient"`` with ``breathing_harmonics=0`` keeps the previous update: the μ₀
+gradient on the fundamental plus the phase-locked correction ω₀ += κΔφ (Δφ the rotation
+of the fundamental weights, κ = 0.01 per sample at 28 Hz); with ``phase_gain=0,
+frequency_harmonics=8, mu_bias=0.03`` it is Riviere's WFLC, which runs to its clamp at
+60 → 70 bpm (tested).  ``offset_natural_hz`` (default off) replaces the offset weight by a
+second-order tracker b ← b + v + k₁ε, v ← v + k₂ε (tried, not used: it competes with the
+loop).  Cost per update: O((m + H_b)·d).
 """
 
 from __future__ import annotations
@@ -44,14 +68,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from predictors.base import Predictor, PredictorSettings
-from predictors.fourier_init import initial_fourier_state
+from predictors.fourier_init import initial_dual_state, initial_fourier_state
 
 __all__ = ["WFLC", "WFLCSettings"]
 
 
 @dataclass(frozen=True)
 class WFLCSettings(PredictorSettings):
-    """WFLC settings (defaults: Yuen et al. 2009).
+    """WFLC settings (m, μ₀, μ₁: Yuen et al. 2009; loop, respiration, μ_b: ours, issue 18).
 
     Attributes
     ----------
@@ -62,7 +86,7 @@ class WFLCSettings(PredictorSettings):
     mu1 : float
         Weight adaptation gain μ₁ [-].
     mu_bias : float
-        Offset adaptation gain μ_b [-] (Riviere; we use μ₁).
+        Offset adaptation gain μ_b [-] (Riviere: 0.03; ours 0.01, see above).
     init_seconds : float
         FFT + least-squares initialisation window [s].
     band_hz : tuple of float
@@ -72,9 +96,31 @@ class WFLCSettings(PredictorSettings):
     gain_rate_hz : float or None
         Rate μ₀, μ₁, κ were tuned at [Hz] (Yuen: 28); ``None``: per own sample.
     phase_gain : float
-        κ, gain of the phase-locked frequency correction [-] (ours; 0 = Riviere's WFLC).
+        κ, gain of the phase-locked frequency correction [-] (``loop="gradient"``; 0 =
+        Riviere's WFLC).
     frequency_harmonics : int
         Harmonics whose phase errors drive the μ₀ gradient [-] (Riviere: all m; ours: 1).
+    loop : str
+        ``"pll"`` (P1–P3, ours) or ``"gradient"`` (μ₀ gradient + κ correction).
+    pll_natural_hz : float
+        Natural frequency ω_n/2π of the heart-phase loop [Hz].
+    pll_damping : float
+        Damping ratio ζ of the loops [-].
+    pll_harmonics : int
+        Harmonics j in the phase detector (P1) [-].
+    pll_max_phase_error : float
+        δ_max, clip of the phase detector output [rad].
+    offset_natural_hz : float or None
+        Natural frequency of the second-order offset tracker [Hz]; ``None``: Riviere's
+        first-order offset weight with μ_b.
+    offset_damping : float
+        Damping ratio of that tracker [-].
+    breathing_harmonics : int
+        H_b, respiratory harmonics [-]; 0 = no respiratory series (Riviere/Yuen).
+    breathing_band_hz : tuple of float
+        Respiratory band [Hz]: FFT search and clamp of ω_b.
+    breathing_natural_hz : float
+        Natural frequency of the respiratory-phase loop [Hz].
     unit : float or None
         Metres per data unit; ``None``: inferred from the data (see ``predictors.base``).
     """
@@ -82,13 +128,23 @@ class WFLCSettings(PredictorSettings):
     harmonics: int = 8
     mu0: float = 7e-6 / 1e-6
     mu1: float = 0.03
-    mu_bias: float = 0.03
+    mu_bias: float = 0.01
     init_seconds: float = 10.0
     band_hz: tuple[float, float] = (0.6, 3.0)
     omega_limits_hz: tuple[float, float] = (0.6, 3.5)
     gain_rate_hz: float | None = 28.0
     phase_gain: float = 0.01
     frequency_harmonics: int = 1
+    loop: str = "pll"
+    pll_natural_hz: float = 0.5
+    pll_damping: float = 1.0 / math.sqrt(2.0)
+    pll_harmonics: int = 1
+    pll_max_phase_error: float = 1.0
+    offset_natural_hz: float | None = None
+    offset_damping: float = 1.0
+    breathing_harmonics: int = 2
+    breathing_band_hz: tuple[float, float] = (0.08, 0.5)
+    breathing_natural_hz: float = 0.02
     unit: float | None = None
 
     def __post_init__(self) -> None:
@@ -97,6 +153,13 @@ class WFLCSettings(PredictorSettings):
             raise ValueError(f"harmonics must be a positive integer, got {self.harmonics!r}")
         if not 1 <= self.frequency_harmonics <= self.harmonics:
             raise ValueError("frequency_harmonics must be in 1..harmonics")
+        if self.loop not in ("pll", "gradient"):
+            raise ValueError(f"loop must be 'pll' or 'gradient', got {self.loop!r}")
+        if not 1 <= self.pll_harmonics <= self.harmonics:
+            raise ValueError("pll_harmonics must be in 1..harmonics")
+        for name in ("pll_natural_hz", "pll_damping", "pll_max_phase_error"):
+            if not getattr(self, name) > 0.0:
+                raise ValueError(f"{name} must be > 0, got {getattr(self, name)!r}")
         for name in ("mu0", "mu1", "mu_bias", "phase_gain"):
             if not getattr(self, name) >= 0.0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
@@ -106,10 +169,32 @@ class WFLCSettings(PredictorSettings):
             if not getattr(self, name) > 0.0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)!r}")
 
+    @classmethod
+    def yuen2009(cls, **overrides) -> WFLCSettings:
+        """Yuen et al. 2009's WFLC, as rhmpc ran it before issue 18 (the 28 Hz studies).
+
+        The μ₀ gradient frequency update with the κ phase-locked correction
+        (``loop="gradient"``), no respiratory series (Yuen's 1-D mitral signal has no
+        breathing) and Riviere's offset gain μ_b = 0.03; m, μ₀, μ₁ are Yuen's.  At 28 Hz and
+        σ_R = 1.3 mm it gives 0.85 mm at ΔHR = 0 in the hr-step study, where the PLL's
+        fixed 0.5 Hz bandwidth passes the phase detector's noise (2.16 mm).  The default
+        (``loop="pll"`` with breathing) is for 3-D motion with breathing (issue 18).
+        """
+        base = {"loop": "gradient", "breathing_harmonics": 0, "mu_bias": 0.03}
+        return cls(**{**base, **overrides})
+
+
+#: Named settings for ``make_predictor("wflc", dt, params=...)``; the default is the PLL.
+PARAMETER_SETS: dict[str, WFLCSettings] = {
+    "pll": WFLCSettings(),
+    "yuen2009": WFLCSettings.yuen2009(),
+}
+
 
 class WFLC(Predictor):
     """Weighted-frequency Fourier linear combiner with accumulated phase."""
 
+    PRESETS = PARAMETER_SETS
     Settings = WFLCSettings
 
     def _allocate(self, d: int) -> None:
@@ -121,6 +206,15 @@ class WFLC(Predictor):
         self._r = np.arange(1.0, m + 1.0)
         self.w = np.zeros((d, 2 * m))  # [sin weights, cos weights] per axis
         self.bias = np.zeros(d)
+        hb = s.breathing_harmonics
+        self._rb = np.arange(1.0, hb + 1.0)
+        self.wb = np.zeros((d, 2 * hb))  # breathing [sin, cos] weights per axis
+        self.omega_b = 0.0  # rad/sample
+        self.psi_b = 0.0
+        self._blo, self._bhi = (2 * math.pi * f * self.dt for f in s.breathing_band_hz)
+        wnb = 2 * math.pi * s.breathing_natural_hz * self.dt
+        self._kpb, self._kib = 2 * s.pll_damping * wnb, wnb * wnb
+        self.bias_rate = np.zeros(d)  # offset velocity [data units per sample]
         self.omega0 = 0.0  # rad/sample
         self.psi = 0.0
         rate = 1.0 if s.gain_rate_hz is None else self.dt * s.gain_rate_hz
@@ -128,6 +222,14 @@ class WFLC(Predictor):
         self._mu1 = s.mu1 * rate
         self._kappa = s.phase_gain * rate
         self._lo, self._hi = (2 * math.pi * f * self.dt for f in s.omega_limits_hz)
+        wn = 2 * math.pi * s.pll_natural_hz * self.dt  # ω_n [rad/sample]
+        self._kp, self._ki = 2 * s.pll_damping * wn, wn * wn
+        self.phase_error = 0.0  # δ of the last update [rad]
+        if s.offset_natural_hz is None:
+            self._kb1, self._kb2 = 2 * s.mu_bias, 0.0
+        else:
+            wb = 2 * math.pi * s.offset_natural_hz * self.dt
+            self._kb1, self._kb2 = 2 * s.offset_damping * wb, wb * wb
 
     @property
     def omega(self) -> float:
@@ -141,9 +243,22 @@ class WFLC(Predictor):
 
     def _initialise(self) -> None:
         order = np.roll(np.arange(self.n_init), -(self._filled % self.n_init))
-        omega, c, r, th = initial_fourier_state(
-            self._window[order], self.dt, self.settings.harmonics, self.settings.band_hz
-        )
+        s = self.settings
+        if s.breathing_harmonics:
+            omega, c, r, th, omega_b, a, b = initial_dual_state(
+                self._window[order],
+                self.dt,
+                s.harmonics,
+                s.band_hz,
+                s.breathing_harmonics,
+                s.breathing_band_hz,
+            )
+            self.wb[:] = np.hstack([a, b])
+            self.omega_b, self.psi_b = omega_b * self.dt, 0.0
+        else:
+            omega, c, r, th = initial_fourier_state(
+                self._window[order], self.dt, self.settings.harmonics, self.settings.band_hz
+            )
         m = self.settings.harmonics
         self.w[:, :m] = r * np.cos(th)  # a_i: r sin(iψ + θ) = a sin iψ + b cos iψ
         self.w[:, m:] = r * np.sin(th)
@@ -161,10 +276,27 @@ class WFLC(Predictor):
             return
         s, m = self.settings, self.settings.harmonics
         self.psi = math.remainder(self.psi + self.omega0, 2 * math.pi)
+        self.bias += self.bias_rate
         ph = self._r * self.psi
         sn, cs = np.sin(ph), np.cos(ph)
         ws, wc = self.w[:, :m], self.w[:, m:]
         eps = z - ws @ sn - wc @ cs - self.bias
+        hb = self._rb.size
+        if hb:
+            self.psi_b = math.remainder(self.psi_b + self.omega_b, 2 * math.pi)
+            phb = self._rb * self.psi_b
+            xb = np.concatenate([np.sin(phb), np.cos(phb)])
+            eps -= self.wb @ xb
+            if s.loop == "pll":
+                self._breathing_pll(eps, xb)
+            self.wb += (2 * self._mu1) * np.multiply.outer(eps, xb)
+        if s.loop == "pll":
+            self._pll(eps, sn, cs)
+            ws += (2 * self._mu1) * np.multiply.outer(eps, sn)
+            wc += (2 * self._mu1) * np.multiply.outer(eps, cs)
+            self.bias += self._kb1 * eps
+            self.bias_rate += self._kb2 * eps
+            return
         j = s.frequency_harmonics
         grad = float(eps @ ((ws[:, :j] * cs[:j] - wc[:, :j] * sn[:j]) @ self._r[:j]))
         w1 = self.w[:, [0, m]].copy()  # fundamental weights (sin, cos) before adaptation
@@ -182,9 +314,45 @@ class WFLC(Predictor):
             dphi = math.atan2(cross, float(np.sum(w1 * w2)))
             self.omega0 = min(max(self.omega0 + self._kappa * dphi, self._lo), self._hi)
 
+    def _pll(self, eps: np.ndarray, sn: np.ndarray, cs: np.ndarray) -> None:
+        """Second-order phase-locked loop on ψ and ω₀ (module docstring, eqs. P1–P3)."""
+        j = self.settings.pll_harmonics
+        ws, wc, r = self.w[:, :j], self.w[:, self.settings.harmonics :][:, :j], self._r[:j]
+        g = (ws * cs[:j] - wc * sn[:j]) @ r  # ∂ŷ_a/∂ψ, (d,)
+        power = 0.5 * float(np.sum((ws * ws + wc * wc) @ (r * r)))  # cycle mean of Σ_a g_a²
+        if not power > 0.0 or not math.isfinite(power):
+            return
+        lim = self.settings.pll_max_phase_error
+        delta = min(max(float(eps @ g) / power, -lim), lim)
+        self.phase_error = delta
+        self.psi = math.remainder(self.psi + self._kp * delta, 2 * math.pi)
+        w0 = self.omega0 + self._ki * delta
+        if not self._lo <= w0 <= self._hi:
+            self.counts["omega_clamped"] += 1
+            w0 = min(max(w0, self._lo), self._hi)
+        self.omega0 = w0
+
+    def _breathing_pll(self, eps: np.ndarray, xb: np.ndarray) -> None:
+        """The loop of :meth:`_pll` on the respiratory phase ψ_b and rate ω_b."""
+        hb = self._rb.size
+        a, b = self.wb[:, :hb], self.wb[:, hb:]
+        g = (a * xb[hb:] - b * xb[:hb]) @ self._rb
+        power = 0.5 * float(np.sum((a * a + b * b) @ (self._rb**2)))
+        if not power > 0.0 or not math.isfinite(power):
+            return
+        lim = self.settings.pll_max_phase_error
+        delta = min(max(float(eps @ g) / power, -lim), lim)
+        self.psi_b = math.remainder(self.psi_b + self._kpb * delta, 2 * math.pi)
+        w = self.omega_b + self._kib * delta
+        if not self._blo <= w <= self._bhi:
+            self.counts["breathing_clamped"] += 1
+            w = min(max(w, self._blo), self._bhi)
+        self.omega_b = w
+
     def _missing(self) -> None:
         if self.ready:
             self.psi = math.remainder(self.psi + self.omega0, 2 * math.pi)
+            self.bias += self.bias_rate
         else:
             self._window[self._filled % self.n_init] = np.nan
             self._filled += 1
@@ -192,4 +360,11 @@ class WFLC(Predictor):
     def _predict(self, steps: int) -> np.ndarray:
         m = self.settings.harmonics
         ph = np.multiply.outer(self.psi + self.omega0 * np.arange(1.0, steps + 1.0), self._r)
-        return np.sin(ph) @ self.w[:, :m].T + np.cos(ph) @ self.w[:, m:].T + self.bias
+        trend = self.bias + np.multiply.outer(np.arange(1.0, steps + 1.0), self.bias_rate)
+        out = np.sin(ph) @ self.w[:, :m].T + np.cos(ph) @ self.w[:, m:].T + trend
+        hb = self._rb.size
+        if hb:
+            k = np.arange(1.0, steps + 1.0)
+            phb = np.multiply.outer(self.psi_b + self.omega_b * k, self._rb)
+            out += np.sin(phb) @ self.wb[:, :hb].T + np.cos(phb) @ self.wb[:, hb:].T
+        return out

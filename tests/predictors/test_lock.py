@@ -24,13 +24,18 @@ def _sonomicrometry(name: str, seconds: float, **overrides):
 @pytest.mark.parametrize(
     ("scenario", "overrides"),
     [
+        ("fixed-a1-top", {}),  # lost lock with Tuna's q_ω (ω̂ at the 0.5 Hz clamp)
         ("fixed-a2-top", {}),
         ("varying-a3-top", {}),
+        ("varying-a3-side", {}),  # lost lock with Tuna's q_ω
         ("fixed-a2-top", {"rr": 60.0 / (100.0 + 8.0 * np.sin(np.arange(60) / 3.0))}),
     ],
 )
 def test_ekf_keeps_heart_rate_lock_in_3d_with_breathing(scenario, overrides):
-    """Measured (seeds 4/5): p95 |ω̂ − ω| 1.5–3.5 bpm, 3-step RMS 0.4–0.5 mm vs hold 0.6–0.8 mm."""
+    """Default ``tuna2013-hrv``.  Measured (seeds 4/5, in the order above): p95 |ω̂ − ω|
+    3.4 / 4.0 / 4.1 / 3.4 / 3.4 bpm, no clamp, 3-step RMS 0.59 / 0.51 / 0.54 / 0.62 / 0.52 × hold's
+    (with Tuna's q_ω fixed-a1-top and varying-a3-side: p95 56 / 61 bpm, 0.93 / 1.35 × hold).
+    Asserted: the 5 bpm lock tolerance, 0.8 × hold.  (varying-a1-top, not asserted: p95 5.4.)"""
     scn, st = _sonomicrometry(scenario, 30.0, **overrides)
     p, hold = make_predictor("ekf", 0.0075), make_predictor("hold", 0.0075)
     hr_err, e_ekf, e_hold = [], [], []
@@ -46,23 +51,101 @@ def test_ekf_keeps_heart_rate_lock_in_3d_with_breathing(scenario, overrides):
     assert np.sqrt(np.mean(np.square(e_ekf))) < 0.8 * np.sqrt(np.mean(np.square(e_hold)))
 
 
+@pytest.mark.parametrize("scenario", ["varying-a1-top", "varying-a3-top", "varying-a1-side"])
+def test_dual_ekf_keeps_heart_rate_lock_in_3d_with_breathing(scenario):
+    """Richa's zero start lost lock on the first two (ω̂_c at its clamp); the third needs the
+    innovation gate.  Measured (seeds 4/5): p95 |ω̂_c − ω| 4.5 / 3.5 / 4.1 bpm, no clamp,
+    3-step RMS 0.47 / 0.45 / 0.82 × hold's; asserted: the 5 bpm lock tolerance, 0.9 × hold."""
+    scn, st = _sonomicrometry(scenario, 30.0)
+    p, hold = make_predictor("dual-ekf", 0.0075), make_predictor("hold", 0.0075)
+    hr_err, e_p, e_hold = [], [], []
+    for k in range(len(st) - 3):
+        p.update(st.z[k])
+        hold.update(st.z[k])
+        if st.t[k] >= 15.0:  # 10 s initialisation + 5 s
+            hr_err.append(60.0 * abs(p.heart_rate_hz - float(scn.source.phase.rate(st.t[k]))))
+            e_p.append(np.linalg.norm(p.predict(3)[2] - st.z[k + 3]))
+            e_hold.append(np.linalg.norm(hold.predict(3)[2] - st.z[k + 3]))
+    assert np.percentile(hr_err, 95) < 5.0
+    assert not p.counts["omega_clamped"]
+    assert np.sqrt(np.mean(np.square(e_p))) < 0.9 * np.sqrt(np.mean(np.square(e_hold)))
+
+
+def _step_signal(base, delta, seconds=45.0, step_at=30.0, dt=1 / 28):
+    t = np.arange(int(seconds / dt)) * dt
+    f = np.where(t < step_at, base / 60, (base + delta) / 60)
+    ph = 2 * np.pi * np.cumsum(f) * dt
+    z = 5 * np.sin(ph) + 2 * np.sin(2 * ph + 1) + np.sin(3 * ph + 2)
+    return t, z[:, None] + 1.3 * np.random.default_rng(0).standard_normal((t.size, 1))
+
+
 @pytest.mark.parametrize("base", [60.0, 103.0])
 @pytest.mark.parametrize("delta", [-10.0, 10.0])
 def test_wflc_follows_a_10_bpm_step_without_clamping(base, delta):
-    """28 Hz, 1-D in mm, σ = 1.3 mm; measured 10 s after the step: |ω̂ − ω| ≤ 0.6 bpm."""
+    """28 Hz, 1-D in mm, σ = 1.3 mm (Yuen's protocol).
+
+    Measured (seed 0): mean ω̂ over 10–15 s after the step within 0.1–0.9 bpm of the new
+    rate, 90th percentile of |ω̂ − ω| 4.0–6.7 bpm (the PLL's jitter at this SNR), never
+    clamped.  Riviere's gradient update (``loop="gradient"``) runs to its clamp at
+    60 → 70 bpm.
+    """
     dt = 1 / 28
-    t = np.arange(int(45 / dt)) * dt
-    f = np.where(t < 30, base / 60, (base + delta) / 60)
-    ph = 2 * np.pi * np.cumsum(f) * dt
-    z = 5 * np.sin(ph) + 2 * np.sin(2 * ph + 1) + np.sin(3 * ph + 2)
-    z = z[:, None] + 1.3 * np.random.default_rng(0).standard_normal((t.size, 1))
+    t, z = _step_signal(base, delta)
     p = make_predictor("wflc", dt)
-    for zk in z:
+    hr = []
+    for k, zk in enumerate(z):
         p.update(zk)
-    assert abs(60 * p.heart_rate_hz - (base + delta)) < 2.0
+        if t[k] >= 40.0:
+            hr.append(60 * p.heart_rate_hz)
+    assert abs(np.mean(hr) - (base + delta)) < 2.0
+    assert np.percentile(np.abs(np.asarray(hr) - (base + delta)), 90) < 10.0
     assert not p.counts["omega_clamped"]
-    q = make_predictor("wflc", dt, phase_gain=0.0, frequency_harmonics=8)  # Riviere's update
+    riviere = {"loop": "gradient", "breathing_harmonics": 0, "phase_gain": 0.0,
+               "frequency_harmonics": 8, "mu_bias": 0.03}
+    q = make_predictor("wflc", dt, **riviere)
     for zk in z:
         q.update(zk)
     if base == 60.0 and delta == 10.0:  # runs away to its clamp
         assert abs(60 * q.heart_rate_hz - (base + delta)) > 10.0
+
+
+def test_wflc_tracks_a_chirp():
+    """Heart rate sweeping 80 → 120 bpm over 30 s (1.33 bpm/s), 3-D, 128 Hz, σ = 0.1 mm.
+
+    A type-2 loop follows a frequency ramp with a constant phase lag and no frequency
+    bias; measured: |ω̂ − ω| RMS 0.5 bpm, max 2.4 bpm after the first 5 s.
+    """
+    dt = 1 / 128
+    t = np.arange(int(45 / dt)) * dt
+    f = np.interp(t, [0, 10, 40, 45], [80, 80, 120, 120]) / 60
+    ph = 2 * np.pi * np.cumsum(f) * dt
+    amp = np.array([[4.0, 1.5, 0.7], [2.0, 1.0, 0.3], [3.0, 0.5, 0.2]])
+    z = sum(amp[:, i] * np.sin((i + 1) * ph[:, None] + i) for i in range(3))
+    z = z + 0.1 * np.random.default_rng(1).standard_normal(z.shape)
+    p = make_predictor("wflc", dt)
+    err = []
+    for k, zk in enumerate(z):
+        p.update(zk)
+        if t[k] >= 15.0:
+            err.append(60 * (p.heart_rate_hz - f[k]))
+    err = np.abs(err)
+    assert np.sqrt(np.mean(err**2)) < 2.0
+    assert err.max() < 5.0
+    assert not p.counts["omega_clamped"]
+
+
+@pytest.mark.parametrize("f_hz", [0.9, 1.6, 2.4])
+def test_wflc_recovers_a_constant_frequency(f_hz):
+    """A 3-harmonic 1-D signal at 128 Hz, σ = 0.1 mm: ω̂ within 0.5 bpm after 20 s."""
+    dt = 1 / 128
+    t = np.arange(int(30 / dt)) * dt
+    ph = 2 * np.pi * f_hz * t
+    z = 5 * np.sin(ph) + 2 * np.sin(2 * ph + 1) + np.sin(3 * ph + 2)
+    z = z[:, None] + 0.1 * np.random.default_rng(2).standard_normal((t.size, 1))
+    p = make_predictor("wflc", dt)
+    hr = []
+    for k, zk in enumerate(z):
+        p.update(zk)
+        if t[k] >= 20.0:
+            hr.append(60 * p.heart_rate_hz)
+    assert abs(np.mean(hr) - 60 * f_hz) < 0.5
