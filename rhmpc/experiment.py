@@ -421,6 +421,12 @@ def run_experiment(config: RunConfig, progress: bool = False, trace: str | None 
         "settings": config.to_dict(),
         "versions": versions(),
     }
+    predictor = getattr(run.reference, "predictor", None)
+    if predictor is not None:  # its running RMS miss per lead (rhmpc.control.confidence)
+        errors = np.asarray(predictor.forecast_error_rms, dtype=float)
+        document["forecast_error_rms_mm"] = [None if not np.isfinite(v) else 1e3 * float(v)
+                                             for v in errors]
+        document["forecast_lead_s"] = config.loop.downsample * config.loop.Ts
     monitor = getattr(run.reference, "monitor", None)
     if monitor is not None:
         document["heart_rate"] = monitor.summary()
