@@ -69,10 +69,19 @@ class LoopSettings:
     outlier_gate : float
         A sensor sample farther from its one-step forecast than max(this, 4 × the running RMS
         forecast miss) is treated as missing (echo outliers: the heart cannot jump millimetres in
-        one 7.5 ms period); 0 disables [m].
+        one 7.5 ms period); 0 disables [m]. Default 0.25 mm, the sonomicrometer's absolute
+        accuracy λ/4 (Tuna §III-A): a miss beyond it is not the instrument's error, while a
+        cycle slip (one wavelength on one range) moves the fix by 0.6–0.9 mm and its first,
+        interpolated sample by 0.3–0.6 mm. (It was 1.5 mm for the former white-noise sensor's
+        2–6 mm outliers; on the physical sensor a slip's accepted first sample made the RLS
+        forecasts run away and the guard restart the predictor: 60 s, seed 0, max error
+        11.5 mm and 32 QP fallbacks, against 2.7 mm and 0 with this gate.) With a noisy sensor
+        the 4 × RMS term sets the radius instead.
     outlier_max_rejections : int
         After this many consecutive rejected samples the gate opens (a real jump, or a forecast
-        gone wrong) until 20 samples in a row fall inside it again [samples].
+        gone wrong) until 20 samples in a row fall inside it again [samples]. Default 3: a slip
+        lasts up to 8 ms and the causal playback adds one raw period (3.9 ms at 257 Hz), so it
+        reaches ⌈11.9 / 7.5⌉ + 1 = 3 samples of the predictor.
     guard_speed : float
         Reference guard: forecasts farther from the last accepted sample than ``guard_margin +
         guard_speed · lead`` mean a diverged predictor; the reference then holds that sample and
@@ -97,8 +106,8 @@ class LoopSettings:
     horizon: int = 50
     downsample: int = 15
     prediction_points: int = 4
-    outlier_gate: float = 1.5e-3
-    outlier_max_rejections: int = 2
+    outlier_gate: float = 0.25e-3
+    outlier_max_rejections: int = 3
     guard_speed: float = 0.3
     guard_margin: float = 2e-3
     duration: float = 20.0
