@@ -26,6 +26,24 @@ sensitivity drags ω̂_r to 40 breaths/min and ω̂_c to its clamp within 4 s
 (varying-a1-top, varying-a3-top).  A window of at least one breath makes them
 identifiable.
 
+Initial covariance after the fit (issue 18, physical sonomicrometer stream): the
+respiratory coefficients and the offset start at the least-squares covariance of the window
+fit, s_a²·(ΦᵀΦ)⁻¹ (their block; s_a² the fit's residual variance on axis a), the cardiac ones
+at ``p0_coefficient``.  With the flat priors (25 mm² on every coefficient, 1 mm² on the offset,
+meant for Richa's zero start) the first innovations after the fit re-fitted the breathing:
+on varying-a1-side the respiratory coefficients moved by 9–14 mm and the offset by 8.7 mm
+within 2 s (against 0.1 mm with the fit's covariance), the near-collinearity of the slow
+respiratory sin/cos with the offset over a fraction of a breath again, and ω̂_c went
+92 → 102 bpm while the heart rate went 80 → 91; the gate then rejected a third of the
+samples and ω̂_c ran to its clamp (436 clamps, 3-step RMS 4.18 mm against hold's 1.16).
+A window of 1.7 breaths does determine the breathing to its covariance (the ventilator
+holds the rate: ``q_omega_respiratory``).  The cardiac fit is not held to its
+covariance: the heart rate at the window's end differs from the window's FFT rate by up to the
+respiratory swing (7–12 bpm measured), which a fixed-rate fit's covariance does not know;
+holding the cardiac coefficients to it as well keeps lock but lets the gate reject the first
+seconds (3-step RMS 0.44 instead of 0.32 mm on fixed-a1-top, 0.48 instead of 0.21 on
+varying-a3-side).
+
 Parameters (Richa §I-D): H_r = 3, H_c = 5; process variances 1e-5 mm² (respiratory
 coefficients), 1e-6 mm² (offset), 1e-5 mm² (cardiac coefficients), 1e-8 (rad/sample)²
 (frequencies), R = 0.1 mm², all per sample at Richa's 83.3 Hz.  Stored here in SI:
@@ -88,9 +106,12 @@ class DualEKFSettings(PredictorSettings):
     r : float
         Measurement variance per axis [m²].
     p0_coefficient : float
-        Initial variance of every coefficient (not the offset) [m²].
-    p0_offset : float
-        Initial variance of the offset [m²].
+        Initial variance of every coefficient (not the offset) [m²]; after the fitted start
+        only of the cardiac ones, unless ``p0_respiratory_from_fit`` is off.
+    p0_respiratory_from_fit : bool
+        After the least-squares initialisation, start the respiratory coefficients and the
+        offset at the fit's own covariance s_a²·(ΦᵀΦ)⁻¹ (their block, per axis) instead of
+        ``p0_coefficient`` / ``p0_offset``; the cardiac coefficients keep ``p0_coefficient``.
     p0_omega_respiratory, p0_omega_cardiac : float
         Initial variances of the two frequencies [(rad/s)²]: (2π·0.01 Hz)² and (2π·0.05 Hz)²;
         a loose respiratory prior lets ω_r slide to a subharmonic.
@@ -129,6 +150,7 @@ class DualEKFSettings(PredictorSettings):
     q_omega_cardiac_per_second: float | None = Q_OMEGA_HRV
     r: float = 0.1 * 1e-6
     p0_coefficient: float = 25e-6
+    p0_respiratory_from_fit: bool = True
     p0_offset: float = 1e-6
     p0_omega_respiratory: float = (_TWO_PI * 0.01) ** 2
     p0_omega_cardiac: float = (_TWO_PI * 0.05) ** 2
@@ -255,6 +277,18 @@ class DualFourierEKF(Predictor):
         coef[:, 2 * hr + 1 : 2 * hr + 1 + r.shape[1]] = r * np.cos(th)
         coef[:, 2 * hr + 1 + r.shape[1] :] = r * np.sin(th)
         self.x[self.iwr], self.x[self.iwc] = wr, wc
+        if s.p0_respiratory_from_fit:
+            # respiratory coefficients and offset: the least-squares covariance of the window
+            # fit, s_a²·[(ΦᵀΦ)⁻¹] (its respiratory + offset block), s_a² the residual variance
+            lag = np.arange(n - 1.0, -1.0, -1.0) * -self.dt
+            ok = np.isfinite(window).all(axis=1)
+            phi = self._basis(lag[ok] * wr, lag[ok] * wc)
+            res = window[ok] - phi @ coef.T
+            s2 = np.sum(res**2, axis=0) / max(int(ok.sum()) - self.k, 1)
+            m = 2 * hr + 1
+            cov = np.linalg.pinv(phi.T @ phi)[:m, :m]
+            for ax in range(self.d):
+                self.P[ax * self.k : ax * self.k + m, ax * self.k : ax * self.k + m] = s2[ax] * cov
         self._filled = 0
         self.ready = True
 
