@@ -34,7 +34,7 @@ import numpy as np
 from sim.sensors.crystals import CrystalArray
 from sim.sensors.events import Dropouts
 from sim.sensors.playback import Upsample
-from sim.sensors.stream import Latency, SampleStream, Sensor
+from sim.sensors.stream import SampleStream, Sensor, delivery_stages
 from sim.sensors.trilateration import trilaterate
 
 
@@ -198,11 +198,4 @@ def sonomicrometry(settings: SonomicrometrySettings | None = None, dim: int = 3)
     cfg = settings or SonomicrometrySettings()
     if dim > 3:
         raise ValueError("sonomicrometry measures at most 3 axes")
-    stages: list = [Sonomicrometer(cfg)]
-    if cfg.dropouts is not None:
-        stages.append(cfg.dropouts)
-    if cfg.latency:
-        stages.append(Latency(cfg.latency))
-    if cfg.upsample is not None:
-        stages.append(cfg.upsample)
-    return Sensor(cfg.rate, tuple(stages), "sonomicrometry")
+    return Sensor(cfg.rate, (Sonomicrometer(cfg), *delivery_stages(cfg)), "sonomicrometry")

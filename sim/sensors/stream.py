@@ -144,3 +144,16 @@ class Sensor:
     def with_stages(self, *extra: Stage) -> Sensor:
         """A copy with ``extra`` stages appended."""
         return replace(self, stages=self.stages + tuple(extra))
+
+
+def delivery_stages(cfg) -> tuple:
+    """The stages after the measurement, in order: dropouts, latency, delivery to the control
+    rate — from any sensor settings with ``dropouts``, ``latency`` [s] and ``upsample``."""
+    stages: list = []
+    if cfg.dropouts is not None:
+        stages.append(cfg.dropouts)
+    if cfg.latency:
+        stages.append(Latency(cfg.latency))
+    if cfg.upsample is not None:
+        stages.append(cfg.upsample)
+    return tuple(stages)

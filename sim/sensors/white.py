@@ -15,7 +15,7 @@ import numpy as np
 
 from sim.sensors.events import Dropouts, EchoOutliers
 from sim.sensors.playback import Upsample
-from sim.sensors.stream import Latency, SampleStream, Sensor
+from sim.sensors.stream import SampleStream, Sensor, delivery_stages
 
 
 @dataclass(frozen=True)
@@ -79,10 +79,4 @@ def white(settings: WhiteSettings | None = None, dim: int = 3) -> Sensor:
     stages: list = [WhiteNoise.from_accuracy(cfg.accuracy, dim)]
     if cfg.outliers is not None:
         stages.append(cfg.outliers)
-    if cfg.dropouts is not None:
-        stages.append(cfg.dropouts)
-    if cfg.latency:
-        stages.append(Latency(cfg.latency))
-    if cfg.upsample is not None:
-        stages.append(cfg.upsample)
-    return Sensor(cfg.rate, tuple(stages), "white")
+    return Sensor(cfg.rate, (*stages, *delivery_stages(cfg)), "white")
