@@ -234,12 +234,19 @@ class Run:
 def heart_source(config: RunConfig, rng: np.random.Generator):
     """The true motion and its label: a recording (``data``) or a named scenario (``rr``)."""
     from sim.heart import load_recording, make_scenario
+    from sim.scenarios import SPECS
 
     if config.data is not None:
         recording = load_recording(config.data, **config.data_read)
         source = _Shifted(recording, recording.t[0]) if recording.t[0] != 0 else recording
         return source, f"file:{Path(config.data).name}", recording.duration, recording
     overrides = {"record": config.rr} if config.rr else {}
+    # The scenario's random processes (HRV, drift, breathing) are drawn over its nominal length
+    # or the run's, whichever is longer; past that they would be extrapolated polynomials.
+    # Only a longer run asks for more, so the draws of shorter runs stay as they were.
+    needed = config.loop.duration + config.loop.horizon * config.loop.Ts + 1.0
+    if needed > SPECS[config.scenario].duration:
+        overrides["duration"] = needed
     scenario = make_scenario(config.scenario, rng=rng, **overrides)
     label = scenario.name + (f"+rr:{Path(config.rr).name}" if config.rr else "")
     return scenario.source, label, scenario.duration, scenario
