@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
+from typing import ClassVar
 
 import numpy as np
 
@@ -118,6 +119,9 @@ class SonomicrometrySettings:
 class Sonomicrometer:
     """The measuring stage: true positions in, trilaterated positions out (module equations)."""
 
+    #: Samples measured per block (memory bound; the result does not depend on it).
+    BLOCK: ClassVar[int] = 1 << 15
+
     settings: SonomicrometrySettings = field(default_factory=SonomicrometrySettings)
 
     def slips(self, t: np.ndarray, count: int,
@@ -166,29 +170,39 @@ class Sonomicrometer:
         return cfg.sound_speed * tof
 
     def apply(self, stream: SampleStream, rng: np.random.Generator) -> SampleStream:
+        """Measure the whole run: the run's draws first (speed-of-sound error, slips), then the
+        ranges and the trilateration block by block (:data:`BLOCK` samples), so that memory
+        does not grow with the run's length beyond the stream itself; the result does not
+        depend on the block size (each sample is solved on its own)."""
         cfg = self.settings
         if stream.t.size == 0:
             return stream
         dim = stream.dim
         if dim > 3:
             raise ValueError("sonomicrometry measures at most 3 axes")
-        p = np.zeros((stream.t.size, 3))
+        n = stream.t.size
+        p = np.zeros((n, 3))
         p[:, :dim] = stream.z
         finite = np.isfinite(p).all(axis=1)
         anchor = p[np.argmax(finite)] if finite.any() else np.zeros(3)
         x0 = cfg.crystals.poi()
-        d = p - anchor
         n0 = x0 / np.linalg.norm(x0)
-        d_perp = d - np.outer(d @ n0, n0)
         scale = 1.0 + cfg.sound_speed_error * rng.standard_normal()
-        path = self.paths(x0 + d, d_perp)
-        start, length, which = self.slips(stream.t, path.shape[1], rng)
-        for s, ln, i in zip(start, length, which, strict=True):
-            i0, i1 = np.searchsorted(stream.t, [s, s + ln])
-            path[i0:max(i1, i0 + 1), i] += cfg.wavelength * scale  # one cycle late
-        r = self.quantize(path, scale)
-        x_hat = trilaterate(cfg.crystals.positions(), r, side=x0)
-        z = (x_hat - x0 + anchor)[:, :dim]
+        start, length, which = self.slips(stream.t, cfg.crystals.positions().shape[0], rng)
+        bounds = np.searchsorted(stream.t, np.stack([start, start + length], axis=1))
+        z = np.empty((n, dim))
+        for a in range(0, n, self.BLOCK):
+            b = min(a + self.BLOCK, n)
+            d = p[a:b] - anchor
+            d_perp = d - np.outer(d @ n0, n0)
+            path = self.paths(x0 + d, d_perp)
+            for (i0, i1), i in zip(bounds, which, strict=True):
+                lo, hi = max(i0, a), min(max(i1, i0 + 1), b)
+                if lo < hi:
+                    path[lo - a:hi - a, i] += cfg.wavelength * scale  # one cycle late
+            r = self.quantize(path, scale)
+            x_hat = trilaterate(cfg.crystals.positions(), r, side=x0)
+            z[a:b] = (x_hat - x0 + anchor)[:, :dim]
         return replace(stream, z=z)
 
 

@@ -124,3 +124,17 @@ def test_one_dimensional_motion_runs_along_the_first_axis() -> None:
     s = sonomicrometry().measure(src, 10.0, np.random.default_rng(0))
     assert s.z.shape == (2571, 1)
     assert np.percentile(np.abs(_error(s, src)), 95) < 0.25e-3
+
+
+def test_measuring_in_blocks_gives_the_same_stream(monkeypatch) -> None:
+    """Memory: the ranges and trilateration run in blocks; the stream does not depend on the
+    block size (each sample is solved on its own; the run's draws come first). Bitwise."""
+    from sim.scenarios import make_scenario
+    from sim.sensors import sonomicrometry
+    from sim.sensors.sonomicrometry import Sonomicrometer
+
+    scn = make_scenario("fixed-a2-top", np.random.default_rng(1))
+    whole = sonomicrometry().measure(scn.source, 40.0, np.random.default_rng(2))
+    monkeypatch.setattr(Sonomicrometer, "BLOCK", 777)
+    blocks = sonomicrometry().measure(scn.source, 40.0, np.random.default_rng(2))
+    np.testing.assert_array_equal(blocks.z, whole.z)
