@@ -245,7 +245,8 @@ def heart_source(config: RunConfig, rng: np.random.Generator):
     # or the run's, whichever is longer; past that they would be extrapolated polynomials.
     # Only a longer run asks for more, so the draws of shorter runs stay as they were.
     needed = config.loop.duration + config.loop.horizon * config.loop.Ts + 1.0
-    if needed > SPECS[config.scenario].duration:
+    spec = SPECS.get(config.scenario)  # an unknown name: make_scenario says so
+    if spec is not None and needed > spec.duration:
         overrides["duration"] = needed
     scenario = make_scenario(config.scenario, rng=rng, **overrides)
     label = scenario.name + (f"+rr:{Path(config.rr).name}" if config.rr else "")
