@@ -73,6 +73,25 @@ from predictors.fourier_init import initial_dual_state, initial_fourier_state
 __all__ = ["WFLC", "WFLCSettings"]
 
 
+def _output_slope(sin_w: np.ndarray, cos_w: np.ndarray, sn: np.ndarray, cs: np.ndarray,
+                  r: np.ndarray) -> np.ndarray:
+    """∂ŷ_a/∂ψ = Σ_r r (a_{a,r} cos rψ − b_{a,r} sin rψ) per axis, (d,): the Fourier series'
+    slope in its phase (sin weights a, cos weights b, harmonic numbers r)."""
+    return (sin_w * cs - cos_w * sn) @ r
+
+
+def _phase_detector(eps: np.ndarray, sin_w: np.ndarray, cos_w: np.ndarray, sn: np.ndarray,
+                    cs: np.ndarray, r: np.ndarray, limit: float) -> float | None:
+    """Normalised least-squares phase error δ = Σ_a ε_a g_a / P, clipped to ±``limit`` [rad]
+    (module docstring, eq. P1), with g the slope of :func:`_output_slope` and P its cycle-mean
+    power ½ Σ_a Σ_r r² (a² + b²); ``None`` while the series has no power."""
+    g = _output_slope(sin_w, cos_w, sn, cs, r)
+    power = 0.5 * float(np.sum((sin_w * sin_w + cos_w * cos_w) @ (r * r)))
+    if not power > 0.0 or not math.isfinite(power):
+        return None
+    return min(max(float(eps @ g) / power, -limit), limit)
+
+
 @dataclass(frozen=True)
 class WFLCSettings(PredictorSettings):
     """WFLC settings (m, μ₀, μ₁: Yuen et al. 2009; loop, respiration, μ_b: ours, issue 18).
@@ -298,7 +317,7 @@ class WFLC(Predictor):
             self.bias_rate += self._kb2 * eps
             return
         j = s.frequency_harmonics
-        grad = float(eps @ ((ws[:, :j] * cs[:j] - wc[:, :j] * sn[:j]) @ self._r[:j]))
+        grad = float(eps @ _output_slope(ws[:, :j], wc[:, :j], sn[:j], cs[:j], self._r[:j]))
         w1 = self.w[:, [0, m]].copy()  # fundamental weights (sin, cos) before adaptation
         w0 = self.omega0 + 2 * self._mu0 * grad
         if not self._lo <= w0 <= self._hi:
@@ -317,13 +336,11 @@ class WFLC(Predictor):
     def _pll(self, eps: np.ndarray, sn: np.ndarray, cs: np.ndarray) -> None:
         """Second-order phase-locked loop on ψ and ω₀ (module docstring, eqs. P1–P3)."""
         j = self.settings.pll_harmonics
-        ws, wc, r = self.w[:, :j], self.w[:, self.settings.harmonics :][:, :j], self._r[:j]
-        g = (ws * cs[:j] - wc * sn[:j]) @ r  # ∂ŷ_a/∂ψ, (d,)
-        power = 0.5 * float(np.sum((ws * ws + wc * wc) @ (r * r)))  # cycle mean of Σ_a g_a²
-        if not power > 0.0 or not math.isfinite(power):
+        ws, wc = self.w[:, :j], self.w[:, self.settings.harmonics :][:, :j]
+        delta = _phase_detector(eps, ws, wc, sn[:j], cs[:j], self._r[:j],
+                                self.settings.pll_max_phase_error)
+        if delta is None:
             return
-        lim = self.settings.pll_max_phase_error
-        delta = min(max(float(eps @ g) / power, -lim), lim)
         self.phase_error = delta
         self.psi = math.remainder(self.psi + self._kp * delta, 2 * math.pi)
         w0 = self.omega0 + self._ki * delta
@@ -335,13 +352,10 @@ class WFLC(Predictor):
     def _breathing_pll(self, eps: np.ndarray, xb: np.ndarray) -> None:
         """The loop of :meth:`_pll` on the respiratory phase ψ_b and rate ω_b."""
         hb = self._rb.size
-        a, b = self.wb[:, :hb], self.wb[:, hb:]
-        g = (a * xb[hb:] - b * xb[:hb]) @ self._rb
-        power = 0.5 * float(np.sum((a * a + b * b) @ (self._rb**2)))
-        if not power > 0.0 or not math.isfinite(power):
+        delta = _phase_detector(eps, self.wb[:, :hb], self.wb[:, hb:], xb[:hb], xb[hb:],
+                                self._rb, self.settings.pll_max_phase_error)
+        if delta is None:
             return
-        lim = self.settings.pll_max_phase_error
-        delta = min(max(float(eps @ g) / power, -lim), lim)
         self.psi_b = math.remainder(self.psi_b + self._kpb * delta, 2 * math.pi)
         w = self.omega_b + self._kib * delta
         if not self._blo <= w <= self._bhi:
