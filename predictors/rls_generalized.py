@@ -24,8 +24,7 @@ import numpy as np
 
 from predictors.base import Predictor
 from predictors.delay_line import TappedDelayLine
-from predictors.rls import RecursiveLeastSquares
-from predictors.rls_one_step import RLSCommon
+from predictors.rls_one_step import RLSCommon, make_rls
 
 __all__ = ["GeneralizedRLS", "GeneralizedSettings"]
 
@@ -62,9 +61,7 @@ class GeneralizedRLS(Predictor):
         s = self.settings
         N, M = s.order, s.points
         batch, n, q = (1, N * d, M * d) if s.correlated else (d, N, M)
-        self.rls = RecursiveLeastSquares(
-            batch, n, q, s.forgetting_factor, s.delta / self.unit**2, s.p_max_factor, self.counts
-        )
+        self.rls = make_rls(s, batch, n, q, self.unit, self.counts)
         # target rows are newest-first: block j predicts M − j steps ahead
         if s.init == "hold":
             if s.correlated:
@@ -78,7 +75,9 @@ class GeneralizedRLS(Predictor):
         s = self.settings
         N, M = s.order, s.points
         line = self.line
-        line.push(z)
+        # after a gap, the fills are repaired toward z (TappedDelayLine): z's forecast first
+        expected = self._block(line.buf[:N])[0] if line.fills and self.ready else None
+        line.push(z, expected=expected)
         if line.real_run >= N + M:
             past, recent = line.buf[M : M + N], line.buf[:M]
             if s.correlated:

@@ -87,6 +87,13 @@ class OneStepSettings(RLSCommon):
             raise ValueError(f"order must be a positive integer, got {self.order!r}")
 
 
+def make_rls(s: RLSCommon, batch: int, n: int, q: int, unit: float, counts):
+    """The RLS kernel of settings ``s``, its SI prior weight δ in data units (``unit`` m each)."""
+    return RecursiveLeastSquares(
+        batch, n, q, s.forgetting_factor, s.delta / unit**2, s.p_max_factor, counts
+    )
+
+
 class OneStepRLS(Predictor):
     """Vector RLS one-step predictor, iterated over the horizon (Tuna §V, eqs. 1–8)."""
 
@@ -96,9 +103,7 @@ class OneStepRLS(Predictor):
         s = self.settings
         N = s.order
         batch, n, q = (1, N * d, d) if s.correlated else (d, N, 1)
-        self.rls = RecursiveLeastSquares(
-            batch, n, q, s.forgetting_factor, s.delta / self.unit**2, s.p_max_factor, self.counts
-        )
+        self.rls = make_rls(s, batch, n, q, self.unit, self.counts)
         if s.init == "hold":  # A_1 = I
             if s.correlated:
                 self.rls.W[0, :, :d] = np.eye(d)
@@ -115,7 +120,8 @@ class OneStepRLS(Predictor):
         return past.T, line[0][:, None]
 
     def _update(self, z: np.ndarray) -> None:
-        self.line.push(z)
+        # after a gap, the fills are repaired toward z (TappedDelayLine): z's forecast first
+        self.line.push(z, expected=self._predict(1)[0] if self.line.fills and self.ready else None)
         if self.line.real_run > self.settings.order:
             self.rls.update(*self._xy(self.line.buf))
         self.ready = self.line.filled >= self.settings.order

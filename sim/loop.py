@@ -75,7 +75,9 @@ class LoopSettings:
         interpolated sample by 0.3–0.6 mm. (It was 1.5 mm for the former white-noise sensor's
         2–6 mm outliers; on the physical sensor a slip's accepted first sample made the RLS
         forecasts run away and the guard restart the predictor: 60 s, seed 0, max error
-        11.5 mm and 32 QP fallbacks, against 2.7 mm and 0 with this gate.) With a noisy sensor
+        11.5 mm and 32 QP fallbacks, against 2.7 mm and 0 with this gate; the remaining 2.7 mm
+        came from the rejected samples' open-loop fills, now repaired when the next measurement
+        arrives, :class:`predictors.delay_line.TappedDelayLine`: 0.74 mm.) With a noisy sensor
         the 4 × RMS term sets the radius instead.
     outlier_max_rejections : int
         After this many consecutive rejected samples the gate opens (a real jump, or a forecast
