@@ -120,6 +120,20 @@ class DualEKFSettings(PredictorSettings):
         ω_c; ``None``: ``q_omega`` (Richa).  Default: heart-rate variability,
         :data:`predictors.ekf_fourier.Q_OMEGA_HRV` (≈ 0.124 (rad/s)²/s, 21× Richa's), as
         the ``ekf``'s ``tuna2013-hrv``.
+    q_phase_cardiac_per_second : float or None
+        Phase walk of every cardiac harmonic [rad² per second], ``None``: none (Richa).  As
+        the ``ekf``'s per-harmonic phase noise (Yuen's φ_{a,i}), in this filter's sin/cos
+        coordinates: d_h sin hθ + e_h cos hθ = r_h sin(hθ + φ_h), a phase step δ moves
+        (d_h, e_h) by δ·(−e_h, d_h), so each axis's (d_h, e_h) block of P gains
+        q_φΔt·[[e_h², −d_he_h], [−d_he_h, d_h²]] per sample.  Off by default; Tuna 2013
+        §VIII-C's 1e-3 rad² per 133 Hz sample (0.133 rad²/s) follows atrial premature beats
+        better (record 100 from 150 s: 3-step RMS 0.58–0.74 instead of 0.79–0.96 mm on the
+        a1 replicas, hold 0.84–0.95) but costs 11–18 % on the variable replicas (0.38
+        instead of 0.32 mm on fixed-a1-top), and from 1500 s (one premature beat at 18.4 s,
+        30 s at 133 Hz) it is mixed: 0.83–1.32 × hold's, a re-fit on all six, against
+        0.72–1.66 × and two re-fits without.  Yuen 2008's 1e-4 per 28 Hz sample
+        (2.8e-3 rad²/s): +1–4 % on the variable replicas and worse on premature beats
+        (0.94–1.27 mm from 150 s).
     r : float
         Measurement variance per axis [m²].
     p0_coefficient : float
@@ -166,6 +180,7 @@ class DualEKFSettings(PredictorSettings):
     q_omega: float = 1e-8 * 83.3**2
     q_omega_respiratory: float | None = 1e-10 * 83.3**2
     q_omega_cardiac_per_second: float | None = Q_OMEGA_HRV
+    q_phase_cardiac_per_second: float | None = None
     r: float = 0.1 * 1e-6
     p0_coefficient: float = 25e-6
     p0_respiratory_from_fit: bool = True
@@ -244,6 +259,10 @@ class DualFourierEKF(Predictor):
         if s.q_omega_cardiac_per_second is not None:
             self._q[self.iwc] = s.q_omega_cardiac_per_second * self.dt
         self._r = s.r / u2
+        c0 = np.arange(d)[:, None] * k + 2 * hr + 1
+        self._id, self._ie = (c0 + np.arange(hc)).ravel(), (c0 + hc + np.arange(hc)).ravel()
+        qp = s.q_phase_cardiac_per_second
+        self._q_phase = 0.0 if qp is None else qp * self.dt
         p0 = np.full(k, s.p0_coefficient / u2)
         p0[2 * hr] = s.p0_offset / u2
         self._p0 = np.concatenate(
@@ -406,6 +425,12 @@ class DualFourierEKF(Predictor):
             P[it, :] += dt * P[iw, :]
             P[:, it] += dt * P[:, iw]
         self._Pdiag += self._q
+        if self._q_phase:  # phase walk of each cardiac harmonic: G q_φ Gᵀ, G = (−e_h, d_h)
+            d, e = x[self._id], x[self._ie]
+            P[self._id, self._id] += self._q_phase * e * e
+            P[self._ie, self._ie] += self._q_phase * d * d
+            P[self._id, self._ie] -= self._q_phase * d * e
+            P[self._ie, self._id] -= self._q_phase * d * e
 
     def _missing(self) -> None:
         if self.ready:
