@@ -218,7 +218,11 @@ class DualEKFSettings(PredictorSettings):
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
         if self.q_rate_hz is not None and not self.q_rate_hz > 0.0:
             raise ValueError(f"q_rate_hz must be > 0 or None, got {self.q_rate_hz!r}")
-        for name in ("q_omega_respiratory", "q_omega_cardiac_per_second"):
+        for name in (
+            "q_omega_respiratory",
+            "q_omega_cardiac_per_second",
+            "q_phase_cardiac_per_second",
+        ):
             v = getattr(self, name)
             if v is not None and not v >= 0.0:
                 raise ValueError(f"{name} must be >= 0 or None, got {v!r}")
