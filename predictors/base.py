@@ -182,6 +182,20 @@ class Predictor(ABC):
         self._errors.record(self.n, out)
         return out
 
+    def retract(self) -> bool:
+        """Treat the newest sample as missing after the fact: it has turned out to be an outlier.
+
+        The outlier gate (:mod:`rhmpc.control.reference`) calls it when the sample after it
+        misses its forecast but agrees with the forecast made *before* the newest sample. The
+        newest sample is replaced by the model's forecast of it, as if it had been missing
+        (``counts["retracted"]``). Returns whether the predictor could; by default it cannot and
+        nothing changes.
+        """
+        if self._pending is not None or not self.ready or not self._retract():
+            return False
+        self.counts["retracted"] += 1
+        return True
+
     @property
     def forecast_error_rms(self) -> np.ndarray:
         """(K,) running RMS of past misses ‖ẑ_{n+k|n} − z_{n+k}‖ per lead k = 1…K [data units].
@@ -251,6 +265,10 @@ class Predictor(ABC):
 
     @abstractmethod
     def _predict(self, steps: int) -> np.ndarray: ...
+
+    def _retract(self) -> bool:
+        """Replace the newest sample by the model's forecast of it; False if not possible."""
+        return False
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(dt={self.dt!r}, settings={self.settings!r})"

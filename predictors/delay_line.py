@@ -49,3 +49,8 @@ class TappedDelayLine:
         self.filled = min(self.filled + 1, buf.shape[0])
         self.real_run = self.real_run + 1 if measured else 0
         self.fills = 0 if measured else self.fills + 1
+
+    def retract(self, fill: np.ndarray) -> None:
+        """The newest row was an outlier: it becomes the open-loop fill ``fill``."""
+        self.buf[0] = fill
+        self.real_run, self.fills = 0, 1

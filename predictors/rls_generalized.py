@@ -95,6 +95,13 @@ class GeneralizedRLS(Predictor):
             out = np.einsum("bji,ib->jb", self.rls.W, past)
         return out[::-1]
 
+    def _retract(self) -> bool:
+        N = self.settings.order
+        if self.line.real_run <= N:  # its replacement is made from N measured rows only
+            return False
+        self.line.retract(self._block(self.line.buf[1 : N + 1])[0])
+        return True
+
     def _missing(self) -> None:
         fill = self._block(self.line.buf[: self.settings.order])[0] if self.ready else None
         self.line.push(self.line.buf[0].copy() if fill is None else fill, measured=False)

@@ -126,6 +126,13 @@ class OneStepRLS(Predictor):
             self.rls.update(*self._xy(self.line.buf))
         self.ready = self.line.filled >= self.settings.order
 
+    def _retract(self) -> bool:
+        N = self.settings.order
+        if self.line.real_run <= N:  # its replacement is made from N measured rows only
+            return False
+        self.line.retract(self._one_step(self.line.buf[1 : N + 1]))
+        return True
+
     def _missing(self) -> None:
         # run open-loop: the model's own one-step forecast fills the gap
         fill = self._predict(1)[0] if self.ready else self.line.buf[0].copy()

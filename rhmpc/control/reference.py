@@ -26,6 +26,15 @@ consecutive rejections the gate *unlocks* and accepts every sample (a real jump,
 gone wrong: gating on a wrong forecast would run the predictor open-loop and let it diverge)
 until ``relock`` consecutive samples fall inside it again (``counts["gate_unlocked"]``).
 
+Retraction: the gate judges a sample by the forecast made from the samples before it, so an
+outlier small enough to pass (a cycle slip's partly interpolated sample, 0.1–0.25 mm off) is
+learnt, and the forecast made from it misses the next, good sample — which a locked gate would
+then reject, and the next ones, until it unlocks. So when a sample falls outside the gate
+around ẑ_{n+1|n} but inside it around ẑ_{n+1|n−1}, the two-step forecast made before the newest
+accepted sample z_n, it is z_n that was off: the predictor retracts z_n (``retract``: replaced
+by its forecast, as if missing; ``counts["retracted"]``) and z_{n+1} is accepted. Predictors
+that cannot retract (the default) keep the plain gate.
+
 Placement: both references work in centred heart coordinates (d = 1 or 3 axes); after
 ``place(origin)`` their ``horizon`` returns workspace points ``r = origin + E r_c`` (N, 3), with
 ``E`` embedding a 1-D motion along x. The closed loop places once, so the offset is added once
@@ -113,6 +122,11 @@ class OutlierGate:
         self._inside = 0  # consecutive samples inside the gate (unlocked)
         self._miss2 = 0.0  # e_rms², over accepted samples
         self._threshold2 = self.gate2
+
+    def inside(self, z: np.ndarray, forecast: np.ndarray) -> bool:
+        """Whether a locked gate would accept ``z`` against ``forecast`` (no state changes)."""
+        miss = z - forecast
+        return self.locked and float(np.dot(miss, miss)) <= self._threshold2
 
     def accept(self, z: np.ndarray, forecast: np.ndarray, counts) -> bool:
         """Whether sample ``z`` is accepted given its ``forecast``; events go to ``counts``."""
@@ -205,6 +219,8 @@ class PredictedReference:
         self._pending: tuple | None = None  # (tick, accepted z or None) between the halves
         self._anchor: float | None = None
         self._forecast: np.ndarray | None = None  # ẑ of the next sample, made one period ago
+        self._second: np.ndarray | None = None  # ẑ of the sample after it, made then too
+        self._before: np.ndarray | None = None  # ẑ of the next sample made two periods ago
         self._held: np.ndarray | None = None  # the last accepted sample …
         self._held_stamp = 0.0  # … and its time [s]
         if self.gate is not None:
@@ -222,10 +238,13 @@ class PredictedReference:
     def update(self, tick: int, z: np.ndarray | None, stamp: float) -> None:
         """First half of a refresh: the outlier gate and the predictor's update with ``z``."""
         valid = z is not None and math.isfinite(float(np.dot(z, z)))
-        if valid and self._forecast is not None and not self.gate.accept(
-            z, self._forecast, self.predictor.counts
-        ):
-            z, valid = None, False
+        if valid and self._forecast is not None:
+            gate, counts = self.gate, self.predictor.counts
+            if (self._before is not None and not gate.inside(z, self._forecast)
+                    and gate.inside(z, self._before) and self.predictor.retract()):
+                gate.accept(z, self._before, counts)  # the previous sample was the outlier
+            elif not gate.accept(z, self._forecast, counts):
+                z, valid = None, False
         self.predictor.update(z)
         self._pending = None
         if valid:
@@ -250,7 +269,11 @@ class PredictedReference:
         K = self.prediction_points + math.ceil(latency / self.dt - 1e-9)
         points = self.predictor.predict(K)
         if self.gate is not None:
-            self._forecast = points[0] if getattr(self.predictor, "ready", True) else None
+            ready = getattr(self.predictor, "ready", True)
+            # the two-step forecast made before this refresh's sample, if one was accepted
+            self._before = self._second if z is not None else None
+            self._forecast = points[0] if ready else None
+            self._second = points[1] if ready else None
         if z is not None:
             nodes = np.concatenate((np.reshape(z, (1, -1)), points))
             t0 = self._anchor
@@ -284,7 +307,7 @@ class PredictedReference:
         self.predictor.counts.update(counts)
         self.predictor.counts["reference_guard"] += 1
         self.predictor.update(self._held)
-        self._forecast = None
+        self._forecast = self._second = self._before = None
         self._dense = np.broadcast_to(self._held, self._dense.shape)
 
     @property

@@ -89,3 +89,23 @@ def test_rls_predictors_recover_from_a_two_sample_gap(name, monkeypatch):
                         lambda self, z, measured=True, expected=None: push(self, z, measured))
     unrepaired, _ = _worst_after_gaps(name, z, gap=2)
     assert unrepaired >= 4.0 * baseline
+
+
+def test_retract_replaces_the_newest_sample_by_its_forecast():
+    z = _stream(12.0)
+    for name in ("generalized", "one-step"):
+        p = make_predictor(name, 0.0075)
+        for k in range(1500):
+            p.update(z[k])
+        before = p.predict(1)[0]  # the forecast of sample 1500 from the samples up to 1499
+        p.update(z[1500] + 1e-3)
+        assert p.retract() and p.counts["retracted"] == 1
+        # the weights keep the one update the outlier made (a 1 mm outlier moved them by 0.2 µm
+        # of forecast), so the replacement is the forecast up to that
+        np.testing.assert_allclose(p.line.buf[0], before, rtol=0, atol=1e-6)
+        assert not p.retract()  # its replacement is not a measurement: nothing more to retract
+    for name in ("hold", "ekf", "wflc"):  # the default: cannot, and nothing changes
+        p = make_predictor(name, 0.0075)
+        for k in range(1500):
+            p.update(z[k])
+        assert not p.retract() and "retracted" not in p.counts
