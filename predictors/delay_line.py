@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from functools import cache
+
 import numpy as np
 
 __all__ = ["TappedDelayLine"]
@@ -25,13 +27,21 @@ class TappedDelayLine:
     measurement and ends at z − ẑ (a Brownian bridge).  Without it the regressor holds a step
     between the drifted fills and the measurement, which a predictor with large, cancelling
     weights (a smooth signal extrapolated 25 ms) amplifies into a miss many times the drift.
+    When the second measurement after a gap of g ≤ ``INTERPOLATE_GAP`` rows arrives and the two
+    rows before the gap are measurements too, the fills are replaced by the cubic through those
+    four samples (Lagrange interpolation at the rows' times: heart motion, ≤ 10 Hz, sampled at
+    133 Hz is smooth on that scale), which is what the repair can only approximate.
     """
+
+    #: longest gap [rows] re-interpolated by the cubic through two samples on each side
+    INTERPOLATE_GAP = 3
 
     def __init__(self, length: int, d: int) -> None:
         self.buf = np.zeros((int(length), int(d)))
         self.filled = 0  # rows written since reset (saturates at length)
         self.real_run = 0  # consecutive measured rows at the top
         self.fills = 0  # consecutive open-loop rows at the top
+        self.measured = np.zeros(int(length), dtype=bool)  # which rows are measurements
 
     def push(self, z: np.ndarray, measured: bool = True, expected: np.ndarray | None = None
              ) -> None:
@@ -46,11 +56,41 @@ class TappedDelayLine:
             buf[:g] += ramp[:, None] * (np.asarray(z) - expected)
         buf[1:] = buf[:-1]
         buf[0] = z
+        self.measured[1:] = self.measured[:-1]
+        self.measured[0] = measured
         self.filled = min(self.filled + 1, buf.shape[0])
         self.real_run = self.real_run + 1 if measured else 0
         self.fills = 0 if measured else self.fills + 1
+        if self.real_run == 2:
+            self._interpolate_gap()
+
+    def _interpolate_gap(self) -> None:
+        """Rows 0, 1 measured: replace a gap of g rows below them by the cubic through rows
+        0, 1, g + 2, g + 3 (if those two are measurements too)."""
+        flags, g = self.measured, 0
+        while 2 + g < flags.shape[0] and not flags[2 + g] and g <= self.INTERPOLATE_GAP:
+            g += 1
+        if not 1 <= g <= self.INTERPOLATE_GAP or 3 + g >= self.filled:
+            return
+        if flags[2 + g : 4 + g].all():
+            self.buf[2 : 2 + g] = _cubic_weights(g) @ self.buf[[0, 1, 2 + g, 3 + g]]
 
     def retract(self, fill: np.ndarray) -> None:
         """The newest row was an outlier: it becomes the open-loop fill ``fill``."""
         self.buf[0] = fill
+        self.measured[0] = False
         self.real_run, self.fills = 0, 1
+
+
+@cache
+def _cubic_weights(g: int) -> np.ndarray:
+    """(g, 4) Lagrange weights L_j(t) = Π_{m≠j} (t − t_m)/(t_j − t_m) of the nodes
+    t = 0, 1, g + 2, g + 3 at the gap's rows t = 2 … g + 1."""
+    nodes = np.array([0.0, 1.0, 2.0 + g, 3.0 + g])
+    at = np.arange(2.0, 2.0 + g)
+    w = np.ones((g, 4))
+    for j in range(4):
+        for m in range(4):
+            if m != j:
+                w[:, j] *= (at - nodes[m]) / (nodes[j] - nodes[m])
+    return w
