@@ -52,52 +52,19 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.linalg.lapack import dpotrf, dpotri
 from scipy.stats import chi2
 
 from predictors.base import Predictor, PredictorSettings
-from predictors.fourier_init import initial_dual_state, initial_fourier_state
+from predictors.fourier_init import (
+    initial_dual_state,
+    initial_fourier_state,
+    spd_inverse,
+    wrap_phase,
+)
 
 __all__ = ["PARAMETER_SETS", "Q_OMEGA_HRV", "EKFSettings", "FourierEKF"]
 
 _TWO_PI = 2.0 * math.pi
-
-
-def wrap_phase(theta: np.ndarray) -> np.ndarray:
-    """Wrap angles to (−π, π] in place and return them."""
-    np.subtract(theta, _TWO_PI * np.floor((theta + math.pi) / _TWO_PI), out=theta)
-    return theta
-
-
-def spd_inverse(S: np.ndarray) -> np.ndarray | None:
-    """S⁻¹ of a small symmetric positive definite matrix, or ``None`` if S is not SPD.
-
-    Closed forms for 1×1 and 3×3 (Sylvester's criterion for definiteness), LAPACK
-    ``potrf``/``potri`` otherwise: ``np.linalg.inv`` costs ~50 µs of overhead per call.
-    """
-    d = S.shape[0]
-    if d == 1:
-        s = float(S[0, 0])
-        return np.array([[1.0 / s]]) if s > 0.0 and math.isfinite(s) else None
-    if d == 3:
-        a, b, c, _, e, f, _, _, i = S.ravel().tolist()  # symmetric: use the upper triangle
-        A, B, C = e * i - f * f, c * f - b * i, b * f - c * e
-        det = a * A + b * B + c * C
-        if not (a > 0.0 and a * e - b * b > 0.0 and det > 0.0 and math.isfinite(det)):
-            return None
-        return (
-            np.array(
-                [[A, B, C], [B, a * i - c * c, b * c - a * f], [C, b * c - a * f, a * e - b * b]]
-            )
-            / det
-        )
-    c, info = dpotrf(S, lower=0, clean=1)
-    if info != 0:
-        return None
-    inv, info = dpotri(c, lower=0)
-    if info != 0 or not np.isfinite(inv).all():
-        return None
-    return np.triu(inv) + np.triu(inv, 1).T
 
 
 @dataclass(frozen=True)
