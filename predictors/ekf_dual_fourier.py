@@ -86,8 +86,8 @@ import numpy as np
 from scipy.stats import chi2
 
 from predictors.base import Predictor, PredictorSettings
-from predictors.ekf_fourier import Q_OMEGA_HRV, spd_inverse, wrap_phase
-from predictors.fourier_init import initial_dual_state
+from predictors.ekf_fourier import Q_OMEGA_HRV
+from predictors.fourier_init import FitWindow, initial_dual_state, spd_inverse, wrap_phase
 
 __all__ = ["DualEKFSettings", "DualFourierEKF"]
 
@@ -286,7 +286,7 @@ class DualFourierEKF(Predictor):
         self._r_lo, self._r_hi = (_TWO_PI * f for f in s.respiratory_band_hz)
         if s.init_seconds is not None:
             n = max(round(s.init_seconds / self.dt), 2 * k)
-            self._window, self._filled = np.full((n, d), np.nan), 0
+            self._window = FitWindow(n, d)
 
     def _start(self, z: np.ndarray) -> None:
         """Richa's start at the first sample, or collect Yuen's window and fit it."""
@@ -300,32 +300,26 @@ class DualFourierEKF(Predictor):
             self.x[self.iwc] = _TWO_PI * s.cardiac_hz
             self.ready = True
             return
-        self._push(z)
-        if self._filled < self._window.shape[0]:
-            return
-        self.ready = self._fit()
-
-    def _push(self, z: np.ndarray) -> None:
-        """Append a sample (NaN: missing) to the circular window of the last ``init_seconds``."""
-        self._window[self._filled % self._window.shape[0]] = z
-        self._filled += 1
+        self._window.push(z)
+        if self._window.full:
+            self.ready = self._fit()
 
     def _lost(self) -> bool:
         """ω̂_c or ω̂_r outside the band its initialisation searches (lock lost)."""
         wr, wc = self.x[self.iwr], self.x[self.iwc]
         inside = self._c_lo <= wc <= self._c_hi and self._r_lo <= wr <= self._r_hi
-        return not inside and self._filled >= self._window.shape[0]
+        return not inside and self._window.full
 
     def _fit(self) -> bool:
         """Fit the window (oldest first) as Yuen; False (state untouched) if < 80 % finite."""
         s, hr = self.settings, self.settings.respiratory_harmonics
-        n = self._window.shape[0]
-        if np.isfinite(self._window).all(axis=1).mean() < 0.8:
+        if not self._window.usable():
             return False
         self.x[:] = 0.0
         self.P[:] = 0.0
         self._Pdiag[:] = self._p0
-        window = self._window[np.roll(np.arange(n), -(self._filled % n))]  # oldest first
+        window = self._window.oldest_first()
+        n = window.shape[0]
         wc, c, r, th, wr, a, b = initial_dual_state(
             window,
             self.dt,
@@ -374,7 +368,7 @@ class DualFourierEKF(Predictor):
             self._start(z)
             return
         if s.init_seconds is not None:
-            self._push(z)
+            self._window.push(z)
         self._time_update()
         x, P, H, hr = self.x, self.P, self._H, s.respiratory_harmonics
         phi = self._basis(x[self.itr : self.itr + 1], x[self.itc : self.itc + 1])[0]
@@ -399,7 +393,7 @@ class DualFourierEKF(Predictor):
             self.counts["ekf_reinit"] += 1
             self.ready = False
             if s.init_seconds is not None:
-                self._window[:], self._filled = np.nan, 0
+                self._window.clear()
             return
         Sinv_nu = Sinv @ nu
         self.nis = float(nu @ Sinv_nu)
@@ -439,7 +433,7 @@ class DualFourierEKF(Predictor):
     def _missing(self) -> None:
         if self.ready:
             if self.settings.init_seconds is not None:
-                self._push(np.full(self.d, np.nan))
+                self._window.push(np.full(self.d, np.nan))
             self._time_update()
         elif self.settings.init_seconds is not None:
             self._start(np.full(self.d, np.nan))

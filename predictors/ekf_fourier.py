@@ -35,6 +35,17 @@ Outliers: a sample whose normalised innovation squared νᵀS⁻¹ν exceeds the
 lock; after ``gate_seconds`` of consecutive rejections samples are used again, so a real
 change of the motion is followed.
 
+Re-fit on lost lock (issue 18, as :mod:`predictors.ekf_dual_fourier`): the last
+``init_seconds`` of samples are kept (:class:`predictors.fourier_init.FitWindow`); when after
+an update ω̂ ∉ 2π·``band_hz`` (the band the initialisation's FFT searches, 36–180 beats/min:
+no heart the filter models) or ω̂ was clamped, state and covariance are re-fitted from that
+window exactly as at the start (counted ``lock_refit``; needs ≥ 80 % finite samples).  No new
+parameter; while ω̂ stays in the band nothing changes (issue-18 bench bit-identical).  On the
+bench stream (seed 7 fixed-a1-top, seed 2 varying-a1-top) ω̂ fell to its 30 beats/min clamp
+2–4 s after the fit and stayed there (1.49 / 2.32 × hold's 3-step RMS over 60 s); with one
+re-fit each: 0.59 / 0.61 × hold's.  A lock on half the heart rate (ω̂ ≈ 50 beats/min,
+inside the band) is not detected.
+
 Numerics: P is symmetrised each step; phases are wrapped to (−π, π]; ω̂ is clamped
 to ``omega_limits_hz`` (counted ``omega_clamped``); a non-finite or non-positive
 innovation covariance restarts the initialisation (counted ``ekf_reinit``).
@@ -52,52 +63,20 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.linalg.lapack import dpotrf, dpotri
 from scipy.stats import chi2
 
 from predictors.base import Predictor, PredictorSettings
-from predictors.fourier_init import initial_dual_state, initial_fourier_state
+from predictors.fourier_init import (
+    FitWindow,
+    initial_dual_state,
+    initial_fourier_state,
+    spd_inverse,
+    wrap_phase,
+)
 
 __all__ = ["PARAMETER_SETS", "Q_OMEGA_HRV", "EKFSettings", "FourierEKF"]
 
 _TWO_PI = 2.0 * math.pi
-
-
-def wrap_phase(theta: np.ndarray) -> np.ndarray:
-    """Wrap angles to (−π, π] in place and return them."""
-    np.subtract(theta, _TWO_PI * np.floor((theta + math.pi) / _TWO_PI), out=theta)
-    return theta
-
-
-def spd_inverse(S: np.ndarray) -> np.ndarray | None:
-    """S⁻¹ of a small symmetric positive definite matrix, or ``None`` if S is not SPD.
-
-    Closed forms for 1×1 and 3×3 (Sylvester's criterion for definiteness), LAPACK
-    ``potrf``/``potri`` otherwise: ``np.linalg.inv`` costs ~50 µs of overhead per call.
-    """
-    d = S.shape[0]
-    if d == 1:
-        s = float(S[0, 0])
-        return np.array([[1.0 / s]]) if s > 0.0 and math.isfinite(s) else None
-    if d == 3:
-        a, b, c, _, e, f, _, _, i = S.ravel().tolist()  # symmetric: use the upper triangle
-        A, B, C = e * i - f * f, c * f - b * i, b * f - c * e
-        det = a * A + b * B + c * C
-        if not (a > 0.0 and a * e - b * b > 0.0 and det > 0.0 and math.isfinite(det)):
-            return None
-        return (
-            np.array(
-                [[A, B, C], [B, a * i - c * c, b * c - a * f], [C, b * c - a * f, a * e - b * b]]
-            )
-            / det
-        )
-    c, info = dpotrf(S, lower=0, clean=1)
-    if info != 0:
-        return None
-    inv, info = dpotri(c, lower=0)
-    if info != 0 or not np.isfinite(inv).all():
-        return None
-    return np.triu(inv) + np.triu(inv, 1).T
 
 
 @dataclass(frozen=True)
@@ -109,7 +88,8 @@ class EKFSettings(PredictorSettings):
     harmonics : int
         m, harmonics per axis [-].
     init_seconds : float
-        Length of the FFT + least-squares initialisation window [s] (N = init_seconds/dt).
+        Length of the FFT + least-squares initialisation window [s] (N = init_seconds/dt),
+        also of the re-fit after a lost lock.
     sigma_r : float
         σ_R, measurement noise standard deviation [m].
     sigma1_sq : float
@@ -126,9 +106,9 @@ class EKFSettings(PredictorSettings):
         Process noise of ω, q_ω [(rad/s)² per sample].
     band_hz : tuple of float
         Heart-rate band searched by the FFT [Hz]: 36–180 beats/min, which holds the
-        95–152 beats/min pacemaker staircase of Tuna §III-B.
+        95–152 beats/min pacemaker staircase of Tuna §III-B; ω̂ outside it triggers the re-fit.
     omega_limits_hz : tuple of float
-        ω̂ is clamped to this range [Hz] (a last resort, counted ``omega_clamped``).
+        ω̂ is clamped to this range [Hz] (counted ``omega_clamped``), then re-fitted.
     gate_probability : float or None
         Innovation gate: samples with NIS above the χ²_d quantile of this probability are
         rejected [-]; ``None``: no gate (Yuen's filter).
@@ -285,8 +265,7 @@ class FourierEKF(Predictor):
         s = self.settings
         m = s.harmonics
         self.n_init = max(round(s.init_seconds / self.dt), 2 * (2 * m + 1))
-        self._window = np.full((self.n_init, d), np.nan)
-        self._filled = 0
+        self._window = FitWindow(self.n_init, d)
         hb = s.breathing_harmonics
         n0 = d * (2 * m + 1) + 1
         self.nx = n0 + (d * 2 * hb + 2 if hb else 0)
@@ -318,6 +297,7 @@ class FourierEKF(Predictor):
         self._r = (s.sigma_r / self.unit) ** 2
         self._harm = harm
         self._w_lo, self._w_hi = (_TWO_PI * f for f in s.omega_limits_hz)
+        self._band_lo, self._band_hi = (_TWO_PI * f for f in s.band_hz)
         self.x = np.zeros(self.nx)
         self.P = np.eye(self.nx)
         self._Pdiag = np.einsum("ii->i", self.P)
@@ -392,8 +372,8 @@ class FourierEKF(Predictor):
 
     # -- the filter -------------------------------------------------------------
     def _initialise(self) -> None:
-        order = np.roll(np.arange(self.n_init), -(self._filled % self.n_init))
-        window = self._window[order]  # oldest first
+        """Fit the window (Yuen's start; also the re-fit after a lost lock)."""
+        window = self._window.oldest_first()
         s = self.settings
         x = np.zeros(self.nx)
         if s.breathing_harmonics:
@@ -432,6 +412,7 @@ class FourierEKF(Predictor):
         if not self.ready:
             self._collect(z)
             return
+        self._window.push(z)
         self._time_update()
         x, P, H = self.x, self.P, self._H
         sin = np.sin(self._th)
@@ -477,22 +458,27 @@ class FourierEKF(Predictor):
         if not self._w_lo <= w <= self._w_hi:
             self.counts["omega_clamped"] += 1
             x[self.iw] = min(max(w, self._w_lo), self._w_hi)
+        elif self._band_lo <= w <= self._band_hi:
+            return
+        if self._window.usable():  # lost lock: ω̂ at its clamp or outside the FFT's band
+            self.counts["lock_refit"] += 1
+            self._rejected = 0
+            self._initialise()
 
     def _restart(self) -> None:
         self.counts["ekf_reinit"] += 1
         self.ready = False
-        self._filled = 0
-        self._window[:] = np.nan
+        self._window.clear()
 
     def _collect(self, z: np.ndarray | float) -> None:
         """Add a sample (or NaN) to the initialisation window; start once ≥ 80 % are valid."""
-        self._window[self._filled % self.n_init] = z
-        self._filled += 1
-        if self._filled >= self.n_init and np.isfinite(self._window).all(axis=1).mean() >= 0.8:
+        self._window.push(z)
+        if self._window.usable():
             self._initialise()
 
     def _missing(self) -> None:
         if self.ready:
+            self._window.push(np.nan)
             self._time_update()
         else:
             self._collect(np.nan)

@@ -14,19 +14,100 @@
    before the heart rate is searched in the heart band, so that breathing harmonics
    cannot capture ω̂₀; then heart and breathing series are fitted jointly (eq. 3 with
    both sums, as Richa et al. 2010 eq. 1).
+
+The Fourier EKFs keep the last window of samples (:class:`FitWindow`) after the fit and fit
+it again when their rate estimate leaves the band the FFT searched (issue 18, ``lock_refit``);
+:func:`wrap_phase` and :func:`spd_inverse` are their shared numerics.
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+from scipy.linalg.lapack import dpotrf, dpotri
 
 __all__ = [
+    "FitWindow",
     "fit_fourier",
     "fit_harmonics",
     "fundamental_frequency",
     "initial_dual_state",
     "initial_fourier_state",
+    "spd_inverse",
+    "wrap_phase",
 ]
+
+_TWO_PI = 2.0 * math.pi
+
+
+class FitWindow:
+    """The last ``n`` samples (d,) of a stream, NaN for a missing one, for the batch fit.
+
+    The fit uses the window once it is full and at least 80 % of its rows are finite.
+    """
+
+    def __init__(self, n: int, d: int) -> None:
+        self.samples = np.full((n, d), np.nan)  # circular; row ``count % n`` is the oldest
+        self.count = 0  # samples pushed since the last clear
+
+    def push(self, z: np.ndarray | float) -> None:
+        """Append a sample (NaN: missing), overwriting the oldest."""
+        self.samples[self.count % self.samples.shape[0]] = z
+        self.count += 1
+
+    def clear(self) -> None:
+        self.samples[:], self.count = np.nan, 0
+
+    @property
+    def full(self) -> bool:
+        return self.count >= self.samples.shape[0]
+
+    def usable(self) -> bool:
+        """Full, and ≥ 80 % of the rows finite."""
+        return self.full and np.isfinite(self.samples).all(axis=1).mean() >= 0.8
+
+    def oldest_first(self) -> np.ndarray:
+        """A copy of the window in time order (n, d)."""
+        n = self.samples.shape[0]
+        return self.samples[np.roll(np.arange(n), -(self.count % n))]
+
+
+def wrap_phase(theta: np.ndarray) -> np.ndarray:
+    """Wrap angles to (−π, π] in place and return them."""
+    np.subtract(theta, _TWO_PI * np.floor((theta + math.pi) / _TWO_PI), out=theta)
+    return theta
+
+
+def spd_inverse(S: np.ndarray) -> np.ndarray | None:
+    """S⁻¹ of a small symmetric positive definite matrix, or ``None`` if S is not SPD.
+
+    Closed forms for 1×1 and 3×3 (Sylvester's criterion for definiteness), LAPACK
+    ``potrf``/``potri`` otherwise: ``np.linalg.inv`` costs ~50 µs of overhead per call.
+    """
+    d = S.shape[0]
+    if d == 1:
+        s = float(S[0, 0])
+        return np.array([[1.0 / s]]) if s > 0.0 and math.isfinite(s) else None
+    if d == 3:
+        a, b, c, _, e, f, _, _, i = S.ravel().tolist()  # symmetric: use the upper triangle
+        A, B, C = e * i - f * f, c * f - b * i, b * f - c * e
+        det = a * A + b * B + c * C
+        if not (a > 0.0 and a * e - b * b > 0.0 and det > 0.0 and math.isfinite(det)):
+            return None
+        return (
+            np.array(
+                [[A, B, C], [B, a * i - c * c, b * c - a * f], [C, b * c - a * f, a * e - b * b]]
+            )
+            / det
+        )
+    c, info = dpotrf(S, lower=0, clean=1)
+    if info != 0:
+        return None
+    inv, info = dpotri(c, lower=0)
+    if info != 0 or not np.isfinite(inv).all():
+        return None
+    return np.triu(inv) + np.triu(inv, 1).T
 
 
 def fundamental_frequency(
