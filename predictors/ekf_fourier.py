@@ -39,12 +39,11 @@ Re-fit on lost lock (issue 18, as :mod:`predictors.ekf_dual_fourier`): the last
 ``init_seconds`` of samples are kept (:class:`predictors.fourier_init.FitWindow`); when after
 an update ω̂ ∉ 2π·``band_hz`` (the band the initialisation's FFT searches, 36–180 beats/min:
 no heart the filter models) or ω̂ was clamped, state and covariance are re-fitted from that
-window exactly as at the start (counted ``lock_refit``; needs ≥ 80 % finite samples).  No new
-parameter; while ω̂ stays in the band nothing changes (issue-18 bench bit-identical).  On the
-bench stream (seed 7 fixed-a1-top, seed 2 varying-a1-top) ω̂ fell to its 30 beats/min clamp
-2–4 s after the fit and stayed there (1.49 / 2.32 × hold's 3-step RMS over 60 s); with one
-re-fit each: 0.59 / 0.61 × hold's.  A lock on half the heart rate (ω̂ ≈ 50 beats/min,
-inside the band) is not detected.
+window exactly as at the start (counted ``lock_refit``; needs ≥ 80 % finite samples); so is a
+lock on a subharmonic (ω̂ ≈ ω/2, inside the band): the second harmonic's power Σ_a r_{a,2}²
+exceeds the fundamental's, which the fit chose as the largest peak (judged once the window
+holds only samples since the last fit; locked, P₂/P₁ = 0.38–0.50 on the replicas, 6–150 on
+ω/2).  No new parameter; a locked filter is unchanged (issue-18 bench bit-identical).
 
 Numerics: P is symmetrised each step; phases are wrapped to (−π, π]; ω̂ is clamped
 to ``omega_limits_hz`` (counted ``omega_clamped``); a non-finite or non-positive
@@ -265,7 +264,7 @@ class FourierEKF(Predictor):
         s = self.settings
         m = s.harmonics
         self.n_init = max(round(s.init_seconds / self.dt), 2 * (2 * m + 1))
-        self._window = FitWindow(self.n_init, d)
+        self._window, self._fit_count = FitWindow(self.n_init, d), 0
         hb = s.breathing_harmonics
         n0 = d * (2 * m + 1) + 1
         self.nx = n0 + (d * 2 * hb + 2 if hb else 0)
@@ -373,7 +372,7 @@ class FourierEKF(Predictor):
     # -- the filter -------------------------------------------------------------
     def _initialise(self) -> None:
         """Fit the window (Yuen's start; also the re-fit after a lost lock)."""
-        window = self._window.oldest_first()
+        window, self._fit_count = self._window.oldest_first(), self._window.count
         s = self.settings
         x = np.zeros(self.nx)
         if s.breathing_harmonics:
@@ -458,12 +457,18 @@ class FourierEKF(Predictor):
         if not self._w_lo <= w <= self._w_hi:
             self.counts["omega_clamped"] += 1
             x[self.iw] = min(max(w, self._w_lo), self._w_hi)
-        elif self._band_lo <= w <= self._band_hi:
+        elif self._band_lo <= w <= self._band_hi and not self._subharmonic():
             return
-        if self._window.usable():  # lost lock: ω̂ at its clamp or outside the FFT's band
+        if self._window.usable():  # lost lock: ω̂ clamped, outside the FFT's band, or on ω/2
             self.counts["lock_refit"] += 1
             self._rejected = 0
             self._initialise()
+
+    def _subharmonic(self) -> bool:
+        """P₂ > P₁ (module docstring), once the window is all new since the last fit."""
+        r = self._rr
+        return (r.shape[1] > 1 and self._window.count - self._fit_count >= self.n_init
+                and float(np.dot(r[:, 1], r[:, 1])) > float(np.dot(r[:, 0], r[:, 0])))
 
     def _restart(self) -> None:
         self.counts["ekf_reinit"] += 1
