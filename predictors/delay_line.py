@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+from abc import abstractmethod
 from functools import cache
 
 import numpy as np
 
-__all__ = ["TappedDelayLine"]
+from predictors.base import Predictor
+
+__all__ = ["DelayLinePredictor", "TappedDelayLine"]
 
 
 class TappedDelayLine:
@@ -80,6 +83,39 @@ class TappedDelayLine:
         self.buf[0] = fill
         self.measured[0] = False
         self.real_run, self.fills = 0, 1
+
+
+class DelayLinePredictor(Predictor):
+    """A transversal-filter predictor on a :class:`TappedDelayLine` ``self.line`` of its
+    ``settings.order`` = N newest samples, with its one-step forecast ``_next(past)``.
+
+    The gap handling the line's owners share: a gap is filled open-loop with ``_next``, the
+    fills are repaired when measurements return (:meth:`_push`), and the newest sample can be
+    retracted (:meth:`predictors.base.Predictor.retract`).
+    """
+
+    @abstractmethod
+    def _next(self, past: np.ndarray) -> np.ndarray:
+        """ẑ (d,) of the sample after the newest-first block ``past`` (N, d)."""
+
+    def _push(self, z: np.ndarray) -> None:
+        """Push a measurement; after a gap its forecast repairs the fills (TappedDelayLine)."""
+        line = self.line
+        fills = line.fills and self.ready
+        line.push(z, expected=self._next(line.buf[: self.settings.order]) if fills else None)
+
+    def _missing(self) -> None:
+        # run open-loop: the model's own one-step forecast fills the gap
+        line = self.line
+        fill = self._next(line.buf[: self.settings.order]) if self.ready else line.buf[0].copy()
+        line.push(fill, measured=False)
+
+    def _retract(self) -> bool:
+        N = self.settings.order
+        if self.line.real_run <= N:  # its replacement is made from N measured rows only
+            return False
+        self.line.retract(self._next(self.line.buf[1 : N + 1]))
+        return True
 
 
 @cache

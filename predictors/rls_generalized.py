@@ -22,8 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from predictors.base import Predictor
-from predictors.delay_line import TappedDelayLine
+from predictors.delay_line import DelayLinePredictor, TappedDelayLine
 from predictors.rls_one_step import RLSCommon, make_rls
 
 __all__ = ["GeneralizedRLS", "GeneralizedSettings"]
@@ -52,7 +51,7 @@ class GeneralizedSettings(RLSCommon):
                 raise ValueError(f"{name} must be a positive integer, got {v!r}")
 
 
-class GeneralizedRLS(Predictor):
+class GeneralizedRLS(DelayLinePredictor):
     """Generalized adaptive-filter predictor (Tuna §VI, eqs. 9–11)."""
 
     Settings = GeneralizedSettings
@@ -75,9 +74,7 @@ class GeneralizedRLS(Predictor):
         s = self.settings
         N, M = s.order, s.points
         line = self.line
-        # after a gap, the fills are repaired toward z (TappedDelayLine): z's forecast first
-        expected = self._block(line.buf[:N])[0] if line.fills and self.ready else None
-        line.push(z, expected=expected)
+        self._push(z)
         if line.real_run >= N + M:
             past, recent = line.buf[M : M + N], line.buf[:M]
             if s.correlated:
@@ -95,16 +92,9 @@ class GeneralizedRLS(Predictor):
             out = np.einsum("bji,ib->jb", self.rls.W, past)
         return out[::-1]
 
-    def _retract(self) -> bool:
-        N = self.settings.order
-        if self.line.real_run <= N:  # its replacement is made from N measured rows only
-            return False
-        self.line.retract(self._block(self.line.buf[1 : N + 1])[0])
-        return True
-
-    def _missing(self) -> None:
-        fill = self._block(self.line.buf[: self.settings.order])[0] if self.ready else None
-        self.line.push(self.line.buf[0].copy() if fill is None else fill, measured=False)
+    def _next(self, past: np.ndarray) -> np.ndarray:
+        """ẑ_{n+1}: the first block of :meth:`_block`."""
+        return self._block(past)[0]
 
     def _predict(self, steps: int) -> np.ndarray:
         N, M = self.settings.order, self.settings.points

@@ -18,8 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from predictors.base import Predictor, PredictorSettings
-from predictors.delay_line import TappedDelayLine
+from predictors.base import PredictorSettings
+from predictors.delay_line import DelayLinePredictor, TappedDelayLine
 from predictors.rls import RecursiveLeastSquares
 
 __all__ = ["OneStepRLS", "OneStepSettings"]
@@ -94,7 +94,7 @@ def make_rls(s: RLSCommon, batch: int, n: int, q: int, unit: float, counts):
     )
 
 
-class OneStepRLS(Predictor):
+class OneStepRLS(DelayLinePredictor):
     """Vector RLS one-step predictor, iterated over the horizon (Tuna §V, eqs. 1–8)."""
 
     Settings = OneStepSettings
@@ -120,25 +120,12 @@ class OneStepRLS(Predictor):
         return past.T, line[0][:, None]
 
     def _update(self, z: np.ndarray) -> None:
-        # after a gap, the fills are repaired toward z (TappedDelayLine): z's forecast first
-        self.line.push(z, expected=self._predict(1)[0] if self.line.fills and self.ready else None)
+        self._push(z)
         if self.line.real_run > self.settings.order:
             self.rls.update(*self._xy(self.line.buf))
         self.ready = self.line.filled >= self.settings.order
 
-    def _retract(self) -> bool:
-        N = self.settings.order
-        if self.line.real_run <= N:  # its replacement is made from N measured rows only
-            return False
-        self.line.retract(self._one_step(self.line.buf[1 : N + 1]))
-        return True
-
-    def _missing(self) -> None:
-        # run open-loop: the model's own one-step forecast fills the gap
-        fill = self._predict(1)[0] if self.ready else self.line.buf[0].copy()
-        self.line.push(fill, measured=False)
-
-    def _one_step(self, past: np.ndarray) -> np.ndarray:
+    def _next(self, past: np.ndarray) -> np.ndarray:
         """ẑ from the newest-first block ``past`` (N, d)."""
         W = self.rls.W
         if self.settings.correlated:
@@ -158,7 +145,7 @@ class OneStepRLS(Predictor):
                 np.dot(W, buf[s : s + Nd], out=buf[s - d : s])
         else:
             for s in range(steps * d, 0, -d):
-                buf[s - d : s] = self._one_step(buf[s : s + Nd].reshape(N, d))
+                buf[s - d : s] = self._next(buf[s : s + Nd].reshape(N, d))
         return buf[: steps * d].reshape(steps, d)[::-1].copy()
 
     @property
