@@ -12,30 +12,20 @@ from __future__ import annotations
 import argparse
 
 import numpy as np
-
-from rhmpc.experiment import RunConfig, build_run
-from sim.loop import _update
-from sim.streams import StreamCursor, as_samples
-
-REPLICAS = ("fixed-a1-top", "fixed-a2-top", "varying-a1-top", "varying-a3-top",
-            "varying-a1-side", "varying-a3-side")
+from reference_bench import SCENARIOS, refreshes  # docs/notes/, this script's directory
 
 
 def misses(scenario: str, predictor: str, seed: int) -> np.ndarray:
     """One-step misses [mm] of ``predictor`` on ``scenario``'s 60-s stream, after 10 s."""
-    cfg = RunConfig().replace(scenario=scenario, seed=seed, predictor=predictor,
-                              **{"loop.duration": 60.0, "loop.settling": 10.0})
-    run, loop = build_run(cfg), cfg.loop
-    ref, ds = run.reference, loop.downsample
-    cursor = StreamCursor(as_samples(run.stream))
-    last_j, _ = _update(ref, cursor, -1, -1, run.center, loop.Ts)
+    changes = {"scenario": scenario, "seed": seed, "predictor": predictor,
+               "loop.duration": 60.0, "loop.settling": 10.0}
     out = []
-    for i in range(0, loop.ticks - ds, ds):
-        ref.forecast()
-        j = cursor.newest((i + ds - 1) * loop.Ts + 1e-12)
-        if ref._forecast is not None and i * loop.Ts > 10.0 and j >= 0:
+    for i, run, cursor in refreshes(changes):
+        loop, ref = run.config.loop, run.reference
+        tick = i + loop.downsample - 1  # the next update's tick
+        j = cursor.newest(tick * loop.Ts + 1e-12)
+        if tick < loop.ticks and ref._forecast is not None and i * loop.Ts > 10.0 and j >= 0:
             out.append(np.linalg.norm(cursor.sample(j)[1] - run.center - ref._forecast))
-        last_j, _ = _update(ref, cursor, i + ds - 1, last_j, run.center, loop.Ts)
     m = 1e3 * np.asarray(out)
     return m[np.isfinite(m)]
 
@@ -45,7 +35,7 @@ def main() -> None:
     ap.add_argument("--predictor", default="generalized")
     ap.add_argument("--seed", type=int, default=0)
     a = ap.parse_args()
-    for scenario in REPLICAS:
+    for scenario in SCENARIOS:
         m = misses(scenario, a.predictor, a.seed)
         print(f"{scenario:<16} one-step miss RMS {np.sqrt(np.mean(m**2)):.4f} mm, median "
               f"{np.median(m):.4f}, p99 {np.percentile(m, 99):.3f}")

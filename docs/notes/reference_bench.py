@@ -20,45 +20,54 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
-SCENARIOS = ("fixed-a1-top", "fixed-a2-top", "varying-a1-top", "varying-a3-top",
-             "varying-a1-side", "varying-a3-side")
+from rhmpc.studies.paper import COLUMNS
+
+SCENARIOS = COLUMNS  # Tuna et al. Tables I–III
+
+
+def refreshes(changes: dict):
+    """Build the run of ``changes`` (``RunConfig.replace`` keys) and drive its open-loop part:
+    yields ``(tick, run, cursor)`` after each refresh's forecast, before the next update (the
+    order of ``sim.loop``'s pipelined refresh)."""
+    from rhmpc.experiment import RunConfig, build_run
+    from sim.loop import _update
+    from sim.streams import StreamCursor, as_samples
+
+    cfg = RunConfig().replace(**changes)
+    run, loop = build_run(cfg), cfg.loop
+    ref, ds, n = run.reference, loop.downsample, loop.ticks
+    cursor = StreamCursor(as_samples(run.stream))
+    last_j, _ = _update(ref, cursor, -1, -1, run.center, loop.Ts)
+    for i in range(0, n, ds):
+        ref.forecast()
+        yield i, run, cursor
+        if i + ds - 1 < n:
+            last_j, _ = _update(ref, cursor, i + ds - 1, last_j, run.center, loop.Ts)
 
 
 def one(job):
     scenario, seed, predictor, sets, duration, rr = job
     from rhmpc.cli.simulate import parse_value
-    from rhmpc.experiment import RunConfig, build_run
-    from sim.loop import _update
-    from sim.streams import StreamCursor, as_samples
 
     changes = {"scenario": scenario, "seed": seed, "predictor": predictor, "rr": rr,
                "loop.duration": duration, "loop.settling": 10.0}
     for item in sets:
         key, _, value = item.partition("=")
         changes[key.strip()] = parse_value(value.strip())
-    cfg = RunConfig().replace(**changes)
-    run = build_run(cfg)
-    loop = cfg.loop
-    ref, ds, N = run.reference, loop.downsample, loop.horizon
-    cursor = StreamCursor(as_samples(run.stream))
-    n = loop.ticks
-    last_j, _ = _update(ref, cursor, -1, -1, run.center, loop.Ts)
     errs = []
-    start = int(loop.settling / loop.Ts)
-    for i in range(0, n, ds):
-        ref.forecast()
-        period = ref.horizons(i, min(ds, n - i))
-        if i + ds - 1 < n:
-            last_j, _ = _update(ref, cursor, i + ds - 1, last_j, run.center, loop.Ts)
-        if i < start:
+    for i, run, _ in refreshes(changes):
+        loop = run.config.loop
+        ds, N, n = loop.downsample, loop.horizon, loop.ticks
+        if i < int(loop.settling / loop.Ts):
             continue
+        period = run.reference.horizons(i, min(ds, n - i))
         truth = run.truth.window(i + 1, i + len(period) + N)
         for k, h in enumerate(period):
             if h is not None:
                 errs.append(np.linalg.norm(h[N - 1] - truth[k + N - 1]))
     e = 1e3 * np.asarray(errs)
     e = e[np.isfinite(e)]  # the recorded stream has gaps (missing samples)
-    counts = dict(ref.predictor.counts)
+    counts = dict(run.reference.predictor.counts)
     return scenario, seed, {
         "rms": float(math.sqrt(np.mean(e**2))), "max": float(e.max()),
         "episodes_ms": float(np.sum(e > 1.0) * loop.Ts * 1e3),

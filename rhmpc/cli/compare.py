@@ -12,10 +12,10 @@ from pathlib import Path
 from rhmpc.cli.simulate import add_run_options, config_from_args
 from rhmpc.errors import UsageError
 from rhmpc.experiment import RunConfig, run_experiment
+from rhmpc.studies.paper import COLUMNS
 
 #: Tuna et al. Table I/II column order (fixed rate: animals 1, 2; varying: 1, 3 top; 1, 3 side).
-TABLE_SCENARIOS = ("fixed-a1-top", "fixed-a2-top", "varying-a1-top", "varying-a3-top",
-                   "varying-a1-side", "varying-a3-side")
+TABLE_SCENARIOS = COLUMNS
 TABLE_PREDICTORS = ("exact", "one-step", "generalized", "ekf")
 DEFAULT_DURATION = 60.0
 DEFAULT_SETTLING = 20.0
