@@ -17,8 +17,9 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
-REPLICAS = ("fixed-a1-top", "fixed-a2-top", "varying-a1-top", "varying-a3-top",
-            "varying-a1-side", "varying-a3-side")
+from rhmpc.studies.paper import COLUMNS
+
+REPLICAS = COLUMNS  # Tuna et al. Tables I–III
 NAMES = ("hold", "ekf", "dual-ekf", "ar", "fading-ar", "wflc", "one-step", "generalized",
          "last-cycle")
 

@@ -14,9 +14,9 @@ import argparse
 
 from rhmpc.control.confidence import confidence_weights
 from rhmpc.experiment import RunConfig, run_experiment
+from rhmpc.studies.paper import COLUMNS
 
-REPLICAS = ("fixed-a1-top", "fixed-a2-top", "varying-a1-top", "varying-a3-top",
-            "varying-a1-side", "varying-a3-side")
+REPLICAS = COLUMNS  # Tuna et al. Tables I–III
 
 
 def main() -> None:

@@ -17,10 +17,10 @@ import warnings
 import numpy as np
 
 from predictors import make_predictor
+from rhmpc.studies.paper import COLUMNS
 from sim.heart import make_scenario
 
-NAMES = ("fixed-a1-top", "fixed-a2-top", "varying-a1-top", "varying-a3-top",
-         "varying-a1-side", "varying-a3-side", "arrhythmia-apb")
+NAMES = (*COLUMNS, "arrhythmia-apb")  # Tuna et al.'s six replicas and an arrhythmia
 PREDICTORS = ("hold", "one-step", "generalized", "ekf", "dual-ekf", "ar", "last-cycle")
 DURATION, SETTLE, SEED = 60.0, 20.0, 2
 
