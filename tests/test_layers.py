@@ -3,15 +3,18 @@
 Layers, from the bottom (peers of one layer do not import each other):
 
 0. ``robots``, ``predictors``
-1. ``sim``
+1. ``sim``, itself in floors: ``sim.heart`` and ``sim.plant``; ``sim.recordings`` and
+   ``sim.sensors`` (they read ``sim.heart``'s motion sources); ``sim.sources`` (a scenario or a
+   recording); ``sim.loop``
 2. ``rhmpc.control`` (with ``rhmpc.errors``, which every part of ``rhmpc`` may use)
 3. ``rhmpc.experiment``
 4. ``rhmpc.studies``, ``rhmpc.tuning``
 5. ``rhmpc.cli``
 
 Every ``import`` statement counts, including those inside functions (deferred imports are
-still dependencies). ``predictors`` also depends on nothing outside numpy, scipy and the standard
-library, so that a predictor can be lifted into another project.
+still dependencies), and no module may reach itself through imports (no cycle).
+``predictors`` also depends on nothing outside numpy, scipy and the standard library, so that
+a predictor can be lifted into another project.
 """
 
 from __future__ import annotations
@@ -25,10 +28,16 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 
 #: (package prefix, layer, peer group); the longest matching prefix decides.
-LAYERS: tuple[tuple[str, int, str], ...] = (
+LAYERS: tuple[tuple[str, float, str], ...] = (
     ("robots", 0, "robots"),
     ("predictors", 0, "predictors"),
     ("sim", 1, "sim"),
+    ("sim.heart", 1.0, "sim.heart"),
+    ("sim.plant", 1.0, "sim.plant"),
+    ("sim.recordings", 1.1, "sim.recordings"),
+    ("sim.sensors", 1.1, "sim.sensors"),
+    ("sim.sources", 1.2, "sim.sources"),
+    ("sim.loop", 1.3, "sim.loop"),
     ("rhmpc.errors", 2, "rhmpc.errors"),
     ("rhmpc.control", 2, "rhmpc.control"),
     ("rhmpc.experiment", 3, "rhmpc.experiment"),
@@ -41,7 +50,7 @@ PACKAGES = ("robots", "predictors", "sim", "rhmpc")
 PREDICTOR_DEPENDENCIES = ("numpy", "scipy")
 
 
-def layer_of(module: str) -> tuple[int, str] | None:
+def layer_of(module: str) -> tuple[float, str] | None:
     """(layer, peer group) of a first-party module, or None for third-party/stdlib ones."""
     best = None
     for prefix, layer, group in LAYERS:
@@ -147,3 +156,69 @@ def test_allowed_imports_pass(tmp_path: Path) -> None:
     (tmp_path / "predictors" / "ok.py").write_text("import math\nimport numpy as np\n"
                                                    "from scipy import linalg\n")
     assert violations(tmp_path) == []
+
+
+def modules(root: Path) -> dict[str, Path]:
+    """Every first-party module under ``root``, by name."""
+    return {module_name(p, root): p for top in PACKAGES for p in sorted((root / top).rglob("*.py"))}
+
+
+def import_graph(root: Path) -> dict[str, set[str]]:
+    """module → the first-party modules it imports (the longest module prefix of each target;
+    a module's imports of its own parent packages are left out: a package runs its children)."""
+    mods = modules(root)
+    graph: dict[str, set[str]] = {m: set() for m in mods}
+    for m, path in mods.items():
+        for _, target in imports_of(path, m):
+            while target and target not in mods:
+                target = target.rpartition(".")[0]
+            if target and target != m and not m.startswith(target + "."):
+                graph[m].add(target)
+    return graph
+
+
+def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components with more than one module (Tarjan's algorithm)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in graph[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                found.append(sorted(component))
+
+    for v in graph:
+        if v not in index:
+            visit(v)
+    return found
+
+
+def test_no_import_cycle() -> None:
+    assert cycles(import_graph(REPO)) == []
+
+
+def test_the_cycle_check_catches_a_deferred_cycle(tmp_path: Path) -> None:
+    for top in PACKAGES:
+        (tmp_path / top).mkdir()
+    (tmp_path / "sim" / "a.py").write_text("from sim.b import g\n")
+    (tmp_path / "sim" / "b.py").write_text("def g():\n    from sim import a\n    return a\n")
+    assert cycles(import_graph(tmp_path)) == [["sim.a", "sim.b"]]

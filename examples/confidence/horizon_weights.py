@@ -1,4 +1,4 @@
-"""Horizon weights from forecast confidence against uniform weights (issue 14, item 4).
+"""Horizon weights from forecast confidence against uniform weights.
 
 For each replica: a closed-loop run with uniform point weights gives the predictor's running RMS
 miss per lead (``forecast_error_rms_mm``); :func:`rhmpc.control.confidence.confidence_weights`

@@ -1,7 +1,7 @@
 """Clean vs variable replicas: open-loop forecast error per predictor on the noise-free motion.
 
 (a) 25 Hz, 3 samples (120 ms) ahead: RMS error / hold's (the predictability statistic of
-    ``sim.analysis.predictability``);
+    ``sim.heart.analysis.predictability``);
 (b) Tuna et al.'s predictor rate, 2 kHz / 15 = 133.3 Hz, 4 samples (30 ms ≥ the 25 ms horizon)
     ahead: RMS error [mm].
 

@@ -20,19 +20,11 @@ from pathlib import Path
 import numpy as np
 
 from rhmpc.errors import UsageError
-from sim.analysis import fill_gaps, motion_stats, predictability, psd
-from sim.heart import (
-    DEFAULT_SCENARIO,
-    SCENARIOS,
-    SPECS,
-    load_recording,
-    make_scenario,
-    save_recording,
-)
-from sim.matfile import parse_indices
-from sim.motion import MotionSource
-from sim.recordings import export_source
-from sim.scenarios import DEFAULT_SEED, missing_data
+from sim.heart import DEFAULT_SCENARIO, SCENARIOS, SPECS, make_scenario
+from sim.heart.analysis import fill_gaps, motion_stats, predictability, psd
+from sim.heart.motion import MotionSource
+from sim.heart.scenarios import DEFAULT_SEED, missing_data
+from sim.recordings import export_source, load_recording, parse_indices, save_recording
 from sim.sensors import SENSORS, sensor_from_name
 
 
@@ -258,15 +250,36 @@ def _plot(args: argparse.Namespace) -> int:
     t = target.start + np.arange(n) / rate
     p = np.asarray(target.source.position(t)).reshape(n, -1) * 1e3
     stats = motion_stats(target.source, target.duration, target.rate, target.start)
-    f, s = psd(fill_gaps(t, p), rate, resolution=0.02)
     dim = p.shape[1]
-    labels = ("x", "y", "z") if dim == 3 else ("x",)
     height = 2.3 * dim + 4.2
     fig = plt.figure(figsize=(13, height))  # fixed margins: a layout engine costs seconds
     grid = fig.add_gridspec(dim + 2, 2, width_ratios=(2.2, 1.0),
                             height_ratios=(*([1.0] * dim), 0.6, 1.1), left=0.07, right=0.985,
                             top=1 - 0.95 / height, bottom=0.55 / height, hspace=0.6,
                             wspace=0.12)
+    _plot_positions(fig, grid, target, t, p, rate, args)
+    _plot_rate_and_stats(fig, grid[dim, 0], grid[dim, 1], target, t, phase, stats, dim)
+    _plot_psd(fig.add_subplot(grid[dim + 1, :]), *psd(fill_gaps(t, p), rate, resolution=0.02),
+              rate, stats)
+    hr = stats.heart_rate
+    hr_text = (f"{60 * hr[0]:.0f} bpm" if abs(hr[1] - hr[0]) * 60 < 0.5
+               else f"{60 * hr[0]:.0f}–{60 * hr[1]:.0f} bpm")
+    fig.suptitle(f"{target.name}: p-p {stats.peak_to_peak * 1e3:.2f} mm, "
+                 f"RMS {stats.rms * 1e3:.2f} mm, heart rate {hr_text}, "
+                 f"{target.rate:g} Hz, {target.duration:g} s\n{target.description}",
+                 fontsize=10)
+    out = Path(args.file)
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    print(f"wrote {out}")
+    return 0
+
+
+def _plot_positions(fig, grid, target: _Target, t: np.ndarray, p: np.ndarray, rate: float,
+                    args: argparse.Namespace) -> None:
+    """Per axis: the whole record's min–max envelope, and a zoomed window."""
+    dim = p.shape[1]
+    labels = ("x", "y", "z") if dim == 3 else ("x",)
     end = target.start + target.duration
     w0 = min(max(args.start, target.start), max(end - args.window, target.start))
     zoom = (t >= w0) & (t <= w0 + args.window)
@@ -288,16 +301,21 @@ def _plot(args: argparse.Namespace) -> int:
             axz.set_title(f"{args.window:g} s window")
         if d == dim - 1:
             axz.set_xlabel("time [s]")
-    ax_hr = fig.add_subplot(grid[dim, 0])
+
+
+def _plot_rate_and_stats(fig, rate_cell, text_cell, target: _Target, t: np.ndarray, phase,
+                         stats, dim: int) -> None:
+    """The heart rate over time (synthetic motion only) and the statistics as text."""
+    ax_hr = fig.add_subplot(rate_cell)
     if phase is not None:
         ax_hr.plot(t, 60 * phase.rate(t), color="tab:red", lw=1.0)
-        ax_hr.set_xlim(target.start, end)
+        ax_hr.set_xlim(target.start, target.start + target.duration)
         ax_hr.set_ylabel("heart rate\n[beats/min]")
         ax_hr.set_xlabel("time [s]")
     else:
         ax_hr.axis("off")
         ax_hr.text(0.0, 0.5, "heart rate unknown for a recording", transform=ax_hr.transAxes)
-    ax_txt = fig.add_subplot(grid[dim, 1])
+    ax_txt = fig.add_subplot(text_cell)
     ax_txt.axis("off")
     ax_txt.text(0.0, 1.0, "\n".join([
         f"peak-to-peak  {stats.peak_to_peak * 1e3:.2f} mm (largest axis range)",
@@ -305,30 +323,22 @@ def _plot(args: argparse.Namespace) -> int:
         + (", 3-D)" if dim > 1 else ")"),
         "spectral peaks " + ", ".join(f"{v:.2f}" for v in stats.peaks[:6]) + " Hz",
     ]), transform=ax_txt.transAxes, va="top", family="monospace", fontsize=8)
-    ax = fig.add_subplot(grid[dim + 1, :])
+
+
+def _plot_psd(ax, f: np.ndarray, s: np.ndarray, rate: float, stats) -> None:
+    """The Welch PSD per axis, the spectral peaks marked."""
+    dim = s.shape[1]
+    labels = ("x", "y", "z") if dim == 3 else ("x",)
     for d in range(dim):
         ax.semilogy(f, s[:, d], lw=0.9, label=labels[d])
     ax.set_xlim(0, min(30.0, rate / 2))
-    floor = max(np.max(s) * 1e-9, 1e-12)
-    ax.set_ylim(floor, np.max(s) * 5)
+    ax.set_ylim(max(np.max(s) * 1e-9, 1e-12), np.max(s) * 5)
     ax.set_xlabel("frequency [Hz]")
     ax.set_ylabel("PSD [mm²/Hz]")
     ax.set_title("power spectral density (Welch)")
     ax.legend(loc="upper right", ncols=dim)
     for fp in stats.peaks[:6]:
         ax.axvline(fp, color="0.5", lw=0.5, ls=":")
-    hr = stats.heart_rate
-    hr_text = (f"{60 * hr[0]:.0f} bpm" if abs(hr[1] - hr[0]) * 60 < 0.5
-               else f"{60 * hr[0]:.0f}–{60 * hr[1]:.0f} bpm")
-    fig.suptitle(f"{target.name}: p-p {stats.peak_to_peak * 1e3:.2f} mm, "
-                 f"RMS {stats.rms * 1e3:.2f} mm, heart rate {hr_text}, "
-                 f"{target.rate:g} Hz, {target.duration:g} s\n{target.description}",
-                 fontsize=10)
-    out = Path(args.file)
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
-    print(f"wrote {out}")
-    return 0
 
 
 def _envelope(t: np.ndarray, y: np.ndarray, rate: float, window: float = 1.2,

@@ -10,7 +10,7 @@ from pathlib import Path
 from rhmpc.cli.presets import add_preset_option, apply_preset
 from rhmpc.errors import UsageError
 from rhmpc.experiment import RunConfig, check_sensor, load_config, run_experiment
-from sim.matfile import parse_indices
+from sim.recordings.matfile import parse_indices
 
 #: Default run length [s] and settling window [s] of ``rhmpc simulate``.
 DEFAULT_DURATION = 30.0
@@ -67,7 +67,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", action="store_true", help="print the result document on stdout")
     p.add_argument("--plot", metavar="FILE.png", help="tracking figure (Tuna Figs 10-11 style)")
     p.add_argument("--trace", metavar="FILE.npz", help="write every tick to an NPZ file as the "
-                   "run goes (chunked; read it with sim.trace.read_trace)")
+                   "run goes (chunked; read it with sim.loop.trace.read_trace)")
     p.set_defaults(func=run)
 
 
@@ -124,7 +124,7 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
             changes["sensor"] = "recorded"
         changes["data_read"] = recording_options(args)
         if args.duration is None and not args.config:  # default: the whole recording
-            from sim.heart import load_recording
+            from sim.recordings import load_recording
 
             whole = load_recording(args.data, **changes["data_read"]).duration
             changes["loop.duration"] = whole
@@ -159,7 +159,7 @@ def run(args: argparse.Namespace) -> int:
     if trace and not Path(trace).resolve().parent.is_dir():
         raise UsageError(f"--trace {trace}: no such directory")
     try:
-        from rhmpc.studies.bench import GainTick  # the yardstick, timed in the same run
+        from rhmpc.control.yardstick import GainTick  # timed in the same run
 
         result, doc = run_experiment(config, progress=not args.json, trace=trace,
                                      gain_tick=GainTick, implementation=args.controller)

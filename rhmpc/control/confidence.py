@@ -1,4 +1,4 @@
-"""Horizon weights from the predictor's forecast confidence (issue 14, option).
+"""Horizon weights from the predictor's forecast confidence (an option).
 
 The MPC's tracking cost weights every horizon point alike unless ``MPCSettings.point_weights``
 says otherwise (``Q_k = tracking_weight · w_k / position_scale² · I``). A forecast is less

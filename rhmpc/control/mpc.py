@@ -275,12 +275,37 @@ class RecedingHorizonMPC:
         ValueError
             Only for wrong shapes (a programming error); never for non-finite values.
         """
-        clock = time.perf_counter_ns
-        t0 = clock()
+        t0 = time.perf_counter_ns()
         stats = self.stats
         stats.ticks += 1
         stats.level = 0
         stats.box_iterations = 0
+        if not self._set_parameters(x, ref):
+            stats.parts_ns[:] = [time.perf_counter_ns() - t0, 0, 0, 0]
+            stats.iterations = 0
+            stats.solve_time = 0.0
+            return self._fallback("nonfinite_input", inputs_finite=False)
+        if self.qp.param_bounds:
+            np.take(self._p, self._G_cols, out=self._p_cols)
+            np.dot(self._G, self._p_cols, out=self._g)
+            np.subtract(self.qp.l0, self._g, out=self._l)
+            np.subtract(self.qp.u0, self._g, out=self._u)
+        if self._screen and not self._forced:
+            np.dot(self._F_z, self._p_ext, out=self._q_z)
+            if self._screened():
+                return self._screened_output(t0, self._z_star, 1)
+            if self._box_on and self._box_solved():
+                v = np.zeros(self._nv)
+                v[: self._nz] = self.box.z
+                return self._screened_output(t0, v, 2)
+            stats.box_iterations = self.box.iterations if self._box_on else 0
+        else:
+            np.dot(self._F_ext, self._p_ext, out=self._q)
+            stats.box_iterations = 0
+        return self._solver_tick(t0)
+
+    def _set_parameters(self, x: np.ndarray, ref: np.ndarray) -> bool:
+        """Write p = [x; r; u_{−1}; d] (d by the offset correction); False if not finite."""
         x = np.asarray(x, dtype=float)
         ref = np.asarray(ref, dtype=float)
         if x.shape != self._x_shape or ref.shape != self._ref_shape:
@@ -290,55 +315,23 @@ class RecedingHorizonMPC:
             )
         self._p_x[:] = x
         self._p_r2[...] = ref
-        p_ext = self._p_ext
-        if not math.isfinite(np.dot(p_ext, p_ext)):  # NaN, ±inf (or absurd > 1e154)
-            t1 = clock()
-            stats.parts_ns[:] = [t1 - t0, 0, 0, 0]
-            stats.iterations = 0
-            stats.solve_time = 0.0
-            return self._fallback("nonfinite_input", inputs_finite=False)
-
+        if not math.isfinite(np.dot(self._p_ext, self._p_ext)):  # NaN, ±inf (or > 1e154)
+            return False
         if self._offset is not None:
             self._offset(x, out=self._p_d)
-            if not math.isfinite(np.dot(self._p_d, self._p_d)):
-                t1 = clock()
-                stats.parts_ns[:] = [t1 - t0, 0, 0, 0]
-                stats.iterations = 0
-                stats.solve_time = 0.0
-                return self._fallback("nonfinite_input", inputs_finite=False)
-        if self.qp.param_bounds:
-            np.take(self._p, self._G_cols, out=self._p_cols)
-            np.dot(self._G, self._p_cols, out=self._g)
-            np.subtract(self.qp.l0, self._g, out=self._l)
-            np.subtract(self.qp.u0, self._g, out=self._u)
-        if self._screen and not self._forced:
-            np.dot(self._F_z, p_ext, out=self._q_z)
-            if self._screened():
-                return self._screened_output(t0, self._z_star, 1)
-            if self._box_on and self._box_solved():
-                v = np.zeros(self._nv)
-                v[: self._nz] = self.box.z
-                return self._screened_output(t0, v, 2)
-            stats.box_iterations = self.box.iterations if self._box_on else 0
-        else:
-            np.dot(self._F_ext, p_ext, out=self._q)
-            stats.box_iterations = 0
+            return math.isfinite(np.dot(self._p_d, self._p_d))
+        return True
+
+    def _solver_tick(self, t0: int) -> np.ndarray:
+        """Level 3: the configured solver, warm-started; its result or the fallback chain."""
+        clock, stats = time.perf_counter_ns, self.stats
         self._last_screened = False
         self._level = 3
         stats.level = 3
         t1 = clock()
         try:
             self._update_q()
-            if self._ws_pending:
-                self._ws_x, self._ws_y = self._shift @ self._plan, self._y_zero
-                self._ws_pending = False
-            if self._ws == "none":
-                # OSQP 1.x keeps its last iterate even with warm_starting=False (measured: the
-                # same iterations as "keep"); a cold start is an explicit start from v = 0.
-                self._warm_start(self._v_cold, self._y_zero)
-            elif self._ws_x is not None:
-                self._warm_start(self._ws_x, self._ws_y)
-                self._ws_x = self._ws_y = None
+            self._apply_warm_start()
             t2 = clock()
             status, iters, z, y = self._solve()
         except Exception:  # the loop must survive any solver error
@@ -350,33 +343,50 @@ class RecedingHorizonMPC:
         t3 = clock()
         stats.iterations = iters
         stats.solve_time = (t3 - t2) * 1e-9
-
         if self._forced:
             reason = self._forced.pop(0)
-        elif status != SOLVED:
-            reason = STATUS_REASON.get(status, f"status_{status}")
         else:
-            reason = None
+            reason = None if status == SOLVED else STATUS_REASON.get(status, f"status_{status}")
         if reason is None:
             tau = z[: self._nu_] * self._scale0
             if not math.isfinite(np.dot(tau, tau)):
                 reason = "nonfinite_solution"
-        if reason is not None:
-            out = self._fallback(reason, inputs_finite=True)
-            if reason in _CONTINUE and self._ws != "none":
-                # An unfinished solve is a good start for the next, nearly identical QP: carry
-                # the ADMM iterate over instead of restarting from the old plan.
-                z, y = self.last_solution()
-                if not (np.isfinite(z).all() and np.isfinite(y).all()):
-                    pass
-                elif self._ws != "keep":
-                    self._ws_x = self._shift @ z
-                    self._ws_y = self._shift_dual @ y
-                else:
-                    self._ws_x = None  # "keep": OSQP's own iterate
-            stats.parts_ns[:] = [t1 - t0, t2 - t1, t3 - t2, clock() - t3]
-            return out
+        out = self._rejected(reason) if reason is not None else self._accepted(tau, z, y)
+        stats.parts_ns[:] = [t1 - t0, t2 - t1, t3 - t2, clock() - t3]
+        return out
 
+    def _apply_warm_start(self) -> None:
+        """The solver's start: the shifted plan of the last solve, its own iterate, or v = 0."""
+        if self._ws_pending:
+            self._ws_x, self._ws_y = self._shift @ self._plan, self._y_zero
+            self._ws_pending = False
+        if self._ws == "none":
+            # OSQP 1.x keeps its last iterate even with warm_starting=False (measured: the
+            # same iterations as "keep"); a cold start is an explicit start from v = 0.
+            self._warm_start(self._v_cold, self._y_zero)
+        elif self._ws_x is not None:
+            self._warm_start(self._ws_x, self._ws_y)
+            self._ws_x = self._ws_y = None
+
+    def _rejected(self, reason: str) -> np.ndarray:
+        """A solve not used: the fallback's torque; an unfinished iterate starts the next solve."""
+        out = self._fallback(reason, inputs_finite=True)
+        if reason in _CONTINUE and self._ws != "none":
+            # An unfinished solve is a good start for the next, nearly identical QP: carry
+            # the ADMM iterate over instead of restarting from the old plan.
+            z, y = self.last_solution()
+            if not (np.isfinite(z).all() and np.isfinite(y).all()):
+                pass
+            elif self._ws != "keep":
+                self._ws_x = self._shift @ z
+                self._ws_y = self._shift_dual @ y
+            else:
+                self._ws_x = None  # "keep": OSQP's own iterate
+        return out
+
+    def _accepted(self, tau: np.ndarray, z: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """A solved QP: τ clipped to ±u_max, the plan kept, the next warm start prepared."""
+        stats = self.stats
         np.maximum(tau, self._neg_umax, out=tau)
         np.minimum(tau, self.u_max, out=tau)
         if self._nv > self._nz:
@@ -388,15 +398,13 @@ class RecedingHorizonMPC:
         self._p_u[:] = tau  # u_{−1} of the next tick (a copy: the caller owns tau)
         self._plan = z  # a fresh array from OSQP on every access of solution.x
         self._plan_age = 0
-        ws = self._ws
-        if ws == "shift":
+        if self._ws == "shift":
             self._ws_x = self._shift @ z
             self._ws_y = self._shift_dual @ y
-        elif ws == "shift_primal":
+        elif self._ws == "shift_primal":
             self._ws_x = self._shift @ z
         stats.status = "solved"
         stats.source = "qp"
-        stats.parts_ns[:] = [t1 - t0, t2 - t1, t3 - t2, clock() - t3]
         return tau
 
     def _screened_output(self, t0: int, v: np.ndarray, level: int) -> np.ndarray:

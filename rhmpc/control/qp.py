@@ -168,119 +168,133 @@ def build_condensed_qp(arm: LinearArm, settings: MPCSettings) -> CondensedQP:
     """
     _check_arm(arm)
     s = settings
-    A, B, C = (np.asarray(m, dtype=float) for m in (arm.A, arm.B, arm.C))
-    y0 = np.asarray(arm.y0, dtype=float)
-    nx, nu, ny, N = arm.nx, arm.nu, arm.ny, s.horizon
-    nq = nx // 2
+    nx, nu, N = arm.nx, arm.nu, s.horizon
     u_max = (1.0 - s.torque_margin) * np.asarray(arm.torque_limit, dtype=float)
     if not np.all(u_max > 0):
         raise ValueError(f"MPC torque bounds must be > 0, got {u_max}")
     env = envelope_rows(arm, s, u_max)
-
     blocks = s.block_lengths
-    nb = len(blocks)
-    nz = nu * nb
-    ns = env.ns
-    nv = nz + ns
+    nb, nz = len(blocks), nu * len(blocks)
+    nv, npar = nz + env.ns, nx + N * arm.ny + nu + arm.ny
     block_of_tick = np.repeat(np.arange(nb), blocks)
     blocking = np.zeros((N * nu, nz))
     for k, b in enumerate(block_of_tick):
         blocking[k * nu:(k + 1) * nu, b * nu:(b + 1) * nu] = np.diag(u_max)
-    block_ends = np.cumsum(blocks)  # tick index k+1 of the state at each block's end
-
-    w = np.ones(N) if s.point_weights is None else np.asarray(s.point_weights, dtype=float)
-    q_scale = s.tracking_weight / s.position_scale**2
-    R = s.effort_weight * np.diag(1.0 / u_max**2)
-    R_d = s.rate_weight * np.diag(1.0 / u_max**2)
-
-    terminal_weight = None
-    if s.terminal == "dare":
-        if s.effort_weight <= 0:
-            raise ValueError("terminal='dare' needs effort_weight > 0 (R positive definite)")
-        Qx = C.T @ (q_scale * w[-1] * np.eye(ny)) @ C
-        P_inf = scipy.linalg.solve_discrete_are(A, B, Qx, R)
-        terminal_weight = 0.5 * ((P_inf - Qx) + (P_inf - Qx).T)
-        Cq_pinv = np.linalg.pinv(C[:, :nq])
-
-    # -- symbolic formulation ----------------------------------------------------------------
-    npar = nx + N * ny + nu + ny
-    z = ca.SX.sym("z", nz)
-    p = ca.SX.sym("p", npar)
-    x = p[:nx]
-    r = ca.reshape(p[nx:nx + N * ny], ny, N)  # column k = r_{k+1}
-    u_prev = p[nx + N * ny:nx + N * ny + nu]
-    d = p[nx + N * ny + nu:]
-    u_seq = ca.mtimes(ca.DM(blocking), z)
-    Ad, Bd, Cd, Rd, R_dd = ca.DM(A), ca.DM(B), ca.DM(C), ca.DM(R), ca.DM(R_d)
-    Dq, Dv, Dy = ca.DM(env.Dq), ca.DM(env.Dv), ca.DM(env.Dy)
-    cost = 0
-    env_rows = []
-    for k in range(N):
-        u = u_seq[k * nu:(k + 1) * nu]
-        du = u - u_prev
-        cost += ca.bilin(Rd, u, u) + ca.bilin(R_dd, du, du)
-        x = ca.mtimes(Ad, x) + ca.mtimes(Bd, u)
-        y_rel = ca.mtimes(Cd, x) + d  # y − y0
-        e = y_rel + ca.DM(y0) - r[:, k]
-        cost += q_scale * w[k] * ca.dot(e, e)
-        if env.m and (k + 1) in block_ends:
-            env_rows.append(ca.mtimes(Dq, x[:nq]) + ca.mtimes(Dv, x[nq:]) + ca.mtimes(Dy, y_rel))
-        u_prev = u
-    if terminal_weight is not None:
-        x_ss = ca.vertcat(ca.mtimes(ca.DM(Cq_pinv), r[:, N - 1] - ca.DM(y0) - d),
-                          ca.DM.zeros(nq))
-        cost += ca.bilin(ca.DM(terminal_weight), x - x_ss, x - x_ss)
-    g = ca.vertcat(*env_rows) if env_rows else ca.SX.zeros(0, 1)
-
-    hess, grad = ca.hessian(cost, z)
-    outputs = [hess, ca.jacobian(grad, p), grad, ca.jacobian(g, z), ca.jacobian(g, p), g]
-    extract = ca.Function("extract", [z, p], outputs)
-    values = extract(np.zeros(nz), np.zeros(npar))
-    H, F, f0, Jz, Jp, g0 = (np.array(v, dtype=float) for v in values)
-    H = 0.5 * (H + H.T)
-    f0, g0 = f0.ravel(), g0.ravel()
-    if not (np.all(np.isfinite(H)) and np.all(np.isfinite(F)) and np.all(np.isfinite(f0))):
-        raise ValueError("the QP data are not finite; check the weights and the arm")
+    terminal_weight = _terminal_weight(arm, s, u_max)
+    H, F, f0, Jz, Jp, g0 = _extract(arm, s, u_max, env, blocking, terminal_weight)
     try:
         chol = scipy.linalg.cho_factor(H)
     except np.linalg.LinAlgError:
         raise ValueError(
             "the QP Hessian is not positive definite; raise effort_weight or rate_weight"
         ) from None
-
-    # -- the soft envelope: slacks, rows, bounds -------------------------------------------------
+    # the soft envelope: slacks, rows, bounds
     Amat, G, l0, u0 = _constraints(env, Jz.reshape(-1, nz), Jp.reshape(-1, npar), g0, blocks,
                                    arm.Ts, nz)
-    P = scipy.linalg.block_diag(H, s.envelope_quadratic * np.eye(ns))
-    F_all = np.vstack([F, np.zeros((ns, npar))])
-    f0_all = np.concatenate([f0, np.full(ns, s.envelope_penalty)])
-
-    # -- unconstrained minimiser over ẑ with s = 0 (screening, LQ fallback) ----------------------
+    P = scipy.linalg.block_diag(H, s.envelope_quadratic * np.eye(env.ns))
+    F_all = np.vstack([F, np.zeros((env.ns, npar))])
+    f0_all = np.concatenate([f0, np.full(env.ns, s.envelope_penalty)])
+    # the unconstrained minimiser over ẑ with s = 0 (screening, LQ fallback)
     Z = np.zeros((nv, npar + 1))
     Z[:nz] = -scipy.linalg.cho_solve(chol, np.column_stack([F, f0]))
-    gain = u_max[:, None] * Z[:nu, :-1]
-    gain0 = u_max * Z[:nu, -1]
-
-    # -- one-tick shift of a blocked plan, projected back onto the blocks ----------------------
-    S_b = np.zeros((nb, nb))
-    for k in range(N):
-        S_b[block_of_tick[k], block_of_tick[min(k + 1, N - 1)]] += 1.0
-    S_b /= np.asarray(blocks, dtype=float)[:, None]
-    shift = scipy.linalg.block_diag(np.kron(S_b, np.eye(nu)), np.eye(ns))
-    m = Amat.shape[0]
-    shift_dual = np.zeros((m, m))
-    shift_dual[:nv, :nv] = shift
-    if env.m:
-        shift_dual[nv:, nv:] = np.kron(S_b, np.eye(2 * env.m))
-
+    shift, shift_dual = _shift_matrices(blocks, nu, env, Amat.shape[0])
     cols = np.flatnonzero(np.any(G != 0, axis=0))
     return CondensedQP(
         P=P, F=F_all, f0=f0_all, A=Amat, G=G, l0=l0, u0=u0, param_bounds=bool(cols.size),
         bound_columns=cols, u_max=u_max, scale=np.tile(u_max, nb), blocking=blocking,
         block_of_tick=block_of_tick, shift=shift, shift_dual=shift_dual, minimiser=Z,
-        gain=gain, gain0=gain0, terminal_weight=terminal_weight, envelope=env,
-        slack_names=env.names, N=N, nx=nx, nu=nu, ny=ny, nz=nz,
+        gain=u_max[:, None] * Z[:nu, :-1], gain0=u_max * Z[:nu, -1],
+        terminal_weight=terminal_weight, envelope=env, slack_names=env.names, N=N, nx=nx,
+        nu=nu, ny=arm.ny, nz=nz,
     )
+
+
+def _terminal_weight(arm: LinearArm, s: MPCSettings, u_max: np.ndarray) -> np.ndarray | None:
+    """P∞ − Q_x of the DARE for the last point's tracking weight (``terminal="dare"``), or None.
+
+    With Q_x = Cᵀ q w_N C and R = effort_weight·diag(1/u_max²), P∞ solves the discrete algebraic
+    Riccati equation of (A, B, Q_x, R); the terminal cost adds the tail of the infinite horizon.
+    """
+    if s.terminal != "dare":
+        return None
+    if s.effort_weight <= 0:
+        raise ValueError("terminal='dare' needs effort_weight > 0 (R positive definite)")
+    C = np.asarray(arm.C, dtype=float)
+    w_last = 1.0 if s.point_weights is None else float(s.point_weights[-1])
+    Qx = C.T @ (s.tracking_weight / s.position_scale**2 * w_last * np.eye(arm.ny)) @ C
+    R = s.effort_weight * np.diag(1.0 / u_max**2)
+    P_inf = scipy.linalg.solve_discrete_are(np.asarray(arm.A, dtype=float),
+                                            np.asarray(arm.B, dtype=float), Qx, R)
+    return 0.5 * ((P_inf - Qx) + (P_inf - Qx).T)
+
+
+def _extract(arm: LinearArm, s: MPCSettings, u_max: np.ndarray, env, blocking: np.ndarray,
+             terminal_weight: np.ndarray | None) -> tuple[np.ndarray, ...]:
+    """The cost and envelope rows in CasADi, and their derivatives at (z, p) = 0.
+
+    Cost over the horizon, with x_{k+1} = A x_k + B u_k, y_k − y0 = C x_k + d and the blocked
+    inputs u = blocking·z::
+
+        Σ_k  uᵀR u + Δuᵀ R_Δ Δu + q w_k ‖y_k − r_k‖²   (+ the DARE terminal cost)
+
+    Returns H, F = ∂∇J/∂p, f0 = ∇J(0, 0), ∂g/∂z, ∂g/∂p, g(0, 0) (g: the envelope rows).
+    """
+    A, B, C = (ca.DM(np.asarray(m, dtype=float)) for m in (arm.A, arm.B, arm.C))
+    y0 = ca.DM(np.asarray(arm.y0, dtype=float))
+    nx, nu, ny, N, nz = arm.nx, arm.nu, arm.ny, s.horizon, blocking.shape[1]
+    nq, npar = nx // 2, nx + N * ny + nu + ny
+    w = np.ones(N) if s.point_weights is None else np.asarray(s.point_weights, dtype=float)
+    q_scale = s.tracking_weight / s.position_scale**2
+    R = ca.DM(s.effort_weight * np.diag(1.0 / u_max**2))
+    R_d = ca.DM(s.rate_weight * np.diag(1.0 / u_max**2))
+    z, p = ca.SX.sym("z", nz), ca.SX.sym("p", npar)
+    x, r = p[:nx], ca.reshape(p[nx:nx + N * ny], ny, N)  # column k = r_{k+1}
+    u_prev, d = p[nx + N * ny:nx + N * ny + nu], p[nx + N * ny + nu:]
+    u_seq = ca.mtimes(ca.DM(blocking), z)
+    Dq, Dv, Dy = ca.DM(env.Dq), ca.DM(env.Dv), ca.DM(env.Dy)
+    block_ends = set(np.cumsum(s.block_lengths).tolist())  # k+1 of each block's last state
+    cost, env_rows = 0, []
+    for k in range(N):
+        u = u_seq[k * nu:(k + 1) * nu]
+        cost += ca.bilin(R, u, u) + ca.bilin(R_d, u - u_prev, u - u_prev)
+        x = ca.mtimes(A, x) + ca.mtimes(B, u)
+        y_rel = ca.mtimes(C, x) + d  # y − y0
+        e = y_rel + y0 - r[:, k]
+        cost += q_scale * w[k] * ca.dot(e, e)
+        if env.m and (k + 1) in block_ends:
+            env_rows.append(ca.mtimes(Dq, x[:nq]) + ca.mtimes(Dv, x[nq:]) + ca.mtimes(Dy, y_rel))
+        u_prev = u
+    if terminal_weight is not None:
+        Cq_pinv = ca.DM(np.linalg.pinv(np.asarray(arm.C, dtype=float)[:, :nq]))
+        x_ss = ca.vertcat(ca.mtimes(Cq_pinv, r[:, N - 1] - y0 - d), ca.DM.zeros(nq))
+        cost += ca.bilin(ca.DM(terminal_weight), x - x_ss, x - x_ss)
+    g = ca.vertcat(*env_rows) if env_rows else ca.SX.zeros(0, 1)
+    hess, grad = ca.hessian(cost, z)
+    outputs = [hess, ca.jacobian(grad, p), grad, ca.jacobian(g, z), ca.jacobian(g, p), g]
+    values = ca.Function("extract", [z, p], outputs)(np.zeros(nz), np.zeros(npar))
+    H, F, f0, Jz, Jp, g0 = (np.array(v, dtype=float) for v in values)
+    H = 0.5 * (H + H.T)
+    if not (np.all(np.isfinite(H)) and np.all(np.isfinite(F)) and np.all(np.isfinite(f0))):
+        raise ValueError("the QP data are not finite; check the weights and the arm")
+    return H, F, f0.ravel(), Jz, Jp, g0.ravel()
+
+
+def _shift_matrices(blocks, nu: int, env, m: int) -> tuple[np.ndarray, np.ndarray]:
+    """The one-tick shift of a blocked plan (primal, and dual over all m rows), projected back
+    onto the blocks: S_b[b(k), b(k+1)] = 1/len(b(k)) summed over the ticks k of each block."""
+    nb, N = len(blocks), int(np.sum(blocks))
+    block_of_tick = np.repeat(np.arange(nb), blocks)
+    S_b = np.zeros((nb, nb))
+    for k in range(N):
+        S_b[block_of_tick[k], block_of_tick[min(k + 1, N - 1)]] += 1.0
+    S_b /= np.asarray(blocks, dtype=float)[:, None]
+    shift = scipy.linalg.block_diag(np.kron(S_b, np.eye(nu)), np.eye(env.ns))
+    nv = shift.shape[0]
+    shift_dual = np.zeros((m, m))
+    shift_dual[:nv, :nv] = shift
+    if env.m:
+        shift_dual[nv:, nv:] = np.kron(S_b, np.eye(2 * env.m))
+    return shift, shift_dual
 
 
 def _constraints(

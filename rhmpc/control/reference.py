@@ -194,7 +194,7 @@ class PredictedReference:
             raise ValueError(f"predictor dt {predictor.dt} s != downsample·Ts = {self.dt} s")
         self.prediction_points = prediction_points
         #: optional ``observe(t, heart_rate_hz)`` scorer of the predictor's heart-rate estimate
-        #: (:class:`sim.metrics.HeartRateScore`), called after every forecast
+        #: (:class:`sim.loop.metrics.HeartRateScore`), called after every forecast
         self.monitor = None
         # ticks a refresh covers: its period, plus one so that a pipelined loop can read the
         # next refresh tick's points from it while that refresh runs
@@ -341,7 +341,7 @@ class ExactReference:
 
     ``truth`` is the centred POI position at every tick of the run plus a horizon's margin: an
     array (n, d), or a truth read in windows (``window(i0, i1)``, ``n_ticks``:
-    :class:`sim.streams.SourceTruth`), which keeps memory flat in run length. Gaps in it (NaN:
+    :class:`sim.loop.streams.SourceTruth`), which keeps memory flat in run length. Gaps in it (NaN:
     dropouts of a recorded stream used as the truth) are bridged linearly between the finite
     ticks around them (constant before the first and after the last), so that the MPC is never
     handed NaN; the metrics still skip those ticks. Read in windows of ``window`` ticks, forward
@@ -350,7 +350,7 @@ class ExactReference:
 
     def __init__(self, truth, horizon: int, window: int = 8192) -> None:
         if not hasattr(truth, "window"):
-            from sim.streams import ArrayTruth
+            from sim.loop.streams import ArrayTruth
 
             array = np.array(truth, dtype=float)
             if not np.all(np.isfinite(array).any(axis=0)):

@@ -220,6 +220,16 @@ class MPCSettings:
             value = getattr(self, name)
             if value is not None:
                 object.__setattr__(self, name, tuple(value))
+        self._check_horizon()
+        self._check_weights()
+        self._check_envelope()
+        self._check_solver()
+        for name in ("adaptive_rho", "check_dualgap", "polish", "screening", "box_screening",
+                     "offset_correction", "joint_envelope"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"{name} must be true or false, got {getattr(self, name)!r}")
+
+    def _check_horizon(self) -> None:
         _integer("horizon", self.horizon, 1)
         if self.blocks is not None:
             if len(self.blocks) == 0:
@@ -230,6 +240,8 @@ class MPCSettings:
                 raise ValueError(
                     f"move blocks must sum to the horizon {self.horizon}, got {sum(self.blocks)}"
                 )
+
+    def _check_weights(self) -> None:
         _finite("position_scale", self.position_scale, positive=True)
         _finite("tracking_weight", self.tracking_weight, positive=True)
         if self.point_weights is not None:
@@ -248,6 +260,8 @@ class MPCSettings:
         _finite("torque_margin", self.torque_margin, nonneg=True)
         if self.torque_margin >= 1:
             raise ValueError(f"torque_margin must be < 1 (a fraction), got {self.torque_margin}")
+
+    def _check_envelope(self) -> None:
         if (self.joint_lower is None) != (self.joint_upper is None):
             raise ValueError("give both joint_lower and joint_upper, or neither")
         if self.joint_lower is not None:
@@ -276,6 +290,8 @@ class MPCSettings:
         _finite("cartesian_depth", self.cartesian_depth)
         _finite("envelope_penalty", self.envelope_penalty, positive=True)
         _finite("envelope_quadratic", self.envelope_quadratic, positive=True)
+
+    def _check_solver(self) -> None:
         if self.solver not in SOLVERS:
             raise ValueError(f"solver must be one of {SOLVERS}, got {self.solver!r}")
         _finite("eps_abs", self.eps_abs, nonneg=True)
@@ -295,11 +311,6 @@ class MPCSettings:
             raise ValueError(f"warm_start must be one of {WARM_STARTS}, got {self.warm_start!r}")
         _integer("plan_fallback_ticks", self.plan_fallback_ticks, 0)
         _integer("box_max_iter", self.box_max_iter, 1)
-        for name in ("adaptive_rho", "check_dualgap", "polish", "screening", "box_screening",
-                     "offset_correction",
-                     "joint_envelope"):
-            if not isinstance(getattr(self, name), bool):
-                raise ValueError(f"{name} must be true or false, got {getattr(self, name)!r}")
 
     @property
     def block_lengths(self) -> tuple[int, ...]:

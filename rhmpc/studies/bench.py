@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import dataclasses
 import gc
-import math
 import platform
 import time
 from collections.abc import Callable
@@ -33,8 +32,8 @@ from importlib.metadata import version as _version
 import numpy as np
 
 from rhmpc.control.mpc import RecedingHorizonMPC
-from rhmpc.control.offset import OutputOffset
 from rhmpc.control.settings import MPCSettings, to_dict
+from rhmpc.control.yardstick import GainTick, QPParameters
 from robots import linearize, load_robot
 from robots.linearize import LinearArm
 
@@ -93,47 +92,6 @@ def heart_like_reference(
     return np.asarray(center, dtype=float) + out
 
 
-class _Params:
-    """p = [x; r_1..r_N; u_{−1}; d] in a preallocated buffer, d by forward kinematics as in the
-    controller (:class:`rhmpc.control.offset.OutputOffset`), so both references solve the QP the
-    controller solves."""
-
-    def __init__(self, mpc: RecedingHorizonMPC) -> None:
-        qp = mpc.qp
-        self.p = np.zeros(qp.npar)
-        self._nx, self._nr, self._nu = qp.nx, qp.N * qp.ny, qp.nu
-        self._d = self.p[self._nx + self._nr + self._nu :]
-        self._offset = OutputOffset(mpc.arm) if mpc.settings.offset_correction else None
-
-    def fill(self, x: np.ndarray, ref: np.ndarray, u_prev: np.ndarray) -> bool:
-        """Write p; False if it is not finite."""
-        p = self.p
-        p[: self._nx] = x
-        p[self._nx : self._nx + self._nr] = ref.reshape(-1)
-        p[self._nx + self._nr : self._nx + self._nr + self._nu] = u_prev
-        if self._offset is not None:
-            self._offset(x, out=self._d)
-        return math.isfinite(p.sum())
-
-
-class GainTick:
-    """Reference 1: the precomputed unconstrained gain, clipped (same parameter handling)."""
-
-    def __init__(self, mpc: RecedingHorizonMPC) -> None:
-        qp = mpc.qp
-        self._params = _Params(mpc)
-        self._K, self._k0 = qp.gain, qp.gain0
-        self._lo, self._hi = -qp.u_max, qp.u_max
-
-    def __call__(self, x: np.ndarray, ref: np.ndarray, u_prev: np.ndarray) -> np.ndarray:
-        if not self._params.fill(x, ref, u_prev):
-            return np.zeros_like(self._k0)
-        u = self._K @ self._params.p
-        u += self._k0
-        np.maximum(u, self._lo, out=u)
-        return np.minimum(u, self._hi, out=u)
-
-
 class ExactTick:
     """Reference 2: the same QP solved exactly by DAQP (active set, hot-started)."""
 
@@ -146,7 +104,7 @@ class ExactTick:
             ) from None
         qp = mpc.qp
         self._qp = qp
-        self._params = _Params(mpc)
+        self._params = QPParameters(mpc)
         self._f = np.empty(qp.nv)
         self._nu, self._nv = qp.nu, qp.nv
         self._lo = -qp.u_max
@@ -200,6 +158,63 @@ def _ratio(a: np.ndarray, b: np.ndarray) -> dict[str, float]:
     }
 
 
+class _Ticks:
+    """One run of the benchmark: the controllers it times and a column per measured figure."""
+
+    COLUMNS = ("tick_ns", "every_ns", "gain_ns", "exact_ns", "parts_ns", "iters", "exact_iters",
+               "u0_err", "every_err", "active", "screened", "level", "box_iters", "err",
+               "c_ns", "c_call_ns", "c_err", "c_level")
+
+    def __init__(self, mpc: RecedingHorizonMPC, compiled, total: int) -> None:
+        arm = mpc.arm
+        self.mpc, self.compiled, self.arm = mpc, compiled, arm
+        self.every = RecedingHorizonMPC(arm, dataclasses.replace(mpc.settings, screening=False))
+        self.gain, self.exact = GainTick(mpc), ExactTick(mpc)
+        self.tau_max = np.asarray(arm.torque_limit, dtype=float)
+        for name in self.COLUMNS:
+            shape = (total, 4) if name == "parts_ns" else total
+            dtype = float if name.endswith("err") else bool if name in ("active", "screened") \
+                else np.int64
+            setattr(self, name, np.zeros(shape, dtype=dtype))
+        self.exact_failures = self.c_mismatch = 0
+
+    def tick(self, k: int, x: np.ndarray, ref: np.ndarray) -> np.ndarray:
+        """Time every controller on tick ``k`` with state ``x`` and points ``ref``; returns τ."""
+        mpc, every, exact, clock = self.mpc, self.every, self.exact, time.perf_counter_ns
+        u_prev, n_screened = mpc.u_prev, mpc.stats.screened
+        t0 = clock()
+        tau = mpc.step(x, ref)
+        t1 = clock()
+        self.gain(x, ref, u_prev)
+        t2 = clock()
+        u_exact = exact(x, ref, u_prev)
+        t3 = clock()
+        every.u_prev = u_prev  # the same QP as the default controller's and DAQP's
+        tau_every = every.step(x, ref)
+        t4 = clock()
+        if self.compiled is not None:
+            self._compiled_tick(k, x, ref, tau)
+        self.tick_ns[k], self.gain_ns[k], self.exact_ns[k] = t1 - t0, t2 - t1, t3 - t2
+        self.every_ns[k] = t4 - t3
+        self.screened[k] = mpc.stats.screened > n_screened
+        self.level[k], self.box_iters[k] = mpc.stats.level, mpc.stats.box_iterations
+        self.parts_ns[k], self.iters[k] = every.stats.parts_ns, every.stats.iterations
+        self.exact_iters[k] = exact.iterations
+        self.exact_failures += exact.exitflag < 0
+        self.active[k] = bool(np.any(np.abs(exact.zhat) >= 1.0 - 1e-9))
+        self.u0_err[k] = float(np.max(np.abs(tau - u_exact) / self.tau_max))
+        self.every_err[k] = float(np.max(np.abs(tau_every - u_exact) / self.tau_max))
+        return tau
+
+    def _compiled_tick(self, k: int, x: np.ndarray, ref: np.ndarray, tau: np.ndarray) -> None:
+        compiled, stats = self.compiled, self.mpc.stats
+        tau_c = compiled.step(x, ref)
+        self.c_level[k] = compiled.level
+        self.c_ns[k], self.c_call_ns[k] = compiled.tick_ns, compiled.call_ns
+        self.c_err[k] = float(np.max(np.abs(tau_c - tau) / self.tau_max))
+        self.c_mismatch += compiled.source != stats.source or compiled.status != stats.status
+
+
 def run_bench(
     robot: str = "phantom",
     ticks: int = 20_000,
@@ -244,170 +259,111 @@ def run_bench(
     t_build = time.perf_counter()
     mpc = RecedingHorizonMPC(arm, settings)
     build_s = time.perf_counter() - t_build
-    every = RecedingHorizonMPC(arm, dataclasses.replace(settings, screening=False))
-    gain, exact = GainTick(mpc), ExactTick(mpc)
     compiled = None
     if controller == "c":
         from rhmpc.control.export import compiled_controller
 
         compiled = compiled_controller(mpc, robot if arm is None else f"{robot}-custom", cache)
-    N, nu = mpc.N, mpc.nu
     total = warmup + ticks
-    rng = np.random.default_rng(seed)
-    traj = heart_like_reference(
-        total + N + 1, arm.Ts, rng, arm.y0, jump=jump, jump_every=jump_every
-    )
+    run = _Ticks(mpc, compiled, total)
+    traj = heart_like_reference(total + mpc.N + 1, arm.Ts, np.random.default_rng(seed), arm.y0,
+                                jump=jump, jump_every=jump_every)
     x = np.zeros(arm.nx)
-    x[: nu] = np.linalg.pinv(arm.C[:, :nu]) @ (traj[0] - arm.y0)
-    tau_max = np.asarray(arm.torque_limit, dtype=float)
-
-    tick_ns = np.zeros(total, dtype=np.int64)
-    every_ns = np.zeros(total, dtype=np.int64)
-    every_err = np.zeros(total)
-    screened = np.zeros(total, dtype=bool)
-    parts_ns = np.zeros((total, 4), dtype=np.int64)
-    gain_ns = np.zeros(total, dtype=np.int64)
-    exact_ns = np.zeros(total, dtype=np.int64)
-    iters = np.zeros(total, dtype=np.int64)
-    exact_iters = np.zeros(total, dtype=np.int64)
-    u0_err = np.zeros(total)
-    active = np.zeros(total, dtype=bool)
-    err = np.zeros(total)
-    exact_fail = 0
-    c_ns = np.zeros(total, dtype=np.int64)
-    c_call_ns = np.zeros(total, dtype=np.int64)
-    c_err = np.zeros(total)
-    c_osqp = np.zeros(total, dtype=bool)
-    level = np.zeros(total, dtype=np.int64)
-    box_iters = np.zeros(total, dtype=np.int64)
-    c_level = np.zeros(total, dtype=np.int64)
-    c_mismatch = 0
-    clock = time.perf_counter_ns
+    x[: mpc.nu] = np.linalg.pinv(arm.C[:, : mpc.nu]) @ (traj[0] - arm.y0)
     gc_was_enabled = gc.isenabled()
     if disable_gc:
         gc.collect()
         gc.disable()
     try:
         for k in range(total):
-            ref = traj[k + 1 : k + 1 + N]
-            u_prev = mpc.u_prev
-            n_screened = mpc.stats.screened
-            t0 = clock()
-            tau = mpc.step(x, ref)
-            t1 = clock()
-            gain(x, ref, u_prev)
-            t2 = clock()
-            u_exact = exact(x, ref, u_prev)
-            t3 = clock()
-            every.u_prev = u_prev  # the same QP as the default controller's and DAQP's
-            tau_every = every.step(x, ref)
-            t4 = clock()
-            if compiled is not None:
-                tau_c = compiled.step(x, ref)
-                c_osqp[k] = compiled.level == 3
-                c_level[k] = compiled.level
-                c_ns[k], c_call_ns[k] = compiled.tick_ns, compiled.call_ns
-                c_err[k] = float(np.max(np.abs(tau_c - tau) / tau_max))
-                if compiled.source != mpc.stats.source or compiled.status != mpc.stats.status:
-                    c_mismatch += 1
-            tick_ns[k], gain_ns[k], exact_ns[k], every_ns[k] = t1 - t0, t2 - t1, t3 - t2, t4 - t3
-            screened[k] = mpc.stats.screened > n_screened
-            level[k] = mpc.stats.level
-            box_iters[k] = mpc.stats.box_iterations
-            parts_ns[k] = every.stats.parts_ns
-            iters[k] = every.stats.iterations
-            exact_iters[k] = exact.iterations
-            if exact.exitflag < 0:
-                exact_fail += 1
-            active[k] = bool(np.any(np.abs(exact.zhat) >= 1.0 - 1e-9))
-            u0_err[k] = float(np.max(np.abs(tau - u_exact) / tau_max))
-            every_err[k] = float(np.max(np.abs(tau_every - u_exact) / tau_max))
+            tau = run.tick(k, x, traj[k + 1 : k + 1 + mpc.N])
             x = arm.A @ x + arm.B @ tau
-            err[k] = float(np.linalg.norm(arm.C @ x + arm.y0 - traj[k + 1]))
+            run.err[k] = float(np.linalg.norm(arm.C @ x + arm.y0 - traj[k + 1]))
             if progress is not None and (k + 1) % 1000 == 0:
                 progress(k + 1, total)
     finally:
         if disable_gc and gc_was_enabled:
             gc.enable()
+    header = {"robot": robot, "ticks": ticks, "warmup_ticks": warmup, "seed": seed,
+              "gc_disabled": disable_gc, "build_s": build_s}
+    result = {**header, **_summary(run, slice(warmup, total)), "settings": to_dict(settings)}
+    if compiled is not None:
+        result.update(_compiled_summary(run, slice(warmup, total)))
+    return result
 
-    sl = slice(warmup, total)
+
+def _summary(run: _Ticks, sl: slice) -> dict:
+    """The Python controller's figures over the timed ticks ``sl``."""
     us = 1e-3
-    tick = tick_ns[sl] * us
-    g, e = gain_ns[sl] * us, exact_ns[sl] * us
-    result = {
-        "robot": robot,
-        "ticks": ticks,
-        "warmup_ticks": warmup,
-        "seed": seed,
-        "gc_disabled": disable_gc,
-        "build_s": build_s,
-        "nz": mpc.qp.nz,
+    tick, g, e = run.tick_ns[sl] * us, run.gain_ns[sl] * us, run.exact_ns[sl] * us
+    level, every = run.level[sl], run.every_ns[sl] * us
+    u0, parts = run.u0_err[sl], run.parts_ns[sl] * us
+    return {
+        "nz": run.mpc.qp.nz,
         "tick_us": _pct(tick),
-        "screened_ticks": int(screened[sl].sum()),
+        "screened_ticks": int(run.screened[sl].sum()),
         # the screening cascade: ticks settled by each level (1 unconstrained minimiser, 2 the
         # torque-box QP, 3 the configured solver; 0 = no QP) and the MPC tick per level
-        "levels": {str(v): int(np.sum(level[sl] == v)) for v in (0, 1, 2, 3)},
-        "level_tick_us": {str(v): _pct(tick[level[sl] == v]) for v in (1, 2, 3)
-                          if np.any(level[sl] == v)},
-        "box_iterations": _pct(box_iters[sl][level[sl] == 2]) if np.any(level[sl] == 2)
-        else None,
-        "osqp_tick_us": _pct(every_ns[sl] * us),
-        "osqp_u0_error_max_frac": float(every_err[sl].max()),
-        "reference_us": _pct(parts_ns[sl, 0] * us),
-        "update_us": _pct(parts_ns[sl, 1] * us),
-        "solve_us": _pct(parts_ns[sl, 2] * us),
-        "output_us": _pct(parts_ns[sl, 3] * us),
-        "iterations": _pct(iters[sl]),
+        "levels": {str(v): int(np.sum(level == v)) for v in (0, 1, 2, 3)},
+        "level_tick_us": {str(v): _pct(tick[level == v]) for v in (1, 2, 3)
+                          if np.any(level == v)},
+        "box_iterations": _pct(run.box_iters[sl][level == 2]) if np.any(level == 2) else None,
+        "osqp_tick_us": _pct(every),
+        "osqp_u0_error_max_frac": float(run.every_err[sl].max()),
+        **{f"{name}_us": _pct(parts[:, i])
+           for i, name in enumerate(("reference", "update", "solve", "output"))},
+        "iterations": _pct(run.iters[sl]),
         "gain_tick_us": _pct(g),
         "exact_tick_us": _pct(e),
-        "exact_iterations": _pct(exact_iters[sl]),
-        "exact_failures": exact_fail,
+        "exact_iterations": _pct(run.exact_iters[sl]),
+        "exact_failures": int(run.exact_failures),
         "ratio_tick_to_gain": _ratio(tick, g),
         "ratio_tick_to_exact": _ratio(tick, e),
-        "ratio_osqp_tick_to_gain": _ratio(every_ns[sl] * us, g),
+        "ratio_osqp_tick_to_gain": _ratio(every, g),
         "controller": "python",
-        "fallbacks": dict(mpc.stats.fallbacks),
-        "failures": dict(mpc.stats.failures),
-        "osqp_fallbacks": dict(every.stats.fallbacks),
-        "u0_error_max_frac": float(u0_err[sl].max()),
-        "u0_error_p99_frac": float(np.percentile(u0_err[sl], 99)),
+        "fallbacks": dict(run.mpc.stats.fallbacks),
+        "failures": dict(run.mpc.stats.failures),
+        "osqp_fallbacks": dict(run.every.stats.fallbacks),
+        "u0_error_max_frac": float(u0.max()),
+        "u0_error_p99_frac": float(np.percentile(u0, 99)),
         # on the ticks levels 1 and 2 settled (exact, so rounding only against DAQP)
-        "u0_error_cascade_max_frac": float(u0_err[sl][(level[sl] == 1) | (level[sl] == 2)].max(
-            initial=0.0)),
-        "active_bound_ticks": int(active[sl].sum()),
-        "tracking_rms_mm": float(1e3 * np.sqrt(np.mean(err[sl] ** 2))),
-        "tracking_max_mm": float(1e3 * err[sl].max()),
-        "settings": to_dict(settings),
-        "versions": {
-            "python": platform.python_version(),
-            "numpy": np.__version__,
-            "osqp": _version("osqp"),
-            "daqp": _version("daqp"),
-        },
+        "u0_error_cascade_max_frac": float(u0[(level == 1) | (level == 2)].max(initial=0.0)),
+        "active_bound_ticks": int(run.active[sl].sum()),
+        "tracking_rms_mm": float(1e3 * np.sqrt(np.mean(run.err[sl] ** 2))),
+        "tracking_max_mm": float(1e3 * run.err[sl].max()),
+        "versions": {"python": platform.python_version(), "numpy": np.__version__,
+                     "osqp": _version("osqp"), "daqp": _version("daqp")},
     }
-    if compiled is not None:
-        c = c_ns[sl] * us
-        result.update({
-            "controller": "c",
-            "c_tick_us": _pct(c),
-            "c_tick_python_us": _pct(c_call_ns[sl] * us),
-            # the split that explains the tail: ticks on which OSQP ran (level 3) vs ticks the
-            # screening cascade settled (levels 1 and 2)
-            "c_osqp_ticks": int(c_osqp[sl].sum()),
-            "c_levels": {str(v): int(np.sum(c_level[sl] == v)) for v in (0, 1, 2, 3)},
-            "c_level_tick_us": {str(v): _pct(c[c_level[sl] == v]) for v in (1, 2, 3)
-                                if np.any(c_level[sl] == v)},
-            "c_osqp_tick_us": _pct(c[c_osqp[sl]]) if c_osqp[sl].any() else None,
-            "c_screened_tick_us": _pct(c[~c_osqp[sl]]) if (~c_osqp[sl]).any() else None,
-            "c_vs_python_max_frac": float(c_err.max()),  # warm-up included
-            "c_mismatched_ticks": c_mismatch,
-            "c_fallbacks": dict(compiled.stats.fallbacks),
-            "c_failures": dict(compiled.stats.failures),
-            "ratio_c_tick_to_python": _ratio(c, tick),
-            "ratio_c_tick_to_gain": _ratio(c, g),
-            "c_library": compiled.library,
-        })
-    return result
+
+
+def _compiled_summary(run: _Ticks, sl: slice) -> dict:
+    """The compiled controller's figures over the timed ticks ``sl``."""
+    us = 1e-3
+    c, tick, g = run.c_ns[sl] * us, run.tick_ns[sl] * us, run.gain_ns[sl] * us
+    level = run.c_level[sl]
+    osqp = level == 3
+    compiled = run.compiled
+    return {
+        "controller": "c",
+        "c_tick_us": _pct(c),
+        "c_tick_python_us": _pct(run.c_call_ns[sl] * us),
+        # the split that explains the tail: ticks on which OSQP ran (level 3) vs ticks the
+        # screening cascade settled (levels 1 and 2)
+        "c_osqp_ticks": int(osqp.sum()),
+        "c_levels": {str(v): int(np.sum(level == v)) for v in (0, 1, 2, 3)},
+        "c_level_tick_us": {str(v): _pct(c[level == v]) for v in (1, 2, 3)
+                            if np.any(level == v)},
+        "c_osqp_tick_us": _pct(c[osqp]) if osqp.any() else None,
+        "c_screened_tick_us": _pct(c[~osqp]) if (~osqp).any() else None,
+        "c_vs_python_max_frac": float(run.c_err.max()),  # warm-up included
+        "c_mismatched_ticks": int(run.c_mismatch),
+        "c_fallbacks": dict(compiled.stats.fallbacks),
+        "c_failures": dict(compiled.stats.failures),
+        "ratio_c_tick_to_python": _ratio(c, tick),
+        "ratio_c_tick_to_gain": _ratio(c, g),
+        "c_library": compiled.library,
+    }
+
 
 _ROWS = (
     ("MPC tick (screening cascade)", "tick_us"),

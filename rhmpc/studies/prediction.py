@@ -34,7 +34,7 @@ from __future__ import annotations
 import math
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -415,12 +415,6 @@ def plot_study(result: dict, path: str | Path) -> Path:
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return path
-
-
-def summarise(values: Sequence[float]) -> str:
-    """'mean ± std' of ``values``."""
-    v = np.asarray(values, dtype=float)
-    return f"{v.mean():.3f} ± {v.std():.3f}" if v.size else "n/a"
 
 
 def parse_float_list(text: str) -> tuple[float, ...]:

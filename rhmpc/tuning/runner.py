@@ -154,86 +154,106 @@ def run_sweep(
     SweepOutcome
         Counts; ``interrupted`` is set instead of propagating ``KeyboardInterrupt``.
     """
-    queue = deque(tasks)
-    outcome = SweepOutcome(submitted=len(queue))
-    inflight: dict[Future, Task] = {}
-    attempts: dict[str, int] = {}
-    window = max(1, int(window))
+    sweep = _Sweep(deque(tasks), writer, executor_factory, max(1, int(window)), evaluate,
+                   extra, on_result, max_attempts)
     start = time.perf_counter()
+    executor = executor_factory()
+    try:
+        while sweep.queue or sweep.inflight:
+            broken = sweep.submit(executor)
+            if not broken:
+                done, _ = wait(list(sweep.inflight), return_when=FIRST_COMPLETED)
+                for fut in done:
+                    broken |= sweep.settle(fut, sweep.inflight.pop(fut))
+            if broken:
+                executor = sweep.restart(executor)
+    except KeyboardInterrupt:
+        sweep.interrupt(executor)
+    else:
+        executor.shutdown(wait=True)
+    sweep.outcome.elapsed_s = time.perf_counter() - start
+    return sweep.outcome
 
-    def finish(record: dict) -> None:
-        writer.append(record)
-        outcome.records.append(record)
+
+class _Sweep:
+    """The state of :func:`run_sweep`: the queue, what is in flight, attempts, the outcome."""
+
+    def __init__(self, queue: deque, writer: ResultsWriter,
+                 executor_factory: Callable[[], Executor], window: int,
+                 evaluate: Callable[..., dict], extra: dict | None,
+                 on_result: Callable[[dict], None] | None, max_attempts: int) -> None:
+        self.queue, self.writer, self.executor_factory = queue, writer, executor_factory
+        self.window, self.evaluate, self.extra = window, evaluate, extra
+        self.on_result, self.max_attempts = on_result, max_attempts
+        self.outcome = SweepOutcome(submitted=len(queue))
+        self.inflight: dict[Future, Task] = {}
+        self.attempts: dict[str, int] = {}
+
+    def record(self, record: dict) -> None:
+        """Append a finished record to the file and the outcome's counts."""
+        self.writer.append(record)
+        self.outcome.records.append(record)
         if record.get("status") == "ok":
-            outcome.ok += 1
+            self.outcome.ok += 1
         else:
-            outcome.failed += 1
-        if on_result is not None:
-            on_result(record)
+            self.outcome.failed += 1
 
-    def settle(fut: Future, task: Task) -> bool:
+    def finish(self, record: dict) -> None:
+        self.record(record)
+        if self.on_result is not None:
+            self.on_result(record)
+
+    def submit(self, executor: Executor) -> bool:
+        """Fill the window; True if the executor turned out to be broken."""
+        while self.queue and len(self.inflight) < self.window:
+            task = self.queue.popleft()
+            try:
+                self.inflight[executor.submit(self.evaluate, task, self.extra)] = task
+            except BrokenExecutor:
+                self.queue.appendleft(task)
+                return True
+        return False
+
+    def settle(self, fut: Future, task: Task) -> bool:
         """Handle one completed future; True if it showed the executor is broken."""
         try:
             record = fut.result()
         except CancelledError:
-            queue.appendleft(task)
+            self.queue.appendleft(task)
             return False
         except BrokenExecutor as exc:
-            attempts[task.key] = attempts.get(task.key, 0) + 1
-            if attempts[task.key] < max_attempts:
-                queue.appendleft(task)
+            self.attempts[task.key] = n = self.attempts.get(task.key, 0) + 1
+            if n < self.max_attempts:
+                self.queue.appendleft(task)
             else:
-                finish(record_for(task, "failed", **(extra or {}),
-                                  error=f"worker died {attempts[task.key]} times while running "
-                                  f"this evaluation ({type(exc).__name__}: {exc})"))
+                self.finish(record_for(task, "failed", **(self.extra or {}),
+                                       error=f"worker died {n} times while running this "
+                                       f"evaluation ({type(exc).__name__}: {exc})"))
             return True
         except Exception as exc:  # the executor could not run it (e.g. dask KilledWorker)
-            finish(record_for(task, "failed", **(extra or {}),
-                              error=f"{type(exc).__name__}: {exc}"))
+            self.finish(record_for(task, "failed", **(self.extra or {}),
+                                   error=f"{type(exc).__name__}: {exc}"))
             return False
-        finish(record)
+        self.finish(record)
         return False
 
-    executor = executor_factory()
-    try:
-        while queue or inflight:
-            broken = False
-            while queue and len(inflight) < window:
-                task = queue.popleft()
-                try:
-                    inflight[executor.submit(evaluate, task, extra)] = task
-                except BrokenExecutor:
-                    queue.appendleft(task)
-                    broken = True
-                    break
-            if not broken:
-                done, _ = wait(list(inflight), return_when=FIRST_COMPLETED)
-                for fut in done:
-                    broken |= settle(fut, inflight.pop(fut))
-            if broken:
-                # every evaluation in flight is lost with the pool: collect them, start afresh
-                done, _ = wait(list(inflight))
-                for fut in done:
-                    settle(fut, inflight.pop(fut))
-                executor.shutdown(wait=True)
-                executor = executor_factory()
-                outcome.pool_restarts += 1
-    except KeyboardInterrupt:
-        outcome.interrupted = True
-        # keep whatever finished meanwhile, then stop the rest
-        for fut in [f for f in inflight if f.done() and not f.cancelled()]:
-            task = inflight.pop(fut)
+    def restart(self, executor: Executor) -> Executor:
+        """Every evaluation in flight is lost with a broken pool: collect them, start afresh."""
+        done, _ = wait(list(self.inflight))
+        for fut in done:
+            self.settle(fut, self.inflight.pop(fut))
+        executor.shutdown(wait=True)
+        self.outcome.pool_restarts += 1
+        return self.executor_factory()
+
+    def interrupt(self, executor: Executor) -> None:
+        """Ctrl-C: keep whatever finished meanwhile, then stop the rest."""
+        self.outcome.interrupted = True
+        for fut in [f for f in self.inflight if f.done() and not f.cancelled()]:
+            self.inflight.pop(fut)
             try:
                 record = fut.result()
             except BaseException:  # unfinished or broken: left for the resume
                 continue
-            writer.append(record)
-            outcome.records.append(record)
-            outcome.ok += record.get("status") == "ok"
-            outcome.failed += record.get("status") != "ok"
-        _stop(executor, inflight)
-        outcome.elapsed_s = time.perf_counter() - start
-        return outcome
-    executor.shutdown(wait=True)
-    outcome.elapsed_s = time.perf_counter() - start
-    return outcome
+            self.record(record)
+        _stop(executor, self.inflight)

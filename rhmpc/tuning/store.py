@@ -11,7 +11,6 @@ from __future__ import annotations
 import fcntl
 import json
 import os
-from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -121,10 +120,6 @@ class ResultsWriter:
             raise RuntimeError("ResultsWriter is not open")
         line = json.dumps(record, separators=(",", ":"), allow_nan=True) + "\n"
         self._write(line.encode())
-
-    def append_all(self, records: Iterable[dict]) -> None:
-        for r in records:
-            self.append(r)
 
     def _write(self, data: bytes) -> None:
         assert self._fd is not None

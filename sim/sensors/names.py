@@ -93,53 +93,62 @@ def sensor_from_name(name: str, rate: float | None = None, latency: float | None
     """
     if playback not in PLAYBACKS:
         raise ValueError(f"unknown playback {playback!r}; valid: {', '.join(PLAYBACKS)}")
-    delivery = None if upsample is None else _playback(upsample, playback)
+    build = _BUILDERS.get(name)
+    if build is None:
+        raise ValueError(f"unknown sensor {name!r}; valid names: {', '.join(SENSORS)}")
     if physics and name != "sonomicrometry":
         raise TypeError(f"sensor {name!r} has no setting(s) {', '.join(sorted(physics))}")
-    if name == "sonomicrometry":
-        if noise is not None:
-            raise TypeError("sonomicrometry has no 'noise' setting: its errors come from its "
-                            "physics (use the 'white' sensor for additive noise)")
-        kw: dict = {"dropouts": dropouts, "upsample": delivery, **_physics(physics)}
-        if rate is not None:
-            kw["rate"] = float(rate)
-        if latency is not None:
-            kw["latency"] = float(latency)
-        if not outliers:
-            kw["slip_rate"] = 0.0
-        return sonomicrometry(SonomicrometrySettings(**kw), dim)
-    if name == "white":
-        kw = {"dropouts": dropouts, "upsample": delivery}
-        if rate is not None:
-            kw["rate"] = float(rate)
-        if latency is not None:
-            kw["latency"] = float(latency)
-        if noise is not None:
-            kw["accuracy"] = float(noise) * dim**0.5
-        if not outliers:
-            kw["outliers"] = None
-        return white(replace(WhiteSettings(), **kw), dim)
-    if name == "ultrasound":
-        cfg_us = UltrasoundSettings(dropouts=dropouts)
-        kw = {}
-        if rate is not None:
-            kw["rate"] = float(rate)
-        if latency is not None:
-            kw["latency"] = float(latency)
-        if noise is not None:
-            kw["noise_std"] = float(noise)
-        sensor = ultrasound(replace(cfg_us, **kw))
-        return sensor.with_stages(delivery) if delivery is not None else sensor
-    if name == "ideal":
-        stages: tuple = ()
-        if dropouts is not None:
-            stages += (dropouts,)
-        if latency:
-            stages += (Latency(float(latency)),)
-        if delivery is not None and rate is not None:
-            stages += (delivery,)
-        return Sensor(2000.0 if rate is None else float(rate), stages, "ideal")
-    raise ValueError(f"unknown sensor {name!r}; valid names: {', '.join(SENSORS)}")
+    timing = {key: float(value) for key, value in (("rate", rate), ("latency", latency))
+              if value is not None}
+    delivery = None if upsample is None else _playback(upsample, playback)
+    return build(timing, noise, dropouts, outliers, delivery, dim, physics)
+
+
+def _sonomicrometer(timing: dict, noise, dropouts, outliers: bool, delivery, dim: int,
+                    physics: dict) -> Sensor:
+    if noise is not None:
+        raise TypeError("sonomicrometry has no 'noise' setting: its errors come from its "
+                        "physics (use the 'white' sensor for additive noise)")
+    kw: dict = {"dropouts": dropouts, "upsample": delivery, **_physics(physics), **timing}
+    if not outliers:
+        kw["slip_rate"] = 0.0
+    return sonomicrometry(SonomicrometrySettings(**kw), dim)
+
+
+def _white(timing: dict, noise, dropouts, outliers: bool, delivery, dim: int,
+           physics: dict) -> Sensor:
+    kw: dict = {"dropouts": dropouts, "upsample": delivery, **timing}
+    if noise is not None:
+        kw["accuracy"] = float(noise) * dim**0.5
+    if not outliers:
+        kw["outliers"] = None
+    return white(replace(WhiteSettings(), **kw), dim)
+
+
+def _ultrasound(timing: dict, noise, dropouts, outliers: bool, delivery, dim: int,
+                physics: dict) -> Sensor:
+    kw: dict = dict(timing)
+    if noise is not None:
+        kw["noise_std"] = float(noise)
+    sensor = ultrasound(replace(UltrasoundSettings(dropouts=dropouts), **kw))
+    return sensor.with_stages(delivery) if delivery is not None else sensor
+
+
+def _ideal(timing: dict, noise, dropouts, outliers: bool, delivery, dim: int,
+           physics: dict) -> Sensor:
+    stages: tuple = ()
+    if dropouts is not None:
+        stages += (dropouts,)
+    if timing.get("latency"):
+        stages += (Latency(timing["latency"]),)
+    if delivery is not None and "rate" in timing:
+        stages += (delivery,)
+    return Sensor(timing.get("rate", 2000.0), stages, "ideal")
+
+
+#: Each sensor name's builder: (timing, noise, dropouts, outliers, delivery, dim, physics).
+_BUILDERS = {"sonomicrometry": _sonomicrometer, "white": _white, "ultrasound": _ultrasound,
+             "ideal": _ideal}
 
 
 def _playback(rate: float, name: str):

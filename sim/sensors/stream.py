@@ -13,7 +13,7 @@ from typing import Protocol
 
 import numpy as np
 
-from sim.motion import MotionSource
+from sim.heart.motion import MotionSource
 
 
 @dataclass(frozen=True)

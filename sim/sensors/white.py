@@ -3,8 +3,8 @@
     z_k = p(t_k) + n_k + o_k,   n_k ~ N(0, σ² I),   o_k the echo outliers,
 
 as the 28-Hz prediction studies of Yuen et al. (2009) and Tuna et al. (2013 §VIII-C) corrupt
-their data. It was this project's model of the sonomicrometer before the physical one of
-:mod:`sim.sensors.sonomicrometry`; it stays, by name, for those studies and for noise sweeps.
+their data. For sonomicrometry the physical model of :mod:`sim.sensors.sonomicrometry` is the
+default; this one serves those studies and noise sweeps.
 """
 
 from __future__ import annotations

@@ -2,8 +2,9 @@
 
 On the nearly noise-free stream of the physical sonomicrometer the RLS weights are large and
 cancel each other (a smooth signal extrapolated 25 ms), so a step between the open-loop fills
-of a gap and the next measurement was amplified into misses of several millimetres (an echo
-outlier rejected by the loop's gate made the generalized predictor miss by 9 mm at 25 ms).
+of a gap and the next measurement is amplified into misses of several millimetres unless the
+gap is repaired (without repair, an echo outlier rejected by the loop's gate makes the
+generalized predictor miss by 9 mm at 25 ms).
 """
 
 from __future__ import annotations

@@ -32,9 +32,9 @@ def _lock_scores(name: str, scenario: str, **overrides) -> tuple[float, int, flo
 
 
 def _bench_stream(scenario: str, seed: int, seconds: float = 30.0):
-    """The stream of ``docs/notes/issue18_bench.py``: scenario and sensor seed ``seed``, every
+    """The stream of ``benchmarks/predictor_streams.py``: scenario and sensor seed ``seed``, every
     second sample of the 257 Hz sonomicrometer (Δt = 7.8 ms)."""
-    sim_scenarios = pytest.importorskip("sim.scenarios")
+    sim_scenarios = pytest.importorskip("sim.heart.scenarios")
     sim_sensors = pytest.importorskip("sim.sensors")
     scn = sim_scenarios.make_scenario(scenario, np.random.default_rng(seed), duration=seconds)
     sensor = sim_sensors.sensor_from_name("sonomicrometry", dim=int(scn.source.dim))
@@ -80,7 +80,7 @@ def test_ekf_keeps_heart_rate_lock_in_3d_with_breathing(scenario, overrides):
 
 @pytest.mark.parametrize(("scenario", "seed"), [("fixed-a1-top", 7), ("varying-a1-top", 2)])
 def test_ekf_refits_after_losing_lock(scenario, seed):
-    """The issue-18 bench stream at seed 7 / 2, 30 s: ω̂ falls out of the 36–180 beats/min band
+    """The predictor-bench stream at seed 7 / 2, 30 s: ω̂ falls out of the 36–180 beats/min band
     of the FFT initialisation 3–4 s after the fit (to its 30 beats/min clamp) and the filter
     re-fits its last 10 s (``lock_refit``, at 14.4 / 12.6 s).  Measured (in the order above):
     one re-fit, no clamp, p95 |ω̂ − ω| 3.0 / 4.7 bpm, 3-step RMS 0.40 / 0.53 × hold's; without
@@ -93,7 +93,7 @@ def test_ekf_refits_after_losing_lock(scenario, seed):
 
 @pytest.mark.parametrize(("scenario", "seed"), [("varying-a3-side", 3), ("varying-a1-side", 2)])
 def test_ekf_refits_after_locking_on_half_the_heart_rate(scenario, seed, monkeypatch):
-    """The issue-18 bench stream at seed 3 / 2, 40 s: 4–5 s after the fit ω̂ settles near half
+    """The predictor-bench stream at seed 3 / 2, 40 s: 4–5 s after the fit ω̂ settles near half
     the heart rate (41–52 beats/min, inside the FFT's band: no clamp) and its second harmonic
     outweighs the fundamental. Once the window is all new the filter re-fits (``lock_refit``).
     Measured p95 |ω̂ − ω| over the last 8 s: 2.4 / 3.4 bpm; without the rule 50.2 / 45.9."""
@@ -121,7 +121,7 @@ def test_dual_ekf_keeps_heart_rate_lock_in_3d_with_breathing(scenario):
 
 def _mitdb_100():
     """MIT-BIH record 100 (../shared/data, outside the repository), or skip."""
-    arrhythmia = pytest.importorskip("sim.arrhythmia")
+    arrhythmia = pytest.importorskip("sim.heart.arrhythmia")
     record = arrhythmia.SHARED_DATA / "mitdb-100" / "100"
     if not record.with_suffix(".atr").is_file():
         pytest.skip(f"real annotation file {record.with_suffix('.atr')} not available")
@@ -155,7 +155,7 @@ def test_dual_ekf_refits_after_losing_lock_on_a_premature_beat(scenario):
     RMS 0.54 / 0.49 / 0.52 × hold's; without the re-fit ω̂_c stays lost (70 / 68 / 96 clamps,
     3.3 / 3.5 / 3.3 × hold's).  |ω̂_c − ω| is not asserted: the premature beat at 28.9 s swings
     the interpolated true rate 69 → 107 → 53 beats/min within a second."""
-    from sim.rr import beat_times_from_annotations
+    from sim.heart.rr import beat_times_from_annotations
 
     beats = beat_times_from_annotations(_mitdb_100())
     beats = beats[beats >= 1200.0]

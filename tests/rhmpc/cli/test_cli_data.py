@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from rhmpc.cli import main
-from sim.heart import load_recording
-from sim.scenarios import available_scenarios
+from sim.heart.scenarios import available_scenarios
+from sim.recordings import load_recording
 
 DATA = Path(__file__).resolve().parents[3] / ".." / "shared" / "data"
 
@@ -128,11 +128,11 @@ def test_list_without_the_shared_data(tmp_path: Path, monkeypatch: pytest.Monkey
                                       capsys: pytest.CaptureFixture[str]) -> None:
     """Where ../shared/data is absent (a clean clone in CI), arrhythmia-apb is skipped with a
     note, never an error."""
-    import sim.scenarios
+    import sim.heart.scenarios
 
-    monkeypatch.setattr(sim.scenarios, "SHARED_DATA", tmp_path)
-    assert sim.scenarios.missing_data("arrhythmia-apb") == tmp_path / "mitdb-100" / "100.atr"
-    assert sim.scenarios.missing_data("fixed-a2-top") is None
+    monkeypatch.setattr(sim.heart.scenarios, "SHARED_DATA", tmp_path)
+    assert sim.heart.scenarios.missing_data("arrhythmia-apb") == tmp_path / "mitdb-100" / "100.atr"
+    assert sim.heart.scenarios.missing_data("fixed-a2-top") is None
     assert "arrhythmia-apb" not in available_scenarios()
     assert main(["data", "list", "--json", "--duration", "5"]) == 0
     captured = capsys.readouterr()

@@ -14,20 +14,15 @@ from rhmpc.control.envelope import envelope_rows
 from rhmpc.control.fallback import brake_torque
 from rhmpc.control.mpc import RecedingHorizonMPC
 from rhmpc.control.settings import MPCSettings
-from robots import linearize, load_robot
+from robots import load_robot
 from sim.plant import ArmPlant, NonlinearityCancellation
 
 N = 50
 
 
 @pytest.fixture(scope="module")
-def robot():
-    return load_robot("phantom")
-
-
-@pytest.fixture(scope="module")
-def arm(robot):
-    return linearize(robot)
+def robot(phantom):
+    return phantom
 
 
 def _closed_loop(robot, arm, settings, reference, ticks):

@@ -11,16 +11,11 @@ import scipy.linalg
 from rhmpc.control.mpc import RecedingHorizonMPC
 from rhmpc.control.settings import MPCSettings
 from rhmpc.studies.bench import heart_like_reference
-from robots import linearize, load_robot
+from robots import load_robot
 
 #: OSQP run to (near) machine accuracy, for comparisons at 1e-6.
 TIGHT = {"eps_abs": 1e-10, "eps_rel": 0.0, "max_iter": 100_000, "check_termination": 1,
          "solver": "osqp"}
-
-
-@pytest.fixture(scope="module")
-def arm():
-    return linearize(load_robot("phantom"))
 
 
 @pytest.fixture(scope="module")

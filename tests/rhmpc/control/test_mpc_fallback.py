@@ -14,11 +14,6 @@ from rhmpc.control.settings import MPCSettings, from_dict, to_dict
 from robots import linearize, load_robot
 
 
-@pytest.fixture(scope="module")
-def arm():
-    return linearize(load_robot("phantom"))
-
-
 @pytest.fixture
 def mpc(arm):
     return RecedingHorizonMPC(arm)

@@ -208,7 +208,7 @@ def test_placement_and_batched_horizons_match_single_lookups():
 
 def test_exact_reference_read_in_windows_is_the_whole_array():
     """Gaps longer than a window, at window edges and at both ends, bridged as on the array."""
-    from sim.streams import ArrayTruth
+    from sim.loop.streams import ArrayTruth
 
     rng = np.random.default_rng(3)
     truth = rng.normal(size=(3000, 3))

@@ -143,7 +143,7 @@ def test_cli_predict_rejects_bad_input(argv, capsys):
 
 def test_hr_step_protocols_and_synchronised_last_cycle():
     """Yuen (60 bpm) stays the default; tuna2013 runs at 103 bpm.  Last cycle synchronised on
-    the beat times: issue 18 measured 1.7/2.7 mm at ΔHR = ∓10 with them, 4.0–4.5 mm without."""
+    the beat times: measured 1.7/2.7 mm at ΔHR = ∓10 with them, 4.0–4.5 mm without."""
     with pytest.raises(ValueError, match="paper"):
         StudySettings("hr-step", paper="nope")
     assert StudySettings("hr-step").paper == "yuen2008"

@@ -1,0 +1,183 @@
+"""A run's configuration: every setting of a closed-loop run, and its TOML file."""
+
+from __future__ import annotations
+
+import dataclasses
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from rhmpc.control.settings import MPCSettings, from_dict, to_dict
+from rhmpc.errors import UsageError
+from sim.loop import LoopSettings
+from sim.plant import ModelMismatch, ObserverSettings, PlantSettings
+
+#: Sections of a run's TOML file and the settings class each one builds.
+SECTIONS: dict[str, type] = {
+    "loop": LoopSettings,
+    "mpc": MPCSettings,
+    "plant": PlantSettings,
+    "mismatch": ModelMismatch,
+    "observer": ObserverSettings,
+}
+
+
+GROUND_TRUTHS: tuple[str, ...] = ("recorded", "true")
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """Every setting of a closed-loop run (what ``rhmpc simulate --config FILE.toml`` reads).
+
+    Attributes
+    ----------
+    robot : str
+        Registered robot name (``rhmpc robots``).
+    scenario : str
+        Named heart-motion scenario (``rhmpc data list``); ignored when ``data`` is given.
+    data : str | None
+        A recording (CSV/NPZ/MAT, see ``sim.recordings``) to track instead of a scenario.
+    data_read : dict
+        How to read it: ``load_recording`` keywords ``var``, ``rows``, ``cols``, ``rate`` [Hz],
+        ``units`` (MATLAB files).
+    rr : str | None
+        PhysioNet record (path without extension) whose beat annotations drive the heart phase.
+    sensor : str
+        Sensor model name (``sim.sensors.SENSORS``: the physical ``sonomicrometry`` by
+        default, ``white``, ``ultrasound``, ``ideal``), or ``"recorded"`` to use a recording's
+        samples as they are.
+    sensor_settings : dict
+        Keyword settings of the sensor model (SI units, ``sim.sensors.sensor_from_name``),
+        among them ``playback``: how the samples reach the 2-kHz loop, ``"linear"`` (causal
+        interpolation one raw period late, default), ``"hold"`` (causal zero-order hold) or
+        ``"offline"`` (the non-causal interpolation of a
+        prerecorded file, Tuna et al.'s protocol).
+    predictor : str
+        Predictor name (``predictors.PREDICTORS``), or ``"exact"`` for the true future.
+    predictor_settings : dict
+        Keyword settings passed to ``predictors.make_predictor``.
+    ground_truth : str
+        What the error is measured against and what ``exact`` reads: ``"recorded"`` — the
+        sensor's samples as recorded, linearly interpolated at the ticks (Tuna et al.'s
+        protocol: the prerecorded data are the target, sensor errors and echo outliers
+        included) — or ``"true"`` — the noise-free motion.
+    seed : int
+        Seed of the run's ``numpy.random.Generator`` (heart variability, sensor noise).
+    loop, mpc, plant, mismatch, observer
+        Component settings (see their classes for units).
+    """
+
+    robot: str = "phantom"
+    scenario: str = "fixed-a2-top"
+    data: str | None = None
+    data_read: dict = field(default_factory=dict)
+    rr: str | None = None
+    sensor: str = "sonomicrometry"
+    sensor_settings: dict = field(default_factory=dict)
+    predictor: str = "generalized"
+    predictor_settings: dict = field(default_factory=dict)
+    ground_truth: str = "recorded"
+    seed: int = 0
+    loop: LoopSettings = field(default_factory=LoopSettings)
+    mpc: MPCSettings = field(default_factory=MPCSettings)
+    plant: PlantSettings = field(default_factory=PlantSettings)
+    mismatch: ModelMismatch = field(default_factory=ModelMismatch)
+    observer: ObserverSettings = field(default_factory=ObserverSettings)
+
+    def __post_init__(self) -> None:
+        if self.ground_truth not in GROUND_TRUTHS:
+            raise ValueError(
+                f"ground_truth must be one of {', '.join(GROUND_TRUTHS)}, got {self.ground_truth!r}"
+            )
+
+    def to_dict(self) -> dict[str, Any]:
+        """TOML-ready nested dict (``None`` values left out)."""
+        out: dict[str, Any] = {}
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if f.name in SECTIONS:
+                out[f.name] = to_dict(value)
+            elif value is not None:
+                out[f.name] = dict(value) if isinstance(value, dict) else value
+        return out
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any], where: str = "config") -> RunConfig:
+        """Build from a nested dict; unknown keys raise ``UsageError`` naming the key."""
+        names = {f.name for f in dataclasses.fields(cls)}
+        kwargs: dict[str, Any] = {}
+        for key, value in data.items():
+            if key not in names:
+                raise UsageError(
+                    f"{where}: unknown key {key!r}; valid keys: {', '.join(sorted(names))}"
+                )
+            if key in SECTIONS:
+                if not isinstance(value, dict):
+                    raise UsageError(f"{where}: [{key}] must be a table")
+                try:
+                    kwargs[key] = from_dict(SECTIONS[key], value)
+                except (TypeError, ValueError) as exc:
+                    raise UsageError(f"{where}: [{key}] {exc}") from None
+            elif key in ("sensor_settings", "predictor_settings"):
+                if not isinstance(value, dict):
+                    raise UsageError(f"{where}: [{key}] must be a table")
+                kwargs[key] = dict(value)
+            else:
+                kwargs[key] = value
+        try:
+            return cls(**kwargs)
+        except (TypeError, ValueError) as exc:
+            raise UsageError(f"{where}: {exc}") from None
+
+    def replace(self, **changes: Any) -> RunConfig:
+        """A copy with top-level or dotted section fields (``"mpc.effort_weight"``) changed."""
+        top: dict[str, Any] = {}
+        nested: dict[str, dict[str, Any]] = {}
+        for key, value in changes.items():
+            section, _, name = key.partition(".")
+            if name:
+                nested.setdefault(section, {})[name] = value
+            else:
+                top[key] = value
+        for section, values in nested.items():
+            if section in SECTIONS:
+                try:
+                    top[section] = dataclasses.replace(getattr(self, section), **values)
+                except (TypeError, ValueError) as exc:
+                    raise UsageError(f"[{section}] {exc}") from None
+            elif section in ("sensor_settings", "predictor_settings"):
+                top[section] = {**getattr(self, section), **values}
+            else:
+                raise UsageError(f"unknown setting {section}.{next(iter(values))!r}")
+        names = {f.name for f in dataclasses.fields(self)}
+        unknown = sorted(set(top) - names)
+        if unknown:
+            raise UsageError(f"unknown setting(s) {', '.join(unknown)}; valid: "
+                             f"{', '.join(sorted(names))}")
+        try:
+            return dataclasses.replace(self, **top)
+        except (TypeError, ValueError) as exc:
+            raise UsageError(str(exc)) from None
+
+
+def read_toml(path: str | Path) -> dict[str, Any]:
+    """A TOML file as a ``dict``; unreadable or invalid files raise ``UsageError`` naming it."""
+    path = Path(path)
+    try:
+        return tomllib.loads(path.read_text())
+    except OSError as exc:
+        raise UsageError(f"{path}: cannot read: {exc.strerror}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise UsageError(f"{path}: not valid TOML: {exc}") from None
+
+
+def load_config(path: str | Path) -> RunConfig:
+    """Read a run's TOML file; errors name the file and the key."""
+    return RunConfig.from_dict(read_toml(path), where=str(path))
+
+
+def save_config(config: RunConfig, path: str | Path) -> None:
+    import tomli_w
+
+    Path(path).write_text(tomli_w.dumps(config.to_dict()))

@@ -1,0 +1,131 @@
+"""Running a configured closed loop and the JSON document of its result."""
+
+from __future__ import annotations
+
+import platform
+import resource
+import time
+from importlib.metadata import PackageNotFoundError, version
+from typing import Any
+
+import numpy as np
+
+from rhmpc.experiment.assembly import Run, build_run
+from rhmpc.experiment.config import RunConfig
+from sim.loop import LoopResult, run_closed_loop
+
+
+def versions() -> dict[str, str]:
+    """Versions of the packages a result depends on."""
+    out = {"python": platform.python_version()}
+    for name in ("rhmpc", "pin", "osqp", "casadi", "numpy", "scipy"):
+        try:
+            out[name] = version(name)
+        except PackageNotFoundError:
+            out[name] = "not installed"
+    return out
+
+
+def run_experiment(config: RunConfig, progress: bool = False, trace: str | None = None,
+                   gain_tick=None, implementation: str = "python") -> tuple[LoopResult, dict]:
+    """Run ``config`` in closed loop; returns the :class:`~sim.loop.LoopResult` and its document.
+
+    The document holds the settings, the metrics (``rms_error_mm``, ``max_error_mm``,
+    ``rms_effort_mNm``, ``tick_us`` with ``p50``/``p99``/``max``, ``fallbacks`` …), the wall
+    time, the peak resident memory of the process so far (``peak_rss_mb``) and the package
+    versions. ``trace``: write every tick to this NPZ file (:mod:`sim.loop.trace`).
+    ``gain_tick``: the class of ``rhmpc bench``'s gain tick (``GainTick(mpc)(x, r, u_prev)``),
+    timed in the run on every 16th tick so that the document has ``gain_tick_us`` and the
+    tick's ratios to its p50 (``tick_ratio_to_gain``). ``implementation``: ``"python"`` or
+    ``"c"`` (:func:`~rhmpc.experiment.assembly.build_run`).
+    """
+    run = build_run(config, implementation)
+    bar, callback = _progress_bar(config, run.label) if progress else (None, None)
+    wall = time.perf_counter()
+    try:
+        result = run_closed_loop(
+            run.robot, run.arm, run.controller, run.reference, run.truth, run.center, run.stream,
+            config.loop, plant_settings=config.plant, mismatch=config.mismatch,
+            observer_settings=config.observer, progress=callback, trace_file=trace,
+            yardstick=None if gain_tick is None else _gain_tick(run.controller, gain_tick),
+        )
+    finally:
+        if bar is not None:
+            bar.close()
+    wall = time.perf_counter() - wall
+    return result, document(config, run, result, wall, implementation, gain_tick is not None)
+
+
+def _progress_bar(config: RunConfig, label: str):
+    """A tqdm bar on stderr and the loop's callback that moves it."""
+    from tqdm import tqdm
+
+    bar = tqdm(total=config.loop.ticks, unit="tick", unit_scale=True, leave=False,
+               desc=f"{config.predictor} on {label}", mininterval=0.5)
+
+    def callback(done: int) -> None:
+        bar.update(done - bar.n)
+
+    return bar, callback
+
+
+def document(config: RunConfig, run: Run, result: LoopResult, wall: float,
+             implementation: str, timed_gain: bool) -> dict[str, Any]:
+    """The JSON document of a run (see :func:`run_experiment`)."""
+    metrics = result.metrics()
+    stats = result.controller_stats
+    doc = {
+        "predictor": config.predictor,
+        "scenario": run.label,
+        "robot": config.robot,
+        "seed": config.seed,
+        "sensor": config.sensor,
+        "ground_truth": config.ground_truth,
+        **metrics,
+        "fallbacks": int(stats.get("fallback_total", 0)),
+        "controller": _jsonable(stats),
+        "implementation": implementation,
+        "predictor_counts": _jsonable(result.predictor_counts),
+        "wall_s": wall,
+        "real_time_factor": config.loop.duration / wall,
+        "plant_dynamics": result.plant_dynamics,
+        "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,  # Linux: KiB
+        "settings": config.to_dict(),
+        "versions": versions(),
+    }
+    predictor = getattr(run.reference, "predictor", None)
+    if predictor is not None:  # its running RMS miss per lead (rhmpc.control.confidence)
+        errors = np.asarray(predictor.forecast_error_rms, dtype=float)
+        doc["forecast_error_rms_mm"] = [None if not np.isfinite(v) else 1e3 * float(v)
+                                        for v in errors]
+        doc["forecast_lead_s"] = config.loop.downsample * config.loop.Ts
+    monitor = getattr(run.reference, "monitor", None)
+    if monitor is not None:
+        doc["heart_rate"] = monitor.summary()
+    if timed_gain:
+        doc["gain_tick_us"] = result.yardstick_us
+        doc["tick_ratio_to_gain"] = {k: v / result.yardstick_us["p50"]
+                                     for k, v in metrics["tick_us"].items() if k != "mean"}
+    return doc
+
+
+def _gain_tick(controller, gain_tick):
+    """``yardstick(x, r)``: the controller's gain tick, or None if it has no gain to time."""
+    try:
+        gain = gain_tick(getattr(controller, "twin", controller))  # compiled: its Python twin
+    except AttributeError:  # a stand-in controller without the MPC's QP
+        return None
+    return lambda x, ref: gain(x, ref, controller.u_prev)
+
+
+def _jsonable(obj: Any) -> Any:
+    """Plain JSON types for stats mappings (numpy scalars, tuples, nested dicts)."""
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    return obj

@@ -1,0 +1,475 @@
+"""Named heart-motion scenarios: synthetic replicas of the papers' data sets.
+
+The in-vivo recordings of Tuna et al. (T-RO 2013) are not public. Each ``*-top``/``*-side``
+scenario is a *synthetic replica* calibrated to what the paper reports for that data set
+(Table I and footnote 1 of §VIII, §III-B): peak-to-peak amplitude, RMS where reported, sensor
+rate, duration and heart-rate profile. ``mitral-1d`` is a replica of the mitral-annulus motion
+of Yuen et al. (IJRR 2009 §2). Nothing here is measured data.
+
+Statistics are defined as in :mod:`sim.heart.analysis`: peak-to-peak is the largest per-axis range
+max_d (max_t p_d − min_t p_d); RMS is the 3-D RMS about the mean √(mean_t ‖p − p̄‖²).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
+
+import numpy as np
+
+from sim.heart.arrhythmia import (
+    SHARED_DATA,
+    premature_stroke,
+    record_beats,
+)
+from sim.heart.motion import (
+    EPICARDIAL_BUMPS,
+    MITRAL_BUMPS,
+    MotionSource,
+    SyntheticHeartMotion,
+    draw_beat_gains,
+    fourier_from_bumps,
+)
+from sim.heart.rr import (
+    PhaseTrack,
+    StaircaseProfile,
+    beat_times_from_annotations,
+    beat_times_from_rr,
+    constant_phase,
+    staircase_phase,
+)
+from sim.heart.variability import (
+    VariabilitySettings,
+    ar1,
+    breathing_phase,
+    drift_knots,
+    modulated_phase,
+    smooth_knots,
+)
+
+#: The seed used when :func:`make_scenario` is given no generator, so that a named replica is
+#: the same everywhere unless a caller asks for another draw.
+DEFAULT_SEED = 20130201
+
+
+@dataclass(frozen=True)
+class ScenarioSpec:
+    """What a named scenario replicates (the values reported by the paper) and its shape.
+
+    Attributes
+    ----------
+    name : str
+        Scenario name.
+    description : str
+        One line: what it replicates and which values are assumed.
+    peak_to_peak : float
+        Target largest per-axis peak-to-peak amplitude [m].
+    rms : float or None
+        Target 3-D RMS about the mean [m]; None keeps the shape's own ratio.
+    sensor_rate : float
+        Sample rate of the recording/sensor [Hz].
+    duration : float
+        Duration [s].
+    heart : str
+        ``"constant"`` or ``"staircase"``.
+    heart_rate : float
+        Heart rate for ``"constant"`` [Hz] (the first staircase level otherwise).
+    site : str
+        ``"top"``, ``"side"`` (epicardial, 3-D) or ``"mitral"`` (1-D).
+    reported : tuple of str
+        Which of ``peak_to_peak``, ``rms``, ``heart_rate``, ``sensor_rate``, ``duration`` come
+        from the paper (the rest are assumptions).
+    record : str or None
+        For ``heart="record"``: the PhysioNet record (relative to the shared data folder) whose
+        annotated beats drive the heart phase.
+    record_start : float
+        Time in the record where the scenario starts [s].
+    variable : bool
+        Whether the default is the physiological variability of :mod:`sim.heart.variability`
+        (True) or the periodic replica (False).
+    """
+
+    name: str
+    description: str
+    peak_to_peak: float
+    rms: float | None
+    sensor_rate: float
+    duration: float
+    heart: str
+    heart_rate: float
+    site: str
+    reported: tuple[str, ...] = field(default=())
+    record: str | None = None
+    record_start: float = 0.0
+    variable: bool = True
+
+
+_SPECS: tuple[ScenarioSpec, ...] = (
+    ScenarioSpec(
+        "fixed-a1-top", "Tuna et al. animal 1, crystal on top, constant heart rate (replica; "
+        "heart rate 95 bpm assumed)", 12.19e-3, None, 404.0, 235.0,
+        "constant", 1.58, "top", ("peak_to_peak", "sensor_rate", "duration")),
+    ScenarioSpec(
+        "fixed-a2-top", "Tuna et al. animal 2, crystal on top, constant 100 bpm (replica of "
+        "§III-B: p-p 8.39 mm, RMS 3.55 mm)", 8.39e-3, 3.55e-3, 257.0, 472.0, "constant",
+        100.0 / 60.0, "top", ("peak_to_peak", "rms", "heart_rate", "sensor_rate", "duration")),
+    ScenarioSpec(
+        "varying-a1-top", "Tuna et al. animal 1, crystal on top, pacemaker staircase 95–152 bpm "
+        "(replica)", 13.75e-3, None, 404.0, 251.0,
+        "staircase", 1.58, "top", ("peak_to_peak", "heart_rate", "sensor_rate", "duration")),
+    ScenarioSpec(
+        "varying-a3-top", "Tuna et al. animal 3, crystal on top, pacemaker staircase 95–152 bpm "
+        "(replica of §III-B: p-p 7.43 mm, RMS 3.38 mm)", 7.43e-3, 3.38e-3, 404.0, 200.0,
+        "staircase", 1.58, "top",
+        ("peak_to_peak", "rms", "heart_rate", "sensor_rate", "duration")),
+    ScenarioSpec(
+        "varying-a1-side", "Tuna et al. animal 1, crystal on the side, pacemaker staircase "
+        "(replica)", 13.39e-3, None, 404.0, 250.0,
+        "staircase", 1.58, "side", ("peak_to_peak", "heart_rate", "sensor_rate", "duration")),
+    ScenarioSpec(
+        "varying-a3-side", "Tuna et al. animal 3, crystal on the side, pacemaker staircase "
+        "(replica; the record ends during the descent)", 7.96e-3,
+        None, 404.0, 140.0, "staircase", 1.58, "side",
+        ("peak_to_peak", "heart_rate", "sensor_rate", "duration")),
+    ScenarioSpec(
+        "mitral-1d", "Yuen et al. mitral annulus along its axis, 1-D: 20 mm travel, "
+        "60 bpm (210 mm/s and 3.8 m/s² peaks at 76 bpm; replica)", 20e-3, None, 28.0, 40.0,
+        "constant", 1.0, "mitral", ("peak_to_peak",), variable=False),
+    ScenarioSpec(
+        "arrhythmia-apb", "fixed-a2-top's motion driven by MIT-BIH record 100 (1035–1275 s: "
+        "10 of its 33 atrial premature beats), premature beats with a smaller stroke and the "
+        "pause after them (replica; real annotations, synthetic motion)", 8.39e-3, 3.55e-3,
+        257.0, 240.0, "record", 100.0 / 60.0, "top", ("peak_to_peak", "rms", "sensor_rate"),
+        record="mitdb-100/100", record_start=1035.0),
+)
+
+SPECS: dict[str, ScenarioSpec] = {s.name: s for s in _SPECS}
+
+#: Scenario names, the default first.
+SCENARIOS: tuple[str, ...] = ("fixed-a2-top",
+                              *(s.name for s in _SPECS if s.name != "fixed-a2-top"))
+
+#: The named scenarios that need the shared real data (skipped where it is absent).
+NEEDS_DATA: tuple[str, ...] = tuple(s.name for s in _SPECS if s.record is not None)
+
+
+def missing_data(name: str) -> Path | None:
+    """The annotation file scenario ``name`` needs and cannot find, or ``None`` if it can run."""
+    if name not in NEEDS_DATA:
+        return None
+    path = (SHARED_DATA / str(SPECS[name].record)).with_suffix(".atr")
+    return None if path.is_file() else path
+
+
+def available_scenarios() -> tuple[str, ...]:
+    """The named scenarios that can run here (those needing absent shared data left out)."""
+    return tuple(name for name in SCENARIOS if missing_data(name) is None)
+
+DEFAULT_SCENARIO = "fixed-a2-top"
+
+#: Per-site geometry: heartbeat axis weights (x, y, z), breathing direction (x, y, z), the
+#: breathing range on its main axis relative to the heartbeat range on the heart's main axis,
+#: and the second breathing harmonic relative to the first (Tuna §III-B: "significant first
+#: harmonic"). Breathing (along one oblique direction) and heartbeat mostly move different
+#: axes, so the three axes have comparable ranges, as the reported RMS/p-p ratios (3.55/8.39,
+#: 3.38/7.43) require.
+_SITES = {
+    "top": dict(heart=(0.45, 0.9, 1.0), breath=(1.0, 0.8, 0.1), breath_ratio=1.0,
+                breath_h2=0.35),
+    "side": dict(heart=(1.0, 0.9, 0.45), breath=(0.1, 0.8, 1.0), breath_ratio=1.0,
+                 breath_h2=0.35),
+}
+_EPICARDIAL_HARMONICS = 20
+_MITRAL_HARMONICS = 12
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A ready-to-run heart-motion scenario.
+
+    Attributes
+    ----------
+    name : str
+        Scenario name.
+    source : MotionSource
+        The true point-of-interest motion, ``source.position(t)`` [m].
+    sensor_rate : float
+        Rate of the sensor that recorded the replicated data [Hz].
+    duration : float
+        Run length [s].
+    description : str
+        What it replicates.
+    spec : ScenarioSpec
+        The targets it was calibrated to.
+    """
+
+    name: str
+    source: MotionSource
+    sensor_rate: float
+    duration: float
+    description: str
+    spec: ScenarioSpec
+
+    @property
+    def dim(self) -> int:
+        """Number of motion axes."""
+        return int(self.source.dim)
+
+
+#: Keyword overrides :func:`make_scenario` accepts.
+OVERRIDES: tuple[str, ...] = (
+    "duration", "sensor_rate", "heart_rate", "peak_to_peak", "rms", "rr", "rr_start",
+    "beat_times", "record", "staircase", "breathing_rate", "coupling", "beat_gain_std",
+    "breathing", "variability",
+)
+
+
+def make_scenario(name: str, rng: np.random.Generator | None = None, **overrides) -> Scenario:
+    """Build the named scenario, calibrated to its targets.
+
+    Parameters
+    ----------
+    name : str
+        One of :data:`SCENARIOS`.
+    rng : numpy.random.Generator, optional
+        Draws the beat-to-beat variability and the initial phases. ``None`` uses
+        ``default_rng(DEFAULT_SEED)``, so the named replica is reproducible.
+    **overrides
+        ``duration`` [s], ``sensor_rate`` [Hz], ``heart_rate`` [Hz] (constant rate),
+        ``staircase`` (:class:`~sim.heart.rr.StaircaseProfile`), ``rr`` (RR intervals [s]) with
+        ``rr_start`` (time of the first beat [s], default 0), ``beat_times`` [s], ``record``
+        (PhysioNet record path: its annotated beat times, shifted so the first beat is at
+        ``rr_start``), ``peak_to_peak`` [m], ``rms`` [m or None], ``breathing_rate`` [Hz],
+        ``coupling`` [-], ``beat_gain_std`` [-], ``breathing`` (False removes it),
+        ``variability`` (:class:`~sim.heart.variability.VariabilitySettings`, or ``"clean"`` for
+        the periodic replica; default ``VariabilitySettings()``: HRV, beat-to-beat stroke and
+        timing, breath period and depth, drift, coupling — except ``mitral-1d``, periodic by
+        default because Yuen et al.'s §III-D studies perturb that signal themselves: noise,
+        heart-rate steps, RR intervals). ``coupling`` and
+        ``beat_gain_std`` override the fields of the same name. Beat-time driven phases
+        (``rr``, ``beat_times``, ``record``) carry their own RR variability: no HRV is added.
+
+    Returns
+    -------
+    Scenario
+        With a :class:`~sim.heart.motion.SyntheticHeartMotion` source whose heart phase satisfies
+        φ(t_i) = i at the given beat times, or φ(t) = φ₀ + ∫ f_h dτ for rate profiles.
+
+    Raises
+    ------
+    ValueError
+        Unknown name (the message lists the valid ones) or unknown/invalid override.
+    """
+    if name not in SPECS:
+        raise ValueError(f"unknown scenario {name!r}; valid names: {', '.join(SCENARIOS)}")
+    unknown = sorted(set(overrides) - set(OVERRIDES))
+    if unknown:
+        raise ValueError(f"unknown scenario override(s) {', '.join(unknown)}; "
+                         f"valid: {', '.join(OVERRIDES)}")
+    rng = np.random.default_rng(DEFAULT_SEED) if rng is None else rng
+    spec = SPECS[name]
+    spec_fields = {f.name for f in fields(ScenarioSpec)}
+    spec = replace(spec, **{k: v for k, v in overrides.items()
+                            if k in spec_fields and k not in {"duration", "sensor_rate"}})
+    nominal = spec.duration
+    duration = float(overrides.get("duration", nominal))
+    sensor_rate = float(overrides.get("sensor_rate", spec.sensor_rate))
+    if not duration > 0 or not sensor_rate > 0:
+        raise ValueError("duration and sensor_rate must be positive")
+
+    settings = _variability(spec, overrides)
+    horizon = max(duration, nominal)
+    breath = None
+    if not settings.is_clean:
+        breath = breathing_phase(rng, float(overrides.get("breathing_rate", 1.0 / 6.0)),
+                                 horizon, settings.breath_period_cv)
+    phase, beat_span = _phase_track(spec, overrides, rng, horizon, settings, breath)
+    if beat_span is not None and "duration" not in overrides:
+        duration = min(nominal, beat_span)
+
+    shape = _shape(spec, overrides, rng, phase, horizon, settings, breath)
+    calib_t = np.arange(round(nominal * spec.sensor_rate) + 1) / spec.sensor_rate
+    source = calibrate(shape, calib_t, spec.peak_to_peak, spec.rms)
+    described = spec.description + (" [RR-driven]" if beat_span is not None else "")
+    return Scenario(name, source, sensor_rate, duration, described, spec)
+
+
+def _variability(spec: ScenarioSpec, overrides: dict) -> VariabilitySettings:
+    """The variability settings with the ``coupling``/``beat_gain_std`` overrides applied."""
+    value = overrides.get("variability",
+                          VariabilitySettings() if spec.variable else "clean")
+    if isinstance(value, str):
+        if value != "clean":
+            raise ValueError(f"variability must be a VariabilitySettings or 'clean', got {value!r}")
+        value = VariabilitySettings.clean()
+    if not isinstance(value, VariabilitySettings):
+        raise ValueError(f"variability must be a VariabilitySettings or 'clean', got {value!r}")
+    if spec.site == "mitral":
+        value = replace(value, coupling=0.0)
+    changes = {k: float(overrides[k]) for k in ("coupling", "beat_gain_std") if k in overrides}
+    return replace(value, **changes)
+
+
+def _phase_track(spec: ScenarioSpec, overrides: dict, rng: np.random.Generator,
+                 horizon: float, settings: VariabilitySettings,
+                 breath: PhaseTrack | None) -> tuple[PhaseTrack, float | None]:
+    """Heart phase for the scenario and, if driven by beat times, the time they span [s]."""
+    start = float(overrides.get("rr_start", 0.0))
+    beats = None
+    if spec.heart == "record" and not {"beat_times", "rr", "record"} & set(overrides):
+        times, _ = _spec_beats(spec)
+        track = PhaseTrack.from_beat_times(times)
+        return track, float(times[-1] - max(times[0], 0.0))
+    if "beat_times" in overrides:
+        beats = np.asarray(overrides["beat_times"], dtype=float)
+    elif "rr" in overrides:
+        beats = beat_times_from_rr(overrides["rr"], start)
+    elif "record" in overrides:
+        raw = beat_times_from_annotations(Path(overrides["record"]))
+        beats = raw - raw[0] + start
+    if beats is not None:
+        track = PhaseTrack.from_beat_times(beats)
+        return track, float(beats[-1] - max(beats[0], 0.0))
+    phase0 = float(rng.random())
+    constant = "heart_rate" in overrides or spec.heart == "constant"
+    if constant:
+        rate = float(spec.heart_rate)
+        if not rate > 0:
+            raise ValueError("heart_rate must be positive [Hz]")
+        knots = (np.array([0.0, 1.0]), np.array([rate, rate]))
+    else:
+        knots = overrides.get("staircase", StaircaseProfile()).knots(horizon)
+    if settings.hrv_cv > 0 and breath is not None:
+        return modulated_phase(rng, *knots, horizon, settings, breath, phase0), None
+    if constant:
+        return constant_phase(float(knots[1][0]), phase0), None
+    return staircase_phase(overrides.get("staircase", StaircaseProfile()), horizon, phase0), None
+
+
+def _shape(spec: ScenarioSpec, overrides: dict, rng: np.random.Generator, phase: PhaseTrack,
+           horizon: float, settings: VariabilitySettings,
+           breath: PhaseTrack | None) -> SyntheticHeartMotion:
+    """The uncalibrated motion for ``spec`` (unit-less shape, scaled later)."""
+    breathing_rate = float(overrides.get("breathing_rate", 1.0 / 6.0))
+    with_breathing = bool(overrides.get("breathing", spec.site != "mitral"))
+    if spec.site == "mitral":
+        heart = fourier_from_bumps(MITRAL_BUMPS, _MITRAL_HARMONICS)[None, :]
+        breathing = np.zeros((1, 2), dtype=complex)
+        if with_breathing:
+            breathing[0, 0] = 0.15 * np.max(np.abs(heart))
+    else:
+        site = _SITES[spec.site]
+        heart = np.stack([w * fourier_from_bumps(b, _EPICARDIAL_HARMONICS)
+                          for w, b in zip(site["heart"], EPICARDIAL_BUMPS, strict=True)])
+        dominant = int(np.argmax(site["heart"]))
+        h_range = _range_of(heart[dominant])
+        direction = np.asarray(site["breath"], dtype=float)
+        a1 = 0.5 * site["breath_ratio"] * h_range * direction / np.max(direction)
+        psi = 2 * np.pi * rng.random()
+        h2 = site["breath_h2"] * a1 * np.exp(1j * (2 * psi + 0.6))
+        breathing = np.stack([a1 * np.exp(1j * psi), h2], axis=1)
+        if not with_breathing:
+            breathing = np.zeros_like(breathing)
+    first = int(np.floor(float(phase(-5.0))))
+    last = int(np.ceil(float(phase(horizon + 5.0))))
+    if spec.heart == "record" and not {"beat_times", "rr", "record"} & set(overrides):
+        times, premature = _spec_beats(spec)
+        stroke = premature_stroke(times, premature)
+        motion = (_shape_clean if breath is None else _variable_shape)(
+            rng, phase, heart, breathing, breathing_rate, horizon, settings, breath, first,
+            last - first + 1)
+        beat = np.arange(first, last + 1)
+        factor = stroke[np.clip(beat, 0, stroke.size - 1)][:, None]
+        return SyntheticHeartMotion(
+            phase, motion.heart, motion.breathing, breathing_rate, motion.coupling,
+            motion.beat_gains * factor, first, coupling_phase=motion.coupling_phase,
+            drift=motion.drift, **motion._variations())
+    if breath is None:  # the clean replica, drawn exactly as before the variability existed
+        return _shape_clean(rng, phase, heart, breathing, breathing_rate, horizon, settings,
+                            breath, first, last - first + 1)
+    return _variable_shape(rng, phase, heart, breathing, breathing_rate, horizon, settings,
+                           breath, first, last - first + 1)
+
+
+def _shape_clean(rng: np.random.Generator, phase: PhaseTrack, heart: np.ndarray,
+                 breathing: np.ndarray, breathing_rate: float, horizon: float,
+                 settings: VariabilitySettings, breath: PhaseTrack | None, first: int,
+                 n_beats: int) -> SyntheticHeartMotion:
+    """The periodic shape (independent beat gains, coupling at the mean breathing rate)."""
+    gains = draw_beat_gains(rng, n_beats, heart.shape[0], settings.beat_gain_std)
+    return SyntheticHeartMotion(phase, heart, breathing, breathing_rate, settings.coupling,
+                                gains, first, coupling_phase=2 * np.pi * rng.random())
+
+
+def _variable_shape(rng: np.random.Generator, phase: PhaseTrack, heart: np.ndarray,
+                    breathing: np.ndarray, breathing_rate: float, horizon: float,
+                    settings: VariabilitySettings, breath: PhaseTrack, first: int,
+                    n_beats: int) -> SyntheticHeartMotion:
+    """The shape with the mechanisms of :mod:`sim.heart.variability` (seeded by ``rng``)."""
+    dim = heart.shape[0]
+    rho = settings.beat_gain_correlation
+    gains = 1.0 + ar1(rng, n_beats, settings.beat_gain_std, rho, dim)
+    offsets = ar1(rng, n_beats, settings.beat_timing_std, rho)[:, 0]
+    first_breath = int(np.floor(float(breath(-5.0))))
+    n_breaths = int(np.ceil(float(breath(horizon + 5.0)))) - first_breath + 1
+    depths = 1.0 + settings.breath_depth_cv * np.clip(rng.standard_normal(n_breaths), -2.5, 2.5)
+    drift = None
+    if settings.drift_std > 0:
+        scale = settings.drift_std * max(_range_of(c) for c in heart)
+        drift = smooth_knots(*drift_knots(rng, horizon, dim, scale, settings.drift_cutoff))
+    return SyntheticHeartMotion(
+        phase, heart, breathing, breathing_rate, settings.coupling, gains, first,
+        coupling_phase=2 * np.pi * rng.random(),
+        breath_phase=breath if settings.coupling_follows_breath
+        or settings.breath_period_cv > 0 or settings.breath_depth_cv > 0 else None,
+        breath_depths=depths if settings.breath_depth_cv > 0 else None,
+        first_breath=first_breath,
+        beat_offsets=offsets if settings.beat_timing_std > 0 else None, drift=drift)
+
+
+def _spec_beats(spec: ScenarioSpec) -> tuple[np.ndarray, np.ndarray]:
+    """Beat times [s] from the spec's record (``record_start`` at t = 0) and premature mask."""
+    return record_beats(SHARED_DATA / str(spec.record), spec.record_start, spec.duration,
+                        spec.name)
+
+
+def _range_of(coef: np.ndarray) -> float:
+    """Peak-to-peak of Re Σ c_k e^{i2πkφ} over one cycle."""
+    phi = np.arange(2048) / 2048
+    k = np.arange(1, coef.size + 1)
+    y = (np.exp(2j * np.pi * np.outer(phi, k)) @ coef).real
+    return float(y.max() - y.min())
+
+
+def calibrate(motion: SyntheticHeartMotion, t: np.ndarray, peak_to_peak: float,
+              rms: float | None = None) -> SyntheticHeartMotion:
+    """Scale ``motion`` so that, sampled at ``t``, its statistics hit the targets.
+
+    The largest per-axis range is set to ``peak_to_peak``. If ``rms`` is given, the axes other
+    than the dominant one are first scaled by a common factor s so that
+    √(Σ_d var_d) / range_dom = rms / peak_to_peak (kept below the dominant range).
+
+    Parameters
+    ----------
+    motion : SyntheticHeartMotion
+        Uncalibrated motion.
+    t : ndarray, shape (n,)
+        Sample times of the reference recording [s].
+    peak_to_peak : float
+        Target [m].
+    rms : float, optional
+        Target 3-D RMS about the mean [m].
+    """
+    p = motion.position(t)
+    ranges = np.ptp(p, axis=0)
+    var = np.var(p, axis=0)
+    dom = int(np.argmax(ranges))
+    factor = np.ones(motion.dim)
+    others = np.arange(motion.dim) != dom
+    if rms is not None and motion.dim > 1 and np.sum(var[others]) > 0:
+        need = (rms / peak_to_peak) ** 2 * ranges[dom] ** 2 - var[dom]
+        s = np.sqrt(max(need, 0.0) / np.sum(var[others]))
+        s = min(s, ranges[dom] / np.max(ranges[others]))
+        factor[others] = s
+    factor *= peak_to_peak / ranges[dom]
+    return motion.scaled(factor)

@@ -1,0 +1,188 @@
+"""Metrics of a run: tracking error, control effort, timing statistics."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+
+
+def rms(x: np.ndarray, axis: int | None = None) -> np.ndarray:
+    """Root mean square, ignoring NaN."""
+    return np.sqrt(np.nanmean(np.square(x), axis=axis))
+
+
+def tracking_metrics(error: np.ndarray, tau_mpc: np.ndarray, tau_total: np.ndarray) -> dict:
+    """3-D position error RMS / max [mm] and RMS control effort [mN·m] over the given ticks.
+
+    ``error`` is (n, 3) end-effector minus POI in metres; efforts are (n, nv) in N·m. The effort
+    is the RMS over time of the Euclidean norm of the joint torque vector.
+    """
+    norm = np.linalg.norm(error, axis=1)
+    return {
+        "rms_error_mm": float(1e3 * rms(norm)),
+        "max_error_mm": float(1e3 * np.nanmax(norm)) if norm.size else float("nan"),
+        "rms_error_axis_mm": (1e3 * rms(error, axis=0)).tolist(),
+        "rms_effort_mNm": float(1e3 * rms(np.linalg.norm(tau_mpc, axis=1))),
+        "rms_total_torque_mNm": float(1e3 * rms(np.linalg.norm(tau_total, axis=1))),
+    }
+
+
+class TickHistogram:
+    """Per-tick durations as a histogram of ``resolution_ns`` bins: memory flat in run length.
+
+    Durations up to ``span_ns`` fall in bins; longer ones are kept exactly (rare: stalls).
+    Percentiles are the inverted-CDF sample quantiles (the smallest duration with at least the
+    fraction ``q`` of the ticks at or below it) rounded down to the bin, so each is exact to
+    ``resolution_ns`` (10 ns by default); ``max`` and ``mean`` are exact.
+    """
+
+    def __init__(self, resolution_ns: int = 10, span_ns: int = 2_000_000) -> None:
+        self.resolution = int(resolution_ns)
+        self.counts = np.zeros(span_ns // self.resolution, dtype=np.int64)
+        self.overflow: list[int] = []
+        self.n, self.total, self.max = 0, 0, 0
+
+    def add(self, ns: np.ndarray) -> None:
+        ns = np.asarray(ns, dtype=np.int64)
+        if ns.size == 0:
+            return
+        bins = ns // self.resolution
+        inside = bins < self.counts.size
+        self.counts += np.bincount(bins[inside], minlength=self.counts.size)
+        self.overflow.extend(ns[~inside].tolist())
+        self.n += int(ns.size)
+        self.total += int(ns.sum())
+        self.max = max(self.max, int(ns.max()))
+
+    def quantile_ns(self, q: float) -> float:
+        """The inverted-CDF ``q`` quantile [ns], rounded down to the bin width."""
+        rank = max(1, math.ceil(q * self.n))  # the rank-th smallest duration
+        cumulative = np.cumsum(self.counts)
+        if rank <= cumulative[-1]:
+            return float(int(np.searchsorted(cumulative, rank)) * self.resolution)
+        return float(sorted(self.overflow)[rank - int(cumulative[-1]) - 1])
+
+    def stats_us(self) -> dict[str, float]:
+        """p50 / p99 / p999 / max / mean [µs] (NaN without ticks)."""
+        if self.n == 0:
+            return {k: float("nan") for k in ("p50", "p99", "p999", "max", "mean")}
+        out = {name: self.quantile_ns(q) / 1e3
+               for name, q in (("p50", 0.5), ("p99", 0.99), ("p999", 0.999))}
+        out["max"] = self.max / 1e3
+        out["mean"] = self.total / self.n / 1e3
+        return out
+
+
+class RunningTracking:
+    """:func:`tracking_metrics` accumulated chunk by chunk (sums of squares, counts, maxima).
+
+    Same definitions: NaN errors (no truth) are skipped per axis and per norm. Sums are per
+    chunk (numpy's pairwise sum) then over chunks, so the results differ from the whole-array
+    ones only in the last bits (relative 1e-15).
+    """
+
+    def __init__(self, dim: int = 3) -> None:
+        self.norm2, self.n_norm, self.max_norm = 0.0, 0, -math.inf
+        self.axis2, self.n_axis = np.zeros(dim), np.zeros(dim, dtype=np.int64)
+        self.effort2, self.total2, self.n_effort = 0.0, 0.0, 0
+
+    def add(self, error: np.ndarray, tau_mpc: np.ndarray, tau_total: np.ndarray) -> None:
+        """Add ticks: ``error`` (n, 3) [m], ``tau_mpc`` and ``tau_total`` (n, nv) [N·m]."""
+        if error.shape[0] == 0:
+            return
+        sq = np.square(error)
+        finite = np.isfinite(sq)
+        self.axis2 += np.where(finite, sq, 0.0).sum(axis=0)
+        self.n_axis += finite.sum(axis=0)
+        norm2 = sq.sum(axis=1)
+        ok = np.isfinite(norm2)
+        if ok.any():
+            self.norm2 += float(norm2[ok].sum())
+            self.n_norm += int(ok.sum())
+            self.max_norm = max(self.max_norm, float(np.sqrt(norm2[ok].max())))
+        self.effort2 += float(np.square(tau_mpc).sum())
+        self.total2 += float(np.square(tau_total).sum())
+        self.n_effort += int(tau_mpc.shape[0])
+
+    def result(self) -> dict:
+        """The dict of :func:`tracking_metrics` [mm, mN·m]."""
+        nan = float("nan")
+        with np.errstate(invalid="ignore", divide="ignore"):
+            axis = 1e3 * np.sqrt(self.axis2 / self.n_axis)
+        return {
+            "rms_error_mm": 1e3 * math.sqrt(self.norm2 / self.n_norm) if self.n_norm else nan,
+            "max_error_mm": 1e3 * self.max_norm if self.n_norm else nan,
+            "rms_error_axis_mm": axis.tolist(),
+            "rms_effort_mNm": 1e3 * math.sqrt(self.effort2 / self.n_effort)
+            if self.n_effort else nan,
+            "rms_total_torque_mNm": 1e3 * math.sqrt(self.total2 / self.n_effort)
+            if self.n_effort else nan,
+        }
+
+
+class HeartRateScore:
+    """Running score of a predictor's heart-rate estimate against the true heart rate.
+
+    At each observation after ``settling`` the error e = 60·(f̂_h − f_h(t)) [bpm] is added to
+    running sums (constant memory): RMS and max of |e| and the fraction of observations with
+    |e| < ``tolerance_bpm`` (5 bpm, the lock criterion). From the first observation
+    on (settling included; an estimate that is not ready yet counts as unlocked) it keeps the
+    "lock time": the time of the first observation after which |e| stayed below the tolerance to
+    the end. ``ready_time_s`` is the first finite estimate (the EKF's initialisation window is
+    Yuen's 10 s, so lock is judged from there).
+
+    Parameters
+    ----------
+    true_rate : callable
+        ``true_rate(t) -> f_h`` [Hz], e.g. ``PhaseTrack.rate`` of the heart source.
+    settling : float
+        Observations before this time [s] are not scored (the run's metric window).
+    tolerance_bpm : float
+        Lock tolerance [bpm].
+    """
+
+    def __init__(self, true_rate: Callable[[float], float], settling: float = 0.0,
+                 tolerance_bpm: float = 5.0) -> None:
+        self.true_rate, self.settling, self.tolerance = true_rate, settling, tolerance_bpm
+        self.n = self.within = 0
+        self.sum_sq = self.max_abs = self.sum_est = self.sum_true = 0.0
+        self.lock_time: float | None = None
+        self.ready_time: float | None = None
+
+    def observe(self, t: float, estimate_hz: float) -> None:
+        """Score the estimate ``estimate_hz`` [Hz] made at time ``t`` [s] (NaN: not yet)."""
+        if self.ready_time is None and math.isfinite(estimate_hz):
+            self.ready_time = t
+        true_bpm = 60.0 * float(self.true_rate(t))
+        error = abs(60.0 * estimate_hz - true_bpm) if math.isfinite(estimate_hz) else math.inf
+        if error < self.tolerance:
+            if self.lock_time is None:
+                self.lock_time = t
+        else:
+            self.lock_time = None
+        if t < self.settling or not math.isfinite(error):
+            return
+        self.n += 1
+        self.sum_sq += error * error
+        self.max_abs = max(self.max_abs, error)
+        self.sum_est += 60.0 * estimate_hz
+        self.sum_true += true_bpm
+        self.within += error < self.tolerance
+
+    def summary(self) -> dict[str, float | int | None]:
+        """``rms_error_bpm``, ``max_error_bpm``, ``within_tolerance``, means, ``lock_time_s``."""
+        if not self.n:
+            return {"observations": 0}
+        return {
+            "observations": self.n,
+            "rms_error_bpm": math.sqrt(self.sum_sq / self.n),
+            "max_error_bpm": self.max_abs,
+            "within_tolerance": self.within / self.n,
+            "tolerance_bpm": self.tolerance,
+            "mean_estimate_bpm": self.sum_est / self.n,
+            "mean_true_bpm": self.sum_true / self.n,
+            "ready_time_s": self.ready_time,
+            "lock_time_s": self.lock_time,
+        }

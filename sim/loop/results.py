@@ -1,0 +1,162 @@
+"""What a closed-loop run leaves: running statistics, a fixed-size trace, the trace file.
+
+:class:`Recorder` takes each chunk of ticks from :func:`sim.loop.run_closed_loop` (joint angles,
+references, torques, tick times), turns it into running statistics (:mod:`sim.loop.metrics`), the
+decimated trace and the optional trace file (:mod:`sim.loop.trace`), and forgets it; memory does not
+grow with the run. :class:`LoopResult` is what the run returns.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pinocchio as pin
+
+from robots import Robot
+from sim.loop.metrics import RunningTracking, TickHistogram, rms
+from sim.loop.trace import DecimatedTrace, TraceFile
+
+
+def embed3(p: np.ndarray) -> np.ndarray:
+    """(n, d) positions with d ≤ 3 as (n, 3), missing axes zero (1-D motion along x)."""
+    p = np.atleast_2d(p)
+    if p.shape[1] == 3:
+        return p
+    out = np.zeros((p.shape[0], 3))
+    out[:, : p.shape[1]] = p
+    return out
+
+
+@dataclass
+class LoopResult:
+    """What a run produced: its metrics, and a fixed-size trace of its ticks (SI units).
+
+    The per-tick arrays (``time``, ``ee``, ``poi``, ``reference0``, ``tau_mpc``, ``tau``,
+    ``tick_ns``) are those of the decimated trace (:class:`sim.loop.trace.DecimatedTrace`:
+    every tick of a run up to 20 000 ticks long; beyond, every ``stride``-th tick plus the last
+    2 s at full rate). The metrics cover every tick after settling.
+    """
+
+    settings: object  # sim.loop.LoopSettings
+    trace: dict  # field -> array over the traced ticks
+    stride: int  # ticks between traced samples before the full-rate tail
+    tracking: dict  # tracking_metrics of every tick after settling
+    tick_us: dict  # p50 / p99 / p999 / max / mean of the whole control tick [µs]
+    yardstick_us: dict  # the same of the yardstick (gain tick) timed in the run [µs]
+    horizon_error: np.ndarray  # (N,) RMS error of the reference vs the truth per lead tick [m]
+    controller_stats: dict = field(default_factory=dict)
+    saturated_ticks: int = 0
+    predictor_counts: dict = field(default_factory=dict)
+    plant_dynamics: str = "pinocchio"  # who integrated the plant (and why not native)
+
+    time = property(lambda self: self.trace["time"])  # [s], the instant of the state (i+1)·Ts
+    ee = property(lambda self: self.trace["ee"])  # (n, 3) end-effector position [m]
+    poi = property(lambda self: self.trace["poi"])  # (n, 3) true POI position [m]
+    reference0 = property(lambda self: self.trace["reference0"])  # (n, 3) r_{i+1} [m]
+    tau_mpc = property(lambda self: self.trace["tau_mpc"])  # (n, nv) [N·m]
+    tau_command = property(lambda self: self.trace["tau_command"])  # (n, nv) before the clip
+    tau = property(lambda self: self.trace["tau"])  # (n, nv) applied, after the clip [N·m]
+    tick_ns = property(lambda self: self.trace["tick_ns"])  # (n,) whole control tick [ns]
+
+    @property
+    def error(self) -> np.ndarray:
+        return self.ee - self.poi
+
+    def metrics(self) -> dict:
+        out = dict(self.tracking)
+        out["tick_us"] = dict(self.tick_us)
+        out["prediction_rms_mm"] = {
+            "lead_1": float(1e3 * self.horizon_error[0]),
+            "lead_N": float(1e3 * self.horizon_error[-1]),
+            "mean": float(1e3 * rms(self.horizon_error)),
+        }
+        out["saturated_ticks"] = int(self.saturated_ticks)
+        return out
+
+
+class Recorder:
+    """Turns each chunk's per-tick lists into running statistics, the trace and the trace file."""
+
+    def __init__(self, robot: Robot, settings, truth, anchor, trace_file) -> None:
+        self.robot, self.settings, self.truth, self.anchor = robot, settings, truth, anchor
+        self.model, self.data, self.fid = robot.model, robot.create_data(), robot.ee_frame_id
+        from sim.plant.native import load_chain
+
+        # end-effector positions of a whole chunk in one compiled call (else Pinocchio per tick)
+        self.chain = load_chain(robot.model)
+        frame = robot.model.frames[self.fid]
+        self.ee_joint, self.ee_point = frame.parentJoint, np.array(frame.placement.translation)
+        self.tracking = RunningTracking()
+        self.ticks = TickHistogram()
+        self.yardstick = TickHistogram()
+        self.trace = DecimatedTrace(settings.ticks)
+        self.file = None if trace_file is None else TraceFile(trace_file)
+        N = settings.horizon
+        self.lead = np.arange(1, N + 1)
+        self.horizon2, self.n_horizons = np.zeros(N), np.zeros(N, dtype=np.int64)
+        self.saturated_ticks = 0
+
+    @staticmethod
+    def start_chunk() -> tuple[list, list, list, list, list, list]:
+        """Fresh per-tick lists: q, r, τ_mpc, commanded τ, tick [ns], yardstick [ns]."""
+        return [], [], [], [], [], []
+
+    def end_chunk(self, c0: int, c1: int, log, horizons: list) -> None:
+        settings, N, ds = self.settings, self.settings.horizon, self.settings.downsample
+        q_log, ref0, tau_mpc, tau_cmd, tick_ns, yard_ns = log
+        self.yardstick.add(np.array(yard_ns, dtype=np.int64))
+        m = c1 - c0
+        if self.chain is not None:
+            ee = self.chain.points(np.array(q_log), self.ee_joint, self.ee_point)
+        else:
+            model, data, fid = self.model, self.data, self.fid
+            ee = np.empty((m, 3))
+            for k, q in enumerate(q_log):
+                pin.forwardKinematics(model, data, q)
+                ee[k] = pin.updateFramePlacement(model, data, fid).translation
+        placed = self.anchor + embed3(self.truth.window(c0, c1 + N + 1))
+        poi = placed[1 : m + 1]
+        tau_mpc, tau_cmd = np.array(tau_mpc), np.array(tau_cmd)
+        tick_ns = np.array(tick_ns, dtype=np.int64)
+        limit = self.robot.torque_limit
+        self.saturated_ticks += int((np.abs(tau_cmd) > limit).any(axis=1).sum())
+        tau = np.clip(tau_cmd, -limit, limit)  # what acted
+        s = max(settings.settling_ticks - c0, 0)
+        self.tracking.add(ee[s:] - poi[s:], tau_mpc[s:], tau[s:])
+        self.ticks.add(tick_ns[s:])
+        # horizon prediction error per lead tick, refreshes after settling
+        first = -(-settings.settling_ticks // ds)
+        for k, h in zip(range(c0 // ds, -(-c1 // ds)), horizons, strict=True):
+            tick = k * ds
+            if k >= first and h is not None and tick + N < self.truth.n_ticks \
+                    and np.all(np.isfinite(h)):
+                err2 = np.square(h - placed[tick - c0 + self.lead]).sum(axis=1)
+                finite = np.isfinite(err2)  # no truth at some leads: skipped per lead
+                self.horizon2 += np.where(finite, err2, 0.0)
+                self.n_horizons += finite
+        ticks = np.arange(c0, c1)
+        chunk = {"tick": ticks, "time": (ticks + 1) * settings.Ts, "ee": ee, "poi": poi,
+                 "reference0": np.array([r[0] for r in ref0]), "tau_mpc": tau_mpc,
+                 "tau_command": tau_cmd,
+                 "tau": tau, "tick_ns": tick_ns}
+        self.trace.add(chunk)
+        if self.file is not None:
+            self.file.add(chunk)
+
+    def close(self) -> None:
+        if self.file is not None:
+            self.file.close()
+            self.file = None
+
+    def result(self, stats: dict, counts: dict, dynamics: str = "pinocchio") -> LoopResult:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            horizon_error = np.sqrt(self.horizon2 / self.n_horizons)  # NaN where no refresh
+        return LoopResult(
+            settings=self.settings, trace=self.trace.arrays(), stride=self.trace.stride,
+            tracking=self.tracking.result(), tick_us=self.ticks.stats_us(),
+            yardstick_us=self.yardstick.stats_us(),
+            horizon_error=horizon_error, controller_stats=stats,
+            saturated_ticks=self.saturated_ticks, predictor_counts=counts,
+            plant_dynamics=dynamics,
+        )

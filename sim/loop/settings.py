@@ -1,0 +1,108 @@
+"""Timing and placement of a closed-loop run."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class LoopSettings:
+    """Timing and placement of a closed-loop run.
+
+    Attributes
+    ----------
+    Ts : float
+        Control period [s] (2 kHz in the paper).
+    horizon : int
+        N, reference points per tick [ticks] (50 = 25 ms).
+    downsample : int
+        Ticks between predictor updates (15 → 7.5 ms, Tuna et al. Fig. 9).
+    prediction_points : int
+        Points the predictor forecasts per update, before latency compensation (4).
+    outlier_gate : float
+        A sensor sample farther from its one-step forecast than max(this, 4 × the running RMS
+        forecast miss) is treated as missing (echo outliers: the heart cannot jump millimetres in
+        one 7.5 ms period); 0 disables [m]. Default 0.15 mm: 4σ of the one-step miss of the RLS
+        predictors on the physical sonomicrometer's stream (RMS 0.029–0.047 mm on the six
+        replicas, p99 0.07–0.09 mm; the running term's memory, 50 samples, is shorter than a
+        beat and dips in diastole, so the floor holds the gate at the whole cycle's 4σ). A cycle
+        slip (one wavelength on one range) moves the fix by 0.6–0.9 mm. With a noisy sensor the
+        4 × RMS term sets the radius instead. The choice is recorded in the design decisions
+        (outlier gate).
+    outlier_max_rejections : int
+        After this many consecutive rejected samples the gate opens (a real jump, or a forecast
+        gone wrong) until 20 samples in a row fall inside it again [samples]. Default 3: a slip
+        lasts up to 8 ms and the causal playback adds one raw period (3.9 ms at 257 Hz), so it
+        reaches ⌈11.9 / 7.5⌉ + 1 = 3 samples of the predictor.
+    guard_speed : float
+        Reference guard: forecasts farther from the last accepted sample than ``guard_margin +
+        guard_speed · lead`` mean a diverged predictor; the reference then holds that sample and
+        the predictor restarts. Above the fastest POI motion of the replicas (0.21 m/s); 0
+        disables [m/s].
+    guard_margin : float
+        Constant part of the guard's reach [m].
+    duration : float
+        Simulated time [s].
+    settling : float
+        Initial time excluded from the metrics while the predictors converge [s].
+    poi_offset : tuple[float, float, float]
+        Mean POI position relative to the end-effector's home position [m].
+    pipelined_refresh : bool
+        Split each predictor refresh over two ticks, so that no tick carries all of it: the tick
+        before a refresh tick runs the outlier gate and the predictor's update with the newest
+        sample arrived by then, the refresh tick the forecast, interpolation and guard. False:
+        the whole refresh on the refresh tick, with the newest sample arrived by that tick.
+    """
+
+    Ts: float = 0.5e-3
+    horizon: int = 50
+    downsample: int = 15
+    prediction_points: int = 4
+    outlier_gate: float = 0.15e-3
+    outlier_max_rejections: int = 3
+    guard_speed: float = 0.3
+    guard_margin: float = 2e-3
+    duration: float = 20.0
+    settling: float = 5.0
+    poi_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    pipelined_refresh: bool = True
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.Ts) and self.Ts > 0):
+            raise ValueError(f"Ts must be > 0 [s], got {self.Ts!r}")
+        for name in ("horizon", "downsample", "prediction_points"):
+            value = getattr(self, name)
+            if not isinstance(value, int) or value < 1:
+                raise ValueError(f"{name} must be a positive integer, got {value!r}")
+        if not (np.isfinite(self.outlier_gate) and self.outlier_gate >= 0):
+            raise ValueError(f"outlier_gate must be >= 0 [m], got {self.outlier_gate!r}")
+        if not isinstance(self.outlier_max_rejections, int) or self.outlier_max_rejections < 0:
+            raise ValueError(
+                f"outlier_max_rejections must be an integer >= 0, got "
+                f"{self.outlier_max_rejections!r}"
+            )
+        if not (np.isfinite(self.guard_speed) and self.guard_speed >= 0):
+            raise ValueError(f"guard_speed must be >= 0 [m/s], got {self.guard_speed!r}")
+        if not (np.isfinite(self.guard_margin) and self.guard_margin > 0):
+            raise ValueError(f"guard_margin must be > 0 [m], got {self.guard_margin!r}")
+        if self.prediction_points < 2:
+            raise ValueError("prediction_points must be >= 2 (quadratic interpolation)")
+        if not (np.isfinite(self.duration) and self.duration > 0):
+            raise ValueError(f"duration must be > 0 [s], got {self.duration!r}")
+        if not (0 <= self.settling < self.duration):
+            raise ValueError(
+                f"settling must be in [0, duration) [s], got {self.settling!r} "
+                f"with duration {self.duration!r}"
+            )
+        if len(self.poi_offset) != 3 or not np.all(np.isfinite(self.poi_offset)):
+            raise ValueError(f"poi_offset must be 3 finite numbers [m], got {self.poi_offset!r}")
+
+    @property
+    def ticks(self) -> int:
+        return round(self.duration / self.Ts)
+
+    @property
+    def settling_ticks(self) -> int:
+        return round(self.settling / self.Ts)

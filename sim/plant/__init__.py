@@ -1,0 +1,20 @@
+"""The robot the controller drives: its dynamics, the controller's cancellation, the observer.
+
+================  ================================================================
+``arm``           :class:`ArmPlant`: Pinocchio's forward dynamics (ABA) integrated over a
+                  tick, torque limits, friction; :class:`PlantSettings`
+``cancellation``  :class:`NonlinearityCancellation` ĝ + Ĉq̇ + f̂ from the controller's own
+                  model; :class:`ModelMismatch`
+``observer``      :class:`JointObserver`: x̂ = [q − q0; q̇] from quantised encoders
+``native``        the same tick compiled (an accelerator, checked against Pinocchio)
+================  ================================================================
+"""
+
+from sim.plant.arm import ArmPlant, PlantSettings
+from sim.plant.cancellation import ModelMismatch, NonlinearityCancellation
+from sim.plant.observer import JointObserver, ObserverSettings
+
+__all__ = [
+    "ArmPlant", "JointObserver", "ModelMismatch", "NonlinearityCancellation", "ObserverSettings",
+    "PlantSettings",
+]

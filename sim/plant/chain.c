@@ -1,0 +1,325 @@
+/* Rigid-body dynamics of a chain of revolute joints, for the plant's inner loop (sim/native.py).
+ *
+ * Featherstone's articulated-body algorithm (ABA) and recursive Newton-Euler (RNEA) in body
+ * coordinates, spatial vectors ordered (angular; linear), with the parameters of a Pinocchio
+ * model: joint placement (R_p, p_p) in the parent body, joint axis a, spatial inertia and rotor
+ * armature. Body i's pose in its parent: (R_p Rot(a, q_i), p_p). The reference is Pinocchio
+ * (tests/sim/test_native.py compares every function with it).
+ */
+#include <math.h>
+#include <string.h>
+
+#define MAXJ 8
+
+typedef struct {
+    int n;
+    int parent[MAXJ];           /* parent joint index, -1 for the base; parent[i] < i */
+    double Rp[MAXJ][9];         /* joint placement rotation, row-major */
+    double pp[MAXJ][3];         /* joint placement translation [m] */
+    double axis[MAXJ][3];       /* unit joint axis in the body frame */
+    double inertia[MAXJ][36];   /* 6x6 spatial inertia about the body origin, (ang; lin) */
+    double armature[MAXJ];      /* rotor inertia reflected to the joint [kg m^2] */
+    double damping[MAXJ];       /* viscous friction D [N m s/rad] */
+    double coulomb[MAXJ];       /* Coulomb friction F_c [N m] */
+    double inv_stiction;        /* 1 / v_s [s/rad] */
+    double gravity[3];          /* [m/s^2], e.g. (0, 0, -9.81) */
+} chain_t;
+
+/* X (6x6, row-major): motion transform from the parent's to body i's coordinates. */
+static void transform(const chain_t *m, int i, double q, double X[36], double R[9]) {
+    const double *a = m->axis[i], *P = m->Rp[i], *r = m->pp[i];
+    double s = sin(q), c = 1.0 - cos(q);
+    double K[9] = {0, -a[2], a[1], a[2], 0, -a[0], -a[1], a[0], 0};
+    double J[9];  /* Rot(a, q) = I + s K + c K^2 */
+    for (int k = 0; k < 3; k++)
+        for (int l = 0; l < 3; l++) {
+            double kk = K[3 * k] * K[l] + K[3 * k + 1] * K[3 + l] + K[3 * k + 2] * K[6 + l];
+            J[3 * k + l] = (k == l) + s * K[3 * k + l] + c * kk;
+        }
+    for (int k = 0; k < 3; k++)  /* R = P J */
+        for (int l = 0; l < 3; l++)
+            R[3 * k + l] = P[3 * k] * J[l] + P[3 * k + 1] * J[3 + l] + P[3 * k + 2] * J[6 + l];
+    double E[9];  /* E = R^T: parent -> body coordinates */
+    for (int k = 0; k < 3; k++)
+        for (int l = 0; l < 3; l++) E[3 * k + l] = R[3 * l + k];
+    double rx[9] = {0, -r[2], r[1], r[2], 0, -r[0], -r[1], r[0], 0};
+    memset(X, 0, 36 * sizeof(double));
+    for (int k = 0; k < 3; k++)
+        for (int l = 0; l < 3; l++) {
+            double er = E[3 * k] * rx[l] + E[3 * k + 1] * rx[3 + l] + E[3 * k + 2] * rx[6 + l];
+            X[6 * k + l] = E[3 * k + l];
+            X[6 * (k + 3) + l + 3] = E[3 * k + l];
+            X[6 * (k + 3) + l] = -er;
+        }
+}
+
+static void mat6_vec(const double A[36], const double x[6], double y[6]) {
+    for (int k = 0; k < 6; k++) {
+        double s = 0;
+        for (int l = 0; l < 6; l++) s += A[6 * k + l] * x[l];
+        y[k] = s;
+    }
+}
+
+static void mat6T_vec(const double A[36], const double x[6], double y[6]) {
+    for (int k = 0; k < 6; k++) {
+        double s = 0;
+        for (int l = 0; l < 6; l++) s += A[6 * l + k] * x[l];
+        y[k] = s;
+    }
+}
+
+static void cross3(const double a[3], const double b[3], double c[3]) {
+    c[0] = a[1] * b[2] - a[2] * b[1];
+    c[1] = a[2] * b[0] - a[0] * b[2];
+    c[2] = a[0] * b[1] - a[1] * b[0];
+}
+
+/* motion cross product v x m */
+static void crm(const double v[6], const double m[6], double out[6]) {
+    double t[3];
+    cross3(v, m, out);
+    cross3(v, m + 3, out + 3);
+    cross3(v + 3, m, t);
+    out[3] += t[0]; out[4] += t[1]; out[5] += t[2];
+}
+
+/* force cross product v x* f */
+static void crf(const double v[6], const double f[6], double out[6]) {
+    double t[3];
+    cross3(v, f, out);
+    cross3(v + 3, f + 3, t);
+    out[0] += t[0]; out[1] += t[1]; out[2] += t[2];
+    cross3(v, f + 3, out + 3);
+}
+
+/* A += X^T B X (6x6) */
+static void add_congruence(double A[36], const double X[36], const double B[36]) {
+    double BX[36];
+    for (int k = 0; k < 6; k++)
+        for (int l = 0; l < 6; l++) {
+            double s = 0;
+            for (int j = 0; j < 6; j++) s += B[6 * k + j] * X[6 * j + l];
+            BX[6 * k + l] = s;
+        }
+    for (int k = 0; k < 6; k++)
+        for (int l = 0; l < 6; l++) {
+            double s = 0;
+            for (int j = 0; j < 6; j++) s += X[6 * j + k] * BX[6 * j + l];
+            A[6 * k + l] += s;
+        }
+}
+
+/* qdd = ABA(q, qd, tau): M(q) qdd + C(q, qd) qd + g(q) = tau, M with the armature. */
+void chain_aba(const chain_t *m, const double *q, const double *qd, const double *tau,
+               double *qdd) {
+    int n = m->n;
+    double X[MAXJ][36], R[9], v[MAXJ][6], c[MAXJ][6], IA[MAXJ][36], pA[MAXJ][6];
+    double U[MAXJ][6], D[MAXJ], u[MAXJ], a[MAXJ][6], zero[6] = {0};
+    double a0[6] = {0, 0, 0, -m->gravity[0], -m->gravity[1], -m->gravity[2]};
+    for (int i = 0; i < n; i++) {
+        const double *ax = m->axis[i];
+        transform(m, i, q[i], X[i], R);
+        mat6_vec(X[i], m->parent[i] < 0 ? zero : v[m->parent[i]], v[i]);
+        double vJ[6] = {ax[0] * qd[i], ax[1] * qd[i], ax[2] * qd[i], 0, 0, 0};
+        for (int k = 0; k < 6; k++) v[i][k] += vJ[k];
+        crm(v[i], vJ, c[i]);
+        double h[6];
+        memcpy(IA[i], m->inertia[i], sizeof IA[i]);
+        mat6_vec(m->inertia[i], v[i], h);
+        crf(v[i], h, pA[i]);
+    }
+    for (int i = n - 1; i >= 0; i--) {
+        const double *ax = m->axis[i];
+        for (int k = 0; k < 6; k++)
+            U[i][k] = IA[i][6 * k] * ax[0] + IA[i][6 * k + 1] * ax[1] + IA[i][6 * k + 2] * ax[2];
+        D[i] = ax[0] * U[i][0] + ax[1] * U[i][1] + ax[2] * U[i][2] + m->armature[i];
+        u[i] = tau[i] - (ax[0] * pA[i][0] + ax[1] * pA[i][1] + ax[2] * pA[i][2]);
+        int p = m->parent[i];
+        if (p >= 0) {
+            double Ia[36], pa[6], t[6];
+            for (int k = 0; k < 6; k++)
+                for (int l = 0; l < 6; l++) Ia[6 * k + l] = IA[i][6 * k + l] - U[i][k] * U[i][l] / D[i];
+            mat6_vec(Ia, c[i], t);
+            for (int k = 0; k < 6; k++) pa[k] = pA[i][k] + t[k] + U[i][k] * u[i] / D[i];
+            add_congruence(IA[p], X[i], Ia);
+            mat6T_vec(X[i], pa, t);
+            for (int k = 0; k < 6; k++) pA[p][k] += t[k];
+        }
+    }
+    for (int i = 0; i < n; i++) {
+        const double *ax = m->axis[i];
+        double ap[6];
+        mat6_vec(X[i], m->parent[i] < 0 ? a0 : a[m->parent[i]], ap);
+        for (int k = 0; k < 6; k++) ap[k] += c[i][k];
+        double Ua = 0;
+        for (int k = 0; k < 6; k++) Ua += U[i][k] * ap[k];
+        qdd[i] = (u[i] - Ua) / D[i];
+        for (int k = 0; k < 6; k++) a[i][k] = ap[k];
+        a[i][0] += ax[0] * qdd[i]; a[i][1] += ax[1] * qdd[i]; a[i][2] += ax[2] * qdd[i];
+    }
+}
+
+/* tau = RNEA(q, qd, qdd) = M(q) qdd + C(q, qd) qd + g(q), M with the armature. */
+void chain_rnea(const chain_t *m, const double *q, const double *qd, const double *qdd,
+                double *tau) {
+    int n = m->n;
+    double X[MAXJ][36], R[9], v[MAXJ][6], a[MAXJ][6], f[MAXJ][6], zero[6] = {0};
+    double a0[6] = {0, 0, 0, -m->gravity[0], -m->gravity[1], -m->gravity[2]};
+    for (int i = 0; i < n; i++) {
+        const double *ax = m->axis[i];
+        int p = m->parent[i];
+        transform(m, i, q[i], X[i], R);
+        mat6_vec(X[i], p < 0 ? zero : v[p], v[i]);
+        mat6_vec(X[i], p < 0 ? a0 : a[p], a[i]);
+        double vJ[6] = {ax[0] * qd[i], ax[1] * qd[i], ax[2] * qd[i], 0, 0, 0}, t[6], h[6];
+        for (int k = 0; k < 6; k++) v[i][k] += vJ[k];
+        crm(v[i], vJ, t);
+        for (int k = 0; k < 6; k++) a[i][k] += t[k];
+        a[i][0] += ax[0] * qdd[i]; a[i][1] += ax[1] * qdd[i]; a[i][2] += ax[2] * qdd[i];
+        mat6_vec(m->inertia[i], a[i], f[i]);
+        mat6_vec(m->inertia[i], v[i], h);
+        crf(v[i], h, t);
+        for (int k = 0; k < 6; k++) f[i][k] += t[k];
+    }
+    for (int i = n - 1; i >= 0; i--) {
+        const double *ax = m->axis[i];
+        tau[i] = ax[0] * f[i][0] + ax[1] * f[i][1] + ax[2] * f[i][2] + m->armature[i] * qdd[i];
+        int p = m->parent[i];
+        if (p >= 0) {
+            double t[6];
+            mat6T_vec(X[i], f[i], t);
+            for (int k = 0; k < 6; k++) f[p][k] += t[k];
+        }
+    }
+}
+
+/* Friction torque D qd + F_c tanh(qd / v_s). */
+static void friction(const chain_t *m, const double *qd, double *out) {
+    for (int i = 0; i < m->n; i++)
+        out[i] = m->damping[i] * qd[i] + m->coulomb[i] * tanh(qd[i] * m->inv_stiction);
+}
+
+/* Explicit midpoint, `substeps` steps of h, torque held (sim.plant.ArmPlant._midpoint_steps):
+ * qd_half = qd + h/2 a(q, qd), q_half = q + h/2 qd, q+ = q + h qd_half, qd+ = qd + h a(q_half,
+ * qd_half), with a = ABA(q, qd, tau - friction(qd)). Updates q and qd in place. */
+void chain_midpoint(const chain_t *m, double *q, double *qd, const double *tau, double h,
+                    int substeps) {
+    int n = m->n;
+    double f[MAXJ], t[MAXJ], a[MAXJ], qh[MAXJ], vh[MAXJ], hh = 0.5 * h;
+    for (int s = 0; s < substeps; s++) {
+        friction(m, qd, f);
+        for (int i = 0; i < n; i++) t[i] = tau[i] - f[i];
+        chain_aba(m, q, qd, t, a);
+        for (int i = 0; i < n; i++) {
+            vh[i] = qd[i] + hh * a[i];
+            qh[i] = q[i] + hh * qd[i];
+        }
+        friction(m, vh, f);
+        for (int i = 0; i < n; i++) t[i] = tau[i] - f[i];
+        chain_aba(m, qh, vh, t, a);
+        for (int i = 0; i < n; i++) {
+            q[i] += h * vh[i];
+            qd[i] += h * a[i];
+        }
+    }
+}
+
+/* Position [m] in the world of `point` (body coordinates of joint `joint`) at configuration q,
+ * for `count` configurations (rows of q, n each) -> out (count x 3). */
+void chain_point(const chain_t *m, const double *q, int count, int joint, const double *point,
+                 double *out) {
+    double X[36], R[MAXJ][9], p[MAXJ][3], Rl[9];
+    for (int c = 0; c < count; c++) {
+        const double *qc = q + (size_t)c * m->n;
+        for (int i = 0; i <= joint; i++) {
+            int pa = m->parent[i];
+            transform(m, i, qc[i], X, Rl);
+            if (pa < 0) {
+                memcpy(R[i], Rl, sizeof Rl);
+                memcpy(p[i], m->pp[i], sizeof p[i]);
+            } else {
+                for (int k = 0; k < 3; k++) {
+                    for (int l = 0; l < 3; l++)
+                        R[i][3 * k + l] = R[pa][3 * k] * Rl[l] + R[pa][3 * k + 1] * Rl[3 + l] +
+                                          R[pa][3 * k + 2] * Rl[6 + l];
+                    p[i][k] = p[pa][k] + R[pa][3 * k] * m->pp[i][0] +
+                              R[pa][3 * k + 1] * m->pp[i][1] + R[pa][3 * k + 2] * m->pp[i][2];
+                }
+            }
+        }
+        for (int k = 0; k < 3; k++)
+            out[3 * c + k] = p[joint][k] + R[joint][3 * k] * point[0] +
+                             R[joint][3 * k + 1] * point[1] + R[joint][3 * k + 2] * point[2];
+    }
+}
+
+/* ---- The loop's tick around the MPC (sim/native.py NativeTick): encoders, observer,
+ * cancellation and plant, the same operations in the same order as sim/loop.py's Python path
+ * (sim.sensors encoder quantisation, sim.plant.observer.JointObserver, sim.plant). ---- */
+
+typedef struct {
+    const chain_t *plant;       /* the true arm */
+    const chain_t *model;       /* the controller's model (mismatch), for the cancellation */
+    double h;                   /* integration step [s] */
+    int substeps;
+    int quantise;               /* encoders present */
+    double resolution[MAXJ], inv_resolution[MAXJ];
+    double tau_max[MAXJ];
+    double correct[2 * MAXJ][3 * MAXJ + 1];  /* x = C [x_prior; q~; 1] */
+    double predict[2 * MAXJ][3 * MAXJ];      /* x_prior = P [x; u] */
+    double q[MAXJ], v[MAXJ];    /* plant state */
+    double prior[3 * MAXJ + 1]; /* [x_prior; q~; 1] */
+    double post[3 * MAXJ];      /* [x; u_applied] */
+    double u[MAXJ];             /* MPC torque, written by the caller */
+    double tau[MAXJ];           /* commanded torque (before the clip) */
+    int saturated;
+} tick_t;
+
+/* Encoders and the observer's correction: post[0:2n] = x_hat. */
+void tick_sense(tick_t *t) {
+    int n = t->plant->n, nx = 2 * n;
+    for (int i = 0; i < n; i++)
+        t->prior[nx + i] = t->quantise ? rint(t->q[i] * t->inv_resolution[i]) * t->resolution[i]
+                                       : t->q[i];
+    t->prior[3 * n] = 1.0;
+    for (int k = 0; k < nx; k++) {
+        double s = 0;
+        for (int l = 0; l <= 3 * n; l++) s += t->correct[k][l] * t->prior[l];
+        t->post[k] = s;
+    }
+}
+
+/* Commanded torque tau = u + RNEA_model(q~, v_hat, 0) + D v_hat + F_c tanh(v_hat / v_s). */
+void tick_actuate(tick_t *t) {
+    const chain_t *m = t->model;
+    int n = m->n;
+    double zero[MAXJ] = {0}, bias[MAXJ];
+    const double *q = t->prior + 2 * n, *v = t->post + n;
+    chain_rnea(m, q, v, zero, bias);
+    for (int i = 0; i < n; i++)
+        t->tau[i] = t->u[i] + bias[i] + m->damping[i] * v[i] +
+                    m->coulomb[i] * tanh(v[i] * m->inv_stiction);
+}
+
+/* Clip, integrate one tick, and predict the observer with the MPC torque that acted. */
+void tick_advance(tick_t *t) {
+    int n = t->plant->n, nx = 2 * n;
+    double applied[MAXJ];
+    t->saturated = 0;
+    for (int i = 0; i < n; i++) {
+        double a = t->tau[i];
+        if (a < -t->tau_max[i]) a = -t->tau_max[i];
+        if (a > t->tau_max[i]) a = t->tau_max[i];
+        applied[i] = a;
+        if (a != t->tau[i]) t->saturated = 1;
+    }
+    chain_midpoint(t->plant, t->q, t->v, applied, t->h, t->substeps);
+    for (int i = 0; i < n; i++)
+        t->post[nx + i] = t->saturated ? t->u[i] + (applied[i] - t->tau[i]) : t->u[i];
+    for (int k = 0; k < nx; k++) {
+        double s = 0;
+        for (int l = 0; l < 3 * n; l++) s += t->predict[k][l] * t->post[l];
+        t->prior[k] = s;
+    }
+}

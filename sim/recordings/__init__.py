@@ -1,0 +1,25 @@
+"""Heart-motion recordings users bring: CSV, NPZ and MATLAB files, read and written.
+
+==============  =================================================================
+``recorded``    :class:`RecordedMotion` (a recording as a motion source),
+                :class:`RecordingError`, the unit tables
+``text``        CSV and NPZ: reading, :func:`save_recording`, :func:`export_source`
+``matfile``     MATLAB ``.mat`` v5 and v7.3 (HDF5)
+``files``       :func:`load_recording`: any of them, by suffix
+==============  =================================================================
+"""
+
+from sim.recordings.files import load_recording
+from sim.recordings.matfile import load_mat, parse_indices
+from sim.recordings.recorded import (
+    LENGTH_UNITS,
+    TIME_UNITS,
+    RecordedMotion,
+    RecordingError,
+)
+from sim.recordings.text import export_source, save_recording
+
+__all__ = [
+    "LENGTH_UNITS", "TIME_UNITS", "RecordedMotion", "RecordingError", "export_source",
+    "load_mat", "load_recording", "parse_indices", "save_recording",
+]

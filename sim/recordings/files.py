@@ -1,0 +1,59 @@
+"""Open a recording of any supported format: CSV, NPZ or MATLAB ``.mat``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from sim.recordings.matfile import load_mat
+from sim.recordings.recorded import RecordedMotion, RecordingError
+from sim.recordings.text import read_csv, read_npz
+
+
+def load_recording(path: str | Path, units: str | None = None, var: str | None = None,
+                   rows=None, cols=None, rate: float | None = None) -> RecordedMotion:
+    """Load a heart-motion recording (CSV, NPZ, or MATLAB .mat: see :mod:`sim.recordings.matfile`).
+
+    Parameters
+    ----------
+    path : str or Path
+        ``.csv`` (or ``.txt``) or ``.npz`` file.
+    units : str, optional
+        Length unit of the positions when the file does not state it (``"m"``, ``"mm"``,
+        ``"um"``, ``"cm"``). A CSV without units is in millimetres.
+    var, rows, cols, rate : optional
+        For ``.mat`` files: the variable, its 0-based rows or columns holding the coordinates,
+        and the sample rate [Hz] when the file has no time vector
+        (:func:`sim.recordings.matfile.load_mat`).
+
+    Returns
+    -------
+    RecordedMotion
+        Positions in metres, times in seconds; missing samples are NaN.
+
+    Raises
+    ------
+    RecordingError
+        Naming the file, the line and the problem.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise RecordingError(f"{path}: no such file")
+    if not path.is_file():
+        raise RecordingError(f"{path}: not a file")
+    suffix = path.suffix.lower()
+    if suffix == ".mat":
+        return load_mat(path, var=var, rows=rows, cols=cols, rate=rate, units=units)
+    if var is not None or rows is not None or cols is not None or rate is not None:
+        raise RecordingError(f"{path}: --var, --rows, --cols and --rate apply to .mat files")
+    if suffix in {".csv", ".txt"}:
+        rec = read_csv(path, units)
+    elif suffix == ".npz":
+        rec = read_npz(path, units)
+    else:
+        raise RecordingError(f"{path}: unsupported file type {path.suffix!r} "
+                             "(use .csv, .npz or .mat)")
+    if not np.any(np.all(np.isfinite(rec.z), axis=1)):
+        raise RecordingError(f"{path}: no complete sample (all positions missing)")
+    return rec

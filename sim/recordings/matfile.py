@@ -1,0 +1,186 @@
+"""MATLAB recordings: ``.mat`` v5 (scipy.io) and v7.3 (HDF5, h5py), as researchers keep them.
+
+A recording is one numeric matrix (``var``) holding the three coordinates (or one) along one
+axis and the samples along the other. ``rows``/``cols`` pick the coordinates when the matrix
+holds more than three series; otherwise the axis of length 3 (or 1) is the coordinates' one.
+The sample times come from a time vector in the file (``t``, ``time``, ``timestamps``; seconds
+unless a string ``time_units`` says ``ms``) or from ``rate`` [Hz]; the length unit from a
+string variable ``units`` in the file or from ``units`` (``mm`` when neither says).
+
+Every problem raises :class:`~sim.recordings.RecordingError` naming the file and the problem.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from sim.recordings.recorded import LENGTH_UNITS, TIME_UNITS, RecordedMotion, RecordingError
+
+#: Names recognised as the time vector, in order of preference.
+TIME_NAMES = ("t", "time", "timestamps", "t_s")
+#: At least this many samples [-].
+MIN_SAMPLES = 2
+
+
+def parse_indices(text: str) -> list[int]:
+    """``"0,1,2"`` → [0, 1, 2] (the command lines' ``--rows``/``--cols``)."""
+    import argparse
+
+    try:
+        return [int(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected comma-separated indices, got {text!r}") from None
+
+
+def _read_variables(path: Path) -> dict[str, object]:
+    """Every variable of a .mat file: numeric arrays (MATLAB's shape) and strings."""
+    import scipy.io
+
+    try:
+        raw = scipy.io.loadmat(path, squeeze_me=False, chars_as_strings=True)
+    except NotImplementedError:  # v7.3: HDF5
+        return _read_hdf5(path)
+    except (ValueError, TypeError, OSError, IndexError, scipy.io.matlab.MatReadError) as exc:
+        if _is_hdf5(path):  # an HDF5 file without MATLAB's header block
+            return _read_hdf5(path)
+        raise RecordingError(f"{path}: not a readable MATLAB file ({exc})") from None
+    out: dict[str, object] = {}
+    for key, value in raw.items():
+        if key.startswith("__"):
+            continue
+        if isinstance(value, np.ndarray) and value.dtype.kind in "US":
+            out[key] = "".join(np.asarray(value).ravel().tolist()).strip()
+        elif isinstance(value, np.ndarray) and value.dtype.kind in "fiub":
+            out[key] = np.asarray(value, dtype=float)
+    return out
+
+
+def _is_hdf5(path: Path) -> bool:
+    import h5py
+
+    try:
+        return bool(h5py.is_hdf5(path))
+    except OSError:
+        return False
+
+
+def _read_hdf5(path: Path) -> dict[str, object]:
+    try:
+        import h5py
+    except ImportError:  # pragma: no cover - h5py is a dependency
+        raise RecordingError(f"{path}: MATLAB v7.3 files need h5py") from None
+    out: dict[str, object] = {}
+    try:
+        with h5py.File(path, "r") as f:
+            for key, item in f.items():
+                if not isinstance(item, h5py.Dataset) or key.startswith("#"):
+                    continue
+                data = item[()]
+                if item.attrs.get("MATLAB_class", b"") in (b"char", "char"):
+                    out[key] = "".join(chr(c) for c in np.asarray(data).ravel()).strip()
+                elif np.asarray(data).dtype.kind in "fiub":
+                    out[key] = np.asarray(data, dtype=float).T  # HDF5 holds MATLAB's transpose
+    except OSError as exc:
+        raise RecordingError(f"{path}: not a readable MATLAB v7.3 file ({exc})") from None
+    return out
+
+
+def _select(path: Path, a: np.ndarray, var: str, rows, cols) -> np.ndarray:
+    """(n, dim) samples of matrix ``a`` with coordinates ``rows`` or ``cols``."""
+    if a.ndim != 2:
+        raise RecordingError(f"{path}: variable {var!r} has shape {a.shape}; expected a matrix "
+                             "(coordinates × samples or samples × coordinates)")
+    if rows is not None and cols is not None:
+        raise RecordingError(f"{path}: give the coordinates as rows or as columns, not both")
+    if rows is not None or cols is not None:
+        pick = list(rows if rows is not None else cols)
+        axis_len = a.shape[0] if rows is not None else a.shape[1]
+        bad = [i for i in pick if not 0 <= i < axis_len]
+        if len(pick) not in (1, 3) or bad:
+            raise RecordingError(
+                f"{path}: variable {var!r} has shape {a.shape}; cannot take "
+                f"{'rows' if rows is not None else 'columns'} {pick} as 1 or 3 coordinates "
+                "(0-based)")
+        return a[pick].T if rows is not None else a[:, pick]
+    if a.shape[1] in (1, 3) and a.shape[0] > 3:
+        return a
+    if a.shape[0] in (1, 3) and a.shape[1] > 3:
+        return a.T
+    raise RecordingError(f"{path}: variable {var!r} has shape {a.shape}: which axis holds "
+                         "the coordinates is ambiguous; give --rows or --cols")
+
+
+def load_mat(path: str | Path, var: str | None = None, rows=None, cols=None,
+             rate: float | None = None, units: str | None = None) -> RecordedMotion:
+    """Load a MATLAB recording (module docstring).
+
+    Parameters
+    ----------
+    path : str or Path
+        ``.mat`` file, v5 or v7.3.
+    var : str, optional
+        The variable holding the positions; optional when the file has only one matrix
+        besides the time vector.
+    rows, cols : sequence of int, optional
+        0-based rows (samples along columns) or columns (samples along rows) holding x, y, z.
+    rate : float, optional
+        Sample rate [Hz] when the file has no time vector (required then).
+    units : str, optional
+        Length unit (``m``, ``mm``, ``um``, ``cm``) when the file does not state it.
+
+    Returns
+    -------
+    RecordedMotion
+        Times in seconds from 0 (or the file's time vector), positions in metres.
+    """
+    path = Path(path)
+    variables = _read_variables(path)
+    arrays = {k: v for k, v in variables.items() if isinstance(v, np.ndarray)}
+    time_key = next((k for k in TIME_NAMES if k in arrays), None)
+    if var is None:
+        candidates = [k for k, v in arrays.items() if k != time_key and v.size > 3]
+        if len(candidates) != 1:
+            raise RecordingError(f"{path}: name the variable with --var (found "
+                                 f"{', '.join(sorted(arrays)) or 'no numeric variables'})")
+        var = candidates[0]
+    if var not in arrays:
+        raise RecordingError(f"{path}: no numeric variable {var!r} (found "
+                             f"{', '.join(sorted(arrays)) or 'none'})")
+    z = _select(path, arrays[var], var, rows, cols)
+    n = z.shape[0]
+    if n < MIN_SAMPLES:
+        raise RecordingError(f"{path}: variable {var!r} has {n} sample(s); at least "
+                             f"{MIN_SAMPLES} are needed")
+    if time_key is not None and time_key != var and rate is None:
+        t = arrays[time_key].ravel() * TIME_UNITS.get(str(variables.get("time_units", "s")), 1.0)
+        if t.size != n:
+            raise RecordingError(f"{path}: time vector {time_key!r} has {t.size} samples, "
+                                 f"{var!r} has {n}")
+        if not np.all(np.isfinite(t)):
+            raise RecordingError(f"{path}: time vector {time_key!r} is not finite everywhere")
+        bad = np.flatnonzero(np.diff(t) <= 0)
+        if bad.size:
+            raise RecordingError(f"{path}: time vector {time_key!r} does not increase at "
+                                 f"sample {bad[0] + 1} ({t[bad[0] + 1]:g} after {t[bad[0]]:g})")
+    elif rate is not None:
+        if not (np.isfinite(rate) and rate > 0):
+            raise RecordingError(f"{path}: the sample rate must be positive, got {rate}")
+        t = np.arange(n) / float(rate)
+    else:
+        raise RecordingError(f"{path}: no time vector ({', '.join(TIME_NAMES)}) in the file; "
+                             "give the sample rate (--rate HZ)")
+    file_units = variables.get("units")
+    if isinstance(file_units, str) and units is not None and file_units != units:
+        raise RecordingError(f"{path}: units {file_units!r} in the file disagree with {units!r}")
+    unit = file_units if isinstance(file_units, str) else (units or "mm")
+    if unit not in LENGTH_UNITS:
+        raise RecordingError(f"{path}: unknown units {unit!r} "
+                             f"(use one of {', '.join(sorted(LENGTH_UNITS))})")
+    if np.any(np.isinf(z)):
+        raise RecordingError(f"{path}: {var!r} has infinite values (use NaN for missing)")
+    if not np.any(np.all(np.isfinite(z), axis=1)):
+        raise RecordingError(f"{path}: {var!r} has no complete sample (all NaN)")
+    return RecordedMotion(t, z * LENGTH_UNITS[unit], name=str(path))

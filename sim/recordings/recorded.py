@@ -1,0 +1,87 @@
+"""A recorded trajectory and the units recording files use.
+
+:class:`RecordedMotion` is the motion source of every reader (:mod:`sim.recordings.text`,
+:mod:`sim.recordings.matfile`); :class:`RecordingError` is what they raise.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from sim.heart.motion import as_time_array
+
+#: Length units accepted in headers and flags, in metres.
+LENGTH_UNITS: dict[str, float] = {"m": 1.0, "mm": 1e-3, "um": 1e-6, "µm": 1e-6, "cm": 1e-2}
+#: Time units accepted in headers, in seconds.
+TIME_UNITS: dict[str, float] = {"s": 1.0, "ms": 1e-3}
+#: Axis names, in order.
+AXES = ("x", "y", "z")
+
+#: Times closer than this to a sample time count as that sample [s].
+SNAP = 1e-9
+
+
+class RecordingError(ValueError):
+    """A recording file is missing, unreadable or malformed; the message names file and line."""
+
+
+class RecordedMotion:
+    """A recorded trajectory, linearly interpolated between samples.
+
+    position(t) = p_k + (t − t_k)/(t_{k+1} − t_k)·(p_{k+1} − p_k) for t_k ≤ t ≤ t_{k+1}.
+    It is NaN outside ``[t[0], t[-1]]`` and on any interval touching a missing sample.
+
+    Parameters
+    ----------
+    t : ndarray, shape (n,)
+        Strictly increasing sample times [s].
+    z : ndarray, shape (n, dim)
+        Positions [m]; NaN marks dropouts.
+    name : str
+        Where it came from (shown by the CLI).
+    """
+
+    def __init__(self, t: np.ndarray, z: np.ndarray, name: str = "recording") -> None:
+        self.t = np.asarray(t, dtype=float)
+        self.z = np.asarray(z, dtype=float).reshape(self.t.size, -1)
+        self.dim = self.z.shape[1]
+        self.name = name
+        self._missing = ~np.all(np.isfinite(self.z), axis=1)
+
+    @property
+    def duration(self) -> float:
+        """t[-1] − t[0] [s]."""
+        return float(self.t[-1] - self.t[0])
+
+    @property
+    def sample_rate(self) -> float:
+        """1 / median sample interval [Hz]."""
+        return float(1.0 / np.median(np.diff(self.t)))
+
+    def starting_at(self, t0: float = 0.0) -> RecordedMotion:
+        """The same recording with its time axis shifted so that it starts at ``t0`` [s]."""
+        return RecordedMotion(self.t - self.t[0] + t0, self.z, self.name)
+
+    def position(self, t: float | np.ndarray) -> np.ndarray:
+        """p(t) [m]: shape (dim,) for a float, (n, dim) for an array; NaN where no data."""
+        ts, scalar = as_time_array(t)
+        k = np.clip(np.searchsorted(self.t, ts, side="right") - 1, 0, self.t.size - 2)
+        t0, t1 = self.t[k], self.t[k + 1]
+        w = ((ts - t0) / (t1 - t0))[:, None]
+        with np.errstate(invalid="ignore"):
+            out = (1.0 - w) * self.z[k] + w * self.z[k + 1]
+        # A time within SNAP of a sample is that sample (resampling at the file's own rate).
+        at0, at1 = np.abs(ts - t0) <= SNAP, np.abs(ts - t1) <= SNAP
+        out = np.where(at0[:, None], self.z[k], np.where(at1[:, None], self.z[k + 1], out))
+        bad = (ts < self.t[0] - SNAP) | (ts > self.t[-1] + SNAP)
+        bad |= self._missing[k] & ~at1
+        bad |= self._missing[k + 1] & ~at0
+        out[bad] = np.nan
+        return out[0] if scalar else out
+
+
+def fail(path: Path, problem: str, line: int | None = None) -> RecordingError:
+    where = f"{path}, line {line}" if line is not None else f"{path}"
+    return RecordingError(f"{where}: {problem}")

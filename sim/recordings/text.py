@@ -1,0 +1,231 @@
+"""CSV and NPZ recordings: read, write, and export any motion source to them.
+
+CSV format
+----------
+A header line, then one sample per line::
+
+    t,x,y,z              (or the 1-D form  t,x)
+    0.0000,1.25,-0.40,3.10
+
+Times are seconds and positions millimetres unless the header says otherwise with a unit
+suffix on each name, ``t_s``/``t[s]``/``t (ms)``, ``x_mm``/``x [m]``/``x(um)``; or the caller
+passes ``units=``. Lines starting with ``#`` and blank lines are ignored. An empty position
+field or ``nan`` is a dropout and is kept as missing (NaN); every other field must be a finite
+number. Time must be finite and strictly increasing.
+
+NPZ format
+----------
+Arrays ``t`` (n,) [s] and ``position`` (n, dim) (``x`` is accepted for ``position``), and a
+string ``units`` (``"m"``, ``"mm"`` or ``"um"``) unless the caller passes ``units=``.
+
+Every problem raises :class:`~sim.recordings.recorded.RecordingError` naming the file, the line
+(CSV) and what is wrong.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import re
+from pathlib import Path
+
+import numpy as np
+
+from sim.heart.motion import MotionSource
+from sim.recordings.recorded import (
+    AXES,
+    LENGTH_UNITS,
+    TIME_UNITS,
+    RecordedMotion,
+    RecordingError,
+    fail,
+)
+
+_HEADER_FIELD = re.compile(
+    r"^\s*(?P<name>[A-Za-z]+)\s*(?:(?:_|\[|\()\s*(?P<unit>[A-Za-zµ]+)\s*[\])]?)?\s*$")
+
+
+def _unit_factor(path: Path, name: str, unit: str | None, table: dict[str, float]) -> float | None:
+    if unit is None:
+        return None
+    key = unit.lower() if unit.lower() in table else unit
+    if key not in table:
+        raise fail(path, f"unknown unit {unit!r} for column {name!r} "
+                    f"(use one of {', '.join(sorted(table))})", 1)
+    return table[key]
+
+
+def _parse_header(path: Path, fields: list[str], units: str | None) -> tuple[int, float, float]:
+    """(dim, time factor [s/unit], length factor [m/unit]) from a header line."""
+    if all(_looks_numeric(f) for f in fields):
+        raise fail(path, "missing header line: the first line must name the columns "
+                    "(t,x,y,z or t,x)", 1)
+    parsed = []
+    for raw in fields:
+        m = _HEADER_FIELD.match(raw)
+        if not m:
+            raise fail(path, f"bad header field {raw.strip()!r}: expected t, x, y, z "
+                        "optionally with a unit such as x_mm or x [mm]", 1)
+        parsed.append((m.group("name").lower(), m.group("unit")))
+    names = [n for n, _ in parsed]
+    if names not in (["t", "x"], ["t", "x", "y", "z"]):
+        raise fail(path, f"header columns {','.join(names)} are not t,x,y,z or t,x", 1)
+    t_factor = _unit_factor(path, "t", parsed[0][1], TIME_UNITS) or 1.0
+    length = {_unit_factor(path, n, u, LENGTH_UNITS) for n, u in parsed[1:]}
+    if len(length) > 1:
+        raise fail(path, "position columns have different units (or only some state one)", 1)
+    header_factor = length.pop()
+    flag_factor = None
+    if units is not None:
+        if units not in LENGTH_UNITS:
+            raise RecordingError(f"{path}: unknown units flag {units!r} "
+                                 f"(use one of {', '.join(sorted(LENGTH_UNITS))})")
+        flag_factor = LENGTH_UNITS[units]
+    if header_factor is not None and flag_factor is not None and header_factor != flag_factor:
+        raise fail(path, f"header units disagree with the units flag {units!r}", 1)
+    factor = header_factor or flag_factor or LENGTH_UNITS["mm"]
+    return len(names) - 1, t_factor, factor
+
+
+def _looks_numeric(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def read_csv(path: Path, units: str | None) -> RecordedMotion:
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise fail(path, f"not a text file ({exc.reason})") from None
+    rows = [(i + 1, row) for i, row in enumerate(csv.reader(io.StringIO(text)))
+            if row and not row[0].lstrip().startswith("#") and any(f.strip() for f in row)]
+    if not rows:
+        raise fail(path, "empty file: no header and no samples")
+    _, header = rows[0]
+    dim, t_factor, factor = _parse_header(path, header, units)
+    names = ["t", *AXES[:dim]]
+    if len(rows) < 3:
+        raise fail(path, f"needs at least two samples, found {len(rows) - 1}")
+    t = np.empty(len(rows) - 1)
+    z = np.empty((len(rows) - 1, dim))
+    prev = -np.inf
+    for k, (line, row) in enumerate(rows[1:]):
+        if len(row) != dim + 1:
+            raise fail(path, f"expected {dim + 1} fields ({','.join(names)}), "
+                        f"got {len(row)}", line)
+        values = []
+        for name, field in zip(names, row, strict=True):
+            field = field.strip()
+            if field == "" or field.lower() == "nan":
+                if name == "t":
+                    raise fail(path, "time is missing; only positions may be missing", line)
+                values.append(np.nan)
+                continue
+            try:
+                value = float(field)
+            except ValueError:
+                raise fail(path, f"column {name}: {field!r} is not a number", line) from None
+            if not np.isfinite(value):
+                raise fail(path, f"column {name}: {field!r} is not finite "
+                            "(leave the field empty for a missing sample)", line)
+            values.append(value)
+        if not values[0] > prev:
+            raise fail(path, f"time {values[0]:g} is not after the previous time "
+                        f"{prev:g} (times must increase strictly)", line)
+        prev = values[0]
+        t[k] = values[0] * t_factor
+        z[k] = np.asarray(values[1:]) * factor
+    return RecordedMotion(t, z, name=str(path))
+
+
+def read_npz(path: Path, units: str | None) -> RecordedMotion:
+    try:
+        data = np.load(path, allow_pickle=False)
+    except (ValueError, OSError) as exc:
+        raise fail(path, f"not a readable .npz archive ({exc})") from None
+    with data:
+        keys = set(data.files)
+        pos_key = "position" if "position" in keys else "x" if "x" in keys else None
+        if "t" not in keys or pos_key is None:
+            raise fail(path, f"needs arrays 't' and 'position'; found {sorted(keys)}")
+        t = np.asarray(data["t"], dtype=float)
+        z = np.asarray(data[pos_key], dtype=float)
+        file_units = str(data["units"]) if "units" in keys else None
+    if t.ndim != 1:
+        raise fail(path, f"'t' must be one-dimensional, got shape {t.shape}")
+    if z.ndim == 1:
+        z = z[:, None]
+    if z.ndim != 2 or z.shape[0] != t.size or z.shape[1] not in (1, 3):
+        raise fail(path, f"'{pos_key}' must have shape ({t.size}, 3) or ({t.size}, 1), "
+                    f"got {z.shape}")
+    if t.size < 2:
+        raise fail(path, f"needs at least two samples, found {t.size}")
+    if units is not None and file_units is not None and units != file_units:
+        raise fail(path, f"units {file_units!r} in the file disagree with the flag {units!r}")
+    unit = file_units or units
+    if unit is None:
+        raise fail(path, "no 'units' array in the file and no units given")
+    if unit not in LENGTH_UNITS:
+        raise fail(path, f"unknown units {unit!r} (use one of {', '.join(sorted(LENGTH_UNITS))})")
+    if not np.all(np.isfinite(t)):
+        row = int(np.flatnonzero(~np.isfinite(t))[0])
+        raise fail(path, f"sample {row}: time is not finite")
+    bad = np.flatnonzero(np.diff(t) <= 0)
+    if bad.size:
+        raise fail(path, f"sample {bad[0] + 1}: time {t[bad[0] + 1]:g} is not after "
+                    f"{t[bad[0]]:g} (times must increase strictly)")
+    if np.any(np.isinf(z)):
+        row = int(np.flatnonzero(np.any(np.isinf(z), axis=1))[0])
+        raise fail(path, f"sample {row}: position is infinite (use NaN for a missing sample)")
+    return RecordedMotion(t, z * LENGTH_UNITS[unit], name=str(path))
+
+
+def save_recording(path: str | Path, t: np.ndarray, z: np.ndarray,
+                   comment: str | None = None) -> Path:
+    """Write samples to ``path`` (.csv: seconds and millimetres; .npz: seconds and metres).
+
+    Parameters
+    ----------
+    path : str or Path
+        Destination; the suffix picks the format.
+    t : ndarray, shape (n,)
+        Sample times [s].
+    z : ndarray, shape (n, dim)
+        Positions [m], NaN for missing (written as empty CSV fields).
+    comment : str, optional
+        A ``#`` line written before the CSV header.
+    """
+    path = Path(path)
+    t = np.asarray(t, dtype=float)
+    z = np.asarray(z, dtype=float).reshape(t.size, -1)
+    suffix = path.suffix.lower()
+    if suffix == ".npz":
+        np.savez_compressed(path, t=t, position=z, units=np.array("m"))
+        return path
+    if suffix not in {".csv", ".txt"}:
+        raise RecordingError(f"{path}: unsupported file type {path.suffix!r} (use .csv or .npz)")
+    axes = AXES[: z.shape[1]] if z.shape[1] in (1, 3) else None
+    if axes is None:
+        raise RecordingError(f"{path}: can only write 1-D or 3-D positions, got {z.shape[1]}")
+    mm = z * 1e3
+    with path.open("w", encoding="utf-8", newline="") as fh:
+        if comment:
+            fh.write(f"# {comment}\n")
+        fh.write(",".join(["t_s", *(f"{a}_mm" for a in axes)]) + "\n")
+        for ti, row in zip(t, mm, strict=True):
+            fields = [f"{ti:.9f}"] + ["" if not np.isfinite(v) else f"{v:.6f}" for v in row]
+            fh.write(",".join(fields) + "\n")
+    return path
+
+
+def export_source(source: MotionSource, path: str | Path, duration: float, rate: float,
+                  t0: float = 0.0, comment: str | None = None) -> Path:
+    """Sample ``source`` at ``rate`` [Hz] over ``[t0, t0 + duration]`` and save it to ``path``."""
+    if not duration > 0 or not rate > 0:
+        raise ValueError("duration and rate must be positive")
+    n = round(duration * rate) + 1
+    t = t0 + np.arange(n) / rate
+    return save_recording(path, t, np.asarray(source.position(t)).reshape(n, -1), comment)

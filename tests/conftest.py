@@ -1,0 +1,19 @@
+"""Fixtures shared across the test suite: the PHANToM and its linear model."""
+
+from __future__ import annotations
+
+import pytest
+
+from robots import LinearArm, Robot, linearize, load_robot
+
+
+@pytest.fixture(scope="session")
+def phantom() -> Robot:
+    """The PHANToM Premium 1.5A (the default robot), loaded once per test run."""
+    return load_robot("phantom")
+
+
+@pytest.fixture(scope="session")
+def arm(phantom: Robot) -> LinearArm:
+    """The PHANToM linearised about its home posture at Ts = 0.5 ms (the MPC's model)."""
+    return linearize(phantom)

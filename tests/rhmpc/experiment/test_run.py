@@ -1,0 +1,111 @@
+"""A configured run end to end: its document, its seeds, its streams against whole arrays."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from rhmpc.control.mpc import RecedingHorizonMPC
+from rhmpc.control.reference import ExactReference, PredictedReference
+from rhmpc.experiment import RunConfig, build_run, run_experiment
+from sim.loop import LoopSettings, run_closed_loop
+from sim.loop.closed_loop import poi_truth
+from sim.sources import heart_source
+
+DOCUMENTED_KEYS = {
+    "rms_error_mm": float, "max_error_mm": float, "rms_effort_mNm": float, "tick_us": dict,
+    "fallbacks": int, "predictor": str, "scenario": str, "robot": str, "seed": int,
+    "settings": dict, "versions": dict, "prediction_rms_mm": dict, "wall_s": float,
+}
+
+
+def small_config(**changes):
+    base = RunConfig(loop=LoopSettings(duration=1.5, settling=0.5))
+    return base.replace(**changes)
+
+
+def test_result_document_has_the_documented_keys():
+    import json
+
+    from rhmpc.control.yardstick import GainTick
+
+    _, doc = run_experiment(small_config(), gain_tick=GainTick)
+    doc = json.loads(json.dumps(doc))  # it is plain JSON
+    for key, kind in DOCUMENTED_KEYS.items():
+        assert isinstance(doc[key], kind), key
+    assert set(doc["tick_us"]) >= {"p50", "p99", "p999", "max"}
+    assert doc["peak_rss_mb"] > 0 and doc["gain_tick_us"]["p50"] > 0
+    assert doc["tick_ratio_to_gain"]["p99"] == doc["tick_us"]["p99"] / doc["gain_tick_us"]["p50"]
+    assert doc["settings"]["loop"]["duration"] == 1.5
+
+
+def test_same_seed_same_numbers_other_seed_other_numbers():
+    keys = ("rms_error_mm", "max_error_mm", "rms_effort_mNm")
+    a = run_experiment(small_config(seed=3))[1]
+    b = run_experiment(small_config(seed=3))[1]
+    c = run_experiment(small_config(seed=4))[1]
+    assert [a[k] for k in keys] == [b[k] for k in keys]
+    assert [a[k] for k in keys] != [c[k] for k in keys]
+
+
+def test_truth_and_stream_start_together():
+    run = build_run(small_config(ground_truth="true"))
+    assert run.stream.block(0, 1)[0][0] == 0.0
+    assert run.truth.n_ticks == run.config.loop.ticks + run.config.loop.horizon + 1
+
+
+@pytest.mark.parametrize("predictor", ["generalized", "exact"])
+def test_streamed_run_is_the_run_on_whole_arrays(tmp_path, predictor):
+    """The streamed run (sensor stream made block by block, truth read per window, running
+    statistics over many chunks) against the same run fed whole-run arrays
+    (``sensor.measure`` over the run, ``poi_truth`` of the raw recording), scored
+    with the whole-array ``tracking_metrics``: equal to 1e-9 relative (measured ≤ 3e-13: sums in
+    another order, the mean summed per block)."""
+    from predictors import make_predictor
+    from sim.loop.metrics import tracking_metrics
+    from sim.loop.trace import read_trace
+    from sim.recordings import RecordedMotion
+    from sim.sensors import sensor_from_name
+
+    config = small_config(predictor=predictor, seed=5, **{
+        "loop.duration": 4.0, "loop.settling": 1.0, "plant.dynamics": "pinocchio"})
+    loop, run = config.loop, build_run(config)
+    streamed = run_closed_loop(  # chunks of 600 ticks: 14 chunk boundaries
+        run.robot, run.arm, run.controller, run.reference, run.truth, None, run.stream, loop,
+        plant_settings=config.plant, trace_file=str(tmp_path / "run.npz"), chunk_ticks=600)
+    doc = streamed.metrics()
+
+    run = build_run(config)
+    heart_rng, sensor_rng = np.random.default_rng(config.seed).spawn(2)
+    heart = heart_source(config.scenario, heart_rng)
+    source, origin = heart.motion, heart.origin
+    sensor = sensor_from_name("sonomicrometry", dim=source.dim, rate=origin.sensor_rate,
+                              upsample=1.0 / loop.Ts)
+    span = loop.duration + (loop.horizon + 1) * loop.Ts
+    stream = sensor.measure(source, span, sensor_rng)
+    # the target: the recording (the raw samples, before the delivery to 2 kHz), same draws
+    raw = dataclasses.replace(sensor, stages=sensor.stages[:-1]).measure(
+        source, span, np.random.default_rng(config.seed).spawn(2)[1])
+    target = RecordedMotion(raw.t, raw.z)
+    center, truth = poi_truth(target, loop.ticks + loop.horizon + 1, loop.Ts)
+    if predictor == "exact":
+        reference = ExactReference(truth, loop.horizon)
+    else:
+        reference = PredictedReference(
+            make_predictor(predictor, dt=loop.downsample * loop.Ts), loop.Ts, loop.horizon,
+            loop.downsample, loop.prediction_points, outlier_gate=loop.outlier_gate,
+            max_rejections=loop.outlier_max_rejections, guard_speed=loop.guard_speed,
+            guard_margin=loop.guard_margin)
+    whole = run_closed_loop(run.robot, run.arm, RecedingHorizonMPC(run.arm, config.mpc),
+                            reference, truth, center, stream, loop, plant_settings=config.plant)
+    for key in ("rms_error_mm", "max_error_mm", "rms_effort_mNm"):
+        np.testing.assert_allclose(doc[key], whole.metrics()[key], rtol=1e-9, err_msg=key)
+    # every tick on disk, scored on whole arrays, gives the running statistics
+    trace, s = read_trace(tmp_path / "run.npz"), loop.settling_ticks
+    assert trace["tick"].size == loop.ticks
+    np.testing.assert_allclose(trace["ee"], whole.ee, rtol=0, atol=1e-15)
+    direct = tracking_metrics(trace["ee"][s:] - trace["poi"][s:], trace["tau_mpc"][s:],
+                              trace["tau"][s:])
+    for key, value in direct.items():
+        np.testing.assert_allclose(streamed.tracking[key], value, rtol=1e-12, err_msg=key)
+    assert doc["tick_us"]["p999"] >= doc["tick_us"]["p99"] >= doc["tick_us"]["p50"] > 0

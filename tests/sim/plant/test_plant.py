@@ -1,0 +1,90 @@
+"""The plant's integrator against finer references, energy, clipping; the cancellation."""
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from robots import load_robot
+from sim.plant import ArmPlant, ModelMismatch, NonlinearityCancellation, PlantSettings
+
+TS = 0.5e-3
+REACH = 0.4  # [m] bound on the lever from any joint axis to the PHANToM tip
+
+
+def one_tick(robot, settings, states):
+    plant = ArmPlant(robot, TS, settings)
+    out = []
+    for q, v, tau in states:
+        plant.q, plant.v = q.copy(), v.copy()
+        plant.step(tau)
+        out.append(np.concatenate([plant.q, plant.v]))
+    return np.array(out)
+
+
+def test_default_integrator_local_error_against_fine_rk4(phantom):
+    rng = np.random.default_rng(5)
+    states = [
+        (phantom.q0 + rng.normal(size=3) * 0.2, rng.normal(size=3) * 0.3, rng.normal(size=3) * 0.3)
+        for _ in range(100)
+    ]
+    ref = one_tick(phantom, PlantSettings("rk4", 400), states)
+    got = one_tick(phantom, PlantSettings(), states)
+    assert np.abs(got[:, :3] - ref[:, :3]).max() * REACH < 0.5e-6  # [m] at the tip, per tick
+    assert np.abs(got[:, 3:] - ref[:, 3:]).max() < 5e-3  # [rad/s]
+    coarse = one_tick(phantom, PlantSettings("semi-implicit-euler", 2), states)
+    assert np.abs(coarse[:, :3] - ref[:, :3]).max() > np.abs(got[:, :3] - ref[:, :3]).max()
+
+
+def total_energy(robot, data, q, v):
+    return pin.computeKineticEnergy(robot.model, data, q, v) + pin.computePotentialEnergy(
+        robot.model, data, q
+    )
+
+
+def test_energy_is_conserved_without_friction_and_torque(phantom):
+    """A free swing under gravity (no damping, no friction, τ = 0) keeps its energy."""
+    robot = load_robot("phantom")
+    robot.model.damping[:] = 0.0
+    robot.model.friction[:] = 0.0
+    plant = ArmPlant(robot, TS, PlantSettings())
+    plant.reset(q=robot.q0 + np.array([0.3, 0.4, -0.3]), v=np.array([0.5, -0.2, 0.3]))
+    data = robot.create_data()
+    e0 = total_energy(robot, data, plant.q, plant.v)
+    energies = []
+    for _ in range(2000):  # 1 s
+        plant.step(np.zeros(3))
+        energies.append(total_energy(robot, data, plant.q, plant.v))
+    drift = np.abs(np.array(energies) - e0).max()
+    assert drift < 1e-6 * max(abs(e0), 1e-3)  # relative drift over 1 s
+    assert np.ptp(plant.q) > 0  # it did move
+
+
+def test_torque_is_clipped_to_actuator_limits(phantom):
+    plant = ArmPlant(phantom, TS)
+    applied = plant.step(np.array([10.0, -10.0, 0.0]))
+    np.testing.assert_allclose(applied, [phantom.torque_limit[0], -phantom.torque_limit[1], 0.0])
+
+
+def test_exact_cancellation_holds_the_arm_still(phantom):
+    """With the controller's model equal to the plant, τ = ĝ + Ĉq̇ + f̂ leaves q̈ = 0 at rest."""
+    plant = ArmPlant(phantom, TS)
+    cancel = NonlinearityCancellation(phantom)
+    for _ in range(200):
+        plant.step(cancel.torque(plant.q, plant.v))
+    np.testing.assert_allclose(plant.q, phantom.q0, atol=1e-9)
+
+
+def test_mass_mismatch_scales_gravity_compensation(phantom):
+    q = phantom.q0 + np.array([0.0, 0.3, -0.2])
+    exact = NonlinearityCancellation(phantom).torque(q, np.zeros(3))
+    heavy = NonlinearityCancellation(phantom, ModelMismatch(mass_scale=1.2)).torque(q, np.zeros(3))
+    np.testing.assert_allclose(heavy, 1.2 * exact, rtol=1e-12, atol=1e-15)
+    with pytest.raises(ValueError, match="mass_scale"):
+        ModelMismatch(mass_scale=float("nan"))
+
+
+def test_bad_plant_settings_raise():
+    with pytest.raises(ValueError, match="valid: midpoint"):
+        PlantSettings(integrator="euler")
+    with pytest.raises(ValueError, match="substeps"):
+        PlantSettings(substeps=0)

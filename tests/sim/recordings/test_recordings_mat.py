@@ -1,0 +1,111 @@
+"""MATLAB recordings (sim.recordings.matfile): v5 and v7.3, orientation, rows/cols, time,
+units, refusals."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.io
+
+from sim.recordings import RecordingError, load_recording
+
+T = np.arange(0, 2, 0.01)
+XYZ = np.vstack([4 * np.sin(2 * np.pi * 1.3 * T), 2 * np.sin(2 * np.pi * 2.6 * T),
+                 3 * np.cos(2 * np.pi * 1.3 * T)])  # mm, coordinates × samples
+
+
+def _v5(tmp_path: Path, name: str = "rec.mat", **variables) -> Path:
+    path = tmp_path / name
+    scipy.io.savemat(path, variables)
+    return path
+
+
+def _v73(tmp_path: Path, **variables) -> Path:
+    """A MATLAB v7.3 file: HDF5 with MATLAB's 512-byte header block; arrays stored
+    transposed (column-major), strings as uint16 with MATLAB_class 'char'."""
+    import h5py
+
+    path = tmp_path / "rec73.mat"
+    with h5py.File(path, "w", userblock_size=512) as f:
+        for key, value in variables.items():
+            if isinstance(value, str):
+                d = f.create_dataset(key, data=np.array([[ord(c)] for c in value], np.uint16))
+                d.attrs["MATLAB_class"] = np.bytes_("char")
+            else:
+                d = f.create_dataset(key, data=np.asarray(value, float).T)
+                d.attrs["MATLAB_class"] = np.bytes_("double")
+    header = b"MATLAB 7.3 MAT-file, Platform: GLNXA64, HDF5 schema 1.00 .".ljust(116)
+    header += b" " * 8 + b"\x00\x02" + b"IM"
+    with path.open("r+b") as fh:
+        fh.write(header.ljust(512, b"\x00"))
+    return path
+
+
+def test_v5_rows_with_rate(tmp_path: Path) -> None:
+    rec = load_recording(_v5(tmp_path, X=XYZ), var="X", rate=100.0)
+    assert rec.dim == 3 and rec.t.size == T.size
+    np.testing.assert_allclose(rec.t, T, atol=1e-12)
+    np.testing.assert_allclose(rec.z, XYZ.T * 1e-3)  # mm by default
+    assert rec.sample_rate == pytest.approx(100.0)
+
+
+def test_v5_samples_along_rows_with_time_vector_and_units(tmp_path: Path) -> None:
+    path = _v5(tmp_path, P=XYZ.T * 1e-3, t=(T + 5.0)[:, None], units="m")
+    rec = load_recording(path)  # the only matrix besides t: no --var needed
+    np.testing.assert_allclose(rec.t, T + 5.0)
+    np.testing.assert_allclose(rec.z, XYZ.T * 1e-3)
+    with pytest.raises(RecordingError, match="disagree"):
+        load_recording(path, units="mm")
+
+
+def test_rows_and_cols_pick_coordinates(tmp_path: Path) -> None:
+    wide = np.vstack([np.zeros(T.size), XYZ, np.ones(T.size)])  # 5 series × samples
+    rec = load_recording(_v5(tmp_path, D=wide), var="D", rows=[1, 2, 3], rate=100.0,
+                         units="mm")
+    np.testing.assert_allclose(rec.z, XYZ.T * 1e-3)
+    rec = load_recording(_v5(tmp_path, "c.mat", D=wide.T), var="D", cols=[3, 2, 1],
+                         rate=100.0)
+    np.testing.assert_allclose(rec.z, XYZ[::-1].T * 1e-3)
+    one = load_recording(_v5(tmp_path, "one.mat", D=wide), var="D", rows=[2], rate=100.0)
+    assert one.dim == 1
+
+
+def test_v73(tmp_path: Path) -> None:
+    path = _v73(tmp_path, X=XYZ, units="mm")
+    rec = load_recording(path, var="X", rate=100.0)
+    np.testing.assert_allclose(rec.z, XYZ.T * 1e-3)
+    assert load_recording(_v73(tmp_path, X=XYZ.T, time=T), var="X").duration == \
+        pytest.approx(T[-1])
+
+
+@pytest.mark.parametrize(("variables", "kwargs", "message"), [
+    (dict(Y=XYZ), dict(var="X", rate=100.0), "no numeric variable 'X'"),
+    (dict(X=np.zeros((3, 3))), dict(var="X", rate=100.0), "ambiguous"),
+    (dict(X=np.zeros((4, 5))), dict(var="X", rate=100.0), "ambiguous"),
+    (dict(X=XYZ), dict(var="X", rows=[0, 1, 7], rate=100.0), "cannot take rows"),
+    (dict(X=np.zeros((3, 1))), dict(var="X", rows=[0, 1, 2], rate=100.0), "1 sample"),
+    (dict(X=XYZ, t=np.r_[T[:50], T[48:198]]), dict(var="X"), "does not increase"),
+    (dict(X=XYZ, t=T[:10]), dict(var="X"), "has 10 samples"),
+    (dict(X=XYZ), dict(var="X"), "--rate"),
+    (dict(X=np.full((3, 50), np.nan)), dict(var="X", rate=100.0), "all NaN"),
+    (dict(X=XYZ, Z=XYZ), dict(rate=100.0), "--var"),
+])
+def test_refusals(tmp_path: Path, variables: dict, kwargs: dict, message: str) -> None:
+    with pytest.raises(RecordingError, match=message):
+        load_recording(_v5(tmp_path, **variables), **kwargs)
+
+
+def test_not_a_mat_file(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.mat"
+    bad.write_text("hello")
+    with pytest.raises(RecordingError, match="not a readable MATLAB"):
+        load_recording(bad, var="X", rate=10.0)
+
+
+def test_all_nan_csv_refused(tmp_path: Path) -> None:
+    path = tmp_path / "nan.csv"
+    path.write_text("t,x,y,z\n0,,,\n0.01,nan,nan,nan\n0.02,,,\n")
+    with pytest.raises(RecordingError, match="no complete sample"):
+        load_recording(path)
