@@ -15,6 +15,11 @@ from sim.recordings.matfile import parse_indices
 #: Default run length [s] and settling window [s] of ``rhmpc simulate``.
 DEFAULT_DURATION = 30.0
 DEFAULT_SETTLING = 10.0
+#: The settling rule when neither --settling nor a config file sets it.
+SETTLING_RULE = (f"settling by default {DEFAULT_SETTLING:g} s, or a third of a run shorter than "
+                 f"{3 * DEFAULT_SETTLING:g} s")
+#: The shortest stretch after settling that a run is scored on [s]: ten 25-ms horizons.
+MIN_SCORED = 0.25
 
 
 def add_run_options(
@@ -32,7 +37,8 @@ def add_run_options(
     p.add_argument("--duration", type=float,
                    help=f"simulated seconds (default {duration:g})")
     p.add_argument("--settling", type=float,
-                   help=f"seconds excluded from the metrics (default {settling:g})")
+                   help=f"seconds excluded from the metrics (default {settling:g}, or a third "
+                   f"of a run shorter than {3 * settling:g} s)")
     p.add_argument("--ground-truth", choices=("recorded", "true"),
                    help="score against the recorded stream (paper protocol, default) or the "
                    "noise-free motion")
@@ -145,7 +151,27 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
         changes[key.strip()] = parse_value(value.strip())
     config = config.replace(**changes)
     check_sensor(config)
+    check_scoring(config)
     return config
+
+
+def settling_rule(args: argparse.Namespace) -> str:
+    """Where the run's settling time came from, for the summary."""
+    if getattr(args, "settling", None) is not None:
+        return "set by --settling"
+    if getattr(args, "config", None):
+        return f"from {args.config}"
+    return SETTLING_RULE
+
+
+def check_scoring(config: RunConfig) -> None:
+    """A run must be scored on at least :data:`MIN_SCORED` seconds after settling."""
+    loop = config.loop
+    scored = loop.duration - loop.settling
+    if scored < MIN_SCORED:
+        raise UsageError(
+            f"the run is scored on {scored:.3g} s after {loop.settling:.3g} s of settling; "
+            f"at least {MIN_SCORED:g} s is needed (raise --duration or lower --settling)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -170,7 +196,7 @@ def run(args: argparse.Namespace) -> int:
     if args.out:
         Path(args.out).write_text(json.dumps(doc, indent=2) + "\n")
     if args.plot:
-        from rhmpc.studies.comparison import plot_run
+        from rhmpc.studies.run_report import plot_run
 
         plot_run(result, args.plot, title=f"{doc['predictor']} on {doc['scenario']} "
                  f"({doc['robot']}): RMS error {doc['rms_error_mm']:.3f} mm")
@@ -178,9 +204,9 @@ def run(args: argparse.Namespace) -> int:
         json.dump(doc, sys.stdout, indent=2)
         print()
     else:
-        from rhmpc.studies.comparison import format_summary
+        from rhmpc.studies.run_report import format_summary
 
-        print(format_summary(doc))
+        print(format_summary(doc, settling_rule(args)))
         if args.out:
             print(f"  result           {args.out}")
         if args.plot:

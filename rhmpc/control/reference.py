@@ -1,8 +1,10 @@
 """From predictor samples to the MPC's N control-rate reference points.
 
-The predictor runs every ``downsample`` ticks (period ``dt = downsample·Ts``, 7.5 ms in the
-paper) on the newest measured sample ``z(t_a)``, measured at ``t_a`` (the anchor; a sensor's
-latency makes it older than the current tick), and forecasts ``K`` points::
+The predictor runs with period ``dt``: every ``downsample`` ticks on the newest sample delivered
+to the control rate (``dt = downsample·Ts``, 7.5 ms in the paper), or once per raw sample of a
+slower sensor (``dt`` its sample period, :mod:`sim.loop.clock`). Each refresh takes the newest
+measured sample ``z(t_a)``, measured at ``t_a`` (the anchor; a sensor's latency makes it older
+than the current tick), and forecasts ``K`` points::
 
     nodes  t_a + k·dt,  k = 0 … K      values  z(t_a), ẑ(t_a + dt), …, ẑ(t_a + K·dt)
 
@@ -15,12 +17,14 @@ these nodes: with ``s = (τ − t_a)/dt`` and the window of nodes ``m, m+1, m+2`
 
 Beyond the last node the last window's quadratic extrapolates (with the paper's K = 4 and
 downsample 15 that is at most the last 2.5 ms of the last horizon before the next update).
-``K = prediction_points + ⌈latency/dt⌉`` so that a sensor's latency is predicted across.
+``K = prediction_points + ⌈latency/dt⌉`` so that a sensor's latency is predicted across (Yuen et
+al. 2009's delay compensation).
 
 Outlier gate (innovation gating): while *locked*, a sample whose miss e = z − ẑ (ẑ the
-forecast made for it one period earlier) has ‖e‖ > max(``outlier_gate``, 4·e_rms) is treated
-as missing; e_rms² is the exponentially weighted mean of ‖e‖² over the accepted samples (weight
-1/50), so a predictor with larger one-step errors gets a proportionally wider gate. Rejections
+forecast made for it one period earlier) has ‖e‖ > max(floor, 4·e_rms) is treated as missing
+(the floor is given, or 4 × the robust RMS of the first misses on the data themselves);
+e_rms² is the exponentially weighted mean of ‖e‖² over the accepted samples (weight 1/50), so
+a predictor with larger one-step errors gets a proportionally wider gate. Rejections
 are counted in the predictor's ``counts["outliers_rejected"]``. After ``max_rejections``
 consecutive rejections the gate *unlocks* and accepts every sample (a real jump, or a forecast
 gone wrong: gating on a wrong forecast would run the predictor open-loop and let it diverge)
@@ -102,18 +106,32 @@ class OutlierGate:
 
     Parameters
     ----------
-    gate : float
-        Smallest gate radius [m]; the radius is max(gate, 4·e_rms).
+    gate : float or None
+        Smallest gate radius, the floor [m]; the radius is max(floor, 4·e_rms). None: the floor
+        is calibrated on the data: every sample is accepted during the first 2 × ``calibration``
+        misses; the first half lets the predictor converge (an RLS predictor's one-step miss
+        falls by 2–4× over its first seconds), and on the second half floor = 4·√(mean ‖e‖²)
+        over the misses no larger than 5 × their median (an outlier in the window does not
+        widen the gate).
     max_rejections : int
         Consecutive rejections after which the gate unlocks.
     relock : int
         Consecutive samples inside the gate after which an unlocked gate locks again.
+    calibration : int
+        Misses the floor is calibrated on (``gate`` None) [samples].
     """
 
-    def __init__(self, gate: float, max_rejections: int = 2, relock: int = 20) -> None:
-        if not (math.isfinite(gate) and gate > 0) or max_rejections < 0 or relock < 1:
-            raise ValueError("the gate must be > 0 [m], max_rejections >= 0 and relock >= 1")
-        self.gate2, self.max_rejections, self.relock = gate**2, max_rejections, relock
+    #: The smallest calibrated floor [m] (a noise-free signal would give 0).
+    MIN_FLOOR = 1e-6
+
+    def __init__(self, gate: float | None, max_rejections: int = 2, relock: int = 20,
+                 calibration: int = 100) -> None:
+        if gate is not None and not (math.isfinite(gate) and gate > 0):
+            raise ValueError("the gate must be > 0 [m] (or None: calibrated on the data)")
+        if max_rejections < 0 or relock < 1 or calibration < 1:
+            raise ValueError("max_rejections must be >= 0, relock and calibration >= 1")
+        self.gate, self.max_rejections, self.relock = gate, max_rejections, relock
+        self.calibration = calibration
         self.reset()
 
     def reset(self) -> None:
@@ -121,10 +139,14 @@ class OutlierGate:
         self._rejected = 0  # consecutive rejections (locked)
         self._inside = 0  # consecutive samples inside the gate (unlocked)
         self._miss2 = 0.0  # e_rms², over accepted samples
-        self._threshold2 = self.gate2
+        self._calibrating: list[float] | None = [] if self.gate is None else None
+        self.floor = self.gate  # [m]; None while calibrating
+        self._threshold2 = 0.0 if self.gate is None else self.gate**2
 
     def inside(self, z: np.ndarray, forecast: np.ndarray) -> bool:
         """Whether a locked gate would accept ``z`` against ``forecast`` (no state changes)."""
+        if self._calibrating is not None:
+            return True
         miss = z - forecast
         return self.locked and float(np.dot(miss, miss)) <= self._threshold2
 
@@ -132,42 +154,57 @@ class OutlierGate:
         """Whether sample ``z`` is accepted given its ``forecast``; events go to ``counts``."""
         miss = z - forecast
         miss2 = float(np.dot(miss, miss))
-        outside = miss2 > self._threshold2
-        if not self.locked:
-            self._inside = 0 if outside else self._inside + 1
-            self.locked = self._inside >= self.relock
-        elif not outside:
-            self._rejected = 0
-        elif self._rejected < self.max_rejections:
-            self._rejected += 1
-            counts["outliers_rejected"] += 1
-            return False
+        if self._calibrating is not None:
+            self._calibrate(miss2)
         else:
-            self.locked, self._rejected, self._inside = False, 0, 0
-            counts["gate_unlocked"] += 1
+            outside = miss2 > self._threshold2
+            if not self.locked:
+                self._inside = 0 if outside else self._inside + 1
+                self.locked = self._inside >= self.relock
+            elif not outside:
+                self._rejected = 0
+            elif self._rejected < self.max_rejections:
+                self._rejected += 1
+                counts["outliers_rejected"] += 1
+                return False
+            else:
+                self.locked, self._rejected, self._inside = False, 0, 0
+                counts["gate_unlocked"] += 1
         self._miss2 += 0.02 * (miss2 - self._miss2)
-        self._threshold2 = max(self.gate2, 16.0 * self._miss2)
+        self._threshold2 = max(self.floor**2 if self.floor else 0.0, 16.0 * self._miss2)
         return True
+
+    def _calibrate(self, miss2: float) -> None:
+        """Collect a squared miss; after 2 × ``calibration`` of them, set the floor."""
+        self._calibrating.append(miss2)
+        if len(self._calibrating) >= 2 * self.calibration:
+            e = np.sqrt(np.asarray(self._calibrating[self.calibration :]))
+            kept = e[e <= 5.0 * np.median(e)]
+            self.floor = max(4.0 * float(np.sqrt(np.mean(kept**2))), self.MIN_FLOOR)
+            self._calibrating = None
 
 
 class PredictedReference:
-    """The N-point reference from a predictor, refreshed every ``downsample`` ticks.
+    """The N-point reference from a predictor, refreshed once per predictor period.
 
     Parameters
     ----------
     predictor : predictors.Predictor
-        Runs at ``dt = downsample · Ts``; fed centred heart coordinates [m].
+        Runs at its ``dt`` (``downsample · Ts``, or a slow sensor's sample period); fed centred
+        heart coordinates [m].
     Ts : float
         Control period [s].
     horizon : int
         N, reference points per tick.
-    downsample : int
-        Ticks between predictor updates.
+    refresh_ticks : int
+        The most ticks one refresh must cover until the next (``downsample``, or a slow
+        sensor's period with a margin); at least ``dt / Ts``.
     prediction_points : int
         Forecast points per update before latency compensation (4 in Tuna et al.).
-    outlier_gate : float
-        Smallest radius of the :class:`OutlierGate` [m]; 0 disables the gate.
-    max_rejections, relock : int
+    outlier_gate : float or None
+        Floor of the :class:`OutlierGate` [m]; 0 disables the gate; None calibrates the floor
+        on the first ``gate_calibration`` misses.
+    max_rejections, relock, gate_calibration : int
         See :class:`OutlierGate`.
     guard_speed, guard_margin : float
         Reference guard: a forecast point farther from the last accepted sample than
@@ -177,28 +214,30 @@ class PredictedReference:
     """
 
     def __init__(
-        self, predictor, Ts: float, horizon: int, downsample: int, prediction_points: int = 4,
-        *, outlier_gate: float = 0.0, max_rejections: int = 2, relock: int = 20,
-        guard_speed: float = 0.0, guard_margin: float = 2e-3,
+        self, predictor, Ts: float, horizon: int, refresh_ticks: int, prediction_points: int = 4,
+        *, outlier_gate: float | None = 0.0, max_rejections: int = 2, relock: int = 20,
+        gate_calibration: int = 100, guard_speed: float = 0.0, guard_margin: float = 2e-3,
     ) -> None:
         if prediction_points < 2:
             raise ValueError(f"prediction_points must be >= 2, got {prediction_points}")
-        self.gate = OutlierGate(outlier_gate, max_rejections, relock) if outlier_gate else None
+        self.gate = None if outlier_gate == 0 else OutlierGate(
+            outlier_gate, max_rejections, relock, gate_calibration)
         if not (guard_speed >= 0 and guard_margin > 0):
             raise ValueError("guard_speed must be >= 0 [m/s] and guard_margin > 0 [m]")
         self.guard_speed, self.guard_margin = guard_speed, guard_margin
         self.predictor = predictor
-        self.Ts, self.N, self.downsample = Ts, horizon, downsample
-        self.dt = downsample * Ts
-        if not math.isclose(predictor.dt, self.dt, rel_tol=1e-9):
-            raise ValueError(f"predictor dt {predictor.dt} s != downsample·Ts = {self.dt} s")
+        self.Ts, self.N, self.refresh_ticks = Ts, horizon, refresh_ticks
+        self.dt = float(predictor.dt)
+        if not self.dt <= refresh_ticks * Ts * (1 + 1e-9):
+            raise ValueError(f"predictor dt {self.dt} s is longer than refresh_ticks·Ts = "
+                             f"{refresh_ticks * Ts} s")
         self.prediction_points = prediction_points
         #: optional ``observe(t, heart_rate_hz)`` scorer of the predictor's heart-rate estimate
         #: (:class:`sim.loop.metrics.HeartRateScore`), called after every forecast
         self.monitor = None
         # ticks a refresh covers: its period, plus one so that a pipelined loop can read the
         # next refresh tick's points from it while that refresh runs
-        self._span = downsample + horizon
+        self._span = refresh_ticks + horizon
         self._lead = np.arange(1, self._span + 1) * (Ts / self.dt)  # (τ − now)/dt per point
         # Interpolation matrices by (nodes, (now − t0)/Ts): with sensor stamps on the tick grid
         # only a few offsets occur, so a refresh is one small product instead of a rebuild.
@@ -223,6 +262,7 @@ class PredictedReference:
         self._before: np.ndarray | None = None  # ẑ of the next sample made two periods ago
         self._held: np.ndarray | None = None  # the last accepted sample …
         self._held_stamp = 0.0  # … and its time [s]
+        self.age_sum, self.age_count = 0.0, 0  # Σ (now − t_a) over forecasts from a sample
         if self.gate is not None:
             self.gate.reset()
 
@@ -277,6 +317,8 @@ class PredictedReference:
         if z is not None:
             nodes = np.concatenate((np.reshape(z, (1, -1)), points))
             t0 = self._anchor
+            self.age_sum += latency
+            self.age_count += 1
         else:
             nodes, t0 = points, self._anchor + self.dt
         self._dense = self._interpolation(nodes.shape[0], now - t0) @ nodes
@@ -314,6 +356,11 @@ class PredictedReference:
     def locked(self) -> bool:
         """True while the outlier gate rejects samples outside it (False without a gate)."""
         return self.gate is not None and self.gate.locked
+
+    @property
+    def mean_age(self) -> float:
+        """Mean age of the newest sample when a forecast is made from it [s] (NaN if none)."""
+        return self.age_sum / self.age_count if self.age_count else math.nan
 
     def horizon(self, tick: int) -> np.ndarray | None:
         """r_{tick+1} … r_{tick+N}, or None before the first valid sample.

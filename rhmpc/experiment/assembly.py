@@ -6,6 +6,7 @@ sensor, plant, loop), ``predictors`` and the controller of :mod:`rhmpc.control`.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -17,6 +18,7 @@ from rhmpc.control.reference import ExactReference, PredictedReference
 from rhmpc.errors import UsageError
 from rhmpc.experiment.config import RunConfig
 from robots import LinearArm, Robot, linearize, load_robot
+from sim.loop.clock import PredictorClock, predictor_clock
 from sim.loop.metrics import HeartRateScore
 from sim.loop.streams import SampleSource, SourceTruth, UpsampledSamples, sensor_samples
 from sim.sensors import DEFAULT_PLAYBACK, SampleStream, Sensor, playback, sensor_from_name
@@ -51,6 +53,8 @@ class Run:
         The motion's name for reports.
     duration : float
         Simulated time [s].
+    clock : PredictorClock
+        When the predictor runs: every ``downsample`` ticks, or on each raw sample.
     """
 
     config: RunConfig
@@ -63,6 +67,7 @@ class Run:
     stream: SampleSource
     label: str
     duration: float
+    clock: PredictorClock
 
 
 def build_stream(config: RunConfig, heart: HeartSource, duration: float,
@@ -132,18 +137,17 @@ def build_controller(config: RunConfig, arm: LinearArm,
     return controller
 
 
-def build_reference(config: RunConfig, truth: SourceTruth,
-                    heart: HeartSource) -> ExactReference | PredictedReference:
-    """The exact future (``predictor = "exact"``) or the predictor's forecast, per the loop."""
+def build_reference(config: RunConfig, truth: SourceTruth, heart: HeartSource,
+                    clock: PredictorClock) -> ExactReference | PredictedReference:
+    """The exact future (``predictor = "exact"``) or the predictor's forecast on ``clock``."""
     loop = config.loop
     if config.predictor == "exact":
         return ExactReference(truth, loop.horizon)
-    predictor = make_predictor(
-        config.predictor, dt=loop.downsample * loop.Ts, **config.predictor_settings
-    )
+    predictor = make_predictor(config.predictor, dt=clock.dt, **config.predictor_settings)
     reference = PredictedReference(
-        predictor, loop.Ts, loop.horizon, loop.downsample, loop.prediction_points,
-        outlier_gate=loop.outlier_gate, max_rejections=loop.outlier_max_rejections,
+        predictor, loop.Ts, loop.horizon, clock.refresh_ticks, loop.prediction_points,
+        outlier_gate=loop.gate_floor, max_rejections=loop.outlier_max_rejections,
+        gate_calibration=math.ceil(loop.gate_calibration / clock.dt),
         guard_speed=loop.guard_speed, guard_margin=loop.guard_margin,
     )
     phase = getattr(heart.motion, "phase", None)
@@ -181,6 +185,7 @@ def build_run(config: RunConfig, implementation: str = "python") -> Run:
     recorded = getattr(stream, "recorded", stream)
     truth = SourceTruth(recorded if config.ground_truth == "recorded" else heart.motion,
                         loop.ticks + loop.horizon + 1, loop.Ts)
-    reference = build_reference(config, truth, heart)
+    clock = predictor_clock(loop, stream)
+    reference = build_reference(config, truth, heart, clock)
     return Run(config, robot, arm, controller, reference, truth, truth.center, stream,
-               heart.label, loop.duration)
+               heart.label, loop.duration, clock)

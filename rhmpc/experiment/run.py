@@ -13,6 +13,7 @@ import numpy as np
 from rhmpc.experiment.assembly import Run, build_run
 from rhmpc.experiment.config import RunConfig
 from sim.loop import LoopResult, run_closed_loop
+from sim.sensors import DEFAULT_PLAYBACK
 
 
 def versions() -> dict[str, str]:
@@ -98,7 +99,17 @@ def document(config: RunConfig, run: Run, result: LoopResult, wall: float,
         errors = np.asarray(predictor.forecast_error_rms, dtype=float)
         doc["forecast_error_rms_mm"] = [None if not np.isfinite(v) else 1e3 * float(v)
                                         for v in errors]
-        doc["forecast_lead_s"] = config.loop.downsample * config.loop.Ts
+        doc["forecast_lead_s"] = run.clock.dt
+    doc["predictor_clock"] = _clock_document(config, run)
+    gate = getattr(run.reference, "gate", None)
+    if gate is not None or predictor is not None:
+        counts = result.predictor_counts
+        doc["outlier_gate"] = {
+            "setting": config.loop.outlier_gate,
+            "floor_mm": None if gate is None or gate.floor is None else 1e3 * gate.floor,
+            **{key: int(counts.get(key, 0))
+               for key in ("outliers_rejected", "gate_unlocked", "retracted", "repaired")},
+        }
     monitor = getattr(run.reference, "monitor", None)
     if monitor is not None:
         doc["heart_rate"] = monitor.summary()
@@ -107,6 +118,23 @@ def document(config: RunConfig, run: Run, result: LoopResult, wall: float,
         doc["tick_ratio_to_gain"] = {k: v / result.yardstick_us["p50"]
                                      for k, v in metrics["tick_us"].items() if k != "mean"}
     return doc
+
+
+def _clock_document(config: RunConfig, run: Run) -> dict[str, Any]:
+    """When the predictor ran, on what, and how old its newest sample was when it forecast."""
+    clock = run.clock
+    playback = None
+    if clock.mode == "downsample" and config.sensor in ("sonomicrometry", "white", "recorded"):
+        playback = config.sensor_settings.get("playback", DEFAULT_PLAYBACK)
+    age = getattr(run.reference, "mean_age", float("nan"))
+    return {
+        "mode": clock.mode,
+        "dt_s": clock.dt,
+        "sensor_rate_hz": clock.sensor_rate,
+        "playback": playback,
+        "mean_sample_age_ms": None if not np.isfinite(age) else 1e3 * age,
+        "description": clock.describe(playback),
+    }
 
 
 def _gain_tick(controller, gain_tick):

@@ -37,15 +37,17 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import gc
+import math
 import time
 from collections.abc import Callable, Iterator
 
 import numpy as np
 
 from robots import LinearArm, Robot
+from sim.loop.clock import PredictorClock, arrival_tick, predictor_clock
 from sim.loop.results import LoopResult, Recorder
 from sim.loop.settings import LoopSettings
-from sim.loop.streams import ArrayTruth, StreamCursor, as_samples
+from sim.loop.streams import BLOCK, ArrayTruth, SampleSource, StreamCursor, as_samples
 from sim.plant import ModelMismatch, ObserverSettings, PlantSettings
 from sim.plant.tick import make_tick
 
@@ -69,6 +71,35 @@ def newest_arrived(arrival: np.ndarray, n_ticks: int, Ts: float) -> np.ndarray:
     return np.searchsorted(arrival, np.arange(n_ticks) * Ts + 1e-12, side="right") - 1
 
 
+class RawQueue:
+    """A sensor's raw samples in arrival order, read a block at a time.
+
+    ``tick()`` is the tick at which the next sample has arrived (None when none is left);
+    ``pop()`` returns it as ``(t, z)``.
+    """
+
+    def __init__(self, samples: SampleSource, Ts: float) -> None:
+        self.samples, self.n, self.Ts = samples, len(samples), Ts
+        self.k = 0
+        self._start, self._block = 0, samples.block(0, min(BLOCK, self.n))
+
+    def _row(self) -> int:
+        if self.k - self._start >= self._block[0].size:
+            self._start = self.k
+            self._block = self.samples.block(self.k, min(self.k + BLOCK, self.n))
+        return self.k - self._start
+
+    def tick(self) -> int | None:
+        if self.k >= self.n:
+            return None
+        return arrival_tick(float(self._block[2][self._row()]), self.Ts)
+
+    def pop(self) -> tuple[float, np.ndarray]:
+        row = self._row()
+        self.k += 1
+        return float(self._block[0][row]), self._block[1][row]
+
+
 class OpenLoop:
     """Steps 1–3 for a chunk of ticks: the references and the time charged to each tick.
 
@@ -84,15 +115,30 @@ class OpenLoop:
     settings : LoopSettings
     hold : ndarray, shape (N, 3)
         The points used before the first sample (the POI's mean position) [m].
+    clock : PredictorClock, optional
+        When the predictor runs (:mod:`sim.loop.clock`); default every ``downsample`` ticks.
     """
 
+    #: The most missing samples filled before a sample after a gap in its time stamps.
+    MAX_FILL = 50
+
     def __init__(self, reference, stream, center: np.ndarray, settings: LoopSettings,
-                 hold: np.ndarray) -> None:
+                 hold: np.ndarray | None, clock: PredictorClock | None = None) -> None:
         self.reference, self.center, self.settings, self.hold = reference, center, settings, hold
-        self.cursor = StreamCursor(as_samples(stream))
-        self.last = -1  # index of the newest sample given to the reference
-        if settings.pipelined_refresh:  # the first refresh's update, on tick −1
-            self.update(-1)
+        self.clock = clock or PredictorClock("downsample", settings.downsample * settings.Ts,
+                                             settings.downsample, math.inf)
+        self.pipelined = settings.pipelined_refresh
+        self.carry = 0  # ns charged to the first tick of the next chunk
+        if self.clock.mode == "sensor":
+            self.queue = RawQueue(self.clock.raw, settings.Ts)
+            self.last_stamp: float | None = None
+            self.next = self._next_arrival()
+        else:
+            self.cursor = StreamCursor(as_samples(stream))
+            self.last = -1  # index of the newest sample given to the reference
+            self.next = 0
+            if self.pipelined:  # the first refresh's update, on tick −1
+                self.update(-1)
 
     def update(self, tick: int) -> int:
         """Feed the reference the newest sample arrived by ``tick`` (None if none is new).
@@ -111,25 +157,71 @@ class OpenLoop:
         return spent
 
     def chunk(self, c0: int, c1: int) -> tuple[list, list[int], list]:
-        """References r_{i+1..i+N} of ticks c0 … c1 − 1, the ns charged to each, the forecasts.
-
-        ``c0`` is a multiple of ``downsample``: every refresh of the chunk starts in it.
-        """
-        ds, pipelined, reference = self.settings.downsample, self.settings.pipelined_refresh, \
-            self.reference
+        """References r_{i+1..i+N} of ticks c0 … c1 − 1, the ns charged to each, and each
+        refresh's ``(tick, points)``."""
         refs, horizons, charged = [], [], [0] * (c1 - c0)
-        for i in range(c0, c1, ds):
-            spent = 0 if pipelined else self.update(i)
-            t_start = clock()
-            reference.forecast()
+        charged[0], self.carry = self.carry, 0
+        i = c0
+        while i < c1:
+            refreshed = i >= self.next
+            if refreshed:
+                self._refresh(i, c0, c1, charged)
+            stop = min(self.next, c1)
             # views; later refreshes replace the arrays they view, never change them
-            period = reference.horizons(i, min(ds, c1 - i))
-            charged[i - c0] += spent + clock() - t_start
-            if pipelined and i + ds - 1 < c1:  # the next refresh's update, on its own tick
-                charged[i + ds - 1 - c0] += self.update(i + ds - 1)
-            horizons.append(period[0])  # the refresh's forecast from tick i
+            period = self.reference.horizons(i, stop - i)
+            if refreshed:
+                horizons.append((i, period[0]))  # the refresh's forecast from tick i
             refs.extend(self.hold if h is None else h for h in period)
+            i = stop
         return refs, charged, horizons
+
+    def _charge(self, tick: int, ns: int, c0: int, c1: int, charged: list[int]) -> None:
+        """Add ``ns`` to ``tick``'s time (the chunk's first tick if earlier, the next chunk's if
+        later)."""
+        if tick >= c1:
+            self.carry += ns
+        else:
+            charged[max(tick, c0) - c0] += ns
+
+    def _refresh(self, i: int, c0: int, c1: int, charged: list[int]) -> None:
+        """The refresh on tick ``i``: its forecast, and the update it needs (pipelined: the
+        update ran on the tick before, and the next refresh's update is made now)."""
+        if self.clock.mode == "sensor":
+            self._charge(i - self.pipelined, self._arrivals(i - self.pipelined), c0, c1, charged)
+        elif not self.pipelined:
+            self._charge(i, self.update(i), c0, c1, charged)
+        t_start = clock()
+        self.reference.forecast()
+        self._charge(i, clock() - t_start, c0, c1, charged)
+        if self.clock.mode == "sensor":
+            self.next = self._next_arrival()
+            return
+        self.next = i + self.settings.downsample
+        if self.pipelined:  # the next refresh's update, on its own tick
+            self._charge(self.next - 1, self.update(self.next - 1), c0, c1, charged)
+
+    def _next_arrival(self) -> float:
+        """The tick of the refresh for the next raw sample (inf when none is left)."""
+        tick = self.queue.tick()
+        return math.inf if tick is None else tick + self.pipelined
+
+    def _arrivals(self, tick: int) -> int:
+        """Feed every raw sample arrived by ``tick``, each once, with its own stamp; a gap in
+        the stamps is filled with missing samples first. Returns the time spent [ns]."""
+        spent, dt, reference = 0, self.clock.dt, self.reference
+        while (arrived := self.queue.tick()) is not None and arrived <= tick:
+            t_k, z_k = self.queue.pop()
+            fills = 0 if self.last_stamp is None else round((t_k - self.last_stamp) / dt) - 1
+            t_start = clock()
+            for _ in range(min(max(fills, 0), self.MAX_FILL)):
+                reference.update(tick, None, t_k)
+                reference.forecast()
+            reference.update(tick, z_k - self.center, t_k)
+            if self.queue.tick() is not None and self.queue.tick() <= tick:
+                reference.forecast()  # a bunch of arrivals: each gated against its forecast
+            spent += clock() - t_start
+            self.last_stamp = t_k
+        return spent
 
 
 @contextlib.contextmanager
@@ -210,7 +302,8 @@ def run_closed_loop(
     chunk = ds * max(1, chunk_ticks // ds)  # ticks per open-loop pass (a multiple of ds)
     with quiet_gc():
         try:
-            open_loop = OpenLoop(reference, stream, truth.center, settings, np.tile(anchor, (N, 1)))
+            open_loop = OpenLoop(reference, stream, truth.center, settings, np.tile(anchor, (N, 1)),
+                                 predictor_clock(settings, stream))
             for c0 in range(0, n, chunk):
                 c1 = min(c0 + chunk, n)
                 refs, charged, horizons = open_loop.chunk(c0, c1)

@@ -103,7 +103,7 @@ class Recorder:
         return [], [], [], [], [], []
 
     def end_chunk(self, c0: int, c1: int, log, horizons: list) -> None:
-        settings, N, ds = self.settings, self.settings.horizon, self.settings.downsample
+        settings, N = self.settings, self.settings.horizon
         q_log, ref0, tau_mpc, tau_cmd, tick_ns, yard_ns = log
         self.yardstick.add(np.array(yard_ns, dtype=np.int64))
         m = c1 - c0
@@ -126,11 +126,9 @@ class Recorder:
         self.tracking.add(ee[s:] - poi[s:], tau_mpc[s:], tau[s:])
         self.ticks.add(tick_ns[s:])
         # horizon prediction error per lead tick, refreshes after settling
-        first = -(-settings.settling_ticks // ds)
-        for k, h in zip(range(c0 // ds, -(-c1 // ds)), horizons, strict=True):
-            tick = k * ds
-            if k >= first and h is not None and tick + N < self.truth.n_ticks \
-                    and np.all(np.isfinite(h)):
+        for tick, h in horizons:
+            if tick >= settings.settling_ticks and h is not None \
+                    and tick + N < self.truth.n_ticks and np.all(np.isfinite(h)):
                 err2 = np.square(h - placed[tick - c0 + self.lead]).sum(axis=1)
                 finite = np.isfinite(err2)  # no truth at some leads: skipped per lead
                 self.horizon2 += np.where(finite, err2, 0.0)

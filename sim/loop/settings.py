@@ -6,6 +6,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+#: When the predictor runs (:attr:`LoopSettings.predictor_clock`).
+PREDICTOR_CLOCKS: tuple[str, ...] = ("auto", "downsample", "sensor")
+
 
 @dataclass(frozen=True)
 class LoopSettings:
@@ -18,19 +21,34 @@ class LoopSettings:
     horizon : int
         N, reference points per tick [ticks] (50 = 25 ms).
     downsample : int
-        Ticks between predictor updates (15 → 7.5 ms, Tuna et al. Fig. 9).
+        Ticks between predictor updates when the sensor is faster than the predictor (15 →
+        7.5 ms, Tuna et al. Fig. 9: their 257-Hz sonomicrometer, read on the 2-kHz stream).
+    predictor_clock : str
+        When the predictor runs. ``"downsample"``: every ``downsample`` ticks on the newest
+        sample delivered to the control rate (Tuna et al.'s protocol). ``"sensor"``: once per raw
+        sample, at its arrival, stamped with its own measurement time, at the sensor's rate —
+        the forecast then spans the delivery latency and the horizon (Yuen et al. 2009's delay
+        compensation: predict across the latency rather than interpolate behind it).
+        ``"auto"`` (default): ``"sensor"`` when the sensor's samples come more slowly than every
+        ``downsample`` ticks (video at 25–30 Hz, 3-D ultrasound at 20–28 Hz, a tracker at
+        40–100 Hz), else ``"downsample"``.
     prediction_points : int
         Points the predictor forecasts per update, before latency compensation (4).
-    outlier_gate : float
-        A sensor sample farther from its one-step forecast than max(this, 4 × the running RMS
-        forecast miss) is treated as missing (echo outliers: the heart cannot jump millimetres in
-        one 7.5 ms period); 0 disables [m]. Default 0.15 mm: 4σ of the one-step miss of the RLS
-        predictors on the physical sonomicrometer's stream (RMS 0.029–0.047 mm on the six
-        replicas, p99 0.07–0.09 mm; the running term's memory, 50 samples, is shorter than a
-        beat and dips in diastole, so the floor holds the gate at the whole cycle's 4σ). A cycle
-        slip (one wavelength on one range) moves the fix by 0.6–0.9 mm. With a noisy sensor the
-        4 × RMS term sets the radius instead. The choice is recorded in the design decisions
-        (outlier gate).
+    outlier_gate : float or str
+        A sensor sample farther from its one-step forecast than max(floor, 4 × the running RMS
+        forecast miss) is treated as missing (echo outliers: the heart cannot jump millimetres
+        between two samples). ``"auto"`` (default): the floor is 4 × the RMS one-step miss of
+        the predictor on the data themselves, measured over ``gate_calibration`` seconds after
+        as many seconds of convergence (misses beyond 5 × their median left out, so that an
+        outlier in that window does not widen the gate); every sample is accepted until then.
+        On the physical sonomicrometer's stream this is ≈ 0.15 mm (the RLS predictors'
+        one-step miss is 0.029–0.047 mm RMS on the six replicas); on a 25-Hz video track it is
+        about a millimetre. A number: that floor [m]; 0 disables the gate. The choice is
+        recorded in the design decisions (outlier gate).
+    gate_calibration : float
+        Length of the ``"auto"`` gate's convergence and of its calibration, each, in the
+        predictor's own forecasts [s] (5 s: several beats; the two fit in the settling of a
+        default run).
     outlier_max_rejections : int
         After this many consecutive rejected samples the gate opens (a real jump, or a forecast
         gone wrong) until 20 samples in a row fall inside it again [samples]. Default 3: a slip
@@ -59,8 +77,10 @@ class LoopSettings:
     Ts: float = 0.5e-3
     horizon: int = 50
     downsample: int = 15
+    predictor_clock: str = "auto"
     prediction_points: int = 4
-    outlier_gate: float = 0.15e-3
+    outlier_gate: float | str = "auto"
+    gate_calibration: float = 5.0
     outlier_max_rejections: int = 3
     guard_speed: float = 0.3
     guard_margin: float = 2e-3
@@ -76,8 +96,15 @@ class LoopSettings:
             value = getattr(self, name)
             if not isinstance(value, int) or value < 1:
                 raise ValueError(f"{name} must be a positive integer, got {value!r}")
-        if not (np.isfinite(self.outlier_gate) and self.outlier_gate >= 0):
-            raise ValueError(f"outlier_gate must be >= 0 [m], got {self.outlier_gate!r}")
+        if self.predictor_clock not in PREDICTOR_CLOCKS:
+            raise ValueError(f"predictor_clock must be one of {', '.join(PREDICTOR_CLOCKS)}, "
+                             f"got {self.predictor_clock!r}")
+        gate = self.outlier_gate
+        if gate != "auto" and not (isinstance(gate, int | float) and np.isfinite(gate)
+                                   and gate >= 0):
+            raise ValueError(f"outlier_gate must be 'auto' or a number >= 0 [m], got {gate!r}")
+        if not (np.isfinite(self.gate_calibration) and self.gate_calibration > 0):
+            raise ValueError(f"gate_calibration must be > 0 [s], got {self.gate_calibration!r}")
         if not isinstance(self.outlier_max_rejections, int) or self.outlier_max_rejections < 0:
             raise ValueError(
                 f"outlier_max_rejections must be an integer >= 0, got "
@@ -106,3 +133,8 @@ class LoopSettings:
     @property
     def settling_ticks(self) -> int:
         return round(self.settling / self.Ts)
+
+    @property
+    def gate_floor(self) -> float | None:
+        """The outlier gate's fixed floor [m], or None for one derived from the data."""
+        return None if self.outlier_gate == "auto" else float(self.outlier_gate)

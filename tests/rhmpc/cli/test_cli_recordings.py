@@ -76,3 +76,52 @@ def test_data_show_and_export_a_mat_file(tmp_path: Path,
     assert "wrote 2000 samples" in capsys.readouterr().out
     assert main(["simulate", "--var", "X"]) == 2
     assert "--data" in capsys.readouterr().err
+
+
+def _recording(path: Path, rate: float, seconds: float, noise_mm: float = 0.1,
+               seed: int = 1) -> Path:
+    """A 3-D heart-like recording (1.2 Hz heart, 0.25 Hz breathing, white noise) as CSV."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, seconds, 1.0 / rate)
+    phase = 2 * np.pi * 1.2 * t
+    z = np.column_stack([1.5 * np.sin(phase) + 0.5 * np.sin(2 * phase + 0.4),
+                         np.cos(phase) + 0.3 * np.sin(2 * phase),
+                         2 * np.sin(phase + 0.5) + 0.25 * np.sin(4 * phase)])
+    z += np.outer(np.sin(2 * np.pi * 0.25 * t), [2.0, 0.8, 1.5])
+    z += rng.normal(0.0, noise_mm, z.shape)
+    np.savetxt(path, np.column_stack([t, z]), delimiter=",", header="t,x,y,z", comments="")
+    return path
+
+
+@pytest.mark.parametrize(("rate", "mode"), [(25.0, "sensor"), (30.0, "sensor"),
+                                            (257.0, "downsample"), (404.0, "downsample")])
+def test_a_recording_at_any_rate_runs_with_the_right_predictor_clock(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], rate: float, mode: str) -> None:
+    path = _recording(tmp_path / "rec.csv", rate, 4.0)
+    assert main(["simulate", "--data", str(path), "--predictor", "one-step", "--settling", "2",
+                 "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    clock = doc["predictor_clock"]
+    assert clock["mode"] == mode
+    assert clock["sensor_rate_hz"] == pytest.approx(rate, rel=1e-6)
+    assert clock["dt_s"] == pytest.approx(1 / rate if mode == "sensor" else 7.5e-3)
+    assert np.isfinite(doc["rms_error_mm"]) and doc["fallbacks"] == 0
+
+
+def test_a_clean_recording_gets_no_rejections_and_the_summary_says_why(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Regularly spaced samples with Gaussian noise: the gate, calibrated on this recording's
+    own one-step miss, rejects nothing; the summary states the regime, the floor and the
+    settling rule."""
+    path = _recording(tmp_path / "rec.csv", 25.0, 24.0)
+    assert main(["simulate", "--data", str(path), "--predictor", "generalized"]) == 0
+    out = capsys.readouterr().out
+    assert "predictor on raw samples at 25 Hz" in out
+    assert "floor" in out and "rejected 0," in out
+    assert "settling by default 10 s, or a third of a run shorter than 30 s" in out
+
+
+def test_a_run_too_short_to_score_is_refused(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["simulate", "--duration", "0.01"]) == 2
+    err = capsys.readouterr().err
+    assert "scored on" in err and len(err.strip().splitlines()) == 1

@@ -87,7 +87,7 @@ def test_missing_samples_keep_a_finite_reference_and_none_before_data():
 
 
 def test_predictor_period_must_match():
-    with pytest.raises(ValueError, match="downsample"):
+    with pytest.raises(ValueError, match="refresh_ticks"):
         PredictedReference(Scripted(np.sin, dt=0.01), TS, N, DS)
 
 
@@ -273,3 +273,37 @@ def test_gate_retracts_a_small_outlier_that_it_let_through(k_out):
     # good samples after the outlier rejected until the gate opens onto a wrong forecast)
     assert worst < 0.6e-3 < 2e-3 < worst_plain
     assert counts["outliers_rejected"] < plain["outliers_rejected"]
+
+
+def test_the_automatic_gate_floor_is_four_times_the_rms_miss_after_convergence():
+    """After ``calibration`` misses of convergence, the floor is 4 × the RMS of the next
+    ``calibration`` misses; an outlier in the window and the converging misses before it do
+    not inflate it."""
+    from rhmpc.control.reference import OutlierGate
+
+    rng = np.random.default_rng(7)
+    counts = {"outliers_rejected": 0, "gate_unlocked": 0}
+    gate = OutlierGate(None, max_rejections=3, calibration=400)
+    sigma = 0.2e-3  # per axis [m]: RMS of the 3-D miss √3·σ
+    converging = rng.normal(0.0, 5 * sigma, (400, 3))
+    window = rng.normal(0.0, sigma, (400, 3))
+    window[123] = 5e-3  # an echo outlier inside the calibration window
+    for k, miss in enumerate(np.concatenate([converging, window])):
+        assert gate.floor is None  # every sample is taken while calibrating
+        assert gate.accept(miss, np.zeros(3), counts), k
+    assert gate.floor == pytest.approx(4 * np.sqrt(3) * sigma, rel=0.1)
+    # Gaussian misses of the same size then pass; a 3-mm spike does not
+    rejected = sum(not gate.accept(m, np.zeros(3), counts)
+                   for m in rng.normal(0.0, sigma, (2000, 3)))
+    assert rejected == 0
+    assert not gate.accept(np.full(3, 3e-3), np.zeros(3), counts)
+
+
+def test_a_fixed_gate_floor_is_used_as_given():
+    from rhmpc.control.reference import OutlierGate
+
+    gate = OutlierGate(1e-3)
+    assert gate.floor == 1e-3
+    assert not gate.accept(np.array([2e-3, 0, 0]), np.zeros(3), {"outliers_rejected": 0})
+    with pytest.raises(ValueError, match="> 0"):
+        OutlierGate(-1.0)

@@ -1,6 +1,7 @@
 """A configured run end to end: its document, its seeds, its streams against whole arrays."""
 
 import dataclasses
+import math
 
 import numpy as np
 import pytest
@@ -91,11 +92,13 @@ def test_streamed_run_is_the_run_on_whole_arrays(tmp_path, predictor):
     if predictor == "exact":
         reference = ExactReference(truth, loop.horizon)
     else:
+        dt = loop.downsample * loop.Ts
         reference = PredictedReference(
-            make_predictor(predictor, dt=loop.downsample * loop.Ts), loop.Ts, loop.horizon,
-            loop.downsample, loop.prediction_points, outlier_gate=loop.outlier_gate,
-            max_rejections=loop.outlier_max_rejections, guard_speed=loop.guard_speed,
-            guard_margin=loop.guard_margin)
+            make_predictor(predictor, dt=dt), loop.Ts, loop.horizon, loop.downsample,
+            loop.prediction_points, outlier_gate=loop.gate_floor,
+            max_rejections=loop.outlier_max_rejections,
+            gate_calibration=math.ceil(loop.gate_calibration / dt),
+            guard_speed=loop.guard_speed, guard_margin=loop.guard_margin)
     whole = run_closed_loop(run.robot, run.arm, RecedingHorizonMPC(run.arm, config.mpc),
                             reference, truth, center, stream, loop, plant_settings=config.plant)
     for key in ("rms_error_mm", "max_error_mm", "rms_effort_mNm"):

@@ -1,0 +1,101 @@
+"""The predictor's clock: a slow sensor's raw samples go to the predictor once each, on arrival."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sim.loop import LoopSettings
+from sim.loop.clock import arrival_tick, predictor_clock
+from sim.loop.closed_loop import OpenLoop
+from sim.loop.streams import ArraySamples, UpsampledSamples
+from sim.sensors import SampleStream, playback
+from tests.sim.loop.stand_ins import HarmonicHeart, ideal_stream
+
+TS = 0.5e-3
+
+
+def _raw(rate: float, seconds: float, latency: float = 0.0, jitter: float = 0.0,
+         rng: np.random.Generator | None = None) -> ArraySamples:
+    t = np.arange(0.0, seconds, 1.0 / rate)
+    if jitter:
+        t = t + rng.uniform(-jitter, jitter, t.size)
+    z = HarmonicHeart().position(t)
+    return ArraySamples(t, z, t + latency)
+
+
+@pytest.mark.parametrize(("rate", "mode"), [(25.0, "sensor"), (30.0, "sensor"), (100.0, "sensor"),
+                                            (257.0, "downsample"), (404.0, "downsample")])
+def test_auto_picks_the_sensor_clock_for_sensors_slower_than_the_predictor(rate, mode):
+    raw = _raw(rate, 2.0)
+    upsampled = UpsampledSamples(SampleStream(raw.t, raw.z, raw.arrival, rate),
+                                 playback("linear", 1 / TS))
+    clock = predictor_clock(LoopSettings(), upsampled)
+    assert clock.mode == mode
+    assert clock.sensor_rate == pytest.approx(rate)
+    if mode == "sensor":
+        assert clock.dt == pytest.approx(1 / rate)
+        assert clock.refresh_ticks == int(np.ceil(1.5 / rate / TS - 1e-9))
+        assert clock.raw.t is not None and len(clock.raw) == raw.t.size  # the raw samples
+    else:
+        assert clock.dt == pytest.approx(15 * TS) and clock.refresh_ticks == 15
+
+
+def test_the_clock_can_be_forced_either_way():
+    raw = _raw(25.0, 2.0)
+    assert predictor_clock(LoopSettings(predictor_clock="downsample"), raw).mode == "downsample"
+    fast = ideal_stream(HarmonicHeart(), 1.0)
+    assert predictor_clock(LoopSettings(predictor_clock="sensor"), fast).dt == pytest.approx(TS)
+    with pytest.raises(ValueError, match="predictor_clock"):
+        LoopSettings(predictor_clock="sometimes")
+
+
+class Spy:
+    """A reference that records what the open loop feeds it."""
+
+    def __init__(self) -> None:
+        self.updates: list[tuple[int, np.ndarray | None, float]] = []
+        self.forecasts = 0
+
+    def update(self, tick, z, stamp):
+        self.updates.append((tick, None if z is None else np.array(z), stamp))
+
+    def forecast(self):
+        self.forecasts += 1
+
+    def horizons(self, tick, count):
+        return [None] * count
+
+
+@pytest.mark.parametrize("pipelined", [True, False])
+def test_each_raw_sample_reaches_the_predictor_once_with_its_own_time_stamp(pipelined):
+    """The anchor of every update is the raw sample's measurement time (no interpolation lag),
+    fed on the tick it arrives (a 12-ms latency, jittered time stamps)."""
+    raw = _raw(28.0, 3.0, latency=0.012, jitter=2e-3, rng=np.random.default_rng(3))
+    settings = LoopSettings(duration=3.0, settling=1.0, pipelined_refresh=pipelined)
+    clock = predictor_clock(settings, raw)
+    spy = Spy()
+    open_loop = OpenLoop(spy, raw, np.zeros(3), settings, np.zeros((50, 3)), clock)
+    for c0 in range(0, settings.ticks, 1000):  # chunks that cut through refresh periods
+        refs, charged, _ = open_loop.chunk(c0, min(c0 + 1000, settings.ticks))
+        assert len(refs) == len(charged) == min(1000, settings.ticks - c0)
+    fed = [u for u in spy.updates if u[1] is not None]
+    arrived = raw.arrival <= (settings.ticks - 1 - pipelined) * TS
+    np.testing.assert_array_equal([u[2] for u in fed], raw.t[arrived])
+    np.testing.assert_array_equal([u[1] for u in fed], raw.z[arrived])
+    assert [u[0] for u in fed] == [arrival_tick(a, TS) for a in raw.arrival[arrived]]
+    assert spy.forecasts == len(fed)
+
+
+def test_a_gap_in_the_time_stamps_is_fed_as_missing_samples():
+    raw = _raw(25.0, 2.0)
+    keep = np.ones(raw.t.size, bool)
+    keep[[10, 11, 12, 30]] = False  # three and one samples lost, without NaN rows
+    raw = ArraySamples(raw.t[keep], raw.z[keep], raw.arrival[keep])
+    settings = LoopSettings(duration=2.0, settling=0.5)
+    spy = Spy()
+    open_loop = OpenLoop(spy, raw, np.zeros(3), settings, None, predictor_clock(settings, raw))
+    open_loop.chunk(0, settings.ticks)
+    missing = [k for k, u in enumerate(spy.updates) if u[1] is None]
+    assert missing == [10, 11, 12, 30]
+    assert len(spy.updates) == 50  # one slot per 40 ms up to the last sample, 1.96 s
