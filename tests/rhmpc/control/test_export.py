@@ -236,7 +236,8 @@ def test_two_controllers_on_one_library_do_not_share_the_solver(arm, built):
 @needs_cc
 def test_library_uses_no_heap_io_or_locks(built):
     """The static library's external symbols: only the monotonic clock, memset/memcpy/memmove
-    (the level-2 active set's shifts) and libm."""
+    (the level-2 active set's shifts) and libm (sin and cos, or their sincos: the output offset's
+    forward kinematics)."""
     nm = shutil.which("nm")
     if nm is None:
         pytest.skip("nm (binutils) not found")
@@ -248,7 +249,7 @@ def test_library_uses_no_heap_io_or_locks(built):
     dfn = {ln.split()[-1] for ln in defined.stdout.splitlines() if len(ln.split()) == 3}
     external = und - dfn
     assert external <= {"clock_gettime", "memset", "memcpy", "memmove", "_GLOBAL_OFFSET_TABLE_",
-                        "fabs", "sqrt", "__stack_chk_fail"}, external
+                        "fabs", "sqrt", "sin", "cos", "sincos", "__stack_chk_fail"}, external
     assert "clock_gettime" in external  # the tick times itself
 
 
@@ -266,6 +267,35 @@ def test_binding_counters_and_u_prev(arm, built):
         twin(py, built("default"), dims=(40, 6, 3, 3))
     with pytest.raises(ValueError, match="step expects"):
         c.step(np.zeros(5), np.zeros((50, 3)))
+
+
+@needs_cc
+@pytest.mark.parametrize("robot", ["phantom", "finger_edu"])
+def test_offset_in_c_is_pinocchios_forward_kinematics(robot, cache):
+    """rhmpc_offset against RecedingHorizonMPC.offset at random states: the forward kinematics
+    (RX/RY/RZ and, on finger_edu, a revolute-unaligned joint) to the bit; C x + y0 summed in
+    column order, which numpy's BLAS may round differently (measured ≤ 1.1e-16 m)."""
+    import ctypes
+
+    import pinocchio as pin
+
+    arm = linearize(load_robot(robot))
+    mpc = RecedingHorizonMPC(arm)
+    lib = ctypes.CDLL(str(build_cached(mpc, robot, cache)))
+    assert lib.rhmpc_extra_source() == 1  # RHMPC_EXTRA_FK
+    lib.rhmpc_offset.argtypes = (ctypes.c_void_p, ctypes.c_void_p)
+    model, data, frame = arm.robot.model, arm.robot.create_data(), arm.robot.ee_frame_id
+    rng = np.random.default_rng(1)
+    d = np.zeros(3)
+    for _ in range(2000):
+        x = rng.normal(scale=[0.3] * 3 + [1.0] * 3) * 10 ** rng.uniform(-6, 0)
+        lib.rhmpc_offset(x.ctypes.data, d.ctypes.data)
+        pin.forwardKinematics(model, data, arm.q0 + x[:3])
+        p = pin.updateFramePlacement(model, data, frame).translation
+        lin = [sum((float(arm.C[a, c]) * float(x[c]) for c in range(arm.nx)), 0.0)
+               for a in range(3)]
+        np.testing.assert_array_equal(d, p - (np.array(lin) + arm.y0))
+        np.testing.assert_allclose(d, mpc.offset(x), rtol=0, atol=1e-15)
 
 
 def test_export_refuses_what_the_embedded_code_cannot_do(arm, tmp_path):
