@@ -77,8 +77,8 @@ def built(arm, cache):
 
 
 def twin(py, lib, **kwargs) -> CController:
-    """The compiled controller of ``lib``, given ``py``'s extra per-tick inputs if it has any."""
-    return CController(lib, extra_inputs=getattr(py, "offset", None), **kwargs)
+    """The compiled controller of ``lib`` (``py``'s output offset computed in C)."""
+    return CController(lib, **kwargs)
 
 
 def bench_trajectory(arm, ticks: int, seed: int = 0) -> np.ndarray:
@@ -158,6 +158,34 @@ def test_other_paths_match_python(arm, built, variant):
         assert py.stats.failures.get("max_iter", 0) > 0  # the carried-over iterate was used
     if variant == "joint-bounds-shift":  # all three levels, the envelope rows checked in C too
         assert py.stats.screened > 0 and py.stats.boxed > 0
+
+
+@needs_cc
+@pytest.mark.parametrize(("binding", "python_offset"),
+                         [("ctypes", False), ("ctypes", True), ("extension", True)])
+def test_every_binding_matches_python(arm, built, binding, python_offset):
+    """The ctypes fallback, and the offset evaluated in Python (``extra_inputs``), give the
+    same ticks as the compiled binding with the offset in C: faults, bounds, all levels."""
+    variant = "joint-bounds-shift"
+    py = RecedingHorizonMPC(arm, MPCSettings(**VARIANTS[variant]))
+    c = twin(py, built(variant), binding=binding,
+             extra_inputs=py.offset if python_offset else None)
+    assert (c.binding, c.extra_source) == (binding, "python" if python_offset else "fk")
+
+    def faults(k, x, ref, py, c):
+        if k % 700 == 350:
+            py.force_failures(4)
+            c.force_failures(4)
+        if k % 900 == 450:
+            x = x.copy()
+            x[1] = np.nan
+        return x, ref
+
+    ticks = 3000
+    err, differ = lockstep(arm, py, c, bench_trajectory(arm, ticks, seed=3), ticks, faults)
+    assert differ == []
+    assert err.max() <= TOL
+    assert_same_counters(py, c)
 
 
 class Lockstep:
@@ -296,6 +324,64 @@ def test_offset_in_c_is_pinocchios_forward_kinematics(robot, cache):
                for a in range(3)]
         np.testing.assert_array_equal(d, p - (np.array(lin) + arm.y0))
         np.testing.assert_allclose(d, mpc.offset(x), rtol=0, atol=1e-15)
+
+
+def _strided(a: np.ndarray) -> np.ndarray:
+    """``a``'s values in a view every other element of a wider buffer (not contiguous)."""
+    wide = np.zeros((*a.shape[:-1], 2 * a.shape[-1]))
+    wide[..., ::2] = a
+    return wide[..., ::2]
+
+
+def _read_only(a: np.ndarray) -> np.ndarray:
+    a = a.copy()
+    a.setflags(write=False)
+    return a
+
+
+@needs_cc
+def test_step_takes_any_float_array_and_returns_a_new_one(arm, built):
+    """Lists, strided views, Fortran order, read-only arrays: the same torque as C-contiguous
+    float64 arrays, to the bit; each call returns a new array that the caller owns."""
+    py = RecedingHorizonMPC(arm)
+    a, b = twin(py, built("default")), twin(py, built("default"))
+    forms = (lambda v: v.tolist(), _strided, np.asfortranarray, _read_only)
+    traj = bench_trajectory(arm, 40)
+    x = np.zeros(arm.nx)
+    taus = []
+    for k in range(40):
+        ref = traj[k + 1:k + 51]
+        form = forms[k % len(forms)]
+        taus.append(a.step(x, ref))
+        np.testing.assert_array_equal(b.step(form(x), form(ref)), taus[-1])
+        x = arm.A @ x + arm.B @ taus[-1]
+    assert not np.shares_memory(taus[-1], taus[-2])
+    taus[-1][:] = 99.0
+    assert np.all(a.u_prev != 99.0)
+    a.reset()
+    np.testing.assert_array_equal(a.u_prev, np.zeros(arm.nu))
+
+
+@needs_cc
+def test_without_the_extension_the_binding_is_ctypes_and_says_why(built, monkeypatch):
+    """No compiler for the extension: "auto" falls back to ctypes with a one-line reason;
+    "extension" raises it."""
+    from rhmpc.control.export import ToolchainError, extension
+
+    lib = built("default")
+    extension.load.cache_clear()
+    try:
+        monkeypatch.setenv("PATH", "")
+        monkeypatch.delenv("CC", raising=False)
+        c = CController(lib)
+        assert c.binding == "ctypes"
+        assert len(c.binding_note.splitlines()) == 1 and "compiler" in c.binding_note
+        with pytest.raises(ToolchainError, match="compiler"):
+            CController(lib, binding="extension")
+    finally:
+        monkeypatch.undo()
+        extension.load.cache_clear()
+    assert CController(lib).binding == "extension"
 
 
 def test_export_refuses_what_the_embedded_code_cannot_do(arm, tmp_path):
