@@ -65,7 +65,9 @@ class _CtypesStep:
 
     def __init__(self, tick, ctl, keep, dims, last, u_in, extra, extra_inputs=None) -> None:
         vp = ctypes.c_void_p
-        self._tick = ctypes.CFUNCTYPE(ctypes.c_int, vp, vp, vp, vp, vp, vp)(tick)
+        # PYFUNCTYPE holds the GIL during the call, as the extension does: the library's OSQP
+        # workspace is static and must not be entered from two threads at once.
+        self._tick = ctypes.PYFUNCTYPE(ctypes.c_int, vp, vp, vp, vp, vp, vp)(tick)
         self._ctl, self._keep = ctl, keep
         N, nx, _, ny, _ = dims
         self._x, self._ref = np.zeros(nx), np.zeros((N, ny))
@@ -75,6 +77,7 @@ class _CtypesStep:
         self.call_ns = 0
 
     def step(self, x: np.ndarray, ref: np.ndarray) -> np.ndarray:
+        """τ_mpc (nu,) for ``x`` (nx,) and ``ref`` (N, ny), a new array (as ``Step.step``)."""
         t0 = time.perf_counter_ns()
         x = np.asarray(x, dtype=float)
         ref = np.asarray(ref, dtype=float)
@@ -184,20 +187,8 @@ class CController:
         path, lib, self._private = _load(str(Path(library).resolve()))
         _in_use[path] = weakref.ref(self)
         self.library, self._lib = path, lib
-        d = np.zeros(9, dtype=np.intc)
-        lib.rhmpc_dims(d.ctypes.data)
-        self.N, self.nx, self.nu, self.ny, self.nv, self.m, self.npar, self.nz, self.n_extra = (
-            int(v) for v in d)
-        source = getattr(lib, "rhmpc_extra_source", None)
-        source = EXTRA_SOURCES[source()] if source is not None else "caller"
-        if self.n_extra and extra_inputs is None and source == "caller":
-            raise ValueError(f"library {path} takes {self.n_extra} extra per-tick inputs; "
-                             "give extra_inputs")
-        if dims is not None and tuple(dims) != (self.N, self.nx, self.nu, self.ny):
-            raise ValueError(f"library {path} is for (N, nx, nu, ny) = "
-                             f"{(self.N, self.nx, self.nu, self.ny)}, expected {tuple(dims)}")
-        extra_inputs = extra_inputs if self.n_extra else None
-        self.extra_source = "python" if extra_inputs is not None else source
+        self._read_dims(dims)
+        extra_inputs = self._extra_inputs(extra_inputs)
         self.u_max = np.ctypeslib.as_array(
             (ctypes.c_double * self.nu).in_dll(lib, "rhmpc_u_max")).copy()
         self.u_max.setflags(write=False)
@@ -213,6 +204,27 @@ class CController:
         self.binding = "ctypes" if step_type is _CtypesStep else "extension"
         self.step = self._core.step  # the binding's own: no Python frame per tick
         self.reset()
+
+    def _read_dims(self, expected: tuple[int, int, int, int] | None) -> None:
+        d = np.zeros(9, dtype=np.intc)
+        self._lib.rhmpc_dims(d.ctypes.data)
+        self.N, self.nx, self.nu, self.ny, self.nv, self.m, self.npar, self.nz, self.n_extra = (
+            int(v) for v in d)
+        if expected is not None and tuple(expected) != (self.N, self.nx, self.nu, self.ny):
+            raise ValueError(f"library {self.library} is for (N, nx, nu, ny) = "
+                             f"{(self.N, self.nx, self.nu, self.ny)}, expected {tuple(expected)}")
+
+    def _extra_inputs(self, given: Callable | None) -> Callable | None:
+        """The callable the binding evaluates per tick (None: the library's own inputs); sets
+        :attr:`extra_source`."""
+        source = getattr(self._lib, "rhmpc_extra_source", None)
+        source = EXTRA_SOURCES[source()] if source is not None else "caller"
+        if self.n_extra and given is None and source == "caller":
+            raise ValueError(f"library {self.library} takes {self.n_extra} extra per-tick "
+                             "inputs; give extra_inputs")
+        given = given if self.n_extra else None
+        self.extra_source = "python" if given is not None else source
+        return given
 
     def reset(self, u_prev: np.ndarray | None = None) -> None:
         """Forget the plan and warm start, zero the counters, u_{−1} = ``u_prev`` (default 0)."""
