@@ -384,6 +384,31 @@ def test_without_the_extension_the_binding_is_ctypes_and_says_why(built, monkeyp
     assert CController(lib).binding == "extension"
 
 
+@needs_cc
+@pytest.mark.parametrize("source", ["caller", "zero"])
+def test_extra_inputs_from_the_caller_or_zero(arm, cache, monkeypatch, source):
+    """Kinematics the generator does not know: the caller gives the offset (a note says so);
+    without offset correction the extra inputs stay zero. Both match Python tick for tick."""
+    from rhmpc.control.export import extra_source, generate
+
+    settings = MPCSettings(offset_correction=source != "zero")
+    if source == "caller":
+        monkeypatch.setattr(generate, "_FK_JOINTS", {})
+    py = RecedingHorizonMPC(arm, settings)
+    assert extra_source(py) == source
+    lib = build_cached(py, "phantom", cache)
+    if source == "caller":
+        with pytest.raises(ValueError, match="give extra_inputs"):
+            CController(lib)
+        info = export_controller(py, cache / "caller-src", robot="phantom")
+        assert any("forward kinematics" in n for n in info.notes)
+    c = CController(lib, extra_inputs=py.offset if source == "caller" else None)
+    assert c.extra_source == ("python" if source == "caller" else "zero")
+    ticks = 2000
+    err, differ = lockstep(arm, py, c, bench_trajectory(arm, ticks), ticks)
+    assert differ == [] and err.max() <= TOL
+
+
 def test_export_refuses_what_the_embedded_code_cannot_do(arm, tmp_path):
     for bad, match in (({"adaptive_rho": True}, "adaptive_rho"), ({"polish": True}, "polish")):
         mpc = RecedingHorizonMPC(arm, MPCSettings(**bad))
