@@ -117,6 +117,10 @@ static PyObject *Step_step(Step *self, PyObject *const *args, Py_ssize_t nargs) 
     PyErr_Format(PyExc_TypeError, "step(x, ref) takes 2 arguments, got %zd", nargs);
     return NULL;
   }
+  if (self->tick == NULL) {
+    PyErr_SetString(PyExc_RuntimeError, "Step was not initialised");
+    return NULL;
+  }
   PyArrayObject *x = as_doubles(args[0]);
   PyArrayObject *ref = x != NULL ? as_doubles(args[1]) : NULL;
   PyObject *out = NULL;
