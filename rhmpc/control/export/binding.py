@@ -143,7 +143,7 @@ class CController:
     minus the tick's own ``tick_ns``, over 19 000 ticks of the bench trajectory (heart-like
     motion, 2-mm jumps), GC off, five runs. The compiled binding adds 0.30–0.32 µs p50 and
     0.5–0.8 µs p99 to the tick (the timer pair itself is 0.07 µs of that; the new output array
-    0.08 µs); the ctypes fallback 2.0–2.1 µs p50 and 2.9–4.3 µs p99; a ctypes wrapper that
+    0.08 µs); the ctypes fallback 2.0–2.1 µs p50 and 2.5–4.3 µs p99; a ctypes wrapper that
     evaluates the offset with Pinocchio in Python, 6.9–7.1 µs p50 and 15–19 µs p99.
 
     Where the extension cannot be built the same ``step`` runs in Python over ctypes
