@@ -1,4 +1,4 @@
-"""The controller as generated C: export, build, and a ctypes binding (see :mod:`.generate`)."""
+"""The controller as generated C: export, build, and a binding (see :mod:`.generate`)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from .build import (
     cache_root,
     missing_toolchain,
 )
-from .generate import ExportError, ExportInfo, export_controller, export_key
+from .generate import ExportError, ExportInfo, export_controller, export_key, extra_source
 
 __all__ = [
     "CController",
@@ -23,6 +23,7 @@ __all__ = [
     "compiled_controller",
     "export_controller",
     "export_key",
+    "extra_source",
     "missing_toolchain",
 ]
 
@@ -30,7 +31,7 @@ __all__ = [
 def compiled_controller(mpc, robot: str, cache: str | None = None) -> CController:
     """The compiled twin of ``mpc`` (exported and built once per distinct data, then cached)."""
     lib = build_cached(mpc, robot, cache)
-    extra = getattr(mpc, "offset", None) if mpc.qp.npar > mpc.nx + mpc.N * mpc.ny + mpc.nu else None
+    extra = mpc.offset if extra_source(mpc) == "caller" else None  # else computed in C
     controller = CController(lib, dims=(mpc.N, mpc.nx, mpc.nu, mpc.ny), extra_inputs=extra)
     controller.twin = mpc  # the Python controller it was generated from (its gain tick, its QP)
     return controller

@@ -3,14 +3,16 @@
 What is written to ``OUTDIR``::
 
     rhmpc.h          the API, units and array layouts (sizes baked in as macros)
-    rhmpc.c          the per-tick logic of RecedingHorizonMPC.step (the screening cascade:
-                     level 1 unconstrained minimiser, level 2 torque-box QP by active set; then
-                     vector update, shifted warm start, OSQP, fallback chain plan → LQ → zero,
-                     torque clipping)
+    rhmpc.c          the per-tick logic of RecedingHorizonMPC.step (the output offset by forward
+                     kinematics; the screening cascade: level 1 unconstrained minimiser, level 2
+                     torque-box QP by active set; then vector update, shifted warm start, OSQP,
+                     fallback chain plan → LQ → zero, torque clipping)
     rhmpc_data.h/.c  the numbers, as ``const`` arrays, from the controller's own CondensedQP:
                      F_ext = [F, f0] (p → q), the screening map Z = −P⁻¹[F, f0], the cascade's
                      W = P_zz⁻¹, H = P_zz, F_z and the envelope rows (dense), A, G, l0, u0,
-                     the LQ gain, the one-tick shift (primal and dual), block of each tick, u_max
+                     the LQ gain, the one-tick shift (primal and dual), block of each tick, u_max,
+                     the end-effector's kinematic chain (joint placements and axes, from the
+                     robot's Pinocchio model)
     osqp/            OSQP's embedded code (``OSQP.codegen``, ``parameters="vectors"``), generated
                      from the controller's own solver object: P, A, settings and KKT factorisation
     CMakeLists.txt   builds librhmpc.a and librhmpc_shared.so
@@ -40,6 +42,22 @@ from rhmpc.control.settings import to_dict
 OSQP_PREFIX = "rhmpc_osqp_"
 _WARM_STARTS = {"shift": 0, "shift_primal": 1, "keep": 2, "none": 3}
 _TEMPLATES = ("rhmpc.h", "rhmpc.c", "rhmpc_data.h", "CMakeLists.txt")
+#: Where the extra per-tick inputs come from (``rhmpc_extra_source()`` in C): constant zero (no
+#: offset correction), forward kinematics in C (``rhmpc_offset``), or the caller.
+EXTRA_SOURCES = ("zero", "fk", "caller")
+#: Pinocchio joints the generated forward kinematics knows: revolute about x, y, z (code 0-2)
+#: or about any unit axis (code 3).
+_FK_JOINTS = {"JointModelRX": 0, "JointModelRY": 1, "JointModelRZ": 2,
+              "JointModelRevoluteUnaligned": 3}
+
+
+_EXTRA_DOC = {
+    "zero": "{n} values, zero (no output offset correction)",
+    "fk": ("{n} values, the output offset d = p(q0 + x_q) - (C x + y0) [m] of "
+           "RecedingHorizonMPC.offset(x), computed by rhmpc_offset from x when extra is NULL"),
+    "caller": ("{n} values, RecedingHorizonMPC.offset(x): the output offset "
+               "d = p(q0 + x_q) - (C x + y0) [m], given by the caller (rhmpc_tick_ext)"),
+}
 
 
 class ExportError(ValueError):
@@ -79,6 +97,61 @@ def _n_extra(mpc: RecedingHorizonMPC) -> int:
     """Per-tick inputs of p after [x; r_1..r_N; u_{−1}] (e.g. an output offset)."""
     qp = mpc.qp
     return qp.npar - (qp.nx + qp.N * qp.ny + qp.nu)
+
+
+def _fk_chain(mpc: RecedingHorizonMPC) -> tuple[list, str | None]:
+    """The joints from the root to the end-effector frame's joint (Pinocchio's JointModel
+    objects), and None; or ``([], reason)`` if the generated kinematics cannot reproduce
+    ``mpc.offset``."""
+    robot = getattr(mpc.arm, "robot", None)
+    if _n_extra(mpc) != mpc.ny or robot is None:
+        return [], "the extra inputs are not an output offset of a known robot"
+    model = robot.model
+    joint = int(model.frames[robot.ee_frame_id].parentJoint)
+    chain = []
+    while joint > 0:
+        chain.append(model.joints[joint])
+        joint = int(model.parents[joint])
+    chain.reverse()
+    names = sorted({j.shortname() for j in chain} - set(_FK_JOINTS))
+    if names or not chain or any(j.nq != 1 or j.idx_q >= mpc.nu for j in chain):
+        return [], f"joints {', '.join(names) or '?'}: only revolute chains are generated"
+    return chain, None
+
+
+def extra_source(mpc: RecedingHorizonMPC) -> str:
+    """Where the exported tick gets its extra per-tick inputs (one of :data:`EXTRA_SOURCES`)."""
+    if _n_extra(mpc) == 0 or not mpc.settings.offset_correction:
+        return "zero"
+    return "fk" if _fk_chain(mpc)[1] is None else "caller"
+
+
+def _offset_arrays(mpc: RecedingHorizonMPC) -> dict[str, tuple[np.ndarray, str]]:
+    """The forward kinematics of ``mpc.offset`` as data for C's ``rhmpc_offset``: per joint
+    of the chain (root first) its type (:data:`_FK_JOINTS`), q index, axis, and placement in
+    its parent (rotation row-major, translation); the end-effector frame's translation in the
+    last joint; and the output map C (row-major). Empty arrays if not generated."""
+    chain = _fk_chain(mpc)[0] if extra_source(mpc) == "fk" else []
+    model = mpc.arm.robot.model if chain else None
+    types, iq, axes, rot, pos = [], [], [], [], []
+    for j in chain:
+        placement = model.jointPlacements[j.id]
+        types.append(_FK_JOINTS[j.shortname()])
+        iq.append(j.idx_q)
+        axes.append(np.asarray(j.extract().axis) if types[-1] == 3 else np.eye(3)[types[-1]])
+        rot.append(np.asarray(placement.rotation))
+        pos.append(np.asarray(placement.translation))
+    frame = (np.asarray(model.frames[mpc.arm.robot.ee_frame_id].placement.translation)
+             if chain else np.zeros(3))
+    return {
+        "fk_type": (np.array(types, dtype=int), "int"),
+        "fk_iq": (np.array(iq, dtype=int), "int"),
+        "fk_axis": (np.array(axes, dtype=float).reshape(-1), "double"),
+        "fk_R": (np.array(rot, dtype=float).reshape(-1), "double"),
+        "fk_p": (np.array(pos, dtype=float).reshape(-1), "double"),
+        "fk_frame_p": (frame.astype(float), "double"),
+        "C": (np.asarray(mpc.arm.C, dtype=float), "double"),
+    }
 
 
 def _brakes(mpc: RecedingHorizonMPC) -> bool:
@@ -257,7 +330,7 @@ def export_key(mpc: RecedingHorizonMPC, robot: str) -> str:
     h.update(json.dumps(meta, sort_keys=True).encode())
     qp = mpc.qp
     sparse = [getattr(qp, name) for name in _SPARSE]
-    blocked = [v for v, _ in _blocked_arrays(mpc).values()]
+    blocked = [v for v, _ in (*_blocked_arrays(mpc).values(), *_offset_arrays(mpc).values())]
     for a in (qp.P, *(_data_arrays(mpc).values()), *sparse, *blocked, qp.block_of_tick):
         h.update(np.ascontiguousarray(a, dtype=float).tobytes())
     for name in _TEMPLATES:
@@ -286,6 +359,9 @@ def export_controller(mpc: RecedingHorizonMPC, outdir: str | Path, *, robot: str
         # no timer object), so the wall-clock limit cannot be generated.
         notes.append(f"time_limit = {s.time_limit:g} s is not enforced in C (OSQP's embedded "
                      f"code has no timer); a solve is bounded by max_iter = {s.max_iter}")
+    if extra_source(mpc) == "caller":
+        notes.append(f"the output offset's forward kinematics ({_fk_chain(mpc)[1]}); "
+                     "the caller gives it to rhmpc_tick_ext")
     subs = {
         "ROBOT": robot, "ROBOT_ID": "".join(c if c.isalnum() else "_" for c in robot),
         "HASH": key, "VERSION": _version("rhmpc"), "OSQP_VERSION": _version("osqp"),
@@ -293,10 +369,10 @@ def export_controller(mpc: RecedingHorizonMPC, outdir: str | Path, *, robot: str
         "N": qp.N, "NX": qp.nx, "NU": qp.nu, "NY": qp.ny,
         "NV": qp.P.shape[0], "NZ": int(qp.nz), "M": qp.A.shape[0], "NPAR": qp.npar,
         "NEXTRA": _n_extra(mpc), "NENV_U": len(_envelope_rows(mpc)[0]),
+        "EXTRA_SOURCE": EXTRA_SOURCES.index(extra_source(mpc)),
+        "FK_JOINTS": len(_offset_arrays(mpc)["fk_type"][0]),
         "NBC": len(qp.bound_columns),
-        "EXTRA_DOC": ("none" if _n_extra(mpc) == 0 else
-                      f"{_n_extra(mpc)} values, RecedingHorizonMPC.offset(x): the output offset "
-                      "d = p(q0 + x_q) - (C x + y0) [m] from forward kinematics"),
+        "EXTRA_DOC": _EXTRA_DOC[extra_source(mpc)].format(n=_n_extra(mpc)),
         "BRAKE": int(_brakes(mpc)), "BRAKE_TICKS": s.block_lengths[0],
         "LQ_DOC": ("used only if its clipped plan keeps every constraint row, else the braking "
                    "torque -M0 qdot / (RHMPC_BRAKE_TICKS Ts), clipped" if _brakes(mpc) else
@@ -335,7 +411,7 @@ def export_controller(mpc: RecedingHorizonMPC, outdir: str | Path, *, robot: str
                   _c_array(f"{name}_x", val)]
     parts.append(_c_array("block_of_tick", qp.block_of_tick, ctype="int"))
     parts.append(_c_array("bound_columns", qp.bound_columns, ctype="int"))
-    for name, (values, ctype) in _blocked_arrays(mpc).items():
+    for name, (values, ctype) in (*_blocked_arrays(mpc).items(), *_offset_arrays(mpc).items()):
         parts.append(_c_array(name, values, ctype=ctype))
     parts.append(_c_array("env_row", _envelope_rows(mpc)[2], ctype="int"))
     (outdir / "rhmpc_data.c").write_text("".join(parts))

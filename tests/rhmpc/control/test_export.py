@@ -77,8 +77,8 @@ def built(arm, cache):
 
 
 def twin(py, lib, **kwargs) -> CController:
-    """The compiled controller of ``lib``, given ``py``'s extra per-tick inputs if it has any."""
-    return CController(lib, extra_inputs=getattr(py, "offset", None), **kwargs)
+    """The compiled controller of ``lib`` (``py``'s output offset computed in C)."""
+    return CController(lib, **kwargs)
 
 
 def bench_trajectory(arm, ticks: int, seed: int = 0) -> np.ndarray:
@@ -160,6 +160,34 @@ def test_other_paths_match_python(arm, built, variant):
         assert py.stats.screened > 0 and py.stats.boxed > 0
 
 
+@needs_cc
+@pytest.mark.parametrize(("binding", "python_offset"),
+                         [("ctypes", False), ("ctypes", True), ("extension", True)])
+def test_every_binding_matches_python(arm, built, binding, python_offset):
+    """The ctypes fallback, and the offset evaluated in Python (``extra_inputs``), give the
+    same ticks as the compiled binding with the offset in C: faults, bounds, all levels."""
+    variant = "joint-bounds-shift"
+    py = RecedingHorizonMPC(arm, MPCSettings(**VARIANTS[variant]))
+    c = twin(py, built(variant), binding=binding,
+             extra_inputs=py.offset if python_offset else None)
+    assert (c.binding, c.extra_source) == (binding, "python" if python_offset else "fk")
+
+    def faults(k, x, ref, py, c):
+        if k % 700 == 350:
+            py.force_failures(4)
+            c.force_failures(4)
+        if k % 900 == 450:
+            x = x.copy()
+            x[1] = np.nan
+        return x, ref
+
+    ticks = 3000
+    err, differ = lockstep(arm, py, c, bench_trajectory(arm, ticks, seed=3), ticks, faults)
+    assert differ == []
+    assert err.max() <= TOL
+    assert_same_counters(py, c)
+
+
 class Lockstep:
     """Closed-loop controller: runs both, applies Python's torque, injects faults into both."""
 
@@ -236,7 +264,8 @@ def test_two_controllers_on_one_library_do_not_share_the_solver(arm, built):
 @needs_cc
 def test_library_uses_no_heap_io_or_locks(built):
     """The static library's external symbols: only the monotonic clock, memset/memcpy/memmove
-    (the level-2 active set's shifts) and libm."""
+    (the level-2 active set's shifts) and libm (sin and cos, or their sincos: the output offset's
+    forward kinematics)."""
     nm = shutil.which("nm")
     if nm is None:
         pytest.skip("nm (binutils) not found")
@@ -248,7 +277,7 @@ def test_library_uses_no_heap_io_or_locks(built):
     dfn = {ln.split()[-1] for ln in defined.stdout.splitlines() if len(ln.split()) == 3}
     external = und - dfn
     assert external <= {"clock_gettime", "memset", "memcpy", "memmove", "_GLOBAL_OFFSET_TABLE_",
-                        "fabs", "sqrt", "__stack_chk_fail"}, external
+                        "fabs", "sqrt", "sin", "cos", "sincos", "__stack_chk_fail"}, external
     assert "clock_gettime" in external  # the tick times itself
 
 
@@ -266,6 +295,118 @@ def test_binding_counters_and_u_prev(arm, built):
         twin(py, built("default"), dims=(40, 6, 3, 3))
     with pytest.raises(ValueError, match="step expects"):
         c.step(np.zeros(5), np.zeros((50, 3)))
+
+
+@needs_cc
+@pytest.mark.parametrize("robot", ["phantom", "finger_edu"])
+def test_offset_in_c_is_pinocchios_forward_kinematics(robot, cache):
+    """rhmpc_offset against RecedingHorizonMPC.offset at random states: the forward kinematics
+    (RX/RY/RZ and, on finger_edu, a revolute-unaligned joint) to the bit; C x + y0 summed in
+    column order, which numpy's BLAS may round differently (measured ≤ 1.1e-16 m)."""
+    import ctypes
+
+    import pinocchio as pin
+
+    arm = linearize(load_robot(robot))
+    mpc = RecedingHorizonMPC(arm)
+    lib = ctypes.CDLL(str(build_cached(mpc, robot, cache)))
+    assert lib.rhmpc_extra_source() == 1  # RHMPC_EXTRA_FK
+    lib.rhmpc_offset.argtypes = (ctypes.c_void_p, ctypes.c_void_p)
+    model, data, frame = arm.robot.model, arm.robot.create_data(), arm.robot.ee_frame_id
+    rng = np.random.default_rng(1)
+    d = np.zeros(3)
+    for _ in range(2000):
+        x = rng.normal(scale=[0.3] * 3 + [1.0] * 3) * 10 ** rng.uniform(-6, 0)
+        lib.rhmpc_offset(x.ctypes.data, d.ctypes.data)
+        pin.forwardKinematics(model, data, arm.q0 + x[:3])
+        p = pin.updateFramePlacement(model, data, frame).translation
+        lin = [sum((float(arm.C[a, c]) * float(x[c]) for c in range(arm.nx)), 0.0)
+               for a in range(3)]
+        np.testing.assert_array_equal(d, p - (np.array(lin) + arm.y0))
+        np.testing.assert_allclose(d, mpc.offset(x), rtol=0, atol=1e-15)
+
+
+def _strided(a: np.ndarray) -> np.ndarray:
+    """``a``'s values in a view every other element of a wider buffer (not contiguous)."""
+    wide = np.zeros((*a.shape[:-1], 2 * a.shape[-1]))
+    wide[..., ::2] = a
+    return wide[..., ::2]
+
+
+def _read_only(a: np.ndarray) -> np.ndarray:
+    a = a.copy()
+    a.setflags(write=False)
+    return a
+
+
+@needs_cc
+def test_step_takes_any_float_array_and_returns_a_new_one(arm, built):
+    """Lists, strided views, Fortran order, read-only arrays: the same torque as C-contiguous
+    float64 arrays, to the bit; each call returns a new array that the caller owns."""
+    py = RecedingHorizonMPC(arm)
+    a, b = twin(py, built("default")), twin(py, built("default"))
+    forms = (lambda v: v.tolist(), _strided, np.asfortranarray, _read_only)
+    traj = bench_trajectory(arm, 40)
+    x = np.zeros(arm.nx)
+    taus = []
+    for k in range(40):
+        ref = traj[k + 1:k + 51]
+        form = forms[k % len(forms)]
+        taus.append(a.step(x, ref))
+        np.testing.assert_array_equal(b.step(form(x), form(ref)), taus[-1])
+        x = arm.A @ x + arm.B @ taus[-1]
+    assert not np.shares_memory(taus[-1], taus[-2])
+    taus[-1][:] = 99.0
+    assert np.all(a.u_prev != 99.0)
+    a.reset()
+    np.testing.assert_array_equal(a.u_prev, np.zeros(arm.nu))
+
+
+@needs_cc
+def test_without_the_extension_the_binding_is_ctypes_and_says_why(built, monkeypatch):
+    """No compiler for the extension: "auto" falls back to ctypes with a one-line reason;
+    "extension" raises it."""
+    from rhmpc.control.export import ToolchainError, extension
+
+    lib = built("default")
+    extension.load.cache_clear()
+    try:
+        monkeypatch.setenv("PATH", "")
+        monkeypatch.delenv("CC", raising=False)
+        c = CController(lib)
+        assert c.binding == "ctypes"
+        assert len(c.binding_note.splitlines()) == 1 and "compiler" in c.binding_note
+        with pytest.raises(ToolchainError, match="compiler"):
+            CController(lib, binding="extension")
+    finally:
+        monkeypatch.undo()
+        extension.load.cache_clear()
+    assert CController(lib).binding == "extension"
+
+
+@needs_cc
+@pytest.mark.parametrize("source", ["caller", "zero"])
+def test_extra_inputs_from_the_caller_or_zero(arm, cache, monkeypatch, source):
+    """Kinematics the generator does not know: the caller gives the offset (a note says so);
+    without offset correction the extra inputs stay zero. Both match Python tick for tick."""
+    from rhmpc.control.export import extra_source, generate
+
+    settings = MPCSettings(offset_correction=source != "zero")
+    if source == "caller":
+        monkeypatch.setattr(generate, "_FK_JOINTS", {})
+    py = RecedingHorizonMPC(arm, settings)
+    assert extra_source(py) == source
+    lib = build_cached(py, "phantom", cache)
+    if source == "caller":
+        with pytest.raises(ValueError, match="give extra_inputs"):
+            CController(lib)
+        info = export_controller(py, cache / "caller-src", robot="phantom")
+        assert any("forward kinematics" in n for n in info.notes)
+    c = CController(lib, extra_inputs=py.offset if source == "caller" else None)
+    assert c.extra_source == ("python" if source == "caller" else "zero")
+    ticks = 2000
+    err, differ = lockstep(arm, py, c, bench_trajectory(arm, ticks), ticks)
+    assert differ == [] and err.max() <= TOL
 
 
 def test_export_refuses_what_the_embedded_code_cannot_do(arm, tmp_path):

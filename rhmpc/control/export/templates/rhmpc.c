@@ -3,7 +3,8 @@
  * Numbers (QP maps, screening map, shift, LQ gain) come from rhmpc_data.c, generated from the
  * same CondensedQP the Python controller uses; the QP is solved by OSQP's generated code.
  *
- *   p = [x; r_1..r_N; u_prev]                    (finiteness check: sum of squares)
+ *   d = p(q0 + x_q) - (C x + y0)                 (output offset, if RHMPC_EXTRA_FK)
+ *   p = [x; r_1..r_N; u_prev; d]                 (finiteness check: sum of squares)
  *   l, u = l0 - G p, u0 - G p                    (only with parameter-dependent bounds)
  *   q_z = F_z [p; 1]                             (the slacks' part of q is the constant rho_1)
  *   level 1: z* = -W q_z; if l <= A [z*; 0] <= u: tau = u_max o z*_0, done    (exact)
@@ -147,6 +148,74 @@ void rhmpc_dims(int out[9]) {
   out[4] = RHMPC_NV; out[5] = RHMPC_M; out[6] = RHMPC_NPAR; out[7] = RHMPC_NZ;
   out[8] = RHMPC_NEXTRA;
 }
+
+int rhmpc_extra_source(void) { return RHMPC_EXTRA_SOURCE; }
+
+#if RHMPC_EXTRA_SOURCE == RHMPC_EXTRA_FK
+/* out = A B (3 x 3, row-major); each entry sums in column order, as Eigen's product. */
+static void mul33(const double *A, const double *B, double *out) {
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j)
+      out[3 * i + j] = A[3 * i] * B[j] + A[3 * i + 1] * B[3 + j] + A[3 * i + 2] * B[6 + j];
+}
+
+/* out = p + R v (translation of an SE3 product). */
+static void act3(const double *R, const double *p, const double *v, double *out) {
+  for (int i = 0; i < 3; ++i) out[i] = p[i] + (R[3 * i] * v[0] + R[3 * i + 1] * v[1] +
+                                               R[3 * i + 2] * v[2]);
+}
+
+/* The rotation of joint j at angle q: about x, y or z, or Rodrigues' formula about fk_axis in
+ * the form of Pinocchio's toRotationMatrix (so that both round alike). */
+static void joint_rotation(int j, double q, double *R) {
+  const double s = sin(q), c = cos(q);
+  const double *a = rhmpc_fk_axis + 3 * j;
+  switch (rhmpc_fk_type[j]) {
+    case 0: R[0] = 1; R[1] = 0; R[2] = 0; R[3] = 0; R[4] = c; R[5] = -s; R[6] = 0; R[7] = s;
+            R[8] = c; return;
+    case 1: R[0] = c; R[1] = 0; R[2] = s; R[3] = 0; R[4] = 1; R[5] = 0; R[6] = -s; R[7] = 0;
+            R[8] = c; return;
+    case 2: R[0] = c; R[1] = -s; R[2] = 0; R[3] = s; R[4] = c; R[5] = 0; R[6] = 0; R[7] = 0;
+            R[8] = 1; return;
+    default: break;
+  }
+  const double sa[3] = {s * a[0], s * a[1], s * a[2]};
+  const double ca[3] = {(1.0 - c) * a[0], (1.0 - c) * a[1], (1.0 - c) * a[2]};
+  double t = ca[0] * a[1];
+  R[1] = t - sa[2]; R[3] = t + sa[2];
+  t = ca[0] * a[2];
+  R[2] = t + sa[1]; R[6] = t - sa[1];
+  t = ca[1] * a[2];
+  R[5] = t - sa[0]; R[7] = t + sa[0];
+  for (int i = 0; i < 3; ++i) R[4 * i] = ca[i] * a[i] + c;
+}
+
+/* oMi = oMi(parent) liMi, liMi = placement * joint (the joint has no translation); then the
+ * frame's translation in the last joint. */
+void rhmpc_offset(const double x[RHMPC_NX], double d[RHMPC_NY]) {
+  double R[9], p[3], Rj[9], Rl[9], t[3];
+  for (int j = 0; j < RHMPC_FK_JOINTS; ++j) {
+    const int iq = rhmpc_fk_iq[j];
+    joint_rotation(j, rhmpc_q0[iq] + x[iq], Rj);
+    mul33(rhmpc_fk_R + 9 * j, Rj, Rl);
+    if (j == 0) {
+      memcpy(R, Rl, sizeof(R));
+      memcpy(p, rhmpc_fk_p, sizeof(p));
+      continue;
+    }
+    act3(R, p, rhmpc_fk_p + 3 * j, t);
+    memcpy(p, t, sizeof(p));
+    mul33(R, Rl, Rj);
+    memcpy(R, Rj, sizeof(R));
+  }
+  act3(R, p, rhmpc_fk_frame_p, t);
+  for (int a = 0; a < RHMPC_NY; ++a) {
+    double lin = 0.0;
+    for (int c = 0; c < RHMPC_NX; ++c) lin += rhmpc_C[a * RHMPC_NX + c] * x[c];
+    d[a] = t[a] - (lin + rhmpc_y0[a]);
+  }
+}
+#endif
 
 void rhmpc_init(rhmpc_t *ctl) {
   static const double zeros_z[RHMPC_NV] = {0};
@@ -478,6 +547,10 @@ int rhmpc_tick_ext(rhmpc_t *ctl, const double x[RHMPC_NX], const double ref[RHMP
     for (int i = 0; i < RHMPC_NU; ++i) p_u[i] = clip(u_prev[i], rhmpc_u_max[i]);
   if (extra != NULL)
     for (int i = 0; i < RHMPC_NEXTRA; ++i) p_extra[i] = extra[i];
+#if RHMPC_EXTRA_SOURCE == RHMPC_EXTRA_FK
+  else
+    rhmpc_offset(x, p_extra);
+#endif
   for (int i = 0; i < NPE; ++i) ss += p[i] * p[i];
   ctl->iterations = 0;
   ctl->level = 0;

@@ -8,6 +8,10 @@
  *     rhmpc_init(&ctl);
  *     every tick:  int status = rhmpc_tick(&ctl, x, ref, u_prev, tau);
  *
+ * The QP's extra per-tick inputs (RHMPC_NEXTRA, see below) come from RHMPC_EXTRA_SOURCE:
+ * zero, rhmpc_offset (the output offset by forward kinematics, computed inside rhmpc_tick), or
+ * the caller (rhmpc_tick_ext).
+ *
  * Units (SI) and array layouts
  *   x[RHMPC_NX]          state about the linearisation posture q0: x = [q - q0 (rad, RHMPC_NU);
  *                        qdot (rad/s, RHMPC_NU)]
@@ -57,6 +61,11 @@ extern "C" {
 #define RHMPC_NENV_U @NENV_U@  /* distinct envelope rows (an upper and a lower row share one) */
 #define RHMPC_NBC @NBC@  /* parameters the bounds depend on (the state and the offset) */
 #define RHMPC_NEXTRA @NEXTRA@  /* extra per-tick inputs at the end of p: @EXTRA_DOC@ */
+#define RHMPC_EXTRA_ZERO 0    /* the extra inputs are zero (no output offset correction) */
+#define RHMPC_EXTRA_FK 1      /* rhmpc_offset computes them from x */
+#define RHMPC_EXTRA_CALLER 2  /* the caller gives them to rhmpc_tick_ext */
+#define RHMPC_EXTRA_SOURCE @EXTRA_SOURCE@
+#define RHMPC_FK_JOINTS @FK_JOINTS@  /* joints of the kinematic chain of rhmpc_offset */
 #define RHMPC_PLAN_FALLBACK_TICKS @PLAN_FALLBACK_TICKS@
 #define RHMPC_MAX_ITER @MAX_ITER@
 
@@ -123,10 +132,20 @@ void rhmpc_init(rhmpc_t *ctl);
 int rhmpc_tick(rhmpc_t *ctl, const double x[RHMPC_NX], const double ref[RHMPC_NY * RHMPC_N],
                const double u_prev[RHMPC_NU], double tau[RHMPC_NU]);
 
-/* The same, with the extra per-tick inputs (RHMPC_NEXTRA values; NULL keeps the last ones,
- * zeros after rhmpc_init). rhmpc_tick is rhmpc_tick_ext with extra = NULL. */
+/* The same, with the extra per-tick inputs (RHMPC_NEXTRA values). extra = NULL: computed by
+ * rhmpc_offset from x if RHMPC_EXTRA_SOURCE is RHMPC_EXTRA_FK, else the last ones (zeros after
+ * rhmpc_init). rhmpc_tick is rhmpc_tick_ext with extra = NULL. */
 int rhmpc_tick_ext(rhmpc_t *ctl, const double x[RHMPC_NX], const double ref[RHMPC_NY * RHMPC_N],
                    const double u_prev[RHMPC_NU], const double *extra, double tau[RHMPC_NU]);
+
+#if RHMPC_EXTRA_SOURCE == RHMPC_EXTRA_FK
+/* The output offset d = p(q0 + x_q) - (C x + y0) [m] at the state x: p is the end-effector
+ * position by forward kinematics of the robot's revolute chain (the operations of Pinocchio's
+ * forwardKinematics and updateFramePlacement, in the same order), C x + y0 the linear model. */
+void rhmpc_offset(const double x[RHMPC_NX], double d[RHMPC_NY]);
+#endif
+/* RHMPC_EXTRA_SOURCE, for bindings. */
+int rhmpc_extra_source(void);
 
 /* Make the next `count` solves report RHMPC_INJECTED (fault injection; the solve still runs). */
 void rhmpc_force_failures(rhmpc_t *ctl, long long count);

@@ -55,4 +55,11 @@ extern const double rhmpc_M0[RHMPC_NU * RHMPC_NU];
 /* The multipliers that go with a primal plan in a warm start (the controller's "zero" dual:
  * 0 on the torque rows; on slack rows, the value of a slack bound that is active). */
 extern const double rhmpc_y_plan[RHMPC_M];
+/* rhmpc_offset's kinematic chain, root first: per joint its type (0, 1, 2: revolute about x,
+ * y, z; 3: about fk_axis), q index, unit axis (3), placement in its parent (rotation 3x3
+ * row-major, translation 3); the end-effector frame's translation in the last joint; the
+ * output map C (RHMPC_NY x RHMPC_NX, row-major). */
+extern const int rhmpc_fk_type[], rhmpc_fk_iq[];
+extern const double rhmpc_fk_axis[], rhmpc_fk_R[], rhmpc_fk_p[], rhmpc_fk_frame_p[];
+extern const double rhmpc_C[RHMPC_NY * RHMPC_NX];
 #endif
