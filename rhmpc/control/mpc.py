@@ -54,6 +54,27 @@ RELAXED_SLACK = 1e-2
 __all__ = ["EXTRA_REASONS", "MPCStats", "RecedingHorizonMPC"]
 
 
+def screening_rows(qp: CondensedQP) -> np.ndarray:
+    """H such that H [z; s; p_B; 1] ≤ 0 holds exactly when l0 − G p ≤ A [z; s] ≤ u0 − G p.
+
+    ``p_B`` are the parameters the bounds depend on (``qp.bound_columns``). A row with a finite
+    upper bound gives [A_i, G_i, −u0_i], one with a finite lower bound [−A_i, −G_i, l0_i]; rows
+    that hold whatever z and p (the slacks' s ≥ 0 at s = 0) are left out.
+    """
+    nz, nv = qp.nz, qp.nv
+    G = qp.G[:, qp.bound_columns]
+    rows = []
+    for i in range(qp.A.shape[0]):
+        if np.isfinite(qp.u0[i]):
+            rows.append(np.concatenate([qp.A[i, :nv], G[i], [-qp.u0[i]]]))
+        if np.isfinite(qp.l0[i]):
+            rows.append(np.concatenate([-qp.A[i, :nv], -G[i], [qp.l0[i]]]))
+    H = np.array(rows).reshape(-1, nv + G.shape[1] + 1)
+    H[:, nz:nv] = 0.0  # the slacks are 0 at level 1
+    needed = np.any(H[:, :nz] != 0, axis=1) | np.any(H[:, nv:-1] != 0, axis=1) | (H[:, -1] > 0)
+    return np.ascontiguousarray(H[needed])
+
+
 class RecedingHorizonMPC:
     """Receding-horizon MPC for the linearised arm, tracking N end-effector reference points.
 
@@ -120,9 +141,14 @@ class RecedingHorizonMPC:
         self._gain, self._gain0 = qp.gain, qp.gain0
         self._screen = self.settings.screening
         self._Z_ext = np.ascontiguousarray(qp.minimiser)
-        self._z_star = np.zeros(qp.nv)
-        self._z_star_z = self._z_star[: qp.nz]  # a view: the slacks stay 0
-        self._z_abs = np.empty(qp.nv)
+        # Level 1 in two mat-vecs (:meth:`_level1`): w = [ẑ*; 0; p_B; 1] with ẑ* = K_z p_ext
+        # (K_z = −W F_z), and every row of l ≤ A [ẑ*; 0] ≤ u as a row of H w ≤ 0.
+        self._w = np.zeros(qp.nv + len(qp.bound_columns) + 1)
+        self._w[-1] = 1.0
+        self._w_z, self._v_star = self._w[: qp.nz], self._w[: qp.nv]
+        self._w_p = self._w[qp.nv : -1]
+        self._H = screening_rows(qp)
+        self._c = np.empty(self._H.shape[0])
         # The screening cascade works on q_z (the slacks' part of q is the constant ρ₁):
         # level 1 ẑ* = −W q_z, level 2 the box QP on the same W (rhmpc.control.box_qp).
         self._q[qp.nz:] = qp.f0[qp.nz:]
@@ -130,6 +156,7 @@ class RecedingHorizonMPC:
         self._F_z = np.ascontiguousarray(self._F_ext[: qp.nz])
         self.box = BoxQP(qp.P[: qp.nz, : qp.nz],
                          BoxQPSettings(max_iter=self.settings.box_max_iter))
+        self._K_z = np.ascontiguousarray(self.box._negW @ self._F_z)
         self._box_on = self.settings.box_screening
         self._A_env = np.ascontiguousarray(qp.A[qp.nv:, : qp.nz])
         self._g_env = np.empty(qp.A.shape[0] - qp.nv)
@@ -285,6 +312,8 @@ class RecedingHorizonMPC:
             stats.iterations = 0
             stats.solve_time = 0.0
             return self._fallback("nonfinite_input", inputs_finite=False)
+        if self._screen and not self._forced and self._level1():
+            return self._screened_output(t0, self._v_star, 1)
         if self.qp.param_bounds:
             np.take(self._p, self._G_cols, out=self._p_cols)
             np.dot(self._G, self._p_cols, out=self._g)
@@ -292,8 +321,6 @@ class RecedingHorizonMPC:
             np.subtract(self.qp.u0, self._g, out=self._u)
         if self._screen and not self._forced:
             np.dot(self._F_z, self._p_ext, out=self._q_z)
-            if self._screened():
-                return self._screened_output(t0, self._z_star, 1)
             if self._box_on and self._box_solved():
                 v = np.zeros(self._nv)
                 v[: self._nz] = self.box.z
@@ -438,21 +465,20 @@ class RecedingHorizonMPC:
         stats.parts_ns[1] = stats.parts_ns[2] = stats.parts_ns[3] = 0
         return tau
 
-    def _screened(self) -> bool:
-        """Level 1: ẑ* = −W q_z (in ``_z_star``, slacks 0); True if [ẑ*; 0] satisfies every
-        constraint row (then it is the QP's solution)."""
-        np.dot(self.box._negW, self._q_z, out=self._z_star_z)
-        z = self._z_star
-        if not self.qp.param_bounds:  # A = I, l = −1, u = 1: the normalised torque bounds
-            return bool(np.abs(z, out=self._z_abs).max() <= 1.0)
-        g = np.dot(self.qp.A, z, out=self._g)
-        return bool((g - self._u).max() <= 0.0 and (self._l - g).max() <= 0.0)
+    def _level1(self) -> bool:
+        """Level 1: ẑ* = K_z p_ext (K_z = −W F_z, in ``_w``, slacks 0); True if [ẑ*; 0]
+        satisfies every constraint row, H [ẑ*; 0; p_B; 1] ≤ 0 (then it is the QP's solution).
+        """
+        np.dot(self._K_z, self._p_ext, out=self._w_z)
+        if self._w_p.size:
+            np.take(self._p, self._G_cols, out=self._w_p)
+        return bool(np.dot(self._H, self._w, out=self._c).max() <= 0.0)
 
     def _box_solved(self) -> bool:
         """Level 2: the torque-box QP solved exactly (KKT certificate), and every envelope row
         holds at [z; 0] (then it is the full QP's solution; :mod:`rhmpc.control.box_qp`)."""
         box = self.box
-        if not box.solve(self._q_z, self._z_star_z):
+        if not box.solve(self._q_z, self._w_z):
             return False
         if self._g_env.size == 0:
             return True

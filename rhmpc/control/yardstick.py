@@ -2,57 +2,52 @@
 
 Timings of the controller (``rhmpc bench``, ``rhmpc simulate``) are reported as multiples of
 the time of :class:`GainTick` measured in the same minutes, so that they compare across machines
-and loads.
+and loads. g is a fixed piece of work — the unconstrained MPC's gain applied to the parameters —
+that no feature of the controller grows: the output offset, the envelope and the clipping are
+the controller's, not the yardstick's. ``rhmpc bench`` also times the same mat-vec written in
+plain NumPy (:func:`numpy_gain_step`), so that a reader sees g for what it is.
 """
 
 from __future__ import annotations
 
-import math
+from collections.abc import Callable
 
 import numpy as np
 
 from rhmpc.control.mpc import RecedingHorizonMPC
-from rhmpc.control.offset import OutputOffset
-
-
-class QPParameters:
-    """p = [x; r_1..r_N; u_{−1}; d] in a preallocated buffer, d by forward kinematics as in the
-    controller (:class:`rhmpc.control.offset.OutputOffset`), so both references solve the QP the
-    controller solves."""
-
-    def __init__(self, mpc: RecedingHorizonMPC) -> None:
-        qp = mpc.qp
-        self.p = np.zeros(qp.npar)
-        self._nx, self._nr, self._nu = qp.nx, qp.N * qp.ny, qp.nu
-        self._d = self.p[self._nx + self._nr + self._nu :]
-        self._offset = OutputOffset(mpc.arm) if mpc.settings.offset_correction else None
-
-    def fill(self, x: np.ndarray, ref: np.ndarray, u_prev: np.ndarray) -> bool:
-        """Write p; False if it is not finite."""
-        p = self.p
-        p[: self._nx] = x
-        p[self._nx : self._nx + self._nr] = ref.reshape(-1)
-        p[self._nx + self._nr : self._nx + self._nr + self._nu] = u_prev
-        if self._offset is not None:
-            self._offset(x, out=self._d)
-        return math.isfinite(p.sum())
 
 
 class GainTick:
-    """Reference 1: the precomputed unconstrained gain, clipped (same parameter handling)."""
+    """g: u = K p + k₀ with p = [x; r_1..r_N; u_{−1}] assembled in a preallocated buffer.
+
+    K (nu × (nx + N·ny + nu)) and k₀ are the unconstrained MPC's precomputed gain on those
+    parameters (:attr:`CondensedQP.gain`, its offset columns left out): the floor of what any
+    controller in Python costs here, a few NumPy calls.
+    """
 
     def __init__(self, mpc: RecedingHorizonMPC) -> None:
         qp = mpc.qp
-        self._params = QPParameters(mpc)
-        self._K, self._k0 = qp.gain, qp.gain0
-        self._lo, self._hi = -qp.u_max, qp.u_max
+        self._nx, self._nr = qp.nx, qp.N * qp.ny
+        n = self._nx + self._nr + qp.nu
+        self._K = np.ascontiguousarray(qp.gain[:, :n])
+        self._k0 = qp.gain0.copy()
+        self._p = np.zeros(n)
+        self._x, self._r, self._u = (self._p[: self._nx], self._p[self._nx : self._nx + self._nr],
+                                     self._p[self._nx + self._nr :])
 
     def __call__(self, x: np.ndarray, ref: np.ndarray, u_prev: np.ndarray) -> np.ndarray:
-        if not self._params.fill(x, ref, u_prev):
-            return np.zeros_like(self._k0)
-        u = self._K @ self._params.p
+        self._x[:] = x
+        self._r[:] = ref.reshape(-1)
+        self._u[:] = u_prev
+        u = self._K @ self._p
         u += self._k0
-        np.maximum(u, self._lo, out=u)
-        return np.minimum(u, self._hi, out=u)
+        return u
 
 
+def numpy_gain_step(K: np.ndarray, k0: np.ndarray) -> Callable[..., np.ndarray]:
+    """The same work in plain NumPy: ``K @ concatenate((x, r.ravel(), u_prev)) + k0``."""
+
+    def step(x: np.ndarray, ref: np.ndarray, u_prev: np.ndarray) -> np.ndarray:
+        return K @ np.concatenate((x, ref.ravel(), u_prev)) + k0
+
+    return step

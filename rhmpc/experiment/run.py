@@ -113,10 +113,16 @@ def document(config: RunConfig, run: Run, result: LoopResult, wall: float,
     monitor = getattr(run.reference, "monitor", None)
     if monitor is not None:
         doc["heart_rate"] = monitor.summary()
-    if timed_gain:
+    if timed_gain and np.isfinite(result.yardstick_us["p50"]):
+        g = result.yardstick_us["p50"]
         doc["gain_tick_us"] = result.yardstick_us
-        doc["tick_ratio_to_gain"] = {k: v / result.yardstick_us["p50"]
-                                     for k, v in metrics["tick_us"].items() if k != "mean"}
+        doc["tick_ratio_to_gain"] = {k: v / g for k, v in metrics["tick_us"].items()
+                                     if k != "mean"}
+        doc["tick_parts_ratio_to_gain"] = {
+            part: {k: v / g for k, v in stats.items() if k != "mean"}
+            for part, stats in metrics["tick_parts_us"].items()}
+        # wall time per simulated second, in gain ticks: the simulation's own speed
+        doc["wall_per_simulated_s_g"] = 1e6 * wall / config.loop.duration / g
     return doc
 
 
@@ -138,12 +144,12 @@ def _clock_document(config: RunConfig, run: Run) -> dict[str, Any]:
 
 
 def _gain_tick(controller, gain_tick):
-    """``yardstick(x, r)``: the controller's gain tick, or None if it has no gain to time."""
+    """``yardstick(x, r, u_prev)``: the controller's gain tick, or None if it has no gain to
+    time (a stand-in controller without the MPC's QP)."""
     try:
-        gain = gain_tick(getattr(controller, "twin", controller))  # compiled: its Python twin
-    except AttributeError:  # a stand-in controller without the MPC's QP
+        return gain_tick(getattr(controller, "twin", controller))  # compiled: its Python twin
+    except AttributeError:
         return None
-    return lambda x, ref: gain(x, ref, controller.u_prev)
 
 
 def _jsonable(obj: Any) -> Any:

@@ -9,8 +9,9 @@ bounds (so that the QP has active constraints). Every tick measures, with
   on: OSQP runs only on ticks where the unconstrained minimiser violates a bound);
 * the same MPC with OSQP on *every* tick (``screening=False``), whole call and its parts
   (``mpc.stats.parts_ns``), fed the same state and reference;
-* a *gain tick*: the same parameter handling plus the precomputed unconstrained gain, clipped —
-  the floor of what any controller in Python costs here;
+* the *gain tick* g (:class:`rhmpc.control.yardstick.GainTick`): the unconstrained gain on
+  p = [x; r; u_{−1}], u = K p + k₀ — the yardstick every timing is a multiple of — and the same
+  mat-vec in plain NumPy (``K @ concatenate(...) + k0``), so that g reads as what it is;
 * an *exact tick*: the same QP (same P, q, A, l, u) solved by the active-set solver DAQP,
   hot-started from its previous active set. Its u0 is the accuracy reference:
   ``u0_error = |u0_mpc − u0_exact| / τ_max`` per joint (τ_max = the robot's torque limit);
@@ -24,6 +25,7 @@ from __future__ import annotations
 
 import dataclasses
 import gc
+import math
 import platform
 import time
 from collections.abc import Callable
@@ -32,8 +34,9 @@ from importlib.metadata import version as _version
 import numpy as np
 
 from rhmpc.control.mpc import RecedingHorizonMPC
+from rhmpc.control.offset import OutputOffset
 from rhmpc.control.settings import MPCSettings, to_dict
-from rhmpc.control.yardstick import GainTick, QPParameters
+from rhmpc.control.yardstick import GainTick, numpy_gain_step
 from robots import linearize, load_robot
 from robots.linearize import LinearArm
 
@@ -90,6 +93,29 @@ def heart_like_reference(
             else:
                 out[k:] -= offset
     return np.asarray(center, dtype=float) + out
+
+
+class QPParameters:
+    """p = [x; r_1..r_N; u_{−1}; d] in a preallocated buffer, d by forward kinematics as in the
+    controller (:class:`rhmpc.control.offset.OutputOffset`), so that the exact tick solves the QP
+    the controller solves."""
+
+    def __init__(self, mpc: RecedingHorizonMPC) -> None:
+        qp = mpc.qp
+        self.p = np.zeros(qp.npar)
+        self._nx, self._nr, self._nu = qp.nx, qp.N * qp.ny, qp.nu
+        self._d = self.p[self._nx + self._nr + self._nu :]
+        self._offset = OutputOffset(mpc.arm) if mpc.settings.offset_correction else None
+
+    def fill(self, x: np.ndarray, ref: np.ndarray, u_prev: np.ndarray) -> bool:
+        """Write p; False if it is not finite."""
+        p = self.p
+        p[: self._nx] = x
+        p[self._nx : self._nx + self._nr] = ref.reshape(-1)
+        p[self._nx + self._nr : self._nx + self._nr + self._nu] = u_prev
+        if self._offset is not None:
+            self._offset(x, out=self._d)
+        return math.isfinite(p.sum())
 
 
 class ExactTick:
@@ -161,7 +187,8 @@ def _ratio(a: np.ndarray, b: np.ndarray) -> dict[str, float]:
 class _Ticks:
     """One run of the benchmark: the controllers it times and a column per measured figure."""
 
-    COLUMNS = ("tick_ns", "every_ns", "gain_ns", "exact_ns", "parts_ns", "iters", "exact_iters",
+    COLUMNS = ("tick_ns", "every_ns", "gain_ns", "numpy_ns", "exact_ns", "parts_ns", "iters",
+               "exact_iters",
                "u0_err", "every_err", "active", "screened", "level", "box_iters", "err",
                "c_ns", "c_call_ns", "c_err", "c_level")
 
@@ -170,6 +197,7 @@ class _Ticks:
         self.mpc, self.compiled, self.arm = mpc, compiled, arm
         self.every = RecedingHorizonMPC(arm, dataclasses.replace(mpc.settings, screening=False))
         self.gain, self.exact = GainTick(mpc), ExactTick(mpc)
+        self.numpy_gain = numpy_gain_step(self.gain._K, self.gain._k0)
         self.tau_max = np.asarray(arm.torque_limit, dtype=float)
         for name in self.COLUMNS:
             shape = (total, 4) if name == "parts_ns" else total
@@ -186,6 +214,9 @@ class _Ticks:
         tau = mpc.step(x, ref)
         t1 = clock()
         self.gain(x, ref, u_prev)
+        t2 = clock()
+        self.numpy_gain(x, ref, u_prev)
+        self.numpy_ns[k] = clock() - t2
         t2 = clock()
         u_exact = exact(x, ref, u_prev)
         t3 = clock()
@@ -314,6 +345,8 @@ def _summary(run: _Ticks, sl: slice) -> dict:
            for i, name in enumerate(("reference", "update", "solve", "output"))},
         "iterations": _pct(run.iters[sl]),
         "gain_tick_us": _pct(g),
+        "numpy_gain_us": _pct(run.numpy_ns[sl] * us),
+        "ratio_gain_to_numpy": _ratio(g, run.numpy_ns[sl] * us),
         "exact_tick_us": _pct(e),
         "exact_iterations": _pct(run.exact_iters[sl]),
         "exact_failures": int(run.exact_failures),
@@ -372,7 +405,8 @@ _ROWS = (
     ("  vector update + warm start", "update_us"),
     ("  OSQP solve", "solve_us"),
     ("  output", "output_us"),
-    ("gain tick (reference)", "gain_tick_us"),
+    ("gain tick g (the yardstick)", "gain_tick_us"),
+    ("  the same mat-vec in plain NumPy", "numpy_gain_us"),
     ("exact tick, DAQP (reference)", "exact_tick_us"),
 )
 

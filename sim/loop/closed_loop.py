@@ -156,11 +156,13 @@ class OpenLoop:
         self.last = j if new else self.last
         return spent
 
-    def chunk(self, c0: int, c1: int) -> tuple[list, list[int], list]:
-        """References r_{i+1..i+N} of ticks c0 … c1 − 1, the ns charged to each, and each
-        refresh's ``(tick, points)``."""
-        refs, horizons, charged = [], [], [0] * (c1 - c0)
-        charged[0], self.carry = self.carry, 0
+    def chunk(self, c0: int, c1: int) -> tuple[list, tuple[list[int], list[int]], list]:
+        """References r_{i+1..i+N} of ticks c0 … c1 − 1, the ns charged to each tick — the
+        predictor's updates (with the gate) and the forecasts (with the interpolation and the
+        guard), two lists — and each refresh's ``(tick, points)``."""
+        refs, horizons = [], []
+        charged = ([0] * (c1 - c0), [0] * (c1 - c0))
+        charged[0][0], self.carry = self.carry, 0
         i = c0
         while i < c1:
             refreshed = i >= self.next
@@ -183,22 +185,23 @@ class OpenLoop:
         else:
             charged[max(tick, c0) - c0] += ns
 
-    def _refresh(self, i: int, c0: int, c1: int, charged: list[int]) -> None:
+    def _refresh(self, i: int, c0: int, c1: int, charged: tuple[list[int], list[int]]) -> None:
         """The refresh on tick ``i``: its forecast, and the update it needs (pipelined: the
         update ran on the tick before, and the next refresh's update is made now)."""
+        updates, forecasts = charged
         if self.clock.mode == "sensor":
-            self._charge(i - self.pipelined, self._arrivals(i - self.pipelined), c0, c1, charged)
+            self._charge(i - self.pipelined, self._arrivals(i - self.pipelined), c0, c1, updates)
         elif not self.pipelined:
-            self._charge(i, self.update(i), c0, c1, charged)
+            self._charge(i, self.update(i), c0, c1, updates)
         t_start = clock()
         self.reference.forecast()
-        self._charge(i, clock() - t_start, c0, c1, charged)
+        self._charge(i, clock() - t_start, c0, c1, forecasts)
         if self.clock.mode == "sensor":
             self.next = self._next_arrival()
             return
         self.next = i + self.settings.downsample
         if self.pipelined:  # the next refresh's update, on its own tick
-            self._charge(self.next - 1, self.update(self.next - 1), c0, c1, charged)
+            self._charge(self.next - 1, self.update(self.next - 1), c0, c1, updates)
 
     def _next_arrival(self) -> float:
         """The tick of the refresh for the next raw sample (inf when none is left)."""
@@ -254,7 +257,7 @@ def run_closed_loop(
     observer_settings: ObserverSettings | None = None,
     progress: Callable[[int], None] | None = None,
     trace_file: str | None = None,
-    yardstick: Callable[[np.ndarray, np.ndarray], object] | None = None,
+    yardstick: Callable[[np.ndarray, np.ndarray, np.ndarray], object] | None = None,
     chunk_ticks: int = 20_000,
 ) -> LoopResult:
     """Run the closed loop for ``settings.duration``, in chunks of ≈ 10 s of ticks.
@@ -283,7 +286,7 @@ def run_closed_loop(
     trace_file
         Write every tick to this NPZ file as the run goes (:class:`sim.loop.trace.TraceFile`).
     yardstick
-        A reference computation ``yardstick(x̂, r)`` (the gain tick of
+        A reference computation ``yardstick(x̂, r, u_{−1})`` (the gain tick g of
         :class:`rhmpc.control.yardstick.GainTick`) timed after the controller on every 16th tick,
         with the tick's own inputs, so that tick times can be stated as ratios to it measured in
         the same run (``LoopResult.yardstick_us``); not part of the tick, its result is not used.
@@ -304,12 +307,13 @@ def run_closed_loop(
         try:
             open_loop = OpenLoop(reference, stream, truth.center, settings, np.tile(anchor, (N, 1)),
                                  predictor_clock(settings, stream))
+            u_prev = None
             for c0 in range(0, n, chunk):
                 c1 = min(c0 + chunk, n)
                 refs, charged, horizons = open_loop.chunk(c0, c1)
-                log = record.start_chunk()
-                log[1].extend(refs)  # r_{i+1..i+N} of every tick (views)
+                log = record.start_chunk(refs, charged, u_prev)
                 run_ticks(side, controller, c0, c1, refs, charged, log, yardstick, progress)
+                u_prev = log["u_prev"]
                 record.end_chunk(c0, c1, log, horizons)
         finally:
             record.close()
@@ -318,32 +322,45 @@ def run_closed_loop(
     return record.result(controller_stats(controller), counts, side.dynamics + note)
 
 
-def run_ticks(side, controller, c0: int, c1: int, refs: list, charged: list[int], log: tuple,
-              yardstick=None, progress=None) -> None:
+def run_ticks(side, controller, c0: int, c1: int, refs: list,
+              charged: tuple[list[int], list[int]], log: dict, yardstick=None,
+              progress=None) -> None:
     """Steps 4–6 for ticks c0 … c1 − 1, appending to the chunk's lists ``log``.
 
-    ``side`` is the robot's side of the tick (:mod:`sim.plant.tick`); the tick's time is from
-    the encoder reading to the commanded torque, plus what the open-loop part ``charged`` it.
+    ``side`` is the robot's side of the tick (:mod:`sim.plant.tick`). The tick's time is from
+    the encoder reading to the commanded torque (its parts: ``sense``, ``controller``,
+    ``actuate``), plus the predictor's update and forecast that the open-loop part ``charged``
+    it. ``yardstick(x̂, r, u_{−1})`` is timed on every 16th tick with the tick's own inputs.
     """
-    q_log, _, tau_mpc_log, tau_log, tick_ns, yard_ns = log
+    updates, forecasts = charged
     sense, actuate, advance, step = side.sense, side.actuate, side.advance, controller.step
+    q_log, tau_mpc_log, tau_log = log["q"], log["tau_mpc"], log["tau"]
+    tick_ns, parts, yard_ns = log["tick_ns"], log["parts_ns"], log["yardstick_ns"]
+    u_prev = log.get("u_prev")
     for i in range(c0, c1):
         t_start = clock()
         x_hat = sense()
+        t_sensed = clock()
         ref = refs[i - c0]
         u = step(x_hat, ref)
+        t_stepped = clock()
         tau = actuate(u)
-        tick_ns.append(clock() - t_start + charged[i - c0])
-        if yardstick is not None and i % 16 == 7:
+        t_end = clock()
+        k = i - c0
+        tick_ns.append(t_end - t_start + updates[k] + forecasts[k])
+        parts.append((t_sensed - t_start, t_stepped - t_sensed, t_end - t_stepped))
+        if yardstick is not None and i % 16 == 7 and u_prev is not None:
             t_start = clock()
-            yardstick(x_hat, ref)
+            yardstick(x_hat, ref, u_prev)
             yard_ns.append(clock() - t_start)
+        u_prev = u
         tau_mpc_log.append(u.tolist())
         tau_log.append(tau.tolist())
         advance()
         q_log.append(side.q.tolist())
         if progress is not None and (i + 1) % 2000 == 0:
             progress(i + 1)
+    log["u_prev"] = u_prev
 
 
 def controller_stats(controller) -> dict:

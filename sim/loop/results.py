@@ -17,6 +17,11 @@ from robots import Robot
 from sim.loop.metrics import RunningTracking, TickHistogram, rms
 from sim.loop.trace import DecimatedTrace, TraceFile
 
+#: The parts of a control tick, timed separately: the encoders and the observer, the
+#: controller, the cancellation (the commanded torque), and the refresh slices the tick carries —
+#: the predictor's update with the outlier gate, the forecast with its interpolation and guard.
+TICK_PARTS = ("sense", "controller", "actuate", "predictor_update", "forecast")
+
 
 def embed3(p: np.ndarray) -> np.ndarray:
     """(n, d) positions with d ≤ 3 as (n, 3), missing axes zero (1-D motion along x)."""
@@ -44,6 +49,7 @@ class LoopResult:
     tracking: dict  # tracking_metrics of every tick after settling
     tick_us: dict  # p50 / p99 / p999 / max / mean of the whole control tick [µs]
     yardstick_us: dict  # the same of the yardstick (gain tick) timed in the run [µs]
+    tick_parts_us: dict  # the same per part of the tick (TICK_PARTS) [µs]
     horizon_error: np.ndarray  # (N,) RMS error of the reference vs the truth per lead tick [m]
     controller_stats: dict = field(default_factory=dict)
     saturated_ticks: int = 0
@@ -66,6 +72,7 @@ class LoopResult:
     def metrics(self) -> dict:
         out = dict(self.tracking)
         out["tick_us"] = dict(self.tick_us)
+        out["tick_parts_us"] = {k: dict(v) for k, v in self.tick_parts_us.items()}
         out["prediction_rms_mm"] = {
             "lead_1": float(1e3 * self.horizon_error[0]),
             "lead_N": float(1e3 * self.horizon_error[-1]),
@@ -90,6 +97,7 @@ class Recorder:
         self.tracking = RunningTracking()
         self.ticks = TickHistogram()
         self.yardstick = TickHistogram()
+        self.parts = {name: TickHistogram() for name in TICK_PARTS}
         self.trace = DecimatedTrace(settings.ticks)
         self.file = None if trace_file is None else TraceFile(trace_file)
         N = settings.horizon
@@ -98,14 +106,19 @@ class Recorder:
         self.saturated_ticks = 0
 
     @staticmethod
-    def start_chunk() -> tuple[list, list, list, list, list, list]:
-        """Fresh per-tick lists: q, r, τ_mpc, commanded τ, tick [ns], yardstick [ns]."""
-        return [], [], [], [], [], []
+    def start_chunk(refs: list, charged: tuple[list[int], list[int]],
+                    u_prev: np.ndarray | None) -> dict:
+        """The chunk's per-tick lists: q, r (the chunk's references), τ_mpc, commanded τ, tick
+        and its parts [ns], the yardstick [ns]; the predictor's update and forecast [ns] as the
+        open-loop part charged them; u_{−1} carried from the last chunk."""
+        return {"q": [], "refs": refs, "tau_mpc": [], "tau": [], "tick_ns": [], "parts_ns": [],
+                "yardstick_ns": [], "charged": charged, "u_prev": u_prev}
 
     def end_chunk(self, c0: int, c1: int, log, horizons: list) -> None:
         settings, N = self.settings, self.settings.horizon
-        q_log, ref0, tau_mpc, tau_cmd, tick_ns, yard_ns = log
-        self.yardstick.add(np.array(yard_ns, dtype=np.int64))
+        q_log, ref0, tau_mpc, tau_cmd = log["q"], log["refs"], log["tau_mpc"], log["tau"]
+        tick_ns = log["tick_ns"]
+        self.yardstick.add(np.array(log["yardstick_ns"], dtype=np.int64))
         m = c1 - c0
         if self.chain is not None:
             ee = self.chain.points(np.array(q_log), self.ee_joint, self.ee_point)
@@ -125,6 +138,11 @@ class Recorder:
         s = max(settings.settling_ticks - c0, 0)
         self.tracking.add(ee[s:] - poi[s:], tau_mpc[s:], tau[s:])
         self.ticks.add(tick_ns[s:])
+        parts = np.array(log["parts_ns"], dtype=np.int64).reshape(-1, 3)
+        for k, name in enumerate(("sense", "controller", "actuate")):
+            self.parts[name].add(parts[s:, k])
+        for charged, name in zip(log["charged"], ("predictor_update", "forecast"), strict=True):
+            self.parts[name].add(np.array(charged, dtype=np.int64)[s:])
         # horizon prediction error per lead tick, refreshes after settling
         for tick, h in horizons:
             if tick >= settings.settling_ticks and h is not None \
@@ -154,6 +172,7 @@ class Recorder:
             settings=self.settings, trace=self.trace.arrays(), stride=self.trace.stride,
             tracking=self.tracking.result(), tick_us=self.ticks.stats_us(),
             yardstick_us=self.yardstick.stats_us(),
+            tick_parts_us={name: h.stats_us() for name, h in self.parts.items()},
             horizon_error=horizon_error, controller_stats=stats,
             saturated_ticks=self.saturated_ticks, predictor_counts=counts,
             plant_dynamics=dynamics,
