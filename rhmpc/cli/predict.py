@@ -53,7 +53,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--records",
         default=None,
-        help="comma-separated PhysioNet records for --study rr (default: ../shared/data)",
+        help="comma-separated PhysioNet records for --study rr: shipped names (mitdb-100, "
+        "1003) or paths without extension (default: every shipped record)",
     )
     p.add_argument("--scenarios", default=None, help="scenarios for --study horizon")
     p.add_argument(
@@ -92,11 +93,12 @@ def _settings(args: argparse.Namespace) -> StudySettings:
         raise UsageError(str(exc)) from None
     if args.records:
         recs = tuple(r.strip() for r in args.records.split(",") if r.strip())
-        missing = [
-            r for r in recs if not Path(r).with_suffix(".atr").exists() and not Path(r).is_dir()
-        ]
+        from sim.heart.rr import shipped_records
+
+        missing = [r for r in recs if not _is_record(r)]
         if missing:
-            raise UsageError(f"record(s) not found: {', '.join(missing)}")
+            raise UsageError(f"record(s) not found: {', '.join(missing)} (shipped: "
+                             f"{', '.join(shipped_records())}, or a path without extension)")
         kw["records"] = recs
     if args.scenarios:
         from sim.heart import SCENARIOS
@@ -108,8 +110,19 @@ def _settings(args: argparse.Namespace) -> StudySettings:
         kw["scenarios"] = scns
     s = StudySettings(**kw)
     if args.study == "rr" and not s.parameters():
-        raise UsageError("--study rr needs --records (nothing found in ../shared/data)")
+        raise UsageError("--study rr needs --records (no shipped record found)")
     return s
+
+
+def _is_record(name: str) -> bool:
+    """Whether ``name`` resolves to a PhysioNet record (a path or a shipped name)."""
+    from sim.heart.rr import find_record
+
+    try:
+        find_record(name)
+    except ValueError:
+        return False
+    return True
 
 
 def run(args: argparse.Namespace) -> int:
