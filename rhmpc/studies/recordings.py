@@ -132,7 +132,12 @@ class Track:
     def period(self) -> float:
         """Δ, the median sample interval [s] (to 12 significant digits: timestamps written in
         decimal make 1/25 s 0.03999999999999915)."""
-        return float(f"{np.median(np.diff(self.t)):.12g}")
+        return _digits(float(np.median(np.diff(self.t))))
+
+
+def _digits(x: float) -> float:
+    """``x`` to 12 significant digits."""
+    return float(f"{x:.12g}")
 
 
 def parse_points(text: str | None) -> str | tuple[int, ...] | None:
@@ -249,12 +254,12 @@ def _rows(track: Track, name: str, errors: np.ndarray, counts: dict, leads: list
     out = []
     for k in leads:
         e = errors[:, k - 1]
-        e = e[np.isfinite(e)]
+        e = 1e3 * e[np.isfinite(e)]
         out.append({
             "source": track.label, "predictor": name, "lead_samples": k,
-            "lead_s": float(f"{k * period:.12g}"), "rms_error_mm": 1e3 * float(np.sqrt(np.mean(e**2)))
-            if e.size else None,
-            "max_error_mm": 1e3 * float(np.max(e)) if e.size else None,
+            "lead_s": _digits(k * period),
+            "rms_error_mm": float(np.sqrt(np.mean(e**2))) if e.size else None,
+            "max_error_mm": float(np.max(e)) if e.size else None,
             "scored": int(e.size), "loop_lead": k == k_loop,
             "rejected": sum(counts.get(c, 0) for c in REJECTED),
             "repaired": sum(counts.get(c, 0) for c in REPAIRED),
@@ -292,9 +297,9 @@ def score_track(track: Track, settings: OpenLoopSettings,
     _ratios(rows)
     source = {
         "label": track.label, "file": track.file, "point": track.point,
-        "rate_hz": float(f"{1.0 / period:.12g}"), "period_s": period, "duration_s": duration,
+        "rate_hz": _digits(1.0 / period), "period_s": period, "duration_s": duration,
         "samples": int(track.t.size), "missing": int(np.sum(~np.isfinite(z).all(axis=1))),
-        "warmup_s": warmup, "loop_lead_samples": k_loop, "loop_lead_s": float(f"{k_loop * period:.12g}"),
+        "warmup_s": warmup, "loop_lead_samples": k_loop, "loop_lead_s": _digits(k_loop * period),
         "gap_samples": int(t.size - track.t.size),
         "regular": bool(np.allclose(np.diff(t), period, rtol=0.05)),
     }
