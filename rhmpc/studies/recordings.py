@@ -174,7 +174,7 @@ def file_points(files: Sequence[str], points, read: dict) -> list[list[tuple[str
         recordings = load_points(f, **read)
         several = len(recordings) > 1
         if several and points is None:
-            raise ValueError(f"{f}: holds {len(recordings)} tracked points; score them with "
+            raise ValueError(f"{f}: holds {len(recordings)} tracked points; choose them with "
                              "--points all (or --points 1,3, numbered from 1)")
         chosen = range(1, len(recordings) + 1) if points in (None, "all") else points
         out.append([(f"{label}:p{k}" if several else label, f, k if several else None,
