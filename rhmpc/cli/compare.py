@@ -49,10 +49,11 @@ class Job:
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
-        "compare", help="predictors x scenarios in parallel: the Tuna Tables I/III replica",
-        description="Run every predictor on every scenario in closed loop (parallel processes) "
-        "and print RMS (max) position error and RMS control effort per predictor and scenario, "
-        "with the ratio to the 'exact' row.")
+        "compare", help="predictors x scenarios (or recordings) in parallel: the Tuna Tables "
+        "I/III replica",
+        description="Run every predictor on every scenario (or recording, --data) in closed "
+        "loop (parallel processes) and print RMS (max) position error and RMS control effort "
+        "per predictor and column, with the ratio to the 'exact' row (to 'hold' without it).")
     p.add_argument("--predictors", default=",".join(TABLE_PREDICTORS),
                    help="comma-separated predictor names (default %(default)s)")
     p.add_argument("--scenarios",
@@ -76,8 +77,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_run_options(p, DEFAULT_DURATION, DEFAULT_SETTLING)
     add_recording_options(p)
     p.add_argument("--json", action="store_true", help="print all result documents as JSON: "
-                   "one per scenario, predictor and seed, each with rms_error_mm, max_error_mm "
-                   "and rms_effort_mNm")
+                   "one per column, predictor and seed, each with scenario (the column: a "
+                   "scenario, a file name, FILE:pN for a point), rms_error_mm, max_error_mm and "
+                   "rms_effort_mNm")
     p.add_argument("--out", metavar="FILE.json", help="write all result documents")
     p.set_defaults(func=run)
 

@@ -42,7 +42,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "Or, with --data, every predictor on your recordings, open loop, each at the file's "
         "own rate: RMS and max forecast error at leads 1..L samples and at the lead the closed "
         "loop needs, ceil((period + latency + 25 ms horizon) / period), with hold and "
-        "last-cycle as baselines; the first max(10 s, 25 %% of the file) are a warm-up, not "
+        "last-cycle as baselines; the first max(10 s, 25 % of the file) are a warm-up, not "
         "scored.",
     )
     what = p.add_mutually_exclusive_group()
