@@ -5,7 +5,7 @@ For every replica (seed 4, 60 s, scored 15–59 s) and the same replicas driven 
 once the beat has ended, so the change between consecutive beats bounds what any causal
 estimator can follow at a beat's start.
 
-    .venv/bin/python benchmarks/lock_bound.py [--record ../shared/data/mitdb-100/100]
+    .venv/bin/python benchmarks/lock_bound.py [--record mitdb-100]
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ REPLICAS = COLUMNS  # Tuna et al. Tables I–III
 
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--record", default="../shared/data/mitdb-100/100")
+    ap.add_argument("--record", default="mitdb-100")
     a = ap.parse_args()
     for rr in (None, a.record):
         for name in REPLICAS:

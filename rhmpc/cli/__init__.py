@@ -23,7 +23,7 @@ from rhmpc.errors import UsageError
 
 #: Subcommand modules, in the order ``rhmpc --help`` lists them.
 COMMANDS: tuple[str, ...] = (
-    "simulate", "compare", "robots", "data", "bench", "predict", "tune", "export",
+    "simulate", "compare", "robots", "data", "bench", "predict", "tune", "export", "config",
 )
 
 

@@ -52,7 +52,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="seed of the beat-to-beat variability (default %(default)s)")
     common.add_argument("--duration", type=float, help="seconds to use (default: the scenario's)")
     common.add_argument("--bpm", type=float, help="constant heart rate [beats/min]")
-    common.add_argument("--record", help="PhysioNet record whose annotated beats drive the heart")
+    common.add_argument("--record", help="PhysioNet record whose annotated beats drive the "
+                        "heart: a shipped name (mitdb-100, 1003) or a path without extension")
     common.add_argument("--var", help="MATLAB variable holding the positions (.mat files)")
     common.add_argument("--rows", type=parse_indices, help="0-based rows holding x,y,z (.mat)")
     common.add_argument("--cols", type=parse_indices, help="0-based columns holding x,y,z (.mat)")

@@ -1,4 +1,5 @@
-"""`rhmpc predict`: the prediction studies of Yuen et al. 2008 and Tuna et al. 2013."""
+"""`rhmpc predict`: the prediction studies of Yuen et al. 2008 and Tuna et al. 2013, or every
+predictor on the user's recordings (``--data``, :mod:`rhmpc.studies.recordings`)."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ import sys
 from pathlib import Path
 
 from predictors import PREDICTORS
+from rhmpc.cli.simulate import add_recording_options, recording_options
 from rhmpc.errors import UsageError
 from rhmpc.studies.prediction import (
     BASE_BPM,
@@ -21,18 +23,32 @@ from rhmpc.studies.prediction import (
     plot_study,
     run_study,
 )
+from rhmpc.studies.recordings import DEFAULT_LEADS, WARMUP_FRACTION, WARMUP_SECONDS
+
+#: Options of the synthetic studies (``--study``) and of the recordings (``--data``).
+STUDY_OPTIONS = ("trials", "noise_mm", "delta_bpm", "records", "scenarios")
+DATA_OPTIONS = ("points", "leads", "warmup", "latency", "var", "rows", "cols", "data_rate",
+                "units")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "predict",
         help="prediction studies: noise, heart-rate step, RR-driven, horizon",
-        description="Monte Carlo prediction studies. noise / hr-step / rr reproduce Yuen et al. "
-        "2008 §III-D (Tuna et al. 2013 Figs 12-13) on mitral-1d at 28 Hz: 30 s to initialise, "
-        "then the RMS one-sample-ahead error against the truth over 10 s. horizon: RMS error "
-        "versus lead time (Tuna Fig. 8) on sonomicrometry replicas at 7.5 ms.",
+        description="Monte Carlo prediction studies (--study). noise / hr-step / rr reproduce "
+        "Yuen et al. 2008 §III-D (Tuna et al. 2013 Figs 12-13) on mitral-1d at 28 Hz: 30 s to "
+        "initialise, then the RMS one-sample-ahead error against the truth over 10 s. horizon: "
+        "RMS error versus lead time (Tuna Fig. 8) on sonomicrometry replicas at 7.5 ms. "
+        "Or, with --data, every predictor on your recordings, open loop, each at the file's "
+        "own rate: RMS and max forecast error at leads 1..L samples and at the lead the closed "
+        "loop needs, ceil((period + latency + 25 ms horizon) / period), with hold and "
+        "last-cycle as baselines; the first max(10 s, 25 % of the file) are a warm-up, not "
+        "scored.",
     )
-    p.add_argument("--study", required=True, choices=STUDIES, help="which study")
+    what = p.add_mutually_exclusive_group()
+    what.add_argument("--study", choices=STUDIES, help="which synthetic study")
+    what.add_argument("--data", nargs="+", metavar="FILE", help="recordings to score every "
+                      "predictor on (CSV t,x,y,z in s and mm, NPZ, or MATLAB .mat v5/v7.3)")
     p.add_argument(
         "--trials",
         type=int,
@@ -53,7 +69,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--records",
         default=None,
-        help="comma-separated PhysioNet records for --study rr (default: ../shared/data)",
+        help="comma-separated PhysioNet records for --study rr: shipped names (mitdb-100, "
+        "1003) or paths without extension (default: every shipped record)",
     )
     p.add_argument("--scenarios", default=None, help="scenarios for --study horizon")
     p.add_argument(
@@ -62,6 +79,18 @@ def register(sub: argparse._SubParsersAction) -> None:
         default="yuen2008",
         help="hr-step protocol: yuen2008 (base 60 bpm, default) or tuna2013 (base 103 bpm)",
     )
+    g = p.add_argument_group("recordings (--data)")
+    g.add_argument("--points", metavar="all|N[,N...]", help="files of several tracked points "
+                   "(CSV t,x1,y1,z1,x2,...; NPZ (n, P, 3); MAT 3P x n): score every point and "
+                   "their mean (all), or the points numbered from 1")
+    g.add_argument("--leads", type=int, help=f"score leads 1..L samples (default {DEFAULT_LEADS})")
+    g.add_argument("--warmup", type=float, metavar="S", help="seconds not scored at the start "
+                   f"(default: the longer of {WARMUP_SECONDS:g} s and "
+                   f"{100 * WARMUP_FRACTION:g} %% of the file)")
+    g.add_argument("--latency", type=float, metavar="S",
+                   help="delivery latency of the samples [s], for the closed loop's lead "
+                   "(default 0: each sample is available at its timestamp)")
+    add_recording_options(p)
     p.add_argument("--json", action="store_true", help="print machine-readable JSON")
     p.add_argument("--out", type=Path, default=None, help="write the result JSON to this file")
     p.add_argument("--plot", type=Path, default=None, help="draw the curves to this PNG file")
@@ -92,11 +121,12 @@ def _settings(args: argparse.Namespace) -> StudySettings:
         raise UsageError(str(exc)) from None
     if args.records:
         recs = tuple(r.strip() for r in args.records.split(",") if r.strip())
-        missing = [
-            r for r in recs if not Path(r).with_suffix(".atr").exists() and not Path(r).is_dir()
-        ]
+        from sim.heart.rr import shipped_records
+
+        missing = [r for r in recs if not _is_record(r)]
         if missing:
-            raise UsageError(f"record(s) not found: {', '.join(missing)}")
+            raise UsageError(f"record(s) not found: {', '.join(missing)} (shipped: "
+                             f"{', '.join(shipped_records())}, or a path without extension)")
         kw["records"] = recs
     if args.scenarios:
         from sim.heart import SCENARIOS
@@ -108,11 +138,40 @@ def _settings(args: argparse.Namespace) -> StudySettings:
         kw["scenarios"] = scns
     s = StudySettings(**kw)
     if args.study == "rr" and not s.parameters():
-        raise UsageError("--study rr needs --records (nothing found in ../shared/data)")
+        raise UsageError("--study rr needs --records (no shipped record found)")
     return s
 
 
+def _is_record(name: str) -> bool:
+    """Whether ``name`` resolves to a PhysioNet record (a path or a shipped name)."""
+    from sim.heart.rr import find_record
+
+    try:
+        find_record(name)
+    except ValueError:
+        return False
+    return True
+
+
+def _check_mode(args: argparse.Namespace) -> None:
+    """One of --study and --data, and only the options of that one."""
+    def flags(names):
+        return [f"--{n.replace('_', '-')}".replace("--data-rate", "--rate") for n in names
+                if getattr(args, n, None) is not None]
+
+    if args.data is None and args.study is None:
+        raise UsageError("choose --study NAME (a synthetic study) or --data FILE [FILE ...] "
+                         "(your recordings)")
+    if args.data is not None and (bad := flags(STUDY_OPTIONS)):
+        raise UsageError(f"{', '.join(bad)} apply to --study, not --data")
+    if args.study is not None and (bad := flags(DATA_OPTIONS)):
+        raise UsageError(f"{', '.join(bad)} apply to --data FILE, not --study")
+
+
 def run(args: argparse.Namespace) -> int:
+    _check_mode(args)
+    if args.data is not None:
+        return _run_data(args)
     s = _settings(args)
     jobs = (os.cpu_count() or 1) if args.jobs == 0 else args.jobs
     if jobs < 1:
@@ -153,4 +212,46 @@ def run(args: argparse.Namespace) -> int:
             f"{','.join(DEFAULT_PREDICTORS[s.study])})",
             file=sys.stderr,
         )
+    return 0
+
+
+def _run_data(args: argparse.Namespace) -> int:
+    """``--data``: every predictor on the recordings, open loop (rhmpc.studies.recordings)."""
+    from rhmpc.studies.recordings import (
+        OpenLoopSettings,
+        format_report,
+        load_tracks,
+        parse_points,
+        plot_leads,
+        run_open_loop,
+    )
+
+    names = tuple(n.strip() for n in (args.predictors or "").split(",") if n.strip())
+    try:
+        settings = OpenLoopSettings(
+            predictors=names, leads=DEFAULT_LEADS if args.leads is None else args.leads,
+            warmup=args.warmup, latency=0.0 if args.latency is None else args.latency)
+        tracks = load_tracks(args.data, parse_points(args.points), recording_options(args))
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    if args.plot and not Path(args.plot).resolve().parent.is_dir():
+        raise UsageError(f"--plot {args.plot}: no such directory")
+
+    def progress(what: str) -> None:
+        if not args.json:
+            print(f"rhmpc predict: {what}", file=sys.stderr, flush=True)
+
+    try:
+        doc = run_open_loop(tracks, settings, progress)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    if args.out:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(json.dumps(doc, indent=2) + "\n")
+    if args.plot:
+        plot_leads(doc, args.plot)
+    if args.json:
+        print(json.dumps(doc, indent=2))
+    else:
+        print(format_report(doc))
     return 0

@@ -340,9 +340,10 @@ def from_dict(cls: type[S], data: dict[str, Any]) -> S:
     ValueError
         On unknown keys or values the dataclass rejects.
     """
-    names = {f.name for f in dataclasses.fields(cls)}
-    unknown = sorted(set(data) - names)
+    names = [f.name for f in dataclasses.fields(cls)]
+    unknown = sorted(set(data) - set(names))
     if unknown:
-        raise ValueError(f"unknown {cls.__name__} setting(s): {', '.join(unknown)}")
+        raise ValueError(f"unknown {cls.__name__} setting(s): {', '.join(unknown)}; "
+                         f"valid: {', '.join(names)}")
     kwargs = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items()}
     return cls(**kwargs)

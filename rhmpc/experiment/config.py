@@ -142,6 +142,7 @@ class RunConfig:
                 top[key] = value
         for section, values in nested.items():
             if section in SECTIONS:
+                _check_keys(section, SECTIONS[section], values)
                 try:
                     top[section] = dataclasses.replace(getattr(self, section), **values)
                 except (TypeError, ValueError) as exc:
@@ -149,7 +150,9 @@ class RunConfig:
             elif section in ("sensor_settings", "predictor_settings"):
                 top[section] = {**getattr(self, section), **values}
             else:
-                raise UsageError(f"unknown setting {section}.{next(iter(values))!r}")
+                valid = ", ".join([*SECTIONS, "sensor_settings", "predictor_settings"])
+                raise UsageError(f"unknown section {section!r} in {section}."
+                                 f"{next(iter(values))}; valid sections: {valid}")
         names = {f.name for f in dataclasses.fields(self)}
         unknown = sorted(set(top) - names)
         if unknown:
@@ -159,6 +162,15 @@ class RunConfig:
             return dataclasses.replace(self, **top)
         except (TypeError, ValueError) as exc:
             raise UsageError(str(exc)) from None
+
+
+def _check_keys(section: str, cls: type, values: dict[str, Any]) -> None:
+    """Raise ``UsageError`` listing the valid keys of ``[section]`` if ``values`` has others."""
+    names = [f.name for f in dataclasses.fields(cls)]
+    unknown = [k for k in values if k not in names]
+    if unknown:
+        raise UsageError(f"unknown setting(s) {', '.join(f'{section}.{k}' for k in unknown)}; "
+                         f"valid keys of [{section}]: {', '.join(names)}")
 
 
 def read_toml(path: str | Path) -> dict[str, Any]:

@@ -11,7 +11,9 @@ def comparison_table(docs: Sequence[dict], predictors: Sequence[str],
                      scenarios: Sequence[str]) -> str:
     """Tuna Tables I/III replica: RMS (max) error [mm] and RMS effort [mN·m] with ratios to exact.
 
-    Each cell is the mean over the seeds that were run (a run that failed shows as ``failed``).
+    One column per scenario (or recording: the documents' ``scenario``). Each cell is the mean
+    over the seeds that were run (a run that failed shows as ``failed``). The ratios are to
+    the ``exact`` row, or to ``hold`` when ``exact`` was not run.
     """
     def cell(pred: str, scen: str) -> dict | None:
         rows = [d for d in docs if d.get("predictor") == pred and d.get("scenario") == scen
@@ -21,31 +23,29 @@ def comparison_table(docs: Sequence[dict], predictors: Sequence[str],
         return {k: float(np.mean([r[k] for r in rows]))
                 for k in ("rms_error_mm", "max_error_mm", "rms_effort_mNm")}
 
-    width = 17
+    width = max(17, *(len(s) + 2 for s in scenarios))
     head = f"{'':<13}" + "".join(f"{s:>{width}}" for s in scenarios)
-    out = ["RMS position error [mm] (maximum error [mm])", head]
-    for pred in predictors:
-        row = f"{pred:<13}"
-        for scen in scenarios:
-            c = cell(pred, scen)
-            row += f"{'failed':>{width}}" if c is None else \
-                f"{c['rms_error_mm']:>8.3f} ({c['max_error_mm']:5.3f})".rjust(width)
-        out.append(row)
-    out += ["", "RMS control effort [mN·m]", head]
-    for pred in predictors:
-        row = f"{pred:<13}"
-        for scen in scenarios:
-            c = cell(pred, scen)
-            row += f"{'failed':>{width}}" if c is None else f"{c['rms_effort_mNm']:>{width}.2f}"
-        out.append(row)
-    if "exact" in predictors:
-        out += ["", "ratio to exact: RMS error / RMS effort", head]
+
+    def block(title: str, text) -> list[str]:
+        lines = ["", title, head]
         for pred in predictors:
-            if pred == "exact":
+            cells = [cell(pred, scen) for scen in scenarios]
+            lines.append(f"{pred:<13}" + "".join(
+                f"{'failed':>{width}}" if c is None else text(c).rjust(width) for c in cells))
+        return lines
+
+    out = block("RMS position error [mm] (maximum error [mm])",
+                lambda c: f"{c['rms_error_mm']:>8.3f} ({c['max_error_mm']:5.3f})")[1:]
+    out += block("RMS control effort [mN·m]", lambda c: f"{c['rms_effort_mNm']:.2f}")
+    ref = next((p for p in ("exact", "hold") if p in predictors), None)
+    if ref is not None:
+        out += ["", f"ratio to {ref}: RMS error / RMS effort", head]
+        for pred in predictors:
+            if pred == ref:
                 continue
             row = f"{pred:<13}"
             for scen in scenarios:
-                c, e = cell(pred, scen), cell("exact", scen)
+                c, e = cell(pred, scen), cell(ref, scen)
                 if c is None or e is None:
                     row += f"{'-':>{width}}"
                 else:

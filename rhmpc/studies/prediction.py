@@ -7,7 +7,8 @@
              60 bpm (Yuen's protocol, ``paper="yuen2008"``, the default) or 103 bpm
              (Tuna §VIII-D, ``paper="tuna2013"``).
 ``rr``       as ``hr-step`` but the heart phase follows the beat annotations of PhysioNet
-             records (a random 45 s stretch per trial), the analogue of Yuen's Table I.
+             records (a random 45 s stretch per trial; by default the records shipped with
+             the package), the analogue of Yuen's Table I.
 ``horizon``  RMS error versus lead time (Tuna Fig. 8) for sonomicrometry replicas sampled at
              the MPC's predictor period 7.5 ms (σ = 0.25 mm/√3 per axis, no echo outliers),
              40 s of warm-up (the EKF needs 10 s) and 20 s of evaluation.
@@ -75,10 +76,6 @@ HORIZON_LEADS = 8  # predictor samples: 7.5 … 60 ms
 HORIZON_WARM_S, HORIZON_EVAL_S = 40.0, 20.0
 
 
-def _default_data_dir() -> Path:
-    return Path(__file__).resolve().parents[3] / "shared" / "data"
-
-
 @dataclass(frozen=True)
 class StudySettings:
     """One prediction study.
@@ -100,7 +97,8 @@ class StudySettings:
     sigma_mm : float
         Noise of ``hr-step`` and ``rr`` [mm].
     records : tuple of str
-        PhysioNet records (paths without extension) driving ``rr``.
+        PhysioNet records driving ``rr``: shipped names (``mitdb-100``, ``1003``) or paths
+        without extension; empty = every shipped record.
     scenarios : tuple of str
         Scenarios of the ``horizon`` study.
     paper : str
@@ -142,9 +140,11 @@ class StudySettings:
 
 
 def default_records() -> tuple[str, ...]:
-    """The PhysioNet annotation records shipped in ``../shared/data`` (may be empty)."""
-    root = _default_data_dir()
-    return tuple(str(p.with_suffix("")) for p in sorted(root.glob("*/*.atr")))
+    """The names of the PhysioNet annotation records shipped with the package
+    (:func:`sim.heart.rr.shipped_records`: ``1003``, ``mitdb-100``)."""
+    from sim.heart.rr import shipped_records
+
+    return tuple(shipped_records())
 
 
 # -- one trial ----------------------------------------------------------------------------

@@ -1,10 +1,10 @@
 """Arrhythmia: a real annotated rhythm drives the heart phase; premature beats change the stroke.
 
 The ``arrhythmia-apb`` scenario (:mod:`sim.heart.scenarios`) takes its beat times from the MIT-BIH
-record 100 annotations in the shared data folder, so the RR intervals — the premature beats'
-short coupling intervals and the pauses after them — are real. The beat morphology is the
-replica's, with the stroke of each premature beat and of the beat after it changed
-(:func:`premature_stroke`).
+record 100 annotations shipped with the package (``sim/heart/physionet``), so the RR
+intervals — the premature beats' short coupling intervals and the pauses after them — are real.
+The beat morphology is the replica's, with the stroke of each premature beat and of the beat
+after it changed (:func:`premature_stroke`).
 """
 
 from __future__ import annotations
@@ -13,10 +13,11 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.heart.rr import beats_from_annotations
+from sim.heart.rr import RECORDS_DIR, beats_from_annotations
 
-#: The shared real data (PhysioNet annotations), outside the repository: ../shared/data.
-SHARED_DATA = Path(__file__).resolve().parents[2] / ".." / "shared" / "data"
+#: The real data the scenarios name their records in: the PhysioNet annotations shipped with
+#: the package (:data:`sim.heart.rr.RECORDS_DIR`).
+SHARED_DATA: Path = RECORDS_DIR
 
 #: Premature beats: stroke gain = (coupling interval / median RR)^PREMATURE_STROKE_EXPONENT
 #: (a shortened filling time gives a smaller stroke, Frank–Starling; exponent 1 assumed), and
@@ -33,7 +34,7 @@ def record_beats(path: Path, start: float, duration: float,
     that ``start`` is t = 0, and their premature mask; ``name`` is the scenario (messages)."""
     if not path.with_suffix(".atr").is_file():
         raise ValueError(f"scenario {name} needs the PhysioNet annotations "
-                         f"{path.with_suffix('.atr')} (the shared data folder is absent)")
+                         f"{path.with_suffix('.atr')} (missing from this install)")
     times, premature = beats_from_annotations(path)
     keep = (times >= start - 10.0) & (times <= start + duration + 10.0)
     return times[keep] - start, premature[keep]

@@ -205,9 +205,51 @@ def beat_times_from_rr(rr: np.ndarray, start: float = 0.0) -> np.ndarray:
     return start + np.concatenate([[0.0], np.cumsum(rr)])
 
 
-def _record_base(record_path: str | Path) -> Path:
-    """Record base ``dir/100`` from ``dir/100``, ``dir/100.atr``/``.hea`` or its folder."""
-    path = Path(record_path)
+#: The PhysioNet annotation records shipped with the package, one folder each (their source
+#: and licence: the folder's README.md).
+RECORDS_DIR: Path = Path(__file__).resolve().parent / "physionet"
+
+
+def shipped_records() -> dict[str, Path]:
+    """The shipped records by folder name (``mitdb-100``, ``1003``) → base path (no suffix)."""
+    return {atr.parent.name: atr.with_suffix("") for atr in sorted(RECORDS_DIR.glob("*/*.atr"))}
+
+
+def _shipped_base(name: str) -> Path | None:
+    """A shipped record by folder (``mitdb-100``), record (``100``) or both (``mitdb-100/100``)."""
+    key = name[: -len(Path(name).suffix)] if Path(name).suffix in {".atr", ".hea"} else name
+    for folder, base in shipped_records().items():
+        if key in (folder, base.name, f"{folder}/{base.name}"):
+            return base
+    return None
+
+
+def find_record(record_path: str | Path) -> Path:
+    """The base (path without suffix) of a PhysioNet record.
+
+    Parameters
+    ----------
+    record_path : str or Path
+        ``dir/100``, ``dir/100.atr``/``.hea``, a folder holding exactly one ``.atr`` file, or,
+        when no such path exists, the name of a shipped record (:func:`shipped_records`):
+        ``mitdb-100``, ``100``, ``mitdb-100/100``, ``1003``.
+
+    Raises
+    ------
+    ValueError
+        Neither a record on disk nor a shipped one (the message lists the shipped names).
+    """
+    try:
+        return _local_base(Path(record_path))
+    except ValueError as exc:
+        shipped = _shipped_base(str(record_path))
+        if shipped is None:
+            names = ", ".join(shipped_records())
+            raise ValueError(f"{exc} (nor a shipped record: {names})") from None
+        return shipped
+
+
+def _local_base(path: Path) -> Path:
     if path.is_dir():
         atr = sorted(path.glob("*.atr"))
         if len(atr) != 1:
@@ -229,10 +271,11 @@ def beat_times_from_annotations(record_path: str | Path) -> np.ndarray:
     Parameters
     ----------
     record_path : str or Path
-        The record without extension (``.../mitdb-100/100``), its ``.atr``/``.hea`` file, or
-        a folder that holds exactly one ``.atr`` file.
+        The record without extension (``.../mitdb-100/100``), its ``.atr``/``.hea`` file, a
+        folder that holds exactly one ``.atr`` file, or the name of a shipped record
+        (``mitdb-100``, ``1003``: :func:`shipped_records`).
     """
-    base = _record_base(record_path)
+    base = find_record(record_path)
     with warnings.catch_warnings():  # wfdb's pandas deprecation noise, not ours
         warnings.filterwarnings("ignore", module=r"wfdb(\.|$)")
         import wfdb
@@ -252,7 +295,7 @@ PREMATURE_SYMBOLS: frozenset[str] = frozenset("AaJSVFE")
 
 def beats_from_annotations(record_path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     """Beat times [s] and a mask of premature beats (:data:`PREMATURE_SYMBOLS`) of a record."""
-    base = _record_base(record_path)
+    base = find_record(record_path)
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", module=r"wfdb(\.|$)")
         import wfdb

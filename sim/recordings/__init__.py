@@ -5,12 +5,14 @@
                 :class:`RecordingError`, the unit tables
 ``text``        CSV and NPZ: reading, :func:`save_recording`, :func:`export_source`
 ``matfile``     MATLAB ``.mat`` v5 and v7.3 (HDF5)
+``points``      :func:`load_points`: files of several tracked points, point by point
 ``files``       :func:`load_recording`: any of them, by suffix
 ==============  =================================================================
 """
 
 from sim.recordings.files import load_recording
 from sim.recordings.matfile import load_mat, parse_indices
+from sim.recordings.points import load_points
 from sim.recordings.recorded import (
     LENGTH_UNITS,
     TIME_UNITS,
@@ -21,5 +23,5 @@ from sim.recordings.text import export_source, save_recording
 
 __all__ = [
     "LENGTH_UNITS", "TIME_UNITS", "RecordedMotion", "RecordingError", "export_source",
-    "load_mat", "load_recording", "parse_indices", "save_recording",
+    "load_mat", "load_points", "load_recording", "parse_indices", "save_recording",
 ]

@@ -7,12 +7,14 @@ from pathlib import Path
 import numpy as np
 
 from sim.recordings.matfile import load_mat
+from sim.recordings.points import load_points, pick_point
 from sim.recordings.recorded import RecordedMotion, RecordingError
 from sim.recordings.text import read_csv, read_npz
 
 
 def load_recording(path: str | Path, units: str | None = None, var: str | None = None,
-                   rows=None, cols=None, rate: float | None = None) -> RecordedMotion:
+                   rows=None, cols=None, rate: float | None = None,
+                   point: int | None = None) -> RecordedMotion:
     """Load a heart-motion recording (CSV, NPZ, or MATLAB .mat: see :mod:`sim.recordings.matfile`).
 
     Parameters
@@ -26,6 +28,9 @@ def load_recording(path: str | Path, units: str | None = None, var: str | None =
         For ``.mat`` files: the variable, its 0-based rows or columns holding the coordinates,
         and the sample rate [Hz] when the file has no time vector
         (:func:`sim.recordings.matfile.load_mat`).
+    point : int, optional
+        In a file of several tracked points, the point to read, from 1
+        (:mod:`sim.recordings.points`); such a file needs it.
 
     Returns
     -------
@@ -38,6 +43,8 @@ def load_recording(path: str | Path, units: str | None = None, var: str | None =
         Naming the file, the line and the problem.
     """
     path = Path(path)
+    if point is not None:
+        return pick_point(path, load_points(path, units, var, rows, cols, rate), point)
     if not path.exists():
         raise RecordingError(f"{path}: no such file")
     if not path.is_file():

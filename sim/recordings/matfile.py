@@ -88,8 +88,9 @@ def _read_hdf5(path: Path) -> dict[str, object]:
     return out
 
 
-def _select(path: Path, a: np.ndarray, var: str, rows, cols) -> np.ndarray:
-    """(n, dim) samples of matrix ``a`` with coordinates ``rows`` or ``cols``."""
+def _select(path: Path, a: np.ndarray, var: str, rows, cols, points: bool = False) -> np.ndarray:
+    """(n, dim) samples of matrix ``a`` with coordinates ``rows`` or ``cols``; ``points``: also
+    (n, 3P) for P tracked points along the shorter axis (x1, y1, z1, x2, …)."""
     if a.ndim != 2:
         raise RecordingError(f"{path}: variable {var!r} has shape {a.shape}; expected a matrix "
                              "(coordinates × samples or samples × coordinates)")
@@ -109,12 +110,20 @@ def _select(path: Path, a: np.ndarray, var: str, rows, cols) -> np.ndarray:
         return a
     if a.shape[0] in (1, 3) and a.shape[1] > 3:
         return a.T
+    short = int(np.argmin(a.shape))
+    if a.shape[short] % 3 == 0 and a.shape[short] < a.shape[1 - short]:
+        if points:
+            return a if short == 1 else a.T
+        raise RecordingError(f"{path}: variable {var!r} has shape {a.shape}: "
+                             f"{a.shape[short] // 3} tracked points of 3 coordinates; read them "
+                             "one by one (point = 1, 2, …) or give --rows or --cols")
     raise RecordingError(f"{path}: variable {var!r} has shape {a.shape}: which axis holds "
                          "the coordinates is ambiguous; give --rows or --cols")
 
 
 def load_mat(path: str | Path, var: str | None = None, rows=None, cols=None,
-             rate: float | None = None, units: str | None = None) -> RecordedMotion:
+             rate: float | None = None, units: str | None = None,
+             points: bool = False) -> RecordedMotion:
     """Load a MATLAB recording (module docstring).
 
     Parameters
@@ -130,6 +139,9 @@ def load_mat(path: str | Path, var: str | None = None, rows=None, cols=None,
         Sample rate [Hz] when the file has no time vector (required then).
     units : str, optional
         Length unit (``m``, ``mm``, ``um``, ``cm``) when the file does not state it.
+    points : bool
+        Accept a matrix of several tracked points: 3P coordinates (x1, y1, z1, x2, …) along
+        its shorter axis, returned as (n, 3P) (:func:`sim.recordings.points.load_points`).
 
     Returns
     -------
@@ -149,7 +161,7 @@ def load_mat(path: str | Path, var: str | None = None, rows=None, cols=None,
     if var not in arrays:
         raise RecordingError(f"{path}: no numeric variable {var!r} (found "
                              f"{', '.join(sorted(arrays)) or 'none'})")
-    z = _select(path, arrays[var], var, rows, cols)
+    z = _select(path, arrays[var], var, rows, cols, points)
     n = z.shape[0]
     if n < MIN_SAMPLES:
         raise RecordingError(f"{path}: variable {var!r} has {n} sample(s); at least "

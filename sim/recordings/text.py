@@ -9,14 +9,21 @@ A header line, then one sample per line::
 
 Times are seconds and positions millimetres unless the header says otherwise with a unit
 suffix on each name, ``t_s``/``t[s]``/``t (ms)``, ``x_mm``/``x [m]``/``x(um)``; or the caller
-passes ``units=``. Lines starting with ``#`` and blank lines are ignored. An empty position
-field or ``nan`` is a dropout and is kept as missing (NaN); every other field must be a finite
-number. Time must be finite and strictly increasing.
+passes ``units=``. A file of several tracked points numbers them from 1, three columns each::
+
+    t,x1,y1,z1,x2,y2,z2,x3,y3,z3
+
+and is read point by point (:func:`sim.recordings.points.load_points`). Lines starting with
+``#`` and blank lines are ignored. An empty position field or ``nan`` is a dropout and is kept
+as missing (NaN); every other field must be a finite number. Time must be finite and strictly
+increasing.
 
 NPZ format
 ----------
 Arrays ``t`` (n,) [s] and ``position`` (n, dim) (``x`` is accepted for ``position``), and a
-string ``units`` (``"m"``, ``"mm"`` or ``"um"``) unless the caller passes ``units=``.
+string ``units`` (``"m"``, ``"mm"`` or ``"um"``) unless the caller passes ``units=``. Several
+tracked points: ``position`` of shape (n, P, 3), or (n, 3P) with point p (from 1) in columns
+3(p − 1) … 3p − 1.
 
 Every problem raises :class:`~sim.recordings.recorded.RecordingError` naming the file, the line
 (CSV) and what is wrong.
@@ -42,7 +49,7 @@ from sim.recordings.recorded import (
 )
 
 _HEADER_FIELD = re.compile(
-    r"^\s*(?P<name>[A-Za-z]+)\s*(?:(?:_|\[|\()\s*(?P<unit>[A-Za-zµ]+)\s*[\])]?)?\s*$")
+    r"^\s*(?P<name>[A-Za-z]+\d*)\s*(?:(?:_|\[|\()\s*(?P<unit>[A-Za-zµ]+)\s*[\])]?)?\s*$")
 
 
 def _unit_factor(path: Path, name: str, unit: str | None, table: dict[str, float]) -> float | None:
@@ -55,8 +62,21 @@ def _unit_factor(path: Path, name: str, unit: str | None, table: dict[str, float
     return table[key]
 
 
-def _parse_header(path: Path, fields: list[str], units: str | None) -> tuple[int, float, float]:
-    """(dim, time factor [s/unit], length factor [m/unit]) from a header line."""
+def _point_names(count: int) -> list[str]:
+    """``t, x1, y1, z1, …`` for ``count`` tracked points."""
+    return ["t", *(f"{a}{p}" for p in range(1, count + 1) for a in AXES)]
+
+
+def _columns_ok(names: list[str], points: bool) -> bool:
+    """Whether header ``names`` are t,x / t,x,y,z, or (``points``) t,x1,y1,z1,…,xP,yP,zP."""
+    if names in (["t", "x"], ["t", "x", "y", "z"], _point_names(1)):
+        return True
+    return points and (len(names) - 1) % 3 == 0 and names == _point_names((len(names) - 1) // 3)
+
+
+def _parse_header(path: Path, fields: list[str], units: str | None,
+                  points: bool = False) -> tuple[int, float, float]:
+    """(columns, time factor [s/unit], length factor [m/unit]) from a header line."""
     if all(_looks_numeric(f) for f in fields):
         raise fail(path, "missing header line: the first line must name the columns "
                     "(t,x,y,z or t,x)", 1)
@@ -68,8 +88,12 @@ def _parse_header(path: Path, fields: list[str], units: str | None) -> tuple[int
                         "optionally with a unit such as x_mm or x [mm]", 1)
         parsed.append((m.group("name").lower(), m.group("unit")))
     names = [n for n, _ in parsed]
-    if names not in (["t", "x"], ["t", "x", "y", "z"]):
-        raise fail(path, f"header columns {','.join(names)} are not t,x,y,z or t,x", 1)
+    if not _columns_ok(names, points):
+        several = _columns_ok(names, True)
+        raise fail(path, f"header columns {','.join(names)} "
+                   + ("hold several tracked points: read them one by one (point = 1, 2, …)"
+                      if several else "are not t,x,y,z or t,x (or t,x1,y1,z1,x2,… for several "
+                      "tracked points)"), 1)
     t_factor = _unit_factor(path, "t", parsed[0][1], TIME_UNITS) or 1.0
     length = {_unit_factor(path, n, u, LENGTH_UNITS) for n, u in parsed[1:]}
     if len(length) > 1:
@@ -95,7 +119,8 @@ def _looks_numeric(text: str) -> bool:
     return True
 
 
-def read_csv(path: Path, units: str | None) -> RecordedMotion:
+def read_csv(path: Path, units: str | None, points: bool = False) -> RecordedMotion:
+    """A CSV recording (module docstring); ``points``: every column of a several-point file."""
     try:
         text = path.read_text(encoding="utf-8-sig")
     except UnicodeDecodeError as exc:
@@ -105,8 +130,8 @@ def read_csv(path: Path, units: str | None) -> RecordedMotion:
     if not rows:
         raise fail(path, "empty file: no header and no samples")
     _, header = rows[0]
-    dim, t_factor, factor = _parse_header(path, header, units)
-    names = ["t", *AXES[:dim]]
+    dim, t_factor, factor = _parse_header(path, header, units, points)
+    names = ["t", *AXES[:dim]] if dim <= 3 else _point_names(dim // 3)
     if len(rows) < 3:
         raise fail(path, f"needs at least two samples, found {len(rows) - 1}")
     t = np.empty(len(rows) - 1)
@@ -141,7 +166,8 @@ def read_csv(path: Path, units: str | None) -> RecordedMotion:
     return RecordedMotion(t, z, name=str(path))
 
 
-def read_npz(path: Path, units: str | None) -> RecordedMotion:
+def read_npz(path: Path, units: str | None, points: bool = False) -> RecordedMotion:
+    """An NPZ recording (module docstring); ``points``: every point of a several-point file."""
     try:
         data = np.load(path, allow_pickle=False)
     except (ValueError, OSError) as exc:
@@ -156,11 +182,17 @@ def read_npz(path: Path, units: str | None) -> RecordedMotion:
         file_units = str(data["units"]) if "units" in keys else None
     if t.ndim != 1:
         raise fail(path, f"'t' must be one-dimensional, got shape {t.shape}")
+    shape = z.shape
     if z.ndim == 1:
         z = z[:, None]
-    if z.ndim != 2 or z.shape[0] != t.size or z.shape[1] not in (1, 3):
-        raise fail(path, f"'{pos_key}' must have shape ({t.size}, 3) or ({t.size}, 1), "
-                    f"got {z.shape}")
+    if z.ndim == 3 and z.shape[2] == 3:  # (n, P, 3): P tracked points
+        z = z.reshape(z.shape[0], -1)
+    if z.ndim != 2 or z.shape[0] != t.size or not (z.shape[1] == 1 or z.shape[1] % 3 == 0):
+        raise fail(path, f"'{pos_key}' must have shape ({t.size}, 3) or ({t.size}, 1), or "
+                   f"({t.size}, P, 3) or ({t.size}, 3P) for P tracked points; got {shape}")
+    if z.shape[1] > 3 and not points:
+        raise fail(path, f"'{pos_key}' holds {z.shape[1] // 3} tracked points; read them one "
+                   "by one (point = 1, 2, …)")
     if t.size < 2:
         raise fail(path, f"needs at least two samples, found {t.size}")
     if units is not None and file_units is not None and units != file_units:

@@ -120,12 +120,8 @@ def test_dual_ekf_keeps_heart_rate_lock_in_3d_with_breathing(scenario):
 
 
 def _mitdb_100():
-    """MIT-BIH record 100 (../shared/data, outside the repository), or skip."""
-    arrhythmia = pytest.importorskip("sim.heart.arrhythmia")
-    record = arrhythmia.SHARED_DATA / "mitdb-100" / "100"
-    if not record.with_suffix(".atr").is_file():
-        pytest.skip(f"real annotation file {record.with_suffix('.atr')} not available")
-    return str(record)
+    """MIT-BIH record 100, shipped with the package."""
+    return "mitdb-100"
 
 
 @pytest.mark.parametrize(

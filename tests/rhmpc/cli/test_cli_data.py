@@ -12,13 +12,12 @@ from rhmpc.cli import main
 from sim.heart.scenarios import available_scenarios
 from sim.recordings import load_recording
 
-DATA = Path(__file__).resolve().parents[3] / ".." / "shared" / "data"
-
 
 def test_list_json(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["data", "list", "--json", "--duration", "40"]) == 0
     rows = json.loads(capsys.readouterr().out)
     assert [r["name"] for r in rows] == list(available_scenarios())
+    assert "arrhythmia-apb" in available_scenarios()  # its record ships with the package
     a2 = rows[0]
     assert a2["target_peak_to_peak_mm"] == 8.39 and a2["target_rms_mm"] == 3.55
     assert a2["rms_mm"] == pytest.approx(3.55, rel=0.03)
@@ -32,7 +31,7 @@ def test_list_json(capsys: pytest.CaptureFixture[str]) -> None:
 def test_list_table(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["data", "list", "--duration", "10"]) == 0
     out = capsys.readouterr().out
-    for name in available_scenarios():  # arrhythmia-apb only where ../shared/data is
+    for name in available_scenarios():
         assert name in out
     assert "p-p" in out and "target" in out
 
@@ -50,11 +49,10 @@ def test_show(capsys: pytest.CaptureFixture[str]) -> None:
     assert "predictability" in row
 
 
-def test_show_with_record(capsys: pytest.CaptureFixture[str]) -> None:
-    record = DATA / "1003" / "1003"
-    if not record.with_suffix(".atr").is_file():
-        pytest.skip(f"{record}.atr not available (../shared/data is outside the repository)")
-    assert main(["data", "show", "fixed-a2-top", "--record", str(record), "--json",
+def test_show_with_record(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                          capsys: pytest.CaptureFixture[str]) -> None:
+    monkeypatch.chdir(tmp_path)  # the shipped record by name, outside the repository
+    assert main(["data", "show", "fixed-a2-top", "--record", "1003", "--json",
                  "--duration", "60"]) == 0
     row = json.loads(capsys.readouterr().out)
     lo, hi = row["heart_rate_bpm"]
@@ -124,10 +122,10 @@ def test_malformed_file_is_reported(tmp_path: Path, capsys: pytest.CaptureFixtur
     assert "bad.csv, line 3: expected 4 fields" in err
 
 
-def test_list_without_the_shared_data(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+def test_list_without_the_annotations(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                       capsys: pytest.CaptureFixture[str]) -> None:
-    """Where ../shared/data is absent (a clean clone in CI), arrhythmia-apb is skipped with a
-    note, never an error."""
+    """Where the shipped annotations are missing (a damaged install), arrhythmia-apb is skipped
+    with a note, never an error."""
     import sim.heart.scenarios
 
     monkeypatch.setattr(sim.heart.scenarios, "SHARED_DATA", tmp_path)

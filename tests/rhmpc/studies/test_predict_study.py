@@ -3,15 +3,12 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from rhmpc.cli import main
 from rhmpc.studies.prediction import StudySettings, default_records, format_table, run_study
-
-DATA = Path(__file__).resolve().parents[4] / "shared" / "data"
 
 
 def _rows(result):
@@ -64,18 +61,17 @@ def test_horizon_study_error_grows_with_lead_and_exact_is_zero():
     assert "lead [ms]" in format_table(result)
 
 
-@pytest.mark.skipif(not (DATA / "1003" / "1003.atr").exists(), reason="../shared/data/1003 absent")
 def test_rr_study_runs_on_a_physionet_record():
     s = StudySettings(
         "rr",
         trials=1,
         seed=5,
-        records=(str(DATA / "1003" / "1003"),),
+        records=("1003",),
         predictors=("ekf", "last-cycle"),
     )
     rows = _rows(run_study(s))
     assert all(np.isfinite(r["rms_mm"]) for r in rows.values())
-    assert str(DATA / "1003" / "1003") in default_records()
+    assert default_records() == ("1003", "mitdb-100")
 
 
 def test_cli_predict_writes_json_table_and_plot(tmp_path, capsys):

@@ -13,16 +13,9 @@ from sim.heart.scenarios import SPECS
 RECORD = SHARED_DATA / "mitdb-100" / "100"
 
 
-def _need() -> None:
-    if not RECORD.with_suffix(".atr").is_file():
-        pytest.skip(f"real annotation file {RECORD.with_suffix('.atr')} not available "
-                    "(../shared/data is outside the repository)")
-
-
 @pytest.mark.filterwarnings("ignore::DeprecationWarning")
 def test_phase_follows_the_annotations() -> None:
     """φ(t_i) = i at the record's beats in the window; 10 of the 33 A beats fall in it."""
-    _need()
     spec = SPECS["arrhythmia-apb"]
     times, premature = beats_from_annotations(RECORD)
     assert premature.sum() == 34  # 33 A + 1 V
@@ -47,7 +40,6 @@ def test_premature_stroke_rule() -> None:
 
 @pytest.mark.filterwarnings("ignore::DeprecationWarning")
 def test_premature_beats_are_smaller_and_calibrated() -> None:
-    _need()
     sc = make_scenario("arrhythmia-apb", variability="clean", beat_gain_std=0.0,
                        breathing=False, coupling=0.0)
     spec = SPECS["arrhythmia-apb"]

@@ -16,21 +16,14 @@ from sim.heart import (
     rr_from_annotations,
     synthetic_rr,
 )
+from sim.heart.rr import RECORDS_DIR, find_record, shipped_records
 
-DATA = Path(__file__).resolve().parents[3] / ".." / "shared" / "data"
-MITDB_100 = DATA / "mitdb-100" / "100"
-REC_1003 = DATA / "1003" / "1003"
-
-
-def _need(record: Path) -> None:
-    if not record.with_suffix(".atr").is_file():
-        pytest.skip(f"real annotation file {record.with_suffix('.atr')} not available "
-                    "(../shared/data is outside the repository)")
+MITDB_100 = RECORDS_DIR / "mitdb-100" / "100"
+REC_1003 = RECORDS_DIR / "1003" / "1003"
 
 
 def test_mitdb_100_rr_statistics() -> None:
     """README: 2 273 beats (2 239 N + 33 A + 1 V), mean RR 0.795 s, σ 0.049 s, 0.522–1.131 s."""
-    _need(MITDB_100)
     rr = rr_from_annotations(MITDB_100)
     assert rr.size == 2239 + 33 + 1 - 1  # the rhythm annotation '+' is skipped
     assert rr.mean() == pytest.approx(0.795, abs=0.002)
@@ -40,7 +33,6 @@ def test_mitdb_100_rr_statistics() -> None:
 
 
 def test_record_path_forms_agree() -> None:
-    _need(MITDB_100)
     a = rr_from_annotations(MITDB_100)
     b = rr_from_annotations(str(MITDB_100) + ".atr")
     c = rr_from_annotations(MITDB_100.parent)
@@ -50,10 +42,28 @@ def test_record_path_forms_agree() -> None:
         rr_from_annotations(MITDB_100.parent / "999")
 
 
+def test_shipped_records_by_name_from_any_directory(tmp_path: Path,
+                                                    monkeypatch: pytest.MonkeyPatch) -> None:
+    """The shipped copies resolve by name outside the repository; a path still wins."""
+    monkeypatch.chdir(tmp_path)
+    assert set(shipped_records()) == {"mitdb-100", "1003"}
+    for name in ("mitdb-100", "100", "mitdb-100/100", "100.atr"):
+        assert find_record(name) == MITDB_100
+    assert find_record("1003") == REC_1003
+    np.testing.assert_array_equal(rr_from_annotations("mitdb-100"),
+                                  rr_from_annotations(MITDB_100))
+    local = tmp_path / "mine"
+    local.mkdir()
+    for suffix in (".hea", ".atr"):
+        (local / f"100{suffix}").write_bytes(MITDB_100.with_suffix(suffix).read_bytes())
+    assert find_record("mine") == Path("mine", "100")  # relative, as given
+    with pytest.raises(ValueError, match="nor a shipped record: 1003, mitdb-100"):
+        find_record("nope")
+
+
 @pytest.mark.filterwarnings("ignore::DeprecationWarning")
 def test_premature_beats_are_kept() -> None:
     """The 33 atrial premature beats show as short RR intervals followed by long ones."""
-    _need(MITDB_100)
     import wfdb
 
     ann = wfdb.rdann(str(MITDB_100), "atr")
@@ -68,7 +78,6 @@ def test_premature_beats_are_kept() -> None:
 
 
 def test_record_1003() -> None:
-    _need(REC_1003)
     rr = rr_from_annotations(REC_1003)
     assert rr.size == 956
     assert 60 / rr.mean() == pytest.approx(95.7, abs=0.3)
@@ -78,7 +87,6 @@ def test_record_1003() -> None:
 @pytest.mark.parametrize("record", [MITDB_100, REC_1003])
 def test_rr_driven_beat_times_equal_annotation_times(record: Path) -> None:
     """φ(t_i) = i at the annotated beats: the motion's beat onsets are the annotation times."""
-    _need(record)
     times = beat_times_from_annotations(record)
     rr = np.diff(times)
     sc = make_scenario("fixed-a2-top", rr=rr, rr_start=times[0])

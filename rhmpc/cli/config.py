@@ -1,0 +1,235 @@
+"""`rhmpc config show`: every setting of a run, with its default, unit and source, as TOML.
+
+The output is a run file: ``rhmpc simulate --config FILE.toml`` reads it back to the same
+settings. Values are the effective ones (defaults < ``--config`` < ``--preset`` < ``--set``);
+the comment above each key gives its description, unit, default and where its value comes
+from. Descriptions and units come from the settings classes' numpydoc ``Attributes`` sections,
+where every unit is stated in brackets (``[m]``, ``[rad/s]``, ``[-]``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import inspect
+import re
+from typing import Any
+
+from rhmpc.cli.presets import PRESETS, add_preset_option, apply_preset
+from rhmpc.cli.simulate import DEFAULT_DURATION, DEFAULT_SETTLING, parse_value
+from rhmpc.errors import UsageError
+from rhmpc.experiment import RunConfig
+from rhmpc.experiment.config import SECTIONS, read_toml
+
+#: Top-level keys of a run file that hold tables of free keys.
+TABLES: tuple[str, ...] = ("data_read", "sensor_settings", "predictor_settings")
+#: Longest description kept in a comment [characters].
+DESCRIPTION_CHARS = 96
+
+_ATTRIBUTES = re.compile(r"^Attributes\n-+\n(?P<body>.*?)(?=^\S[^\n]*\n-+\n|\Z)", re.S | re.M)
+_ENTRY = re.compile(r"^(?P<names>\w+(?:\s*,\s*\w+)*)(?:\s*:\s*(?P<type>.*))?$")
+_UNIT = re.compile(r"(?<!\S)\[([^\[\],;=]{1,40})\]")
+#: A sentence ends at ". " before a capital letter, except after e.g., i.e. and et al.
+_SENTENCE_END = re.compile(r"(?<!e\.g)(?<!i\.e)(?<!et al)\.\s+(?=[A-Z(])")
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "config", help="show every setting of a run (TOML that --config reads back)",
+        description="Print every setting of a closed-loop run as TOML, with its description, "
+        "unit, default and source in comments; `rhmpc simulate --config FILE.toml` reads it "
+        "back. Values: defaults < --config < --preset < --set.")
+    actions = p.add_subparsers(dest="action", metavar="ACTION")
+    show = actions.add_parser("show", help="print the settings as TOML")
+    show.add_argument("--config", metavar="FILE.toml", help="start from this run file")
+    add_preset_option(show)
+    show.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                      help="override one setting (repeatable), as in rhmpc simulate")
+    p.set_defaults(func=run, action=None)
+
+
+def attribute_docs(cls: type) -> dict[str, tuple[str, str]]:
+    """name → (type, description) from the numpydoc ``Attributes`` of ``cls`` and its bases."""
+    out: dict[str, tuple[str, str]] = {}
+    for klass in reversed(cls.__mro__):
+        match = _ATTRIBUTES.search(inspect.getdoc(klass) or "")
+        if not match:
+            continue
+        names: list[str] = []
+        for line in match.group("body").splitlines():
+            entry = _ENTRY.match(line) if line and not line[0].isspace() else None
+            if entry:
+                names = [n.strip() for n in entry.group("names").split(",")]
+                for name in names:
+                    out[name] = ((entry.group("type") or "").strip(), "")
+            elif names and line.strip():
+                for name in names:
+                    kind, text = out[name]
+                    out[name] = (kind, f"{text} {line.strip()}".strip())
+    return out
+
+
+def unit_of(description: str) -> str | None:
+    """The unit a description states in brackets, or ``None``.
+
+    The first bracket after a space that reads as a unit (no comma, semicolon or equals sign:
+    not ``R[0]``, not ``[0, 1)``), skipping one right after a ````literal````, which gives that
+    expression's unit rather than the field's.
+    """
+    for match in _UNIT.finditer(description):
+        if not description[: match.start()].rstrip().endswith("``"):
+            return match.group(1).replace("``", "").strip()
+    return None
+
+
+def summary(description: str) -> str:
+    """The description's first sentence, without units and markup, at most DESCRIPTION_CHARS."""
+    first = _SENTENCE_END.split(description, maxsplit=1)[0].rstrip(".")
+    first = re.sub(r"\s+", " ", _UNIT.sub("", first).replace("``", "")).strip()
+    for mark in ",.;:":
+        first = first.replace(f" {mark}", mark)
+    return first if len(first) <= DESCRIPTION_CHARS else first[: DESCRIPTION_CHARS - 1] + "…"
+
+
+def _flat(config: RunConfig) -> dict[str, Any]:
+    """Dotted key → value of every setting (``None`` for unset ones)."""
+    out: dict[str, Any] = {}
+    for f in dataclasses.fields(config):
+        value = getattr(config, f.name)
+        if f.name in SECTIONS:
+            for g in dataclasses.fields(value):
+                out[f"{f.name}.{g.name}"] = getattr(value, g.name)
+        elif f.name in TABLES:
+            out.update({f"{f.name}.{k}": v for k, v in value.items()})
+        else:
+            out[f.name] = value
+    return out
+
+
+def _file_keys(data: dict, prefix: str = "") -> list[str]:
+    """Dotted keys of a parsed run file."""
+    keys = []
+    for key, value in data.items():
+        if isinstance(value, dict):
+            keys += _file_keys(value, f"{prefix}{key}.")
+        else:
+            keys.append(prefix + key)
+    return keys
+
+
+def effective(args: argparse.Namespace) -> tuple[RunConfig, RunConfig, dict[str, str]]:
+    """(the run's settings, the defaults, dotted key → where its value was set)."""
+    defaults = RunConfig().replace(**{"loop.duration": DEFAULT_DURATION,
+                                      "loop.settling": DEFAULT_SETTLING})
+    sources = {"loop.duration": "rhmpc simulate", "loop.settling": "rhmpc simulate"}
+    config = defaults
+    if args.config:
+        data = read_toml(args.config)
+        config = RunConfig.from_dict(data, where=str(args.config))
+        sources.update({k: f"config {args.config}" for k in _file_keys(data)})
+    if args.preset:
+        config = apply_preset(config, args.preset)
+        sources.update({k: f"preset {args.preset}" for k in PRESETS[args.preset]})
+    changes: dict[str, Any] = {}
+    for item in args.set:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise UsageError(f"--set {item!r}: expected SECTION.KEY=VALUE")
+        changes[key.strip()] = parse_value(value.strip())
+    config = config.replace(**changes)
+    sources.update({k: "--set" for k in changes})
+    return config, defaults, sources
+
+
+def _value(value: Any) -> str:
+    """A TOML value (tomli_w's spelling, so that it reads back the same)."""
+    import tomli_w
+
+    if isinstance(value, tuple | list):
+        return "[" + ", ".join(_value(v) for v in value) + "]"
+    return tomli_w.dumps({"v": value}).partition("=")[2].strip()
+
+
+def _key_lines(key: str, name: str, value: Any, default: Any, doc: tuple[str, str] | None,
+               source: str | None) -> list[str]:
+    """The comment line and the ``name = value`` line of one setting."""
+    text = summary(doc[1]) if doc else ""
+    unit = unit_of(doc[1]) if doc else None
+    head = " ".join(part for part in (text, f"[{unit}]" if unit else "") if part)
+    notes = ("default " + ("unset" if default is None else _value(default))
+             + f", source: {source or 'default'}")
+    comment = f"# {head} — {notes}" if head else f"# {notes}"
+    if value is None:
+        return [comment, f"# {name} =   (unset)"]
+    return [comment, f"{name} = {_value(value)}"]
+
+
+def render(config: RunConfig, defaults: RunConfig, sources: dict[str, str]) -> str:
+    """The run's settings as commented TOML (module docstring)."""
+    flat, base = _flat(config), _flat(defaults)
+    docs = attribute_docs(RunConfig)
+    lines = ["# rhmpc run settings. Above each key: its description [unit] — default, source.",
+             "# Read back with: rhmpc simulate --config FILE.toml", ""]
+    for f in dataclasses.fields(config):
+        if f.name not in SECTIONS and f.name not in TABLES:
+            lines += _key_lines(f.name, f.name, flat[f.name], base[f.name], docs.get(f.name),
+                                sources.get(f.name))
+    for table in TABLES:
+        lines += ["", f"[{table}]", f"# {summary(docs[table][1])}"]
+        lines += _table_lines(config, table, flat, sources)
+    for section, cls in SECTIONS.items():
+        lines += ["", f"[{section}]", f"# {cls.__module__}.{cls.__qualname__}"]
+        section_docs = attribute_docs(cls)
+        for g in dataclasses.fields(cls):
+            key = f"{section}.{g.name}"
+            lines += _key_lines(key, g.name, flat[key], base[key], section_docs.get(g.name),
+                                sources.get(key))
+    return "\n".join(lines) + "\n"
+
+
+def _table_lines(config: RunConfig, table: str, flat: dict[str, Any],
+                 sources: dict[str, str]) -> list[str]:
+    """The keys set in a free table; for ``predictor_settings`` also the predictor's other
+    settings with their defaults, commented out."""
+    lines: list[str] = []
+    prefix = f"{table}."
+    docs: dict[str, tuple[str, str]] = {}
+    defaults: dict[str, Any] = {}
+    if table == "predictor_settings":
+        from predictors import PREDICTORS, settings_for
+
+        cls = PREDICTORS[config.predictor][0].Settings
+        docs = attribute_docs(cls)
+        try:
+            made = settings_for(config.predictor)
+            defaults = {g.name: getattr(made, g.name) for g in dataclasses.fields(made)}
+        except ValueError:
+            defaults = {}
+        lines.append(f"# {config.predictor}: {cls.__module__}.{cls.__qualname__}")
+    for key, value in flat.items():
+        if key.startswith(prefix):
+            name = key[len(prefix):]
+            lines += _key_lines(key, name, value, defaults.get(name), docs.get(name),
+                                sources.get(key))
+    for name, default in defaults.items():
+        if f"{prefix}{name}" not in flat and _tomlable(default):
+            doc = docs.get(name)
+            unit = unit_of(doc[1]) if doc else None
+            text = f"{summary(doc[1])} " if doc else ""
+            line = f"# {name} = {_value(default)}   # {text}" + (f"[{unit}]" if unit else "")
+            lines.append(line.rstrip())
+    return lines
+
+
+def _tomlable(value: Any) -> bool:
+    if isinstance(value, bool | int | float | str):
+        return True
+    return isinstance(value, tuple) and all(isinstance(v, int | float | str) for v in value)
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.action is None:
+        raise UsageError("choose an action: show")
+    config, defaults, sources = effective(args)
+    print(render(config, defaults, sources), end="")
+    return 0

@@ -1,0 +1,89 @@
+"""Recordings of several tracked points: each point's trajectory as a recording of its own.
+
+Video tracking of the heart surface follows several points at once (four is common), and
+files keep them side by side, three coordinates per point:
+
+===========  =========================================================================
+CSV          header ``t,x1,y1,z1,x2,y2,z2,…`` (unit suffixes as in a one-point file)
+NPZ          ``position`` of shape (n, P, 3), or (n, 3P) with x1, y1, z1, x2, …
+MAT          a 3P × n (or n × 3P) matrix, e.g. 12 × N for four points: x1, y1, z1, x2, …
+             along its shorter axis
+===========  =========================================================================
+
+Points are numbered from 1, in the file's order. A one-point file is a file of one point.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from sim.recordings.matfile import load_mat
+from sim.recordings.recorded import RecordedMotion, RecordingError
+from sim.recordings.text import read_csv, read_npz
+
+
+def _wide(path: Path, units, var, rows, cols, rate) -> RecordedMotion:
+    """Every column of a recording: (n, 1), (n, 3) or (n, 3P)."""
+    if not path.exists():
+        raise RecordingError(f"{path}: no such file")
+    if not path.is_file():
+        raise RecordingError(f"{path}: not a file")
+    suffix = path.suffix.lower()
+    if suffix == ".mat":
+        return load_mat(path, var=var, rows=rows, cols=cols, rate=rate, units=units,
+                        points=True)
+    if var is not None or rows is not None or cols is not None or rate is not None:
+        raise RecordingError(f"{path}: --var, --rows, --cols and --rate apply to .mat files")
+    if suffix in {".csv", ".txt"}:
+        return read_csv(path, units, points=True)
+    if suffix == ".npz":
+        return read_npz(path, units, points=True)
+    raise RecordingError(f"{path}: unsupported file type {path.suffix!r} "
+                         "(use .csv, .npz or .mat)")
+
+
+def load_points(path: str | Path, units: str | None = None, var: str | None = None,
+                rows=None, cols=None, rate: float | None = None) -> list[RecordedMotion]:
+    """Every tracked point of a recording, in the file's order (module docstring).
+
+    Parameters
+    ----------
+    path : str or Path
+        ``.csv``/``.txt``, ``.npz`` or ``.mat``.
+    units, var, rows, cols, rate : optional
+        As for :func:`sim.recordings.load_recording`; ``rows``/``cols`` select one point.
+
+    Returns
+    -------
+    list of RecordedMotion
+        One per point (a one-point file gives a list of one), positions in metres; each named
+        ``FILE:pK`` when the file holds several.
+
+    Raises
+    ------
+    RecordingError
+        Naming the file and the problem, also when a point has no complete sample.
+    """
+    path = Path(path)
+    wide = _wide(path, units, var, rows, cols, rate)
+    if wide.dim <= 3:
+        recordings = [wide]
+    else:
+        recordings = [RecordedMotion(wide.t, wide.z[:, 3 * k:3 * k + 3], name=f"{path}:p{k + 1}")
+                      for k in range(wide.dim // 3)]
+    for k, rec in enumerate(recordings):
+        if not np.any(np.all(np.isfinite(rec.z), axis=1)):
+            where = f"point {k + 1}" if len(recordings) > 1 else "the recording"
+            raise RecordingError(f"{path}: {where} has no complete sample (all missing)")
+    return recordings
+
+
+def pick_point(path: str | Path, recordings: list[RecordedMotion], point: int) -> RecordedMotion:
+    """Point ``point`` (from 1) of ``recordings``; a ``RecordingError`` names the valid range."""
+    if isinstance(point, bool) or not isinstance(point, int | np.integer) \
+            or not 1 <= point <= len(recordings):
+        raise RecordingError(f"{path}: no point {point!r}; the file holds "
+                             f"{len(recordings)} (point = 1…{len(recordings)})")
+    return recordings[int(point) - 1]

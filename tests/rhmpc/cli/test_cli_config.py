@@ -1,0 +1,92 @@
+"""`rhmpc config show` (TOML that --config reads back) and unknown keys listing the valid ones."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import pytest
+
+from rhmpc.cli import main
+from rhmpc.cli.config import attribute_docs, summary, unit_of
+from rhmpc.cli.simulate import DEFAULT_DURATION, DEFAULT_SETTLING
+from rhmpc.experiment import RunConfig, load_config
+from rhmpc.experiment.config import SECTIONS
+from sim.loop import LoopSettings
+
+
+def _show(capsys, tmp_path: Path, *argv: str) -> tuple[str, RunConfig]:
+    assert main(["config", "show", *argv]) == 0
+    text = capsys.readouterr().out
+    path = tmp_path / "run.toml"
+    path.write_text(text)
+    return text, load_config(path)
+
+
+def test_show_round_trips_to_the_same_settings(capsys, tmp_path: Path) -> None:
+    _, config = _show(capsys, tmp_path)
+    assert config == RunConfig().replace(**{"loop.duration": DEFAULT_DURATION,
+                                            "loop.settling": DEFAULT_SETTLING})
+    _, config = _show(capsys, tmp_path, "--preset", "tuna2013", "--set", "predictor=ekf",
+                         "--set", "sensor_settings.playback=\"hold\"", "--set",
+                         "mpc.blocks=[25, 25]", "--set", "loop.poi_offset=[0.001, 0.0, 0.0]")
+    expected = RunConfig().replace(**{
+        "loop.duration": DEFAULT_DURATION, "loop.settling": DEFAULT_SETTLING,
+        "mpc.effort_weight": 50.0, "predictor": "ekf", "sensor_settings.playback": "hold",
+        "mpc.blocks": (25, 25), "loop.poi_offset": (1e-3, 0.0, 0.0)})
+    assert config == expected
+    again, _ = _show(capsys, tmp_path, "--config", str(tmp_path / "run.toml"))
+    assert load_config(tmp_path / "run.toml") == expected and "source: config" in again
+
+
+def test_show_states_unit_default_and_source(capsys, tmp_path: Path) -> None:
+    text, _ = _show(capsys, tmp_path, "--preset", "tuna2013", "--set", "mpc.rate_weight=0.3")
+    lines = text.splitlines()
+
+    def comment(key: str) -> str:
+        return lines[lines.index(key) - 1]
+
+    assert "[-] — default 0.0001, source: preset tuna2013" in comment("effort_weight = 50.0")
+    assert "default 0.1, source: --set" in comment("rate_weight = 0.3")
+    assert comment("Ts = 0.0005").startswith("# Control period (2 kHz in the paper) [s]")
+    assert "[m/s]" in comment("guard_speed = 0.3")
+    assert "source: rhmpc simulate" in comment(f"duration = {DEFAULT_DURATION}")
+    assert "# joint_lower =   (unset)" in lines  # unset keys stay out, commented
+    for section in SECTIONS:
+        assert f"[{section}]" in lines
+    assert any(line.startswith("# order = 10") for line in lines)  # generalized's own settings
+
+
+def test_units_come_from_the_attributes_sections() -> None:
+    docs = attribute_docs(LoopSettings)
+    assert {f.name for f in dataclasses.fields(LoopSettings)} <= set(docs)
+    assert unit_of(docs["outlier_gate"][1]) == "m"
+    assert unit_of(docs["downsample"][1]) is None
+    assert unit_of("R[0] = δ I [m²]; tiny") == "m²"  # an index is no unit
+    assert unit_of("the step is ``Ts / substeps`` [s].") is None  # the literal's unit
+    assert summary("Ticks between updates (15 → 7.5 ms, Tuna et al. Fig. 9). More.") == \
+        "Ticks between updates (15 → 7.5 ms, Tuna et al. Fig. 9)"
+
+
+@pytest.mark.parametrize("section", list(SECTIONS))
+def test_unknown_keys_list_the_valid_ones(capsys, tmp_path: Path, section: str) -> None:
+    valid = [f.name for f in dataclasses.fields(SECTIONS[section])]
+    assert main(["simulate", "--set", f"{section}.nope=1"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "__init__" not in err
+    assert f"unknown setting(s) {section}.nope; valid keys of [{section}]: " in err
+    assert err.endswith(", ".join(valid))
+    path = tmp_path / "bad.toml"
+    path.write_text(f"[{section}]\nnope = 1\n")
+    assert main(["simulate", "--config", str(path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "nope" in err and err.endswith(", ".join(valid)) and len(err.splitlines()) == 1
+
+
+def test_unknown_sections_and_top_level_keys(capsys) -> None:
+    assert main(["simulate", "--set", "foo.bar=1"]) == 2
+    assert "unknown section 'foo' in foo.bar; valid sections: loop, mpc" in capsys.readouterr().err
+    assert main(["config", "show", "--set", "nope=1"]) == 2
+    assert "unknown setting(s) nope; valid: data, data_read" in capsys.readouterr().err
+    assert main(["config"]) == 2
+    assert "choose an action: show" in capsys.readouterr().err
