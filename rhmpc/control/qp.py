@@ -331,3 +331,24 @@ def _constraints(
     row_scale = np.ones(m)
     row_scale[nv:] = 1.0 / np.linalg.norm(A[nv:], axis=1)
     return A * row_scale[:, None], G * row_scale[:, None], l0 * row_scale, u0 * row_scale
+
+
+def screening_rows(qp: CondensedQP) -> np.ndarray:
+    """H such that H [z; s; p_B; 1] ≤ 0 holds exactly when l0 − G p ≤ A [z; s] ≤ u0 − G p.
+
+    ``p_B`` are the parameters the bounds depend on (``qp.bound_columns``). A row with a finite
+    upper bound gives [A_i, G_i, −u0_i], one with a finite lower bound [−A_i, −G_i, l0_i]; rows
+    that hold whatever z and p (the slacks' s ≥ 0 at s = 0) are left out.
+    """
+    nz, nv = qp.nz, qp.nv
+    G = qp.G[:, qp.bound_columns]
+    rows = []
+    for i in range(qp.A.shape[0]):
+        if np.isfinite(qp.u0[i]):
+            rows.append(np.concatenate([qp.A[i, :nv], G[i], [-qp.u0[i]]]))
+        if np.isfinite(qp.l0[i]):
+            rows.append(np.concatenate([-qp.A[i, :nv], -G[i], [qp.l0[i]]]))
+    H = np.array(rows).reshape(-1, nv + G.shape[1] + 1)
+    H[:, nz:nv] = 0.0  # the slacks are 0 at level 1
+    needed = np.any(H[:, :nz] != 0, axis=1) | np.any(H[:, nv:-1] != 0, axis=1) | (H[:, -1] > 0)
+    return np.ascontiguousarray(H[needed])

@@ -235,9 +235,9 @@ class PredictedReference:
         #: optional ``observe(t, heart_rate_hz)`` scorer of the predictor's heart-rate estimate
         #: (:class:`sim.loop.metrics.HeartRateScore`), called after every forecast
         self.monitor = None
-        # ticks a refresh covers: its period, plus one so that a pipelined loop can read the
-        # next refresh tick's points from it while that refresh runs
-        self._span = refresh_ticks + horizon
+        # ticks a refresh covers: its period, plus the two ticks a pipelined loop runs between
+        # an update and its interpolation, while it reads the previous refresh's points
+        self._span = refresh_ticks + horizon + 2
         self._lead = np.arange(1, self._span + 1) * (Ts / self.dt)  # (τ − now)/dt per point
         # Interpolation matrices by (nodes, (now − t0)/Ts): with sensor stamps on the tick grid
         # only a few offsets occur, so a refresh is one small product instead of a rebuild.
@@ -255,7 +255,8 @@ class PredictedReference:
         self._dense: np.ndarray | None = None
         self._placed: np.ndarray | None = None
         self._first = 0
-        self._pending: tuple | None = None  # (tick, accepted z or None) between the halves
+        self._pending: tuple | None = None  # (tick, accepted z or None): updated, not predicted
+        self._points: tuple | None = None  # (tick, z, points, latency): predicted, not placed
         self._anchor: float | None = None
         self._forecast: np.ndarray | None = None  # ẑ of the next sample, made one period ago
         self._second: np.ndarray | None = None  # ẑ of the sample after it, made then too
@@ -286,7 +287,7 @@ class PredictedReference:
             elif not gate.accept(z, self._forecast, counts):
                 z, valid = None, False
         self.predictor.update(z)
-        self._pending = None
+        self._pending = self._points = None
         if valid:
             self._anchor, self._held, self._held_stamp = stamp, np.array(z, dtype=float), stamp
         elif self._anchor is None:
@@ -296,24 +297,39 @@ class PredictedReference:
         self._pending = (tick, z if valid else None)
 
     def forecast(self) -> None:
-        """Second half: forecast, interpolate and guard the points of the last :meth:`update`.
+        """Forecast, interpolate and guard the points of the last :meth:`update`:
+        :meth:`predict` then :meth:`interpolate`, the slices a pipelined loop runs on
+        consecutive ticks.
 
         The points are those of the update's tick; until this runs, :meth:`horizons` reads the
         previous refresh's points.
         """
+        self.predict()
+        self.interpolate()
+
+    def predict(self) -> None:
+        """The predictor's forecast from the last :meth:`update`, ``K = prediction_points +
+        ⌈latency/dt⌉`` points (the gate keeps the one- and two-step ones)."""
         if self._pending is None:
             return
         (tick, z), self._pending = self._pending, None
-        now = tick * self.Ts
-        latency = max(0.0, now - self._anchor)
-        K = self.prediction_points + math.ceil(latency / self.dt - 1e-9)
-        points = self.predictor.predict(K)
+        latency = max(0.0, tick * self.Ts - self._anchor)
+        points = self.predictor.predict(self.prediction_points
+                                        + math.ceil(latency / self.dt - 1e-9))
         if self.gate is not None:
             ready = getattr(self.predictor, "ready", True)
             # the two-step forecast made before this refresh's sample, if one was accepted
             self._before = self._second if z is not None else None
             self._forecast = points[0] if ready else None
             self._second = points[1] if ready else None
+        self._points = (tick, z, points, latency)
+
+    def interpolate(self) -> None:
+        """The N-point references of the last :meth:`predict`: interpolated, guarded, placed."""
+        if self._points is None:
+            return
+        (tick, z, points, latency), self._points = self._points, None
+        now = tick * self.Ts
         if z is not None:
             nodes = np.concatenate((np.reshape(z, (1, -1)), points))
             t0 = self._anchor
@@ -480,6 +496,12 @@ class ExactReference:
         pass
 
     def forecast(self) -> None:
+        pass
+
+    def predict(self) -> None:
+        pass
+
+    def interpolate(self) -> None:
         pass
 
     def horizon(self, tick: int) -> np.ndarray:

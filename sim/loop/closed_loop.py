@@ -3,11 +3,12 @@
 Time is integer ticks of ``Ts`` (seconds = tick·Ts). Each tick ``i``:
 
 1. the newest sensor sample that has *arrived* by ``i·Ts`` is known;
-2. every ``downsample`` ticks the reference is refreshed with it (the predictor runs; a tick
-   with no new sample since the last refresh is a missing sample for the predictor) — by default
-   pipelined: the gate and the predictor's update on the tick before, the forecast,
-   interpolation and guard on the refresh tick, so that no tick carries a whole refresh
-   (``LoopSettings.pipelined_refresh``);
+2. every ``downsample`` ticks, or on each raw sample of a slow sensor (:mod:`sim.loop.clock`),
+   the reference is refreshed with it (the predictor runs; a tick with no new sample since the
+   last refresh is a missing sample for the predictor) — by default pipelined over three
+   ticks: the gate and the predictor's update, then the predictor's forecast, then the
+   interpolation, guard and placement on the refresh tick, so that no tick carries more than
+   one slice of a refresh (``LoopSettings.pipelined_refresh``);
 3. the reference gives the N points ``r_{i+1..i+N}``, placed in the robot's workspace:
    ``r = y0 + offset + E·r_c`` (``r_c`` centred heart coordinates);
 4. the encoders quantise ``q``, the observer estimates ``x̂ = [q − q0; q̇]``;
@@ -45,13 +46,15 @@ import numpy as np
 
 from robots import LinearArm, Robot
 from sim.loop.clock import PredictorClock, arrival_tick, predictor_clock
-from sim.loop.results import LoopResult, Recorder
+from sim.loop.results import CHARGED, LoopResult, Recorder
 from sim.loop.settings import LoopSettings
 from sim.loop.streams import BLOCK, ArrayTruth, SampleSource, StreamCursor, as_samples
 from sim.plant import ModelMismatch, ObserverSettings, PlantSettings
 from sim.plant.tick import make_tick
 
 clock = time.perf_counter_ns
+#: Ticks from a refresh's update to its interpolation when the refresh is pipelined.
+REFRESH_LAG = 2
 
 
 def poi_truth(source, n_ticks: int, Ts: float) -> tuple[np.ndarray, np.ndarray]:
@@ -127,18 +130,22 @@ class OpenLoop:
         self.reference, self.center, self.settings, self.hold = reference, center, settings, hold
         self.clock = clock or PredictorClock("downsample", settings.downsample * settings.Ts,
                                              settings.downsample, math.inf)
-        self.pipelined = settings.pipelined_refresh
-        self.carry = 0  # ns charged to the first tick of the next chunk
+        # ticks from a refresh's update to its interpolation: update, forecast, interpolation
+        # each on its own tick when pipelined, all on the refresh tick otherwise
+        self.lag = REFRESH_LAG if settings.pipelined_refresh else 0
+        self.carry = [0] * len(CHARGED)  # ns per part charged to the next chunk's first tick
+        self.prepared = False  # whether the next refresh's update and forecast have run
         if self.clock.mode == "sensor":
             self.queue = RawQueue(self.clock.raw, settings.Ts)
             self.last_stamp: float | None = None
-            self.next = self._next_arrival()
+            first = self.queue.tick()
+            self.next = math.inf if first is None else first + self.lag
         else:
             self.cursor = StreamCursor(as_samples(stream))
             self.last = -1  # index of the newest sample given to the reference
             self.next = 0
-            if self.pipelined:  # the first refresh's update, on tick −1
-                self.update(-1)
+        if self.lag and self.next < math.inf:
+            self._prepare(self.next, None)
 
     def update(self, tick: int) -> int:
         """Feed the reference the newest sample arrived by ``tick`` (None if none is new).
@@ -156,18 +163,20 @@ class OpenLoop:
         self.last = j if new else self.last
         return spent
 
-    def chunk(self, c0: int, c1: int) -> tuple[list, tuple[list[int], list[int]], list]:
-        """References r_{i+1..i+N} of ticks c0 … c1 − 1, the ns charged to each tick — the
-        predictor's updates (with the gate) and the forecasts (with the interpolation and the
-        guard), two lists — and each refresh's ``(tick, points)``."""
+    def chunk(self, c0: int, c1: int) -> tuple[list, tuple[list[int], ...], list]:
+        """References r_{i+1..i+N} of ticks c0 … c1 − 1; the ns charged to each tick for each
+        part of a refresh (:data:`CHARGED`: the predictor's update with the gate, its
+        forecast, the interpolation with the guard); each refresh's ``(tick, points)``."""
         refs, horizons = [], []
-        charged = ([0] * (c1 - c0), [0] * (c1 - c0))
-        charged[0][0], self.carry = self.carry, 0
+        charged = tuple([0] * (c1 - c0) for _ in CHARGED)
+        for part, carried in zip(charged, self.carry, strict=True):
+            part[0] += carried
+        self.carry = [0] * len(CHARGED)
         i = c0
         while i < c1:
             refreshed = i >= self.next
             if refreshed:
-                self._refresh(i, c0, c1, charged)
+                self._refresh(i, (c0, c1, charged))
             stop = min(self.next, c1)
             # views; later refreshes replace the arrays they view, never change them
             period = self.reference.horizons(i, stop - i)
@@ -177,36 +186,50 @@ class OpenLoop:
             i = stop
         return refs, charged, horizons
 
-    def _charge(self, tick: int, ns: int, c0: int, c1: int, charged: list[int]) -> None:
-        """Add ``ns`` to ``tick``'s time (the chunk's first tick if earlier, the next chunk's if
-        later)."""
+    def _charge(self, tick: int, part: int, ns: int, chunk) -> None:
+        """Add ``ns`` to ``tick``'s time of ``part`` (the chunk's first tick if earlier, the
+        next chunk's if later)."""
+        c0, c1, charged = chunk
         if tick >= c1:
-            self.carry += ns
+            self.carry[part] += ns
         else:
-            charged[max(tick, c0) - c0] += ns
+            charged[part][max(tick, c0) - c0] += ns
 
-    def _refresh(self, i: int, c0: int, c1: int, charged: tuple[list[int], list[int]]) -> None:
-        """The refresh on tick ``i``: its forecast, and the update it needs (pipelined: the
-        update ran on the tick before, and the next refresh's update is made now)."""
-        updates, forecasts = charged
-        if self.clock.mode == "sensor":
-            self._charge(i - self.pipelined, self._arrivals(i - self.pipelined), c0, c1, updates)
-        elif not self.pipelined:
-            self._charge(i, self.update(i), c0, c1, updates)
+    def _refresh(self, i: int, chunk) -> None:
+        """The refresh on tick ``i``: its interpolation; its update and forecast ran on the
+        ticks before when pipelined, and the next refresh's are made now, charged to theirs."""
+        if not self.prepared:
+            self._prepare(i, chunk)
         t_start = clock()
-        self.reference.forecast()
-        self._charge(i, clock() - t_start, c0, c1, forecasts)
+        self.reference.interpolate()
+        self._charge(i, 2, clock() - t_start, chunk)
+        self.prepared = False
         if self.clock.mode == "sensor":
-            self.next = self._next_arrival()
-            return
-        self.next = i + self.settings.downsample
-        if self.pipelined:  # the next refresh's update, on its own tick
-            self._charge(self.next - 1, self.update(self.next - 1), c0, c1, updates)
+            arrival = self.queue.tick()
+            self.next = math.inf if arrival is None else max(arrival + self.lag, i + 1)
+        else:
+            self.next = i + self.settings.downsample
+        if self.lag and self.next < math.inf:
+            self._prepare(self.next, chunk, after=i)
 
-    def _next_arrival(self) -> float:
-        """The tick of the refresh for the next raw sample (inf when none is left)."""
-        tick = self.queue.tick()
-        return math.inf if tick is None else tick + self.pipelined
+    def _prepare(self, r: int, chunk, after: int | None = None) -> None:
+        """The update and the forecast of the refresh on tick ``r``: on ticks r − lag and
+        r − 1 (not before the refresh ``after`` they follow), timed and charged to them."""
+        update_tick = r - self.lag if after is None else max(r - self.lag, after)
+        if self.clock.mode == "sensor":
+            spent = self._arrivals(update_tick)
+        else:
+            spent = self.update(update_tick)
+        t_start = clock()
+        self.reference.predict()
+        forecast_ns = clock() - t_start
+        if chunk is None:  # before the run: charged to its first tick
+            self.carry[0] += spent
+            self.carry[1] += forecast_ns
+        else:
+            self._charge(update_tick, 0, spent, chunk)
+            self._charge(max(r - 1, update_tick), 1, forecast_ns, chunk)
+        self.prepared = True
 
     def _arrivals(self, tick: int) -> int:
         """Feed every raw sample arrived by ``tick``, each once, with its own stamp; a gap in
@@ -218,10 +241,10 @@ class OpenLoop:
             t_start = clock()
             for _ in range(min(max(fills, 0), self.MAX_FILL)):
                 reference.update(tick, None, t_k)
-                reference.forecast()
+                reference.predict()
             reference.update(tick, z_k - self.center, t_k)
             if self.queue.tick() is not None and self.queue.tick() <= tick:
-                reference.forecast()  # a bunch of arrivals: each gated against its forecast
+                reference.predict()  # a bunch of arrivals: each gated against its forecast
             spent += clock() - t_start
             self.last_stamp = t_k
         return spent
@@ -323,16 +346,16 @@ def run_closed_loop(
 
 
 def run_ticks(side, controller, c0: int, c1: int, refs: list,
-              charged: tuple[list[int], list[int]], log: dict, yardstick=None,
+              charged: tuple[list[int], ...], log: dict, yardstick=None,
               progress=None) -> None:
     """Steps 4–6 for ticks c0 … c1 − 1, appending to the chunk's lists ``log``.
 
     ``side`` is the robot's side of the tick (:mod:`sim.plant.tick`). The tick's time is from
     the encoder reading to the commanded torque (its parts: ``sense``, ``controller``,
-    ``actuate``), plus the predictor's update and forecast that the open-loop part ``charged``
-    it. ``yardstick(x̂, r, u_{−1})`` is timed on every 16th tick with the tick's own inputs.
+    ``actuate``), plus the refresh's parts that the open-loop part ``charged`` it.
+    ``yardstick(x̂, r, u_{−1})`` is timed on every 16th tick with the tick's own inputs.
     """
-    updates, forecasts = charged
+    updates, forecasts, interpolations = charged
     sense, actuate, advance, step = side.sense, side.actuate, side.advance, controller.step
     q_log, tau_mpc_log, tau_log = log["q"], log["tau_mpc"], log["tau"]
     tick_ns, parts, yard_ns = log["tick_ns"], log["parts_ns"], log["yardstick_ns"]
@@ -347,7 +370,7 @@ def run_ticks(side, controller, c0: int, c1: int, refs: list,
         tau = actuate(u)
         t_end = clock()
         k = i - c0
-        tick_ns.append(t_end - t_start + updates[k] + forecasts[k])
+        tick_ns.append(t_end - t_start + updates[k] + forecasts[k] + interpolations[k])
         parts.append((t_sensed - t_start, t_stepped - t_sensed, t_end - t_stepped))
         if yardstick is not None and i % 16 == 7 and u_prev is not None:
             t_start = clock()

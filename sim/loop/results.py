@@ -17,10 +17,12 @@ from robots import Robot
 from sim.loop.metrics import RunningTracking, TickHistogram, rms
 from sim.loop.trace import DecimatedTrace, TraceFile
 
+#: The parts of a refresh charged to the ticks that run them: the predictor's update with the
+#: outlier gate, the predictor's forecast, the interpolation with the guard and placement.
+CHARGED = ("predictor_update", "forecast", "interpolation")
 #: The parts of a control tick, timed separately: the encoders and the observer, the
-#: controller, the cancellation (the commanded torque), and the refresh slices the tick carries —
-#: the predictor's update with the outlier gate, the forecast with its interpolation and guard.
-TICK_PARTS = ("sense", "controller", "actuate", "predictor_update", "forecast")
+#: controller, the cancellation (the commanded torque), and the refresh slices (CHARGED).
+TICK_PARTS = ("sense", "controller", "actuate", *CHARGED)
 
 
 def embed3(p: np.ndarray) -> np.ndarray:
@@ -106,7 +108,7 @@ class Recorder:
         self.saturated_ticks = 0
 
     @staticmethod
-    def start_chunk(refs: list, charged: tuple[list[int], list[int]],
+    def start_chunk(refs: list, charged: tuple[list[int], ...],
                     u_prev: np.ndarray | None) -> dict:
         """The chunk's per-tick lists: q, r (the chunk's references), τ_mpc, commanded τ, tick
         and its parts [ns], the yardstick [ns]; the predictor's update and forecast [ns] as the
@@ -141,7 +143,7 @@ class Recorder:
         parts = np.array(log["parts_ns"], dtype=np.int64).reshape(-1, 3)
         for k, name in enumerate(("sense", "controller", "actuate")):
             self.parts[name].add(parts[s:, k])
-        for charged, name in zip(log["charged"], ("predictor_update", "forecast"), strict=True):
+        for charged, name in zip(log["charged"], CHARGED, strict=True):
             self.parts[name].add(np.array(charged, dtype=np.int64)[s:])
         # horizon prediction error per lead tick, refreshes after settling
         for tick, h in horizons:

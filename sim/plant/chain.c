@@ -254,6 +254,22 @@ void chain_point(const chain_t *m, const double *q, int count, int joint, const 
     }
 }
 
+/* The output offset of a linearised arm, d = p(q0 + x_q) - (C x + y0) (rhmpc.control.offset):
+ * the end-point of `point` in joint `joint`'s frame by forward kinematics at q = q0 + x[0..n-1],
+ * minus the linear model's output; C is 3 x 2n, row-major. */
+void chain_offset(const chain_t *m, const double *x, const double *q0, const double *C,
+                  const double *y0, int joint, const double *point, double *out) {
+    int n = m->n;
+    double q[MAXJ], p[3];
+    for (int i = 0; i < n; i++) q[i] = q0[i] + x[i];
+    chain_point(m, q, 1, joint, point, p);
+    for (int r = 0; r < 3; r++) {
+        double lin = 0.0;
+        for (int k = 0; k < 2 * n; k++) lin += C[2 * n * r + k] * x[k];
+        out[r] = p[r] - (lin + y0[r]);
+    }
+}
+
 /* ---- The loop's tick around the MPC (sim/native.py NativeTick): encoders, observer,
  * cancellation and plant, the same operations in the same order as sim/loop.py's Python path
  * (sim.sensors encoder quantisation, sim.plant.observer.JointObserver, sim.plant). ---- */

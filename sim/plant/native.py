@@ -101,7 +101,9 @@ def _compile() -> ctypes.CDLL | None:
     library.chain_rnea.argtypes = [ptr, ptr, ptr, ptr, ptr]
     library.chain_midpoint.argtypes = [ptr, ptr, ptr, ptr, _d, _i]
     library.chain_point.argtypes = [ptr, ptr, _i, _i, ptr, ptr]
-    for f in (library.chain_aba, library.chain_rnea, library.chain_midpoint, library.chain_point):
+    library.chain_offset.argtypes = [ptr, ptr, ptr, ptr, ptr, _i, ptr, ptr]
+    for f in (library.chain_aba, library.chain_rnea, library.chain_midpoint, library.chain_point,
+              library.chain_offset):
         f.restype = None
     _library = library
     return library
@@ -148,6 +150,49 @@ class NativeChain:
         self._lib.chain_point(self._ptr, q.ctypes.data, q.shape[0], joint - 1, p.ctypes.data,
                               out.ctypes.data)
         return out
+
+
+class NativeOffset:
+    """``d(x) = p(q0 + x_q) − (C x + y0)`` [m] compiled: the output offset of
+    :class:`rhmpc.control.offset.OutputOffset` in one C call (forward kinematics of the chain).
+
+    Parameters
+    ----------
+    chain : NativeChain
+        The robot's compiled chain.
+    joint : int
+        Pinocchio index (≥ 1) of the joint carrying the end-point.
+    point : array (3,)
+        The end-point in that joint's frame [m].
+    q0, C, y0 : arrays
+        Linearisation point (nv,) [rad], output matrix (3, 2nv) and output at q0 (3,) [m].
+    out : ndarray (3,), optional
+        Where every call writes d (a contiguous float64 array, e.g. a controller's parameter
+        slot); default its own.
+    """
+
+    def __init__(self, chain: NativeChain, joint: int, point, q0, C, y0,
+                 out: np.ndarray | None = None) -> None:
+        nv = chain.nv
+        self._chain = chain  # the C structure the call points to lives in it
+        self._keep = [np.ascontiguousarray(a, dtype=float).reshape(-1).copy()
+                      for a in (point, q0, C, y0)]
+        if [a.size for a in self._keep] != [3, nv, 6 * nv, 3]:
+            raise ValueError("point (3,), q0 (nv,), C (3, 2nv) and y0 (3,) expected")
+        self._x = np.zeros(2 * nv)
+        self.out = np.zeros(3) if out is None else out  #: the last offset (overwritten)
+        if self.out.shape != (3,) or self.out.dtype != np.float64 or \
+                not self.out.flags.c_contiguous:
+            raise ValueError("out must be a contiguous float64 array of 3")
+        point, q0, C, y0 = (a.ctypes.data for a in self._keep)
+        self._call = functools.partial(chain._lib.chain_offset, chain._ptr, self._x.ctypes.data,
+                                       q0, C, y0, joint - 1, point, self.out.ctypes.data)
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        """The offset at ``x`` = [q − q0; q̇] (the array :attr:`out`)."""
+        self._x[:] = x
+        self._call()
+        return self.out
 
 
 def load_chain(model, damping=0.0, coulomb=0.0, stiction_velocity: float = 5e-3

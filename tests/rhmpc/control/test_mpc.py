@@ -11,7 +11,7 @@ import scipy.linalg
 from rhmpc.control.mpc import RecedingHorizonMPC
 from rhmpc.control.settings import MPCSettings
 from rhmpc.studies.bench import heart_like_reference
-from robots import load_robot
+from robots import linearize, load_robot
 
 #: OSQP run to (near) machine accuracy, for comparisons at 1e-6.
 TIGHT = {"eps_abs": 1e-10, "eps_rel": 0.0, "max_iter": 100_000, "check_termination": 1,
@@ -412,3 +412,19 @@ def test_level_2_checks_every_envelope_row_it_skips(arm):
                 assert np.max(np.abs(z - z_ex)) <= 1e-8
         x = arm.A @ x + arm.B @ tau
     assert seen["level2"] > 0 and seen["envelope_breaks"] > 0, seen
+
+
+@pytest.mark.parametrize("robot", ["phantom", "finger_edu", "ur5"])
+def test_the_compiled_output_offset_is_pinocchios(robot):
+    """The output offset by the compiled chain's forward kinematics against Pinocchio's, at
+    random states: the same to 1e-15 m."""
+    from rhmpc.control.offset import OutputOffset
+
+    arm = linearize(load_robot(robot))
+    compiled, reference = OutputOffset(arm), OutputOffset(arm, compiled=False)
+    if compiled.compiled is None:
+        pytest.skip("the compiled chain does not build here (no C compiler)")
+    rng = np.random.default_rng(4)
+    for _ in range(200):
+        x = np.concatenate([rng.uniform(-0.5, 0.5, arm.nx // 2), rng.normal(size=arm.nx // 2)])
+        np.testing.assert_allclose(compiled(x).copy(), reference(x), rtol=0, atol=1e-15)
