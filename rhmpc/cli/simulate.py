@@ -42,8 +42,9 @@ def add_run_options(
     p.add_argument("--ground-truth", choices=("recorded", "true"),
                    help="score against the recorded stream (paper protocol, default) or the "
                    "noise-free motion")
-    p.add_argument("--rr", metavar="RECORD", help="PhysioNet record (path without extension) "
-                   "whose beat annotations drive the heart phase")
+    p.add_argument("--rr", metavar="RECORD", help="PhysioNet record whose beat annotations "
+                   "drive the heart phase: a shipped name (mitdb-100, 1003) or a path without "
+                   "extension")
     add_preset_option(p)
     p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
                    help="override one setting, e.g. --set mpc.effort_weight=1e-3 (repeatable)")

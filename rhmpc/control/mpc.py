@@ -5,9 +5,11 @@ each tick then only does::
 
     d = p(q0 + x̂_q) − (C x̂ + y0)       (output offset: one forward-kinematics call)
     p = [x; r_1..r_N; u_{−1}; d]        (copy into a preallocated buffer, finiteness check)
+    level 1: ẑ* = K_z [p; 1]            (K_z = −W F_z, W = P_zz⁻¹: the unconstrained minimiser)
+             if H [ẑ*; 0; p_B; 1] ≤ 0    (every row of l0 − G p ≤ A [ẑ*; 0] ≤ u0 − G p, signed,
+                                          :func:`rhmpc.control.qp.screening_rows`): done
     l, u = l0 − G p, u0 − G p           (envelope rows: only the state and offset columns)
     q_z = F_z p + f0_z                  (one mat-vec; the slacks' q is the constant ρ₁)
-    level 1: ẑ* = −W q_z (W = P_zz⁻¹)   if l ≤ A [ẑ*; 0] ≤ u (every row): v = [ẑ*; 0], done
     level 2: the torque-box QP by active set (:mod:`rhmpc.control.box_qp`); if it converges, its
              KKT certificate holds and every envelope row holds at [z; 0]: v = [z; 0], done
     level 3: solver.update(q, l, u) ; warm start ; solver.solve()   (DAQP: hot-started working
@@ -295,7 +297,7 @@ class RecedingHorizonMPC:
         if self._screen and not self._forced and self._level1():
             return self._screened_output(t0, self._v_star, 1)
         if self.qp.param_bounds:
-            np.take(self._p, self._G_cols, out=self._p_cols)
+            self._p.take(self._G_cols, out=self._p_cols)
             np.dot(self._G, self._p_cols, out=self._g)
             np.subtract(self.qp.l0, self._g, out=self._l)
             np.subtract(self.qp.u0, self._g, out=self._u)
@@ -451,7 +453,7 @@ class RecedingHorizonMPC:
         """
         np.dot(self._K_z, self._p_ext, out=self._w_z)
         if self._w_p.size:
-            np.take(self._p, self._G_cols, out=self._w_p)
+            self._p.take(self._G_cols, out=self._w_p)
         return bool(np.dot(self._H, self._w, out=self._c).max() <= 0.0)
 
     def _box_solved(self) -> bool:

@@ -42,7 +42,8 @@ class RunConfig:
         How to read it: ``load_recording`` keywords ``var``, ``rows``, ``cols``, ``rate`` [Hz],
         ``units`` (MATLAB files).
     rr : str | None
-        PhysioNet record (path without extension) whose beat annotations drive the heart phase.
+        PhysioNet record whose beat annotations drive the heart phase: a shipped name
+        (``mitdb-100``, ``1003``) or a path without extension.
     sensor : str
         Sensor model name (``sim.sensors.SENSORS``: the physical ``sonomicrometry`` by
         default, ``white``, ``ultrasound``, ``ideal``), or ``"recorded"`` to use a recording's
