@@ -5,7 +5,7 @@ miss per lead (``forecast_error_rms_mm``); :func:`rhmpc.control.confidence.confi
 turns it into ``w_k ∝ 1/(σ² + e_k²)``; the same run (same seed, same stream) is repeated with
 those weights. Prints both runs' RMS/max error and effort.
 
-    .venv/bin/python examples/confidence/horizon_weights.py [--duration 60] [--preset]
+    .venv/bin/python benchmarks/horizon_weights.py [--duration 60] [--preset]
 """
 
 from __future__ import annotations

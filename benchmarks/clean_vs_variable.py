@@ -7,7 +7,7 @@
 
 60 s of each replica (seed 2), the first 20 s not scored. Run from the project root:
 
-    .venv/bin/python examples/variability/clean_vs_variable.py     # ≈ 2 min
+    .venv/bin/python benchmarks/clean_vs_variable.py     # ≈ 2 min
 """
 
 from __future__ import annotations
