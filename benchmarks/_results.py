@@ -90,7 +90,8 @@ def write(name: str, title: str, data, tables: dict[str, str], quick: bool,
     """Write ``docs/results/NAME.json`` and ``NAME.md``; returns the JSON's path.
 
     ``tables``: caption → Markdown table (made with :func:`table` and :func:`fmt` from
-    ``data``); ``notes``: a paragraph placed after the tables (no numbers of its own).
+    ``data``); a caption ``"slug|Caption"`` also marks the table with ``<!-- table:slug -->``
+    comments, so that a page can include that table alone; ``notes``: a paragraph placed after the tables (no numbers of its own).
     """
     from rhmpc import __version__
 
@@ -104,10 +105,15 @@ def write(name: str, title: str, data, tables: dict[str, str], quick: bool,
     path = RESULTS / f"{name}.json"
     path.write_text(json.dumps(doc, indent=1, default=float) + "\n")
     md = []
-    for caption, tab in tables.items():
+    for key, tab in tables.items():
+        slug, _, caption = key.rpartition("|")
+        if slug:
+            md.append(f"<!-- table:{slug} -->")
         if caption:
             md += [f"**{caption}**", ""]
         md += [tab, ""]
+        if slug:
+            md += [f"<!-- /table:{slug} -->", ""]
     if notes:
         md += [notes, ""]
     md.append(provenance(doc))

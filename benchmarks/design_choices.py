@@ -120,10 +120,10 @@ def main() -> None:
     duration = 20.0 if a.quick else 60.0
     data, tables = {}, {}
     for name, fn, caption in (
-            ("gate", lambda d: gate(max(d, 60.0)), "Outlier gate, main job (60 s)"),
-            ("clock", clock, "Predictor clock, a 25-Hz recording (one-step)"),
-            ("plant", plant, "Compiled plant against Pinocchio, main job"),
-            ("controller", controller, "Compiled controller against Python, main job")):
+            ("gate", lambda d: gate(max(d, 60.0)), "gate|Outlier gate, main job (60 s)"),
+            ("clock", clock, "clock|Predictor clock, a 25-Hz recording (one-step)"),
+            ("plant", plant, "plant|Compiled plant against Pinocchio, main job"),
+            ("controller", controller, "controller|Compiled controller against Python, main job")):
         d, tab = fn(duration)
         data[name] = d
         if tab is not None:
