@@ -91,7 +91,8 @@ def write(name: str, title: str, data, tables: dict[str, str], quick: bool,
 
     ``tables``: caption → Markdown table (made with :func:`table` and :func:`fmt` from
     ``data``); a caption ``"slug|Caption"`` also marks the table with ``<!-- table:slug -->``
-    comments, so that a page can include that table alone; ``notes``: a paragraph placed after the tables (no numbers of its own).
+    comments, so that a page can include that table alone; ``notes``: a paragraph placed
+    after the tables (no numbers of its own).
     """
     from rhmpc import __version__
 

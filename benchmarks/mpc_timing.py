@@ -56,8 +56,8 @@ def main() -> None:
     acc = R.table(["u₀ error against DAQP", "max [fraction of τ_max]"], [
         ["levels 1–2", R.fmt(doc["u0_error_cascade_max_frac"], 1, sci=True)],
         ["OSQP every tick", R.fmt(doc["u0_error_max_frac"], 1, sci=True)]])
-    tables = {"ticks|Tick time (same run, same gain tick)": t1, "levels|Screening cascade: ticks per level": t2,
-              "Accuracy": acc}
+    tables = {"ticks|Tick time (same run, same gain tick)": t1,
+              "levels|Screening cascade: ticks per level": t2, "Accuracy": acc}
     if c is not None:
         tables["c|C against Python"] = R.table(["max ‖τ_C − τ_Python‖ / τ_max", "mismatched ticks"],
                                              [[R.fmt(c["c_vs_python_max_frac"], 1, sci=True),
