@@ -30,7 +30,7 @@ MATH = re.compile(r"\$\$.+?\$\$|\$[^$\n]+\$", re.S)
 COMMENT = re.compile(r"<!--.*?-->", re.S)
 LINK_TARGET = re.compile(r"\]\([^)]*\)")
 AT_DECISION = re.compile(r"^(#+) At the decision\s*$(.*?)(?=^#{1,3} |\Z)", re.S | re.M)
-HISTORY = re.compile(r"issue[ -]?[0-9]|\bsession\b|closing note", re.I)
+HISTORY = re.compile(r"issue[ -]?[0-9]|\bsession\b|closing\s+note", re.I)
 
 
 def pages() -> list[Path]:
