@@ -91,12 +91,13 @@ html_theme_options = {
     "navigation_with_keys": False,
     "show_toc_level": 2,
     "header_links_before_dropdown": 8,
-    "secondary_sidebar_items": ["page-toc"],
+    "secondary_sidebar_items": [],  # the article gets the width (wide tables, long commands)
     "footer_start": ["copyright"],
     "footer_end": ["sphinx-version"],
 }
 html_sidebars = {"**": ["sidebar-nav-bs"], "index": [], "changelog": []}
 html_show_sourcelink = False
+html_css_files = ["custom.css"]
 
 # WORKAROUND (docstrings in files this documentation does not own; each entry names the fix the
 # file needs, after which the entry goes): these docstrings hold reST that docutils rejects, so
