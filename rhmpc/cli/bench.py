@@ -20,7 +20,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "heart-like reference with occasional jumps, and report per-tick p50/p99/max of the "
         "whole tick and its parts, OSQP iterations, fallbacks, and - measured in the same run - "
         "a precomputed-gain tick and an exact DAQP solve of the same QP, with the largest "
-        "|u0 - u0_exact| / tau_max.",
+        "abs(u0 - u0_exact) / tau_max.",
     )
     p.add_argument("--ticks", type=int, default=20_000, help="timed ticks (default 20000)")
     p.add_argument("--warmup", type=int, default=500, help="untimed warm-up ticks (default 500)")

@@ -38,7 +38,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "Dask cluster. Every finished evaluation is appended to a JSON-lines results file; "
         "re-running the same command skips what is done. Then print the ranked table and the "
         "best settings. 'rhmpc tune report RESULTS.jsonl' prints the table of a results file.",
-        epilog="Spec format: see examples/tune/*.toml and the README.")
+        epilog="Spec format: the TOML files in examples/tune/ and the user guide (Tuning).")
     p.add_argument("target", nargs="+", metavar="SPEC.toml | report RESULTS.jsonl",
                    help="a sweep specification, or 'report' and a results file")
     run = p.add_argument_group("sweep options")

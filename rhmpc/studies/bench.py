@@ -18,7 +18,7 @@ bounds (so that the QP has active constraints). Every tick measures, with
 * with ``controller="c"``, the compiled controller of ``rhmpc export`` (:mod:`rhmpc.control.
   export`), fed the same state and reference and keeping its own u_{−1}: its tick measured inside
   C (``clock_gettime(CLOCK_MONOTONIC)``) and as seen from Python (the ctypes call), and
-  ``c_vs_python_max_frac`` = max over the run of |τ_C − τ_Python| / τ_max.
+  ``c_vs_python_max_frac`` = max over the run of ``|τ_C − τ_Python|`` / τ_max.
 """
 
 from __future__ import annotations

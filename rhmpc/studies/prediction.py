@@ -27,7 +27,7 @@ the beat times of the simulated heart (Yuen and Bebek synchronise it on the ECG)
 yuen2009`: the μ₀ gradient frequency update, no respiratory series), not the 3-D default's
 phase-locked loop, whose 0.5 Hz bandwidth passes the noise at 28 Hz and σ_R = 1.3 mm.  In
 ``horizon`` the predictors that estimate the heart rate (``heart_rate_hz``) are also scored
-on |ω̂/2π − f_h| [beats/min] against the scenario's true rate after the warm-up.
+on ``|ω̂/2π − f_h|`` [beats/min] against the scenario's true rate after the warm-up.
 """
 
 from __future__ import annotations
