@@ -5,7 +5,7 @@ inputs: the C code has its own implementation of the tick (screening, warm start
 chain, clipping) and OSQP's generated solver, so any drift between the two shows up here.
 Tolerance: |τ_C − τ_Python| ≤ 1e-6 τ_max on every tick (the issue's target); measured ≈ 2e-11
 (the same OSQP iterations, rounding differences only), so the margin is 5 orders of magnitude.
-Libraries are compiled once per session (``built``); tests that need a compiler skip without one.
+Libraries are compiled once per test run (``built``); tests that need a compiler skip without one.
 """
 
 from __future__ import annotations
@@ -58,7 +58,7 @@ def arm():
 
 @pytest.fixture(scope="session")
 def cache(tmp_path_factory):
-    """One build cache per session (shared with tests/rhmpc/studies/test_bench.py)."""
+    """One build cache per test run (shared with tests/rhmpc/studies/test_bench.py)."""
     return tmp_path_factory.getbasetemp() / "rhmpc-cache"
 
 
