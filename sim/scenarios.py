@@ -22,6 +22,7 @@ from sim.arrhythmia import (
     premature_stroke,
     record_beats,
 )
+from sim.invivo import InVivoSettings, invivo_motion
 from sim.motion import (
     EPICARDIAL_BUMPS,
     MITRAL_BUMPS,
@@ -71,11 +72,11 @@ class ScenarioSpec:
     duration : float
         Duration [s].
     heart : str
-        ``"constant"`` or ``"staircase"``.
+        ``"constant"``, ``"staircase"``, ``"record"`` or ``"invivo"`` (:mod:`sim.invivo`).
     heart_rate : float
         Heart rate for ``"constant"`` [Hz] (the first staircase level otherwise).
     site : str
-        ``"top"``, ``"side"`` (epicardial, 3-D) or ``"mitral"`` (1-D).
+        ``"top"``, ``"side"`` (epicardial, 3-D), ``"mitral"`` (1-D) or ``"invivo"``.
     reported : tuple of str
         Which of ``peak_to_peak``, ``rms``, ``heart_rate``, ``sensor_rate``, ``duration`` come
         from the paper (the rest are assumptions).
@@ -87,6 +88,10 @@ class ScenarioSpec:
     variable : bool
         Whether the default is the physiological variability of :mod:`sim.variability`
         (True) or the periodic replica (False).
+    hrv_band_powers : tuple of float or None
+        Relative VLF/LF/HF powers of the default heart-rate variability
+        (:attr:`~sim.variability.VariabilitySettings.band_powers`; its total ``hrv_cv`` is
+        kept); ``None``: the Task Force norms.
     """
 
     name: str
@@ -102,6 +107,7 @@ class ScenarioSpec:
     record: str | None = None
     record_start: float = 0.0
     variable: bool = True
+    hrv_band_powers: tuple[float, float, float] | None = None
 
 
 _SPECS: tuple[ScenarioSpec, ...] = (
@@ -109,10 +115,15 @@ _SPECS: tuple[ScenarioSpec, ...] = (
         "fixed-a1-top", "Tuna et al. animal 1, crystal on top, constant heart rate (replica; "
         "heart rate 95 bpm assumed)", 12.19e-3, None, 404.0, 235.0,
         "constant", 1.58, "top", ("peak_to_peak", "sensor_rate", "duration")),
+    # Tuna §III-B: the constant-rate record's heart line is sharp at 1.66 Hz over 472 s ("the
+    # harmonics decay very little in time"), so its rate variability is respiratory (the HF
+    # band, at the ventilator's rate) and not the VLF/LF wander that moves a 40-s mean rate
+    # by ±0.1 Hz: all of the 6 % HRV is put in the HF band.
     ScenarioSpec(
         "fixed-a2-top", "Tuna et al. animal 2, crystal on top, constant 100 bpm (replica of "
         "§III-B: p-p 8.39 mm, RMS 3.55 mm)", 8.39e-3, 3.55e-3, 257.0, 472.0, "constant",
-        100.0 / 60.0, "top", ("peak_to_peak", "rms", "heart_rate", "sensor_rate", "duration")),
+        100.0 / 60.0, "top", ("peak_to_peak", "rms", "heart_rate", "sensor_rate", "duration"),
+        hrv_band_powers=(0.0, 0.0, 975.0)),
     ScenarioSpec(
         "varying-a1-top", "Tuna et al. animal 1, crystal on top, pacemaker staircase 95–152 bpm "
         "(replica)", 13.75e-3, None, 404.0, 251.0,
@@ -141,6 +152,11 @@ _SPECS: tuple[ScenarioSpec, ...] = (
         "pause after them (replica; real annotations, synthetic motion)", 8.39e-3, 3.55e-3,
         257.0, 240.0, "record", 100.0 / 60.0, "top", ("peak_to_peak", "rms", "sensor_rate"),
         record="mitdb-100/100", record_start=1035.0),
+    ScenarioSpec(
+        "invivo-video", "in-vivo regime: breathing-dominated 3-D epicardial motion at 50 bpm "
+        "with large beat-to-beat variation, as tracked by stereo endoscopic video at 25 "
+        "frames/s (built from a recording's statistics, sim.invivo)", 5.1e-3, None, 25.0, 60.0,
+        "invivo", 0.83, "invivo", ("peak_to_peak", "heart_rate", "sensor_rate")),
 )
 
 SPECS: dict[str, ScenarioSpec] = {s.name: s for s in _SPECS}
@@ -277,8 +293,10 @@ def make_scenario(name: str, rng: np.random.Generator | None = None, **overrides
     if not duration > 0 or not sensor_rate > 0:
         raise ValueError("duration and sensor_rate must be positive")
 
-    settings = _variability(spec, overrides)
     horizon = max(duration, nominal)
+    if spec.heart == "invivo":
+        return _invivo(spec, overrides, rng, duration, sensor_rate, horizon)
+    settings = _variability(spec, overrides)
     breath = None
     if not settings.is_clean:
         breath = breathing_phase(rng, float(overrides.get("breathing_rate", 1.0 / 6.0)),
@@ -294,10 +312,24 @@ def make_scenario(name: str, rng: np.random.Generator | None = None, **overrides
     return Scenario(name, source, sensor_rate, duration, described, spec)
 
 
+def _invivo(spec: ScenarioSpec, overrides: dict, rng: np.random.Generator, duration: float,
+            sensor_rate: float, horizon: float) -> Scenario:
+    """The in-vivo regime of :mod:`sim.invivo` (overrides: ``heart_rate``, ``breathing_rate``)."""
+    unsupported = sorted(set(overrides) - {"duration", "sensor_rate", "heart_rate",
+                                           "breathing_rate"})
+    if unsupported:
+        raise ValueError(f"{spec.name} takes no override(s) {', '.join(unsupported)}")
+    changes = {k: float(overrides[k]) for k in ("heart_rate", "breathing_rate") if k in overrides}
+    source = invivo_motion(rng, horizon, spec.duration, InVivoSettings(**changes))
+    return Scenario(spec.name, source, sensor_rate, duration, spec.description, spec)
+
+
 def _variability(spec: ScenarioSpec, overrides: dict) -> VariabilitySettings:
     """The variability settings with the ``coupling``/``beat_gain_std`` overrides applied."""
-    value = overrides.get("variability",
-                          VariabilitySettings() if spec.variable else "clean")
+    default = VariabilitySettings()
+    if spec.hrv_band_powers is not None:
+        default = replace(default, band_powers=spec.hrv_band_powers)
+    value = overrides.get("variability", default if spec.variable else "clean")
     if isinstance(value, str):
         if value != "clean":
             raise ValueError(f"variability must be a VariabilitySettings or 'clean', got {value!r}")

@@ -29,6 +29,7 @@ from sim.heart import (
     make_scenario,
     save_recording,
 )
+from sim.invivo import source_statistics, statistics_table
 from sim.matfile import parse_indices
 from sim.motion import MotionSource
 from sim.recordings import export_source
@@ -190,7 +191,11 @@ def _list(args: argparse.Namespace) -> int:
 
 
 def _show(args: argparse.Namespace) -> int:
-    row = _stats_row(_target(args.name, args))
+    target = _target(args.name, args)
+    row = _stats_row(target)
+    invivo = args.name in SPECS and SPECS[args.name].heart == "invivo"
+    if invivo:  # the in-vivo regime beside the recording it was built from
+        row["regime"] = source_statistics(target.source, target.duration)
     if args.json:
         print(json.dumps(row, indent=2))
         return 0
@@ -210,6 +215,9 @@ def _show(args: argparse.Namespace) -> int:
         print(f"  missing samples   {100 * row['missing_fraction']:.2f} %")
     print(f"  predictability    {_pred_text(row)} (one-step RLS / hold RMS error, 120 ms ahead "
           "at 25 Hz; phantom ≈ 0.12, in-vivo heart ≈ 0.69)")
+    if invivo:
+        print("  the in-vivo recording's statistics (sim.invivo, sampled at 25 Hz):")
+        print("\n".join(statistics_table(row["regime"])))
     return 0
 
 

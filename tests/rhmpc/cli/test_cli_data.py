@@ -26,7 +26,12 @@ def test_list_json(capsys: pytest.CaptureFixture[str]) -> None:
     assert 75 < lo < 100 < hi < 125
     for r in rows:  # 40 s of the replica: nearly the whole record's p-p
         assert 0.93 < r["peak_to_peak_mm"] / r["target_peak_to_peak_mm"] <= 1.0 + 1e-6
-        assert 0.1 < r["predictability"] < 0.5  # one-step RLS / hold at 120 ms, 25 Hz
+        # one-step RLS / hold at 120 ms, 25 Hz: the replicas are regular, the in-vivo regime
+        # is as hard as its recording (0.67)
+        if r["name"].startswith("invivo"):
+            assert 0.55 < r["predictability"] < 0.8
+        else:
+            assert 0.1 < r["predictability"] < 0.5
 
 
 def test_list_table(capsys: pytest.CaptureFixture[str]) -> None:
