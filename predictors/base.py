@@ -120,10 +120,8 @@ class Predictor(ABC):
     GUARD_MULTIPLE = 2.0
     #: window of the recent signal range [s]
     RANGE_SECONDS = 2.0
-    #: initialisation window of the unit inference (``unit=None``) [s]: one beat at the slowest
-    #: rate of the heart-rate bands (36 beats/min, 1.67 s), so that it holds a systole; 0.5 s
-    #: of a quiet diastasis at 50 beats/min moves < 0.3 mm and read as kilometres
-    SCALE_SECONDS = 2.0
+    #: initialisation window of the unit inference (``unit=None``) [s]
+    SCALE_SECONDS = 0.5
     #: memory of the running forecast-error RMS [s]
     ERROR_MEMORY_SECONDS = 10.0
 

@@ -139,9 +139,9 @@ def fundamental_frequency(
     if 0 < k < power.size - 1 and np.all(power[k - 1 : k + 2] > 0):
         la, lb, lc = np.log(power[k - 1 : k + 2])
         den = la - 2 * lb + lc
-        if den < 0:
-            fk += 0.5 * (la - lc) / den * (f[1] - f[0])
-    return 2 * np.pi * float(fk)
+        if den < 0:  # the vertex, within half a bin (at a band edge the peak may lie outside)
+            fk += min(max(0.5 * (la - lc) / den, -0.5), 0.5) * (f[1] - f[0])
+    return 2 * np.pi * float(min(max(fk, band_hz[0]), band_hz[1]))
 
 
 def fit_fourier(
