@@ -21,6 +21,8 @@ residual of its *current* state over the recent samples,
 
        R̂ ← R̂ + (R* − R̂)/L,   R* = max(σ_R², γ₀(1 + ρ)/(1 − ρ) − (H P⁻ Hᵀ)_aa),
 
+   per sample (applied every L/16 samples with weight 1/16: the same memory of one beat),
+
    ρ clipped to [0, ``RHO_MAX``]. The residual of the current state over a whole beat is large
    when the state chases the newest samples (in-vivo motion: R̂ ≈ 1–2 mm), and small when
    the model holds the motion (the replicas: R̂ = σ_R); the one-step innovations cannot tell
@@ -86,6 +88,8 @@ class NonPeriodic:
     #: ρ ≤ 0.95: long-run factor ≤ 39; a residual still correlated beyond that over a beat
     #: is the model's own transient (it decays as the filter converges), not motion.
     RHO_MAX = 0.95
+    #: R̂ is updated this many times per beat [-]
+    R_UPDATES = 16
 
     def __init__(self, d: int, dt: float, floor: float, adaptive_r: bool, residual_order: int,
                  forgetting: float, unit: float, slowest_hz: float, counts: Counter) -> None:
@@ -98,6 +102,7 @@ class NonPeriodic:
         beat = math.ceil(1.0 / (slowest_hz * dt)) if adaptive_r else 0
         self.recent = RecentSamples(max(beat, residual_order + 1, 1), d)
         self.e = np.zeros((residual_order + 1, d))
+        self._tick = 0
 
     def push(self, z: np.ndarray | float) -> None:
         """A new sample (NaN: missing)."""
@@ -113,21 +118,24 @@ class NonPeriodic:
         R̂ from the last beat (with diag H P⁻ Hᵀ ``hph``) and one RLS step if ``learn``."""
         p = 0 if self.residual is None else self.residual.p
         beat = max(8, min(round(2 * math.pi / (omega * self.dt)), len(self.recent.z)))
-        lags = max(beat if self.adaptive else 0, p + 1)
-        k = -np.arange(float(lags))
-        y = model(k)
+        every = max(1, beat // self.R_UPDATES)  # R̂ moves by 1/beat per sample, so every
+        self._tick += 1  # ``every`` samples by every/beat: the same memory at less cost
+        due = self.adaptive and hph is not None and learn and self._tick % every == 0
+        lags = max(beat if due else 0, p + 1)
+        y = model(-np.arange(float(lags)))
         e = self.recent.z[:lags] - y
         self.e = e[: p + 1]
-        if self.adaptive and hph is not None and learn:
-            self._follow_r(e[:beat], hph, beat)
+        if due:
+            self._follow_r(e[:beat], hph, beat / every)
         if self.residual is not None and learn:
             self.residual.learn(self.e, y[0] - y[1])
 
-    def _follow_r(self, e: np.ndarray, hph: np.ndarray, beat: int) -> None:
+    def _follow_r(self, e: np.ndarray, hph: np.ndarray, memory: float) -> None:
+        """R̂ ← R̂ + (R* − R̂)/memory (module docstring)."""
         if np.isfinite(e).all(axis=1).sum() < 8:
             return
         target = np.maximum(long_run_variance(e, self.RHO_MAX) - hph, self.floor)
-        self.r += (target - self.r) / beat
+        self.r += (target - self.r) / max(memory, 1.0)
 
     def restart(self) -> None:
         """After a (re)fit: the residual AR's prior at its weights, worth p residuals of R̂."""

@@ -10,10 +10,11 @@ from sim.sensors.playback import PLAYBACKS, playback
 from sim.sensors.sonomicrometry import SonomicrometrySettings, sonomicrometry
 from sim.sensors.stream import Latency, Sensor
 from sim.sensors.ultrasound import UltrasoundSettings, ultrasound
+from sim.sensors.video import VideoSettings, video
 from sim.sensors.white import WhiteSettings, white
 
 #: Names :func:`sensor_from_name` accepts.
-SENSORS: tuple[str, ...] = ("sonomicrometry", "white", "ultrasound", "ideal")
+SENSORS: tuple[str, ...] = ("sonomicrometry", "white", "ultrasound", "video", "ideal")
 
 #: The default playback of a sensor's samples to the control rate (causal: linear
 #: interpolation delivered one raw period late, every sample equally old).
@@ -61,11 +62,12 @@ def sensor_from_name(name: str, rate: float | None = None, latency: float | None
         ``"sonomicrometry"`` (physical, :mod:`sim.sensors.sonomicrometry`), ``"white"``
         (additive white noise, :mod:`sim.sensors.white`), ``"ultrasound"`` or ``"ideal"``.
     rate : float, optional
-        Sample rate [Hz] (defaults: 257, 257, 28, 2000).
+        Sample rate [Hz] (defaults: 257, 257, 28, 25, 2000).
     latency : float, optional
-        Delay [s] (defaults: 0, 0, 0.068, 0).
+        Delay [s] (defaults: 0, 0, 0.068, 0.04, 0).
     noise : float, optional
-        σ per axis [m] of ``white`` (default 0.25 mm/√dim) or ``ultrasound`` (1.3 mm); the
+        σ per axis [m] of ``white`` (default 0.25 mm/√dim), ``ultrasound`` (1.3 mm) or
+        ``video`` (0.15 mm); the
         physical sonomicrometer has no such setting (its errors come from its physics).
     dropouts : Dropouts, optional
         Add occlusions.
@@ -130,6 +132,12 @@ def sensor_from_name(name: str, rate: float | None = None, latency: float | None
             kw["noise_std"] = float(noise)
         sensor = ultrasound(replace(cfg_us, **kw))
         return sensor.with_stages(delivery) if delivery is not None else sensor
+    if name == "video":
+        kw = {"dropouts": dropouts, "upsample": delivery}
+        for key, value in (("rate", rate), ("latency", latency), ("noise_std", noise)):
+            if value is not None:
+                kw[key] = float(value)
+        return video(VideoSettings(**kw))
     if name == "ideal":
         stages: tuple = ()
         if dropouts is not None:
