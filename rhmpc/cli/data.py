@@ -184,7 +184,8 @@ def _list(args: argparse.Namespace) -> int:
         print(f"{r['name']:<16} {r['dim']:>3} {r['sensor_rate_hz']:>6g} {r['duration_s']:>6g} "
               f"{r['peak_to_peak_mm']:>7.2f} {r['target_peak_to_peak_mm']:>9.2f} "
               f"{r['rms_mm']:>6.2f} {rms_t:>9} {hr_text:>12} {_pred_text(r):>8}")
-    print("All scenarios are synthetic replicas calibrated to the papers' reported statistics.")
+    print("All scenarios are synthetic, calibrated to the papers' reported statistics "
+          "(invivo-video: to an in-vivo recording's).")
     print("predict.: one-step RLS / hold RMS error 120 ms (3 samples) ahead at 25 Hz on the "
           "noise-free motion (line spectrum ≈ 0; mechanical phantom ≈ 0.12; in-vivo ≈ 0.69).")
     return 0
