@@ -3,8 +3,8 @@
 The protocol of the ``invivo-regime`` check: each scenario's true motion sampled at 25 Hz for
 60 s (seed 2), every sample fed, forecasts from sample 300 on scored against the motion 1, 3 and
 5 samples later (3-D RMS, mm).  Rows: each predictor with its default parameters, and, as
-``name:set``, the papers' parameter sets and the sets that were the defaults before the
-in-vivo regime.  Prints a markdown table (``--json`` for the numbers).
+``name:set``, its other parameter sets (the papers' protocols, and the sets without the
+non-periodic part).  Prints a markdown table (``--json`` for the numbers).
 
     .venv/bin/python benchmarks/invivo_regime.py [--seed 2] [--seconds 60] [--json]
 """
