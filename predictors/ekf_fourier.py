@@ -13,7 +13,7 @@ b_{a,h} cos hθ_b with one respiratory rate ω_b and accumulated phase θ_b (θ_
 shared by the axes; a, b, ω_b are random walks with Richa's process variances, appended
 to the state as [a_{a,1..H_b}, b_{a,1..H_b} (for each a), ω_b, θ_b].  Without it the
 offset random walk cannot follow breathing, whose residual pulls ω̂ to the low end of
-its range (issue 18: on fixed-a2-top ω̂ sat at its 0.5 Hz clamp on 42 % of updates).
+its range (measured: on fixed-a2-top ω̂ sat at its 0.5 Hz clamp on 42 % of updates).
 
 Discrete model x⁺ = F x + μ, F = I except ∂θ_{a,i}/∂ω = iΔt,
 μ ~ N(0, Q), z = h(x) + ν, ν ~ N(0, σ_R² I).  EKF recursion (Yuen, §III-A):
@@ -35,7 +35,7 @@ Outliers: a sample whose normalised innovation squared νᵀS⁻¹ν exceeds the
 lock; after ``gate_seconds`` of consecutive rejections samples are used again, so a real
 change of the motion is followed.
 
-Re-fit on lost lock (issue 18, as :mod:`predictors.ekf_dual_fourier`): the last
+Re-fit on lost lock (as :mod:`predictors.ekf_dual_fourier`): the last
 ``init_seconds`` of samples are kept (:class:`predictors.fourier_init.FitWindow`); when after
 an update ω̂ ∉ 2π·``band_hz`` (the band the initialisation's FFT searches, 36–180 beats/min:
 no heart the filter models) or ω̂ was clamped, state and covariance are re-fitted from that
@@ -43,7 +43,7 @@ window exactly as at the start (counted ``lock_refit``; needs ≥ 80 % finite sa
 lock on a subharmonic (ω̂ ≈ ω/2, inside the band): the second harmonic's power Σ_a r_{a,2}²
 exceeds the fundamental's, which the fit chose as the largest peak (judged once the window
 holds only samples since the last fit; locked, P₂/P₁ = 0.38–0.50 on the replicas, 6–150 on
-ω/2).  No new parameter; a locked filter is unchanged (issue-18 bench bit-identical).
+ω/2).  No new parameter; a locked filter is unchanged (its forecasts bit-identical).
 
 Numerics: P is symmetrised each step; phases are wrapped to (−π, π]; ω̂ is clamped
 to ``omega_limits_hz`` (counted ``omega_clamped``); a non-finite or non-positive
@@ -52,6 +52,42 @@ Cost per update: O(n²) for the prediction (F is identity plus two columns) and
 O(n² d) for the correction, n = d(2m + 1) + 1 + 2dH_b + 2 (48 for d = 3, m = 5, H_b = 2;
 34 without breathing).
 
+Motion that is not periodic (``adaptive``, the default parameter set).  In vivo, beats differ
+in shape, amplitude and timing; with R = σ_R² the filter explains that variation as changes
+of phase, rate and amplitude and forecasts from a state that chases the newest sample
+(``invivo-video``, 25 Hz: 1.36 / 1.06 / 1.01 × hold's error at 1 / 3 / 5 samples).  Five
+changes, each measured on that regime and the six replicas (25 Hz, 60 s, seed 2; ratios to
+hold at 1 / 3 / 5 samples):
+
+* ``adaptive_r``: R follows the long-run variance of the current state's residual over the
+  last beat, minus the model's share H P⁻ Hᵀ (:mod:`predictors.nonperiodic`).  Alone it makes
+  the state stiff (R̂ 1–2 mm in vivo, σ_R on the replicas) but not the forecast: 2.16 / 1.16 /
+  0.95 in vivo.
+* ``residual_order`` = 16: an AR model of the residual, with the model's increments as input
+  (:mod:`predictors.residual`), added to the forecast: it starts from the newest sample.
+  With ``adaptive_r``: 0.72 / 0.87 / 0.90 in vivo; alone 1.01 / 1.12 / 1.03 (a chasing state's
+  residual has no course to follow).
+* ``p0_from_fit``: P(T|T) of c, r, θ and of the breathing coefficients is the least-squares
+  covariance of the window fit, s²_lr·(AᵀA)⁻¹ (per axis; r and θ by first-order propagation
+  from a, b), with s²_lr the long-run variance of the fit's residual; σ_ω² stays Yuen's.  A fit
+  that explains little starts uncertain and converges quickly: 0.73 / 0.76 / 0.69 in vivo.
+* ``fit_beats`` = 3: c, r, θ are fitted again on the window's last 3 beats (its breathing fit
+  removed), which the heart-rate variability of a 10-s window otherwise smears (2.7 mm RMS
+  residual on the last beat of varying-a1-side just after the fit, R̂ rising to 7 mm).  With
+  the two above it keeps every replica at or below the ``tuna2013-hrv`` errors.
+
+* ``rate_band`` = 1.5: R̂ makes the state slow to correct a wrong start: a fit 13 bpm low
+  (fixed-a1-top, seed 7, 128 Hz) drifted to 47 bpm within 9 s with R̂ at 3–20 mm, until the
+  half-rate rule re-fitted.  ω̂ leaving [ω₀/1.5, 1.5 ω₀] of the fitted ω₀ is a lost lock too
+  (re-fit 1.7 s after that start).  1.5 because ω̂ smooths the beat rate, which swings
+  ×0.77–×1.67 about its mean in the in-vivo recording; 1.3 re-fits through the pacing
+  staircase (varying-a3-top 0.29 / 0.16 / 0.15 instead of 0.21 / 0.12 / 0.12).
+
+All five: 0.76 / 0.81 / 0.75 in vivo (seeds 1–7: at most 0.84 at 3 samples); fixed-a1-top
+0.30 / 0.17 / 0.15 (``tuna2013-hrv`` 0.63 / 0.34 / 0.27), the other replicas 0.19–0.25 /
+0.11–0.15 / 0.11–0.14 (0.22–0.37 / 0.12–0.23 / 0.12–0.21); the 128 Hz sonomicrometry stream
+of fixed-a2-top, 3 samples: 0.33 (0.41).
+
 Units: Q, σ_R and σ₁² are given in SI (the papers give mm, mm²; converted here),
 per sample at the predictor's own rate as in the papers.
 """
@@ -59,195 +95,27 @@ per sample at the predictor's own rate as in the papers.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.stats import chi2
 
-from predictors.base import Predictor, PredictorSettings
+from predictors.base import Predictor
 from predictors.fourier_init import (
     FitWindow,
+    fit_covariance,
+    fit_harmonics,
     initial_dual_state,
     initial_fourier_state,
     spd_inverse,
     wrap_phase,
 )
+from predictors.fourier_settings import EKF_PARAMETER_SETS as PARAMETER_SETS
+from predictors.fourier_settings import Q_OMEGA_HRV, EKFSettings
+from predictors.nonperiodic import NonPeriodic, long_run_variance
 
 __all__ = ["PARAMETER_SETS", "Q_OMEGA_HRV", "EKFSettings", "FourierEKF"]
 
 _TWO_PI = 2.0 * math.pi
-
-
-@dataclass(frozen=True)
-class EKFSettings(PredictorSettings):
-    """Fourier-series EKF settings; defaults are Tuna et al. 2013's (``tuna2013``).
-
-    Attributes
-    ----------
-    harmonics : int
-        m, harmonics per axis [-].
-    init_seconds : float
-        Length of the FFT + least-squares initialisation window [s] (N = init_seconds/dt),
-        also of the re-fit after a lost lock.
-    sigma_r : float
-        σ_R, measurement noise standard deviation [m].
-    sigma1_sq : float
-        σ₁², initial variance of the first harmonic amplitude [m²]; σ₁²/i² for the i-th.
-    sigma_omega_sq : float
-        σ_ω², initial variance of ω [(rad/s)²].
-    sigma_phase_sq : float
-        Initial variance of each phase [rad²].
-    q : float
-        Process noise of c and r_i [m² per sample].
-    q_phase : float
-        Process noise of each phase [rad² per sample].
-    q_omega : float
-        Process noise of ω, q_ω [(rad/s)² per sample].
-    band_hz : tuple of float
-        Heart-rate band searched by the FFT [Hz]: 36–180 beats/min, which holds the
-        95–152 beats/min pacemaker staircase of Tuna §III-B; ω̂ outside it triggers the re-fit.
-    omega_limits_hz : tuple of float
-        ω̂ is clamped to this range [Hz] (counted ``omega_clamped``), then re-fitted.
-    gate_probability : float or None
-        Innovation gate: samples with NIS above the χ²_d quantile of this probability are
-        rejected [-]; ``None``: no gate (Yuen's filter).
-    gate_seconds : float
-        Longest run of rejected samples [s]; then samples are used again.
-    breathing_harmonics : int
-        H_b, respiratory harmonics in the state [-]; 0 = Yuen's model without breathing.
-    breathing_band_hz : tuple of float
-        Respiratory band [Hz] (6–30 breaths/min): FFT search and clamp of ω̂_b.
-    q_breathing : float
-        Process noise of the respiratory coefficients [m² per sample at 83.3 Hz]
-        (Richa §I-D: 1e-5 mm²).
-    q_omega_breathing : float
-        Process noise of ω_b [(rad/s)² per sample at 83.3 Hz] (Richa: 1e-8 (rad/sample)²).
-    q_omega_per_second : float or None
-        Process noise intensity of ω [(rad/s)² per second]; if given it replaces
-        ``q_omega`` by ``q_omega_per_second · Δt`` (rate-independent).  ``tuna2013-hrv``
-        derives it from heart-rate variability (see ``PARAMETER_SETS``).
-    q_rate_hz : float or None
-        Sample rate at which q, q_phase, q_omega were tuned [Hz].  ``None``: they are
-        per sample at the predictor's own rate.  Otherwise they are rescaled by
-        ``dt · q_rate_hz`` so that the random walks diffuse as fast per second as in
-        the paper (Yuen tuned at 28 Hz; used at 133 Hz unscaled they are 4.75× looser).
-    unit : float or None
-        Metres per data unit (1.0 for samples in m, 1e-3 for mm); ``None``: inferred.
-    """
-
-    harmonics: int = 5
-    init_seconds: float = 10.0
-    sigma_r: float = 0.3e-3
-    sigma1_sq: float = 1.0e-6
-    sigma_omega_sq: float = 0.10
-    sigma_phase_sq: float = 1e-3
-    q: float = 1e-3 * 1e-6
-    q_phase: float = 1e-3
-    q_omega: float = 5e-3
-    band_hz: tuple[float, float] = field(default=(0.6, 3.0))
-    omega_limits_hz: tuple[float, float] = field(default=(0.5, 3.5))
-    gate_probability: float | None = 1.0 - 1e-6
-    gate_seconds: float = 0.1
-    breathing_harmonics: int = 2
-    breathing_band_hz: tuple[float, float] = field(default=(0.08, 0.5))
-    q_breathing: float = 1e-5 * 1e-6
-    q_omega_breathing: float = 1e-8 * 83.3**2
-    q_omega_per_second: float | None = None
-    q_rate_hz: float | None = None
-    unit: float | None = None
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        if int(self.harmonics) != self.harmonics or self.harmonics < 1:
-            raise ValueError(f"harmonics must be a positive integer, got {self.harmonics!r}")
-        for name in ("init_seconds", "sigma_r", "sigma1_sq", "sigma_omega_sq"):
-            if not getattr(self, name) > 0.0:
-                raise ValueError(f"{name} must be > 0, got {getattr(self, name)!r}")
-        for name in (
-            "sigma_phase_sq",
-            "q",
-            "q_phase",
-            "q_omega",
-            "q_breathing",
-            "q_omega_breathing",
-        ):
-            if not getattr(self, name) >= 0.0:
-                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
-        if self.gate_probability is not None and not 0.0 < self.gate_probability < 1.0:
-            raise ValueError(
-                f"gate_probability must be in (0, 1) or None, got {self.gate_probability!r}"
-            )
-        if not self.gate_seconds > 0.0:
-            raise ValueError(f"gate_seconds must be > 0, got {self.gate_seconds!r}")
-        if self.q_rate_hz is not None and not self.q_rate_hz > 0.0:
-            raise ValueError(f"q_rate_hz must be > 0 or None, got {self.q_rate_hz!r}")
-        if self.q_omega_per_second is not None and not self.q_omega_per_second >= 0.0:
-            raise ValueError(
-                f"q_omega_per_second must be >= 0 or None, got {self.q_omega_per_second!r}"
-            )
-        if (
-            int(self.breathing_harmonics) != self.breathing_harmonics
-            or self.breathing_harmonics < 0
-        ):
-            raise ValueError(f"breathing_harmonics must be >= 0, got {self.breathing_harmonics!r}")
-        for name in ("band_hz", "omega_limits_hz", "breathing_band_hz"):
-            lo, hi = getattr(self, name)
-            if not 0.0 < lo < hi:
-                raise ValueError(f"{name} must be (low, high) with 0 < low < high [Hz]")
-
-
-MM, MM2 = 1e-3, 1e-6  # metres per millimetre, m² per mm²
-
-#: HRV magnitude used for ``tuna2013-hrv``: short-term RR coefficient of variation [-]
-#: (6 %, the variability of ``sim/variability.py``; resting humans 3–7 %), at the replicas'
-#: mean heart rate [Hz] (≈ 96 bpm; Tuna §III-B 95–152 bpm) over one ventilator breath [s]
-#: (0.17 Hz, Tuna/Richa's ventilated animals).
-HRV_CV, HRV_HEART_HZ, HRV_BREATH_S = 0.06, 1.6, 1.0 / 0.17
-#: RSA takes the rate from its trough to its peak within half a breath [s].
-HRV_RISE_S = 0.5 * HRV_BREATH_S
-#: q_ω [(rad/s)²/s] such that the random walk of ω spreads by one HRV standard deviation
-#: σ_ω = 2π·CV·f_h in the time RSA takes to swing the rate from trough to peak (half a
-#: breath): q_ω·T_b/2 = σ_ω² (≈ 0.124 (rad/s)²/s; 9.6e-4 per sample at 128.5 Hz).
-Q_OMEGA_HRV = (_TWO_PI * HRV_CV * HRV_HEART_HZ) ** 2 / HRV_RISE_S
-
-#: Parameter sets.  ``yuen2008``: Yuen et al. 2008 §III-A/D (noise study; σ_R is
-#: the 3DUS uncertainty 1.3 mm, set it to the simulated noise).  ``tuna2013``: Tuna et al.
-#: 2013 §VIII-C, tuned for the 3-D sonomicrometry tracking experiments; Tuna do not give the
-#: rate, we take it to be per sample of the 133 Hz predictor (``q_rate_hz=None``).
-#: ``tuna2013-hrv`` (the ``ekf`` default): Tuna's set with q_ω from heart-rate variability,
-#: ``Q_OMEGA_HRV`` (issue 18).  Tuna's q_ω = 5e-3 (rad/s)² per 128.5 Hz sample (0.64
-#: (rad/s)²/s, 10× the HRV value) lets the breathing residual walk ω̂ to its 0.5 Hz clamp
-#: within 3 s on fixed-a1-top and varying-a3-side; the HRV value keeps lock on all six
-#: replicas (|ω̂ − ω| RMS 2.4–3.1 bpm), and anything in 2e-4–2e-3 per sample does.
-PARAMETER_SETS: dict[str, EKFSettings] = {
-    "yuen2008": EKFSettings(
-        harmonics=8,
-        init_seconds=10.0,
-        sigma_r=1.3 * MM,
-        sigma1_sq=2.0 * MM2,
-        sigma_omega_sq=0.11,
-        sigma_phase_sq=0.02,
-        q=1e-4 * MM2,
-        q_phase=1e-4,
-        q_omega=1e-3,
-        q_rate_hz=28.0,
-        band_hz=(0.5, 2.5),
-        breathing_harmonics=0,
-        gate_probability=None,
-    ),
-    "tuna2013": EKFSettings(
-        harmonics=5,
-        init_seconds=10.0,
-        sigma_r=0.3 * MM,
-        sigma1_sq=1.0 * MM2,
-        sigma_omega_sq=0.10,
-        sigma_phase_sq=1e-3,
-        q=1e-3 * MM2,
-        q_phase=1e-3,
-        q_omega=5e-3,
-    ),
-}
-PARAMETER_SETS["tuna2013-hrv"] = EKFSettings(q_omega_per_second=Q_OMEGA_HRV)
 
 
 class FourierEKF(Predictor):
@@ -294,6 +162,11 @@ class FourierEKF(Predictor):
         self._gate = math.inf if s.gate_probability is None else chi2.ppf(s.gate_probability, d)
         self._max_reject, self._rejected = max(1, round(s.gate_seconds / self.dt)), 0
         self._r = (s.sigma_r / self.unit) ** 2
+        self._rest, self._hph = None, None
+        if s.adaptive_r or s.residual_order:
+            self._rest = NonPeriodic(d, self.dt, self._r, s.adaptive_r, s.residual_order,
+                                     s.residual_forgetting, self.unit, s.omega_limits_hz[0],
+                                     self.counts)
         self._harm = harm
         self._w_lo, self._w_hi = (_TWO_PI * f for f in s.omega_limits_hz)
         self._band_lo, self._band_hi = (_TWO_PI * f for f in s.band_hz)
@@ -389,6 +262,48 @@ class FourierEKF(Predictor):
             omega, c, r, th = initial_fourier_state(window, self.dt, s.harmonics, s.band_hz)
         x[self.ic], x[self.ir], x[self.iw], x[self.ith] = c, r, omega, th
         self.set_state(x, self.initial_covariance())
+        self._fit_omega = omega
+        if s.fit_beats:
+            self._refit_recent(window, omega)
+        if s.p0_from_fit:
+            self._covariance_from_fit(window, omega)
+        if self._rest is not None:
+            self._rest.restart()
+
+    def _heart_samples(self, window: np.ndarray, omega: float) -> int:
+        """Samples the heart series is fitted on: the last ``fit_beats`` beats, or all."""
+        beats = self.settings.fit_beats
+        n = len(window) if not beats else round(beats * _TWO_PI / (omega * self.dt))
+        return max(2 * (2 * self.settings.harmonics + 1), min(len(window), n))
+
+    def _refit_recent(self, window: np.ndarray, omega: float) -> None:
+        """c, r, θ again from the last beats of the window, its breathing fit removed."""
+        n = self._heart_samples(window, omega)
+        heart = self._c.copy(), self._rr.copy()
+        self._c[:], self._rr[:] = 0.0, 0.0
+        rest = window[-n:] - self._model(np.arange(1.0 - n, 1.0))  # the window less breathing
+        self._c[:], self._rr[:] = heart
+        c, a, b = fit_harmonics(rest, self.dt, omega, self.settings.harmonics)
+        self._c[:], self._rr[:], self._th[:] = c, np.hypot(a, b), np.arctan2(b, a)
+
+    def _covariance_from_fit(self, window: np.ndarray, omega: float) -> None:
+        """P(T|T) of c, r, θ and of the breathing a, b from the least-squares covariance
+        s²_lr·(AᵀA)⁻¹ of the window fit, s²_lr the long-run variance of its residual per axis."""
+        m, hb, P = self.settings.harmonics, self.settings.breathing_harmonics, self._Pdiag
+        res = window - self._model(np.arange(1.0 - len(window), 1.0))
+        s2 = np.maximum(long_run_variance(res), self._r)
+        series = [(omega, m)] + ([(self.x[self.iwb], hb)] if hb else [])
+        C = fit_covariance(len(window), self.dt, series)
+        va, vb = np.diag(C)[1 : m + 1], np.diag(C)[m + 1 : 2 * m + 1]
+        cab = np.diag(C, m)[1 : m + 1]
+        a, b = self._rr * np.cos(self._th), self._rr * np.sin(self._th)  # (d, m)
+        r2 = np.maximum(self._rr**2, 1e-150)  # r2² stays a normal float
+        P[self.ic] = s2 * C[0, 0]  # r = |(a, b)|, θ = atan2(b, a): first-order propagation
+        P[self.ir] = s2[:, None] * (a * a * va + 2 * a * b * cab + b * b * vb) / r2
+        P[self.ith] = np.minimum(
+            s2[:, None] * (a * a * vb - 2 * a * b * cab + b * b * va) / r2**2, math.pi**2)
+        if hb:
+            P[self.ib] = s2[:, None] * np.diag(C)[2 * m + 1 :]
 
     def _time_update(self) -> None:
         x, P, g, iw = self.x, self.P, self._g, self.iw
@@ -408,11 +323,30 @@ class FourierEKF(Predictor):
         self._Pdiag += self._q
 
     def _update(self, z: np.ndarray) -> None:
+        rest = self._rest
+        if rest is not None:
+            rest.push(z)
         if not self.ready:
             self._collect(z)
+            self._follow(learn=False)
             return
         self._window.push(z)
         self._time_update()
+        accepted = self._correct(z)
+        if accepted:
+            self._keep_lock()
+        elif rest is not None:
+            rest.reject()
+        self._follow(learn=accepted)
+
+    def _follow(self, learn: bool) -> None:
+        """The non-periodic part from the current state (:mod:`predictors.nonperiodic`)."""
+        if self._rest is not None and self.ready:
+            self._rest.follow(self._model, self.x[self.iw], self._hph, learn)
+
+
+    def _correct(self, z: np.ndarray) -> bool:
+        """The EKF correction with sample z; False if the gate rejected it or S is not SPD."""
         x, P, H = self.x, self.P, self._H
         sin = np.sin(self._th)
         self._H_r[:] = sin
@@ -429,17 +363,18 @@ class FourierEKF(Predictor):
             nu -= a @ sb + b @ cb
         PHt = P @ H.T
         S = H @ PHt
-        S.flat[:: self.d + 1] += self._r
+        self._hph = S.diagonal().copy()
+        S.flat[:: self.d + 1] += self._r if self._rest is None else self._rest.r
         Sinv = spd_inverse(S)
         if Sinv is None:
             self._restart()
-            return
+            return False
         Sinv_nu = Sinv @ nu
         self.nis = float(nu @ Sinv_nu)
         if self.nis > self._gate and self._rejected < self._max_reject:
             self.counts["innovation_rejected"] += 1
             self._rejected += 1
-            return
+            return False
         self._rejected = 0
         K = PHt @ Sinv
         x += PHt @ Sinv_nu
@@ -447,7 +382,12 @@ class FourierEKF(Predictor):
         P += P.T
         P *= 0.5
         wrap_phase(x[self.iw + 1 :])
-        if hb.size and not self._wb_lo <= x[self.iwb] <= self._wb_hi:
+        return True
+
+    def _keep_lock(self) -> None:
+        """Clamp ω̂_b and ω̂; re-fit when ω̂ left its band or locked on ω/2 (module docstring)."""
+        x = self.x
+        if self._hb.size and not self._wb_lo <= x[self.iwb] <= self._wb_hi:
             self.counts["breathing_clamped"] += 1
             x[self.iwb] = min(max(x[self.iwb], self._wb_lo), self._wb_hi)
         w = x[self.iw]
@@ -457,12 +397,17 @@ class FourierEKF(Predictor):
         if not self._w_lo <= w <= self._w_hi:
             self.counts["omega_clamped"] += 1
             x[self.iw] = min(max(w, self._w_lo), self._w_hi)
-        elif self._band_lo <= w <= self._band_hi and not self._subharmonic():
+        elif self._band_lo <= w <= self._band_hi and not self._subharmonic() and self._near_fit(w):
             return
         if self._window.usable():  # lost lock: ω̂ clamped, outside the FFT's band, or on ω/2
             self.counts["lock_refit"] += 1
             self._rejected = 0
             self._initialise()
+
+    def _near_fit(self, w: float) -> bool:
+        """ω̂ within [ω_fit/b, ω_fit·b] of the rate of the last fit (``rate_band`` b)."""
+        b = self.settings.rate_band
+        return b is None or self._fit_omega / b <= w <= self._fit_omega * b
 
     def _subharmonic(self) -> bool:
         """P₂ > P₁ (module docstring), once the window is all new since the last fit."""
@@ -487,9 +432,13 @@ class FourierEKF(Predictor):
             self._time_update()
         else:
             self._collect(np.nan)
+        if self._rest is not None:
+            self._rest.push(np.nan)
+            self._follow(learn=False)
 
-    def _predict(self, steps: int) -> np.ndarray:
-        k = np.arange(1.0, steps + 1.0)[:, None, None]
+    def _model(self, k: np.ndarray) -> np.ndarray:
+        """The Fourier model (eq. 2 with breathing) k samples ahead of the state, (len(k), d)."""
+        k = np.asarray(k, dtype=float)[:, None, None]
         th = self._th[None] + (self._harm * (self.x[self.iw] * self.dt)) * k
         out = self._c[None, :] + (self._rr[None] * np.sin(th)).sum(axis=2)
         hb = self._hb
@@ -497,3 +446,9 @@ class FourierEKF(Predictor):
             ph = np.multiply.outer(self.x[self.itb] + self.x[self.iwb] * self.dt * k[:, 0, 0], hb)
             out += np.sin(ph) @ self._ab[:, : hb.size].T + np.cos(ph) @ self._ab[:, hb.size :].T
         return out
+
+    def _predict(self, steps: int) -> np.ndarray:
+        if self._rest is None:
+            return self._model(np.arange(1.0, steps + 1.0))
+        y = self._model(np.arange(0.0, steps + 1.0))  # ŷ_{n+k|n} + ê_{n+k|n}
+        return y[1:] + self._rest.forecast(np.diff(y, axis=0))

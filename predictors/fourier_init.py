@@ -16,7 +16,7 @@
    both sums, as Richa et al. 2010 eq. 1).
 
 The Fourier EKFs keep the last window of samples (:class:`FitWindow`) after the fit and fit
-it again when their rate estimate leaves the band the FFT searched (issue 18, ``lock_refit``);
+it again when their rate estimate leaves the band the FFT searched (``lock_refit``);
 :func:`wrap_phase` and :func:`spd_inverse` are their shared numerics.
 """
 
@@ -66,6 +66,11 @@ class FitWindow:
     def usable(self) -> bool:
         """Full, and ≥ 80 % of the rows finite."""
         return self.full and np.isfinite(self.samples).all(axis=1).mean() >= 0.8
+
+    def newest(self, k: int) -> np.ndarray:
+        """The newest ``k`` ≤ n samples, newest first (k, d)."""
+        n = self.samples.shape[0]
+        return self.samples[(self.count - 1 - np.arange(k)) % n]
 
     def oldest_first(self) -> np.ndarray:
         """A copy of the window in time order (n, d)."""
@@ -134,9 +139,9 @@ def fundamental_frequency(
     if 0 < k < power.size - 1 and np.all(power[k - 1 : k + 2] > 0):
         la, lb, lc = np.log(power[k - 1 : k + 2])
         den = la - 2 * lb + lc
-        if den < 0:
-            fk += 0.5 * (la - lc) / den * (f[1] - f[0])
-    return 2 * np.pi * float(fk)
+        if den < 0:  # the vertex, within half a bin (at a band edge the peak may lie outside)
+            fk += min(max(0.5 * (la - lc) / den, -0.5), 0.5) * (f[1] - f[0])
+    return 2 * np.pi * float(min(max(fk, band_hz[0]), band_hz[1]))
 
 
 def fit_fourier(
@@ -221,3 +226,16 @@ def initial_dual_state(
     omega = fundamental_frequency(heart_only, dt, band_hz)
     c, [(ah, bh), (a, b)] = fit_fourier(x, dt, [(omega, m), (omega_b, breathing_harmonics)])
     return omega, c, np.hypot(ah, bh), np.arctan2(bh, ah), omega_b, a, b
+
+
+def fit_covariance(n: int, dt: float, series: list[tuple[float, int]]) -> np.ndarray:
+    """(AᵀA)⁻¹ of the design of :func:`fit_fourier` for ``n`` samples (t = 0 at the newest):
+    columns [1, sin iω₁t (i ≤ m₁), cos iω₁t, sin iω₂t, …]; × a residual variance it is the
+    least-squares covariance of [c₀, a, b, …]."""
+    t = (np.arange(n) - (n - 1)) * dt
+    cols = [np.ones((n, 1))]
+    for omega, m in series:
+        ph = np.outer(t, np.arange(1, m + 1) * omega)
+        cols += [np.sin(ph), np.cos(ph)]
+    A = np.hstack(cols)
+    return np.linalg.pinv(A.T @ A)

@@ -19,9 +19,11 @@ import numpy as np
 
 __all__ = ["LeadErrorRMS", "RangeEnvelope", "infer_unit"]
 
-#: typical peak-to-peak heart-surface motion [m]: ≈ 10 mm (Tuna 2013 §VIII: 5–15 mm;
-#: Yuen 2008: mitral annulus ≈ 10–15 mm)
-TYPICAL_RANGE_M = 10e-3
+#: typical range of heart-surface motion within the inference window (0.5 s, less than a
+#: beat) [m]: ≈ 2 mm, between a quiet diastasis (0.2 mm at 50 beats/min in the in-vivo regime)
+#: and a systole (6–9 mm on the Tuna replicas, whose whole motion spans 5–15 mm, Tuna 2013
+#: §VIII); ranges of 0.06–63 mm are then read as metres
+TYPICAL_RANGE_M = 2e-3
 #: typical distance of a sample from the origin when it does not move [m]
 TYPICAL_POSITION_M = 0.1
 
@@ -30,8 +32,8 @@ def infer_unit(window: np.ndarray) -> float:
     """Metres per data unit, 1000^−k, for samples ``window`` (T, d) (NaN rows ignored).
 
     k = round(log₁₀₀₀(r / r₀)) with r the largest per-axis peak-to-peak range and
-    r₀ = :data:`TYPICAL_RANGE_M` (10 mm): a range between 0.3 mm and 0.3 m is read as
-    metres, 0.3 mm–0.3 m ×1000 as mm, and so on.  A window that does not move is
+    r₀ = :data:`TYPICAL_RANGE_M` (2 mm): a range between 0.063 mm and 63 mm is read as
+    metres, 0.063–63 m as millimetres (×1000), and so on.  A window that does not move is
     judged by its largest magnitude against :data:`TYPICAL_POSITION_M`; all zeros → 1.
     """
     x = np.asarray(window, dtype=float)

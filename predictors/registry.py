@@ -32,8 +32,9 @@ PREDICTORS: dict[str, tuple[type[Predictor], dict[str, Any]]] = {
     "exact": (Oracle, {}),
 }
 
-#: the ``ekf`` parameter set used when ``params`` is not given
-DEFAULT_PARAMS = {"ekf": "tuna2013-hrv"}
+#: the parameter set used when ``params`` is not given
+DEFAULT_PARAMS = {"ekf": "adaptive", "dual-ekf": "adaptive", "wflc": "adaptive",
+                  "last-cycle": "anchored"}
 
 
 def settings_for(name: str, **settings: Any):
@@ -65,9 +66,11 @@ def settings_for(name: str, **settings: Any):
 def make_predictor(name: str, dt: float, **settings: Any) -> Predictor:
     """Build the predictor ``name`` running at period ``dt`` [s] with ``settings``.
 
-    Unknown names and settings raise ``ValueError`` listing the valid ones.  ``ekf``
-    takes ``params="tuna2013-hrv"`` (default: Tuna's set, q_ω from HRV), ``"tuna2013"``
-    or ``"yuen2008"``; other settings override it.
+    Unknown names and settings raise ``ValueError`` listing the valid ones.  A predictor with
+    parameter sets takes ``params=`` one of its class's ``PRESETS`` (``ekf``: ``"adaptive"``,
+    the default, ``"tuna2013-hrv"``, ``"tuna2013"``, ``"yuen2008"``; ``dual-ekf``: ``"adaptive"``,
+    ``"fitted"``, ``"richa2010"``; ``wflc``: ``"adaptive"``, ``"pll"``, ``"yuen2009"``;
+    ``last-cycle``: ``"anchored"``, ``"yuen2008"``); other settings override it.
     """
     cls = PREDICTORS[name][0] if name in PREDICTORS else None
     s = settings_for(name, **settings)

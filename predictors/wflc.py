@@ -10,7 +10,7 @@ Model with accumulated phase ψ_k = Σ_{t≤k} ω₀,t (ω₀ in rad/sample), pe
 One frequency is shared by the axes (their frequency gradients add).  Forecast k
 steps: ψ + kω₀ in the model.  Initialised like the EKF (Yuen): FFT + least squares
 on the first ``init_seconds`` (ψ = 0 at the newest sample); until then the forecast
-holds the newest sample.  A missing sample advances ψ only.
+holds the newest sample.  A missing sample advances ψ and ψ_b only.
 
 Parameters (Yuen et al. 2009): m = 8, μ₀ = 7e-6, μ₁ = 0.03, tuned at 28 Hz on data in
 mm.  μ₀ multiplies ε·w (mm²), so it is stored in SI as 7e-6 rad/mm² = 7 rad/m² per
@@ -21,7 +21,7 @@ gains adapt faster per second (more updates, and ω₀ in rad/sample), so with
 within seconds on fixed-a2-top.)  μ_b is not rescaled: the offset weight is what follows
 breathing (time constant 1/(2μ_b) ≈ 17 samples).
 
-Phase-locked loop (ours, issue 18; ``loop="pll"``, the default).  With physiological
+Phase-locked loop (ours; ``loop="pll"``).  With physiological
 heart-rate variability (RSA swings the rate by several bpm within one 4–6 s breath) the
 μ₀ gradient is too slow: on fixed-a2-top ω̂ lagged by up to 14 bpm and the 23 ms forecast
 (1.72 mm) lost to ``hold`` (0.87 mm).  ψ and ω₀ are instead driven by a normalised phase
@@ -37,11 +37,11 @@ ed., 2005, ch. 2–4; the PLL view of the WFLC's frequency adaptation):
 is independent of the data unit and, with ω_n in Hz, of the sample rate.  j =
 ``pll_harmonics`` = 1: the fundamental only, as ``frequency_harmonics`` for μ₀.  ω_n =
 2π·0.5 Hz, ζ = 1/√2: measured on the six replicas (ω_n = 0.3 Hz lags the RSA, 0.8 Hz
-follows beat-to-beat waveform changes; docs/notes/issue-18.md).  δ_max = 1 rad bounds the
+follows beat-to-beat waveform changes).  δ_max = 1 rad bounds the
 step an echo outlier can make (0.5 rad is worse on the replicas).  A ±10 bpm step is a
 phase ramp, which a type-2 loop follows with no steady-state error, so ω̂ cannot run away.
 
-Respiration (ours, issue 18; Richa et al. 2010 eq. 1, the model the EKF also carries):
+Respiration (ours; Richa et al. 2010 eq. 1, the model the EKF also carries):
 ``breathing_harmonics`` = H_b = 2 terms Σ_h a_{a,h} sin hψ_b + b_{a,h} cos hψ_b with their
 own accumulated phase ψ_b, initialised with the heart series (FFT in the breathing band,
 joint least squares, :func:`predictors.fourier_init.initial_dual_state`), adapted by LMS
@@ -50,6 +50,26 @@ with μ₁ and a slow loop (P1–P3 on ψ_b, ω_n = 2π·0.02 Hz) clamped to
 of 1/(2μ_b) samples, was the largest error even with the true heart phase given (0.74 mm,
 oracle test, fixed-a2-top).  With breathing modelled the offset only follows drift:
 μ_b = 0.01 (Riviere's 0.03 is worse: it absorbs heartbeat error).
+
+Motion that is not periodic (``adaptive``, the default parameter set).  In vivo (the
+``invivo-video`` regime, 50 beats/min, beats differing in shape and amplitude) the weights,
+adapting within a beat (1/(2μ₁) = 17 samples at 28 Hz), chase each beat's deviations, and a
+0.5 Hz loop — 60 % of the heart rate — turns them into rate swings (204 clamps at the 0.6 Hz
+floor in 60 s): 1.69 / 1.10 / 0.89 × hold's error at 1 / 3 / 5 samples (25 Hz, 60 s, seed 2).
+Sized to the heart rate instead:
+
+* ``loop_ratio`` = 0.3: ω_n = 0.3 ω̂₀, the replicas' 0.5 Hz at their 1.6 Hz (0.25 Hz in vivo);
+* ``weight_beats`` = 2: μ₁ = ω̂₀Δt/(8π), the weights' time constant two beats, over which
+  beat-to-beat deviations average out (1 beat: 0.80 / 0.91 / 0.79 in vivo; 3 beats: fixed-a2-top
+  0.24 / 0.16 / 0.15 instead of 0.25 / 0.15 / 0.13);
+* ``residual_order`` = 16: the AR model of the residual of :mod:`predictors.nonperiodic`
+  (without R: the WFLC has none) adds to the forecast, which starts from the newest sample.
+
+All three: 0.68 / 0.76 / 0.70 in vivo (seeds 1–7: at most 0.84 at 3 samples), the replicas
+0.20–0.24 / 0.14–0.16 / 0.13–0.15 (``pll`` 0.25–0.32 / 0.15–0.19 / 0.13–0.17), the 128 Hz
+sonomicrometry stream of fixed-a2-top 0.26 (0.55), all at 3 samples.  The residual alone
+leaves the in-vivo forecast at 1.06 / 1.07 / 0.88, the sizing alone at 2.01 / 0.94 / 0.73
+(ratio 0.15, 3 beats).
 
 ``loop="gradient"`` with ``breathing_harmonics=0`` keeps the previous update: the μ₀
 gradient on the fundamental plus the phase-locked correction ω₀ += κΔφ (Δφ the rotation
@@ -69,6 +89,7 @@ import numpy as np
 
 from predictors.base import Predictor, PredictorSettings
 from predictors.fourier_init import initial_dual_state, initial_fourier_state
+from predictors.nonperiodic import NonPeriodic
 
 __all__ = ["WFLC", "WFLCSettings"]
 
@@ -94,7 +115,7 @@ def _phase_detector(eps: np.ndarray, sin_w: np.ndarray, cos_w: np.ndarray, sn: n
 
 @dataclass(frozen=True)
 class WFLCSettings(PredictorSettings):
-    """WFLC settings (m, μ₀, μ₁: Yuen et al. 2009; loop, respiration, μ_b: ours, issue 18).
+    """WFLC settings (m, μ₀, μ₁: Yuen et al. 2009; loop, respiration, μ_b: ours).
 
     Attributes
     ----------
@@ -140,6 +161,16 @@ class WFLCSettings(PredictorSettings):
         Respiratory band [Hz]: FFT search and clamp of ω_b.
     breathing_natural_hz : float
         Natural frequency of the respiratory-phase loop [Hz].
+    loop_ratio : float or None
+        Heart-phase loop natural frequency as a fraction of the heart rate, ω_n = ratio·ω̂₀
+        (``loop="pll"``); ``None``: ``pll_natural_hz``.
+    weight_beats : float or None
+        μ₁ such that the weights' LMS time constant 1/(2μ₁) lasts this many beats at ω̂₀:
+        μ₁ = ω̂₀Δt/(4π·beats); ``None``: ``mu1``.
+    residual_order : int
+        p of the autoregression of the residual (:mod:`predictors.residual`); 0: none.
+    residual_forgetting : float
+        λ of its RLS [-].
     unit : float or None
         Metres per data unit; ``None``: inferred from the data (see ``predictors.base``).
     """
@@ -164,6 +195,10 @@ class WFLCSettings(PredictorSettings):
     breathing_harmonics: int = 2
     breathing_band_hz: tuple[float, float] = (0.08, 0.5)
     breathing_natural_hz: float = 0.02
+    loop_ratio: float | None = None
+    weight_beats: float | None = None
+    residual_order: int = 0
+    residual_forgetting: float = 0.999
     unit: float | None = None
 
     def __post_init__(self) -> None:
@@ -187,26 +222,36 @@ class WFLCSettings(PredictorSettings):
         for name in ("init_seconds",):
             if not getattr(self, name) > 0.0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)!r}")
+        for name in ("loop_ratio", "weight_beats"):
+            v = getattr(self, name)
+            if v is not None and not v > 0.0:
+                raise ValueError(f"{name} must be > 0 or None, got {v!r}")
+        if int(self.residual_order) != self.residual_order or self.residual_order < 0:
+            raise ValueError(f"residual_order must be an integer >= 0, got {self.residual_order!r}")
 
     @classmethod
     def yuen2009(cls, **overrides) -> WFLCSettings:
-        """Yuen et al. 2009's WFLC, as rhmpc ran it before issue 18 (the 28 Hz studies).
+        """Yuen et al. 2009's WFLC (the 28 Hz studies).
 
         The μ₀ gradient frequency update with the κ phase-locked correction
         (``loop="gradient"``), no respiratory series (Yuen's 1-D mitral signal has no
         breathing) and Riviere's offset gain μ_b = 0.03; m, μ₀, μ₁ are Yuen's.  At 28 Hz and
         σ_R = 1.3 mm it gives 0.85 mm at ΔHR = 0 in the hr-step study, where the PLL's
         fixed 0.5 Hz bandwidth passes the phase detector's noise (2.16 mm).  The default
-        (``loop="pll"`` with breathing) is for 3-D motion with breathing (issue 18).
+        (``loop="pll"`` with breathing) is for 3-D motion with breathing.
         """
         base = {"loop": "gradient", "breathing_harmonics": 0, "mu_bias": 0.03}
         return cls(**{**base, **overrides})
 
 
-#: Named settings for ``make_predictor("wflc", dt, params=...)``; the default is the PLL.
+#: Named settings for ``make_predictor("wflc", dt, params=...)``: ``yuen2009`` (Yuen's
+#: algorithm), ``pll`` (the phase-locked loop at a fixed 0.5 Hz with respiration) and
+#: ``adaptive`` (the default: ``pll`` with the loop and the weights sized to the heart rate and
+#: the residual's AR(16); module docstring, "Motion that is not periodic").
 PARAMETER_SETS: dict[str, WFLCSettings] = {
     "pll": WFLCSettings(),
     "yuen2009": WFLCSettings.yuen2009(),
+    "adaptive": WFLCSettings(loop_ratio=0.3, weight_beats=2.0, residual_order=16),
 }
 
 
@@ -244,6 +289,10 @@ class WFLC(Predictor):
         wn = 2 * math.pi * s.pll_natural_hz * self.dt  # ω_n [rad/sample]
         self._kp, self._ki = 2 * s.pll_damping * wn, wn * wn
         self.phase_error = 0.0  # δ of the last update [rad]
+        self._rest = None
+        if s.residual_order:
+            self._rest = NonPeriodic(d, self.dt, 0.0, False, s.residual_order,
+                                     s.residual_forgetting, self.unit, s.band_hz[0], self.counts)
         if s.offset_natural_hz is None:
             self._kb1, self._kb2 = 2 * s.mu_bias, 0.0
         else:
@@ -287,13 +336,32 @@ class WFLC(Predictor):
         self.ready = True
 
     def _update(self, z: np.ndarray) -> None:
+        if self._rest is not None:
+            self._rest.push(z)
         if not self.ready:
             self._window[self._filled % self.n_init] = z
             self._filled += 1
             if self._filled >= self.n_init:
                 self._initialise()
+            self._follow(learn=False)
             return
+        self._adapt(z)
+        self._follow(learn=True)
+
+    def _follow(self, learn: bool) -> None:
+        """The residual of the current weights and phases (:mod:`predictors.nonperiodic`)."""
+        if self._rest is not None and self.ready:
+            self._rest.follow(self._model, self.omega0 / self.dt, None, learn)
+
+    def _mu1_now(self) -> float:
+        """μ₁: fixed, or ``weight_beats`` beats of LMS memory at ω̂₀."""
+        beats = self.settings.weight_beats
+        return self._mu1 if beats is None else self.omega0 / (4 * math.pi * beats)
+
+    def _adapt(self, z: np.ndarray) -> None:
+        """One WFLC step with sample z (module docstring)."""
         s, m = self.settings, self.settings.harmonics
+        mu1 = self._mu1_now()
         self.psi = math.remainder(self.psi + self.omega0, 2 * math.pi)
         self.bias += self.bias_rate
         ph = self._r * self.psi
@@ -308,11 +376,11 @@ class WFLC(Predictor):
             eps -= self.wb @ xb
             if s.loop == "pll":
                 self._breathing_pll(eps, xb)
-            self.wb += (2 * self._mu1) * np.multiply.outer(eps, xb)
+            self.wb += (2 * mu1) * np.multiply.outer(eps, xb)
         if s.loop == "pll":
             self._pll(eps, sn, cs)
-            ws += (2 * self._mu1) * np.multiply.outer(eps, sn)
-            wc += (2 * self._mu1) * np.multiply.outer(eps, cs)
+            ws += (2 * mu1) * np.multiply.outer(eps, sn)
+            wc += (2 * mu1) * np.multiply.outer(eps, cs)
             self.bias += self._kb1 * eps
             self.bias_rate += self._kb2 * eps
             return
@@ -324,8 +392,8 @@ class WFLC(Predictor):
             self.counts["omega_clamped"] += 1
             w0 = min(max(w0, self._lo), self._hi) if math.isfinite(w0) else self.omega0
         self.omega0 = w0
-        ws += (2 * self._mu1) * np.multiply.outer(eps, sn)
-        wc += (2 * self._mu1) * np.multiply.outer(eps, cs)
+        ws += (2 * mu1) * np.multiply.outer(eps, sn)
+        wc += (2 * mu1) * np.multiply.outer(eps, cs)
         self.bias += (2 * s.mu_bias) * eps
         if self._kappa:  # phase-locked correction: the rotation the weights made, Δφ
             w2 = self.w[:, [0, m]]
@@ -342,8 +410,12 @@ class WFLC(Predictor):
         if delta is None:
             return
         self.phase_error = delta
-        self.psi = math.remainder(self.psi + self._kp * delta, 2 * math.pi)
-        w0 = self.omega0 + self._ki * delta
+        kp, ki = self._kp, self._ki
+        if self.settings.loop_ratio is not None:  # ω_n = ratio·ω̂₀ [rad/sample]
+            wn = self.settings.loop_ratio * self.omega0
+            kp, ki = 2 * self.settings.pll_damping * wn, wn * wn
+        self.psi = math.remainder(self.psi + kp * delta, 2 * math.pi)
+        w0 = self.omega0 + ki * delta
         if not self._lo <= w0 <= self._hi:
             self.counts["omega_clamped"] += 1
             w0 = min(max(w0, self._lo), self._hi)
@@ -367,18 +439,29 @@ class WFLC(Predictor):
         if self.ready:
             self.psi = math.remainder(self.psi + self.omega0, 2 * math.pi)
             self.bias += self.bias_rate
+            if self._rb.size:
+                self.psi_b = math.remainder(self.psi_b + self.omega_b, 2 * math.pi)
         else:
             self._window[self._filled % self.n_init] = np.nan
             self._filled += 1
+        if self._rest is not None:
+            self._rest.push(np.nan)
+            self._follow(learn=False)
 
-    def _predict(self, steps: int) -> np.ndarray:
-        m = self.settings.harmonics
-        ph = np.multiply.outer(self.psi + self.omega0 * np.arange(1.0, steps + 1.0), self._r)
-        trend = self.bias + np.multiply.outer(np.arange(1.0, steps + 1.0), self.bias_rate)
+    def _model(self, k: np.ndarray) -> np.ndarray:
+        """ŷ k samples ahead of the newest (any k, past ones negative), (len(k), d)."""
+        m, k = self.settings.harmonics, np.asarray(k, dtype=float)
+        ph = np.multiply.outer(self.psi + self.omega0 * k, self._r)
+        trend = self.bias + np.multiply.outer(k, self.bias_rate)
         out = np.sin(ph) @ self.w[:, :m].T + np.cos(ph) @ self.w[:, m:].T + trend
         hb = self._rb.size
         if hb:
-            k = np.arange(1.0, steps + 1.0)
             phb = np.multiply.outer(self.psi_b + self.omega_b * k, self._rb)
             out += np.sin(phb) @ self.wb[:, :hb].T + np.cos(phb) @ self.wb[:, hb:].T
         return out
+
+    def _predict(self, steps: int) -> np.ndarray:
+        if self._rest is None:
+            return self._model(np.arange(1.0, steps + 1.0))
+        y = self._model(np.arange(0.0, steps + 1.0))  # ŷ_{n+k|n} + ê_{n+k|n}
+        return y[1:] + self._rest.forecast(np.diff(y, axis=0))

@@ -22,6 +22,7 @@ import numpy as np
 from rhmpc.errors import UsageError
 from sim.heart import DEFAULT_SCENARIO, SCENARIOS, SPECS, make_scenario
 from sim.heart.analysis import fill_gaps, motion_stats, predictability, psd
+from sim.heart.invivo import source_statistics, statistics_table
 from sim.heart.motion import MotionSource
 from sim.heart.scenarios import DEFAULT_SEED, missing_data
 from sim.recordings import export_source, load_recording, parse_indices, save_recording
@@ -176,14 +177,19 @@ def _list(args: argparse.Namespace) -> int:
         print(f"{r['name']:<16} {r['dim']:>3} {r['sensor_rate_hz']:>6g} {r['duration_s']:>6g} "
               f"{r['peak_to_peak_mm']:>7.2f} {r['target_peak_to_peak_mm']:>9.2f} "
               f"{r['rms_mm']:>6.2f} {rms_t:>9} {hr_text:>12} {_pred_text(r):>8}")
-    print("All scenarios are synthetic replicas calibrated to the papers' reported statistics.")
+    print("All scenarios are synthetic, calibrated to the papers' reported statistics "
+          "(invivo-video: to an in-vivo recording's).")
     print("predict.: one-step RLS / hold RMS error 120 ms (3 samples) ahead at 25 Hz on the "
           "noise-free motion (line spectrum ≈ 0; mechanical phantom ≈ 0.12; in-vivo ≈ 0.69).")
     return 0
 
 
 def _show(args: argparse.Namespace) -> int:
-    row = _stats_row(_target(args.name, args))
+    target = _target(args.name, args)
+    row = _stats_row(target)
+    invivo = args.name in SPECS and SPECS[args.name].heart == "invivo"
+    if invivo:  # the in-vivo regime beside the recording it was built from
+        row["regime"] = source_statistics(target.source, target.duration)
     if args.json:
         print(json.dumps(row, indent=2))
         return 0
@@ -203,6 +209,9 @@ def _show(args: argparse.Namespace) -> int:
         print(f"  missing samples   {100 * row['missing_fraction']:.2f} %")
     print(f"  predictability    {_pred_text(row)} (one-step RLS / hold RMS error, 120 ms ahead "
           "at 25 Hz; phantom ≈ 0.12, in-vivo heart ≈ 0.69)")
+    if invivo:
+        print("  the in-vivo recording's statistics (sim.heart.invivo, sampled at 25 Hz):")
+        print("\n".join(statistics_table(row["regime"])))
     return 0
 
 

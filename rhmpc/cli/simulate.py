@@ -31,7 +31,8 @@ def add_run_options(
     p.add_argument("--config", metavar="FILE.toml", help="every setting of the run (TOML)")
     p.add_argument("--robot", help="robot name (rhmpc robots); default phantom")
     p.add_argument("--sensor", help="sonomicrometry (default; the instrument from its "
-                   "physics), white (additive white noise), ultrasound, ideal; 'recorded' uses a "
+                   "physics), white (additive white noise), ultrasound, video (stereo video "
+                   "tracking, 25 Hz), ideal; 'recorded' uses a "
                    "--data file's samples as they are. Settings: --set sensor_settings.KEY=VALUE "
                    "(e.g. playback=\"offline\", noise=5e-5 for white, crystals=6)")
     p.add_argument("--duration", type=float,

@@ -11,7 +11,8 @@
              the package), the analogue of Yuen's Table I.
 ``horizon``  RMS error versus lead time (Tuna Fig. 8) for sonomicrometry replicas sampled at
              the MPC's predictor period 7.5 ms (σ = 0.25 mm/√3 per axis, no echo outliers),
-             40 s of warm-up (the EKF needs 10 s) and 20 s of evaluation.
+             40 s of warm-up (the EKF needs 10 s) and 20 s of evaluation; by default two
+             replicas and the in-vivo regime (its motion through the same sensor).
 
 Each trial draws its scenario phase and its noise from its own generator, spawned from
 the study seed (``SeedSequence(seed).spawn``); every predictor and every parameter value of
@@ -21,8 +22,9 @@ not sampling noise.  Errors are Euclidean norms, reported in millimetres.
 EKF parameters follow Yuen: ``yuen2008`` with σ_R set to the simulated noise; in ``hr-step``
 and ``rr`` q_ω = 5e-3 (rad/s)² and σ_ω² = 1 (rad/s)² (Yuen §III-D).  The RLS predictors run
 with order N = 30 at 28 Hz (Tuna Figs 12–13 compare them at the AR filter's order 30; their
-133 Hz orders 16/10 span too short a history at 28 Hz).  ``last-cycle`` is synchronised on
-the beat times of the simulated heart (Yuen and Bebek synchronise it on the ECG).
+133 Hz orders 16/10 span too short a history at 28 Hz).  ``last-cycle`` is Yuen's
+(``params="yuen2008"``), synchronised on the beat times of the simulated heart (Yuen and
+Bebek synchronise it on the ECG).
 ``wflc`` runs Yuen's algorithm (``params="yuen2009"``, :meth:`predictors.wflc.WFLCSettings.
 yuen2009`: the μ₀ gradient frequency update, no respiratory series), not the 3-D default's
 phase-locked loop, whose 0.5 Hz bandwidth passes the noise at 28 Hz and σ_R = 1.3 mm.  In
@@ -113,7 +115,7 @@ class StudySettings:
     delta_bpm: tuple[float, ...] = (-10.0, -6.0, -2.0, 0.0, 2.0, 6.0, 10.0)
     sigma_mm: float = 1.3
     records: tuple[str, ...] = ()
-    scenarios: tuple[str, ...] = ("fixed-a2-top", "varying-a3-top")
+    scenarios: tuple[str, ...] = ("fixed-a2-top", "varying-a3-top", "invivo-video")
     paper: str = "yuen2008"
 
     def __post_init__(self) -> None:
@@ -157,7 +159,7 @@ def _yuen_predictor(
     if name in ("one-step", "generalized"):
         return make_predictor(name, dt, order=ORDER_28HZ)
     if name == "last-cycle":
-        return make_predictor(name, dt, beat_times=tuple(beats), t0=t0)
+        return make_predictor(name, dt, params="yuen2008", beat_times=tuple(beats), t0=t0)
     if name == "wflc":  # Yuen's gradient WFLC; the PLL default is for 3-D with breathing
         return make_predictor(name, dt, params="yuen2009")
     return make_predictor(name, dt)

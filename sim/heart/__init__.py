@@ -8,6 +8,9 @@
 ``variability``     physiological variability (HRV with RSA, beat-to-beat stroke and
                     timing, breath period and depth, drift, breathing–heartbeat coupling)
 ``arrhythmia``      an annotated real rhythm with premature-beat strokes
+``invivo``          the in-vivo regime: breathing-dominated motion with beat-to-beat changes
+                    of shape, amplitude and timing, built from a recording's statistics
+``specs``           what the papers report for each replicated data set
 ``scenarios``       the named replicas of the papers' data sets and their calibration
 ``analysis``        peak-to-peak, RMS, spectra, predictability
 ==================  ==============================================================

@@ -12,7 +12,7 @@ max_d (max_t p_d − min_t p_d); RMS is the 3-D RMS about the mean √(mean_t �
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, fields, replace
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +22,7 @@ from sim.heart.arrhythmia import (
     premature_stroke,
     record_beats,
 )
+from sim.heart.invivo import InVivoSettings, invivo_motion
 from sim.heart.motion import (
     EPICARDIAL_BUMPS,
     MITRAL_BUMPS,
@@ -38,6 +39,16 @@ from sim.heart.rr import (
     constant_phase,
     staircase_phase,
 )
+from sim.heart.specs import (
+    DEFAULT_SCENARIO,
+    DEFAULT_SEED,
+    NEEDS_DATA,
+    SCENARIOS,
+    SPECS,
+    ScenarioSpec,
+    available_scenarios,
+    missing_data,
+)
 from sim.heart.variability import (
     VariabilitySettings,
     ar1,
@@ -47,125 +58,9 @@ from sim.heart.variability import (
     smooth_knots,
 )
 
-#: The seed used when :func:`make_scenario` is given no generator, so that a named replica is
-#: the same everywhere unless a caller asks for another draw.
-DEFAULT_SEED = 20130201
-
-
-@dataclass(frozen=True)
-class ScenarioSpec:
-    """What a named scenario replicates (the values reported by the paper) and its shape.
-
-    Attributes
-    ----------
-    name : str
-        Scenario name.
-    description : str
-        One line: what it replicates and which values are assumed.
-    peak_to_peak : float
-        Target largest per-axis peak-to-peak amplitude [m].
-    rms : float or None
-        Target 3-D RMS about the mean [m]; None keeps the shape's own ratio.
-    sensor_rate : float
-        Sample rate of the recording/sensor [Hz].
-    duration : float
-        Duration [s].
-    heart : str
-        ``"constant"`` or ``"staircase"``.
-    heart_rate : float
-        Heart rate for ``"constant"`` [Hz] (the first staircase level otherwise).
-    site : str
-        ``"top"``, ``"side"`` (epicardial, 3-D) or ``"mitral"`` (1-D).
-    reported : tuple of str
-        Which of ``peak_to_peak``, ``rms``, ``heart_rate``, ``sensor_rate``, ``duration`` come
-        from the paper (the rest are assumptions).
-    record : str or None
-        For ``heart="record"``: the PhysioNet record (relative to the shared data folder) whose
-        annotated beats drive the heart phase.
-    record_start : float
-        Time in the record where the scenario starts [s].
-    variable : bool
-        Whether the default is the physiological variability of :mod:`sim.heart.variability`
-        (True) or the periodic replica (False).
-    """
-
-    name: str
-    description: str
-    peak_to_peak: float
-    rms: float | None
-    sensor_rate: float
-    duration: float
-    heart: str
-    heart_rate: float
-    site: str
-    reported: tuple[str, ...] = field(default=())
-    record: str | None = None
-    record_start: float = 0.0
-    variable: bool = True
-
-
-_SPECS: tuple[ScenarioSpec, ...] = (
-    ScenarioSpec(
-        "fixed-a1-top", "Tuna et al. animal 1, crystal on top, constant heart rate (replica; "
-        "heart rate 95 bpm assumed)", 12.19e-3, None, 404.0, 235.0,
-        "constant", 1.58, "top", ("peak_to_peak", "sensor_rate", "duration")),
-    ScenarioSpec(
-        "fixed-a2-top", "Tuna et al. animal 2, crystal on top, constant 100 bpm (replica of "
-        "§III-B: p-p 8.39 mm, RMS 3.55 mm)", 8.39e-3, 3.55e-3, 257.0, 472.0, "constant",
-        100.0 / 60.0, "top", ("peak_to_peak", "rms", "heart_rate", "sensor_rate", "duration")),
-    ScenarioSpec(
-        "varying-a1-top", "Tuna et al. animal 1, crystal on top, pacemaker staircase 95–152 bpm "
-        "(replica)", 13.75e-3, None, 404.0, 251.0,
-        "staircase", 1.58, "top", ("peak_to_peak", "heart_rate", "sensor_rate", "duration")),
-    ScenarioSpec(
-        "varying-a3-top", "Tuna et al. animal 3, crystal on top, pacemaker staircase 95–152 bpm "
-        "(replica of §III-B: p-p 7.43 mm, RMS 3.38 mm)", 7.43e-3, 3.38e-3, 404.0, 200.0,
-        "staircase", 1.58, "top",
-        ("peak_to_peak", "rms", "heart_rate", "sensor_rate", "duration")),
-    ScenarioSpec(
-        "varying-a1-side", "Tuna et al. animal 1, crystal on the side, pacemaker staircase "
-        "(replica)", 13.39e-3, None, 404.0, 250.0,
-        "staircase", 1.58, "side", ("peak_to_peak", "heart_rate", "sensor_rate", "duration")),
-    ScenarioSpec(
-        "varying-a3-side", "Tuna et al. animal 3, crystal on the side, pacemaker staircase "
-        "(replica; the record ends during the descent)", 7.96e-3,
-        None, 404.0, 140.0, "staircase", 1.58, "side",
-        ("peak_to_peak", "heart_rate", "sensor_rate", "duration")),
-    ScenarioSpec(
-        "mitral-1d", "Yuen et al. mitral annulus along its axis, 1-D: 20 mm travel, "
-        "60 bpm (210 mm/s and 3.8 m/s² peaks at 76 bpm; replica)", 20e-3, None, 28.0, 40.0,
-        "constant", 1.0, "mitral", ("peak_to_peak",), variable=False),
-    ScenarioSpec(
-        "arrhythmia-apb", "fixed-a2-top's motion driven by MIT-BIH record 100 (1035–1275 s: "
-        "10 of its 33 atrial premature beats), premature beats with a smaller stroke and the "
-        "pause after them (replica; real annotations, synthetic motion)", 8.39e-3, 3.55e-3,
-        257.0, 240.0, "record", 100.0 / 60.0, "top", ("peak_to_peak", "rms", "sensor_rate"),
-        record="mitdb-100/100", record_start=1035.0),
-)
-
-SPECS: dict[str, ScenarioSpec] = {s.name: s for s in _SPECS}
-
-#: Scenario names, the default first.
-SCENARIOS: tuple[str, ...] = ("fixed-a2-top",
-                              *(s.name for s in _SPECS if s.name != "fixed-a2-top"))
-
-#: The named scenarios that need the shared real data (skipped where it is absent).
-NEEDS_DATA: tuple[str, ...] = tuple(s.name for s in _SPECS if s.record is not None)
-
-
-def missing_data(name: str) -> Path | None:
-    """The annotation file scenario ``name`` needs and cannot find, or ``None`` if it can run."""
-    if name not in NEEDS_DATA:
-        return None
-    path = (SHARED_DATA / str(SPECS[name].record)).with_suffix(".atr")
-    return None if path.is_file() else path
-
-
-def available_scenarios() -> tuple[str, ...]:
-    """The named scenarios that can run here (those needing absent shared data left out)."""
-    return tuple(name for name in SCENARIOS if missing_data(name) is None)
-
-DEFAULT_SCENARIO = "fixed-a2-top"
+__all__ = ["DEFAULT_SCENARIO", "DEFAULT_SEED", "NEEDS_DATA", "OVERRIDES", "SCENARIOS", "SPECS",
+           "Scenario", "ScenarioSpec", "available_scenarios", "calibrate", "make_scenario",
+           "missing_data"]
 
 #: Per-site geometry: heartbeat axis weights (x, y, z), breathing direction (x, y, z), the
 #: breathing range on its main axis relative to the heartbeat range on the heart's main axis,
@@ -277,8 +172,10 @@ def make_scenario(name: str, rng: np.random.Generator | None = None, **overrides
     if not duration > 0 or not sensor_rate > 0:
         raise ValueError("duration and sensor_rate must be positive")
 
-    settings = _variability(spec, overrides)
     horizon = max(duration, nominal)
+    if spec.heart == "invivo":
+        return _invivo(spec, overrides, rng, duration, sensor_rate, horizon)
+    settings = _variability(spec, overrides)
     breath = None
     if not settings.is_clean:
         breath = breathing_phase(rng, float(overrides.get("breathing_rate", 1.0 / 6.0)),
@@ -294,10 +191,25 @@ def make_scenario(name: str, rng: np.random.Generator | None = None, **overrides
     return Scenario(name, source, sensor_rate, duration, described, spec)
 
 
+def _invivo(spec: ScenarioSpec, overrides: dict, rng: np.random.Generator, duration: float,
+            sensor_rate: float, horizon: float) -> Scenario:
+    """The in-vivo regime of :mod:`sim.heart.invivo` (overrides: ``heart_rate``,
+    ``breathing_rate``)."""
+    unsupported = sorted(set(overrides) - {"duration", "sensor_rate", "heart_rate",
+                                           "breathing_rate"})
+    if unsupported:
+        raise ValueError(f"{spec.name} takes no override(s) {', '.join(unsupported)}")
+    changes = {k: float(overrides[k]) for k in ("heart_rate", "breathing_rate") if k in overrides}
+    source = invivo_motion(rng, horizon, spec.duration, InVivoSettings(**changes))
+    return Scenario(spec.name, source, sensor_rate, duration, spec.description, spec)
+
+
 def _variability(spec: ScenarioSpec, overrides: dict) -> VariabilitySettings:
     """The variability settings with the ``coupling``/``beat_gain_std`` overrides applied."""
-    value = overrides.get("variability",
-                          VariabilitySettings() if spec.variable else "clean")
+    default = VariabilitySettings()
+    if spec.hrv_band_powers is not None:
+        default = replace(default, band_powers=spec.hrv_band_powers)
+    value = overrides.get("variability", default if spec.variable else "clean")
     if isinstance(value, str):
         if value != "clean":
             raise ValueError(f"variability must be a VariabilitySettings or 'clean', got {value!r}")

@@ -14,6 +14,7 @@ comes from the injected ``numpy.random.Generator``.
 ``events``             :class:`EchoOutliers`, :class:`Dropouts`
 ``playback``           delivery to the control rate: :class:`Upsample`, :data:`PLAYBACKS`
 ``ultrasound``         3-D ultrasound (Yuen et al.): 28 Hz, σ = 1.3 mm, 68 ms latency
+``video``              stereo-endoscopic video tracking: 25 Hz, σ = 0.15 mm, one frame late
 ``encoder``            :class:`Encoder`, quantised joint angles
 ``names``              :func:`sensor_from_name`, :data:`SENSORS`
 =====================  ===================================================================
@@ -28,12 +29,13 @@ from sim.sensors.sonomicrometry import Sonomicrometer, SonomicrometrySettings, s
 from sim.sensors.stream import Latency, SampleStream, Sensor, Stage
 from sim.sensors.trilateration import dilution, trilaterate
 from sim.sensors.ultrasound import UltrasoundSettings, ultrasound
+from sim.sensors.video import VideoSettings, video
 from sim.sensors.white import WhiteNoise, WhiteSettings, white
 
 __all__ = [
     "DEFAULT_PLAYBACK", "PLAYBACKS", "SENSORS", "CrystalArray", "Dropouts", "EchoOutliers",
     "Encoder", "Latency", "SampleStream", "Sensor", "Sonomicrometer", "SonomicrometrySettings",
-    "Stage", "UltrasoundSettings", "Upsample", "WhiteNoise", "WhiteSettings", "dilution",
-    "ideal", "playback", "sensor_from_name", "sonomicrometry", "trilaterate", "ultrasound",
-    "white",
+    "Stage", "UltrasoundSettings", "Upsample", "VideoSettings", "WhiteNoise", "WhiteSettings",
+    "dilution", "ideal", "playback", "sensor_from_name", "sonomicrometry", "trilaterate",
+    "ultrasound", "video", "white",
 ]

@@ -10,10 +10,11 @@ from sim.sensors.playback import PLAYBACKS, playback
 from sim.sensors.sonomicrometry import SonomicrometrySettings, sonomicrometry
 from sim.sensors.stream import Latency, Sensor
 from sim.sensors.ultrasound import UltrasoundSettings, ultrasound
+from sim.sensors.video import VideoSettings, video
 from sim.sensors.white import WhiteSettings, white
 
 #: Names :func:`sensor_from_name` accepts.
-SENSORS: tuple[str, ...] = ("sonomicrometry", "white", "ultrasound", "ideal")
+SENSORS: tuple[str, ...] = ("sonomicrometry", "white", "ultrasound", "video", "ideal")
 
 #: The default playback of a sensor's samples to the control rate (causal: linear
 #: interpolation delivered one raw period late, every sample equally old).
@@ -61,11 +62,12 @@ def sensor_from_name(name: str, rate: float | None = None, latency: float | None
         ``"sonomicrometry"`` (physical, :mod:`sim.sensors.sonomicrometry`), ``"white"``
         (additive white noise, :mod:`sim.sensors.white`), ``"ultrasound"`` or ``"ideal"``.
     rate : float, optional
-        Sample rate [Hz] (defaults: 257, 257, 28, 2000).
+        Sample rate [Hz] (defaults: 257, 257, 28, 25, 2000).
     latency : float, optional
-        Delay [s] (defaults: 0, 0, 0.068, 0).
+        Delay [s] (defaults: 0, 0, 0.068, 0.04, 0).
     noise : float, optional
-        σ per axis [m] of ``white`` (default 0.25 mm/√dim) or ``ultrasound`` (1.3 mm); the
+        σ per axis [m] of ``white`` (default 0.25 mm/√dim), ``ultrasound`` (1.3 mm) or
+        ``video`` (0.15 mm); the
         physical sonomicrometer has no such setting (its errors come from its physics).
     dropouts : Dropouts, optional
         Add occlusions.
@@ -134,6 +136,14 @@ def _ultrasound(timing: dict, noise, dropouts, outliers: bool, delivery, dim: in
     return sensor.with_stages(delivery) if delivery is not None else sensor
 
 
+def _video(timing: dict, noise, dropouts, outliers: bool, delivery, dim: int,
+           physics: dict) -> Sensor:
+    kw: dict = {"dropouts": dropouts, "upsample": delivery, **timing}
+    if noise is not None:
+        kw["noise_std"] = float(noise)
+    return video(VideoSettings(**kw))
+
+
 def _ideal(timing: dict, noise, dropouts, outliers: bool, delivery, dim: int,
            physics: dict) -> Sensor:
     stages: tuple = ()
@@ -148,7 +158,7 @@ def _ideal(timing: dict, noise, dropouts, outliers: bool, delivery, dim: int,
 
 #: Each sensor name's builder: (timing, noise, dropouts, outliers, delivery, dim, physics).
 _BUILDERS = {"sonomicrometry": _sonomicrometer, "white": _white, "ultrasound": _ultrasound,
-             "ideal": _ideal}
+             "video": _video, "ideal": _ideal}
 
 
 def _playback(rate: float, name: str):

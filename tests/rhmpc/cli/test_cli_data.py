@@ -25,7 +25,12 @@ def test_list_json(capsys: pytest.CaptureFixture[str]) -> None:
     assert 75 < lo < 100 < hi < 125
     for r in rows:  # 40 s of the replica: nearly the whole record's p-p
         assert 0.93 < r["peak_to_peak_mm"] / r["target_peak_to_peak_mm"] <= 1.0 + 1e-6
-        assert 0.1 < r["predictability"] < 0.5  # one-step RLS / hold at 120 ms, 25 Hz
+        # one-step RLS / hold at 120 ms, 25 Hz: the replicas are regular, the in-vivo regime
+        # is as hard as its recording (0.67)
+        if r["name"].startswith("invivo"):
+            assert 0.55 < r["predictability"] < 0.8
+        else:
+            assert 0.1 < r["predictability"] < 0.5
 
 
 def test_list_table(capsys: pytest.CaptureFixture[str]) -> None:
@@ -126,11 +131,11 @@ def test_list_without_the_annotations(tmp_path: Path, monkeypatch: pytest.Monkey
                                       capsys: pytest.CaptureFixture[str]) -> None:
     """Where the shipped annotations are missing (a damaged install), arrhythmia-apb is skipped
     with a note, never an error."""
-    import sim.heart.scenarios
+    import sim.heart.specs
 
-    monkeypatch.setattr(sim.heart.scenarios, "SHARED_DATA", tmp_path)
-    assert sim.heart.scenarios.missing_data("arrhythmia-apb") == tmp_path / "mitdb-100" / "100.atr"
-    assert sim.heart.scenarios.missing_data("fixed-a2-top") is None
+    monkeypatch.setattr(sim.heart.specs, "SHARED_DATA", tmp_path)
+    assert sim.heart.specs.missing_data("arrhythmia-apb") == tmp_path / "mitdb-100" / "100.atr"
+    assert sim.heart.specs.missing_data("fixed-a2-top") is None
     assert "arrhythmia-apb" not in available_scenarios()
     assert main(["data", "list", "--json", "--duration", "5"]) == 0
     captured = capsys.readouterr()

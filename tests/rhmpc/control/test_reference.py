@@ -279,7 +279,7 @@ def test_the_automatic_gate_floor_is_four_times_the_rms_miss_after_convergence()
     """After ``calibration`` misses of convergence, the floor is 4 × the RMS of the next
     ``calibration`` misses; an outlier in the window and the converging misses before it do
     not inflate it."""
-    from rhmpc.control.reference import OutlierGate
+    from rhmpc.control.gate import OutlierGate
 
     rng = np.random.default_rng(7)
     counts = {"outliers_rejected": 0, "gate_unlocked": 0}
@@ -300,7 +300,7 @@ def test_the_automatic_gate_floor_is_four_times_the_rms_miss_after_convergence()
 
 
 def test_a_fixed_gate_floor_is_used_as_given():
-    from rhmpc.control.reference import OutlierGate
+    from rhmpc.control.gate import OutlierGate
 
     gate = OutlierGate(1e-3)
     assert gate.floor == 1e-3

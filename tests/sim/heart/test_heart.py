@@ -49,7 +49,7 @@ def clean() -> dict[str, Scenario]:
 def test_names_and_default() -> None:
     assert set(SCENARIOS) == {
         "fixed-a1-top", "fixed-a2-top", "varying-a1-top", "varying-a3-top",
-        "varying-a1-side", "varying-a3-side", "mitral-1d", "arrhythmia-apb"}
+        "varying-a1-side", "varying-a3-side", "mitral-1d", "arrhythmia-apb", "invivo-video"}
     assert DEFAULT_SCENARIO == "fixed-a2-top" == SCENARIOS[0]
 
 

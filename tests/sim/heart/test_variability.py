@@ -7,7 +7,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from sim.heart import make_scenario
+from sim.heart import SPECS, make_scenario
 from sim.heart.variability import (
     LF_BAND,
     VariabilitySettings,
@@ -95,7 +95,8 @@ def test_defaults_are_not_clean_and_validated() -> None:
 
 
 def test_heart_rate_variability_magnitude_and_mean() -> None:
-    """std(f_h)/mean(f_h) ≈ hrv_cv (0.06, Task Force), mean rate kept (100 bpm)."""
+    """std(f_h)/mean(f_h) ≈ hrv_cv (0.06, Task Force), mean rate kept (100 bpm); the HF part
+    locked to the breathing phase (fixed-a2-top: all of it, ``hrv_band_powers``)."""
     sc = make_scenario("fixed-a2-top")
     t = np.arange(0, sc.duration, 0.05)
     rate = sc.source.phase.rate(t)
@@ -106,7 +107,8 @@ def test_heart_rate_variability_magnitude_and_mean() -> None:
     y = np.sin(2 * np.pi * sc.source.breath_phase(t))
     m = rate / rate.mean() - 1
     locked = np.hypot(np.mean(m * x), np.mean(m * y)) * 2  # amplitude of the locked cosine
-    share = 975.0 / 3466.0
+    powers = SPECS["fixed-a2-top"].hrv_band_powers
+    share = powers[2] / sum(powers)
     assert locked == pytest.approx(0.06 * np.sqrt(2 * share), rel=0.1)
 
 

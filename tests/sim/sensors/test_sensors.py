@@ -158,7 +158,7 @@ def test_sensor_from_name() -> None:
     us = sensor_from_name("ultrasound", latency=0.1, noise=2e-3)
     assert us.rate == 28.0 and us.latency == pytest.approx(0.1)
     assert ideal().rate == sensor_from_name("ideal").rate == 2000.0
-    with pytest.raises(ValueError, match="sonomicrometry, white, ultrasound, ideal"):
+    with pytest.raises(ValueError, match="sonomicrometry, white, ultrasound, video, ideal"):
         sensor_from_name("lidar")
 
 
