@@ -1,10 +1,14 @@
-/* Rigid-body dynamics of a chain of revolute joints, for the plant's inner loop (sim/native.py).
+/* Rigid-body dynamics of a tree of revolute joints, for the plant's inner loop (sim/native.py).
  *
  * Featherstone's articulated-body algorithm (ABA) and recursive Newton-Euler (RNEA) in body
  * coordinates, spatial vectors ordered (angular; linear), with the parameters of a Pinocchio
  * model: joint placement (R_p, p_p) in the parent body, joint axis a, spatial inertia and rotor
- * armature. Body i's pose in its parent: (R_p Rot(a, q_i), p_p). The reference is Pinocchio
- * (tests/sim/test_native.py compares every function with it).
+ * armature. Body i's pose in its parent: (R_p Rot(a, qb_i), p_p), qb_i = s_i q[c_i] + o_i: a
+ * body follows one degree of freedom, scaled and offset (mimic joints: a closed linkage such as a
+ * parallelogram written as a tree). Without mimic bodies qb = q and the dynamics are ABA; with
+ * them, M(q) = sum of RNEA columns and q'' = M^-1 (tau - h) by Cholesky. Friction acts on the
+ * motors' output rates w = S q' (S the motor map) and reaches the joints as S^T f(w). The
+ * reference is Pinocchio (tests/sim/plant/test_native.py compares every function with it).
  */
 #include <math.h>
 #include <string.h>
@@ -12,15 +16,22 @@
 #define MAXJ 8
 
 typedef struct {
-    int n;
-    int parent[MAXJ];           /* parent joint index, -1 for the base; parent[i] < i */
+    int n;                      /* degrees of freedom */
+    int nb;                     /* bodies (joints of the tree), nb >= n */
+    int parent[MAXJ];           /* parent body index, -1 for the base; parent[i] < i */
+    int coord[MAXJ];            /* the degree of freedom body i follows */
+    double scale[MAXJ];         /* qb_i = scale_i q[coord_i] + offset_i */
+    double offset[MAXJ];
+    int projected;              /* some body is not simply "body i = degree of freedom i" */
     double Rp[MAXJ][9];         /* joint placement rotation, row-major */
     double pp[MAXJ][3];         /* joint placement translation [m] */
     double axis[MAXJ][3];       /* unit joint axis in the body frame */
     double inertia[MAXJ][36];   /* 6x6 spatial inertia about the body origin, (ang; lin) */
-    double armature[MAXJ];      /* rotor inertia reflected to the joint [kg m^2] */
-    double damping[MAXJ];       /* viscous friction D [N m s/rad] */
-    double coulomb[MAXJ];       /* Coulomb friction F_c [N m] */
+    double armature[MAXJ];      /* rotor inertia reflected to each degree of freedom [kg m^2] */
+    double motor[MAXJ * MAXJ];  /* S (n x n, row-major): motor output rates w = S q' */
+    int mapped;                 /* S is not the identity */
+    double damping[MAXJ];       /* viscous friction D of each motor [N m s/rad] */
+    double coulomb[MAXJ];       /* Coulomb friction F_c of each motor [N m] */
     double inv_stiction;        /* 1 / v_s [s/rad] */
     double gravity[3];          /* [m/s^2], e.g. (0, 0, -9.81) */
 } chain_t;
@@ -110,9 +121,9 @@ static void add_congruence(double A[36], const double X[36], const double B[36])
         }
 }
 
-/* qdd = ABA(q, qd, tau): M(q) qdd + C(q, qd) qd + g(q) = tau, M with the armature. */
-void chain_aba(const chain_t *m, const double *q, const double *qd, const double *tau,
-               double *qdd) {
+/* ABA of a model without mimic bodies (qb = q). */
+static void body_aba(const chain_t *m, const double *q, const double *qd, const double *tau,
+                     double *qdd) {
     int n = m->n;
     double X[MAXJ][36], R[9], v[MAXJ][6], c[MAXJ][6], IA[MAXJ][36], pA[MAXJ][6];
     double U[MAXJ][6], D[MAXJ], u[MAXJ], a[MAXJ][6], zero[6] = {0};
@@ -160,13 +171,21 @@ void chain_aba(const chain_t *m, const double *q, const double *qd, const double
     }
 }
 
-/* tau = RNEA(q, qd, qdd) = M(q) qdd + C(q, qd) qd + g(q), M with the armature. */
-void chain_rnea(const chain_t *m, const double *q, const double *qd, const double *qdd,
-                double *tau) {
-    int n = m->n;
+/* Body angles (or rates, offset = 0) of the degrees of freedom x. */
+static void expand(const chain_t *m, const double *x, int with_offset, double *xb) {
+    for (int i = 0; i < m->nb; i++)
+        xb[i] = m->scale[i] * x[m->coord[i]] + (with_offset ? m->offset[i] : 0.0);
+}
+
+/* RNEA over the bodies at (qb, qdb, qddb), gravity on or off, projected on the degrees of
+ * freedom: tau_j = sum over the bodies i following j of s_i (a_i . f_i); no armature. */
+static void body_rnea(const chain_t *m, const double *q, const double *qd, const double *qdd,
+                      int gravity, double *tau) {
+    int nb = m->nb;
     double X[MAXJ][36], R[9], v[MAXJ][6], a[MAXJ][6], f[MAXJ][6], zero[6] = {0};
     double a0[6] = {0, 0, 0, -m->gravity[0], -m->gravity[1], -m->gravity[2]};
-    for (int i = 0; i < n; i++) {
+    if (!gravity) a0[3] = a0[4] = a0[5] = 0.0;
+    for (int i = 0; i < nb; i++) {
         const double *ax = m->axis[i];
         int p = m->parent[i];
         transform(m, i, q[i], X[i], R);
@@ -182,9 +201,10 @@ void chain_rnea(const chain_t *m, const double *q, const double *qd, const doubl
         crf(v[i], h, t);
         for (int k = 0; k < 6; k++) f[i][k] += t[k];
     }
-    for (int i = n - 1; i >= 0; i--) {
+    for (int j = 0; j < m->n; j++) tau[j] = 0.0;
+    for (int i = nb - 1; i >= 0; i--) {
         const double *ax = m->axis[i];
-        tau[i] = ax[0] * f[i][0] + ax[1] * f[i][1] + ax[2] * f[i][2] + m->armature[i] * qdd[i];
+        tau[m->coord[i]] += m->scale[i] * (ax[0] * f[i][0] + ax[1] * f[i][1] + ax[2] * f[i][2]);
         int p = m->parent[i];
         if (p >= 0) {
             double t[6];
@@ -194,10 +214,84 @@ void chain_rnea(const chain_t *m, const double *q, const double *qd, const doubl
     }
 }
 
-/* Friction torque D qd + F_c tanh(qd / v_s). */
+/* tau = RNEA(q, qd, qdd) = M(q) qdd + C(q, qd) qd + g(q), M with the armature. */
+void chain_rnea(const chain_t *m, const double *q, const double *qd, const double *qdd,
+                double *tau) {
+    double qb[MAXJ], vb[MAXJ], ab[MAXJ];
+    expand(m, q, 1, qb);
+    expand(m, qd, 0, vb);
+    expand(m, qdd, 0, ab);
+    body_rnea(m, qb, vb, ab, 1, tau);
+    for (int j = 0; j < m->n; j++) tau[j] += m->armature[j] * qdd[j];
+}
+
+/* q'' = M(q)^-1 (tau - h(q, q')) with M from n RNEA columns (no gravity, no velocity) and the
+ * armature, by Cholesky: the dynamics of a model with mimic bodies. */
+static void projected_fd(const chain_t *m, const double *q, const double *qd, const double *tau,
+                         double *qdd) {
+    int n = m->n;
+    double qb[MAXJ], vb[MAXJ], ab[MAXJ], zero[MAXJ] = {0}, h[MAXJ], M[MAXJ][MAXJ], e[MAXJ];
+    double L[MAXJ][MAXJ], y[MAXJ], col[MAXJ];
+    expand(m, q, 1, qb);
+    expand(m, qd, 0, vb);
+    body_rnea(m, qb, vb, zero, 1, h);
+    for (int j = 0; j < n; j++) {
+        for (int k = 0; k < n; k++) e[k] = (k == j);
+        expand(m, e, 0, ab);
+        body_rnea(m, qb, zero, ab, 0, col);
+        for (int k = 0; k < n; k++) M[k][j] = col[k];
+        M[j][j] += m->armature[j];
+    }
+    for (int j = 0; j < n; j++) {  /* M = L L^T */
+        double d = M[j][j];
+        for (int k = 0; k < j; k++) d -= L[j][k] * L[j][k];
+        L[j][j] = sqrt(d);
+        for (int i = j + 1; i < n; i++) {
+            double s = M[i][j];
+            for (int k = 0; k < j; k++) s -= L[i][k] * L[j][k];
+            L[i][j] = s / L[j][j];
+        }
+    }
+    for (int i = 0; i < n; i++) {
+        double s = tau[i] - h[i];
+        for (int k = 0; k < i; k++) s -= L[i][k] * y[k];
+        y[i] = s / L[i][i];
+    }
+    for (int i = n - 1; i >= 0; i--) {
+        double s = y[i];
+        for (int k = i + 1; k < n; k++) s -= L[k][i] * qdd[k];
+        qdd[i] = s / L[i][i];
+    }
+}
+
+/* qdd = forward dynamics: M(q) qdd + C(q, qd) qd + g(q) = tau, M with the armature. */
+void chain_aba(const chain_t *m, const double *q, const double *qd, const double *tau,
+               double *qdd) {
+    if (m->projected)
+        projected_fd(m, q, qd, tau, qdd);
+    else
+        body_aba(m, q, qd, tau, qdd);
+}
+
+/* Friction torque S^T (D w + F_c tanh(w / v_s)), w = S qd (S = I: D qd + F_c tanh(qd / v_s)). */
 static void friction(const chain_t *m, const double *qd, double *out) {
-    for (int i = 0; i < m->n; i++)
-        out[i] = m->damping[i] * qd[i] + m->coulomb[i] * tanh(qd[i] * m->inv_stiction);
+    int n = m->n;
+    if (!m->mapped) {
+        for (int i = 0; i < n; i++)
+            out[i] = m->damping[i] * qd[i] + m->coulomb[i] * tanh(qd[i] * m->inv_stiction);
+        return;
+    }
+    double f[MAXJ];
+    for (int k = 0; k < n; k++) {
+        double w = 0;
+        for (int l = 0; l < n; l++) w += m->motor[n * k + l] * qd[l];
+        f[k] = m->damping[k] * w + m->coulomb[k] * tanh(w * m->inv_stiction);
+    }
+    for (int j = 0; j < n; j++) {
+        double s = 0;
+        for (int k = 0; k < n; k++) s += m->motor[n * k + j] * f[k];
+        out[j] = s;
+    }
 }
 
 /* Explicit midpoint, `substeps` steps of h, torque held (sim.plant.ArmPlant._midpoint_steps):
@@ -229,9 +323,9 @@ void chain_midpoint(const chain_t *m, double *q, double *qd, const double *tau, 
  * for `count` configurations (rows of q, n each) -> out (count x 3). */
 void chain_point(const chain_t *m, const double *q, int count, int joint, const double *point,
                  double *out) {
-    double X[36], R[MAXJ][9], p[MAXJ][3], Rl[9];
+    double X[36], R[MAXJ][9], p[MAXJ][3], Rl[9], qc[MAXJ];
     for (int c = 0; c < count; c++) {
-        const double *qc = q + (size_t)c * m->n;
+        expand(m, q + (size_t)c * m->n, 1, qc);
         for (int i = 0; i <= joint; i++) {
             int pa = m->parent[i];
             transform(m, i, qc[i], X, Rl);
@@ -297,6 +391,12 @@ void tick_actuate(tick_t *t) {
     double zero[MAXJ] = {0}, bias[MAXJ];
     const double *q = t->prior + 2 * n, *v = t->post + n;
     chain_rnea(m, q, v, zero, bias);
+    if (m->mapped) {
+        double f[MAXJ];
+        friction(m, v, f);
+        for (int i = 0; i < n; i++) t->tau[i] = t->u[i] + bias[i] + f[i];
+        return;
+    }
     for (int i = 0; i < n; i++)
         t->tau[i] = t->u[i] + bias[i] + m->damping[i] * v[i] +
                     m->coulomb[i] * tanh(v[i] * m->inv_stiction);

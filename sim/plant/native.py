@@ -57,11 +57,13 @@ class _Chain(ctypes.Structure):
     """``chain_t`` of sim/chain.c."""
 
     _fields_ = [
-        ("n", _i), ("parent", _i * MAX_JOINTS), ("Rp", (_d * 9) * MAX_JOINTS),
-        ("pp", (_d * 3) * MAX_JOINTS), ("axis", (_d * 3) * MAX_JOINTS),
-        ("inertia", (_d * 36) * MAX_JOINTS), ("armature", _d * MAX_JOINTS),
-        ("damping", _d * MAX_JOINTS), ("coulomb", _d * MAX_JOINTS), ("inv_stiction", _d),
-        ("gravity", _d * 3),
+        ("n", _i), ("nb", _i), ("parent", _i * MAX_JOINTS), ("coord", _i * MAX_JOINTS),
+        ("scale", _d * MAX_JOINTS), ("offset", _d * MAX_JOINTS), ("projected", _i),
+        ("Rp", (_d * 9) * MAX_JOINTS), ("pp", (_d * 3) * MAX_JOINTS),
+        ("axis", (_d * 3) * MAX_JOINTS), ("inertia", (_d * 36) * MAX_JOINTS),
+        ("armature", _d * MAX_JOINTS), ("motor", _d * (MAX_JOINTS * MAX_JOINTS)),
+        ("mapped", _i), ("damping", _d * MAX_JOINTS), ("coulomb", _d * MAX_JOINTS),
+        ("inv_stiction", _d), ("gravity", _d * 3),
     ]
 
 
@@ -150,23 +152,53 @@ class NativeChain:
         return out
 
 
-def load_chain(model, damping=0.0, coulomb=0.0, stiction_velocity: float = 5e-3
-               ) -> NativeChain | None:
+def _bodies(model) -> list[tuple[int, float, float, tuple[float, float, float]]] | None:
+    """(degree of freedom, scale, offset, axis) of each body's joint; None if one is not a
+    revolute joint (or a mimic of one)."""
+    import pinocchio as pin
+
+    data = model.createData()
+    pin.forwardKinematics(model, data, pin.neutral(model))
+    out = []
+    for i, joint in enumerate(model.joints[1:], start=1):
+        name = joint.shortname()
+        if name in _AXES or name == "JointModelRevoluteUnaligned":
+            axis = _AXES.get(name) or tuple(np.asarray(joint.extract().axis).tolist())
+            out.append((joint.idx_v, 1.0, 0.0, axis))
+        elif name == "JointModelMimic":
+            mimic = joint.extract()
+            S = np.asarray(data.joints[i].S).reshape(6, -1)[:, 0]
+            if np.abs(S[:3]).max() > 0 or mimic.scaling == 0:  # a translation: not revolute
+                return None
+            out.append((joint.idx_v, float(mimic.scaling), float(mimic.offset),
+                        tuple((S[3:] / mimic.scaling).tolist())))
+        else:
+            return None
+    return out
+
+
+def load_chain(model, damping=0.0, coulomb=0.0, stiction_velocity: float = 5e-3,
+               motor_map=None) -> NativeChain | None:
     """The compiled dynamics of a Pinocchio ``model``, or None (reason in ``unavailable_reason``).
 
     Parameters
     ----------
     model : pinocchio.Model
-        A chain (or tree) of revolute joints (RX, RY, RZ, revolute-unaligned), at most 8.
+        A chain or tree of revolute joints (RX, RY, RZ, revolute-unaligned), at most 8 bodies;
+        bodies on mimic joints of revolute joints follow their degree of freedom (then the
+        forward dynamics is M⁻¹(τ − h) instead of ABA).
     damping, coulomb : float or array
-        Viscous [N·m·s/rad] and Coulomb [N·m] friction per joint, for :meth:`NativeChain.midpoint`.
+        Viscous [N·m·s/rad] and Coulomb [N·m] friction of each motor, for
+        :meth:`NativeChain.midpoint`.
     stiction_velocity : float
         v_s of the smoothed Coulomb friction [rad/s].
+    motor_map : array or None
+        S, the motors' output rates ω = S q̇ the friction acts on (None: identity).
     """
     global unavailable_reason
+    bodies = _bodies(model)
     names = [j.shortname() for j in model.joints[1:]]
-    supported = all(n in _AXES or n == "JointModelRevoluteUnaligned" for n in names)
-    if not supported or model.nq != model.nv or not 0 < model.nv <= MAX_JOINTS:
+    if bodies is None or not 0 < model.nv <= len(bodies) <= MAX_JOINTS or model.nq != model.nv:
         unavailable_reason = f"joints {', '.join(names)}: only revolute chains are compiled"
         return None
     library = _compile()
@@ -174,22 +206,27 @@ def load_chain(model, damping=0.0, coulomb=0.0, stiction_velocity: float = 5e-3
         return None
     nv = model.nv
     chain = _Chain()
-    chain.n = nv
+    chain.n, chain.nb = nv, len(bodies)
     damping = np.broadcast_to(np.asarray(damping, dtype=float), (nv,))
     coulomb = np.broadcast_to(np.asarray(coulomb, dtype=float), (nv,))
-    for k, joint in enumerate(model.joints[1:]):
+    S = np.eye(nv) if motor_map is None else np.asarray(motor_map, dtype=float)
+    chain.motor[: nv * nv] = S.reshape(-1).tolist()
+    chain.mapped = int(not np.array_equal(S, np.eye(nv)))
+    for k, (coord, scale, offset, axis) in enumerate(bodies):
         i = k + 1
         chain.parent[k] = int(model.parents[i]) - 1
+        chain.coord[k], chain.scale[k], chain.offset[k] = coord, scale, offset
+        chain.projected |= int(coord != k or scale != 1.0 or offset != 0.0)
         placement = model.jointPlacements[i]
         chain.Rp[k][:] = np.asarray(placement.rotation).reshape(-1).tolist()
         chain.pp[k][:] = np.asarray(placement.translation).tolist()
-        axis = _AXES.get(joint.shortname())
-        chain.axis[k][:] = list(axis) if axis else np.asarray(joint.extract().axis).tolist()
+        chain.axis[k][:] = list(axis)
         M = np.asarray(model.inertias[i].matrix())  # Pinocchio's (linear; angular) order
         M = np.block([[M[3:, 3:], M[3:, :3]], [M[:3, 3:], M[:3, :3]]])
         chain.inertia[k][:] = M.reshape(-1).tolist()
-        chain.armature[k] = float(model.armature[k])
-        chain.damping[k], chain.coulomb[k] = float(damping[k]), float(coulomb[k])
+    for j in range(nv):
+        chain.armature[j] = float(model.armature[j])
+        chain.damping[j], chain.coulomb[j] = float(damping[j]), float(coulomb[j])
     chain.inv_stiction = 1.0 / stiction_velocity
     chain.gravity[:] = np.asarray(model.gravity.linear).tolist()
     unavailable_reason = None
@@ -228,9 +265,10 @@ class NativeTick:
         nv = plant.robot.nv
         s = plant.settings
         self._plant = load_chain(plant.model, plant.damping, plant.coulomb_friction,
-                                 s.stiction_velocity)
+                                 s.stiction_velocity, plant.robot.motor_map)
         self._model = load_chain(cancellation.model, cancellation.damping,
-                                 cancellation.coulomb_friction, cancellation.stiction_velocity)
+                                 cancellation.coulomb_friction, cancellation.stiction_velocity,
+                                 cancellation.motor_map)
         if self._plant is None or self._model is None or s.integrator != "midpoint":
             raise ValueError(f"no native tick: {unavailable_reason or s.integrator}")
         lib = self._plant._lib
