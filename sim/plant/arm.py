@@ -24,14 +24,21 @@ from robots.model import forward_dynamics
 
 INTEGRATORS = ("midpoint", "rk4", "semi-implicit-euler")
 DYNAMICS = ("auto", "native", "pinocchio")
+MODELS = ("ideal", "linear", "hardware")
 
 
 @dataclass(frozen=True)
 class PlantSettings:
-    """Integration of the plant.
+    """Which plant, and its integration.
 
     Attributes
     ----------
+    model : str
+        ``"ideal"``: the nonlinear arm, the torque applied as commanded (this module);
+        ``"linear"``: the MPC's own linear model as the plant (Tuna et al.'s Table I
+        simulation); ``"hardware"``: the arm behind an I/O delay, a DAC, a current amplifier,
+        friction with stiction and optionally compliant cables (:mod:`sim.plant.hardware`,
+        its settings in ``HardwareSettings``).
     integrator : str
         ``"midpoint"`` (explicit midpoint, 2nd order, 2 ABA calls per step), ``"rk4"``
         (classical Runge–Kutta, 4 calls) or ``"semi-implicit-euler"`` (symplectic Euler, 1 call).
@@ -59,8 +66,11 @@ class PlantSettings:
     substeps: int = 2
     stiction_velocity: float = 5e-3
     dynamics: str = "auto"
+    model: str = "ideal"
 
     def __post_init__(self) -> None:
+        if self.model not in MODELS:
+            raise ValueError(f"unknown plant model {self.model!r}; valid: {', '.join(MODELS)}")
         if self.integrator not in INTEGRATORS:
             raise ValueError(
                 f"unknown integrator {self.integrator!r}; valid: {', '.join(INTEGRATORS)}"

@@ -225,16 +225,10 @@ void chain_rnea(const chain_t *m, const double *q, const double *qd, const doubl
     for (int j = 0; j < m->n; j++) tau[j] += m->armature[j] * qdd[j];
 }
 
-/* q'' = M(q)^-1 (tau - h(q, q')) with M from n RNEA columns (no gravity, no velocity) and the
- * armature, by Cholesky: the dynamics of a model with mimic bodies. */
-static void projected_fd(const chain_t *m, const double *q, const double *qd, const double *tau,
-                         double *qdd) {
+/* M(q) (with the armature) from n RNEA columns at the body angles qb, no gravity, no velocity. */
+static void body_mass(const chain_t *m, const double *qb, double M[MAXJ][MAXJ]) {
     int n = m->n;
-    double qb[MAXJ], vb[MAXJ], ab[MAXJ], zero[MAXJ] = {0}, h[MAXJ], M[MAXJ][MAXJ], e[MAXJ];
-    double L[MAXJ][MAXJ], y[MAXJ], col[MAXJ];
-    expand(m, q, 1, qb);
-    expand(m, qd, 0, vb);
-    body_rnea(m, qb, vb, zero, 1, h);
+    double ab[MAXJ], zero[MAXJ] = {0}, e[MAXJ], col[MAXJ];
     for (int j = 0; j < n; j++) {
         for (int k = 0; k < n; k++) e[k] = (k == j);
         expand(m, e, 0, ab);
@@ -242,6 +236,28 @@ static void projected_fd(const chain_t *m, const double *q, const double *qd, co
         for (int k = 0; k < n; k++) M[k][j] = col[k];
         M[j][j] += m->armature[j];
     }
+}
+
+/* M(q) with the armature, n x n row-major. */
+void chain_mass(const chain_t *m, const double *q, double *out) {
+    double qb[MAXJ], M[MAXJ][MAXJ];
+    expand(m, q, 1, qb);
+    body_mass(m, qb, M);
+    for (int k = 0; k < m->n; k++)
+        for (int j = 0; j < m->n; j++) out[m->n * k + j] = M[k][j];
+}
+
+/* q'' = M(q)^-1 (tau - h(q, q')) with M from n RNEA columns (no gravity, no velocity) and the
+ * armature, by Cholesky: the dynamics of a model with mimic bodies. */
+static void projected_fd(const chain_t *m, const double *q, const double *qd, const double *tau,
+                         double *qdd) {
+    int n = m->n;
+    double qb[MAXJ], vb[MAXJ], zero[MAXJ] = {0}, h[MAXJ], M[MAXJ][MAXJ];
+    double L[MAXJ][MAXJ], y[MAXJ];
+    expand(m, q, 1, qb);
+    expand(m, qd, 0, vb);
+    body_rnea(m, qb, vb, zero, 1, h);
+    body_mass(m, qb, M);
     for (int j = 0; j < n; j++) {  /* M = L L^T */
         double d = M[j][j];
         for (int k = 0; k < j; k++) d -= L[j][k] * L[j][k];
@@ -422,4 +438,116 @@ void tick_advance(tick_t *t) {
         for (int l = 0; l < 3 * n; l++) s += t->predict[k][l] * t->post[l];
         t->prior[k] = s;
     }
+}
+
+/* ---- The hardware-like plant's tick (sim/plant/hardware.py HardwareTick): motor currents
+ * through a first-order lag, Stribeck friction on the motors' output rates, optional two-mass
+ * cables; the same equations as the Python reference there. ---- */
+
+typedef struct {
+    const chain_t *arm;         /* M(q) and h(q, q') (its own friction fields unused) */
+    int cables, steps;
+    double S[MAXJ * MAXJ];      /* motor map, n x n row-major */
+    double gain[MAXJ];          /* eta K_t: output torque per ampere */
+    double coulomb[MAXJ], damping[MAXJ];
+    double ratio, v_stribeck, inv_smooth;
+    double rotor[MAXJ];         /* J_r on each output coordinate */
+    double R[MAXJ * MAXJ];      /* S^T diag(J_r) S, taken off M with cables */
+    double k[MAXJ], c[MAXJ];    /* cable stiffness and damping */
+    double q0[MAXJ];
+    double tau_e, h;            /* current lag, step [s] */
+} hw_t;
+
+static double hw_friction(const hw_t *w, int k, double rate) {
+    double x = rate / w->v_stribeck;
+    double peak = w->coulomb[k] * (1.0 + (w->ratio - 1.0) * exp(-x * x));
+    return w->damping[k] * rate + peak * tanh(rate * w->inv_smooth);
+}
+
+/* Solve A x = b (n x n, symmetric positive definite) by Cholesky. */
+static void spd_solve(int n, double A[MAXJ][MAXJ], const double *b, double *x) {
+    double L[MAXJ][MAXJ], y[MAXJ];
+    for (int j = 0; j < n; j++) {
+        double d = A[j][j];
+        for (int k = 0; k < j; k++) d -= L[j][k] * L[j][k];
+        L[j][j] = sqrt(d);
+        for (int i = j + 1; i < n; i++) {
+            double s = A[i][j];
+            for (int k = 0; k < j; k++) s -= L[i][k] * L[j][k];
+            L[i][j] = s / L[j][j];
+        }
+    }
+    for (int i = 0; i < n; i++) {
+        double s = b[i];
+        for (int k = 0; k < i; k++) s -= L[i][k] * y[k];
+        y[i] = s / L[i][i];
+    }
+    for (int i = n - 1; i >= 0; i--) {
+        double s = y[i];
+        for (int k = i + 1; k < n; k++) s -= L[k][i] * x[k];
+        x[i] = s / L[i][i];
+    }
+}
+
+/* d/dt of x = [q, q', theta_r, theta_r'] (4n) with winding currents cur. */
+static void hw_rates(const hw_t *w, const double *x, const double *cur, double *dx) {
+    int n = w->arm->n;
+    const double *q = x, *v = x + n, *th = x + 2 * n, *om = x + 3 * n;
+    double out[MAXJ], joint[MAXJ];
+    for (int k = 0; k < n; k++) {
+        double sq = 0, sv = 0;
+        for (int l = 0; l < n; l++) {
+            sq += w->S[n * k + l] * (q[l] - w->q0[l]);
+            sv += w->S[n * k + l] * v[l];
+        }
+        double motor = w->gain[k] * cur[k];
+        if (w->cables) {
+            out[k] = w->k[k] * (th[k] - sq) + w->c[k] * (om[k] - sv);  /* cable torque */
+            dx[3 * n + k] = (motor - out[k] - hw_friction(w, k, om[k])) / w->rotor[k];
+        } else {
+            out[k] = motor - hw_friction(w, k, sv);
+            dx[3 * n + k] = 0.0;
+        }
+        dx[2 * n + k] = om[k];
+    }
+    for (int j = 0; j < n; j++) {
+        double s = 0;
+        for (int k = 0; k < n; k++) s += w->S[n * k + j] * out[k];
+        joint[j] = s;
+        dx[j] = v[j];
+    }
+    if (!w->cables) {
+        chain_aba(w->arm, q, v, joint, dx + n);
+        return;
+    }
+    double qb[MAXJ], vb[MAXJ], zero[MAXJ] = {0}, h[MAXJ], M[MAXJ][MAXJ], b[MAXJ];
+    expand(w->arm, q, 1, qb);
+    expand(w->arm, v, 0, vb);
+    body_rnea(w->arm, qb, vb, zero, 1, h);
+    body_mass(w->arm, qb, M);
+    for (int i = 0; i < n; i++) {
+        b[i] = joint[i] - h[i];
+        for (int j = 0; j < n; j++) M[i][j] -= w->R[n * i + j];
+    }
+    spd_solve(n, M, b, dx + n);
+}
+
+/* One tick: `steps` explicit-midpoint steps, each with the current's exact mean over the step
+ * (command cmd held, lag tau_e from i0); x (4n) and i0 updated in place. */
+void hw_integrate(const hw_t *w, double *x, double *i0, const double *cmd) {
+    int n = w->arm->n, nx = 4 * n;
+    double k1[4 * MAXJ], mid[4 * MAXJ], k2[4 * MAXJ], cur[MAXJ], h = w->h;
+    for (int s = 0; s < w->steps; s++) {
+        double t = s * h;
+        for (int k = 0; k < n; k++)
+            cur[k] = w->tau_e > 0 ? cmd[k] + (i0[k] - cmd[k]) * (w->tau_e / h) *
+                                                 (exp(-t / w->tau_e) - exp(-(t + h) / w->tau_e))
+                                  : cmd[k];
+        hw_rates(w, x, cur, k1);
+        for (int k = 0; k < nx; k++) mid[k] = x[k] + 0.5 * h * k1[k];
+        hw_rates(w, mid, cur, k2);
+        for (int k = 0; k < nx; k++) x[k] += h * k2[k];
+    }
+    for (int k = 0; k < n; k++)
+        i0[k] = w->tau_e > 0 ? cmd[k] + (i0[k] - cmd[k]) * exp(-w->steps * h / w->tau_e) : cmd[k];
 }

@@ -103,7 +103,10 @@ def _compile() -> ctypes.CDLL | None:
     library.chain_rnea.argtypes = [ptr, ptr, ptr, ptr, ptr]
     library.chain_midpoint.argtypes = [ptr, ptr, ptr, ptr, _d, _i]
     library.chain_point.argtypes = [ptr, ptr, _i, _i, ptr, ptr]
-    for f in (library.chain_aba, library.chain_rnea, library.chain_midpoint, library.chain_point):
+    library.chain_mass.argtypes = [ptr, ptr, ptr]
+    library.hw_integrate.argtypes = [ptr, ptr, ptr, ptr]
+    for f in (library.chain_aba, library.chain_rnea, library.chain_midpoint, library.chain_point,
+              library.chain_mass, library.hw_integrate):
         f.restype = None
     _library = library
     return library
@@ -133,6 +136,13 @@ class NativeChain:
         self._q[:], self._v[:], self._x[:] = q, v, a
         self._lib.chain_rnea(self._ptr, *self._addr)
         return self._out.copy()
+
+    def mass(self, q) -> np.ndarray:
+        """M(q) with the armature [kg·m²] (as ``pin.crba``, both triangles)."""
+        self._q[:] = q
+        out = np.empty((self.nv, self.nv))
+        self._lib.chain_mass(self._ptr, self._addr[0], out.ctypes.data)
+        return out
 
     def midpoint(self, q, v, tau, h: float, substeps: int) -> tuple[np.ndarray, np.ndarray]:
         """(q, q̇) after ``substeps`` explicit-midpoint steps of ``h`` with friction, τ held."""
@@ -231,6 +241,63 @@ def load_chain(model, damping=0.0, coulomb=0.0, stiction_velocity: float = 5e-3,
     chain.gravity[:] = np.asarray(model.gravity.linear).tolist()
     unavailable_reason = None
     return NativeChain(library, chain, nv)
+
+
+class _Hardware(ctypes.Structure):
+    """``hw_t`` of sim/plant/chain.c."""
+
+    _fields_ = [
+        ("arm", ctypes.c_void_p), ("cables", _i), ("steps", _i),
+        ("S", _d * (MAX_JOINTS * MAX_JOINTS)), ("gain", _d * MAX_JOINTS),
+        ("coulomb", _d * MAX_JOINTS), ("damping", _d * MAX_JOINTS), ("ratio", _d),
+        ("v_stribeck", _d), ("inv_smooth", _d), ("rotor", _d * MAX_JOINTS),
+        ("R", _d * (MAX_JOINTS * MAX_JOINTS)), ("k", _d * MAX_JOINTS), ("c", _d * MAX_JOINTS),
+        ("q0", _d * MAX_JOINTS), ("tau_e", _d), ("h", _d),
+    ]
+
+
+class HardwareStep:
+    """The hardware-like plant's tick compiled (``hw_integrate``): the equations of
+    :class:`sim.plant.hardware.HardwareTick`, whose Python steps are the reference.
+
+    Parameters are those of the tick: the arm's chain, its motor map S, output torque per
+    ampere η K_t, friction (Coulomb, viscous, stiction ratio, Stribeck and smoothing rates),
+    rotor inertias, cable stiffness and damping (None: rigid), home posture, current lag τ_e
+    and step h.
+    """
+
+    def __init__(self, chain: NativeChain, *, S, gain, coulomb, damping, ratio, v_stribeck,
+                 v_smooth, rotor, cables, q0, tau_e, h, steps) -> None:
+        n = chain.nv
+        w = self._w = _Hardware()
+        self._chain = chain  # kept alive: w.arm points into it
+        w.arm, w.steps, w.cables = chain._ptr, steps, int(cables is not None)
+        w.S[: n * n] = np.asarray(S, dtype=float).reshape(-1).tolist()
+        R = np.asarray(S).T @ np.diag(rotor) @ np.asarray(S)
+        w.R[: n * n] = R.reshape(-1).tolist()
+        for name, value in (("gain", gain), ("coulomb", coulomb), ("damping", damping),
+                            ("rotor", rotor), ("q0", q0)):
+            getattr(w, name)[:n] = np.broadcast_to(np.asarray(value, dtype=float), (n,)).tolist()
+        if cables is not None:
+            w.k[:n], w.c[:n] = np.asarray(cables[0]).tolist(), np.asarray(cables[1]).tolist()
+        w.ratio, w.v_stribeck, w.inv_smooth = ratio, v_stribeck, 1.0 / v_smooth
+        w.tau_e, w.h = tau_e, h
+        self._x, self._i, self._cmd = np.zeros(4 * n), np.zeros(n), np.zeros(n)
+        self._args = (ctypes.addressof(w), self._x.ctypes.data, self._i.ctypes.data,
+                      self._cmd.ctypes.data)
+        self._fn = chain._lib.hw_integrate
+        self.n = n
+
+    def integrate(self, state: list, current: np.ndarray, command: np.ndarray
+                  ) -> tuple[list, np.ndarray]:
+        """One tick from ``state`` = [q, q̇, θ_r, θ̇_r] with winding currents ``current`` and
+        the held current command; returns the new state and currents."""
+        n = self.n
+        self._x[:] = np.concatenate(state)
+        self._i[:], self._cmd[:] = current, command
+        self._fn(*self._args)
+        x = self._x.copy()
+        return [x[k * n:(k + 1) * n] for k in range(4)], self._i.copy()
 
 
 class _Tick(ctypes.Structure):
