@@ -73,7 +73,7 @@ def test_findings_say_what_reproduces_and_why_not() -> None:
     assert "[reproduced    ] generalized ≤ one-step (RMS): 6/6" in good
     assert "[reproduced    ] generalized ≈ exact in simulation" in good
     assert "[reproduced    ] EKF behind both RLS predictors: 6/6" in good
-    assert "[reproduced    ] effort exact ≤ generalized ≤ one-step: 6/6" in good
+    assert "[reproduced    ] effort ordering: exact lowest in 6/6, one-step highest in 6/6" in good
     bad = paper_table(_docs("hardware", **{"one-step": 1.1, "generalized": 1.2, "exact": 1.3}),
                       preds, list(COLUMNS))
     assert "[NOT reproduced] generalized ≤ one-step (RMS): 0/6" in bad
