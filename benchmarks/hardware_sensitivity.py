@@ -74,11 +74,11 @@ def table(rows: list[dict], scenarios: list[str], predictors: list[str], publish
     """Variant × column: exact RMS [mm] / effort [mN·m], and each RLS predictor's RMS ÷ exact."""
     paper = TUNA2013[(published, "rms_error_mm")]
     effort = TUNA2013[(published, "rms_effort_mNm")]
-    out = [f"{'variant':<30}" + "".join(f"{s:>34}" for s in scenarios),
+    out = [f"{'variant':<30}" + "".join(f"{s:>38}" for s in scenarios),
            f"{'Table ' + published:<30}" + "".join(
                f"{paper['exact'][s]:.3f} mm {effort['exact'][s]:5.1f} mN.m "
                f"g/e {paper['generalized'][s] / paper['exact'][s]:.2f} "
-               f"o/e {paper['one-step'][s] / paper['exact'][s]:.2f}".rjust(34)
+               f"o/e {paper['one-step'][s] / paper['exact'][s]:.2f}".rjust(38)
                for s in scenarios)]
     for variant in dict.fromkeys(r["variant"] for r in rows):
         cells = []
@@ -91,7 +91,7 @@ def table(rows: list[dict], scenarios: list[str], predictors: list[str], publish
             for p, tag in (("generalized", "g/e"), ("one-step", "o/e")):
                 if p in predictors and p in got and e is not None:
                     cell += f" {tag} {got[p]['rms_error_mm'] / e['rms_error_mm']:.2f}"
-            cells.append(cell.rjust(34))
+            cells.append(cell.rjust(38))
         out.append(f"{variant:<30}" + "".join(cells))
     return "\n".join(out)
 
@@ -104,9 +104,16 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--duration", type=float, default=60.0)
     p.add_argument("--seed", type=int, default=3)
     p.add_argument("--out", help="write every run's metrics as JSON")
+    p.add_argument("--table", metavar="FILE.json", help="only print the table of a former --out")
     args = p.parse_args(argv)
     scenarios, predictors = args.scenarios.split(","), args.predictors.split(",")
     preset, published = PRESET[args.sweep]
+    if args.table:
+        with open(args.table) as f:
+            rows = json.load(f)
+        print(table(rows, list(dict.fromkeys(r["scenario"] for r in rows)), predictors,
+                    published))
+        return 0
     rows = []
     for variant, changes in SWEEPS[args.sweep].items():
         for s in scenarios:

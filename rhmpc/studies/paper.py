@@ -282,7 +282,7 @@ def hardware_effort_finding(simulation: Sequence[dict], hardware: Sequence[dict]
     line = (f"[{_mark(k == len(ratios))}] hardware effort above simulation effort: {k}/"
             f"{len(ratios)} cells, ours ×{min(ratios):.2f}–{max(ratios):.2f} (paper "
             f"×{min(paper):.2f}–{max(paper):.2f})")
-    if k < len(ratios):
-        line += ("; cause: the hardware plant's delay, lag, quantisation and friction cost the "
-                 "MPC little torque at these weights")
+    if k < len(ratios) or max(ratios) < min(paper):
+        line += ("; the size is not: the hardware plant's delay, lag, DAC, friction and model "
+                 "mismatch cost the MPC little torque at these weights")
     return line

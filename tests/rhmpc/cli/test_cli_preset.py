@@ -106,3 +106,15 @@ def test_bad_sensor_settings_one_line_exit_2(capsys, setting, message) -> None:
         code = main([command, "--duration", "0.5", "--set", setting])
         err = capsys.readouterr().err
         assert code == 2 and message in err and len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("setting, message", [
+    ("plant.model=\"rigid\"", "unknown plant model 'rigid'"),
+    ("hardware.dac_bits=-1", "hardware dac_bits must be an integer >= 0"),
+    ("hardware.error_from=\"tip\"", "hardware error_from must be one of true, encoders"),
+    ("mismatch.parameters=\"puma\"", "unknown parameters 'puma'"),
+])
+def test_bad_plant_settings_one_line_exit_2(capsys, setting, message) -> None:
+    code = main(["simulate", "--duration", "0.5", "--set", setting])
+    err = capsys.readouterr().err
+    assert code == 2 and message in err and len(err.strip().splitlines()) == 1
