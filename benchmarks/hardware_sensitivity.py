@@ -13,6 +13,11 @@ Usage::
     python benchmarks/hardware_sensitivity.py resonance [--duration 60] [--out FILE.json]
     python benchmarks/hardware_sensitivity.py mismatch  [--scenarios fixed-a2-top,...]
     python benchmarks/hardware_sensitivity.py noise
+    python benchmarks/hardware_sensitivity.py stability   # cables: resonance × damping ratio
+
+``stability`` runs the exact reference for 2 s per cell of resonance (40–150 Hz) × damping
+ratio and prints the RMS error (mm; "unstable" above 5 mm, where the cable mode grows until the
+DAC saturates).
 """
 
 from __future__ import annotations
@@ -27,15 +32,20 @@ from rhmpc.studies.paper import TUNA2013
 
 #: The preset each sweep changes, and the published table beside it.
 PRESET = {"resonance": ("tuna2013-hardware", "II"), "mismatch": ("tuna2013-hardware", "II"),
-          "noise": ("tuna2013", "I")}
+          "noise": ("tuna2013", "I"), "stability": ("tuna2013-hardware", "II")}
+#: Cable resonances [Hz] and damping ratios of the stability map.
+RESONANCES = (40.0, 60.0, 80.0, 100.0, 150.0)
+DAMPING_RATIOS = (0.05, 0.1, 0.2, 0.3, 0.5)
 #: The default white range error [m] (sim.sensors.SonomicrometrySettings.range_noise).
 _SIGMA = 88e-6
 
 #: Variant name → the settings it changes on top of the sweep's preset.
 SWEEPS: dict[str, dict[str, dict]] = {
-    "resonance": {
+    "resonance": {  # the cables where the loop is stable (``stability``: none in 40–150 Hz)
         "rigid": {},
-        **{f"{f:g} Hz": {"hardware.cable_resonance": float(f)} for f in (40, 60, 80, 100, 150)},
+        **{f"{f:g} Hz, zeta {z:g}": {"hardware.cable_resonance": f,
+                                     "hardware.cable_damping_ratio": z, "hardware.substeps": 40}
+           for f, z in ((300.0, 0.2), (500.0, 0.05), (500.0, 0.2))},
     },
     "mismatch": {
         "default (Cavusoglu model)": {},
@@ -96,9 +106,26 @@ def table(rows: list[dict], scenarios: list[str], predictors: list[str], publish
     return "\n".join(out)
 
 
+def stability(scenario: str, seed: int) -> str:
+    """Resonance × damping ratio: the exact reference's RMS error over 2 s [mm]."""
+    out = [f"{'f_r [Hz]':<10}" + "".join(f"{'zeta ' + format(z, 'g'):>12}"
+                                         for z in DAMPING_RATIOS)]
+    for f in RESONANCES:
+        line = f"{f:<10g}"
+        for z in DAMPING_RATIOS:
+            doc = run_variant("tuna2013-hardware", {"hardware.cable_resonance": f,
+                                                    "hardware.cable_damping_ratio": z},
+                              scenario, "exact", 2.0, seed)
+            rms = doc["rms_error_mm"]
+            line += f"{'unstable' if rms > 5.0 else format(rms, '.3f'):>12}"
+            print(f"{f:g} Hz zeta {z:g}: {rms:.3f} mm", file=sys.stderr, flush=True)
+        out.append(line)
+    return "\n".join(out)
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("sweep", choices=tuple(SWEEPS))
+    p.add_argument("sweep", choices=(*SWEEPS, "stability"))
     p.add_argument("--scenarios", default="fixed-a2-top,varying-a3-top")
     p.add_argument("--predictors", default="exact,generalized,one-step")
     p.add_argument("--duration", type=float, default=60.0)
@@ -108,6 +135,9 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     scenarios, predictors = args.scenarios.split(","), args.predictors.split(",")
     preset, published = PRESET[args.sweep]
+    if args.sweep == "stability":
+        print(stability(scenarios[0], args.seed))
+        return 0
     if args.table:
         with open(args.table) as f:
             rows = json.load(f)
