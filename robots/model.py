@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pinocchio as pin
+import scipy.linalg
 
 
 @dataclass(frozen=True, eq=False)
@@ -20,8 +21,9 @@ class Robot:
     name : str
         Registry name.
     model : pinocchio.Model
-        Kinematics and rigid-body dynamics; ``model.armature`` [kg·m²], ``model.damping``
-        [N·m·s/rad] and ``model.friction`` (Coulomb) [N·m] hold the actuator data.
+        Kinematics and rigid-body dynamics; ``model.armature`` [kg·m²] holds reflected rotor
+        inertia, ``model.damping`` [N·m·s/rad] and ``model.friction`` (Coulomb) [N·m] the
+        friction of each motor, acting on its output coordinate (``motor_map``).
     ee_frame : str
         Name of the end-effector frame whose origin is the controlled point.
     q0 : numpy.ndarray
@@ -29,9 +31,21 @@ class Robot:
     torque_limit : numpy.ndarray
         Actuator saturation per joint [N·m].
     encoder_resolution : numpy.ndarray | None
-        Joint angle per encoder count [rad], or None when the robot has no encoder model.
+        Angle per encoder count of each motor's output coordinate ``S q`` [rad], or None when
+        the robot has no encoder model.
     description : str
         One line on where the model comes from.
+    motor_map : numpy.ndarray | None
+        ``S`` (n, n): the motors' output angles are ``θ = S (q − q0)`` (the angles the drives
+        turn, each motor through its transmission), rates ``ω = S q̇``; None: ``S = I``, each
+        joint its own motor. Friction acts on ``θ`` and the encoders count it.
+    gear_ratio : numpy.ndarray | None
+        Transmission ratio η of each motor, motor angle = η θ [-]; None when unknown.
+    rotor_inertia : numpy.ndarray | None
+        Reflected rotor inertia η² J_m of each motor, on its output coordinate [kg·m²]; it is
+        part of the model's M(q) as ``Sᵀ diag(η² J_m) S`` (the registry adds it). None: zero.
+    coupling : tuple
+        Linear joint limits beyond the box: ``(c, lo, hi)`` rows, ``lo ≤ c·q ≤ hi`` [rad].
     """
 
     name: str
@@ -41,6 +55,10 @@ class Robot:
     torque_limit: np.ndarray
     encoder_resolution: np.ndarray | None = None
     description: str = ""
+    motor_map: np.ndarray | None = None
+    gear_ratio: np.ndarray | None = None
+    rotor_inertia: np.ndarray | None = None
+    coupling: tuple = ()
     _data: pin.Data = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -49,6 +67,16 @@ class Robot:
         object.__setattr__(self, "q0", np.asarray(self.q0, dtype=float).copy())
         object.__setattr__(self, "torque_limit", np.asarray(self.torque_limit, dtype=float).copy())
         object.__setattr__(self, "_data", self.model.createData())
+        S = np.eye(self.nv) if self.motor_map is None else np.asarray(self.motor_map, float)
+        if S.shape != (self.nv, self.nv) or abs(np.linalg.det(S)) < 1e-9:
+            raise ValueError(f"robot {self.name!r}: motor_map must be an invertible "
+                             f"{self.nv}x{self.nv} matrix")
+        object.__setattr__(self, "motor_map", S)
+        rotor = np.zeros(self.nv) if self.rotor_inertia is None else self.rotor_inertia
+        object.__setattr__(self, "rotor_inertia", np.broadcast_to(
+            np.asarray(rotor, dtype=float), (self.nv,)).copy())
+        object.__setattr__(self, "coupling", tuple(
+            (np.asarray(c, dtype=float), float(lo), float(hi)) for c, lo, hi in self.coupling))
         self.check_posture(self.q0)
         if self.torque_limit.shape != (self.nv,) or np.any(self.torque_limit <= 0):
             raise ValueError(
@@ -75,12 +103,12 @@ class Robot:
 
     @property
     def damping(self) -> np.ndarray:
-        """Viscous joint damping [N·m·s/rad]."""
+        """Viscous friction of each motor on its output coordinate [N·m·s/rad]."""
         return np.asarray(self.model.damping).copy()
 
     @property
     def coulomb_friction(self) -> np.ndarray:
-        """Coulomb joint friction [N·m]."""
+        """Coulomb friction of each motor on its output coordinate [N·m]."""
         return np.asarray(self.model.friction).copy()
 
     @property
@@ -119,6 +147,13 @@ class Robot:
                 f"robot {self.name!r}: joint {self.model.names[j + 1]!r} at {at:.1f} deg "
                 f"is outside its limits [{lo:.1f}, {hi:.1f}] deg"
             )
+        for c, lo, hi in self.coupling:
+            value = float(c @ q)
+            if not lo - 1e-12 <= value <= hi + 1e-12:
+                raise ValueError(
+                    f"robot {self.name!r}: coupled limit {np.degrees(lo):.1f} ≤ {c.tolist()}·q ≤ "
+                    f"{np.degrees(hi):.1f} deg violated ({np.degrees(value):.1f} deg)"
+                )
         return q
 
     def ee_position(self, q: np.ndarray) -> np.ndarray:
@@ -137,3 +172,24 @@ class Robot:
         """Joint-space inertia M(q) including armature [kg·m²] (CRBA, symmetrised)."""
         M = pin.crba(self.model, self._data, q)
         return np.triu(M) + np.triu(M, 1).T
+
+    @property
+    def has_mimic(self) -> bool:
+        """Whether bodies follow the joints through mimic joints (a closed linkage as a tree):
+        Pinocchio's ABA does not take such models, :func:`forward_dynamics` does."""
+        return self.model.njoints - 1 != self.nv
+
+
+def forward_dynamics(model: pin.Model, data: pin.Data, q: np.ndarray, v: np.ndarray,
+                     tau: np.ndarray) -> np.ndarray:
+    """q̈ = M(q)⁻¹ (τ − h(q, q̇)) [rad/s²], M from CRBA and h = C q̇ + g from RNEA(q, q̇, 0).
+
+    Pinocchio's ABA where the model allows it (no mimic joints), else the mass matrix solved by
+    Cholesky: the same equation of motion for a linkage whose extra bodies follow the joints.
+    """
+    if model.njoints - 1 == model.nv:
+        return pin.aba(model, data, q, v, tau)
+    M = pin.crba(model, data, q)
+    M = np.triu(M) + np.triu(M, 1).T
+    h = pin.nonLinearEffects(model, data, q, v)
+    return scipy.linalg.cho_solve(scipy.linalg.cho_factor(M), np.subtract(tau, h))

@@ -68,8 +68,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="seeds per cell: SEED..SEED+S-1 (default 1)")
     p.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
     p.add_argument("--paper", action="store_true",
-                   help="also print Tuna et al. 2013 Tables I and III beside ours: paper, ours "
-                   "and their ratio for every cell (RMS, max, effort)")
+                   help="also print Tuna et al. 2013's tables of the runs' setting beside ours "
+                   "(Table I for a simulated plant, II-III for the hardware plant): paper, ours "
+                   "and their ratio for every cell, and which published findings reproduce")
     p.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
                    help="parallel processes (default: the number of cores)")
     p.add_argument("--full", action="store_true",

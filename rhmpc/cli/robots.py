@@ -46,12 +46,12 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(rows, indent=2))
         return 0
-    head = f"{'robot':<11} {'DOF':>3}  {'home q0 [deg]':<22} {'EE at home [mm]':<24} "
+    head = f"{'robot':<17} {'DOF':>3}  {'home q0 [deg]':<22} {'EE at home [mm]':<24} "
     head += f"{'torque limit [N·m]':<25} {'J sing. values [m]':<24} cond"
     print(head)
     for r in rows:
         print(
-            f"{r['name']:<11} {r['dof']:>3}  {_vec(r['q0_deg'], 1):<22} "
+            f"{r['name']:<17} {r['dof']:>3}  {_vec(r['q0_deg'], 1):<22} "
             f"{_vec(r['ee_position_mm'], 1):<24} {_vec(r['torque_limit_Nm'], 3):<25} "
             f"{_vec(r['jacobian_singular_values_m'], 3):<24} {r['jacobian_condition']:.2f}"
         )

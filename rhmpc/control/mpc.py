@@ -460,7 +460,8 @@ class RecedingHorizonMPC:
         """Level 2: the torque-box QP solved exactly (KKT certificate), and every envelope row
         holds at [z; 0] (then it is the full QP's solution; :mod:`rhmpc.control.box_qp`)."""
         box = self.box
-        if not box.solve(self._q_z, self._w_z):
+        # its start: the unconstrained minimiser −W q_z (as the compiled controller computes it)
+        if not box.solve(self._q_z, np.dot(box._negW, self._q_z, out=self._w_z)):
             return False
         if self._g_env.size == 0:
             return True

@@ -11,7 +11,7 @@ from typing import Any
 from rhmpc.control.settings import MPCSettings, from_dict, to_dict
 from rhmpc.errors import UsageError
 from sim.loop import LoopSettings
-from sim.plant import ModelMismatch, ObserverSettings, PlantSettings
+from sim.plant import HardwareSettings, ModelMismatch, ObserverSettings, PlantSettings
 
 #: Sections of a run's TOML file and the settings class each one builds.
 SECTIONS: dict[str, type] = {
@@ -20,6 +20,7 @@ SECTIONS: dict[str, type] = {
     "plant": PlantSettings,
     "mismatch": ModelMismatch,
     "observer": ObserverSettings,
+    "hardware": HardwareSettings,
 }
 
 
@@ -65,8 +66,9 @@ class RunConfig:
         included) — or ``"true"`` — the noise-free motion.
     seed : int
         Seed of the run's ``numpy.random.Generator`` (heart variability, sensor noise).
-    loop, mpc, plant, mismatch, observer
-        Component settings (see their classes for units).
+    loop, mpc, plant, mismatch, observer, hardware
+        Component settings (see their classes for units); ``hardware`` applies when
+        ``plant.model = "hardware"``.
     """
 
     robot: str = "phantom"
@@ -85,6 +87,7 @@ class RunConfig:
     plant: PlantSettings = field(default_factory=PlantSettings)
     mismatch: ModelMismatch = field(default_factory=ModelMismatch)
     observer: ObserverSettings = field(default_factory=ObserverSettings)
+    hardware: HardwareSettings = field(default_factory=HardwareSettings)
 
     def __post_init__(self) -> None:
         if self.ground_truth not in GROUND_TRUTHS:

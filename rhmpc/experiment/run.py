@@ -47,7 +47,8 @@ def run_experiment(config: RunConfig, progress: bool = False, trace: str | None 
         result = run_closed_loop(
             run.robot, run.arm, run.controller, run.reference, run.truth, run.center, run.stream,
             config.loop, plant_settings=config.plant, mismatch=config.mismatch,
-            observer_settings=config.observer, progress=callback, trace_file=trace,
+            observer_settings=config.observer, hardware=config.hardware,
+            progress=callback, trace_file=trace,
             yardstick=None if gain_tick is None else _gain_tick(run.controller, gain_tick),
         )
     finally:

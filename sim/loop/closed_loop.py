@@ -49,7 +49,7 @@ from sim.loop.clock import PredictorClock, arrival_tick, predictor_clock
 from sim.loop.results import CHARGED, LoopResult, Recorder
 from sim.loop.settings import LoopSettings
 from sim.loop.streams import BLOCK, ArrayTruth, SampleSource, StreamCursor, as_samples
-from sim.plant import ModelMismatch, ObserverSettings, PlantSettings
+from sim.plant import HardwareSettings, ModelMismatch, ObserverSettings, PlantSettings
 from sim.plant.tick import make_tick
 
 clock = time.perf_counter_ns
@@ -278,6 +278,7 @@ def run_closed_loop(
     plant_settings: PlantSettings | None = None,
     mismatch: ModelMismatch | None = None,
     observer_settings: ObserverSettings | None = None,
+    hardware: HardwareSettings | None = None,
     progress: Callable[[int], None] | None = None,
     trace_file: str | None = None,
     yardstick: Callable[[np.ndarray, np.ndarray, np.ndarray], object] | None = None,
@@ -302,7 +303,7 @@ def run_closed_loop(
     stream
         Sensor samples: arrays ``t`` [s], ``z`` (n, d) [m] (NaN = missing) and ``arrival`` [s],
         or a sample source of :mod:`sim.loop.streams` read block by block.
-    plant_settings, mismatch, observer_settings
+    plant_settings, mismatch, observer_settings, hardware
         The robot's side of the tick (:func:`sim.plant.tick.make_tick`).
     progress
         Called with the number of ticks done, every 2000 ticks.
@@ -323,7 +324,8 @@ def run_closed_loop(
         raise ValueError(f"truth covers {truth.n_ticks} ticks, the run needs {n + N + 1}")
     anchor = arm.y0 + np.asarray(settings.poi_offset, dtype=float)
     reference.place(anchor)
-    side = make_tick(robot, arm, settings.Ts, plant_settings, mismatch, observer_settings)
+    side = make_tick(robot, arm, settings.Ts, plant_settings, mismatch, observer_settings,
+                     hardware)
     record = Recorder(robot, settings, truth, anchor, trace_file)
     chunk = ds * max(1, chunk_ticks // ds)  # ticks per open-loop pass (a multiple of ds)
     with quiet_gc():

@@ -2,11 +2,14 @@
 
 With the joint torque ``τ`` held constant over a control tick::
 
-    M(q) q̈ + C(q, q̇) q̇ + g(q) = τ − D q̇ − F_c tanh(q̇ / v_s)        (ABA solves for q̈)
+    M(q) q̈ + C(q, q̇) q̇ + g(q) = τ − Sᵀ (D ω + F_c tanh(ω / v_s)),   ω = S q̇
 
 ``M`` includes the reflected rotor inertia (armature); ``D`` is viscous damping and ``F_c``
-Coulomb friction, smoothed by ``tanh`` over the stiction velocity ``v_s`` so that the ODE stays
-integrable. The controller's cancellation of these terms is :mod:`sim.plant.cancellation`.
+Coulomb friction of each motor, acting on its output rate ω (``S`` the robot's motor map, the
+identity where each joint has its own motor), smoothed by ``tanh`` over the stiction velocity
+``v_s`` so that the ODE stays integrable. ABA solves for q̈; a model with mimic bodies (a
+parallelogram as a tree) is solved as M⁻¹(τ − h) (:func:`robots.model.forward_dynamics`). The
+controller's cancellation of these terms is :mod:`sim.plant.cancellation`.
 """
 from __future__ import annotations
 
@@ -17,17 +20,25 @@ import numpy as np
 import pinocchio as pin
 
 from robots import Robot
+from robots.model import forward_dynamics
 
 INTEGRATORS = ("midpoint", "rk4", "semi-implicit-euler")
 DYNAMICS = ("auto", "native", "pinocchio")
+MODELS = ("ideal", "linear", "hardware")
 
 
 @dataclass(frozen=True)
 class PlantSettings:
-    """Integration of the plant.
+    """Which plant, and its integration.
 
     Attributes
     ----------
+    model : str
+        ``"ideal"``: the nonlinear arm, the torque applied as commanded (this module);
+        ``"linear"``: the MPC's own linear model as the plant (Tuna et al.'s Table I
+        simulation); ``"hardware"``: the arm behind an I/O delay, a DAC, a current amplifier,
+        friction with stiction and optionally compliant cables (:mod:`sim.plant.hardware`,
+        its settings in ``HardwareSettings``).
     integrator : str
         ``"midpoint"`` (explicit midpoint, 2nd order, 2 ABA calls per step), ``"rk4"``
         (classical Runge–Kutta, 4 calls) or ``"semi-implicit-euler"`` (symplectic Euler, 1 call).
@@ -55,8 +66,11 @@ class PlantSettings:
     substeps: int = 2
     stiction_velocity: float = 5e-3
     dynamics: str = "auto"
+    model: str = "ideal"
 
     def __post_init__(self) -> None:
+        if self.model not in MODELS:
+            raise ValueError(f"unknown plant model {self.model!r}; valid: {', '.join(MODELS)}")
         if self.integrator not in INTEGRATORS:
             raise ValueError(
                 f"unknown integrator {self.integrator!r}; valid: {', '.join(INTEGRATORS)}"
@@ -91,8 +105,11 @@ class ArmPlant:
         self._tau_min_list = (-robot.torque_limit).tolist()
         self._substeps = self.settings.substeps
         self._h = self.Ts / self.settings.substeps
+        self._S = robot.motor_map
+        self._plain = not robot.has_mimic and np.array_equal(self._S, np.eye(robot.nv))
         self._advance = {  # all substeps of one tick, torque given as a list of floats
-            "midpoint": self._midpoint_steps,
+            "midpoint": self._midpoint_steps if self._plain
+            else self._substeps_of(self._midpoint),
             "rk4": self._substeps_of(self._rk4),
             "semi-implicit-euler": self._substeps_of(self._symplectic_euler),
         }[self.settings.integrator]
@@ -111,7 +128,7 @@ class ArmPlant:
         chain = None
         if self.settings.integrator == "midpoint":
             chain = native.load_chain(self.model, self._damping, self._coulomb,
-                                      self.settings.stiction_velocity)
+                                      self.settings.stiction_velocity, self._S)
             note = native.unavailable_reason
         else:
             note = f"the {self.settings.integrator} integrator runs on Pinocchio"
@@ -147,12 +164,15 @@ class ArmPlant:
         self.v = np.zeros(self.robot.nv) if v is None else np.asarray(v, dtype=float).copy()
 
     def friction(self, v: np.ndarray) -> np.ndarray:
-        """Joint friction torque D q̇ + F_c tanh(q̇ / v_s) opposing the motion [N·m]."""
-        return self._damping * v + self._coulomb * np.tanh(v / self.settings.stiction_velocity)
+        """Joint friction torque Sᵀ (D ω + F_c tanh(ω / v_s)), ω = S q̇, opposing the motion
+        [N·m]."""
+        w = self._S @ v
+        f = self._damping * w + self._coulomb * np.tanh(w / self.settings.stiction_velocity)
+        return self._S.T @ f
 
     def acceleration(self, q: np.ndarray, v: np.ndarray, tau: np.ndarray) -> np.ndarray:
-        """q̈ = ABA(q, q̇, τ − friction(q̇)) [rad/s²]."""
-        return pin.aba(self.model, self.data, q, v, np.subtract(tau, self.friction(v)))
+        """q̈ = M⁻¹ (τ − friction(q̇) − h(q, q̇)) [rad/s²] (ABA where the model allows)."""
+        return forward_dynamics(self.model, self.data, q, v, np.subtract(tau, self.friction(v)))
 
     def step(self, tau: np.ndarray) -> np.ndarray:
         """Advance one control tick with ``tau`` [N·m] held constant; returns the applied torque.
@@ -182,6 +202,13 @@ class ArmPlant:
         h = self._h
         self.v = self.v + h * self.acceleration(self.q, self.v, tau)
         self.q = self.q + h * self.v
+
+    def _midpoint(self, tau: list[float]) -> None:
+        """One explicit-midpoint step of h (the equations of :meth:`_midpoint_steps`)."""
+        h, acc = self._h, self.acceleration
+        v_mid = self.v + 0.5 * h * acc(self.q, self.v, tau)
+        q_mid = self.q + 0.5 * h * self.v
+        self.q, self.v = self.q + h * v_mid, self.v + h * acc(q_mid, v_mid, tau)
 
     def _midpoint_steps(self, tau: list[float]) -> None:
         """Explicit midpoint, ``substeps`` times: with a = ABA(q, q̇, τ − D q̇ − F_c tanh(q̇/v_s)),

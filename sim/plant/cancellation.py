@@ -2,10 +2,11 @@
 
 The controller adds to its MPC torque::
 
-    τ = τ_mpc + ĝ(q) + Ĉ(q, q̇) q̇ + D̂ q̇ + F̂_c tanh(q̇ / v_s),   ĝ + Ĉq̇ = RNEA(q̂, q̇, 0)
+    τ = τ_mpc + ĝ(q) + Ĉ(q, q̇) q̇ + Sᵀ (D̂ ω + F̂_c tanh(ω / v_s)),   ĝ + Ĉq̇ = RNEA(q̂, q̇, 0)
 
-where the model's masses and friction may be scaled (:class:`ModelMismatch`) to study
-robustness. The controller's model is a copy of the robot's, apart from the plant's.
+with ω = S q̇ the motors' output rates (S the robot's motor map). The model's masses and friction
+may be scaled, or taken from another parameter set of the same robot (:class:`ModelMismatch`),
+to study robustness. The controller's model is a copy, apart from the plant's.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from robots import Robot
+from robots import ROBOTS, Robot, load_robot
 
 
 @dataclass(frozen=True)
@@ -29,16 +30,24 @@ class ModelMismatch:
         Factor on every link mass and rotational inertia in the controller's model [-].
     friction_scale : float
         Factor on the viscous damping and Coulomb friction the controller cancels [-].
+    parameters : str or None
+        A registered robot whose mass properties and friction the controller's model takes
+        (``"phantom-cavusoglu"``: the published set of Çavuşoğlu et al. 2002 against the CAD
+        set of ``"phantom"``); it must have the plant's joints. None: the plant's own.
     """
 
     mass_scale: float = 1.0
     friction_scale: float = 1.0
+    parameters: str | None = None
 
     def __post_init__(self) -> None:
         for name in ("mass_scale", "friction_scale"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value >= 0):
                 raise ValueError(f"{name} must be a finite number >= 0, got {value!r}")
+        if self.parameters is not None and self.parameters not in ROBOTS:
+            raise ValueError(f"unknown parameters {self.parameters!r}; valid robots: "
+                             f"{', '.join(ROBOTS)}")
 
 
 class NonlinearityCancellation:
@@ -48,6 +57,10 @@ class NonlinearityCancellation:
         self, robot: Robot, mismatch: ModelMismatch | None = None, stiction_velocity: float = 5e-3
     ) -> None:
         self.mismatch = mismatch or ModelMismatch()
+        if self.mismatch.parameters is not None:
+            robot = _same_joints(robot, load_robot(self.mismatch.parameters))
+        self.motor_map = robot.motor_map
+        self._plain = np.array_equal(self.motor_map, np.eye(robot.nv))
         self.model = robot.model.copy()
         for i, inertia in enumerate(self.model.inertias):
             self.model.inertias[i] = pin.Inertia(
@@ -75,9 +88,20 @@ class NonlinearityCancellation:
         u = self._zero if tau_mpc is None else tau_mpc
         if u.shape != self._zero.shape or v.shape != self._zero.shape:
             raise ValueError(f"v and tau_mpc must have shape {self._zero.shape}")
+        if not self._plain:
+            w = self.motor_map @ v
+            f = self.damping * w + self.coulomb_friction * np.tanh(w * self._inv_stiction)
+            return u + np.array(bias) + self.motor_map.T @ f
         inv_vs, tanh = self._inv_stiction, math.tanh
         return np.array([  # floats, zip without strict= (shapes checked): see ArmPlant
             t + b + d * x + c * tanh(x * inv_vs)
             for t, b, d, c, x in zip(u.tolist(), bias, self._damping_list, self._coulomb_list,
                                      v.tolist())
         ])
+
+
+def _same_joints(plant: Robot, model: Robot) -> Robot:
+    """``model`` if it has the plant's joints and motor map; else ValueError."""
+    if model.nv != plant.nv or not np.array_equal(model.motor_map, plant.motor_map):
+        raise ValueError(f"parameters {model.name!r} do not have the joints of {plant.name!r}")
+    return model

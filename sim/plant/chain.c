@@ -1,10 +1,14 @@
-/* Rigid-body dynamics of a chain of revolute joints, for the plant's inner loop (sim/native.py).
+/* Rigid-body dynamics of a tree of revolute joints, for the plant's inner loop (sim/native.py).
  *
  * Featherstone's articulated-body algorithm (ABA) and recursive Newton-Euler (RNEA) in body
  * coordinates, spatial vectors ordered (angular; linear), with the parameters of a Pinocchio
  * model: joint placement (R_p, p_p) in the parent body, joint axis a, spatial inertia and rotor
- * armature. Body i's pose in its parent: (R_p Rot(a, q_i), p_p). The reference is Pinocchio
- * (tests/sim/test_native.py compares every function with it).
+ * armature. Body i's pose in its parent: (R_p Rot(a, qb_i), p_p), qb_i = s_i q[c_i] + o_i: a
+ * body follows one degree of freedom, scaled and offset (mimic joints: a closed linkage such as a
+ * parallelogram written as a tree). Without mimic bodies qb = q and the dynamics are ABA; with
+ * them, M(q) = sum of RNEA columns and q'' = M^-1 (tau - h) by Cholesky. Friction acts on the
+ * motors' output rates w = S q' (S the motor map) and reaches the joints as S^T f(w). The
+ * reference is Pinocchio (tests/sim/plant/test_native.py compares every function with it).
  */
 #include <math.h>
 #include <string.h>
@@ -12,15 +16,22 @@
 #define MAXJ 8
 
 typedef struct {
-    int n;
-    int parent[MAXJ];           /* parent joint index, -1 for the base; parent[i] < i */
+    int n;                      /* degrees of freedom */
+    int nb;                     /* bodies (joints of the tree), nb >= n */
+    int parent[MAXJ];           /* parent body index, -1 for the base; parent[i] < i */
+    int coord[MAXJ];            /* the degree of freedom body i follows */
+    double scale[MAXJ];         /* qb_i = scale_i q[coord_i] + offset_i */
+    double offset[MAXJ];
+    int projected;              /* some body is not simply "body i = degree of freedom i" */
     double Rp[MAXJ][9];         /* joint placement rotation, row-major */
     double pp[MAXJ][3];         /* joint placement translation [m] */
     double axis[MAXJ][3];       /* unit joint axis in the body frame */
     double inertia[MAXJ][36];   /* 6x6 spatial inertia about the body origin, (ang; lin) */
-    double armature[MAXJ];      /* rotor inertia reflected to the joint [kg m^2] */
-    double damping[MAXJ];       /* viscous friction D [N m s/rad] */
-    double coulomb[MAXJ];       /* Coulomb friction F_c [N m] */
+    double armature[MAXJ];      /* rotor inertia reflected to each degree of freedom [kg m^2] */
+    double motor[MAXJ * MAXJ];  /* S (n x n, row-major): motor output rates w = S q' */
+    int mapped;                 /* S is not the identity */
+    double damping[MAXJ];       /* viscous friction D of each motor [N m s/rad] */
+    double coulomb[MAXJ];       /* Coulomb friction F_c of each motor [N m] */
     double inv_stiction;        /* 1 / v_s [s/rad] */
     double gravity[3];          /* [m/s^2], e.g. (0, 0, -9.81) */
 } chain_t;
@@ -110,9 +121,9 @@ static void add_congruence(double A[36], const double X[36], const double B[36])
         }
 }
 
-/* qdd = ABA(q, qd, tau): M(q) qdd + C(q, qd) qd + g(q) = tau, M with the armature. */
-void chain_aba(const chain_t *m, const double *q, const double *qd, const double *tau,
-               double *qdd) {
+/* ABA of a model without mimic bodies (qb = q). */
+static void body_aba(const chain_t *m, const double *q, const double *qd, const double *tau,
+                     double *qdd) {
     int n = m->n;
     double X[MAXJ][36], R[9], v[MAXJ][6], c[MAXJ][6], IA[MAXJ][36], pA[MAXJ][6];
     double U[MAXJ][6], D[MAXJ], u[MAXJ], a[MAXJ][6], zero[6] = {0};
@@ -160,13 +171,21 @@ void chain_aba(const chain_t *m, const double *q, const double *qd, const double
     }
 }
 
-/* tau = RNEA(q, qd, qdd) = M(q) qdd + C(q, qd) qd + g(q), M with the armature. */
-void chain_rnea(const chain_t *m, const double *q, const double *qd, const double *qdd,
-                double *tau) {
-    int n = m->n;
+/* Body angles (or rates, offset = 0) of the degrees of freedom x. */
+static void expand(const chain_t *m, const double *x, int with_offset, double *xb) {
+    for (int i = 0; i < m->nb; i++)
+        xb[i] = m->scale[i] * x[m->coord[i]] + (with_offset ? m->offset[i] : 0.0);
+}
+
+/* RNEA over the bodies at (qb, qdb, qddb), gravity on or off, projected on the degrees of
+ * freedom: tau_j = sum over the bodies i following j of s_i (a_i . f_i); no armature. */
+static void body_rnea(const chain_t *m, const double *q, const double *qd, const double *qdd,
+                      int gravity, double *tau) {
+    int nb = m->nb;
     double X[MAXJ][36], R[9], v[MAXJ][6], a[MAXJ][6], f[MAXJ][6], zero[6] = {0};
     double a0[6] = {0, 0, 0, -m->gravity[0], -m->gravity[1], -m->gravity[2]};
-    for (int i = 0; i < n; i++) {
+    if (!gravity) a0[3] = a0[4] = a0[5] = 0.0;
+    for (int i = 0; i < nb; i++) {
         const double *ax = m->axis[i];
         int p = m->parent[i];
         transform(m, i, q[i], X[i], R);
@@ -182,9 +201,10 @@ void chain_rnea(const chain_t *m, const double *q, const double *qd, const doubl
         crf(v[i], h, t);
         for (int k = 0; k < 6; k++) f[i][k] += t[k];
     }
-    for (int i = n - 1; i >= 0; i--) {
+    for (int j = 0; j < m->n; j++) tau[j] = 0.0;
+    for (int i = nb - 1; i >= 0; i--) {
         const double *ax = m->axis[i];
-        tau[i] = ax[0] * f[i][0] + ax[1] * f[i][1] + ax[2] * f[i][2] + m->armature[i] * qdd[i];
+        tau[m->coord[i]] += m->scale[i] * (ax[0] * f[i][0] + ax[1] * f[i][1] + ax[2] * f[i][2]);
         int p = m->parent[i];
         if (p >= 0) {
             double t[6];
@@ -194,10 +214,100 @@ void chain_rnea(const chain_t *m, const double *q, const double *qd, const doubl
     }
 }
 
-/* Friction torque D qd + F_c tanh(qd / v_s). */
+/* tau = RNEA(q, qd, qdd) = M(q) qdd + C(q, qd) qd + g(q), M with the armature. */
+void chain_rnea(const chain_t *m, const double *q, const double *qd, const double *qdd,
+                double *tau) {
+    double qb[MAXJ], vb[MAXJ], ab[MAXJ];
+    expand(m, q, 1, qb);
+    expand(m, qd, 0, vb);
+    expand(m, qdd, 0, ab);
+    body_rnea(m, qb, vb, ab, 1, tau);
+    for (int j = 0; j < m->n; j++) tau[j] += m->armature[j] * qdd[j];
+}
+
+/* M(q) (with the armature) from n RNEA columns at the body angles qb, no gravity, no velocity. */
+static void body_mass(const chain_t *m, const double *qb, double M[MAXJ][MAXJ]) {
+    int n = m->n;
+    double ab[MAXJ], zero[MAXJ] = {0}, e[MAXJ], col[MAXJ];
+    for (int j = 0; j < n; j++) {
+        for (int k = 0; k < n; k++) e[k] = (k == j);
+        expand(m, e, 0, ab);
+        body_rnea(m, qb, zero, ab, 0, col);
+        for (int k = 0; k < n; k++) M[k][j] = col[k];
+        M[j][j] += m->armature[j];
+    }
+}
+
+/* M(q) with the armature, n x n row-major. */
+void chain_mass(const chain_t *m, const double *q, double *out) {
+    double qb[MAXJ], M[MAXJ][MAXJ];
+    expand(m, q, 1, qb);
+    body_mass(m, qb, M);
+    for (int k = 0; k < m->n; k++)
+        for (int j = 0; j < m->n; j++) out[m->n * k + j] = M[k][j];
+}
+
+/* q'' = M(q)^-1 (tau - h(q, q')) with M from n RNEA columns (no gravity, no velocity) and the
+ * armature, by Cholesky: the dynamics of a model with mimic bodies. */
+static void projected_fd(const chain_t *m, const double *q, const double *qd, const double *tau,
+                         double *qdd) {
+    int n = m->n;
+    double qb[MAXJ], vb[MAXJ], zero[MAXJ] = {0}, h[MAXJ], M[MAXJ][MAXJ];
+    double L[MAXJ][MAXJ], y[MAXJ];
+    expand(m, q, 1, qb);
+    expand(m, qd, 0, vb);
+    body_rnea(m, qb, vb, zero, 1, h);
+    body_mass(m, qb, M);
+    for (int j = 0; j < n; j++) {  /* M = L L^T */
+        double d = M[j][j];
+        for (int k = 0; k < j; k++) d -= L[j][k] * L[j][k];
+        L[j][j] = sqrt(d);
+        for (int i = j + 1; i < n; i++) {
+            double s = M[i][j];
+            for (int k = 0; k < j; k++) s -= L[i][k] * L[j][k];
+            L[i][j] = s / L[j][j];
+        }
+    }
+    for (int i = 0; i < n; i++) {
+        double s = tau[i] - h[i];
+        for (int k = 0; k < i; k++) s -= L[i][k] * y[k];
+        y[i] = s / L[i][i];
+    }
+    for (int i = n - 1; i >= 0; i--) {
+        double s = y[i];
+        for (int k = i + 1; k < n; k++) s -= L[k][i] * qdd[k];
+        qdd[i] = s / L[i][i];
+    }
+}
+
+/* qdd = forward dynamics: M(q) qdd + C(q, qd) qd + g(q) = tau, M with the armature. */
+void chain_aba(const chain_t *m, const double *q, const double *qd, const double *tau,
+               double *qdd) {
+    if (m->projected)
+        projected_fd(m, q, qd, tau, qdd);
+    else
+        body_aba(m, q, qd, tau, qdd);
+}
+
+/* Friction torque S^T (D w + F_c tanh(w / v_s)), w = S qd (S = I: D qd + F_c tanh(qd / v_s)). */
 static void friction(const chain_t *m, const double *qd, double *out) {
-    for (int i = 0; i < m->n; i++)
-        out[i] = m->damping[i] * qd[i] + m->coulomb[i] * tanh(qd[i] * m->inv_stiction);
+    int n = m->n;
+    if (!m->mapped) {
+        for (int i = 0; i < n; i++)
+            out[i] = m->damping[i] * qd[i] + m->coulomb[i] * tanh(qd[i] * m->inv_stiction);
+        return;
+    }
+    double f[MAXJ];
+    for (int k = 0; k < n; k++) {
+        double w = 0;
+        for (int l = 0; l < n; l++) w += m->motor[n * k + l] * qd[l];
+        f[k] = m->damping[k] * w + m->coulomb[k] * tanh(w * m->inv_stiction);
+    }
+    for (int j = 0; j < n; j++) {
+        double s = 0;
+        for (int k = 0; k < n; k++) s += m->motor[n * k + j] * f[k];
+        out[j] = s;
+    }
 }
 
 /* Explicit midpoint, `substeps` steps of h, torque held (sim.plant.ArmPlant._midpoint_steps):
@@ -229,9 +339,9 @@ void chain_midpoint(const chain_t *m, double *q, double *qd, const double *tau, 
  * for `count` configurations (rows of q, n each) -> out (count x 3). */
 void chain_point(const chain_t *m, const double *q, int count, int joint, const double *point,
                  double *out) {
-    double X[36], R[MAXJ][9], p[MAXJ][3], Rl[9];
+    double X[36], R[MAXJ][9], p[MAXJ][3], Rl[9], qc[MAXJ];
     for (int c = 0; c < count; c++) {
-        const double *qc = q + (size_t)c * m->n;
+        expand(m, q + (size_t)c * m->n, 1, qc);
         for (int i = 0; i <= joint; i++) {
             int pa = m->parent[i];
             transform(m, i, qc[i], X, Rl);
@@ -313,6 +423,12 @@ void tick_actuate(tick_t *t) {
     double zero[MAXJ] = {0}, bias[MAXJ];
     const double *q = t->prior + 2 * n, *v = t->post + n;
     chain_rnea(m, q, v, zero, bias);
+    if (m->mapped) {
+        double f[MAXJ];
+        friction(m, v, f);
+        for (int i = 0; i < n; i++) t->tau[i] = t->u[i] + bias[i] + f[i];
+        return;
+    }
     for (int i = 0; i < n; i++)
         t->tau[i] = t->u[i] + bias[i] + m->damping[i] * v[i] +
                     m->coulomb[i] * tanh(v[i] * m->inv_stiction);
@@ -338,4 +454,116 @@ void tick_advance(tick_t *t) {
         for (int l = 0; l < 3 * n; l++) s += t->predict[k][l] * t->post[l];
         t->prior[k] = s;
     }
+}
+
+/* ---- The hardware-like plant's tick (sim/plant/hardware.py HardwareTick): motor currents
+ * through a first-order lag, Stribeck friction on the motors' output rates, optional two-mass
+ * cables; the same equations as the Python reference there. ---- */
+
+typedef struct {
+    const chain_t *arm;         /* M(q) and h(q, q') (its own friction fields unused) */
+    int cables, steps;
+    double S[MAXJ * MAXJ];      /* motor map, n x n row-major */
+    double gain[MAXJ];          /* eta K_t: output torque per ampere */
+    double coulomb[MAXJ], damping[MAXJ];
+    double ratio, v_stribeck, inv_smooth;
+    double rotor[MAXJ];         /* J_r on each output coordinate */
+    double R[MAXJ * MAXJ];      /* S^T diag(J_r) S, taken off M with cables */
+    double k[MAXJ], c[MAXJ];    /* cable stiffness and damping */
+    double q0[MAXJ];
+    double tau_e, h;            /* current lag, step [s] */
+} hw_t;
+
+static double hw_friction(const hw_t *w, int k, double rate) {
+    double x = rate / w->v_stribeck;
+    double peak = w->coulomb[k] * (1.0 + (w->ratio - 1.0) * exp(-x * x));
+    return w->damping[k] * rate + peak * tanh(rate * w->inv_smooth);
+}
+
+/* Solve A x = b (n x n, symmetric positive definite) by Cholesky. */
+static void spd_solve(int n, double A[MAXJ][MAXJ], const double *b, double *x) {
+    double L[MAXJ][MAXJ], y[MAXJ];
+    for (int j = 0; j < n; j++) {
+        double d = A[j][j];
+        for (int k = 0; k < j; k++) d -= L[j][k] * L[j][k];
+        L[j][j] = sqrt(d);
+        for (int i = j + 1; i < n; i++) {
+            double s = A[i][j];
+            for (int k = 0; k < j; k++) s -= L[i][k] * L[j][k];
+            L[i][j] = s / L[j][j];
+        }
+    }
+    for (int i = 0; i < n; i++) {
+        double s = b[i];
+        for (int k = 0; k < i; k++) s -= L[i][k] * y[k];
+        y[i] = s / L[i][i];
+    }
+    for (int i = n - 1; i >= 0; i--) {
+        double s = y[i];
+        for (int k = i + 1; k < n; k++) s -= L[k][i] * x[k];
+        x[i] = s / L[i][i];
+    }
+}
+
+/* d/dt of x = [q, q', theta_r, theta_r'] (4n) with winding currents cur. */
+static void hw_rates(const hw_t *w, const double *x, const double *cur, double *dx) {
+    int n = w->arm->n;
+    const double *q = x, *v = x + n, *th = x + 2 * n, *om = x + 3 * n;
+    double out[MAXJ], joint[MAXJ];
+    for (int k = 0; k < n; k++) {
+        double sq = 0, sv = 0;
+        for (int l = 0; l < n; l++) {
+            sq += w->S[n * k + l] * (q[l] - w->q0[l]);
+            sv += w->S[n * k + l] * v[l];
+        }
+        double motor = w->gain[k] * cur[k];
+        if (w->cables) {
+            out[k] = w->k[k] * (th[k] - sq) + w->c[k] * (om[k] - sv);  /* cable torque */
+            dx[3 * n + k] = (motor - out[k] - hw_friction(w, k, om[k])) / w->rotor[k];
+        } else {
+            out[k] = motor - hw_friction(w, k, sv);
+            dx[3 * n + k] = 0.0;
+        }
+        dx[2 * n + k] = om[k];
+    }
+    for (int j = 0; j < n; j++) {
+        double s = 0;
+        for (int k = 0; k < n; k++) s += w->S[n * k + j] * out[k];
+        joint[j] = s;
+        dx[j] = v[j];
+    }
+    if (!w->cables) {
+        chain_aba(w->arm, q, v, joint, dx + n);
+        return;
+    }
+    double qb[MAXJ], vb[MAXJ], zero[MAXJ] = {0}, h[MAXJ], M[MAXJ][MAXJ], b[MAXJ];
+    expand(w->arm, q, 1, qb);
+    expand(w->arm, v, 0, vb);
+    body_rnea(w->arm, qb, vb, zero, 1, h);
+    body_mass(w->arm, qb, M);
+    for (int i = 0; i < n; i++) {
+        b[i] = joint[i] - h[i];
+        for (int j = 0; j < n; j++) M[i][j] -= w->R[n * i + j];
+    }
+    spd_solve(n, M, b, dx + n);
+}
+
+/* One tick: `steps` explicit-midpoint steps, each with the current's exact mean over the step
+ * (command cmd held, lag tau_e from i0); x (4n) and i0 updated in place. */
+void hw_integrate(const hw_t *w, double *x, double *i0, const double *cmd) {
+    int n = w->arm->n, nx = 4 * n;
+    double k1[4 * MAXJ], mid[4 * MAXJ], k2[4 * MAXJ], cur[MAXJ], h = w->h;
+    for (int s = 0; s < w->steps; s++) {
+        double t = s * h;
+        for (int k = 0; k < n; k++)
+            cur[k] = w->tau_e > 0 ? cmd[k] + (i0[k] - cmd[k]) * (w->tau_e / h) *
+                                                 (exp(-t / w->tau_e) - exp(-(t + h) / w->tau_e))
+                                  : cmd[k];
+        hw_rates(w, x, cur, k1);
+        for (int k = 0; k < nx; k++) mid[k] = x[k] + 0.5 * h * k1[k];
+        hw_rates(w, mid, cur, k2);
+        for (int k = 0; k < nx; k++) x[k] += h * k2[k];
+    }
+    for (int k = 0; k < n; k++)
+        i0[k] = w->tau_e > 0 ? cmd[k] + (i0[k] - cmd[k]) * exp(-w->steps * h / w->tau_e) : cmd[k];
 }

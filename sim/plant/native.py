@@ -57,11 +57,13 @@ class _Chain(ctypes.Structure):
     """``chain_t`` of sim/chain.c."""
 
     _fields_ = [
-        ("n", _i), ("parent", _i * MAX_JOINTS), ("Rp", (_d * 9) * MAX_JOINTS),
-        ("pp", (_d * 3) * MAX_JOINTS), ("axis", (_d * 3) * MAX_JOINTS),
-        ("inertia", (_d * 36) * MAX_JOINTS), ("armature", _d * MAX_JOINTS),
-        ("damping", _d * MAX_JOINTS), ("coulomb", _d * MAX_JOINTS), ("inv_stiction", _d),
-        ("gravity", _d * 3),
+        ("n", _i), ("nb", _i), ("parent", _i * MAX_JOINTS), ("coord", _i * MAX_JOINTS),
+        ("scale", _d * MAX_JOINTS), ("offset", _d * MAX_JOINTS), ("projected", _i),
+        ("Rp", (_d * 9) * MAX_JOINTS), ("pp", (_d * 3) * MAX_JOINTS),
+        ("axis", (_d * 3) * MAX_JOINTS), ("inertia", (_d * 36) * MAX_JOINTS),
+        ("armature", _d * MAX_JOINTS), ("motor", _d * (MAX_JOINTS * MAX_JOINTS)),
+        ("mapped", _i), ("damping", _d * MAX_JOINTS), ("coulomb", _d * MAX_JOINTS),
+        ("inv_stiction", _d), ("gravity", _d * 3),
     ]
 
 
@@ -101,9 +103,11 @@ def _compile() -> ctypes.CDLL | None:
     library.chain_rnea.argtypes = [ptr, ptr, ptr, ptr, ptr]
     library.chain_midpoint.argtypes = [ptr, ptr, ptr, ptr, _d, _i]
     library.chain_point.argtypes = [ptr, ptr, _i, _i, ptr, ptr]
+    library.chain_mass.argtypes = [ptr, ptr, ptr]
+    library.hw_integrate.argtypes = [ptr, ptr, ptr, ptr]
     library.chain_offset.argtypes = [ptr, ptr, ptr, ptr, ptr, _i, ptr, ptr]
     for f in (library.chain_aba, library.chain_rnea, library.chain_midpoint, library.chain_point,
-              library.chain_offset):
+              library.chain_mass, library.hw_integrate, library.chain_offset):
         f.restype = None
     _library = library
     return library
@@ -133,6 +137,13 @@ class NativeChain:
         self._q[:], self._v[:], self._x[:] = q, v, a
         self._lib.chain_rnea(self._ptr, *self._addr)
         return self._out.copy()
+
+    def mass(self, q) -> np.ndarray:
+        """M(q) with the armature [kg·m²] (as ``pin.crba``, both triangles)."""
+        self._q[:] = q
+        out = np.empty((self.nv, self.nv))
+        self._lib.chain_mass(self._ptr, self._addr[0], out.ctypes.data)
+        return out
 
     def midpoint(self, q, v, tau, h: float, substeps: int) -> tuple[np.ndarray, np.ndarray]:
         """(q, q̇) after ``substeps`` explicit-midpoint steps of ``h`` with friction, τ held."""
@@ -195,23 +206,53 @@ class NativeOffset:
         return self.out
 
 
-def load_chain(model, damping=0.0, coulomb=0.0, stiction_velocity: float = 5e-3
-               ) -> NativeChain | None:
+def _bodies(model) -> list[tuple[int, float, float, tuple[float, float, float]]] | None:
+    """(degree of freedom, scale, offset, axis) of each body's joint; None if one is not a
+    revolute joint (or a mimic of one)."""
+    import pinocchio as pin
+
+    data = model.createData()
+    pin.forwardKinematics(model, data, pin.neutral(model))
+    out = []
+    for i, joint in enumerate(model.joints[1:], start=1):
+        name = joint.shortname()
+        if name in _AXES or name == "JointModelRevoluteUnaligned":
+            axis = _AXES.get(name) or tuple(np.asarray(joint.extract().axis).tolist())
+            out.append((joint.idx_v, 1.0, 0.0, axis))
+        elif name == "JointModelMimic":
+            mimic = joint.extract()
+            S = np.asarray(data.joints[i].S).reshape(6, -1)[:, 0]
+            if np.abs(S[:3]).max() > 0 or mimic.scaling == 0:  # a translation: not revolute
+                return None
+            out.append((joint.idx_v, float(mimic.scaling), float(mimic.offset),
+                        tuple((S[3:] / mimic.scaling).tolist())))
+        else:
+            return None
+    return out
+
+
+def load_chain(model, damping=0.0, coulomb=0.0, stiction_velocity: float = 5e-3,
+               motor_map=None) -> NativeChain | None:
     """The compiled dynamics of a Pinocchio ``model``, or None (reason in ``unavailable_reason``).
 
     Parameters
     ----------
     model : pinocchio.Model
-        A chain (or tree) of revolute joints (RX, RY, RZ, revolute-unaligned), at most 8.
+        A chain or tree of revolute joints (RX, RY, RZ, revolute-unaligned), at most 8 bodies;
+        bodies on mimic joints of revolute joints follow their degree of freedom (then the
+        forward dynamics is M⁻¹(τ − h) instead of ABA).
     damping, coulomb : float or array
-        Viscous [N·m·s/rad] and Coulomb [N·m] friction per joint, for :meth:`NativeChain.midpoint`.
+        Viscous [N·m·s/rad] and Coulomb [N·m] friction of each motor, for
+        :meth:`NativeChain.midpoint`.
     stiction_velocity : float
         v_s of the smoothed Coulomb friction [rad/s].
+    motor_map : array or None
+        S, the motors' output rates ω = S q̇ the friction acts on (None: identity).
     """
     global unavailable_reason
+    bodies = _bodies(model)
     names = [j.shortname() for j in model.joints[1:]]
-    supported = all(n in _AXES or n == "JointModelRevoluteUnaligned" for n in names)
-    if not supported or model.nq != model.nv or not 0 < model.nv <= MAX_JOINTS:
+    if bodies is None or not 0 < model.nv <= len(bodies) <= MAX_JOINTS or model.nq != model.nv:
         unavailable_reason = f"joints {', '.join(names)}: only revolute chains are compiled"
         return None
     library = _compile()
@@ -219,26 +260,88 @@ def load_chain(model, damping=0.0, coulomb=0.0, stiction_velocity: float = 5e-3
         return None
     nv = model.nv
     chain = _Chain()
-    chain.n = nv
+    chain.n, chain.nb = nv, len(bodies)
     damping = np.broadcast_to(np.asarray(damping, dtype=float), (nv,))
     coulomb = np.broadcast_to(np.asarray(coulomb, dtype=float), (nv,))
-    for k, joint in enumerate(model.joints[1:]):
+    S = np.eye(nv) if motor_map is None else np.asarray(motor_map, dtype=float)
+    chain.motor[: nv * nv] = S.reshape(-1).tolist()
+    chain.mapped = int(not np.array_equal(S, np.eye(nv)))
+    for k, (coord, scale, offset, axis) in enumerate(bodies):
         i = k + 1
         chain.parent[k] = int(model.parents[i]) - 1
+        chain.coord[k], chain.scale[k], chain.offset[k] = coord, scale, offset
+        chain.projected |= int(coord != k or scale != 1.0 or offset != 0.0)
         placement = model.jointPlacements[i]
         chain.Rp[k][:] = np.asarray(placement.rotation).reshape(-1).tolist()
         chain.pp[k][:] = np.asarray(placement.translation).tolist()
-        axis = _AXES.get(joint.shortname())
-        chain.axis[k][:] = list(axis) if axis else np.asarray(joint.extract().axis).tolist()
+        chain.axis[k][:] = list(axis)
         M = np.asarray(model.inertias[i].matrix())  # Pinocchio's (linear; angular) order
         M = np.block([[M[3:, 3:], M[3:, :3]], [M[:3, 3:], M[:3, :3]]])
         chain.inertia[k][:] = M.reshape(-1).tolist()
-        chain.armature[k] = float(model.armature[k])
-        chain.damping[k], chain.coulomb[k] = float(damping[k]), float(coulomb[k])
+    for j in range(nv):
+        chain.armature[j] = float(model.armature[j])
+        chain.damping[j], chain.coulomb[j] = float(damping[j]), float(coulomb[j])
     chain.inv_stiction = 1.0 / stiction_velocity
     chain.gravity[:] = np.asarray(model.gravity.linear).tolist()
     unavailable_reason = None
     return NativeChain(library, chain, nv)
+
+
+class _Hardware(ctypes.Structure):
+    """``hw_t`` of sim/plant/chain.c."""
+
+    _fields_ = [
+        ("arm", ctypes.c_void_p), ("cables", _i), ("steps", _i),
+        ("S", _d * (MAX_JOINTS * MAX_JOINTS)), ("gain", _d * MAX_JOINTS),
+        ("coulomb", _d * MAX_JOINTS), ("damping", _d * MAX_JOINTS), ("ratio", _d),
+        ("v_stribeck", _d), ("inv_smooth", _d), ("rotor", _d * MAX_JOINTS),
+        ("R", _d * (MAX_JOINTS * MAX_JOINTS)), ("k", _d * MAX_JOINTS), ("c", _d * MAX_JOINTS),
+        ("q0", _d * MAX_JOINTS), ("tau_e", _d), ("h", _d),
+    ]
+
+
+class HardwareStep:
+    """The hardware-like plant's tick compiled (``hw_integrate``): the equations of
+    :class:`sim.plant.hardware.HardwareTick`, whose Python steps are the reference.
+
+    Parameters are those of the tick: the arm's chain, its motor map S, output torque per
+    ampere η K_t, friction (Coulomb, viscous, stiction ratio, Stribeck and smoothing rates),
+    rotor inertias, cable stiffness and damping (None: rigid), home posture, current lag τ_e
+    and step h.
+    """
+
+    def __init__(self, chain: NativeChain, *, S, gain, coulomb, damping, ratio, v_stribeck,
+                 v_smooth, rotor, cables, q0, tau_e, h, steps) -> None:
+        n = chain.nv
+        w = self._w = _Hardware()
+        self._chain = chain  # kept alive: w.arm points into it
+        w.arm, w.steps, w.cables = chain._ptr, steps, int(cables is not None)
+        w.S[: n * n] = np.asarray(S, dtype=float).reshape(-1).tolist()
+        R = np.asarray(S).T @ np.diag(rotor) @ np.asarray(S)
+        w.R[: n * n] = R.reshape(-1).tolist()
+        for name, value in (("gain", gain), ("coulomb", coulomb), ("damping", damping),
+                            ("rotor", rotor), ("q0", q0)):
+            getattr(w, name)[:n] = np.broadcast_to(np.asarray(value, dtype=float), (n,)).tolist()
+        if cables is not None:
+            w.k[:n], w.c[:n] = np.asarray(cables[0]).tolist(), np.asarray(cables[1]).tolist()
+        w.ratio, w.v_stribeck, w.inv_smooth = ratio, v_stribeck, 1.0 / v_smooth
+        w.tau_e, w.h = tau_e, h
+        self._x, self._i, self._cmd = np.zeros(4 * n), np.zeros(n), np.zeros(n)
+        self._args = (ctypes.addressof(w), self._x.ctypes.data, self._i.ctypes.data,
+                      self._cmd.ctypes.data)
+        self._fn = chain._lib.hw_integrate
+        self.n = n
+
+    def integrate(self, state: list, current: np.ndarray, command: np.ndarray
+                  ) -> tuple[list, np.ndarray]:
+        """One tick from ``state`` = [q, q̇, θ_r, θ̇_r] with winding currents ``current`` and
+        the held current command; returns the new state and currents."""
+        n = self.n
+        self._x[:] = np.concatenate(state)
+        self._i[:], self._cmd[:] = current, command
+        self._fn(*self._args)
+        x = self._x.copy()
+        return [x[k * n:(k + 1) * n] for k in range(4)], self._i.copy()
 
 
 class _Tick(ctypes.Structure):
@@ -273,9 +376,10 @@ class NativeTick:
         nv = plant.robot.nv
         s = plant.settings
         self._plant = load_chain(plant.model, plant.damping, plant.coulomb_friction,
-                                 s.stiction_velocity)
+                                 s.stiction_velocity, plant.robot.motor_map)
         self._model = load_chain(cancellation.model, cancellation.damping,
-                                 cancellation.coulomb_friction, cancellation.stiction_velocity)
+                                 cancellation.coulomb_friction, cancellation.stiction_velocity,
+                                 cancellation.motor_map)
         if self._plant is None or self._model is None or s.integrator != "midpoint":
             raise ValueError(f"no native tick: {unavailable_reason or s.integrator}")
         lib = self._plant._lib

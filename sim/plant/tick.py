@@ -10,7 +10,10 @@ A tick of the closed loop is::
 
 :class:`ArmTick` does it with Pinocchio (:class:`~sim.plant.arm.ArmPlant`), the reference;
 :class:`~sim.plant.native.NativeTick` does the same operations compiled. :func:`make_tick`
-picks one from :attr:`PlantSettings.dynamics <sim.plant.arm.PlantSettings.dynamics>`.
+picks one from :attr:`PlantSettings.dynamics <sim.plant.arm.PlantSettings.dynamics>`, or, by
+:attr:`PlantSettings.model <sim.plant.arm.PlantSettings.model>`, the hardware-like plant
+(:class:`~sim.plant.hardware.HardwareTick`) or the linear one
+(:class:`~sim.plant.hardware.LinearTick`).
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ import numpy as np
 from robots import LinearArm, Robot
 from sim.plant.arm import ArmPlant, PlantSettings
 from sim.plant.cancellation import ModelMismatch, NonlinearityCancellation
+from sim.plant.hardware import HardwareSettings, HardwareTick, LinearTick
 from sim.plant.native import NativeTick
 from sim.plant.observer import JointObserver, ObserverSettings
 
@@ -82,13 +86,25 @@ class ArmTick:
 
 
 def make_tick(robot: Robot, arm: LinearArm, Ts: float, plant: PlantSettings | None = None,
-              mismatch: ModelMismatch | None = None,
-              observer: ObserverSettings | None = None) -> ArmTick | NativeTick:
+              mismatch: ModelMismatch | None = None, observer: ObserverSettings | None = None,
+              hardware: HardwareSettings | None = None
+              ) -> ArmTick | NativeTick | HardwareTick | LinearTick:
     """The robot's side of the loop at the home posture, at rest.
 
-    Compiled (:class:`~sim.plant.native.NativeTick`) when the plant's dynamics are
-    ``"native"`` (``"auto"`` where the C step builds), else :class:`ArmTick`.
+    ``plant.model`` ``"hardware"``: :class:`~sim.plant.hardware.HardwareTick` with
+    ``hardware`` (default settings if None); ``"linear"``:
+    :class:`~sim.plant.hardware.LinearTick`. The ideal plant: compiled
+    (:class:`~sim.plant.native.NativeTick`) when its dynamics are ``"native"`` (``"auto"``
+    where the C step builds), else :class:`ArmTick`.
     """
+    plant = plant or PlantSettings()
+    if plant.model == "linear":
+        return LinearTick(robot, arm, JointObserver(arm, robot.encoder_resolution, observer))
+    if plant.model == "hardware":
+        cancellation = NonlinearityCancellation(robot, mismatch, plant.stiction_velocity)
+        return HardwareTick(robot, Ts, hardware or HardwareSettings(), cancellation,
+                            JointObserver(arm, robot.encoder_resolution, observer),
+                            plant.dynamics)
     arm_plant = ArmPlant(robot, Ts, plant)
     arm_plant.reset()
     cancellation = NonlinearityCancellation(

@@ -8,8 +8,9 @@ a range with the speed of sound it is set to, and solves the 3-D position by tri
 
     d_i   = ‖x_k − b_i‖                               true distance, x_k = x₀ + p(t_k) − p(t₀)
     δ_i   = (λ/4)·(g_i⁰ − g_i),  g_i = cos θ_i·cos φ_i    leading-edge error, |δ_i| ≤ λ/4
+    w_i   ~ N(0, σ_r²), white                          crystal-geometry error (§IX)
     s_i   ∈ {0, λ}                                     cycle slip (echo outlier), rare
-    τ_i   = Δ·round((d_i + δ_i + s_i) / (c (1 + ε)) / Δ)   time of flight, counter step Δ
+    τ_i   = Δ·round((d_i + δ_i + w_i + s_i) / (c (1 + ε)) / Δ)   time of flight, counter step Δ
     r_i   = c·τ_i                                      range with the set speed of sound c
     z_k   = trilaterate(b, r) − x₀ + p(t₀)              back in the motion's frame
 
@@ -21,7 +22,11 @@ error, "approximately one-fourth wavelength"). The constant part, g_i⁰ at the 
 per-crystal delay the instrument's software calibrates away (SonoSOFT's offset). The POI
 crystal's axis turns with the heart wall: n = normalise(n₀ + d⊥/L), d⊥ the displacement
 across n₀ and L the lever (a rotation of the wall by d⊥/L rad). The error is smooth and follows
-the motion: it is not white. ε is the relative error of the speed of sound, one draw per run.
+the motion: it is not white. The rest of the crystal-geometry error — where on the crystal's face
+the wave front is received, which changes with the crystals' shape and their orientation from
+sample to sample — is what §IX says "might be approximated by a white noise" (citing Ratcliffe et
+al., IEEE TBME 42(6), 1995): w_i, independent per range and sample. ε is the relative error of
+the speed of sound, one draw per run.
 """
 
 from __future__ import annotations
@@ -66,6 +71,18 @@ class SonomicrometrySettings:
         "approximately a one-fourth wavelength", so λ = 1 mm and f = 1.59 MHz.
     orientation_error : bool
         Model the leading-edge / orientation error δ_i (bounded by λ/4).
+    range_noise : float
+        σ_r of the white crystal-geometry error w_i on each range [m]: 88 µm. Sized from Tuna
+        §III-B, not fitted to a result: the recorded POI motion is "approximated with an error
+        less than 140 µm RMS with frequency components up to 26 Hz", so the recordings held
+        at most 0.14 mm RMS above 26 Hz. The white term alone is put at 0.12 mm there, the
+        middle of 0.10–0.14 mm, which leaves the rest of that residual (the motion's own
+        content above 26 Hz, the counter step) inside the bound. White noise of σ_r per range
+        gives σ_r·G per position (3-D; G = ‖:func:`~sim.sensors.trilateration.dilution`‖ =
+        √trace((HᵀH)⁻¹) = 1.534 for the default crystals at rest, H the unit lines of sight),
+        of which the share √(1 − 2·26/f_s) lies above 26 Hz:
+        σ_r = 0.12 mm / (1.534 · √(1 − 52/257)) = 88 µm at 257 Hz (0.125 mm above 26 Hz at
+        404 Hz). 0 disables it.
     tilt_lever : float
         L [m]: the POI crystal's axis turns by d⊥/L rad with the displacement d⊥ across it;
         30 mm, the heart's radius (a wall point turning about the ventricle's centre).
@@ -89,6 +106,7 @@ class SonomicrometrySettings:
     clock: float = 7.8e-9
     frequency: float = 1.59e6
     orientation_error: bool = True
+    range_noise: float = 88e-6
     tilt_lever: float = 30e-3
     slip_rate: float = 0.05
     slip_duration: tuple[float, float] = (2e-3, 8e-3)
@@ -98,7 +116,8 @@ class SonomicrometrySettings:
 
     def __post_init__(self) -> None:
         positive = ("rate", "sound_speed", "frequency", "tilt_lever")
-        for name in (*positive, "sound_speed_error", "clock", "slip_rate", "latency"):
+        for name in (*positive, "sound_speed_error", "clock", "slip_rate", "latency",
+                     "range_noise"):
             value = getattr(self, name)
             if not math.isfinite(value):
                 raise ValueError(f"sonomicrometry {name} must be finite, got {value}")
@@ -173,7 +192,8 @@ class Sonomicrometer:
         """Measure the whole run: the run's draws first (speed-of-sound error, slips), then the
         ranges and the trilateration block by block (:data:`BLOCK` samples), so that memory
         does not grow with the run's length beyond the stream itself; the result does not
-        depend on the block size (each sample is solved on its own)."""
+        depend on the block size (each sample is solved on its own, the white range errors are
+        drawn block after block from one stream of normal deviates)."""
         cfg = self.settings
         if stream.t.size == 0:
             return stream
@@ -196,6 +216,8 @@ class Sonomicrometer:
             d = p[a:b] - anchor
             d_perp = d - np.outer(d @ n0, n0)
             path = self.paths(x0 + d, d_perp)
+            if cfg.range_noise > 0:
+                path += cfg.range_noise * rng.standard_normal(path.shape)
             for (i0, i1), i in zip(bounds, which, strict=True):
                 lo, hi = max(i0, a), min(max(i1, i0 + 1), b)
                 if lo < hi:

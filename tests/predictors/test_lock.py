@@ -33,13 +33,13 @@ def _lock_scores(name: str, scenario: str, params: str | None = None,
     return p95, counts["omega_clamped"], ratio
 
 
-def _bench_stream(scenario: str, seed: int, seconds: float = 30.0):
+def _bench_stream(scenario: str, seed: int, seconds: float = 30.0, **physics):
     """The stream of ``benchmarks/predictor_streams.py``: scenario and sensor seed ``seed``, every
-    second sample of the 257 Hz sonomicrometer (Δt = 7.8 ms)."""
+    second sample of the 257 Hz sonomicrometer (Δt = 7.8 ms); ``physics``: sensor settings."""
     sim_scenarios = pytest.importorskip("sim.heart.scenarios")
     sim_sensors = pytest.importorskip("sim.sensors")
     scn = sim_scenarios.make_scenario(scenario, np.random.default_rng(seed), duration=seconds)
-    sensor = sim_sensors.sensor_from_name("sonomicrometry", dim=int(scn.source.dim))
+    sensor = sim_sensors.sensor_from_name("sonomicrometry", dim=int(scn.source.dim), **physics)
     st = sensor.measure(scn.source, seconds, np.random.default_rng(seed))
     return scn, SimpleNamespace(t=st.t[::2], z=st.z[::2])
 
@@ -77,15 +77,16 @@ _RR_SINE = {"rr": 60.0 / (100.0 + 8.0 * np.sin(np.arange(60) / 3.0))}
     ],
 )
 def test_ekf_keeps_heart_rate_lock_in_3d_with_breathing(scenario, overrides, tolerance, params):
-    """Measured (seeds 4/5, in the order above), ``adaptive`` / ``tuna2013-hrv``: p95
-    |ω̂ − ω| 3.1 / 5.5 / 3.8 / 3.1 / 3.1 bpm and 3.3 / 5.5 / 3.9 / 3.2 / 3.1 bpm, no clamp,
-    3-step RMS 0.25 / 0.29 / 0.31 / 0.27 / 0.27 and 0.54 / 0.43 / 0.42 / 0.52 / 0.41 × hold's
-    (with Tuna's q_ω fixed-a1-top and varying-a3-side: p95 56 / 61 bpm, 0.93 / 1.35 × hold).
-    Asserted: the lock tolerance (5 bpm; 6 where the rate swings with each breath), 0.4 / 0.8 ×
-    hold.  (varying-a1-top, not asserted: p95 5.4.)"""
+    """Measured (seeds 4/5, in the order above, the default sonomicrometer with its white
+    range error), ``adaptive`` / ``tuna2013-hrv``: p95 |ω̂ − ω| 3.1 / 5.5 / 3.8 / 3.2 / 3.2 bpm
+    and 3.2 / 5.5 / 4.0 / 3.3 / 3.2 bpm, no clamp, 3-step RMS 0.35 / 0.42 / 0.42 / 0.46 / 0.39
+    and 0.54 / 0.47 / 0.47 / 0.56 / 0.44 × hold's (with Tuna's q_ω fixed-a1-top and
+    varying-a3-side lose lock: p95 56 / 61 bpm). Asserted: the lock tolerance (5 bpm; 6 where
+    the rate swings with each breath), 0.55 / 0.8 × hold.  (varying-a1-top, not asserted:
+    p95 5.4.)"""
     p95, clamped, ratio = _lock_scores("ekf", scenario, params, **overrides)
     assert p95 < tolerance and not clamped
-    assert ratio < (0.4 if params == "adaptive" else 0.8)
+    assert ratio < (0.55 if params == "adaptive" else 0.8)
 
 
 @pytest.mark.parametrize(("scenario", "seed"), [("fixed-a1-top", 7), ("varying-a1-top", 2)])
@@ -107,10 +108,11 @@ def test_ekf_refits_after_locking_on_half_the_heart_rate(scenario, seed, monkeyp
     """The predictor-bench stream at seed 3 / 2, 40 s: 4–5 s after the fit ω̂ settles near half
     the heart rate (41–52 beats/min, inside the FFT's band: no clamp) and its second harmonic
     outweighs the fundamental. Once the window is all new the filter re-fits (``lock_refit``).
-    Measured p95 |ω̂ − ω| over the last 8 s: 2.4 / 3.4 bpm; without the rule 50.2 / 45.9."""
+    Measured p95 |ω̂ − ω| over the last 8 s: 2.4 / 3.4 bpm; without the rule 50.2 / 45.9.
+    The streams are those without the white range error, on which these cases were found."""
     from predictors.ekf_fourier import FourierEKF
 
-    stream = _bench_stream(scenario, seed, 40.0)
+    stream = _bench_stream(scenario, seed, 40.0, range_noise=0.0)
     kw = {"since": 32.0, "params": "tuna2013-hrv"}
     p95, counts, _ = _scores("ekf", *stream, 2 / 257, **kw)
     assert counts["lock_refit"] >= 1 and not counts["omega_clamped"] and p95 < 5.0

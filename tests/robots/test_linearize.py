@@ -74,7 +74,8 @@ def test_linear_arm_carries_the_robot_and_its_limits():
     arm = linearize(robot)
     assert arm.robot is robot
     joints = ET.parse(urdf_path("phantom_premium_1_5a.urdf")).iter("joint")
-    limits = [j.find("limit") for j in joints if j.get("type") == "revolute"]
+    limits = [j.find("limit") for j in joints
+              if j.get("type") == "revolute" and j.find("mimic") is None]
     lower = np.array([float(e.get("lower")) for e in limits])
     upper = np.array([float(e.get("upper")) for e in limits])
     velocity = np.array([float(e.get("velocity")) for e in limits])

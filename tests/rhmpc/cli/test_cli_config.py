@@ -9,6 +9,7 @@ import pytest
 
 from rhmpc.cli import main
 from rhmpc.cli.config import attribute_docs, summary, unit_of
+from rhmpc.cli.presets import PRESETS
 from rhmpc.cli.simulate import DEFAULT_DURATION, DEFAULT_SETTLING
 from rhmpc.experiment import RunConfig, load_config
 from rhmpc.experiment.config import SECTIONS
@@ -32,7 +33,7 @@ def test_show_round_trips_to_the_same_settings(capsys, tmp_path: Path) -> None:
                          "mpc.blocks=[25, 25]", "--set", "loop.poi_offset=[0.001, 0.0, 0.0]")
     expected = RunConfig().replace(**{
         "loop.duration": DEFAULT_DURATION, "loop.settling": DEFAULT_SETTLING,
-        "mpc.effort_weight": 50.0, "predictor": "ekf", "sensor_settings.playback": "hold",
+        **PRESETS["tuna2013"], "predictor": "ekf", "sensor_settings.playback": "hold",
         "mpc.blocks": (25, 25), "loop.poi_offset": (1e-3, 0.0, 0.0)})
     assert config == expected
     again, _ = _show(capsys, tmp_path, "--config", str(tmp_path / "run.toml"))

@@ -1,4 +1,4 @@
-"""`--preset tuna2013`, `compare --paper`/`--seed`/`--json`, and bad sensor settings (exit 2)."""
+"""The presets, `compare --paper`/`--seed`/`--json`, and bad sensor settings (exit 2)."""
 
 import argparse
 import json
@@ -9,15 +9,26 @@ from rhmpc.cli import build_parser, main
 from rhmpc.cli.compare import configs
 from rhmpc.cli.presets import PRESETS
 from rhmpc.cli.simulate import config_from_args
-from rhmpc.studies.paper import COLUMNS, TUNA2013, paper_table
+from rhmpc.studies.paper import COLUMNS, TUNA2013, hardware_effort_finding, paper_table
 
 
 def _args(*argv) -> argparse.Namespace:
     return build_parser().parse_args(list(argv))
 
 
+def test_presets_set_the_plant_and_the_weights() -> None:
+    table1 = config_from_args(_args("simulate", "--preset", "tuna2013"))
+    assert table1.mpc.effort_weight == 50.0 and table1.plant.model == "linear"
+    table2 = config_from_args(_args("simulate", "--preset", "tuna2013-hardware"))
+    assert table2.mpc.effort_weight == 50.0 and table2.plant.model == "hardware"
+    assert table2.hardware.error_from == "encoders"
+    assert table2.mismatch.parameters == "phantom-cavusoglu"
+    hardware = config_from_args(_args("simulate", "--preset", "hardware"))
+    assert hardware.plant.model == "hardware" and hardware.hardware.error_from == "true"
+    assert config_from_args(_args("simulate")).plant.model == "ideal"
+
+
 def test_preset_sets_the_effort_weight_and_set_still_wins() -> None:
-    assert config_from_args(_args("simulate", "--preset", "tuna2013")).mpc.effort_weight == 50.0
     config = config_from_args(_args("simulate", "--preset", "tuna2013", "--set",
                                     "mpc.effort_weight=7"))
     assert config.mpc.effort_weight == 7.0
@@ -27,16 +38,50 @@ def test_preset_sets_the_effort_weight_and_set_still_wins() -> None:
     assert all(c.mpc.effort_weight == PRESETS["tuna2013"]["mpc.effort_weight"] for c in runs)
 
 
-def test_paper_table_has_every_cell_with_its_ratio() -> None:
-    docs = [{"predictor": p, "scenario": s, "rms_error_mm": 0.1, "max_error_mm": 1.0,
-             "rms_effort_mNm": 10.0} for p in ("exact", "one-step", "generalized", "ekf")
-            for s in COLUMNS]
-    text = paper_table(docs, ["exact", "one-step", "generalized", "ekf"], list(COLUMNS))
-    cells = sum(len(rows) * len(COLUMNS) for rows in TUNA2013.values())
-    assert cells == 3 * 3 * 6 + 2 * 4 * 6
-    assert text.count(" / ") == 2 * cells + 2 * len(TUNA2013)  # every cell, every title
-    assert "0.237 / 0.100 / 0.42" in text  # Table I, fixed-a2-top, exact RMS
-    assert "5.157 / 1.000 / 0.19" in text  # Table III, fixed-a1-top, EKF max
+def _docs(plant: str, **scale) -> list[dict]:
+    """Synthetic results: RMS 0.1 mm × the predictor's scale, effort 10 mN·m × the same."""
+    return [{"predictor": p, "scenario": s, "seed": 0, "rms_error_mm": 0.1 * scale.get(p, 1.0),
+             "max_error_mm": 1.0, "rms_effort_mNm": 10.0 * scale.get(p, 1.0),
+             "prediction_rms_mm": {"lead_N": 0.2}, "settings": {"plant": {"model": plant}}}
+            for p in ("exact", "one-step", "generalized", "ekf") for s in COLUMNS]
+
+
+def test_paper_table_has_every_cell_of_its_setting_only() -> None:
+    """Simulation runs beside Table I only, hardware runs beside Tables II–III only; every
+    cell as paper / ours / ratio."""
+    preds = ["exact", "one-step", "generalized", "ekf"]
+    sim = paper_table(_docs("linear"), preds, list(COLUMNS))
+    hw = paper_table(_docs("hardware"), preds, list(COLUMNS))
+    per_table = {t: sum(len(rows) * len(COLUMNS) for (tt, _), rows in TUNA2013.items() if tt == t)
+                 for t in ("I", "II", "III")}
+    assert per_table == {"I": 54, "II": 54, "III": 12}
+    tables = {k: text.split("Published")[0] for k, text in (("sim", sim), ("hw", hw))}
+    assert tables["sim"].count(" / ") == 2 * per_table["I"] + 2 * 3  # every cell, every title
+    assert tables["hw"].count(" / ") == 2 * (per_table["II"] + per_table["III"]) + 2 * 5
+    assert "Table II" not in tables["sim"] and "Table I " not in tables["hw"]
+    assert "published only on hardware, Table III" in sim  # said so where a finding is
+    assert "0.237 / 0.100 / 0.42" in sim  # Table I, fixed-a2-top, exact RMS
+    assert "5.157 / 1.000 / 0.19" in hw  # Table III, fixed-a1-top, EKF max
+    assert "28.512 / 10.000 / 0.35" in hw  # Table II(b), fixed-a2-top, exact effort
+    assert "plant.model = \"linear\" is" in paper_table(_docs("ideal"), preds, list(COLUMNS))
+
+
+def test_findings_say_what_reproduces_and_why_not() -> None:
+    preds = ["exact", "one-step", "generalized", "ekf"]
+    good = paper_table(_docs("linear", **{"one-step": 1.2, "generalized": 1.05, "ekf": 3.0}),
+                       preds, list(COLUMNS))
+    assert "[reproduced    ] generalized ≤ one-step (RMS): 6/6" in good
+    assert "[reproduced    ] generalized ≈ exact in simulation" in good
+    assert "[reproduced    ] EKF behind both RLS predictors: 6/6" in good
+    assert "[reproduced    ] effort ordering: exact lowest in 6/6, one-step highest in 6/6" in good
+    bad = paper_table(_docs("hardware", **{"one-step": 1.1, "generalized": 1.2, "exact": 1.3}),
+                      preds, list(COLUMNS))
+    assert "[NOT reproduced] generalized ≤ one-step (RMS): 0/6" in bad
+    assert "cause: 25-ms forecast error generalized 0.200 mm" in bad
+    assert "[NOT reproduced] exact lowest RMS on hardware: 0/6" in bad
+    cross = hardware_effort_finding(_docs("linear"), _docs("hardware", exact=2.0))
+    assert cross.startswith("[NOT reproduced] hardware effort above simulation effort: 6/18")
+    assert "paper ×1.23–2.88" in cross
 
 
 def test_compare_json_rows(capsys) -> None:
@@ -61,3 +106,15 @@ def test_bad_sensor_settings_one_line_exit_2(capsys, setting, message) -> None:
         code = main([command, "--duration", "0.5", "--set", setting])
         err = capsys.readouterr().err
         assert code == 2 and message in err and len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("setting, message", [
+    ("plant.model=\"rigid\"", "unknown plant model 'rigid'"),
+    ("hardware.dac_bits=-1", "hardware dac_bits must be an integer >= 0"),
+    ("hardware.error_from=\"tip\"", "hardware error_from must be one of true, encoders"),
+    ("mismatch.parameters=\"puma\"", "unknown parameters 'puma'"),
+])
+def test_bad_plant_settings_one_line_exit_2(capsys, setting, message) -> None:
+    code = main(["simulate", "--duration", "0.5", "--set", setting])
+    err = capsys.readouterr().err
+    assert code == 2 and message in err and len(err.strip().splitlines()) == 1

@@ -178,8 +178,9 @@ def test_iteration_cap_and_no_violation():
 
 
 def test_kkt_certificate_rejects_a_wrong_inverse(H_mpc):
-    """The residual is computed from H and q, not from W: a perturbed W is caught."""
-    box = BoxQP(H_mpc)
+    """The residual is computed from H and q, not from W: a perturbed W is caught (all 30
+    torques past their bound: 25 active-set solves, above the default cap)."""
+    box = BoxQP(H_mpc, BoxQPSettings(max_iter=30))
     q = -H_mpc @ np.full(30, 2.0)
     assert box.solve(q, box.unconstrained(q))
     box.W = box.W * (1 + 1e-4)

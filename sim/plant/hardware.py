@@ -1,0 +1,383 @@
+"""A hardware-like plant: I/O delay, DAC, current amplifier, friction with stiction, cables.
+
+The robot's side of a tick as :class:`~sim.plant.tick.ArmTick` (sense, actuate, advance), with
+what the ideal plant leaves out between the controller's torque and the arm. Per motor k, with
+the motors' output angles θ = S (q − q0) (S the robot's motor map), transmission ratio η_k and
+torque constant K_t:
+
+1. **I/O delay** of ``d`` ticks: the torque τ_i commanded at tick i reaches the DAC at tick
+   i + d and acts over the tick after it (``d = 1``: computed at i, acting over i + 1).
+2. **DAC**: the current command i*_k = (S⁻ᵀ τ)_k / (η_k K_t) is rounded to the DAC's step
+   2 I_max / 2^b and clipped to ±I_max.
+3. **Current-mode amplifier**: the winding current follows the command as a first-order lag,
+   i̇ = (i* − i) / τ_e, τ_e = L/R (exact over the tick: i* is held), and the motor's torque on
+   its output coordinate is τ_m = η K_t i.
+4. **Friction** on each motor's output rate ω, Coulomb with stiction (a Stribeck peak)::
+
+       f(ω) = D ω + [F_c + (F_s − F_c) exp(−(ω / v_S)²)] tanh(ω / v_s)
+
+5. **Cables** (optional): each motor's rotor, reflected inertia J_r = η² J_m, drives its output
+   coordinate through a spring k and damper c (a two-mass model). Rigid::
+
+       M(q) q̈ + h(q, q̇) = Sᵀ (τ_m − f(S q̇))
+
+   With cables, rotor angle θ_r and M_l = M − Sᵀ diag(J_r) S the links alone::
+
+       τ_s = k (θ_r − S (q − q0)) + c (θ̇_r − S q̇)
+       M_l(q) q̈ + h(q, q̇) = Sᵀ τ_s,      J_r θ̈_r = τ_m − τ_s − f(θ̇_r)
+
+   k follows from the resonance f_r: k = (2π f_r)² J_r J_l / (J_r + J_l), J_l the links'
+   inertia on that motor's coordinate at home (the other motors held); c = 2ζ √(k J_r J_l /
+   (J_r + J_l)).
+6. **Encoders** on the motor shafts count θ (rigid) or θ_r (cables): q̃ = q0 + S⁻¹ Δ round(θ/Δ).
+
+Pinocchio gives M and h (:func:`robots.model.forward_dynamics`'s equations), or the compiled
+chain (:mod:`sim.plant.native`, checked against Pinocchio) where it builds; the ODE is
+integrated by explicit midpoint steps, each with the current's exact mean over the step. The
+controller's side is unchanged: the observer, the cancellation with the controller's own model
+(:class:`~sim.plant.cancellation.NonlinearityCancellation`), the MPC.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+import scipy.linalg
+
+from robots import LinearArm, Robot
+from sim.plant import native
+from sim.plant.cancellation import NonlinearityCancellation
+from sim.plant.observer import JointObserver
+
+ERRORS_FROM = ("true", "encoders")
+
+
+@dataclass(frozen=True)
+class HardwareSettings:
+    """The hardware-like plant's effects, each default with its source or stated assumption.
+
+    Attributes
+    ----------
+    delay_ticks : int
+        I/O delay [ticks]: 1, the torque computed at tick i acts over tick i + 1. Assumption:
+        Tuna et al. give only the 0.5-ms xPC Target period (§VIII); one tick is what a loop
+        that samples the encoders at the start of a tick and writes the DAC at its end has.
+    current_time_constant : float
+        τ_e of the current-mode amplifier [s]: L/R = 0.238 mH / 2.18 Ω = 0.109 ms, the Maxon
+        RE 25 118743's winding (mahilab/Phantom README.md). The amplifier's own bandwidth is
+        not published; a current loop closed around the winding is faster than L/R, so this is
+        the slow bound. 0: the current follows the command at once.
+    torque_constant : float
+        K_t [N·m/A]: 23.4 mN·m/A (Maxon RE 25 118743).
+    dac_bits : int
+        DAC resolution [bits]: 12. Assumption: neither SensAble's card nor Tuna's xPC Target
+        I/O board is named in a source we found; 12 bits is the coarse end of the boards of
+        that time (16 bits gives a 16× finer step). 0: no quantisation.
+    dac_range : float
+        I_max, the current at the DAC's full scale [A]: 5.5 A, the motor's stall current at its
+        rated 12 V (datasheet), the most an amplifier for it delivers; it makes the saturation
+        η K_t I_max = η·129 mN·m the robot's torque limit. (mahilab/Phantom's rig maps ±10 V to
+        ±1.5 A.) The step is then 2.7 mA: 0.84, 0.70, 0.70 mN·m at the joints.
+    stiction_ratio : float
+        F_s / F_c, the static friction's peak over the Coulomb level [-]: 1.25. Assumption:
+        no published value for this drive (the identification of Taati et al., Presence 17(4),
+        2008, was not reachable); 1.0–1.5 is the usual range for brushed motors.
+    stribeck_velocity : float
+        v_S, the output rate over which the stiction peak decays [rad/s]: 0.01. Assumption.
+    friction_smoothing : float
+        v_s of the friction's tanh [rad/s]: 1 mrad/s on the output (the smoothing makes the
+        friction a steep viscous law near rest: a residual torque below the stiction peak
+        creeps at ≈ v_s·τ/F_s, 1.4 mrad/s at 90 % of it; the explicit steps need
+        h ≤ J v_s / F_s, which sets ``substeps``).
+    cable_resonance : float
+        f_r of the cable transmissions [Hz]; 0: rigid cables. Not published for this device:
+        sweep 40–150 Hz for sensitivity, do not pick one.
+    cable_damping_ratio : float
+        ζ of each cable [-]: 0.05. Assumption (light damping of steel cable drives).
+    substeps : int
+        Integration steps per tick; 0: 4 rigid (h = 125 µs against J v_s/F_s ≈ 120 µs for the
+        elbow's ≈ 1e-3 kg·m²), 20 with cables (h = 25 µs: the rotor, 1.3e-4 kg·m², alone on
+        its friction).
+    error_from : str
+        Which joint angles the loop scores the tip from: ``"true"`` (the arm's) or
+        ``"encoders"`` (forward kinematics of the encoder angles, what Tuna et al. measured on
+        the hardware, §VIII: "calculated from joint angles").
+    """
+
+    delay_ticks: int = 1
+    current_time_constant: float = 0.238e-3 / 2.18
+    torque_constant: float = 0.0234
+    dac_bits: int = 12
+    dac_range: float = 5.5
+    stiction_ratio: float = 1.25
+    stribeck_velocity: float = 0.01
+    friction_smoothing: float = 1e-3
+    cable_resonance: float = 0.0
+    cable_damping_ratio: float = 0.05
+    substeps: int = 0
+    error_from: str = "true"
+
+    def __post_init__(self) -> None:
+        for name in ("delay_ticks", "dac_bits", "substeps"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                raise ValueError(f"hardware {name} must be an integer >= 0, got {value!r}")
+        for name in ("current_time_constant", "cable_resonance", "cable_damping_ratio"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"hardware {name} must be finite and >= 0, got {value!r}")
+        for name in ("torque_constant", "dac_range", "stribeck_velocity", "friction_smoothing"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"hardware {name} must be finite and > 0, got {value!r}")
+        if not (math.isfinite(self.stiction_ratio) and self.stiction_ratio >= 1):
+            raise ValueError(f"hardware stiction_ratio must be >= 1, got {self.stiction_ratio!r}")
+        if self.error_from not in ERRORS_FROM:
+            raise ValueError(f"hardware error_from must be one of {', '.join(ERRORS_FROM)}, "
+                             f"got {self.error_from!r}")
+
+    @property
+    def steps(self) -> int:
+        """Integration steps per tick (``substeps``, or its default)."""
+        return self.substeps or (20 if self.cable_resonance > 0 else 4)
+
+
+def dac(current: np.ndarray, bits: int, full_scale: float) -> np.ndarray:
+    """The DAC's output: ``current`` rounded to the step 2 I_max / 2^bits, clipped to ±I_max [A]
+    (``bits`` 0: only clipped)."""
+    out = np.asarray(current, dtype=float)
+    if bits:
+        step = 2.0 * full_scale / 2**bits
+        out = step * np.round(out / step)
+    return np.clip(out, -full_scale, full_scale)
+
+
+def lagged(i0: np.ndarray, target: np.ndarray, t: float, tau: float) -> np.ndarray:
+    """First-order response i(t) = i* + (i₀ − i*) e^(−t/τ) of a lag τ to a held command i*
+    (τ = 0: i*)."""
+    if tau == 0:
+        return np.asarray(target, dtype=float)
+    return target + (i0 - target) * math.exp(-t / tau)
+
+
+def lagged_mean(i0: np.ndarray, target: np.ndarray, t: float, h: float,
+                tau: float) -> np.ndarray:
+    """Mean of the first-order response over [t, t + h]:
+    i* + (i₀ − i*) (τ/h) (e^(−t/τ) − e^(−(t+h)/τ))."""
+    if tau == 0:
+        return np.asarray(target, dtype=float)
+    return target + (i0 - target) * (tau / h) * (math.exp(-t / tau) - math.exp(-(t + h) / tau))
+
+
+def stribeck(w: np.ndarray, coulomb: np.ndarray, damping: np.ndarray, ratio: float,
+             v_stribeck: float, v_smooth: float) -> np.ndarray:
+    """Friction D ω + [F_c + (F_s − F_c) exp(−(ω/v_S)²)] tanh(ω/v_s) on output rates ω [N·m],
+    F_s = ``ratio``·F_c."""
+    peak = coulomb * (1.0 + (ratio - 1.0) * np.exp(-np.square(w / v_stribeck)))
+    return damping * w + peak * np.tanh(w / v_smooth)
+
+
+def cable_stiffness(resonance: float, rotor: np.ndarray, link: np.ndarray,
+                    damping_ratio: float) -> tuple[np.ndarray, np.ndarray]:
+    """(k, c) of two-mass cables with resonance ``resonance`` [Hz] between rotor inertias
+    ``rotor`` and link inertias ``link`` [kg·m²]: k = ω² J_r J_l/(J_r + J_l), c = 2ζ√(k J)."""
+    reduced = rotor * link / (rotor + link)
+    k = (2 * math.pi * resonance) ** 2 * reduced
+    return k, 2 * damping_ratio * np.sqrt(k * reduced)
+
+
+def _check_drives(robot: Robot) -> None:
+    if robot.gear_ratio is None or robot.encoder_resolution is None:
+        raise ValueError(f"the hardware plant needs the robot's drives (gear ratios, encoders); "
+                         f"robot {robot.name!r} has none")
+
+
+class HardwareTick:
+    """The robot's side of a tick on the hardware-like plant (module equations).
+
+    Parameters
+    ----------
+    robot : Robot
+        The true arm; it must have gear ratios, a motor map and encoders.
+    Ts : float
+        Control period [s].
+    settings : HardwareSettings
+    cancellation : NonlinearityCancellation
+        The controller's cancellation (its own model).
+    observer : JointObserver
+        The controller's observer; it predicts with the MPC torque that acts over the tick (the
+        controller knows its own I/O delay), not with what the DAC, amplifier and cables make
+        of it.
+    dynamics : str
+        Who computes M and h: ``"pinocchio"`` (the reference), ``"native"`` (the compiled
+        chain) or ``"auto"`` (native where it builds).
+    """
+
+    dynamics_note = "hardware-like plant"
+
+    def __init__(self, robot: Robot, Ts: float, settings: HardwareSettings,
+                 cancellation: NonlinearityCancellation, observer: JointObserver,
+                 dynamics: str = "auto") -> None:
+        _check_drives(robot)
+        self._chain = None if dynamics == "pinocchio" else native.load_chain(robot.model)
+        if dynamics == "native" and self._chain is None:
+            raise ValueError(f"native plant dynamics unavailable: {native.unavailable_reason}")
+        self.dynamics = "pinocchio" if self._chain is None else "native"
+        self.robot, self.Ts, self.settings = robot, float(Ts), settings
+        self.cancellation, self.observer = cancellation, observer
+        n, S = robot.nv, robot.motor_map
+        self._S, self._S_inv = S, np.linalg.inv(S)
+        self._gain = robot.gear_ratio * settings.torque_constant  # output torque per ampere
+        self._model, self._data = robot.model, robot.create_data()
+        self._rotor, self._h = robot.rotor_inertia, self.Ts / settings.steps
+        self._cables = settings.cable_resonance > 0
+        self._rotor_matrix = S.T @ np.diag(self._rotor) @ S if self._cables else 0.0
+        self.q_arm, self.v = robot.q0.copy(), np.zeros(n)
+        gravity = pin.computeGeneralizedGravity(self._model, self._data, robot.q0).copy()
+        self.k = self.c = np.zeros(n)
+        self.theta_r, self.omega_r = np.zeros(n), np.zeros(n)
+        if self._cables:
+            M_l = robot.mass_matrix(robot.q0) - self._rotor_matrix
+            link = np.diag(self._S_inv.T @ M_l @ self._S_inv)
+            self.k, self.c = cable_stiffness(settings.cable_resonance, self._rotor, link,
+                                             settings.cable_damping_ratio)
+            self.theta_r = (self._S_inv.T @ gravity) / self.k  # the cables hold the arm
+        self.current = (self._S_inv.T @ gravity) / self._gain  # held against gravity at rest
+        self._compiled = None if self._chain is None else native.HardwareStep(
+            self._chain, S=S, gain=self._gain, coulomb=robot.coulomb_friction,
+            damping=robot.damping, ratio=settings.stiction_ratio,
+            v_stribeck=settings.stribeck_velocity, v_smooth=settings.friction_smoothing,
+            rotor=self._rotor, cables=(self.k, self.c) if self._cables else None, q0=robot.q0,
+            tau_e=settings.current_time_constant, h=self._h, steps=settings.steps)
+        self._pending = [(gravity.copy(), np.zeros(n))] * settings.delay_ticks
+        self._q_meas, self._u, self._tau = robot.q0.copy(), np.zeros(n), gravity
+        self.saturated = False
+
+    def encoders(self) -> np.ndarray:
+        """q̃ = q0 + S⁻¹ Δ round(θ/Δ): joint angles from the motor encoders [rad]."""
+        theta = self.theta_r if self._cables else self._S @ (self.q_arm - self.robot.q0)
+        res = self.robot.encoder_resolution
+        return self.robot.q0 + self._S_inv @ (res * np.round(theta / res))
+
+    @property
+    def q(self) -> np.ndarray:
+        """The joint angles the loop scores [rad]: the arm's (``q_arm``), or the encoders'
+        (``HardwareSettings.error_from``)."""
+        return self.encoders() if self.settings.error_from == "encoders" else self.q_arm
+
+    def sense(self) -> np.ndarray:
+        """x̂ = [q − q0; q̇] from the motor encoders (the observer's storage)."""
+        self._q_meas = self.encoders()
+        return self.observer.correct(self._q_meas)
+
+    def actuate(self, u: np.ndarray) -> np.ndarray:
+        """The commanded torque τ = u + ĝ + Ĉq̇ + f̂ at the estimate [N·m]."""
+        self._u = np.array(u, dtype=float)
+        self._tau = self.cancellation.torque(self._q_meas, self.observer.x[self.robot.nv:], u)
+        return self._tau
+
+    def advance(self) -> None:
+        """Delay, DAC, amplifier and one tick of the arm; the observer predicts with the MPC
+        torque that acts (plus what the DAC's clipping took off it)."""
+        self._pending.append((self._tau, self._u))
+        tau, u = self._pending.pop(0)
+        wanted = (self._S_inv.T @ tau) / self._gain
+        command = dac(wanted, self.settings.dac_bits, self.settings.dac_range)
+        self.saturated = bool(np.any(np.abs(wanted) > self.settings.dac_range))
+        self._integrate(command)
+        applied = self._S.T @ (self._gain * command)
+        self.observer.predict(u + (applied - tau) if self.saturated else u)
+
+    def _integrate(self, command: np.ndarray) -> None:
+        """Explicit midpoint steps over the tick, each with the current's exact mean over the
+        step (the 0.1-ms lag is shorter than a step: its impulse is then exact)."""
+        h, tau_e, i0 = self._h, self.settings.current_time_constant, self.current
+        state = [self.q_arm, self.v, self.theta_r, self.omega_r]
+        if self._compiled is not None:
+            state, self.current = self._compiled.integrate(state, i0, command)
+            self.q_arm, self.v, self.theta_r, self.omega_r = state
+            return
+        for s in range(self.settings.steps):
+            current = lagged_mean(i0, command, s * h, h, tau_e)
+            k1 = self._rates(state, current)
+            mid = [x + 0.5 * h * dx for x, dx in zip(state, k1, strict=True)]
+            k2 = self._rates(mid, current)
+            state = [x + h * dx for x, dx in zip(state, k2, strict=True)]
+        self.q_arm, self.v, self.theta_r, self.omega_r = state
+        self.current = lagged(i0, command, self.Ts, tau_e)
+
+    def _friction(self, w: np.ndarray) -> np.ndarray:
+        s, robot = self.settings, self.robot
+        return stribeck(w, robot.coulomb_friction, robot.damping, s.stiction_ratio,
+                        s.stribeck_velocity, s.friction_smoothing)
+
+    def _rates(self, state: list, current: np.ndarray) -> list:
+        """d/dt [q, q̇, θ_r, θ̇_r] at ``state`` with winding currents ``current`` [A]."""
+        q, v, theta, omega = state
+        S, motor = self._S, self._gain * current
+        if self._cables:
+            spring = self.k * (theta - S @ (q - self.robot.q0)) + self.c * (omega - S @ v)
+            joint = S.T @ spring
+            rotor_acc = (motor - spring - self._friction(omega)) / self._rotor
+        else:
+            joint = S.T @ (motor - self._friction(S @ v))
+            rotor_acc = omega
+        return [v, self._link_acceleration(q, v, joint), omega, rotor_acc]
+
+    def _link_acceleration(self, q: np.ndarray, v: np.ndarray, joint: np.ndarray) -> np.ndarray:
+        """q̈ = (M(q) − Sᵀ J_r S)⁻¹ (τ − h(q, q̇)) with cables, M(q)⁻¹ (τ − h) without."""
+        chain = self._chain
+        if chain is not None and not self._cables:
+            return chain.aba(q, v, joint)
+        if chain is not None:
+            M = chain.mass(q) - self._rotor_matrix
+            return np.linalg.solve(M, joint - chain.rnea(q, v, np.zeros_like(v)))
+        M = pin.crba(self._model, self._data, q)
+        M = np.triu(M) + np.triu(M, 1).T - self._rotor_matrix
+        bias = pin.nonLinearEffects(self._model, self._data, q, v)
+        return scipy.linalg.cho_solve(scipy.linalg.cho_factor(M), joint - bias)
+
+
+class LinearTick:
+    """The robot's side of a tick on the MPC's own linear model (Tuna et al.'s Table I plant,
+    "a linearized, reduced order model of the actual hardware").
+
+    The arm is x⁺ = A x + B τ (the :class:`~robots.LinearArm`, gravity, Coriolis and friction
+    absent, so nothing is cancelled: τ = u, clipped to the torque limits); the encoders quantise
+    q = q0 + x_q per joint and the observer estimates x̂ as in :class:`~sim.plant.tick.ArmTick`.
+    The loop scores the forward kinematics of q.
+    """
+
+    dynamics, dynamics_note = "linear", None
+
+    def __init__(self, robot: Robot, arm: LinearArm, observer: JointObserver) -> None:
+        self.robot, self.arm, self.observer = robot, arm, observer
+        self._x = np.zeros(arm.nx)
+        self._u = np.zeros(arm.nu)
+        self._limit = robot.torque_limit
+        self.saturated = False
+
+    @property
+    def q(self) -> np.ndarray:
+        """The plant's joint angles q0 + x_q [rad]."""
+        return self.arm.q0 + self._x[: self.arm.nu]
+
+    def sense(self) -> np.ndarray:
+        """x̂ from the quantised joint angles (the observer's storage)."""
+        q, res = self.q, self.robot.encoder_resolution
+        return self.observer.correct(q if res is None else res * np.round(q / res))
+
+    def actuate(self, u: np.ndarray) -> np.ndarray:
+        """τ = u [N·m]: the linear plant has nothing to cancel."""
+        self._u = np.array(u, dtype=float)
+        return self._u
+
+    def advance(self) -> None:
+        """x⁺ = A x + B clip(u); the observer predicts with the torque that acted."""
+        applied = np.clip(self._u, -self._limit, self._limit)
+        self.saturated = bool(np.any(applied != self._u))
+        self._x = self.arm.A @ self._x + self.arm.B @ applied
+        self.observer.predict(applied)
