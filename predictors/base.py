@@ -36,6 +36,7 @@ Conventions (see ``../shared/DESIGN.md``):
 
 from __future__ import annotations
 
+import functools
 from abc import ABC, abstractmethod
 from collections import Counter
 from dataclasses import dataclass
@@ -146,12 +147,15 @@ class Predictor(ABC):
         self.unit = getattr(self.settings, "unit", None)
         infer = hasattr(self.settings, "unit") and self.unit is None
         self._pending: list | None = [] if infer else None
+        self._deferred = None  # the last update's learning, if the subclass deferred it
         self._allocated = False
         if self.settings.dim is not None:
             self._set_dim(int(self.settings.dim))
 
     def update(self, z: np.ndarray | None) -> None:
         """Absorb the newest sample z_n, shape (d,); ``None``/NaN/inf = missing."""
+        if self._deferred is not None:
+            self.learn()
         x = as_sample(z, self.d)
         self.n += 1
         if x is None:
@@ -172,6 +176,8 @@ class Predictor(ABC):
         """Forecast ẑ_{n+1} … ẑ_{n+steps} at this predictor's ``dt``; returns (steps, d)."""
         if int(steps) != steps or steps < 1:
             raise ValueError(f"steps must be a positive integer, got {steps!r}")
+        if self._deferred is not None:
+            self.learn()
         steps = int(steps)
         if not self.ready:
             if self._last is None:
@@ -191,10 +197,26 @@ class Predictor(ABC):
         (``counts["retracted"]``). Returns whether the predictor could; by default it cannot and
         nothing changes.
         """
+        if self._deferred is not None:
+            self.learn()
         if self._pending is not None or not self.ready or not self._retract():
             return False
         self.counts["retracted"] += 1
         return True
+
+    def learn(self) -> None:
+        """Finish the last :meth:`update`: a predictor may defer the learning of its weights
+        from the newest sample to here (:meth:`_defer`), so that a real-time loop can run it on
+        a tick of its own; :meth:`update`, :meth:`predict` and :meth:`retract` call it first,
+        so that the forecasts are the same whether or not the caller does."""
+        deferred, self._deferred = self._deferred, None
+        if deferred is not None:
+            deferred()
+
+    def _defer(self, step, *args) -> None:
+        """Run ``step(*args)`` at the next :meth:`learn` (the arguments must stay valid until
+        then: no sample is pushed before it runs)."""
+        self._deferred = functools.partial(step, *args)
 
     @property
     def forecast_error_rms(self) -> np.ndarray:

@@ -97,7 +97,8 @@ class LeadErrorRMS:
 
     def __init__(self, d: int, memory: float) -> None:
         self.d = d
-        self.alpha = 1.0 / max(1.0, float(memory))
+        self.memory = max(1.0, float(memory))
+        self.alpha = 1.0 / self.memory
         self.K = 0
         self._alloc(1)
 
@@ -112,6 +113,9 @@ class LeadErrorRMS:
         self._k = self._leads - 1
         # ring rows of the forecasts made 1…K updates before an update landing on row j
         self._rows = (np.arange(K)[:, None] - self._leads[None, :]) % K
+        # the fast path of observe: full-length forecasts recorded at consecutive updates
+        # up to ``_last`` (``_run`` of them), and every lead past its memory
+        self._last, self._run, self._steady = -1, 0, False
 
     def record(self, n: int, forecast: np.ndarray) -> None:
         K = forecast.shape[0]
@@ -121,9 +125,20 @@ class LeadErrorRMS:
         self.fc[row, :K] = forecast
         self.made[row] = n
         self.length[row] = K
+        full = K == self.K
+        self._run = (self._run + 1 if n == self._last + 1 else 1) if full else 0
+        self._last = n
 
     def observe(self, n: int, z: np.ndarray) -> None:
         rows = self._rows[n % self.K]
+        if self._steady and self._last == n - 1 and self._run >= self.K:
+            # every lead has its forecast and α is constant: m ← m + α (e² − m)
+            miss = self.fc[rows, self._k] - z
+            e2 = np.einsum("ij,ij->i", miss, miss)
+            e2 -= self.ms
+            e2 *= self.alpha
+            self.ms += e2
+            return
         made = n - self._leads
         ok = (self.made[rows] == made) & (self.length[rows] >= self._leads)
         miss = self.fc[rows, self._k] - z
@@ -131,6 +146,7 @@ class LeadErrorRMS:
         self.count += ok
         a = np.maximum(self.alpha, 1.0 / np.maximum(self.count, 1.0)) * ok
         self.ms += a * (e2 - self.ms)
+        self._steady = bool(self.count.min() >= self.memory)
 
     def rms(self) -> np.ndarray:
         """(K,) RMS miss per lead (lead k at index k − 1); NaN where nothing was scored."""

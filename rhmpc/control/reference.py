@@ -225,6 +225,13 @@ class PredictedReference:
         self.predict()
         self.interpolate()
 
+    def learn(self) -> None:
+        """The predictor's learning from the last :meth:`update`, where it defers it
+        (:meth:`predictors.base.Predictor.learn`); otherwise it ran in the update."""
+        learn = getattr(self.predictor, "learn", None)
+        if learn is not None:
+            learn()
+
     def predict(self) -> None:
         """The predictor's forecast from the last :meth:`update`, ``K = prediction_points +
         ⌈latency/dt⌉`` points (the gate keeps the one- and two-step ones)."""
@@ -414,6 +421,9 @@ class ExactReference:
         pass
 
     def forecast(self) -> None:
+        pass
+
+    def learn(self) -> None:
         pass
 
     def predict(self) -> None:

@@ -5,8 +5,8 @@ Time is integer ticks of ``Ts`` (seconds = tick·Ts). Each tick ``i``:
 1. the newest sensor sample that has *arrived* by ``i·Ts`` is known;
 2. every ``downsample`` ticks, or on each raw sample of a slow sensor (:mod:`sim.loop.clock`),
    the reference is refreshed with it (the predictor runs; a tick with no new sample since the
-   last refresh is a missing sample for the predictor) — by default pipelined over three
-   ticks: the gate and the predictor's update, then the predictor's forecast, then the
+   last refresh is a missing sample for the predictor) — by default pipelined over four
+   ticks: the gate and the predictor's update, its learning, its forecast, then the
    interpolation, guard and placement on the refresh tick, so that no tick carries more than
    one slice of a refresh (``LoopSettings.pipelined_refresh``);
 3. the reference gives the N points ``r_{i+1..i+N}``, placed in the robot's workspace:
@@ -46,6 +46,7 @@ import numpy as np
 
 from robots import LinearArm, Robot
 from sim.loop.clock import PredictorClock, arrival_tick, predictor_clock
+from sim.loop.metrics import warm_ns
 from sim.loop.results import CHARGED, LoopResult, Recorder
 from sim.loop.settings import LoopSettings
 from sim.loop.streams import BLOCK, ArrayTruth, SampleSource, StreamCursor, as_samples
@@ -53,8 +54,9 @@ from sim.plant import HardwareSettings, ModelMismatch, ObserverSettings, PlantSe
 from sim.plant.tick import make_tick
 
 clock = time.perf_counter_ns
-#: Ticks from a refresh's update to its interpolation when the refresh is pipelined.
-REFRESH_LAG = 2
+#: Ticks from a refresh's update to its interpolation when the refresh is pipelined: the
+#: update, the learning, the forecast and the interpolation each on a tick of its own.
+REFRESH_LAG = 3
 
 
 def poi_truth(source, n_ticks: int, Ts: float) -> tuple[np.ndarray, np.ndarray]:
@@ -130,8 +132,8 @@ class OpenLoop:
         self.reference, self.center, self.settings, self.hold = reference, center, settings, hold
         self.clock = clock or PredictorClock("downsample", settings.downsample * settings.Ts,
                                              settings.downsample, math.inf)
-        # ticks from a refresh's update to its interpolation: update, forecast, interpolation
-        # each on its own tick when pipelined, all on the refresh tick otherwise
+        # ticks from a refresh's update to its interpolation: update, learning, forecast and
+        # interpolation each on its own tick when pipelined, all on the refresh tick otherwise
         self.lag = REFRESH_LAG if settings.pipelined_refresh else 0
         self.carry = [0] * len(CHARGED)  # ns per part charged to the next chunk's first tick
         self.prepared = False  # whether the next refresh's update and forecast have run
@@ -196,13 +198,14 @@ class OpenLoop:
             charged[part][max(tick, c0) - c0] += ns
 
     def _refresh(self, i: int, chunk) -> None:
-        """The refresh on tick ``i``: its interpolation; its update and forecast ran on the
-        ticks before when pipelined, and the next refresh's are made now, charged to theirs."""
+        """The refresh on tick ``i``: its interpolation; its update, learning and forecast ran on
+        the ticks before when pipelined, and the next refresh's are made now, charged to
+        theirs."""
         if not self.prepared:
             self._prepare(i, chunk)
         t_start = clock()
         self.reference.interpolate()
-        self._charge(i, 2, clock() - t_start, chunk)
+        self._charge(i, 3, clock() - t_start, chunk)
         self.prepared = False
         if self.clock.mode == "sensor":
             arrival = self.queue.tick()
@@ -213,22 +216,23 @@ class OpenLoop:
             self._prepare(self.next, chunk, after=i)
 
     def _prepare(self, r: int, chunk, after: int | None = None) -> None:
-        """The update and the forecast of the refresh on tick ``r``: on ticks r − lag and
-        r − 1 (not before the refresh ``after`` they follow), timed and charged to them."""
-        update_tick = r - self.lag if after is None else max(r - self.lag, after)
-        if self.clock.mode == "sensor":
-            spent = self._arrivals(update_tick)
-        else:
-            spent = self.update(update_tick)
-        t_start = clock()
-        self.reference.predict()
-        forecast_ns = clock() - t_start
-        if chunk is None:  # before the run: charged to its first tick
-            self.carry[0] += spent
-            self.carry[1] += forecast_ns
-        else:
-            self._charge(update_tick, 0, spent, chunk)
-            self._charge(max(r - 1, update_tick), 1, forecast_ns, chunk)
+        """The update, the learning and the forecast of the refresh on tick ``r``: on ticks
+        r − lag, r − lag + 1 and r − 1 (not before the refresh ``after`` they follow), timed
+        and charged to them."""
+        ticks = [r - self.lag, r - self.lag + 1, r - 1]
+        if after is not None:
+            ticks = [max(t, after) for t in ticks]
+        spent = [self._arrivals(ticks[0]) if self.clock.mode == "sensor"
+                 else self.update(ticks[0])]
+        for step in (self.reference.learn, self.reference.predict):
+            t_start = clock()
+            step()
+            spent.append(clock() - t_start)
+        for part, (tick, ns) in enumerate(zip(ticks, spent, strict=True)):
+            if chunk is None:  # before the run: charged to its first tick
+                self.carry[part] += ns
+            else:
+                self._charge(tick, part, ns, chunk)
         self.prepared = True
 
     def _arrivals(self, tick: int) -> int:
@@ -355,9 +359,10 @@ def run_ticks(side, controller, c0: int, c1: int, refs: list,
     ``side`` is the robot's side of the tick (:mod:`sim.plant.tick`). The tick's time is from
     the encoder reading to the commanded torque (its parts: ``sense``, ``controller``,
     ``actuate``), plus the refresh's parts that the open-loop part ``charged`` it.
-    ``yardstick(x̂, r, u_{−1})`` is timed on every 16th tick with the tick's own inputs.
+    ``yardstick(x̂, r, u_{−1})`` is timed on every 16th tick with the tick's own inputs (the
+    least of three calls, :func:`sim.loop.metrics.warm_ns`).
     """
-    updates, forecasts, interpolations = charged
+    updates, learning, forecasts, interpolations = charged
     sense, actuate, advance, step = side.sense, side.actuate, side.advance, controller.step
     q_log, tau_mpc_log, tau_log = log["q"], log["tau_mpc"], log["tau"]
     tick_ns, parts, yard_ns = log["tick_ns"], log["parts_ns"], log["yardstick_ns"]
@@ -372,12 +377,11 @@ def run_ticks(side, controller, c0: int, c1: int, refs: list,
         tau = actuate(u)
         t_end = clock()
         k = i - c0
-        tick_ns.append(t_end - t_start + updates[k] + forecasts[k] + interpolations[k])
+        tick_ns.append(t_end - t_start + updates[k] + learning[k] + forecasts[k]
+                       + interpolations[k])
         parts.append((t_sensed - t_start, t_stepped - t_sensed, t_end - t_stepped))
         if yardstick is not None and i % 16 == 7 and u_prev is not None:
-            t_start = clock()
-            yardstick(x_hat, ref, u_prev)
-            yard_ns.append(clock() - t_start)
+            yard_ns.append(warm_ns(yardstick, x_hat, ref, u_prev))
         u_prev = u
         tau_mpc_log.append(u.tolist())
         tau_log.append(tau.tolist())

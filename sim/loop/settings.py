@@ -68,10 +68,11 @@ class LoopSettings:
     poi_offset : tuple[float, float, float]
         Mean POI position relative to the end-effector's home position [m].
     pipelined_refresh : bool
-        Split each predictor refresh over two ticks, so that no tick carries all of it: the tick
-        before a refresh tick runs the outlier gate and the predictor's update with the newest
-        sample arrived by then, the refresh tick the forecast, interpolation and guard. False:
-        the whole refresh on the refresh tick, with the newest sample arrived by that tick.
+        Spread each predictor refresh over four ticks, so that no tick carries all of it: the
+        outlier gate and the predictor's update with the newest sample arrived by then, the
+        predictor's learning (where it defers it), its forecast, and on the refresh tick the
+        interpolation, guard and placement. False: the whole refresh on the refresh tick, with
+        the newest sample arrived by that tick.
     """
 
     Ts: float = 0.5e-3

@@ -60,6 +60,9 @@ class Spy:
     def update(self, tick, z, stamp):
         self.updates.append((tick, None if z is None else np.array(z), stamp))
 
+    def learn(self):
+        pass
+
     def predict(self):
         self.forecasts += 1
 
@@ -81,10 +84,10 @@ def test_each_raw_sample_reaches_the_predictor_once_with_its_own_time_stamp(pipe
     open_loop = OpenLoop(spy, raw, np.zeros(3), settings, np.zeros((50, 3)), clock)
     for c0 in range(0, settings.ticks, 1000):  # chunks that cut through refresh periods
         refs, charged, _ = open_loop.chunk(c0, min(c0 + 1000, settings.ticks))
-        assert len(charged) == 3  # the update, the forecast and the interpolation
+        assert len(charged) == 4  # the update, the learning, the forecast, the interpolation
         assert len(refs) == len(charged[0]) == min(1000, settings.ticks - c0)
     fed = [u for u in spy.updates if u[1] is not None]
-    lag = 2 if pipelined else 0  # update, forecast, interpolation on consecutive ticks
+    lag = 3 if pipelined else 0  # update, learning, forecast, interpolation on 4 ticks
     arrived = raw.arrival <= (settings.ticks - 1 - lag) * TS
     np.testing.assert_array_equal([u[2] for u in fed], raw.t[arrived])
     np.testing.assert_array_equal([u[1] for u in fed], raw.z[arrived])
