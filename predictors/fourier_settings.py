@@ -19,6 +19,18 @@ __all__ = ["DUAL_PARAMETER_SETS", "EKF_PARAMETER_SETS", "Q_OMEGA_HRV", "DualEKFS
 _TWO_PI = 2.0 * math.pi
 
 
+def _positive(settings, *names: str) -> None:
+    for name in names:
+        if not getattr(settings, name) > 0.0:
+            raise ValueError(f"{name} must be > 0, got {getattr(settings, name)!r}")
+
+
+def _nonnegative(settings, *names: str) -> None:
+    for name in names:
+        if not getattr(settings, name) >= 0.0:
+            raise ValueError(f"{name} must be >= 0, got {getattr(settings, name)!r}")
+
+
 @dataclass(frozen=True)
 class EKFSettings(PredictorSettings):
     """Fourier-series EKF settings; defaults are Tuna et al. 2013's (``tuna2013``).
@@ -125,19 +137,9 @@ class EKFSettings(PredictorSettings):
         super().__post_init__()
         if int(self.harmonics) != self.harmonics or self.harmonics < 1:
             raise ValueError(f"harmonics must be a positive integer, got {self.harmonics!r}")
-        for name in ("init_seconds", "sigma_r", "sigma1_sq", "sigma_omega_sq"):
-            if not getattr(self, name) > 0.0:
-                raise ValueError(f"{name} must be > 0, got {getattr(self, name)!r}")
-        for name in (
-            "sigma_phase_sq",
-            "q",
-            "q_phase",
-            "q_omega",
-            "q_breathing",
-            "q_omega_breathing",
-        ):
-            if not getattr(self, name) >= 0.0:
-                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
+        _positive(self, "init_seconds", "sigma_r", "sigma1_sq", "sigma_omega_sq")
+        _nonnegative(self, "sigma_phase_sq", "q", "q_phase", "q_omega", "q_breathing",
+                     "q_omega_breathing")
         if self.gate_probability is not None and not 0.0 < self.gate_probability < 1.0:
             raise ValueError(
                 f"gate_probability must be in (0, 1) or None, got {self.gate_probability!r}"
@@ -363,19 +365,9 @@ class DualEKFSettings(PredictorSettings):
             v = getattr(self, name)
             if int(v) != v or v < 1:
                 raise ValueError(f"{name} must be a positive integer, got {v!r}")
-        for name in ("respiratory_hz", "cardiac_hz", "r", "p0_coefficient", "p0_offset"):
-            if not getattr(self, name) > 0.0:
-                raise ValueError(f"{name} must be > 0, got {getattr(self, name)!r}")
-        for name in (
-            "q_respiratory",
-            "q_offset",
-            "q_cardiac",
-            "q_omega",
-            "p0_omega_respiratory",
-            "p0_omega_cardiac",
-        ):
-            if not getattr(self, name) >= 0.0:
-                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
+        _positive(self, "respiratory_hz", "cardiac_hz", "r", "p0_coefficient", "p0_offset")
+        _nonnegative(self, "q_respiratory", "q_offset", "q_cardiac", "q_omega",
+                     "p0_omega_respiratory", "p0_omega_cardiac")
         if self.q_rate_hz is not None and not self.q_rate_hz > 0.0:
             raise ValueError(f"q_rate_hz must be > 0 or None, got {self.q_rate_hz!r}")
         for name in (

@@ -8,7 +8,7 @@ import numpy as np
 
 from sim.recordings.matfile import load_mat
 from sim.recordings.points import load_points, pick_point
-from sim.recordings.recorded import RecordedMotion, RecordingError
+from sim.recordings.recorded import RecordedMotion, RecordingError, check_file
 from sim.recordings.text import read_csv, read_npz
 
 
@@ -45,10 +45,7 @@ def load_recording(path: str | Path, units: str | None = None, var: str | None =
     path = Path(path)
     if point is not None:
         return pick_point(path, load_points(path, units, var, rows, cols, rate), point)
-    if not path.exists():
-        raise RecordingError(f"{path}: no such file")
-    if not path.is_file():
-        raise RecordingError(f"{path}: not a file")
+    check_file(path)
     suffix = path.suffix.lower()
     if suffix == ".mat":
         return load_mat(path, var=var, rows=rows, cols=cols, rate=rate, units=units)

@@ -20,16 +20,13 @@ from pathlib import Path
 import numpy as np
 
 from sim.recordings.matfile import load_mat
-from sim.recordings.recorded import RecordedMotion, RecordingError
+from sim.recordings.recorded import RecordedMotion, RecordingError, check_file
 from sim.recordings.text import read_csv, read_npz
 
 
 def _wide(path: Path, units, var, rows, cols, rate) -> RecordedMotion:
     """Every column of a recording: (n, 1), (n, 3) or (n, 3P)."""
-    if not path.exists():
-        raise RecordingError(f"{path}: no such file")
-    if not path.is_file():
-        raise RecordingError(f"{path}: not a file")
+    check_file(path)
     suffix = path.suffix.lower()
     if suffix == ".mat":
         return load_mat(path, var=var, rows=rows, cols=cols, rate=rate, units=units,

@@ -82,6 +82,14 @@ class RecordedMotion:
         return out[0] if scalar else out
 
 
+def check_file(path: Path) -> None:
+    """Raise :class:`RecordingError` unless ``path`` is an existing file."""
+    if not path.exists():
+        raise RecordingError(f"{path}: no such file")
+    if not path.is_file():
+        raise RecordingError(f"{path}: not a file")
+
+
 def fail(path: Path, problem: str, line: int | None = None) -> RecordingError:
     where = f"{path}, line {line}" if line is not None else f"{path}"
     return RecordingError(f"{where}: {problem}")

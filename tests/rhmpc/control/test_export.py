@@ -109,6 +109,17 @@ def lockstep(arm, py, c, traj, ticks, faults=None):
     return err, differ
 
 
+def inject_faults(k, x, ref, py, c):
+    """Four forced solver failures every 700 ticks, a NaN state every 900."""
+    if k % 700 == 350:
+        py.force_failures(4)
+        c.force_failures(4)
+    if k % 900 == 450:
+        x = x.copy()
+        x[1] = np.nan
+    return x, ref
+
+
 def assert_same_counters(py, c):
     cs, ps = c.stats, py.stats
     assert cs.ticks == ps.ticks
@@ -138,18 +149,9 @@ def test_other_paths_match_python(arm, built, variant):
     """Joint bounds, max_iter failures and every warm-start mode, with injected faults."""
     py = RecedingHorizonMPC(arm, MPCSettings(**VARIANTS[variant]))
     c = twin(py, built(variant))
-
-    def faults(k, x, ref, py, c):
-        if k % 700 == 350:
-            py.force_failures(4)
-            c.force_failures(4)
-        if k % 900 == 450:
-            x = x.copy()
-            x[1] = np.nan
-        return x, ref
-
     ticks = 6000
-    err, differ = lockstep(arm, py, c, bench_trajectory(arm, ticks, seed=3), ticks, faults)
+    err, differ = lockstep(arm, py, c, bench_trajectory(arm, ticks, seed=3), ticks,
+                            inject_faults)
     assert differ == []
     assert err.max() <= TOL
     assert_same_counters(py, c)
@@ -172,17 +174,9 @@ def test_every_binding_matches_python(arm, built, binding, python_offset):
              extra_inputs=py.offset if python_offset else None)
     assert (c.binding, c.extra_source) == (binding, "python" if python_offset else "fk")
 
-    def faults(k, x, ref, py, c):
-        if k % 700 == 350:
-            py.force_failures(4)
-            c.force_failures(4)
-        if k % 900 == 450:
-            x = x.copy()
-            x[1] = np.nan
-        return x, ref
-
     ticks = 3000
-    err, differ = lockstep(arm, py, c, bench_trajectory(arm, ticks, seed=3), ticks, faults)
+    err, differ = lockstep(arm, py, c, bench_trajectory(arm, ticks, seed=3), ticks,
+                            inject_faults)
     assert differ == []
     assert err.max() <= TOL
     assert_same_counters(py, c)
