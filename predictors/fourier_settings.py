@@ -194,7 +194,7 @@ Q_OMEGA_HRV = (_TWO_PI * HRV_CV * HRV_HEART_HZ) ** 2 / HRV_RISE_S
 #: ``Q_OMEGA_HRV``.  Tuna's q_ω = 5e-3 (rad/s)² per 128.5 Hz sample (0.64
 #: (rad/s)²/s, 10× the HRV value) lets the breathing residual walk ω̂ to its 0.5 Hz clamp
 #: within 3 s on fixed-a1-top and varying-a3-side; the HRV value keeps lock on all six
-#: replicas (|ω̂ − ω| RMS 2.4–3.1 bpm), and anything in 2e-4–2e-3 per sample does.
+#: replicas (RMS of ω̂ − ω 2.4–3.1 bpm), and anything in 2e-4–2e-3 per sample does.
 EKF_PARAMETER_SETS: dict[str, EKFSettings] = {
     "yuen2008": EKFSettings(
         harmonics=8,

@@ -69,7 +69,7 @@ class ResidualAR:
         Where the RLS guards are counted.
     """
 
-    #: a forecast beyond this multiple of the largest recent |residual| is unstable [-]
+    #: a forecast beyond this multiple of the largest recent residual magnitude is unstable [-]
     GROWTH = 3.0
 
     def __init__(self, d: int, order: int, forgetting_factor: float, delta: float,
@@ -98,8 +98,9 @@ class ResidualAR:
         """ê_{n+1…n+steps} (steps, d) from residuals ``e`` (≥ p, d), newest first (NaN → 0),
         and the model's increments u_{n+k} = ŷ_{n+k|n} − ŷ_{n+k−1|n} (steps, d).
 
-        An axis whose forecast leaves ``GROWTH`` times the largest recent |e| (an unstable
-        fit of few samples) persists its newest residual instead (counted ``residual_unstable``).
+        An axis whose forecast leaves ``GROWTH`` times the largest recent magnitude of e (an
+        unstable fit of few samples) persists its newest residual instead (counted
+        ``residual_unstable``).
         """
         a, b = self.rls.W[:, 0, : self.p], self.rls.W[:, 0, self.p]  # (d, p), (d,)
         buf = np.zeros((steps + self.p, self.d))

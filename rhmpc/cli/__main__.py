@@ -4,4 +4,5 @@ import sys
 
 from rhmpc.cli import main
 
-sys.exit(main())
+if __name__ == "__main__":  # importing the module (autosummary does) must not run the CLI
+    sys.exit(main())

@@ -22,7 +22,8 @@ from rhmpc.experiment import RunConfig
 from rhmpc.experiment.config import SECTIONS, read_toml
 
 #: Top-level keys of a run file that hold tables of free keys.
-TABLES: tuple[str, ...] = ("data_read", "sensor_settings", "predictor_settings")
+TABLES: tuple[str, ...] = ("data_read", "sensor_settings", "predictor_settings",
+                           "predictor_params")
 #: Longest description kept in a comment [characters].
 DESCRIPTION_CHARS = 96
 

@@ -13,9 +13,11 @@ the ``--config`` file, before the explicit options and ``--set``.
     the sensor's white term the exact effort is 14.3–23.4 mN·m over the six columns (1.01–1.42×
     Table I(b), ``rhmpc compare --preset tuna2013 --predictors exact --duration 60 --seed 3``);
     the weight is kept, not refitted. Only the effort weight changes: the paper's horizon
-    (25 ms) and rate (2 kHz) are the default controller's. The sensor stays the default
-    physical sonomicrometer with causal delivery (``--set sensor_settings.playback="offline"``
-    for the paper's playback of a prerecorded file).
+    (25 ms) and rate (2 kHz) are the default controller's. The EKF runs with Tuna's parameters
+    (``predictor_params.ekf = "tuna2013"``, §VIII-C), not this package's default. The sensor
+    stays the default physical sonomicrometer with causal delivery
+    (``--set sensor_settings.playback="offline"`` for the paper's playback of a prerecorded
+    file).
 ``hardware``
     The hardware-like plant (:mod:`sim.plant.hardware`, every default with its source or
     stated assumption: one tick of I/O delay, 12-bit DAC over ±5.5 A, the winding's L/R lag,
@@ -38,7 +40,7 @@ from typing import Any
 from rhmpc.errors import UsageError
 from rhmpc.experiment import RunConfig
 
-_TUNA_WEIGHTS = {"mpc.effort_weight": 50.0}
+_TUNA_WEIGHTS = {"mpc.effort_weight": 50.0, "predictor_params.ekf": "tuna2013"}
 _HARDWARE = {"plant.model": "hardware", "mismatch.parameters": "phantom-cavusoglu"}
 
 #: Preset name → dotted settings it sets.

@@ -143,7 +143,10 @@ def build_reference(config: RunConfig, truth: SourceTruth, heart: HeartSource,
     loop = config.loop
     if config.predictor == "exact":
         return ExactReference(truth, loop.horizon)
-    predictor = make_predictor(config.predictor, dt=clock.dt, **config.predictor_settings)
+    settings = dict(config.predictor_settings)
+    if config.predictor in config.predictor_params and "params" not in settings:
+        settings["params"] = config.predictor_params[config.predictor]
+    predictor = make_predictor(config.predictor, dt=clock.dt, **settings)
     reference = PredictedReference(
         predictor, loop.Ts, loop.horizon, clock.refresh_ticks, loop.prediction_points,
         outlier_gate=loop.gate_floor, max_rejections=loop.outlier_max_rejections,

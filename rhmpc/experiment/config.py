@@ -26,6 +26,9 @@ SECTIONS: dict[str, type] = {
 
 GROUND_TRUTHS: tuple[str, ...] = ("recorded", "true")
 
+#: Tables of a run's TOML file whose keys are free (passed on, checked by what takes them).
+FREE_TABLES: tuple[str, ...] = ("sensor_settings", "predictor_settings", "predictor_params")
+
 
 @dataclass(frozen=True)
 class RunConfig:
@@ -59,6 +62,10 @@ class RunConfig:
         Predictor name (``predictors.PREDICTORS``), or ``"exact"`` for the true future.
     predictor_settings : dict
         Keyword settings passed to ``predictors.make_predictor``.
+    predictor_params : dict
+        The named parameter set each predictor runs with (``{"ekf": "tuna2013"}``: a paper's
+        protocol, ``predictors.registry``), unless ``predictor_settings`` names one; the
+        others take their default set.
     ground_truth : str
         What the error is measured against and what ``exact`` reads: ``"recorded"`` — the
         sensor's samples as recorded, linearly interpolated at the ticks (Tuna et al.'s
@@ -80,6 +87,7 @@ class RunConfig:
     sensor_settings: dict = field(default_factory=dict)
     predictor: str = "generalized"
     predictor_settings: dict = field(default_factory=dict)
+    predictor_params: dict = field(default_factory=dict)
     ground_truth: str = "recorded"
     seed: int = 0
     loop: LoopSettings = field(default_factory=LoopSettings)
@@ -123,7 +131,7 @@ class RunConfig:
                     kwargs[key] = from_dict(SECTIONS[key], value)
                 except (TypeError, ValueError) as exc:
                     raise UsageError(f"{where}: [{key}] {exc}") from None
-            elif key in ("sensor_settings", "predictor_settings"):
+            elif key in FREE_TABLES:
                 if not isinstance(value, dict):
                     raise UsageError(f"{where}: [{key}] must be a table")
                 kwargs[key] = dict(value)
@@ -151,10 +159,10 @@ class RunConfig:
                     top[section] = dataclasses.replace(getattr(self, section), **values)
                 except (TypeError, ValueError) as exc:
                     raise UsageError(f"[{section}] {exc}") from None
-            elif section in ("sensor_settings", "predictor_settings"):
+            elif section in FREE_TABLES:
                 top[section] = {**getattr(self, section), **values}
             else:
-                valid = ", ".join([*SECTIONS, "sensor_settings", "predictor_settings"])
+                valid = ", ".join([*SECTIONS, *FREE_TABLES])
                 raise UsageError(f"unknown section {section!r} in {section}."
                                  f"{next(iter(values))}; valid sections: {valid}")
         names = {f.name for f in dataclasses.fields(self)}

@@ -18,14 +18,16 @@ with
 * ψ(t): the mechanical phase at which the beat template h is read. The template
   (:data:`sim.heart.motion.EPICARDIAL_BUMPS`, the replicas' beat at ``REFERENCE_RR`` = 0.6 s) is
   split at its end of systole ψ_S, end of rapid filling ψ_E and onset of atrial contraction
-  ψ_A. In beat i of length RR_i,
-    - systole [0, ψ_S] lasts S_i = ψ_S·RR_ref·QS2(HR_i)/QS2(HR_ref), with the electromechanical
-      systole QS2 = 546 − 2.1·HR ms (HR in beats/min; Weissler, Harris & Schoenfeld 1968,
-      Circulation 37:149): systole barely shortens with rate;
-    - rapid filling [ψ_S, ψ_E] and atrial systole [ψ_A, 1] keep their durations at the
-      reference, (ψ_E − ψ_S)·RR_ref and (1 − ψ_A)·RR_ref;
-    - diastasis [ψ_E, ψ_A] takes the rest: it is the phase of diastole that absorbs changes of
-      the RR interval (Chung, Karamanoglu & Kovács 2004, Am. J. Physiol. Heart 287:H2003).
+  ψ_A. In beat i of length RR_i:
+
+  - systole [0, ψ_S] lasts S_i = ψ_S·RR_ref·QS2(HR_i)/QS2(HR_ref), with the electromechanical
+    systole QS2 = 546 − 2.1·HR ms (HR in beats/min; Weissler, Harris & Schoenfeld 1968,
+    Circulation 37:149): systole barely shortens with rate;
+  - rapid filling [ψ_S, ψ_E] and atrial systole [ψ_A, 1] keep their durations at the
+    reference, (ψ_E − ψ_S)·RR_ref and (1 − ψ_A)·RR_ref;
+  - diastasis [ψ_E, ψ_A] takes the rest: it is the phase of diastole that absorbs changes of
+    the RR interval (Chung, Karamanoglu & Kovács 2004, Am. J. Physiol. Heart 287:H2003).
+
   ψ is the monotone cubic (PCHIP) through these knots. A long beat is therefore not a slowed
   copy of a short one: its contraction is as fast and its quiet diastasis longer — the shape
   of the beat changes with every RR interval, which a Fourier series in one phase cannot
