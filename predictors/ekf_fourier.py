@@ -213,7 +213,7 @@ class FourierEKF(Predictor):
 
     @property
     def amplitudes(self) -> np.ndarray:
-        """|r̂_{a,i}| as (d, m), in data units."""
+        """``|r̂_{a,i}|`` as (d, m), in data units."""
         return np.abs(self._rr)
 
     @property

@@ -2,14 +2,14 @@
 
 One object solves ``B`` independent problems of the same shape at once (``B = 1``
 for correlated axes, ``B = d`` for independent axes).  Problem b has regressors
-x ∈ ℝⁿ, targets y ∈ ℝ^q and weights W ∈ ℝ^{q×n}; after k samples W minimises
+x ∈ ℝⁿ, targets y ∈ ℝ^q and weights W ∈ ℝ^{q×n}; after k samples W minimises::
 
     J(W) = Σ_{i≤k} λ^{k−i} ‖y_i − W x_i‖² + λ^k δ ‖W − W₀‖²_F
 
 with forgetting factor 0 < λ ≤ 1 and prior weight δ > 0 (``P₀ = I/δ``).  All q
 outputs share the regressor, so one inverse correlation matrix P = Φ⁻¹ (n×n)
 serves them: the Sherman–Morrison (matrix inversion lemma) form of Haykin,
-*Adaptive Filter Theory* (2001), Table 10.1,
+*Adaptive Filter Theory* (2001), Table 10.1::
 
     π = P x,   κ = λ + xᵀπ,   k = π/κ,
     e = y − W x                   (a-priori error),
@@ -20,11 +20,12 @@ Cost per sample: ≈ B(2n² + 2qn) multiply-adds, no matrix inverse.
 
 Numerical guards (counted in ``counts``):
 
-``rls_reset``  κ ≤ 0 or non-finite P: P is reset to P₀ (weights kept);
-``rls_bound``  wind-up: with λ < 1, directions that the data do not excite grow
-               as λ^{−k}; diagonal entries above ``p_max`` are brought back to it
-               by the congruence P ← D P D (D diagonal ≤ 1), which keeps P positive
-               definite and leaves the excited coordinates alone.
+``rls_reset``
+    κ ≤ 0 or non-finite P: P is reset to P₀ (weights kept);
+``rls_bound``
+    wind-up: with λ < 1, directions that the data do not excite grow as λ^{−k}; diagonal
+    entries above ``p_max`` are brought back to it by the congruence P ← D P D (D diagonal
+    ≤ 1), which keeps P positive definite and leaves the excited coordinates alone.
 """
 
 from __future__ import annotations

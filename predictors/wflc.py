@@ -1,6 +1,6 @@
 """Weighted-frequency Fourier linear combiner, WFLC (Riviere et al. 1998; Yuen et al. 2009, §4.2).
 
-Model with accumulated phase ψ_k = Σ_{t≤k} ω₀,t (ω₀ in rad/sample), per axis a:
+Model with accumulated phase ψ_k = Σ_{t≤k} ω₀,t (ω₀ in rad/sample), per axis a::
 
     x_k = [sin ψ_k, …, sin mψ_k, cos ψ_k, …, cos mψ_k],   ŷ_{a,k} = w_aᵀ x_k + w_{a,b},
     ε_{a,k} = z_{a,k} − ŷ_{a,k},
@@ -26,7 +26,7 @@ heart-rate variability (RSA swings the rate by several bpm within one 4–6 s br
 μ₀ gradient is too slow: on fixed-a2-top ω̂ lagged by up to 14 bpm and the 23 ms forecast
 (1.72 mm) lost to ``hold`` (0.87 mm).  ψ and ω₀ are instead driven by a normalised phase
 detector, a second-order (type-2) phase-locked loop (Gardner, *Phaselock Techniques*, 3rd
-ed., 2005, ch. 2–4; the PLL view of the WFLC's frequency adaptation):
+ed., 2005, ch. 2–4; the PLL view of the WFLC's frequency adaptation)::
 
     (P1) δ_k = Σ_a ε_{a,k} g_{a,k} / P_k,  g_a = Σ_{r≤j} r (w_{a,r} cos rψ − w_{a,m+r} sin rψ),
          P = ½ Σ_a Σ_{r≤j} r² (w_{a,r}² + w_{a,m+r}²)   (cycle mean of Σ_a g_a²),

@@ -15,7 +15,7 @@ Range-space (Schur-complement) step
 
     (Nocedal & Wright, *Numerical Optimization*, 2nd ed., §16.2, range-space / Schur-complement
     method). ``W_𝒜𝒜`` is a principal submatrix of an SPD matrix, so it is SPD and factorised by
-    Cholesky; it has |𝒜| rows (1–4 on the bench's saturated ticks). An active upper bound needs
+    Cholesky; it has ``|𝒜|`` rows (1–4 on the bench's saturated ticks). An active upper bound needs
     ``μ_i ≥ 0``, an active lower bound ``μ_i ≤ 0`` (OSQP's sign convention for ``z ≤ 1``).
 
 Phase 1: primal-dual active set (PDAS)

@@ -4,7 +4,7 @@ Each limit is a linear function of the predicted state, checked at the end of ev
 and *certified in between*: within a block the input is constant, so under the model
 (a double integrator per joint, exact ZOH) the velocity is affine in time and the position
 quadratic. An affine function on an interval is bounded by its end values, so the velocity
-rows at block ends hold at every tick. For a quadratic ``f(t)`` over a block of duration ``T``,
+rows at block ends hold at every tick. For a quadratic ``f(t)`` over a block of duration ``T``::
 
     max_t f(t) ≤ max(f(0), f(T)) + |f̈| T² / 8,
 
@@ -42,7 +42,7 @@ class EnvelopeRows:
     ----------
     Dq, Dv, Dy : (m, nq), (m, nq), (m, 3) row directions, already divided by the unit [1/unit]
     lo, hi : (m,) bounds in units (±inf where one-sided) [-]
-    curvature : (m,) |f̈|_max / unit per s² [1/s²] (0 for velocity rows)
+    curvature : (m,) ``|f̈|_max`` / unit per s² [1/s²] (0 for velocity rows)
     slack : (m,) slack index of each row
     names : tuple[str, ...] one name per slack (e.g. ``"position[1]"``)
     """

@@ -140,10 +140,10 @@ class HeartRateScore:
     """Running score of a predictor's heart-rate estimate against the true heart rate.
 
     At each observation after ``settling`` the error e = 60·(f̂_h − f_h(t)) [bpm] is added to
-    running sums (constant memory): RMS and max of |e| and the fraction of observations with
-    |e| < ``tolerance_bpm`` (5 bpm, the lock criterion). From the first observation
+    running sums (constant memory): RMS and max of ``|e|`` and the fraction of observations with
+    ``|e|`` < ``tolerance_bpm`` (5 bpm, the lock criterion). From the first observation
     on (settling included; an estimate that is not ready yet counts as unlocked) it keeps the
-    "lock time": the time of the first observation after which |e| stayed below the tolerance to
+    "lock time": the time of the first observation after which ``|e|`` stayed below the tolerance to
     the end. ``ready_time_s`` is the first finite estimate (the EKF's initialisation window is
     Yuen's 10 s, so lock is judged from there).
 
