@@ -25,10 +25,43 @@ def _positive(settings, *names: str) -> None:
             raise ValueError(f"{name} must be > 0, got {getattr(settings, name)!r}")
 
 
-def _nonnegative(settings, *names: str) -> None:
+def _nonnegative(settings, *names: str, optional: bool = False) -> None:
     for name in names:
-        if not getattr(settings, name) >= 0.0:
-            raise ValueError(f"{name} must be >= 0, got {getattr(settings, name)!r}")
+        v = getattr(settings, name)
+        if not (optional and v is None) and not v >= 0.0:
+            raise ValueError(f"{name} must be >= 0{' or None' if optional else ''}, got {v!r}")
+
+
+def _integers(settings, low: int, *names: str) -> None:
+    for name in names:
+        v = getattr(settings, name)
+        if int(v) != v or v < low:
+            raise ValueError(f"{name} must be an integer >= {low}, got {v!r}")
+
+
+def _bands(settings, *names: str) -> None:
+    for name in names:
+        lo, hi = getattr(settings, name)
+        if not 0.0 < lo < hi:
+            raise ValueError(f"{name} must be (low, high) with 0 < low < high [Hz]")
+
+
+def _shared(settings) -> None:
+    """The checks of the settings both EKFs have: the gate, the rate of the process variances
+    and the non-periodic part."""
+    if settings.gate_probability is not None and not 0.0 < settings.gate_probability < 1.0:
+        raise ValueError(
+            f"gate_probability must be in (0, 1) or None, got {settings.gate_probability!r}")
+    if not settings.gate_seconds > 0.0:
+        raise ValueError(f"gate_seconds must be > 0, got {settings.gate_seconds!r}")
+    if settings.q_rate_hz is not None and not settings.q_rate_hz > 0.0:
+        raise ValueError(f"q_rate_hz must be > 0 or None, got {settings.q_rate_hz!r}")
+    _integers(settings, 0, "residual_order", "fit_beats")
+    if settings.rate_band is not None and not settings.rate_band > 1.0:
+        raise ValueError(f"rate_band must be > 1 or None, got {settings.rate_band!r}")
+    if not 0.0 < settings.residual_forgetting <= 1.0:
+        raise ValueError(
+            f"residual_forgetting must be in (0, 1], got {settings.residual_forgetting!r}")
 
 
 @dataclass(frozen=True)
@@ -135,41 +168,14 @@ class EKFSettings(PredictorSettings):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        if int(self.harmonics) != self.harmonics or self.harmonics < 1:
-            raise ValueError(f"harmonics must be a positive integer, got {self.harmonics!r}")
+        _integers(self, 1, "harmonics")
+        _integers(self, 0, "breathing_harmonics")
         _positive(self, "init_seconds", "sigma_r", "sigma1_sq", "sigma_omega_sq")
         _nonnegative(self, "sigma_phase_sq", "q", "q_phase", "q_omega", "q_breathing",
                      "q_omega_breathing")
-        if self.gate_probability is not None and not 0.0 < self.gate_probability < 1.0:
-            raise ValueError(
-                f"gate_probability must be in (0, 1) or None, got {self.gate_probability!r}"
-            )
-        if not self.gate_seconds > 0.0:
-            raise ValueError(f"gate_seconds must be > 0, got {self.gate_seconds!r}")
-        if self.q_rate_hz is not None and not self.q_rate_hz > 0.0:
-            raise ValueError(f"q_rate_hz must be > 0 or None, got {self.q_rate_hz!r}")
-        if self.q_omega_per_second is not None and not self.q_omega_per_second >= 0.0:
-            raise ValueError(
-                f"q_omega_per_second must be >= 0 or None, got {self.q_omega_per_second!r}"
-            )
-        if (
-            int(self.breathing_harmonics) != self.breathing_harmonics
-            or self.breathing_harmonics < 0
-        ):
-            raise ValueError(f"breathing_harmonics must be >= 0, got {self.breathing_harmonics!r}")
-        for name in ("band_hz", "omega_limits_hz", "breathing_band_hz"):
-            lo, hi = getattr(self, name)
-            if not 0.0 < lo < hi:
-                raise ValueError(f"{name} must be (low, high) with 0 < low < high [Hz]")
-        for name in ("residual_order", "fit_beats"):
-            v = getattr(self, name)
-            if int(v) != v or v < 0:
-                raise ValueError(f"{name} must be an integer >= 0, got {v!r}")
-        if self.rate_band is not None and not self.rate_band > 1.0:
-            raise ValueError(f"rate_band must be > 1 or None, got {self.rate_band!r}")
-        if not 0.0 < self.residual_forgetting <= 1.0:
-            raise ValueError(
-                f"residual_forgetting must be in (0, 1], got {self.residual_forgetting!r}")
+        _nonnegative(self, "q_omega_per_second", optional=True)
+        _bands(self, "band_hz", "omega_limits_hz", "breathing_band_hz")
+        _shared(self)
 
 
 MM, MM2 = 1e-3, 1e-6  # metres per millimetre, m² per mm²
@@ -361,41 +367,16 @@ class DualEKFSettings(PredictorSettings):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        for name in ("respiratory_harmonics", "cardiac_harmonics"):
-            v = getattr(self, name)
-            if int(v) != v or v < 1:
-                raise ValueError(f"{name} must be a positive integer, got {v!r}")
+        _integers(self, 1, "respiratory_harmonics", "cardiac_harmonics")
         _positive(self, "respiratory_hz", "cardiac_hz", "r", "p0_coefficient", "p0_offset")
         _nonnegative(self, "q_respiratory", "q_offset", "q_cardiac", "q_omega",
                      "p0_omega_respiratory", "p0_omega_cardiac")
-        if self.q_rate_hz is not None and not self.q_rate_hz > 0.0:
-            raise ValueError(f"q_rate_hz must be > 0 or None, got {self.q_rate_hz!r}")
-        for name in (
-            "q_omega_respiratory",
-            "q_omega_cardiac_per_second",
-            "q_phase_cardiac_per_second",
-        ):
-            v = getattr(self, name)
-            if v is not None and not v >= 0.0:
-                raise ValueError(f"{name} must be >= 0 or None, got {v!r}")
-        if self.gate_probability is not None and not 0.0 < self.gate_probability < 1.0:
-            raise ValueError(
-                f"gate_probability must be in (0, 1) or None, got {self.gate_probability!r}"
-            )
-        if not self.gate_seconds > 0.0:
-            raise ValueError(f"gate_seconds must be > 0, got {self.gate_seconds!r}")
+        _nonnegative(self, "q_omega_respiratory", "q_omega_cardiac_per_second",
+                     "q_phase_cardiac_per_second", optional=True)
         if self.init_seconds is not None and not self.init_seconds > 0.0:
             raise ValueError(f"init_seconds must be > 0 or None, got {self.init_seconds!r}")
-        for name in ("respiratory_band_hz", "cardiac_band_hz"):
-            lo, hi = getattr(self, name)
-            if not 0.0 < lo < hi:
-                raise ValueError(f"{name} must be (low, high) with 0 < low < high [Hz]")
-        for name in ("residual_order", "fit_beats"):
-            v = getattr(self, name)
-            if int(v) != v or v < 0:
-                raise ValueError(f"{name} must be an integer >= 0, got {v!r}")
-        if self.rate_band is not None and not self.rate_band > 1.0:
-            raise ValueError(f"rate_band must be > 1 or None, got {self.rate_band!r}")
+        _bands(self, "respiratory_band_hz", "cardiac_band_hz")
+        _shared(self)
 
 
 #: Parameter sets.  ``richa2010``: Richa et al. 2010 §I-C/D as published (zero start at the

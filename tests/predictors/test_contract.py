@@ -91,6 +91,25 @@ def test_registry_rejects_bad_names_and_settings():
         make_predictor("hold", 0.0)
 
 
+@pytest.mark.parametrize("name, bad, message", [
+    ("ekf", {"harmonics": 1.5}, "harmonics must be an integer >= 1"),
+    ("ekf", {"breathing_harmonics": -1}, "breathing_harmonics must be an integer >= 0"),
+    ("ekf", {"q_omega_per_second": -1.0}, "q_omega_per_second must be >= 0 or None"),
+    ("ekf", {"band_hz": (3.0, 0.6)}, "band_hz must be"),
+    ("ekf", {"gate_probability": 1.0}, "gate_probability"),
+    ("ekf", {"rate_band": 0.9}, "rate_band must be > 1"),
+    ("dual-ekf", {"cardiac_harmonics": 0}, "cardiac_harmonics must be an integer >= 1"),
+    ("dual-ekf", {"q_omega_respiratory": -1.0}, "q_omega_respiratory must be >= 0 or None"),
+    ("dual-ekf", {"init_seconds": 0.0}, "init_seconds must be > 0 or None"),
+    ("dual-ekf", {"cardiac_band_hz": (0.0, 3.0)}, "cardiac_band_hz must be"),
+    ("dual-ekf", {"residual_forgetting": 0.0}, "residual_forgetting"),
+    ("dual-ekf", {"fit_beats": -2}, "fit_beats must be an integer >= 0"),
+])
+def test_fourier_settings_reject_values_out_of_range(name, bad, message):
+    with pytest.raises(ValueError, match=message):
+        make_predictor(name, DT, **bad)
+
+
 def test_registry_presets_and_overrides():
     assert make_predictor("ekf", DT).settings.harmonics == 5  # tuna2013 by default
     e = make_predictor("ekf", DT, params="yuen2008", sigma_r=1e-3)
