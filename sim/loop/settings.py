@@ -41,9 +41,8 @@ class LoopSettings:
         the predictor on the data themselves, measured over ``gate_calibration`` seconds after
         as many seconds of convergence (misses beyond 5 × their median left out, so that an
         outlier in that window does not widen the gate); every sample is accepted until then.
-        On the physical sonomicrometer's stream this is ≈ 0.15 mm (the RLS predictors'
-        one-step miss is 0.029–0.047 mm RMS on the six replicas); on a 25-Hz video track it is
-        about a millimetre. A number: that floor [m]; 0 disables the gate. The choice is
+        It follows the sensor: the sonomicrometer's white range error and a video track's
+        pixel noise give floors several times apart; the run reports the floor it found. A number: that floor [m]; 0 disables the gate. The choice is
         recorded in the design decisions (outlier gate).
     gate_calibration : float
         Length of the ``"auto"`` gate's convergence and of its calibration, each, in the
