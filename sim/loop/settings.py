@@ -42,8 +42,9 @@ class LoopSettings:
         as many seconds of convergence (misses beyond 5 × their median left out, so that an
         outlier in that window does not widen the gate); every sample is accepted until then.
         It follows the sensor: the sonomicrometer's white range error and a video track's
-        pixel noise give floors several times apart; the run reports the floor it found. A number: that floor [m]; 0 disables the gate. The choice is
-        recorded in the design decisions (outlier gate).
+        pixel noise give floors several times apart; the run reports the floor it found. A
+        number: that floor [m]; 0 disables the gate. The choice is recorded in the design
+        decisions (outlier gate).
     gate_calibration : float
         Length of the ``"auto"`` gate's convergence and of its calibration, each, in the
         predictor's own forecasts [s] (5 s: several beats; the two fit in the settling of a
