@@ -247,37 +247,42 @@ void chain_mass(const chain_t *m, const double *q, double *out) {
         for (int j = 0; j < m->n; j++) out[m->n * k + j] = M[k][j];
 }
 
-/* q'' = M(q)^-1 (tau - h(q, q')) with M from n RNEA columns (no gravity, no velocity) and the
- * armature, by Cholesky: the dynamics of a model with mimic bodies. */
-static void projected_fd(const chain_t *m, const double *q, const double *qd, const double *tau,
-                         double *qdd) {
-    int n = m->n;
-    double qb[MAXJ], vb[MAXJ], zero[MAXJ] = {0}, h[MAXJ], M[MAXJ][MAXJ];
+/* Solve A x = b (n x n, symmetric positive definite) by Cholesky. */
+static void spd_solve(int n, double A[MAXJ][MAXJ], const double *b, double *x) {
     double L[MAXJ][MAXJ], y[MAXJ];
-    expand(m, q, 1, qb);
-    expand(m, qd, 0, vb);
-    body_rnea(m, qb, vb, zero, 1, h);
-    body_mass(m, qb, M);
-    for (int j = 0; j < n; j++) {  /* M = L L^T */
-        double d = M[j][j];
+    for (int j = 0; j < n; j++) {
+        double d = A[j][j];
         for (int k = 0; k < j; k++) d -= L[j][k] * L[j][k];
         L[j][j] = sqrt(d);
         for (int i = j + 1; i < n; i++) {
-            double s = M[i][j];
+            double s = A[i][j];
             for (int k = 0; k < j; k++) s -= L[i][k] * L[j][k];
             L[i][j] = s / L[j][j];
         }
     }
     for (int i = 0; i < n; i++) {
-        double s = tau[i] - h[i];
+        double s = b[i];
         for (int k = 0; k < i; k++) s -= L[i][k] * y[k];
         y[i] = s / L[i][i];
     }
     for (int i = n - 1; i >= 0; i--) {
         double s = y[i];
-        for (int k = i + 1; k < n; k++) s -= L[k][i] * qdd[k];
-        qdd[i] = s / L[i][i];
+        for (int k = i + 1; k < n; k++) s -= L[k][i] * x[k];
+        x[i] = s / L[i][i];
     }
+}
+
+/* q'' = M(q)^-1 (tau - h(q, q')) with M from n RNEA columns (no gravity, no velocity) and the
+ * armature, by Cholesky: the dynamics of a model with mimic bodies. */
+static void projected_fd(const chain_t *m, const double *q, const double *qd, const double *tau,
+                         double *qdd) {
+    double qb[MAXJ], vb[MAXJ], zero[MAXJ] = {0}, h[MAXJ], M[MAXJ][MAXJ], b[MAXJ];
+    expand(m, q, 1, qb);
+    expand(m, qd, 0, vb);
+    body_rnea(m, qb, vb, zero, 1, h);
+    body_mass(m, qb, M);
+    for (int i = 0; i < m->n; i++) b[i] = tau[i] - h[i];
+    spd_solve(m->n, M, b, qdd);
 }
 
 /* qdd = forward dynamics: M(q) qdd + C(q, qd) qd + g(q) = tau, M with the armature. */
@@ -478,31 +483,6 @@ static double hw_friction(const hw_t *w, int k, double rate) {
     double x = rate / w->v_stribeck;
     double peak = w->coulomb[k] * (1.0 + (w->ratio - 1.0) * exp(-x * x));
     return w->damping[k] * rate + peak * tanh(rate * w->inv_smooth);
-}
-
-/* Solve A x = b (n x n, symmetric positive definite) by Cholesky. */
-static void spd_solve(int n, double A[MAXJ][MAXJ], const double *b, double *x) {
-    double L[MAXJ][MAXJ], y[MAXJ];
-    for (int j = 0; j < n; j++) {
-        double d = A[j][j];
-        for (int k = 0; k < j; k++) d -= L[j][k] * L[j][k];
-        L[j][j] = sqrt(d);
-        for (int i = j + 1; i < n; i++) {
-            double s = A[i][j];
-            for (int k = 0; k < j; k++) s -= L[i][k] * L[j][k];
-            L[i][j] = s / L[j][j];
-        }
-    }
-    for (int i = 0; i < n; i++) {
-        double s = b[i];
-        for (int k = 0; k < i; k++) s -= L[i][k] * y[k];
-        y[i] = s / L[i][i];
-    }
-    for (int i = n - 1; i >= 0; i--) {
-        double s = y[i];
-        for (int k = i + 1; k < n; k++) s -= L[k][i] * x[k];
-        x[i] = s / L[i][i];
-    }
 }
 
 /* d/dt of x = [q, q', theta_r, theta_r'] (4n) with winding currents cur. */
