@@ -17,6 +17,7 @@ import json
 import numpy as np
 
 from predictors import make_predictor
+from predictors.monitor import rms_by_lead
 from rhmpc.studies.paper import COLUMNS
 from sim.heart import make_scenario
 
@@ -30,15 +31,7 @@ def score(row: str, z: np.ndarray) -> list[float]:
     """RMS [mm] at each of ``LEADS`` of predictor ``row`` (``name`` or ``name:params``)."""
     name, _, params = row.partition(":")
     p = make_predictor(name, 1.0 / RATE, **({"params": params} if params else {}))
-    K = max(LEADS)
-    sq, count = np.zeros(K), 0
-    for n in range(len(z) - K):
-        p.update(z[n])
-        if n >= WARMUP:
-            e = p.predict(K) - z[n + 1 : n + 1 + K]
-            sq += np.einsum("ij,ij->i", e, e)
-            count += 1
-    rms = 1e3 * np.sqrt(sq / count)
+    rms = 1e3 * rms_by_lead(p, z, max(LEADS), WARMUP)
     return [float(rms[k - 1]) for k in LEADS]
 
 

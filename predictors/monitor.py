@@ -9,6 +9,8 @@ the running forecast error per lead.
   ``window`` samples, kept as block extrema (O(d) per sample, O(blocks·d) per query).
 * :class:`LeadErrorRMS` — the exponentially weighted RMS of past forecast misses at each
   lead, e_k = ‖ẑ_{n+k|n} − z_{n+k}‖, from the forecasts the owner recorded.
+* :func:`rms_by_lead` — the plain RMS of those misses over a whole stream, open loop: how a
+  predictor is scored offline.
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ import math
 
 import numpy as np
 
-__all__ = ["LeadErrorRMS", "RangeEnvelope", "infer_unit"]
+__all__ = ["LeadErrorRMS", "RangeEnvelope", "infer_unit", "rms_by_lead"]
 
 #: typical range of heart-surface motion within the inference window (0.5 s, less than a
 #: beat) [m]: ≈ 2 mm, between a quiet diastasis (0.2 mm at 50 beats/min in the in-vivo regime)
@@ -151,3 +153,20 @@ class LeadErrorRMS:
     def rms(self) -> np.ndarray:
         """(K,) RMS miss per lead (lead k at index k − 1); NaN where nothing was scored."""
         return np.where(self.count > 0, np.sqrt(self.ms), np.nan)
+
+
+def rms_by_lead(predictor, z: np.ndarray, steps: int, first: int) -> np.ndarray:
+    """(steps,) RMS over n ≥ ``first`` of e_k = ‖ẑ_{n+k|n} − z_{n+k}‖, k = 1 … ``steps``.
+
+    ``predictor`` (:class:`predictors.base.Predictor`) is fed the samples ``z`` (n, d) in
+    order, open loop; after each sample n with n + steps < len(z) and n ≥ ``first`` (its
+    warm-up) it forecasts ``steps`` samples, scored against those that follow. Units: z's.
+    """
+    sq, count = np.zeros(steps), 0
+    for n in range(len(z) - steps):
+        predictor.update(z[n])
+        if n >= first:
+            e = predictor.predict(steps) - z[n + 1 : n + 1 + steps]
+            sq += np.einsum("ij,ij->i", e, e)
+            count += 1
+    return np.sqrt(sq / count)

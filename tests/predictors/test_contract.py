@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from predictors import PREDICTORS, Predictor, make_predictor
+from predictors.monitor import rms_by_lead
 from tests.predictors.helpers import HarmonicSource
 
 DT = 0.0075
@@ -160,3 +161,11 @@ def test_caller_buffers_are_not_kept_by_reference():
     p.update(buf)
     buf[:] = 0.0
     np.testing.assert_array_equal(p.predict(1)[0], [1.0, 2.0, 3.0])
+
+
+def test_rms_by_lead_scores_hold_on_a_ramp_exactly():
+    # hold forecasts z_n at every lead; on z_n = v·n (3-D) its miss at lead k is k‖v‖ exactly
+    v = np.array([1e-4, -2e-4, 3e-4])
+    z = np.arange(200)[:, None] * v
+    rms = rms_by_lead(make_predictor("hold", DT), z, 4, 50)
+    np.testing.assert_allclose(rms, np.arange(1, 5) * np.linalg.norm(v), rtol=1e-12)

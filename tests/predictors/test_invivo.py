@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from predictors import make_predictor
+from predictors.monitor import rms_by_lead
 
 RATE, SECONDS, SEED, WARMUP, LEADS = 25.0, 40.0, 2, 300, 5
 SCENARIOS = ("invivo-video", "fixed-a1-top", "fixed-a2-top", "varying-a1-top",
@@ -28,16 +29,7 @@ def _stream(scenario: str, seed: int = SEED) -> np.ndarray:
 
 def _rms_by_lead(name: str, z: np.ndarray) -> np.ndarray:
     """(LEADS,) RMS forecast error of predictor ``name`` on ``z`` [m]."""
-    p = make_predictor(name, 1.0 / RATE)
-    sq = np.zeros(LEADS)
-    count = 0
-    for n in range(len(z) - LEADS):
-        p.update(z[n])
-        if n >= WARMUP:
-            e = p.predict(LEADS) - z[n + 1 : n + 1 + LEADS]
-            sq += np.einsum("ij,ij->i", e, e)
-            count += 1
-    return np.sqrt(sq / count)
+    return rms_by_lead(make_predictor(name, 1.0 / RATE), z, LEADS, WARMUP)
 
 
 @pytest.fixture(scope="module", params=SCENARIOS)
