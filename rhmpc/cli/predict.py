@@ -198,15 +198,8 @@ def run(args: argparse.Namespace) -> int:
     result = run_study(s, jobs=jobs, progress=progress)
     if bar is not None:
         bar.close()
-    if args.out:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps(result, indent=2))
-    if args.plot:
-        plot_study(result, args.plot)
-    if args.json:
-        print(json.dumps(result, indent=2))
-    else:
-        print(format_table(result))
+    _publish(args, result, plot_study, format_table)
+    if not args.json:
         print(
             f"({result['elapsed_s']:.1f} s, {jobs} job(s); default predictors "
             f"{','.join(DEFAULT_PREDICTORS[s.study])})",
@@ -245,13 +238,16 @@ def _run_data(args: argparse.Namespace) -> int:
         doc = run_open_loop(tracks, settings, progress)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
+    _publish(args, doc, plot_leads, format_report)
+    return 0
+
+
+def _publish(args: argparse.Namespace, doc: dict, plot, text) -> None:
+    """The document to ``--out``, its figure to ``--plot``, and to stdout as JSON (``--json``)
+    or as ``text(doc)``."""
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(json.dumps(doc, indent=2) + "\n")
     if args.plot:
-        plot_leads(doc, args.plot)
-    if args.json:
-        print(json.dumps(doc, indent=2))
-    else:
-        print(format_report(doc))
-    return 0
+        plot(doc, args.plot)
+    print(json.dumps(doc, indent=2) if args.json else text(doc))
