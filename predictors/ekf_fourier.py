@@ -344,7 +344,6 @@ class FourierEKF(Predictor):
         if self._rest is not None and self.ready:
             self._rest.follow(self._model, self.x[self.iw], self._hph, learn)
 
-
     def _correct(self, z: np.ndarray) -> bool:
         """The EKF correction with sample z; False if the gate rejected it or S is not SPD."""
         x, P, H = self.x, self.P, self._H
