@@ -112,3 +112,20 @@ def test_streamed_run_is_the_run_on_whole_arrays(tmp_path, predictor):
     for key, value in direct.items():
         np.testing.assert_allclose(streamed.tracking[key], value, rtol=1e-12, err_msg=key)
     assert doc["tick_us"]["p999"] >= doc["tick_us"]["p99"] >= doc["tick_us"]["p50"] > 0
+
+
+def test_predictor_params_pick_each_predictors_named_set():
+    """``predictor_params`` names a parameter set per predictor (a preset's choice for every
+    predictor a comparison runs); ``predictor_settings.params`` still wins over it."""
+    from predictors.fourier_settings import EKF_PARAMETER_SETS
+
+    params = {"ekf": "tuna2013"}
+    ekf = build_run(small_config(predictor="ekf", predictor_params=params)).reference.predictor
+    assert ekf.settings == EKF_PARAMETER_SETS["tuna2013"]
+    default = build_run(small_config(predictor="ekf")).reference.predictor
+    assert default.settings == EKF_PARAMETER_SETS["adaptive"] != EKF_PARAMETER_SETS["tuna2013"]
+    chosen = build_run(small_config(predictor="ekf", predictor_params=params,
+                                    predictor_settings={"params": "yuen2008"}))
+    assert chosen.reference.predictor.settings == EKF_PARAMETER_SETS["yuen2008"]
+    other = build_run(small_config(predictor="one-step", predictor_params=params))
+    assert type(other.reference.predictor).__name__ == "OneStepRLS"
