@@ -19,11 +19,11 @@ from rhmpc.cli.presets import PRESETS, add_preset_option, apply_preset
 from rhmpc.cli.simulate import DEFAULT_DURATION, DEFAULT_SETTLING, parse_value
 from rhmpc.errors import UsageError
 from rhmpc.experiment import RunConfig
-from rhmpc.experiment.config import SECTIONS, read_toml
+from rhmpc.experiment.config import FREE_TABLES, SECTIONS, read_toml
 
-#: Top-level keys of a run file that hold tables of free keys.
-TABLES: tuple[str, ...] = ("data_read", "sensor_settings", "predictor_settings",
-                           "predictor_params")
+#: Top-level keys of a run file that hold tables of free keys: the recording's read options and
+#: the configuration's free tables.
+TABLES: tuple[str, ...] = ("data_read", *FREE_TABLES)
 #: Longest description kept in a comment [characters].
 DESCRIPTION_CHARS = 96
 
