@@ -62,7 +62,6 @@ import math
 import numpy as np
 from scipy.stats import chi2
 
-from predictors.base import Predictor
 from predictors.fourier_init import (
     FitWindow,
     fit_harmonics,
@@ -72,14 +71,14 @@ from predictors.fourier_init import (
 )
 from predictors.fourier_settings import DUAL_PARAMETER_SETS as PARAMETER_SETS
 from predictors.fourier_settings import DualEKFSettings
-from predictors.nonperiodic import NonPeriodic, long_run_variance
+from predictors.nonperiodic import FourierPredictor, NonPeriodic, long_run_variance
 
 __all__ = ["PARAMETER_SETS", "DualEKFSettings", "DualFourierEKF"]
 
 _TWO_PI = 2.0 * math.pi
 
 
-class DualFourierEKF(Predictor):
+class DualFourierEKF(FourierPredictor):
     """Richa's dual time-varying Fourier-series EKF, 1-D or 3-D (shared ω_r, ω_c)."""
 
     Settings = DualEKFSettings
@@ -254,10 +253,8 @@ class DualFourierEKF(Predictor):
             self._rest.reject()
         self._follow(learn=accepted)
 
-    def _follow(self, learn: bool) -> None:
-        """The non-periodic part from the current state (:mod:`predictors.nonperiodic`)."""
-        if self._rest is not None and self.ready:
-            self._rest.follow(self._model, self.x[self.iwc], self._hph, learn)
+    def _rate(self) -> float:
+        return float(self.x[self.iwc])
 
     def _correct(self, z: np.ndarray) -> bool:
         """The EKF correction (eqs. 3–5) with sample z; False if gated out or S is not SPD."""
@@ -329,9 +326,7 @@ class DualFourierEKF(Predictor):
             self._time_update()
         elif self.settings.init_seconds is not None:
             self._start(np.full(self.d, np.nan))
-        if self._rest is not None:
-            self._rest.push(np.nan)
-            self._follow(learn=False)
+        self._rest_missing()
 
     def _model(self, k: np.ndarray) -> np.ndarray:
         """Eq. (1) k samples ahead of the state (any k, past ones negative), (len(k), d)."""
@@ -340,12 +335,6 @@ class DualFourierEKF(Predictor):
             x[self.itr] + k * x[self.iwr] * self.dt, x[self.itc] + k * x[self.iwc] * self.dt
         )
         return phi @ self._coef.T
-
-    def _predict(self, steps: int) -> np.ndarray:
-        if self._rest is None:
-            return self._model(np.arange(1.0, steps + 1.0))
-        y = self._model(np.arange(0.0, steps + 1.0))  # ŷ_{n+k|n} + ê_{n+k|n}
-        return y[1:] + self._rest.forecast(np.diff(y, axis=0))
 
     @property
     def heart_rate_hz(self) -> float:

@@ -99,7 +99,6 @@ import math
 import numpy as np
 from scipy.stats import chi2
 
-from predictors.base import Predictor
 from predictors.fourier_init import (
     FitWindow,
     fit_covariance,
@@ -111,14 +110,14 @@ from predictors.fourier_init import (
 )
 from predictors.fourier_settings import EKF_PARAMETER_SETS as PARAMETER_SETS
 from predictors.fourier_settings import Q_OMEGA_HRV, EKFSettings
-from predictors.nonperiodic import NonPeriodic, long_run_variance
+from predictors.nonperiodic import FourierPredictor, NonPeriodic, long_run_variance
 
 __all__ = ["PARAMETER_SETS", "Q_OMEGA_HRV", "EKFSettings", "FourierEKF"]
 
 _TWO_PI = 2.0 * math.pi
 
 
-class FourierEKF(Predictor):
+class FourierEKF(FourierPredictor):
     """Time-varying Fourier-series EKF predictor, 1-D or 3-D with one shared ω."""
 
     Settings = EKFSettings
@@ -339,10 +338,8 @@ class FourierEKF(Predictor):
             rest.reject()
         self._follow(learn=accepted)
 
-    def _follow(self, learn: bool) -> None:
-        """The non-periodic part from the current state (:mod:`predictors.nonperiodic`)."""
-        if self._rest is not None and self.ready:
-            self._rest.follow(self._model, self.x[self.iw], self._hph, learn)
+    def _rate(self) -> float:
+        return float(self.x[self.iw])
 
     def _correct(self, z: np.ndarray) -> bool:
         """The EKF correction with sample z; False if the gate rejected it or S is not SPD."""
@@ -431,9 +428,7 @@ class FourierEKF(Predictor):
             self._time_update()
         else:
             self._collect(np.nan)
-        if self._rest is not None:
-            self._rest.push(np.nan)
-            self._follow(learn=False)
+        self._rest_missing()
 
     def _model(self, k: np.ndarray) -> np.ndarray:
         """The Fourier model (eq. 2 with breathing) k samples ahead of the state, (len(k), d)."""
@@ -446,8 +441,3 @@ class FourierEKF(Predictor):
             out += np.sin(ph) @ self._ab[:, : hb.size].T + np.cos(ph) @ self._ab[:, hb.size :].T
         return out
 
-    def _predict(self, steps: int) -> np.ndarray:
-        if self._rest is None:
-            return self._model(np.arange(1.0, steps + 1.0))
-        y = self._model(np.arange(0.0, steps + 1.0))  # ŷ_{n+k|n} + ê_{n+k|n}
-        return y[1:] + self._rest.forecast(np.diff(y, axis=0))

@@ -38,14 +38,16 @@ gated sample is NaN: no residual, nothing learnt from a window holding it.
 from __future__ import annotations
 
 import math
+from abc import abstractmethod
 from collections import Counter
 from collections.abc import Callable
 
 import numpy as np
 
+from predictors.base import Predictor
 from predictors.residual import RecentSamples, ResidualAR
 
-__all__ = ["NonPeriodic", "long_run_variance"]
+__all__ = ["FourierPredictor", "NonPeriodic", "long_run_variance"]
 
 #: Prior weight δ of the residual model's RLS [m²], as the RLS predictors' (P₀ = I/δ).
 RESIDUAL_DELTA = 1e-8
@@ -147,3 +149,46 @@ class NonPeriodic:
         if self.residual is None:
             return np.zeros_like(increments)
         return self.residual.forecast(self.e, increments, len(increments))
+
+
+class FourierPredictor(Predictor):
+    """Base of the Fourier-series predictors (``ekf``, ``dual-ekf``, ``wflc``).
+
+    A subclass has a model ``_model(k)`` of the motion k samples from the newest (past ones
+    negative), its rate ω̂ (``_rate``), and, when ``_rest`` is set, the model's non-periodic
+    part (:class:`NonPeriodic`), which this class keeps up and adds to the forecast:
+
+        ẑ_{n+k|n} = ŷ_{n+k|n} + ê_{n+k|n},
+
+    ê the residual AR's forecast driven by the model's increments ŷ_{n+k|n} − ŷ_{n+k−1|n}.
+    """
+
+    #: the non-periodic part, if the settings ask for one
+    _rest: NonPeriodic | None = None
+    #: diag H P⁻ Hᵀ of the last correction (the EKFs; R̂ subtracts it), data units²
+    _hph: np.ndarray | None = None
+
+    @abstractmethod
+    def _model(self, k: np.ndarray) -> np.ndarray:
+        """ŷ at offsets ``k`` from the newest sample, (len(k), d)."""
+
+    @abstractmethod
+    def _rate(self) -> float:
+        """ω̂ [rad/s], the heart rate the model runs at."""
+
+    def _follow(self, learn: bool) -> None:
+        """The non-periodic part from the current state; learn from it if ``learn``."""
+        if self._rest is not None and self.ready:
+            self._rest.follow(self._model, self._rate(), self._hph, learn)
+
+    def _rest_missing(self) -> None:
+        """A missing sample reaches the non-periodic part (after the model has advanced)."""
+        if self._rest is not None:
+            self._rest.push(np.nan)
+            self._follow(learn=False)
+
+    def _predict(self, steps: int) -> np.ndarray:
+        if self._rest is None:
+            return self._model(np.arange(1.0, steps + 1.0))
+        y = self._model(np.arange(0.0, steps + 1.0))  # ŷ_{n+k|n} + ê_{n+k|n}
+        return y[1:] + self._rest.forecast(np.diff(y, axis=0))

@@ -87,9 +87,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from predictors.base import Predictor, PredictorSettings
+from predictors.base import PredictorSettings
 from predictors.fourier_init import initial_dual_state, initial_fourier_state
-from predictors.nonperiodic import NonPeriodic
+from predictors.nonperiodic import FourierPredictor, NonPeriodic
 
 __all__ = ["WFLC", "WFLCSettings"]
 
@@ -255,7 +255,7 @@ PARAMETER_SETS: dict[str, WFLCSettings] = {
 }
 
 
-class WFLC(Predictor):
+class WFLC(FourierPredictor):
     """Weighted-frequency Fourier linear combiner with accumulated phase."""
 
     PRESETS = PARAMETER_SETS
@@ -348,10 +348,8 @@ class WFLC(Predictor):
         self._adapt(z)
         self._follow(learn=True)
 
-    def _follow(self, learn: bool) -> None:
-        """The residual of the current weights and phases (:mod:`predictors.nonperiodic`)."""
-        if self._rest is not None and self.ready:
-            self._rest.follow(self._model, self.omega0 / self.dt, None, learn)
+    def _rate(self) -> float:
+        return self.omega0 / self.dt
 
     def _mu1_now(self) -> float:
         """μ₁: fixed, or ``weight_beats`` beats of LMS memory at ω̂₀."""
@@ -444,9 +442,7 @@ class WFLC(Predictor):
         else:
             self._window[self._filled % self.n_init] = np.nan
             self._filled += 1
-        if self._rest is not None:
-            self._rest.push(np.nan)
-            self._follow(learn=False)
+        self._rest_missing()
 
     def _model(self, k: np.ndarray) -> np.ndarray:
         """ŷ k samples ahead of the newest (any k, past ones negative), (len(k), d)."""
@@ -460,8 +456,3 @@ class WFLC(Predictor):
             out += np.sin(phb) @ self.wb[:, :hb].T + np.cos(phb) @ self.wb[:, hb:].T
         return out
 
-    def _predict(self, steps: int) -> np.ndarray:
-        if self._rest is None:
-            return self._model(np.arange(1.0, steps + 1.0))
-        y = self._model(np.arange(0.0, steps + 1.0))  # ŷ_{n+k|n} + ê_{n+k|n}
-        return y[1:] + self._rest.forecast(np.diff(y, axis=0))
