@@ -177,29 +177,41 @@ static void expand(const chain_t *m, const double *x, int with_offset, double *x
         xb[i] = m->scale[i] * x[m->coord[i]] + (with_offset ? m->offset[i] : 0.0);
 }
 
-/* RNEA over the bodies at (qb, qdb, qddb), gravity on or off, projected on the degrees of
- * freedom: tau_j = sum over the bodies i following j of s_i (a_i . f_i); no armature. */
-static void body_rnea(const chain_t *m, const double *q, const double *qd, const double *qdd,
+/* The bodies' motion transforms X_i (parent -> body i) at the body angles qb. */
+static void body_transforms(const chain_t *m, const double *qb, double X[][36]) {
+    double R[9];
+    for (int i = 0; i < m->nb; i++) transform(m, i, qb[i], X[i], R);
+}
+
+/* RNEA over the bodies with their transforms X, body rates qd (NULL: at rest) and body
+ * accelerations qdd, gravity on or off, projected on the degrees of freedom:
+ * tau_j = sum over the bodies i following j of s_i (a_i . f_i); no armature. */
+static void body_rnea(const chain_t *m, double X[][36], const double *qd, const double *qdd,
                       int gravity, double *tau) {
     int nb = m->nb;
-    double X[MAXJ][36], R[9], v[MAXJ][6], a[MAXJ][6], f[MAXJ][6], zero[6] = {0};
+    double v[MAXJ][6], a[MAXJ][6], f[MAXJ][6], zero[6] = {0};
     double a0[6] = {0, 0, 0, -m->gravity[0], -m->gravity[1], -m->gravity[2]};
     if (!gravity) a0[3] = a0[4] = a0[5] = 0.0;
     for (int i = 0; i < nb; i++) {
         const double *ax = m->axis[i];
         int p = m->parent[i];
-        transform(m, i, q[i], X[i], R);
-        mat6_vec(X[i], p < 0 ? zero : v[p], v[i]);
+        double t[6], h[6];
+        if (qd) {
+            double vJ[6] = {ax[0] * qd[i], ax[1] * qd[i], ax[2] * qd[i], 0, 0, 0};
+            mat6_vec(X[i], p < 0 ? zero : v[p], v[i]);
+            for (int k = 0; k < 6; k++) v[i][k] += vJ[k];
+            crm(v[i], vJ, t);
+        }
         mat6_vec(X[i], p < 0 ? a0 : a[p], a[i]);
-        double vJ[6] = {ax[0] * qd[i], ax[1] * qd[i], ax[2] * qd[i], 0, 0, 0}, t[6], h[6];
-        for (int k = 0; k < 6; k++) v[i][k] += vJ[k];
-        crm(v[i], vJ, t);
-        for (int k = 0; k < 6; k++) a[i][k] += t[k];
+        if (qd)
+            for (int k = 0; k < 6; k++) a[i][k] += t[k];
         a[i][0] += ax[0] * qdd[i]; a[i][1] += ax[1] * qdd[i]; a[i][2] += ax[2] * qdd[i];
         mat6_vec(m->inertia[i], a[i], f[i]);
-        mat6_vec(m->inertia[i], v[i], h);
-        crf(v[i], h, t);
-        for (int k = 0; k < 6; k++) f[i][k] += t[k];
+        if (qd) {
+            mat6_vec(m->inertia[i], v[i], h);
+            crf(v[i], h, t);
+            for (int k = 0; k < 6; k++) f[i][k] += t[k];
+        }
     }
     for (int j = 0; j < m->n; j++) tau[j] = 0.0;
     for (int i = nb - 1; i >= 0; i--) {
@@ -213,26 +225,27 @@ static void body_rnea(const chain_t *m, const double *q, const double *qd, const
         }
     }
 }
-
 /* tau = RNEA(q, qd, qdd) = M(q) qdd + C(q, qd) qd + g(q), M with the armature. */
 void chain_rnea(const chain_t *m, const double *q, const double *qd, const double *qdd,
                 double *tau) {
-    double qb[MAXJ], vb[MAXJ], ab[MAXJ];
+    double qb[MAXJ], vb[MAXJ], ab[MAXJ], X[MAXJ][36];
     expand(m, q, 1, qb);
     expand(m, qd, 0, vb);
     expand(m, qdd, 0, ab);
-    body_rnea(m, qb, vb, ab, 1, tau);
+    body_transforms(m, qb, X);
+    body_rnea(m, X, vb, ab, 1, tau);
     for (int j = 0; j < m->n; j++) tau[j] += m->armature[j] * qdd[j];
 }
 
-/* M(q) (with the armature) from n RNEA columns at the body angles qb, no gravity, no velocity. */
-static void body_mass(const chain_t *m, const double *qb, double M[MAXJ][MAXJ]) {
+/* M(q) (with the armature) from n RNEA columns with the bodies' transforms X, at rest, no
+ * gravity. */
+static void body_mass(const chain_t *m, double X[][36], double M[MAXJ][MAXJ]) {
     int n = m->n;
-    double ab[MAXJ], zero[MAXJ] = {0}, e[MAXJ], col[MAXJ];
+    double ab[MAXJ], e[MAXJ], col[MAXJ];
     for (int j = 0; j < n; j++) {
         for (int k = 0; k < n; k++) e[k] = (k == j);
         expand(m, e, 0, ab);
-        body_rnea(m, qb, zero, ab, 0, col);
+        body_rnea(m, X, NULL, ab, 0, col);
         for (int k = 0; k < n; k++) M[k][j] = col[k];
         M[j][j] += m->armature[j];
     }
@@ -240,9 +253,10 @@ static void body_mass(const chain_t *m, const double *qb, double M[MAXJ][MAXJ]) 
 
 /* M(q) with the armature, n x n row-major. */
 void chain_mass(const chain_t *m, const double *q, double *out) {
-    double qb[MAXJ], M[MAXJ][MAXJ];
+    double qb[MAXJ], M[MAXJ][MAXJ], X[MAXJ][36];
     expand(m, q, 1, qb);
-    body_mass(m, qb, M);
+    body_transforms(m, qb, X);
+    body_mass(m, X, M);
     for (int k = 0; k < m->n; k++)
         for (int j = 0; j < m->n; j++) out[m->n * k + j] = M[k][j];
 }
@@ -272,15 +286,23 @@ static void spd_solve(int n, double A[MAXJ][MAXJ], const double *b, double *x) {
     }
 }
 
-/* q'' = M(q)^-1 (tau - h(q, q')) with M from n RNEA columns (no gravity, no velocity) and the
- * armature, by Cholesky: the dynamics of a model with mimic bodies. */
-static void projected_fd(const chain_t *m, const double *q, const double *qd, const double *tau,
-                         double *qdd) {
-    double qb[MAXJ], vb[MAXJ], zero[MAXJ] = {0}, h[MAXJ], M[MAXJ][MAXJ], b[MAXJ];
+/* h(q, q') = C(q, q') q' + g(q) and M(q) with the armature, from one set of body transforms:
+ * the bias by RNEA at zero acceleration, M from n RNEA columns at rest (mimic bodies). */
+static void bias_and_mass(const chain_t *m, const double *q, const double *qd, double *h,
+                          double M[MAXJ][MAXJ]) {
+    double qb[MAXJ], vb[MAXJ], zero[MAXJ] = {0}, X[MAXJ][36];
     expand(m, q, 1, qb);
     expand(m, qd, 0, vb);
-    body_rnea(m, qb, vb, zero, 1, h);
-    body_mass(m, qb, M);
+    body_transforms(m, qb, X);
+    body_rnea(m, X, vb, zero, 1, h);
+    body_mass(m, X, M);
+}
+
+/* q'' = M(q)^-1 (tau - h(q, q')) by Cholesky: the dynamics of a model with mimic bodies. */
+static void projected_fd(const chain_t *m, const double *q, const double *qd, const double *tau,
+                         double *qdd) {
+    double h[MAXJ], M[MAXJ][MAXJ], b[MAXJ];
+    bias_and_mass(m, q, qd, h, M);
     for (int i = 0; i < m->n; i++) b[i] = tau[i] - h[i];
     spd_solve(m->n, M, b, qdd);
 }
@@ -516,11 +538,8 @@ static void hw_rates(const hw_t *w, const double *x, const double *cur, double *
         chain_aba(w->arm, q, v, joint, dx + n);
         return;
     }
-    double qb[MAXJ], vb[MAXJ], zero[MAXJ] = {0}, h[MAXJ], M[MAXJ][MAXJ], b[MAXJ];
-    expand(w->arm, q, 1, qb);
-    expand(w->arm, v, 0, vb);
-    body_rnea(w->arm, qb, vb, zero, 1, h);
-    body_mass(w->arm, qb, M);
+    double h[MAXJ], M[MAXJ][MAXJ], b[MAXJ];
+    bias_and_mass(w->arm, q, v, h, M);
     for (int i = 0; i < n; i++) {
         b[i] = joint[i] - h[i];
         for (int j = 0; j < n; j++) M[i][j] -= w->R[n * i + j];
