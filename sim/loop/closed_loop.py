@@ -354,7 +354,8 @@ def run_closed_loop(
 def run_ticks(side, controller, c0: int, c1: int, refs: list,
               charged: tuple[list[int], ...], log: dict, yardstick=None,
               progress=None) -> None:
-    """Steps 4–6 for ticks c0 … c1 − 1, appending to the chunk's lists ``log``.
+    """Steps 4–6 for ticks c0 … c1 − 1, written into row k = i − c0 of the chunk's records ``log``
+    (:meth:`~sim.loop.results.Recorder.start_chunk`).
 
     ``side`` is the robot's side of the tick (:mod:`sim.plant.tick`). The tick's time is from
     the encoder reading to the commanded torque (its parts: ``sense``, ``controller``,
@@ -367,26 +368,25 @@ def run_ticks(side, controller, c0: int, c1: int, refs: list,
     q_log, tau_mpc_log, tau_log = log["q"], log["tau_mpc"], log["tau"]
     tick_ns, parts, yard_ns = log["tick_ns"], log["parts_ns"], log["yardstick_ns"]
     u_prev = log.get("u_prev")
-    for i in range(c0, c1):
+    for k, i in enumerate(range(c0, c1)):
         t_start = clock()
         x_hat = sense()
         t_sensed = clock()
-        ref = refs[i - c0]
+        ref = refs[k]
         u = step(x_hat, ref)
         t_stepped = clock()
         tau = actuate(u)
         t_end = clock()
-        k = i - c0
-        tick_ns.append(t_end - t_start + updates[k] + learning[k] + forecasts[k]
-                       + interpolations[k])
-        parts.append((t_sensed - t_start, t_stepped - t_sensed, t_end - t_stepped))
+        tick_ns[k] = (t_end - t_start + updates[k] + learning[k] + forecasts[k]
+                      + interpolations[k])
+        parts[k] = (t_sensed - t_start, t_stepped - t_sensed, t_end - t_stepped)
         if yardstick is not None and i % 16 == 7 and u_prev is not None:
             yard_ns.append(warm_ns(yardstick, x_hat, ref, u_prev))
         u_prev = u
-        tau_mpc_log.append(u.tolist())
-        tau_log.append(tau.tolist())
+        tau_mpc_log[k] = u
+        tau_log[k] = tau
         advance()
-        q_log.append(side.q.tolist())
+        q_log[k] = side.q
         if progress is not None and (i + 1) % 2000 == 0:
             progress(i + 1)
     log["u_prev"] = u_prev

@@ -108,14 +108,17 @@ class Recorder:
         self.horizon2, self.n_horizons = np.zeros(N), np.zeros(N, dtype=np.int64)
         self.saturated_ticks = 0
 
-    @staticmethod
-    def start_chunk(refs: list, charged: tuple[list[int], ...],
+    def start_chunk(self, refs: list, charged: tuple[list[int], ...],
                     u_prev: np.ndarray | None) -> dict:
-        """The chunk's per-tick lists: q, r (the chunk's references), τ_mpc, commanded τ, tick
-        and its parts [ns], the yardstick [ns]; the predictor's update and forecast [ns] as the
-        open-loop part charged them; u_{−1} carried from the last chunk."""
-        return {"q": [], "refs": refs, "tau_mpc": [], "tau": [], "tick_ns": [], "parts_ns": [],
-                "yardstick_ns": [], "charged": charged, "u_prev": u_prev}
+        """The chunk's per-tick records, preallocated (the loop writes rows, allocates
+        nothing): q, τ_mpc and the commanded τ (m, nv), the tick and its parts [ns], the chunk's
+        references, the yardstick [ns]; the predictor's update and forecast [ns] as the open-loop
+        part charged them; u_{−1} carried from the last chunk."""
+        m, nq, nv = len(refs), self.robot.nq, self.robot.nv
+        return {"q": np.empty((m, nq)), "refs": refs, "tau_mpc": np.empty((m, nv)),
+                "tau": np.empty((m, nv)), "tick_ns": np.empty(m, dtype=np.int64),
+                "parts_ns": np.empty((m, 3), dtype=np.int64), "yardstick_ns": [],
+                "charged": charged, "u_prev": u_prev}
 
     def end_chunk(self, c0: int, c1: int, log, horizons: list) -> None:
         settings, N = self.settings, self.settings.horizon
@@ -124,7 +127,7 @@ class Recorder:
         self.yardstick.add(np.array(log["yardstick_ns"], dtype=np.int64))
         m = c1 - c0
         if self.chain is not None:
-            ee = self.chain.points(np.array(q_log), self.ee_joint, self.ee_point)
+            ee = self.chain.points(q_log, self.ee_joint, self.ee_point)
         else:
             model, data, fid = self.model, self.data, self.fid
             ee = np.empty((m, 3))
@@ -133,15 +136,13 @@ class Recorder:
                 ee[k] = pin.updateFramePlacement(model, data, fid).translation
         placed = self.anchor + embed3(self.truth.window(c0, c1 + N + 1))
         poi = placed[1 : m + 1]
-        tau_mpc, tau_cmd = np.array(tau_mpc), np.array(tau_cmd)
-        tick_ns = np.array(tick_ns, dtype=np.int64)
         limit = self.robot.torque_limit
         self.saturated_ticks += int((np.abs(tau_cmd) > limit).any(axis=1).sum())
         tau = np.clip(tau_cmd, -limit, limit)  # what acted
         s = max(settings.settling_ticks - c0, 0)
         self.tracking.add(ee[s:] - poi[s:], tau_mpc[s:], tau[s:])
         self.ticks.add(tick_ns[s:])
-        parts = np.array(log["parts_ns"], dtype=np.int64).reshape(-1, 3)
+        parts = log["parts_ns"]
         for k, name in enumerate(("sense", "controller", "actuate")):
             self.parts[name].add(parts[s:, k])
         for charged, name in zip(log["charged"], CHARGED, strict=True):
