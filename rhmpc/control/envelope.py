@@ -1,4 +1,5 @@
-"""The safety envelope of the MPC: joint position, joint velocity and Cartesian limits.
+"""The safety envelope of the MPC: joint position, joint velocity, coupled joint and Cartesian
+limits.
 
 Each limit is a linear function of the predicted state, checked at the end of every move block
 and *certified in between*: within a block the input is constant, so under the model
@@ -12,8 +13,8 @@ so the position and Cartesian rows are tightened by ``|f̈|_max T_b² / 8`` with
 ``|f̈|_max = Σ_i |c M0⁻¹|_i u_max,i`` (``c`` the row's direction in joint space).
 
 The limits are soft with an exact L1 penalty: each group (one joint's position, one joint's
-velocity, the Cartesian set) has a slack ``s ≥ 0`` measured in :data:`units` of that group,
-shared by all its rows over the horizon::
+velocity, one coupling, the Cartesian set) has a slack ``s ≥ 0`` measured in :data:`units` of
+that group, shared by all its rows over the horizon::
 
     lo − s ≤ c·x_k ≤ hi + s,     cost  ρ₁ s + ½ ρ₂ s²
 
@@ -102,6 +103,12 @@ def envelope_rows(arm, settings, u_max: np.ndarray) -> EnvelopeRows:
             names.append(f"velocity[{j}]")
             rows.append((0 * eye[j], eye[j] / unit, np.zeros(3), -vmax[j] / unit,
                          vmax[j] / unit, 0.0, len(names) - 1))
+        for k, (c, lo, hi) in enumerate(_couplings(arm)):  # lo ≤ c·q ≤ hi
+            unit = RANGE_UNIT * (hi - lo)
+            names.append(f"coupling[{k}]")
+            rows.append((c / unit, 0 * c, np.zeros(3), (lo - c @ arm.q0) / unit,
+                         (hi - c @ arm.q0) / unit, float(np.abs(c @ Minv) @ u_max) / unit,
+                         len(names) - 1))
     if s.cartesian != "none":
         point = np.asarray(s.cartesian_point, dtype=float)
         names.append("cartesian")
@@ -144,6 +151,16 @@ def _joint_limits(arm, s, nq: int) -> tuple[np.ndarray, np.ndarray]:
     if np.any(lower > arm.q0) or np.any(upper < arm.q0):
         raise ValueError("the joint bounds must contain the linearisation posture q0")
     return lower, upper
+
+
+def _couplings(arm) -> tuple:
+    """The robot's linear joint limits beyond the box, ``(c, lo, hi)`` with lo ≤ c·q ≤ hi
+    (:attr:`robots.Robot.coupling`, e.g. a parallelogram's), checked to hold at q0."""
+    couplings = tuple(getattr(arm.robot, "coupling", ()) or ())
+    for c, lo, hi in couplings:
+        if not lo <= float(c @ arm.q0) <= hi:
+            raise ValueError("the joint couplings must hold at the linearisation posture q0")
+    return couplings
 
 
 def _velocity_limits(arm, s, nq: int) -> np.ndarray:

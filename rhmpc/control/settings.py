@@ -86,8 +86,10 @@ class MPCSettings:
         Correct the linearised output by the offset ``d`` computed by forward kinematics at the
         estimated joint state every tick (offset-free MPC). Needs the arm's robot.
     joint_envelope : bool
-        Enforce the joint position and velocity limits (soft, exact L1 penalty) at every move
-        block's end, certified in between (:mod:`rhmpc.control.envelope`).
+        Enforce the joint position and velocity limits, and the robot's coupled joint limits
+        (:attr:`robots.Robot.coupling`, e.g. the PHANToM's parallelogram), soft with an exact
+        L1 penalty, at every move block's end, certified in between
+        (:mod:`rhmpc.control.envelope`).
     joint_lower, joint_upper : tuple[float, ...] | None
         Absolute joint position limits [rad]; ``None`` = the robot model's (URDF) limits.
     velocity_limit : tuple[float, ...] | None

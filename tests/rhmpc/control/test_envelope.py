@@ -7,6 +7,8 @@ limit; the limit is checked on the plant's own trajectory (its q, q̇ and forwar
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -152,10 +154,10 @@ def test_envelope_rows_come_from_the_urdf_and_are_certified_between_block_ends(a
     env = envelope_rows(arm, s, 0.75 * arm.torque_limit)
     lower, upper = load_robot("phantom").position_limits
     assert env.names == tuple(f"position[{j}]" for j in range(3)) + tuple(
-        f"velocity[{j}]" for j in range(3))
+        f"velocity[{j}]" for j in range(3)) + ("coupling[0]",)
     unit = 0.01 * (upper - lower)
     np.testing.assert_allclose(env.hi[:3] * unit, upper - arm.q0)
-    np.testing.assert_allclose(env.hi[3:] * 0.01 * 20.0, 10.0)  # URDF velocity = 10 rad/s
+    np.testing.assert_allclose(env.hi[3:6] * 0.01 * 20.0, 10.0)  # URDF velocity = 10 rad/s
     # Certification: an upper-bound row of block b is tightened by curvature · T_b² / 8.
     mpc = RecedingHorizonMPC(arm, s)
     qp = mpc.qp
@@ -168,6 +170,40 @@ def test_envelope_rows_come_from_the_urdf_and_are_certified_between_block_ends(a
     T0 = s.block_lengths[0] * arm.Ts
     np.testing.assert_allclose(up[rows_b0][:3] / scale[:3],
                                env.hi[:3] - env.curvature[:3] * T0**2 / 8, rtol=1e-12)
+
+
+def test_the_parallelogram_coupling_is_a_row_of_the_envelope(arm):
+    """−124° ≤ q2 + q3 ≤ 119° (the PHANToM's forearm), as (c·q − c·q0)/unit within its bounds."""
+    env = envelope_rows(arm, MPCSettings(), 0.75 * arm.torque_limit)
+    ((c, lo, hi),) = arm.robot.coupling
+    row = np.flatnonzero(env.slack == env.names.index("coupling[0]"))
+    assert row.size == 1
+    unit = 0.01 * (hi - lo)
+    np.testing.assert_allclose(env.Dq[row[0]] * unit, [0.0, 1.0, 1.0], atol=1e-15)
+    np.testing.assert_allclose([env.lo[row[0]] * unit, env.hi[row[0]] * unit],
+                               [lo - c @ arm.q0, hi - c @ arm.q0], rtol=1e-12)
+    Minv = np.linalg.inv(arm.M0)
+    np.testing.assert_allclose(env.curvature[row[0]] * unit,
+                               np.abs(c @ Minv) @ (0.75 * arm.torque_limit), rtol=1e-12)
+
+
+@SOLVERS
+def test_a_coupled_joint_limit_holds_with_the_reference_past_it(robot, arm, solver):
+    ((c, _, _),) = robot.coupling
+    mid, band = float(c @ arm.q0), np.radians(1.0)
+    tight = dataclasses.replace(robot, coupling=((c, mid - band, mid + band),))
+    J = arm.C[:, :3]
+    direction = np.linalg.pinv(J).T @ c  # the tip's direction that turns c·q the most
+    target = np.tile(arm.y0 + 10e-3 * direction / np.linalg.norm(direction), (N, 1))
+    settings = MPCSettings(solver=solver)
+    mpc, q, _, y = _closed_loop(robot, dataclasses.replace(arm, robot=tight), settings,
+                                lambda k: target, 1500)
+    excess = np.max(np.maximum(q @ c - (mid + band), (mid - band) - q @ c)) / (2 * band)
+    assert excess <= 0.01, excess  # the target is 1 % of the band
+    assert np.linalg.norm(y[-1] - target[0]) > 5e-3  # it could not follow the reference
+    if solver == "daqp":
+        assert excess > -0.01  # …and went up to the limit
+    _no_failures(mpc)
 
 
 @pytest.mark.parametrize("bad", [
