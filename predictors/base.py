@@ -31,7 +31,9 @@ Conventions (see ``../shared/DESIGN.md``):
   ``GUARD_MULTIPLE``; clipped forecasts are counted (``forecast_clamped``).  A
   non-finite forecast is replaced by the hold forecast, the learnt state is dropped and
   relearnt from the next samples (``forecast_nonfinite``).
-* ``forecast_error_rms``: the running RMS of past forecast misses at each lead.
+* ``forecast_error_rms``: the running RMS of past forecast misses at each lead.  Its
+  bookkeeping is deferred to :meth:`Predictor.score` (which the next ``update`` and the
+  property run first), so that a real-time loop can run it on a tick of its own.
 """
 
 from __future__ import annotations
@@ -148,6 +150,8 @@ class Predictor(ABC):
         infer = hasattr(self.settings, "unit") and self.unit is None
         self._pending: list | None = [] if infer else None
         self._deferred = None  # the last update's learning, if the subclass deferred it
+        self._unscored = None  # (n, z_n): the last sample, not yet scored against forecasts
+        self._unrecorded = None  # (n, forecast): the last forecast, not yet recorded
         self._allocated = False
         if self.settings.dim is not None:
             self._set_dim(int(self.settings.dim))
@@ -156,6 +160,7 @@ class Predictor(ABC):
         """Absorb the newest sample z_n, shape (d,); ``None``/NaN/inf = missing."""
         if self._deferred is not None:
             self.learn()
+        self.score()
         x = as_sample(z, self.d)
         self.n += 1
         if x is None:
@@ -169,7 +174,7 @@ class Predictor(ABC):
         self.counts["updates"] += 1
         self._last = x
         self._envelope.tick(x)
-        self._errors.observe(self.n, x)
+        self._unscored = (self.n, x)
         self._absorb(x)
 
     def predict(self, steps: int) -> np.ndarray:
@@ -185,7 +190,7 @@ class Predictor(ABC):
             out = np.repeat(self._last[None, :], steps, axis=0)
         else:
             out = self._guard(self._predict(steps))
-        self._errors.record(self.n, out)
+        self._unrecorded = (self.n, out.copy())  # the latest forecast of update n
         return out
 
     def retract(self) -> bool:
@@ -213,6 +218,19 @@ class Predictor(ABC):
         if deferred is not None:
             deferred()
 
+    def score(self) -> None:
+        """The forecast-error bookkeeping of the last :meth:`update` and :meth:`predict`: the
+        newest sample scored against the forecasts that reach it, then the newest forecast
+        recorded (:class:`predictors.monitor.LeadErrorRMS`). Deferred so that a real-time loop
+        can run it on a tick of its own; :meth:`update` and :attr:`forecast_error_rms` run it
+        first, so that the errors are the same whether or not the caller does."""
+        unscored, self._unscored = self._unscored, None
+        if unscored is not None:
+            self._errors.observe(*unscored)
+        unrecorded, self._unrecorded = self._unrecorded, None
+        if unrecorded is not None:
+            self._errors.record(*unrecorded)
+
     def _defer(self, step, *args) -> None:
         """Run ``step(*args)`` at the next :meth:`learn` (the arguments must stay valid until
         then: no sample is pushed before it runs)."""
@@ -227,6 +245,7 @@ class Predictor(ABC):
         """
         if self.d is None:
             return np.full(0, np.nan)
+        self.score()
         return self._errors.rms()
 
     # -- for subclasses -----------------------------------------------------------

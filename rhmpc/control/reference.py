@@ -232,6 +232,13 @@ class PredictedReference:
         if learn is not None:
             learn()
 
+    def score(self) -> None:
+        """The predictor's forecast-error bookkeeping (:meth:`predictors.base.Predictor.score`),
+        which a pipelined loop runs on the tick after the interpolation."""
+        score = getattr(self.predictor, "score", None)
+        if score is not None:
+            score()
+
     def predict(self) -> None:
         """The predictor's forecast from the last :meth:`update`, ``K = prediction_points +
         ⌈latency/dt⌉`` points (the gate keeps the one- and two-step ones)."""
@@ -430,6 +437,9 @@ class ExactReference:
         pass
 
     def interpolate(self) -> None:
+        pass
+
+    def score(self) -> None:
         pass
 
     def horizon(self, tick: int) -> np.ndarray:

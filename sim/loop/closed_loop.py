@@ -111,7 +111,8 @@ class OpenLoop:
     Parameters
     ----------
     reference
-        ``update(tick, z, stamp)``, ``forecast()`` and ``horizons(tick, count)``
+        ``update(tick, z, stamp)``, ``learn()``, ``predict()``, ``interpolate()``,
+        ``horizons(tick, count)`` and optionally ``score()``
         (:mod:`rhmpc.control.reference`), placed in the workspace.
     stream
         The sensor's sample source (:mod:`sim.loop.streams`).
@@ -130,6 +131,7 @@ class OpenLoop:
     def __init__(self, reference, stream, center: np.ndarray, settings: LoopSettings,
                  hold: np.ndarray | None, clock: PredictorClock | None = None) -> None:
         self.reference, self.center, self.settings, self.hold = reference, center, settings, hold
+        self.score = getattr(reference, "score", None)  # optional: the predictor's bookkeeping
         self.clock = clock or PredictorClock("downsample", settings.downsample * settings.Ts,
                                              settings.downsample, math.inf)
         # ticks from a refresh's update to its interpolation: update, learning, forecast and
@@ -167,8 +169,9 @@ class OpenLoop:
 
     def chunk(self, c0: int, c1: int) -> tuple[list, tuple[list[int], ...], list]:
         """References r_{i+1..i+N} of ticks c0 … c1 − 1; the ns charged to each tick for each
-        part of a refresh (:data:`CHARGED`: the predictor's update with the gate, its
-        forecast, the interpolation with the guard); each refresh's ``(tick, points)``."""
+        part of a refresh (:data:`CHARGED`: the predictor's update with the gate, its learning,
+        its forecast, the interpolation with the guard, the forecast-error bookkeeping); each
+        refresh's ``(tick, points)``."""
         refs, horizons = [], []
         charged = tuple([0] * (c1 - c0) for _ in CHARGED)
         for part, carried in zip(charged, self.carry, strict=True):
@@ -198,14 +201,18 @@ class OpenLoop:
             charged[part][max(tick, c0) - c0] += ns
 
     def _refresh(self, i: int, chunk) -> None:
-        """The refresh on tick ``i``: its interpolation; its update, learning and forecast ran on
-        the ticks before when pipelined, and the next refresh's are made now, charged to
-        theirs."""
+        """The refresh on tick ``i``: its interpolation, then the forecast-error bookkeeping
+        (charged to tick i + 1 when pipelined); its update, learning and forecast ran on the
+        ticks before when pipelined, and the next refresh's are made now, charged to theirs."""
         if not self.prepared:
             self._prepare(i, chunk)
         t_start = clock()
         self.reference.interpolate()
         self._charge(i, 3, clock() - t_start, chunk)
+        if self.score is not None:  # bookkeeping only: on the next tick when pipelined
+            t_start = clock()
+            self.score()
+            self._charge(i + (1 if self.lag else 0), 4, clock() - t_start, chunk)
         self.prepared = False
         if self.clock.mode == "sensor":
             arrival = self.queue.tick()
@@ -363,7 +370,7 @@ def run_ticks(side, controller, c0: int, c1: int, refs: list,
     ``yardstick(x̂, r, u_{−1})`` is timed on every 16th tick with the tick's own inputs (the
     least of three calls, :func:`sim.loop.metrics.warm_ns`).
     """
-    updates, learning, forecasts, interpolations = charged
+    updates, learning, forecasts, interpolations, scoring = charged
     sense, actuate, advance, step = side.sense, side.actuate, side.advance, controller.step
     q_log, tau_mpc_log, tau_log = log["q"], log["tau_mpc"], log["tau"]
     tick_ns, parts, yard_ns = log["tick_ns"], log["parts_ns"], log["yardstick_ns"]
@@ -378,7 +385,7 @@ def run_ticks(side, controller, c0: int, c1: int, refs: list,
         tau = actuate(u)
         t_end = clock()
         tick_ns[k] = (t_end - t_start + updates[k] + learning[k] + forecasts[k]
-                      + interpolations[k])
+                      + interpolations[k] + scoring[k])
         parts[k] = (t_sensed - t_start, t_stepped - t_sensed, t_end - t_stepped)
         if yardstick is not None and i % 16 == 7 and u_prev is not None:
             yard_ns.append(warm_ns(yardstick, x_hat, ref, u_prev))

@@ -19,8 +19,8 @@ from sim.loop.trace import DecimatedTrace, TraceFile
 
 #: The parts of a refresh charged to the ticks that run them: the predictor's update with the
 #: outlier gate, its learning (where it defers it), its forecast, the interpolation with the
-#: guard and placement.
-CHARGED = ("predictor_update", "predictor_learn", "forecast", "interpolation")
+#: guard and placement, and the forecast-error bookkeeping (``Predictor.score``).
+CHARGED = ("predictor_update", "predictor_learn", "forecast", "interpolation", "scoring")
 #: The parts of a control tick, timed separately: the encoders and the observer, the
 #: controller, the cancellation (the commanded torque), and the refresh slices (CHARGED).
 TICK_PARTS = ("sense", "controller", "actuate", *CHARGED)

@@ -84,7 +84,8 @@ def test_each_raw_sample_reaches_the_predictor_once_with_its_own_time_stamp(pipe
     open_loop = OpenLoop(spy, raw, np.zeros(3), settings, np.zeros((50, 3)), clock)
     for c0 in range(0, settings.ticks, 1000):  # chunks that cut through refresh periods
         refs, charged, _ = open_loop.chunk(c0, min(c0 + 1000, settings.ticks))
-        assert len(charged) == 4  # the update, the learning, the forecast, the interpolation
+        # the update, the learning, the forecast, the interpolation, the error bookkeeping
+        assert len(charged) == 5
         assert len(refs) == len(charged[0]) == min(1000, settings.ticks - c0)
     fed = [u for u in spy.updates if u[1] is not None]
     lag = 3 if pipelined else 0  # update, learning, forecast, interpolation on 4 ticks
