@@ -217,6 +217,7 @@ class Predictor(ABC):
         deferred, self._deferred = self._deferred, None
         if deferred is not None:
             deferred()
+            self._update_bounds()  # the guard's range, from the same update
 
     def score(self) -> None:
         """The forecast-error bookkeeping of the last :meth:`update` and :meth:`predict`: the
@@ -285,15 +286,21 @@ class Predictor(ABC):
             return np.repeat(self._last[None, :], f.shape[0], axis=0)
         if not self._envelope.known:
             return f
-        if self._bounds_n != self.n:  # once per update
-            lo, hi = self._envelope.envelope()
-            r = hi - lo
-            r = self.GUARD_MULTIPLE * np.maximum(r, 0.1 * r.max())
-            self._bounds, self._bounds_n = (lo - r, hi + r), self.n
+        self._update_bounds()
         g = np.minimum(np.maximum(f, self._bounds[0]), self._bounds[1])  # np.clip: slower
         if (g != f).any():
             self.counts["forecast_clamped"] += 1
         return g
+
+    def _update_bounds(self) -> None:
+        """The guard's range [lo − G·r, hi + G·r] of the recent samples, once per update: with
+        a deferred learning (:meth:`learn`), else at the forecast."""
+        if self.d is None or self._bounds_n == self.n or not self._envelope.known:
+            return
+        lo, hi = self._envelope.envelope()
+        r = hi - lo
+        r = self.GUARD_MULTIPLE * np.maximum(r, 0.1 * r.max())
+        self._bounds, self._bounds_n = (lo - r, hi + r), self.n
 
     def _allocate(self, d: int) -> None:  # noqa: B027 - optional hook
         """Allocate (and reset) the learnt state for dimension ``d``."""
