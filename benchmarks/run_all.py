@@ -19,8 +19,8 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 #: The benchmarks that write docs/results/NAME.json, in the order they run.
-SCRIPTS = ("headline", "tuna_tables", "yuen_noise", "mpc_timing", "predictor_table",
-           "invivo_table", "design_choices", "long_run")
+SCRIPTS = ("headline", "tuna_tables", "hardware_sensitivity", "causal_bound", "yuen_noise",
+           "mpc_timing", "predictor_table", "invivo_table", "design_choices", "long_run")
 MARK = re.compile(r"(<!-- results:(\w+) -->\n).*?(<!-- /results:\2 -->)", re.S)
 
 
