@@ -274,6 +274,7 @@ class Predictor(ABC):
             self._allocated = True
             n = self.n
             for self.n, v in pending:  # replay on the subclass's own clock
+                self.learn()  # each replayed sample's deferred learning before the next
                 self._update(v) if v is not None else self._missing()
             self.n = n
 
