@@ -85,9 +85,9 @@ def document(config: RunConfig, run: Run, result: LoopResult, wall: float,
         "ground_truth": config.ground_truth,
         **metrics,
         "fallbacks": int(stats.get("fallback_total", 0)),
-        "controller": _jsonable(stats),
+        "controller": jsonable(stats),
         "implementation": implementation,
-        "predictor_counts": _jsonable(result.predictor_counts),
+        "predictor_counts": jsonable(result.predictor_counts),
         "wall_s": wall,
         "real_time_factor": config.loop.duration / wall,
         "plant_dynamics": result.plant_dynamics,
@@ -153,12 +153,13 @@ def _gain_tick(controller, gain_tick):
         return None
 
 
-def _jsonable(obj: Any) -> Any:
-    """Plain JSON types for stats mappings (numpy scalars, tuples, nested dicts)."""
+def jsonable(obj: Any) -> Any:
+    """Plain JSON/TOML types: dicts with string keys, lists for tuples, Python numbers for
+    numpy scalars and arrays (nested)."""
     if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
+        return {str(k): jsonable(v) for k, v in obj.items()}
     if isinstance(obj, list | tuple):
-        return [_jsonable(v) for v in obj]
+        return [jsonable(v) for v in obj]
     if isinstance(obj, np.generic):
         return obj.item()
     if isinstance(obj, np.ndarray):

@@ -18,10 +18,9 @@ import traceback
 from dataclasses import dataclass
 from typing import Any
 
-import numpy as np
-
 from rhmpc.control.settings import to_dict as settings_to_dict
 from rhmpc.experiment import SECTIONS, RunConfig
+from rhmpc.experiment.run import jsonable
 
 __all__ = ["Task", "apply_point", "current_value", "evaluate_task", "evaluation_key",
            "record_for"]
@@ -69,30 +68,19 @@ class Task:
 # --------------------------------------------------------------------------- settings helpers
 
 
-def _plain(value: Any) -> Any:
-    """JSON/TOML-friendly copy (tuples → lists, numpy scalars → Python)."""
-    if isinstance(value, dict):
-        return {str(k): _plain(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_plain(v) for v in value]
-    if isinstance(value, np.generic):
-        return value.item()
-    return value
-
-
 def current_value(config: RunConfig, key: str) -> Any:
     """The value of dotted setting ``key`` in ``config`` (predictor settings resolved)."""
     section, _, name = key.partition(".")
     if not name:
-        return _plain(getattr(config, section))
+        return jsonable(getattr(config, section))
     if section in SECTIONS:
-        return _plain(getattr(getattr(config, section), name))
+        return jsonable(getattr(getattr(config, section), name))
     if section == "predictor_settings":
         if name in config.predictor_settings:
-            return _plain(config.predictor_settings[name])
+            return jsonable(config.predictor_settings[name])
         resolved = resolved_predictor_settings(config)
-        return _plain(resolved.get(name)) if resolved is not None else None
-    return _plain(config.sensor_settings.get(name))
+        return jsonable(resolved.get(name)) if resolved is not None else None
+    return jsonable(config.sensor_settings.get(name))
 
 
 def resolved_predictor_settings(config: RunConfig) -> dict | None:
@@ -119,7 +107,7 @@ def evaluation_key(config: RunConfig, point: bool = False) -> str:
     if point:
         data.pop("scenario", None)
         data.pop("seed", None)
-    text = json.dumps(_plain(data), sort_keys=True, separators=(",", ":"), allow_nan=True)
+    text = json.dumps(jsonable(data), sort_keys=True, separators=(",", ":"), allow_nan=True)
     return hashlib.sha256(text.encode()).hexdigest()[:20]
 
 
@@ -189,7 +177,7 @@ def evaluate_task(task: Task, extra: dict | None = None) -> dict:
             return record_for(task, "failed", **(extra or {}),
                               error=f"{type(exc).__name__}: {exc}", traceback=tb[-6:],
                               timing={**timing, "wall_s": time.perf_counter() - wall})
-        return record_for(task, "ok", **(extra or {}), metrics=_plain(_metrics(document)),
+        return record_for(task, "ok", **(extra or {}), metrics=jsonable(_metrics(document)),
                           scenario_label=document.get("scenario"),
                           timing={**timing, "wall_s": time.perf_counter() - wall,
                                   "run_wall_s": document.get("wall_s")})

@@ -36,7 +36,8 @@ import numpy as np
 
 from rhmpc.errors import UsageError
 from rhmpc.experiment import SECTIONS, RunConfig, load_config, read_toml
-from rhmpc.tuning.evaluate import Task, _plain, apply_point, current_value, evaluation_key
+from rhmpc.experiment.run import jsonable
+from rhmpc.tuning.evaluate import Task, apply_point, current_value, evaluation_key
 from rhmpc.tuning.objective import Constraint, Objective, Penalty
 
 __all__ = [
@@ -195,7 +196,7 @@ class TuneSpec:
             seen[point_key] = len(tasks)
             for index, (scenario, seed) in enumerate(self.evaluations()):
                 run = config.replace(scenario=scenario, seed=seed)
-                tasks.append(Task(evaluation_key(run), point_key, index, _plain(assignment),
+                tasks.append(Task(evaluation_key(run), point_key, index, jsonable(assignment),
                                   run.to_dict(), is_base))
         return tasks
 
@@ -330,7 +331,7 @@ def _parse_parameters(table: Any, where: str) -> tuple[Parameter, ...]:
         if isinstance(value, list):
             if not value:
                 raise UsageError(f"{here}: the list of values is empty")
-            out.append(Parameter(key, values=tuple(_plain(v) for v in value)))
+            out.append(Parameter(key, values=tuple(jsonable(v) for v in value)))
         elif isinstance(value, dict):
             _check_keys(value, _RANGE_KEYS, here)
             lo, hi = value.get("low"), value.get("high")
