@@ -234,7 +234,9 @@ class Predictor(ABC):
 
     def _defer(self, step, *args) -> None:
         """Run ``step(*args)`` at the next :meth:`learn` (the arguments must stay valid until
-        then: no sample is pushed before it runs)."""
+        then: no sample is pushed before it runs); a step still pending runs first."""
+        if self._deferred is not None:
+            self.learn()
         self._deferred = functools.partial(step, *args)
 
     @property

@@ -184,12 +184,9 @@ class FourierPredictor(Predictor):
     def _follow_later(self, learn: bool) -> None:
         """:meth:`_follow`, deferred to :meth:`~predictors.base.Predictor.learn` (a real-time
         loop's learning tick; ``update`` and ``predict`` run it first, so the forecasts are the
-        same). A step still pending, from a sample replayed in the same update, runs first."""
-        if self._rest is None:
-            return
-        if self._deferred is not None:
-            self.learn()
-        self._defer(self._follow, learn)
+        same)."""
+        if self._rest is not None:
+            self._defer(self._follow, learn)
 
     def _rest_missing(self) -> None:
         """A missing sample reaches the non-periodic part (after the model has advanced)."""
