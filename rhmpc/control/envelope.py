@@ -155,12 +155,12 @@ def _joint_limits(arm, s, nq: int) -> tuple[np.ndarray, np.ndarray]:
 
 def _couplings(arm) -> tuple:
     """The robot's linear joint limits beyond the box, ``(c, lo, hi)`` with lo ≤ c·q ≤ hi
-    (:attr:`robots.Robot.coupling`, e.g. a parallelogram's), checked to hold at q0."""
-    couplings = tuple(getattr(arm.robot, "coupling", ()) or ())
-    for c, lo, hi in couplings:
-        if not lo <= float(c @ arm.q0) <= hi:
-            raise ValueError("the joint couplings must hold at the linearisation posture q0")
-    return couplings
+    (:attr:`robots.Robot.coupling`, e.g. a parallelogram's), checked to hold at q0
+    (:meth:`robots.Robot.check_posture`)."""
+    if arm.robot is None or not arm.robot.coupling:
+        return ()
+    arm.robot.check_posture(arm.q0)
+    return arm.robot.coupling
 
 
 def _velocity_limits(arm, s, nq: int) -> np.ndarray:
