@@ -32,6 +32,7 @@ from rhmpc.control.reference import ExactReference
 from rhmpc.experiment import RunConfig
 from rhmpc.experiment.assembly import build_run
 from rhmpc.studies.paper import COLUMNS
+from sim.heart.analysis import fill_gaps
 from sim.loop import run_closed_loop
 from sim.loop.streams import ArrayTruth
 
@@ -43,12 +44,7 @@ ROWS = ("exact", *(("bound", f) for f in CUTOFFS), "one-step", "generalized")
 
 def lowpassed(truth, fc: float, Ts: float) -> ArrayTruth:
     """The centred truth zero-phase low-passed at ``fc`` [Hz], NaN bridged linearly first."""
-    x = np.array(truth.window(0, truth.n_ticks), dtype=float)
-    ticks = np.arange(x.shape[0])
-    for k in range(x.shape[1]):
-        bad = ~np.isfinite(x[:, k])
-        if bad.any():
-            x[bad, k] = np.interp(ticks[bad], ticks[~bad], x[~bad, k])
+    x = fill_gaps(np.arange(truth.n_ticks), truth.window(0, truth.n_ticks))
     sos = butter(4, fc, fs=1.0 / Ts, output="sos")
     return ArrayTruth(sosfiltfilt(sos, x, axis=0), truth.center)
 
