@@ -56,6 +56,14 @@ RELAXED_SLACK = 1e-2
 __all__ = ["EXTRA_REASONS", "MPCStats", "RecedingHorizonMPC"]
 
 
+def _as_slice(index: np.ndarray) -> slice | np.ndarray:
+    """``index`` as a slice when it is a contiguous ascending range (a view, not a gather)."""
+    index = np.asarray(index, dtype=np.intp)
+    if index.size and np.array_equal(index, np.arange(index[0], index[0] + index.size)):
+        return slice(int(index[0]), int(index[0]) + index.size)
+    return index
+
+
 class RecedingHorizonMPC:
     """Receding-horizon MPC for the linearised arm, tracking N end-effector reference points.
 
@@ -106,8 +114,8 @@ class RecedingHorizonMPC:
         self._p_r2 = self._p_r.reshape(N, ny)  # a view: ref is copied in without a reshape
         self._p_u = self._p_ext[nx + N * ny:nx + N * ny + self.nu]
         self._p_d = self._p_ext[nx + N * ny + self.nu:-1]
-        self._offset = (OutputOffset(arm, out=self._p_d) if self.settings.offset_correction
-                        else None)
+        self._offset = (OutputOffset(arm, out=self._p_d, state=self._p_x)
+                        if self.settings.offset_correction else None)
         self._x_shape, self._ref_shape = (nx,), (N, ny)
         self._F_ext = np.ascontiguousarray(np.column_stack([qp.F, qp.f0]))
         self._q = np.empty(qp.nv)
@@ -115,6 +123,7 @@ class RecedingHorizonMPC:
         self._u = qp.u0.copy()
         self._g = np.empty(qp.A.shape[0])
         self._G_cols = qp.bound_columns
+        self._G_take = _as_slice(qp.bound_columns)  # p[G_take] = p[bound_columns]
         self._G = np.ascontiguousarray(qp.G[:, qp.bound_columns])
         self._p_cols = np.empty(len(qp.bound_columns))
         self._nz, self._nv = qp.nz, qp.nv
@@ -297,7 +306,7 @@ class RecedingHorizonMPC:
         if self._screen and not self._forced and self._level1():
             return self._screened_output(t0, self._v_star, 1)
         if self.qp.param_bounds:
-            self._p.take(self._G_cols, out=self._p_cols)
+            self._p_cols[:] = self._p[self._G_take]
             np.dot(self._G, self._p_cols, out=self._g)
             np.subtract(self.qp.l0, self._g, out=self._l)
             np.subtract(self.qp.u0, self._g, out=self._u)
@@ -327,8 +336,9 @@ class RecedingHorizonMPC:
         if not math.isfinite(np.dot(self._p_ext, self._p_ext)):  # NaN, ±inf (or > 1e154)
             return False
         if self._offset is not None:
-            self._offset(x)  # into p's d slot
-            return math.isfinite(np.dot(self._p_d, self._p_d))
+            # d from the x just written to p, into p's d slot. Finite: the kinematics of finite
+            # angles is, and |C x| ≤ ‖C‖ ‖x‖ with ‖x‖ < 1e154 by the check above.
+            self._offset.evaluate()
         return True
 
     def _solver_tick(self, t0: int) -> np.ndarray:
@@ -453,8 +463,9 @@ class RecedingHorizonMPC:
         """
         np.dot(self._K_z, self._p_ext, out=self._w_z)
         if self._w_p.size:
-            self._p.take(self._G_cols, out=self._w_p)
-        return bool(np.dot(self._H, self._w, out=self._c).max() <= 0.0)
+            self._w_p[:] = self._p[self._G_take]
+        c = np.dot(self._H, self._w, out=self._c)
+        return bool(c[c.argmax()] <= 0.0)  # argmax: a quarter of max()'s cost; NaN → False
 
     def _box_solved(self) -> bool:
         """Level 2: the torque-box QP solved exactly (KKT certificate), and every envelope row

@@ -37,7 +37,8 @@ class OutputOffset:
         If the arm does not carry its robot (``robots.linearize`` keeps it).
     """
 
-    def __init__(self, arm, out: np.ndarray | None = None, compiled: bool = True) -> None:
+    def __init__(self, arm, out: np.ndarray | None = None, compiled: bool = True,
+                 state: np.ndarray | None = None) -> None:
         robot = getattr(arm, "robot", None)
         if robot is None:
             raise ValueError(
@@ -56,6 +57,8 @@ class OutputOffset:
         self._y = np.empty(3)
         #: where every evaluation writes d (3,) [m]
         self.out = np.zeros(3) if out is None else out
+        #: where :meth:`evaluate` reads x (2nv,): the caller's copy of the state
+        self.state = np.zeros(2 * nq) if state is None else state
         self.compiled = self._compiled(robot) if compiled else None
 
     def _compiled(self, robot):
@@ -67,7 +70,7 @@ class OutputOffset:
             return None
         frame = robot.model.frames[self._fid]
         return NativeOffset(chain, frame.parentJoint, frame.placement.translation, self._q0,
-                            self._C, self._y0, out=self.out)
+                            self._C, self._y0, out=self.out, state=self.state)
 
     def __call__(self, x: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """The offset d (3,) [m] at the state ``x`` = [q − q0; q̇]: in :attr:`out`, and copied
@@ -85,3 +88,10 @@ class OutputOffset:
             return self.out
         out[:] = self.out
         return out
+
+    def evaluate(self) -> np.ndarray:
+        """The offset at the x the caller wrote into :attr:`state`, in :attr:`out` (no copy
+        of x on the compiled path)."""
+        if self.compiled is not None:
+            return self.compiled.evaluate()
+        return self(self.state)

@@ -184,21 +184,24 @@ class NativeOffset:
     out : ndarray (3,), optional
         Where every call writes d (a contiguous float64 array, e.g. a controller's parameter
         slot); default its own.
+    state : ndarray (2nv,), optional
+        Where :meth:`evaluate` reads x (a contiguous float64 array, e.g. the state slot of
+        the same parameter vector, so that x is not copied twice); default its own.
     """
 
     def __init__(self, chain: NativeChain, joint: int, point, q0, C, y0,
-                 out: np.ndarray | None = None) -> None:
+                 out: np.ndarray | None = None, state: np.ndarray | None = None) -> None:
         nv = chain.nv
         self._chain = chain  # the C structure the call points to lives in it
         self._keep = [np.ascontiguousarray(a, dtype=float).reshape(-1).copy()
                       for a in (point, q0, C, y0)]
         if [a.size for a in self._keep] != [3, nv, 6 * nv, 3]:
             raise ValueError("point (3,), q0 (nv,), C (3, 2nv) and y0 (3,) expected")
-        self._x = np.zeros(2 * nv)
+        self._x = np.zeros(2 * nv) if state is None else state
         self.out = np.zeros(3) if out is None else out  #: the last offset (overwritten)
-        if self.out.shape != (3,) or self.out.dtype != np.float64 or \
-                not self.out.flags.c_contiguous:
-            raise ValueError("out must be a contiguous float64 array of 3")
+        for name, a, n in (("out", self.out, 3), ("state", self._x, 2 * nv)):
+            if a.shape != (n,) or a.dtype != np.float64 or not a.flags.c_contiguous:
+                raise ValueError(f"{name} must be a contiguous float64 array of {n}")
         point, q0, C, y0 = (a.ctypes.data for a in self._keep)
         self._call = functools.partial(chain._lib.chain_offset, chain._ptr, self._x.ctypes.data,
                                        q0, C, y0, joint - 1, point, self.out.ctypes.data)
@@ -206,6 +209,11 @@ class NativeOffset:
     def __call__(self, x: np.ndarray) -> np.ndarray:
         """The offset at ``x`` = [q − q0; q̇] (the array :attr:`out`)."""
         self._x[:] = x
+        self._call()
+        return self.out
+
+    def evaluate(self) -> np.ndarray:
+        """The offset at the x already in the ``state`` array (the array :attr:`out`)."""
         self._call()
         return self.out
 

@@ -428,3 +428,5 @@ def test_the_compiled_output_offset_is_pinocchios(robot):
     for _ in range(200):
         x = np.concatenate([rng.uniform(-0.5, 0.5, arm.nx // 2), rng.normal(size=arm.nx // 2)])
         np.testing.assert_allclose(compiled(x).copy(), reference(x), rtol=0, atol=1e-15)
+        compiled.state[:] = x  # the controller's path: x written in place, then evaluated
+        np.testing.assert_array_equal(compiled.evaluate(), compiled(x))
