@@ -39,6 +39,7 @@ Conventions (see ``../shared/DESIGN.md``):
 from __future__ import annotations
 
 import functools
+import math
 from abc import ABC, abstractmethod
 from collections import Counter
 from dataclasses import dataclass
@@ -73,15 +74,16 @@ class PredictorSettings:
 def as_sample(z, d: int | None) -> np.ndarray | None:
     """Return ``z`` as a float (d,) array, or ``None`` if it is missing.
 
-    ``None`` and samples with any non-finite component are missing.  A sample of
-    the wrong size raises ``ValueError`` (that is a wiring bug, not a dropout).
+    ``None`` and samples with any non-finite component are missing (so is one whose squared
+    norm overflows, ≥ 1e154 data units: no heart moves that far).  A sample of the wrong size
+    raises ``ValueError`` (that is a wiring bug, not a dropout).
     """
     if z is None:
         return None
     x = np.array(z, dtype=float).reshape(-1)  # a copy: callers may reuse buffers
     if d is not None and x.shape[0] != d:
         raise ValueError(f"sample has {x.shape[0]} components, predictor has d={d}")
-    if not np.isfinite(x).all():
+    if not math.isfinite(np.dot(x, x)):  # NaN or ±inf anywhere (a third of isfinite().all())
         return None
     return x
 
@@ -281,19 +283,29 @@ class Predictor(ABC):
             self.n = n
 
     def _guard(self, f: np.ndarray) -> np.ndarray:
-        """Clip a forecast to the recent range (``forecast_clamped``); relearn if non-finite."""
-        if not np.isfinite(f).all():
-            self.counts["forecast_nonfinite"] += 1
-            self.ready = False
-            self._allocate(self.d)
-            return np.repeat(self._last[None, :], f.shape[0], axis=0)
+        """Clip a forecast to the recent range (``forecast_clamped``); relearn if non-finite.
+
+        The clipped g = min(max(f, lo), hi) tells both at once: ‖g − f‖² is NaN or inf where f
+        is not finite (or absurdly large, ≥ 1e154 data units), > 0 where the clip acted.
+        """
         if not self._envelope.known:
-            return f
+            return f if np.isfinite(f).all() else self._relearn(f.shape[0])
         self._update_bounds()
         g = np.minimum(np.maximum(f, self._bounds[0]), self._bounds[1])  # np.clip: slower
-        if (g != f).any():
+        d = np.subtract(g, f)
+        moved = float(np.vdot(d, d))
+        if not math.isfinite(moved):
+            return self._relearn(f.shape[0])
+        if moved > 0.0:
             self.counts["forecast_clamped"] += 1
         return g
+
+    def _relearn(self, steps: int) -> np.ndarray:
+        """A non-finite forecast: learn again from scratch; hold the last sample meanwhile."""
+        self.counts["forecast_nonfinite"] += 1
+        self.ready = False
+        self._allocate(self.d)
+        return np.repeat(self._last[None, :], steps, axis=0)
 
     def _update_bounds(self) -> None:
         """The guard's range [lo − G·r, hi + G·r] of the recent samples, once per update: with
@@ -302,7 +314,7 @@ class Predictor(ABC):
             return
         lo, hi = self._envelope.envelope()
         r = hi - lo
-        r = self.GUARD_MULTIPLE * np.maximum(r, 0.1 * r.max())
+        r = self.GUARD_MULTIPLE * np.maximum(r, 0.1 * r[r.argmax()])
         self._bounds, self._bounds_n = (lo - r, hi + r), self.n
 
     def _allocate(self, d: int) -> None:  # noqa: B027 - optional hook

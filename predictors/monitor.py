@@ -115,6 +115,9 @@ class LeadErrorRMS:
         self._k = self._leads - 1
         # ring rows of the forecasts made 1…K updates before an update landing on row j
         self._rows = (np.arange(K)[:, None] - self._leads[None, :]) % K
+        # the same as flat indices into fc viewed as (K·K, d): one take instead of a 2-D gather
+        self._flat = self._rows * K + self._k
+        self._fc_rows = self.fc.reshape(K * K, self.d)
         # the fast path of observe: full-length forecasts recorded at consecutive updates
         # up to ``_last`` (``_run`` of them), and every lead past its memory
         self._last, self._run, self._steady = -1, 0, False
@@ -135,7 +138,8 @@ class LeadErrorRMS:
         rows = self._rows[n % self.K]
         if self._steady and self._last == n - 1 and self._run >= self.K:
             # every lead has its forecast and α is constant: m ← m + α (e² − m)
-            miss = self.fc[rows, self._k] - z
+            miss = np.take(self._fc_rows, self._flat[n % self.K], axis=0)
+            miss -= z
             e2 = np.einsum("ij,ij->i", miss, miss)
             e2 -= self.ms
             e2 *= self.alpha

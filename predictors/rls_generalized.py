@@ -101,14 +101,17 @@ class GeneralizedRLS(DelayLinePredictor):
         first = self._block(self.line.buf[:N])
         if steps <= M:
             return first[:steps].copy()
-        chunks, have = [first], M
-        hist = np.concatenate([first[::-1], self.line.buf[:N]])  # newest first
-        while have < steps:
-            nxt = self._block(hist[:N])
-            chunks.append(nxt)
-            hist = np.concatenate([nxt[::-1], hist])[: N + M]
-            have += M
-        return np.concatenate(chunks)[:steps]
+        blocks = -(-steps // M)
+        out = np.empty((blocks * M, self.d))
+        out[:M] = first
+        # newest first: the forecasts so far (reversed), then the delay line's N rows
+        hist = np.empty(((blocks - 1) * M + N, self.d))
+        hist[-N:] = self.line.buf[:N]
+        for b in range(1, blocks):
+            top = (blocks - 1 - b) * M  # block b − 1's forecasts, then the older rows
+            hist[top : top + M] = out[(b - 1) * M : b * M][::-1]
+            out[b * M : (b + 1) * M] = self._block(hist[top : top + N])
+        return out[:steps]
 
     @property
     def weights(self) -> np.ndarray:

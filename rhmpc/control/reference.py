@@ -273,10 +273,13 @@ class PredictedReference:
         self._first = tick + 1
         if self.guard_speed > 0 and self._held is not None:
             lead = now + self._span * self.Ts - self._held_stamp  # [s] to the last point
-            if np.abs(self._dense - self._held).max() > self.guard_margin + self.guard_speed * lead:
+            gap = np.subtract(self._dense, self._held)
+            np.abs(gap, out=gap)
+            if gap.flat[gap.argmax()] > self.guard_margin + self.guard_speed * lead:
                 self._diverged()
-        if self._origin is not None:
-            self._placed = self._origin + embed3(self._dense)
+        if self._origin is not None:  # origin + E r_c; E = I for 3 axes
+            dense = self._dense
+            self._placed = self._origin + (dense if dense.shape[1] == 3 else embed3(dense))
         if self.monitor is not None:
             self.monitor.observe(now, self.predictor.heart_rate_hz)
 

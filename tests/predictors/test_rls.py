@@ -143,6 +143,15 @@ def test_generalized_chains_beyond_its_points():
     f = p.predict(10)
     assert f.shape == (10, 3)
     np.testing.assert_allclose(f, src.position(t[-1] + dt * np.arange(1, 11)), atol=1e-6)
+    # the chain itself: V applied to the newest N rows, its own forecasts pushed as observed
+    V, N, M = p.weights, p.settings.order, p.settings.points
+    rows, chained = list(p.line.buf[:N]), []  # newest first
+    while len(chained) < 10:
+        block = (V @ np.concatenate(rows[:N])).reshape(M, 3)
+        chained += list(block)
+        rows = list(block[::-1]) + rows
+    assert p.counts["forecast_clamped"] == 0
+    np.testing.assert_allclose(f, chained[:10], rtol=1e-12, atol=1e-15)
 
 
 def test_rls_kernel_bounds_windup_and_counts_it():
