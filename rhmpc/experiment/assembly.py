@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from predictors import make_predictor
+from predictors import make_predictor, settings_for
 from rhmpc.control.mpc import RecedingHorizonMPC
 from rhmpc.control.reference import ExactReference, PredictedReference
 from rhmpc.errors import UsageError
@@ -146,6 +146,11 @@ def build_reference(config: RunConfig, truth: SourceTruth, heart: HeartSource,
     settings = dict(config.predictor_settings)
     if config.predictor in config.predictor_params and "params" not in settings:
         settings["params"] = config.predictor_params[config.predictor]
+    if "unit" not in settings and getattr(settings_for(config.predictor, **settings), "unit",
+                                          1.0) is None:
+        # the loop feeds metres: no unit inference, which would hold the first 0.5 s and then
+        # replay it in one refresh (≈ 1 ms on one tick)
+        settings["unit"] = 1.0
     predictor = make_predictor(config.predictor, dt=clock.dt, **settings)
     reference = PredictedReference(
         predictor, loop.Ts, loop.horizon, clock.refresh_ticks, loop.prediction_points,

@@ -94,7 +94,8 @@ def test_streamed_run_is_the_run_on_whole_arrays(tmp_path, predictor):
     else:
         dt = loop.downsample * loop.Ts
         reference = PredictedReference(
-            make_predictor(predictor, dt=dt), loop.Ts, loop.horizon, loop.downsample,
+            make_predictor(predictor, dt=dt, unit=1.0),  # metres, as the loop says
+            loop.Ts, loop.horizon, loop.downsample,
             loop.prediction_points, outlier_gate=loop.gate_floor,
             max_rejections=loop.outlier_max_rejections,
             gate_calibration=math.ceil(loop.gate_calibration / dt),
@@ -116,16 +117,22 @@ def test_streamed_run_is_the_run_on_whole_arrays(tmp_path, predictor):
 
 def test_predictor_params_pick_each_predictors_named_set():
     """``predictor_params`` names a parameter set per predictor (a preset's choice for every
-    predictor a comparison runs); ``predictor_settings.params`` still wins over it."""
+    predictor a comparison runs); ``predictor_settings.params`` still wins over it. The loop
+    feeds metres and says so (``unit=1``)."""
     from predictors.fourier_settings import EKF_PARAMETER_SETS
+
+    def named(name):
+        return dataclasses.replace(EKF_PARAMETER_SETS[name], unit=1.0)
 
     params = {"ekf": "tuna2013"}
     ekf = build_run(small_config(predictor="ekf", predictor_params=params)).reference.predictor
-    assert ekf.settings == EKF_PARAMETER_SETS["tuna2013"]
+    assert ekf.settings == named("tuna2013")
     default = build_run(small_config(predictor="ekf")).reference.predictor
-    assert default.settings == EKF_PARAMETER_SETS["adaptive"] != EKF_PARAMETER_SETS["tuna2013"]
+    assert default.settings == named("adaptive") != named("tuna2013")
     chosen = build_run(small_config(predictor="ekf", predictor_params=params,
                                     predictor_settings={"params": "yuen2008"}))
-    assert chosen.reference.predictor.settings == EKF_PARAMETER_SETS["yuen2008"]
+    assert chosen.reference.predictor.settings == named("yuen2008")
+    mm = build_run(small_config(predictor="ekf", predictor_settings={"unit": 1e-3}))
+    assert mm.reference.predictor.settings.unit == 1e-3  # a unit the user sets is kept
     other = build_run(small_config(predictor="one-step", predictor_params=params))
     assert type(other.reference.predictor).__name__ == "OneStepRLS"
