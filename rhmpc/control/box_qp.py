@@ -72,6 +72,11 @@ from scipy.linalg.lapack import dpotrf as _potrf
 from scipy.linalg.lapack import dpotrs as _potrs
 
 
+def _peak(v: np.ndarray) -> float:
+    """max(v) by argmax (a quarter of ``max()``'s cost on a few dozen entries; NaN wins)."""
+    return float(v[v.argmax()])
+
+
 @dataclass(frozen=True)
 class BoxQPSettings:
     """Settings of :class:`BoxQP`.
@@ -167,9 +172,9 @@ class BoxQP:
         """
         st = self.settings
         self.iterations = 0
-        if not np.abs(z_star).max() > 1.0:
+        if not _peak(np.abs(z_star)) > 1.0:
             return False
-        scale = 1.0 + float(np.abs(q).max())
+        scale = 1.0 + _peak(np.abs(q))
         act = self._pdas(z_star, scale)
         if act is None:
             act = self._dual_active_set(z_star, scale)
@@ -181,7 +186,7 @@ class BoxQP:
         r = np.dot(self.H, self.z, out=self._r)
         r += q
         r += mu
-        return bool(np.abs(r).max() <= st.kkt_tol * scale)
+        return bool(_peak(np.abs(r, out=r)) <= st.kkt_tol * scale)
 
     def _pdas(self, z_star: np.ndarray, scale: float) -> np.ndarray | None:
         """Phase 1, primal-dual active set: the final active indices (z, mu set), or None
@@ -190,7 +195,7 @@ class BoxQP:
         W = self.W
         dual_tol = st.dual_tol * scale
         upper = 1.0 + st.primal_tol
-        act = np.flatnonzero(np.abs(z_star) > 1.0)
+        act = (np.abs(z_star) > 1.0).nonzero()[0]
         b = np.copysign(1.0, z_star[act])
         sign = self.active
         for it in range(1, min(st.pdas_iter, st.max_iter) + 1):
@@ -205,8 +210,8 @@ class BoxQP:
             z = z_star - mu @ W_a
             z[act] = b  # exactly ±1: never counted as past a bound below
             bmu = b * mu
-            join = np.flatnonzero(np.abs(z) > upper)  # free variables past a bound join
-            if join.size == 0 and bmu.min() >= -dual_tol:
+            join = (np.abs(z) > upper).nonzero()[0]  # free variables past a bound join
+            if join.size == 0 and bmu[bmu.argmin()] >= -dual_tol:
                 self.z[:] = z
                 self.mu[:] = 0.0
                 self.mu[act] = mu
@@ -215,7 +220,7 @@ class BoxQP:
             keep = bmu >= -dual_tol  # active bounds with a wrong-sign multiplier leave
             sign[act[keep]] = b[keep]
             sign[join] = np.where(z[join] > 0.0, 1, -1)
-            act = np.flatnonzero(sign)
+            act = sign.nonzero()[0]
             if act.size == 0:  # every bound left: ẑ*, which violates them
                 return None
             b = sign[act].astype(float)
@@ -257,8 +262,8 @@ class BoxQP:
                     step = sp * W[p] - y @ W_a  # s = W n_p − W N r
                     r = sig * y  # dual step direction of the active multipliers
                     t = (sp * z[p] - 1.0) / (sp * step[p])  # full step: z_p reaches σ_p
-                    if r.max() > 0.0:  # partial step: an active λ reaches 0 first
-                        for a in np.flatnonzero(r > 0.0).tolist():
+                    if r[r.argmax()] > 0.0:  # partial step: an active λ reaches 0 first
+                        for a in (r > 0.0).nonzero()[0].tolist():
                             ratio = lam[a] / r[a]
                             if ratio < t:
                                 t, j = ratio, a
@@ -283,7 +288,7 @@ class BoxQP:
             np.abs(z, out=viol)
             viol -= 1.0
             p = int(np.argmax(viol))
-        if k and lam_b[:k].min() < -st.dual_tol * scale:
+        if k and _peak(-lam_b[:k]) > st.dual_tol * scale:
             return None
         self.mu[:] = 0.0
         self.mu[act_b[:k]] = sig_b[:k] * lam_b[:k]
