@@ -122,6 +122,10 @@ def document(config: RunConfig, run: Run, result: LoopResult, wall: float,
         doc["tick_parts_ratio_to_gain"] = {
             part: {k: v / g for k, v in stats.items() if k != "mean"}
             for part, stats in metrics["tick_parts_us"].items()}
+        doc["control_tick_ratio_to_gain"] = {k: v / g for k, v in
+                                             metrics["control_tick_us"].items() if k != "mean"}
+        # the tick's own work per simulated second (mean × rate): no simulator is faster
+        doc["tick_per_simulated_s_g"] = metrics["tick_us"]["mean"] / config.loop.Ts / g
         # wall time per simulated second, in gain ticks: the simulation's own speed
         doc["wall_per_simulated_s_g"] = 1e6 * wall / config.loop.duration / g
     return doc

@@ -82,10 +82,24 @@ def _gate_line(gate: dict) -> str:
 
 
 def _in_gain_ticks(doc: dict) -> str:
-    """The tick percentiles as multiples of the gain tick timed in the same run (×g)."""
+    """The tick percentiles as multiples of the gain tick timed in the same run (×g), its
+    parts' p99, the tick without the refresh slices, and the wall time per simulated second."""
     r, g = doc["tick_ratio_to_gain"], doc["gain_tick_us"]["p50"]
-    return (f"\n                   = {r['p50']:.1f} / {r['p99']:.1f} / {r.get('p999', 0):.1f} / "
-            f"{r['max']:.0f} g   (g = gain tick p50 {g:.1f} µs, same run)")
+    parts = ", ".join(f"{name.replace('_', ' ')} {v['p99']:.1f}"
+                      for name, v in doc.get("tick_parts_ratio_to_gain", {}).items())
+    out = (f"\n                   = {r['p50']:.1f} / {r['p99']:.1f} / {r.get('p999', 0):.1f} / "
+           f"{r['max']:.0f} g   (g = gain tick p50 {g:.1f} µs, same run)")
+    if parts:
+        out += f"\n                   parts p99 [g]: {parts}"
+    control = doc.get("control_tick_ratio_to_gain")
+    if control:
+        out += (f"\n                   without the refresh slices: p99 {control['p99']:.1f} g, "
+                f"max {control['max']:.0f} g")
+    if "wall_per_simulated_s_g" in doc:
+        wall, ticks = doc["wall_per_simulated_s_g"], doc["tick_per_simulated_s_g"]
+        out += (f"\n                   per simulated second: wall {wall:.0f} g, of which the "
+                f"ticks {ticks:.0f} g")
+    return out
 
 
 def plot_run(result, path: str, title: str = "", zoom: tuple[float, float] | None = None) -> None:

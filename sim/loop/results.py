@@ -53,6 +53,9 @@ class LoopResult:
     tick_us: dict  # p50 / p99 / p999 / max / mean of the whole control tick [µs]
     yardstick_us: dict  # the same of the yardstick (gain tick) timed in the run [µs]
     tick_parts_us: dict  # the same per part of the tick (TICK_PARTS) [µs]
+    #: the same of the tick without the refresh slices (sense + controller + actuate) [µs]:
+    #: what it would cost with the predictor in a task of its own
+    control_tick_us: dict
     horizon_error: np.ndarray  # (N,) RMS error of the reference vs the truth per lead tick [m]
     controller_stats: dict = field(default_factory=dict)
     saturated_ticks: int = 0
@@ -76,6 +79,7 @@ class LoopResult:
         out = dict(self.tracking)
         out["tick_us"] = dict(self.tick_us)
         out["tick_parts_us"] = {k: dict(v) for k, v in self.tick_parts_us.items()}
+        out["control_tick_us"] = dict(self.control_tick_us)
         out["prediction_rms_mm"] = {
             "lead_1": float(1e3 * self.horizon_error[0]),
             "lead_N": float(1e3 * self.horizon_error[-1]),
@@ -101,6 +105,7 @@ class Recorder:
         self.ticks = TickHistogram()
         self.yardstick = TickHistogram()
         self.parts = {name: TickHistogram() for name in TICK_PARTS}
+        self.control = TickHistogram()  # sense + controller + actuate
         self.trace = DecimatedTrace(settings.ticks)
         self.file = None if trace_file is None else TraceFile(trace_file)
         N = settings.horizon
@@ -145,6 +150,7 @@ class Recorder:
         parts = log["parts_ns"]
         for k, name in enumerate(("sense", "controller", "actuate")):
             self.parts[name].add(parts[s:, k])
+        self.control.add(parts[s:].sum(axis=1))
         for charged, name in zip(log["charged"], CHARGED, strict=True):
             self.parts[name].add(np.array(charged, dtype=np.int64)[s:])
         # horizon prediction error per lead tick, refreshes after settling
@@ -177,7 +183,8 @@ class Recorder:
             tracking=self.tracking.result(), tick_us=self.ticks.stats_us(),
             yardstick_us=self.yardstick.stats_us(),
             tick_parts_us={name: h.stats_us() for name, h in self.parts.items()},
-            horizon_error=horizon_error, controller_stats=stats,
+            control_tick_us=self.control.stats_us(), horizon_error=horizon_error,
+            controller_stats=stats,
             saturated_ticks=self.saturated_ticks, predictor_counts=counts,
             plant_dynamics=dynamics,
         )
