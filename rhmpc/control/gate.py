@@ -55,17 +55,25 @@ class OutlierGate:
         self.floor = self.gate  # [m]; None while calibrating
         self._threshold2 = 0.0 if self.gate is None else self.gate**2
 
-    def inside(self, z: np.ndarray, forecast: np.ndarray) -> bool:
-        """Whether a locked gate would accept ``z`` against ``forecast`` (no state changes)."""
+    @staticmethod
+    def miss2(z: np.ndarray, forecast: np.ndarray) -> float:
+        """‖z − ẑ‖² [m²], what :meth:`inside` and :meth:`accept` judge."""
+        miss = z - forecast
+        return float(np.dot(miss, miss))
+
+    def inside(self, z: np.ndarray, forecast: np.ndarray, miss2: float | None = None) -> bool:
+        """Whether a locked gate would accept ``z`` against ``forecast`` (no state changes);
+        ``miss2``: :meth:`miss2` of the two, if the caller has it."""
         if self._calibrating is not None:
             return True
-        miss = z - forecast
-        return self.locked and float(np.dot(miss, miss)) <= self._threshold2
+        miss2 = self.miss2(z, forecast) if miss2 is None else miss2
+        return self.locked and miss2 <= self._threshold2
 
-    def accept(self, z: np.ndarray, forecast: np.ndarray, counts) -> bool:
-        """Whether sample ``z`` is accepted given its ``forecast``; events go to ``counts``."""
-        miss = z - forecast
-        miss2 = float(np.dot(miss, miss))
+    def accept(self, z: np.ndarray, forecast: np.ndarray, counts,
+               miss2: float | None = None) -> bool:
+        """Whether sample ``z`` is accepted given its ``forecast``; events go to ``counts``;
+        ``miss2``: :meth:`miss2` of the two, if the caller has it."""
+        miss2 = self.miss2(z, forecast) if miss2 is None else miss2
         if self._calibrating is not None:
             self._calibrate(miss2)
         else:

@@ -14,7 +14,8 @@ change of the Jacobian over the horizon's motion (second order in the planned mo
 The forward kinematics run compiled where the robot's chain builds
 (:class:`sim.plant.native.NativeOffset`: one C call, ≈ 1 µs with its argument copy, against
 ≈ 3 µs through Pinocchio's Python bindings, the same end-point to 1e-15 m), else through
-Pinocchio.
+Pinocchio. The controller writes x into its parameter vector anyway; :meth:`OutputOffset.evaluate`
+reads it there (the ``state`` array), which saves the copy.
 """
 
 from __future__ import annotations

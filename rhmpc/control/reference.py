@@ -199,10 +199,11 @@ class PredictedReference:
         valid = z is not None and math.isfinite(float(np.dot(z, z)))
         if valid and self._forecast is not None:
             gate, counts = self.gate, self.predictor.counts
-            if (self._before is not None and not gate.inside(z, self._forecast)
+            miss2 = gate.miss2(z, self._forecast)  # judged once, used twice
+            if (self._before is not None and not gate.inside(z, self._forecast, miss2)
                     and gate.inside(z, self._before) and self.predictor.retract()):
                 gate.accept(z, self._before, counts)  # the previous sample was the outlier
-            elif not gate.accept(z, self._forecast, counts):
+            elif not gate.accept(z, self._forecast, counts, miss2):
                 z, valid = None, False
         self.predictor.update(z)
         self._pending = self._points = None
