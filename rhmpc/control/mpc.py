@@ -56,14 +56,6 @@ RELAXED_SLACK = 1e-2
 __all__ = ["EXTRA_REASONS", "MPCStats", "RecedingHorizonMPC"]
 
 
-def _as_slice(index: np.ndarray) -> slice | np.ndarray:
-    """``index`` as a slice when it is a contiguous ascending range (a view, not a gather)."""
-    index = np.asarray(index, dtype=np.intp)
-    if index.size and np.array_equal(index, np.arange(index[0], index[0] + index.size)):
-        return slice(int(index[0]), int(index[0]) + index.size)
-    return index
-
-
 class RecedingHorizonMPC:
     """Receding-horizon MPC for the linearised arm, tracking N end-effector reference points.
 
@@ -123,7 +115,7 @@ class RecedingHorizonMPC:
         self._u = qp.u0.copy()
         self._g = np.empty(qp.A.shape[0])
         self._G_cols = qp.bound_columns
-        self._G_take = _as_slice(qp.bound_columns)  # p[G_take] = p[bound_columns]
+        self._G_take = qp.bound_index  # p[G_take] = p[bound_columns]
         self._G = np.ascontiguousarray(qp.G[:, qp.bound_columns])
         self._p_cols = np.empty(len(qp.bound_columns))
         self._nz, self._nv = qp.nz, qp.nv
@@ -336,9 +328,7 @@ class RecedingHorizonMPC:
         if not math.isfinite(np.dot(self._p_ext, self._p_ext)):  # NaN, ±inf (or > 1e154)
             return False
         if self._offset is not None:
-            # d from the x just written to p, into p's d slot. Finite: the kinematics of finite
-            # angles is, and |C x| ≤ ‖C‖ ‖x‖ with ‖x‖ < 1e154 by the check above.
-            self._offset.evaluate()
+            self._offset.evaluate()  # d of the x in p, into p; finite as x is (‖x‖ < 1e154)
         return True
 
     def _solver_tick(self, t0: int) -> np.ndarray:

@@ -118,6 +118,14 @@ class CondensedQP:
     def npar(self) -> int:
         return self.F.shape[1]
 
+    @property
+    def bound_index(self) -> slice | np.ndarray:
+        """``bound_columns`` as a slice where they are one ascending run (a view, not a copy)."""
+        c = self.bound_columns
+        if c.size and np.array_equal(c, np.arange(c[0], c[0] + c.size)):
+            return slice(int(c[0]), int(c[0]) + c.size)
+        return c
+
     def q(self, p: np.ndarray) -> np.ndarray:
         """Linear cost term q(p) = F p + f0."""
         return self.F @ p + self.f0
