@@ -20,7 +20,8 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 #: The benchmarks that write docs/results/NAME.json, in the order they run.
 SCRIPTS = ("headline", "tuna_tables", "hardware_sensitivity", "causal_bound", "yuen_noise",
-           "mpc_timing", "predictor_table", "invivo_table", "design_choices", "long_run")
+           "mpc_timing", "tick_budget", "predictor_table", "invivo_table", "design_choices",
+           "long_run")
 MARK = re.compile(r"(<!-- results:(\w+) -->\n).*?(<!-- /results:\2 -->)", re.S)
 
 
