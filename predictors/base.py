@@ -74,16 +74,15 @@ class PredictorSettings:
 def as_sample(z, d: int | None) -> np.ndarray | None:
     """Return ``z`` as a float (d,) array, or ``None`` if it is missing.
 
-    ``None`` and samples with any non-finite component are missing (so is one whose squared
-    norm overflows, ≥ 1e154 data units: no heart moves that far).  A sample of the wrong size
-    raises ``ValueError`` (that is a wiring bug, not a dropout).
+    ``None`` and samples with any non-finite component are missing.  A sample of
+    the wrong size raises ``ValueError`` (that is a wiring bug, not a dropout).
     """
     if z is None:
         return None
     x = np.array(z, dtype=float).reshape(-1)  # a copy: callers may reuse buffers
     if d is not None and x.shape[0] != d:
         raise ValueError(f"sample has {x.shape[0]} components, predictor has d={d}")
-    if not math.isfinite(np.dot(x, x)):  # NaN or ±inf anywhere (a third of isfinite().all())
+    if not np.isfinite(x).all():
         return None
     return x
 
@@ -285,18 +284,19 @@ class Predictor(ABC):
     def _guard(self, f: np.ndarray) -> np.ndarray:
         """Clip a forecast to the recent range (``forecast_clamped``); relearn if non-finite.
 
-        The clipped g = min(max(f, lo), hi) tells both at once: ‖g − f‖² is NaN or inf where f
-        is not finite (or absurdly large, ≥ 1e154 data units), > 0 where the clip acted.
+        The clipped g = min(max(f, lo), hi) tells both at once: ‖g − f‖² is > 0 where the clip
+        acted, and NaN or inf where f is not finite (or so large that the square overflows:
+        only then is f itself tested).
         """
         if not self._envelope.known:
             return f if np.isfinite(f).all() else self._relearn(f.shape[0])
         self._update_bounds()
         g = np.minimum(np.maximum(f, self._bounds[0]), self._bounds[1])  # np.clip: slower
         d = np.subtract(g, f)
-        moved = float(np.vdot(d, d))
-        if not math.isfinite(moved):
+        moved = float(np.vdot(d, d))  # vdot: no overflow warning
+        if not math.isfinite(moved) and not np.isfinite(f).all():
             return self._relearn(f.shape[0])
-        if moved > 0.0:
+        if moved != 0.0:  # > 0, or inf for a finite f beyond 1e154
             self.counts["forecast_clamped"] += 1
         return g
 

@@ -108,6 +108,7 @@ class RecedingHorizonMPC:
         self._p_d = self._p_ext[nx + N * ny + self.nu:-1]
         self._offset = (OutputOffset(arm, out=self._p_d, state=self._p_x)
                         if self.settings.offset_correction else None)
+        self._probe = OutputOffset(arm) if self._offset is not None else None  # for offset()
         self._x_shape, self._ref_shape = (nx,), (N, ny)
         self._F_ext = np.ascontiguousarray(np.column_stack([qp.F, qp.f0]))
         self._q = np.empty(qp.nv)
@@ -210,7 +211,7 @@ class RecedingHorizonMPC:
         ``offset_correction`` is off)."""
         if self._offset is None:
             return np.zeros(self.ny)
-        return self._offset(np.asarray(x, dtype=float), out=np.empty(self.ny))
+        return self._probe(np.asarray(x, dtype=float), out=np.empty(self.ny))
 
     def params(
         self, x: np.ndarray, ref: np.ndarray, u_prev: np.ndarray | None = None
@@ -315,7 +316,7 @@ class RecedingHorizonMPC:
         return self._solver_tick(t0)
 
     def _set_parameters(self, x: np.ndarray, ref: np.ndarray) -> bool:
-        """Write p = [x; r; u_{−1}; d] (d by the offset correction); False if not finite."""
+        """Write p = [x; r; u_{−1}; d(x)] (d: the offset correction); False if not all finite."""
         x = np.asarray(x, dtype=float)
         ref = np.asarray(ref, dtype=float)
         if x.shape != self._x_shape or ref.shape != self._ref_shape:
@@ -325,11 +326,9 @@ class RecedingHorizonMPC:
             )
         self._p_x[:] = x
         self._p_r2[...] = ref
-        if not math.isfinite(np.dot(self._p_ext, self._p_ext)):  # NaN, ±inf (or > 1e154)
-            return False
         if self._offset is not None:
-            self._offset.evaluate()  # d of the x in p, into p; finite as x is (‖x‖ < 1e154)
-        return True
+            self._offset.evaluate()  # d of the x in p, into p (NaN where x is not finite)
+        return math.isfinite(np.vdot(self._p_ext, self._p_ext))  # NaN, ±inf, > 1e154: no warning
 
     def _solver_tick(self, t0: int) -> np.ndarray:
         """Level 3: the configured solver, warm-started; its result or the fallback chain."""

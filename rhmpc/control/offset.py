@@ -31,6 +31,13 @@ class OutputOffset:
     ----------
     arm : robots.LinearArm
         The linearised arm; ``arm.robot`` gives the forward kinematics.
+    out : ndarray (3,), optional
+        Where every evaluation writes d (e.g. a controller's parameter slot); default its own.
+    compiled : bool
+        Use the compiled chain where it builds (else Pinocchio).
+    state : ndarray (2nv,), optional
+        Where x is read: :meth:`__call__` writes its x there, :meth:`evaluate` reads what the
+        caller wrote (e.g. the state slot of the same parameter vector); default its own.
 
     Raises
     ------
@@ -74,25 +81,23 @@ class OutputOffset:
                             self._C, self._y0, out=self.out, state=self.state)
 
     def __call__(self, x: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-        """The offset d (3,) [m] at the state ``x`` = [q − q0; q̇]: in :attr:`out`, and copied
-        to ``out`` if another array is given."""
-        if self.compiled is not None:
-            self.compiled(x)
-        else:
-            q = np.add(self._q0, x[: self._nq], out=self._q)
-            pin.forwardKinematics(self._model, self._data, q)
-            p = pin.updateFramePlacement(self._model, self._data, self._fid).translation
-            lin = np.dot(self._C, x, out=self._y)
-            lin += self._y0
-            np.subtract(p, lin, out=self.out)
+        """The offset d (3,) [m] at the state ``x`` = [q − q0; q̇], written into :attr:`state`
+        first: in :attr:`out`, and copied to ``out`` if another array is given."""
+        self.state[:] = x
+        self.evaluate()
         if out is None or out is self.out:
             return self.out
         out[:] = self.out
         return out
 
     def evaluate(self) -> np.ndarray:
-        """The offset at the x the caller wrote into :attr:`state`, in :attr:`out` (no copy
-        of x on the compiled path)."""
+        """The offset at the x the caller wrote into :attr:`state`, in :attr:`out` (the array)."""
         if self.compiled is not None:
             return self.compiled.evaluate()
-        return self(self.state)
+        x = self.state
+        q = np.add(self._q0, x[: self._nq], out=self._q)
+        pin.forwardKinematics(self._model, self._data, q)
+        p = pin.updateFramePlacement(self._model, self._data, self._fid).translation
+        lin = np.dot(self._C, x, out=self._y)
+        lin += self._y0
+        return np.subtract(p, lin, out=self.out)

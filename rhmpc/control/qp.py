@@ -122,7 +122,7 @@ class CondensedQP:
     def bound_index(self) -> slice | np.ndarray:
         """``bound_columns`` as a slice where they are one ascending run (a view, not a copy)."""
         c = self.bound_columns
-        if c.size and np.array_equal(c, np.arange(c[0], c[0] + c.size)):
+        if c.size and c[0] >= 0 and np.array_equal(c, np.arange(c[0], c[0] + c.size)):
             return slice(int(c[0]), int(c[0]) + c.size)
         return c
 

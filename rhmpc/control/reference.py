@@ -196,7 +196,7 @@ class PredictedReference:
 
     def update(self, tick: int, z: np.ndarray | None, stamp: float) -> None:
         """First half of a refresh: the outlier gate and the predictor's update with ``z``."""
-        valid = z is not None and math.isfinite(float(np.dot(z, z)))
+        valid = z is not None and math.isfinite(float(np.vdot(z, z)))  # vdot: no FP warning
         if valid and self._forecast is not None:
             gate, counts = self.gate, self.predictor.counts
             miss2 = gate.miss2(z, self._forecast)  # judged once, used twice

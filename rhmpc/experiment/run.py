@@ -101,6 +101,7 @@ def document(config: RunConfig, run: Run, result: LoopResult, wall: float,
         doc["forecast_error_rms_mm"] = [None if not np.isfinite(v) else 1e3 * float(v)
                                         for v in errors]
         doc["forecast_lead_s"] = run.clock.dt
+        doc["predictor_unit_m"] = getattr(predictor, "unit", None)  # metres per data unit
     doc["predictor_clock"] = _clock_document(config, run)
     gate = getattr(run.reference, "gate", None)
     if gate is not None or predictor is not None:

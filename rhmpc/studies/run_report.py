@@ -95,7 +95,7 @@ def _in_gain_ticks(doc: dict) -> str:
     if control:
         out += (f"\n                   without the refresh slices: p99 {control['p99']:.1f} g, "
                 f"max {control['max']:.0f} g")
-    if "wall_per_simulated_s_g" in doc:
+    if "tick_per_simulated_s_g" in doc:
         wall, ticks = doc["wall_per_simulated_s_g"], doc["tick_per_simulated_s_g"]
         out += (f"\n                   per simulated second: wall {wall:.0f} g, of which the "
                 f"ticks {ticks:.0f} g")

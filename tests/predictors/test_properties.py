@@ -98,6 +98,10 @@ def test_guard_clips_and_counts_a_diverging_forecast(name):
     assert p.counts["forecast_nonfinite"] == 1
     for zk in z:  # and it learns again
         p.update(zk)
+    p._predict = lambda steps: np.full((steps, 3), 1e160)  # finite, its square is not
+    f = p.predict(1)
+    np.testing.assert_array_equal(f, [p._bounds[1]])
+    assert p.counts["forecast_clamped"] == 2 and p.counts["forecast_nonfinite"] == 1
     for count, bad in enumerate((np.inf, -np.inf), start=2):  # not clipped to a finite one
         p._predict = lambda steps, v=bad: np.full((steps, 3), v)
         np.testing.assert_array_equal(p.predict(1), [z[-1]])

@@ -428,5 +428,20 @@ def test_the_compiled_output_offset_is_pinocchios(robot):
     for _ in range(200):
         x = np.concatenate([rng.uniform(-0.5, 0.5, arm.nx // 2), rng.normal(size=arm.nx // 2)])
         np.testing.assert_allclose(compiled(x).copy(), reference(x), rtol=0, atol=1e-15)
-        compiled.state[:] = x  # the controller's path: x written in place, then evaluated
-        np.testing.assert_array_equal(compiled.evaluate(), compiled(x))
+        # the controller's path: x written into the state buffer, then evaluated
+        for offset in (compiled, reference):
+            offset(np.zeros(arm.nx))  # another x first: evaluate must not return its d
+            offset.state[:] = x
+            np.testing.assert_allclose(offset.evaluate(), reference(x), rtol=0, atol=1e-15)
+
+
+def test_the_offset_asked_of_the_controller_leaves_its_tick_alone():
+    """``mpc.offset(x)`` at a state that is not finite is answered (NaN) without touching the
+    tick's parameters: the next tick with finite inputs solves, as it would have anyway."""
+    arm = linearize(load_robot("phantom"))
+    mpc, twin = RecedingHorizonMPC(arm), RecedingHorizonMPC(arm)
+    x = np.zeros(arm.nx)
+    ref = np.tile(arm.y0, (mpc.N, 1))
+    assert not np.isfinite(mpc.offset(np.full(arm.nx, np.nan))).any()
+    np.testing.assert_array_equal(mpc.step(x, ref), twin.step(x, ref))
+    assert mpc.stats.fallback_total == 0

@@ -38,6 +38,12 @@ def test_result_document_has_the_documented_keys():
     assert doc["peak_rss_mb"] > 0 and doc["gain_tick_us"]["p50"] > 0
     assert doc["tick_ratio_to_gain"]["p99"] == doc["tick_us"]["p99"] / doc["gain_tick_us"]["p50"]
     assert doc["settings"]["loop"]["duration"] == 1.5
+    # the tick without the refresh slices is part of the tick; the ticks' work per second
+    control, tick, g = doc["control_tick_us"], doc["tick_us"], doc["gain_tick_us"]["p50"]
+    assert 0 < control["p50"] <= tick["max"] and control["max"] <= tick["max"]
+    assert doc["control_tick_ratio_to_gain"]["p99"] == control["p99"] / g
+    assert math.isclose(doc["tick_per_simulated_s_g"], tick["mean"] / 0.5e-3 / g, rel_tol=1e-12)
+    assert doc["tick_per_simulated_s_g"] < doc["wall_per_simulated_s_g"]
 
 
 def test_same_seed_same_numbers_other_seed_other_numbers():
