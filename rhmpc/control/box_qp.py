@@ -262,7 +262,7 @@ class BoxQP:
                     step = sp * W[p] - y @ W_a  # s = W n_p − W N r
                     r = sig * y  # dual step direction of the active multipliers
                     t = (sp * z[p] - 1.0) / (sp * step[p])  # full step: z_p reaches σ_p
-                    if r[r.argmax()] > 0.0:  # partial step: an active λ reaches 0 first
+                    if _peak(r) > 0.0:  # partial step: an active λ reaches 0 first
                         for a in (r > 0.0).nonzero()[0].tolist():
                             ratio = lam[a] / r[a]
                             if ratio < t:

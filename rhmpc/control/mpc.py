@@ -115,10 +115,8 @@ class RecedingHorizonMPC:
         self._l = qp.l0.copy()
         self._u = qp.u0.copy()
         self._g = np.empty(qp.A.shape[0])
-        self._G_cols = qp.bound_columns
         self._G_take = qp.bound_index  # p[G_take] = p[bound_columns]
         self._G = np.ascontiguousarray(qp.G[:, qp.bound_columns])
-        self._p_cols = np.empty(len(qp.bound_columns))
         self._nz, self._nv = qp.nz, qp.nv
         self._shift, self._shift_dual = qp.shift, qp.shift_dual
         self._scale0 = qp.u_max.copy()
@@ -299,8 +297,7 @@ class RecedingHorizonMPC:
         if self._screen and not self._forced and self._level1():
             return self._screened_output(t0, self._v_star, 1)
         if self.qp.param_bounds:
-            self._p_cols[:] = self._p[self._G_take]
-            np.dot(self._G, self._p_cols, out=self._g)
+            np.dot(self._G, self._p[self._G_take], out=self._g)
             np.subtract(self.qp.l0, self._g, out=self._l)
             np.subtract(self.qp.u0, self._g, out=self._u)
         if self._screen and not self._forced:

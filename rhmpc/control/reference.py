@@ -278,9 +278,8 @@ class PredictedReference:
             np.abs(gap, out=gap)
             if gap.flat[gap.argmax()] > self.guard_margin + self.guard_speed * lead:
                 self._diverged()
-        if self._origin is not None:  # origin + E r_c; E = I for 3 axes
-            dense = self._dense
-            self._placed = self._origin + (dense if dense.shape[1] == 3 else embed3(dense))
+        if self._origin is not None:
+            self._placed = self._origin + embed3(self._dense)
         if self.monitor is not None:
             self.monitor.observe(now, self.predictor.heart_rate_hz)
 

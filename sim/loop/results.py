@@ -28,6 +28,8 @@ TICK_PARTS = ("sense", "controller", "actuate", *CHARGED)
 
 def embed3(p: np.ndarray) -> np.ndarray:
     """(n, d) positions with d ≤ 3 as (n, 3), missing axes zero (1-D motion along x)."""
+    if getattr(p, "ndim", 0) == 2 and p.shape[1] == 3:  # already (n, 3): the array, at once
+        return p
     p = np.atleast_2d(p)
     if p.shape[1] == 3:
         return p

@@ -185,9 +185,9 @@ class NativeOffset:
         Where every call writes d (a contiguous float64 array, e.g. a controller's parameter
         slot); default its own.
     state : ndarray (2nv,), optional
-        Where x is read (a contiguous float64 array): :meth:`__call__` writes its x there,
-        :meth:`evaluate` reads what the caller wrote (e.g. the state slot of the same parameter
-        vector, so that x is not copied twice); default its own.
+        Where :meth:`evaluate` reads x (a contiguous float64 array the caller writes, e.g. the
+        state slot of a controller's parameter vector, so that x is not copied twice); default
+        its own.
     """
 
     def __init__(self, chain: NativeChain, joint: int, point, q0, C, y0,
@@ -206,12 +206,6 @@ class NativeOffset:
         point, q0, C, y0 = (a.ctypes.data for a in self._keep)
         self._call = functools.partial(chain._lib.chain_offset, chain._ptr, self._x.ctypes.data,
                                        q0, C, y0, joint - 1, point, self.out.ctypes.data)
-
-    def __call__(self, x: np.ndarray) -> np.ndarray:
-        """The offset at ``x`` = [q − q0; q̇], x written into ``state`` (returns :attr:`out`)."""
-        self._x[:] = x
-        self._call()
-        return self.out
 
     def evaluate(self) -> np.ndarray:
         """The offset at the x already in the ``state`` array (returns :attr:`out`)."""
