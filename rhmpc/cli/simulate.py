@@ -76,6 +76,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--plot", metavar="FILE.png", help="tracking figure (Tuna Figs 10-11 style)")
     p.add_argument("--trace", metavar="FILE.npz", help="write every tick to an NPZ file as the "
                    "run goes (chunked; read it with sim.loop.trace.read_trace)")
+    p.add_argument("--host-stalls", type=float, default=0.0, metavar="SECONDS",
+                   help="after the run, time a busy loop for SECONDS and report the host's "
+                   "stalls beside the tick's maximum (sim.loop.metrics.host_stalls; default 0: "
+                   "off)")
     p.set_defaults(func=run)
 
 
@@ -186,6 +190,9 @@ def run(args: argparse.Namespace) -> int:
     trace = getattr(args, "trace", None)
     if trace and not Path(trace).resolve().parent.is_dir():
         raise UsageError(f"--trace {trace}: no such directory")
+    stalls = getattr(args, "host_stalls", 0.0)
+    if not 0.0 <= stalls <= 600.0:
+        raise UsageError(f"--host-stalls must be between 0 and 600 s, got {stalls:g}")
     try:
         from rhmpc.control.yardstick import GainTick  # timed in the same run
 
@@ -195,6 +202,11 @@ def run(args: argparse.Namespace) -> int:
         if trace and str(exc).startswith(f"{trace}:"):  # the trace file cannot be written
             raise UsageError(str(exc)) from None
         raise
+    if stalls > 0:
+        from sim.loop.metrics import host_stalls, stall_summary
+
+        g = (doc.get("gain_tick_us") or {}).get("p50")
+        doc["host_stalls"] = stall_summary(host_stalls(stalls), stalls, g)
     if args.out:
         Path(args.out).write_text(json.dumps(doc, indent=2) + "\n")
     if args.plot:

@@ -15,13 +15,12 @@ Time is integer ticks of ``Ts`` (seconds = tick·Ts). Each tick ``i``:
 5. the MPC computes ``τ_mpc``; the cancellation adds ``ĝ + Ĉq̇ + f̂`` at the estimated state;
 6. the plant integrates one tick with the (clipped) torque held.
 
-Steps 1–3 are open-loop — the heart and its sensor do not see the robot — so the loop makes them
-for a chunk of ≈ 10 s of ticks ahead (same calls, same order, same results) and then runs steps
-4–6 for that chunk (:mod:`sim.plant.tick`). Each part of a refresh is timed and charged to the
-tick that would run it, so the per-tick timing still holds everything the controller does. The
-first tick of a chunk runs with cold caches, a cost of simulating in chunks that a controller
-running every tick does not have; it stays in the statistics, once per chunk (1 in 20 000 ticks,
-below p99.9).
+Steps 1–3 are open-loop — the heart and its sensor do not see the robot — but they run tick
+by tick all the same, interleaved with steps 4–6 (:meth:`OpenLoop.references`): each slice of a
+refresh runs on the tick it is charged to, between two control ticks, as in a controller with
+one thread, so that its time is taken with the caches the control ticks leave behind. The
+heart's and the sensor's samples are made a block at a time (:mod:`sim.loop.streams`), and the
+records are kept per chunk of ≈ 10 s of ticks (:mod:`sim.loop.results`).
 
 Memory is flat in run length: the sensor stream and the POI truth are read per chunk
 (:mod:`sim.loop.streams`), results accumulate as running statistics (:mod:`sim.loop.metrics`)
@@ -35,6 +34,7 @@ position plus ``poi_offset``. A 1-D motion moves along the x axis. The error is
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import dataclasses
 import gc
@@ -106,7 +106,8 @@ class RawQueue:
 
 
 class OpenLoop:
-    """Steps 1–3 for a chunk of ticks: the references and the time charged to each tick.
+    """Steps 1–3, tick by tick: each slice of a refresh runs on its own tick, between the
+    control ticks, as a controller with one thread runs it; its time is charged to that tick.
 
     Parameters
     ----------
@@ -123,10 +124,17 @@ class OpenLoop:
         The points used before the first sample (the POI's mean position) [m].
     clock : PredictorClock, optional
         When the predictor runs (:mod:`sim.loop.clock`); default every ``downsample`` ticks.
+
+    The slices wait in a queue, in the order they run, each with its tick: a refresh on tick r
+    queues its forecast-error bookkeeping (tick r + 1 when pipelined), then the next refresh's
+    update, learning and forecast (ticks r' − 3, r' − 2, r' − 1, not before r) and its
+    interpolation (tick r'). :meth:`references` runs those due on each tick before it yields
+    the tick's reference; a slice held behind an earlier one runs on the next tick with it.
     """
 
     #: The most missing samples filled before a sample after a gap in its time stamps.
     MAX_FILL = 50
+    _INTERPOLATE = 3  # the part (index in CHARGED) whose slice is a refresh
 
     def __init__(self, reference, stream, center: np.ndarray, settings: LoopSettings,
                  hold: np.ndarray | None, clock: PredictorClock | None = None) -> None:
@@ -137,8 +145,7 @@ class OpenLoop:
         # ticks from a refresh's update to its interpolation: update, learning, forecast and
         # interpolation each on its own tick when pipelined, all on the refresh tick otherwise
         self.lag = REFRESH_LAG if settings.pipelined_refresh else 0
-        self.carry = [0] * len(CHARGED)  # ns per part charged to the next chunk's first tick
-        self.prepared = False  # whether the next refresh's update and forecast have run
+        self.slices: collections.deque = collections.deque()  # (tick, part, step() -> ns)
         if self.clock.mode == "sensor":
             self.queue = RawQueue(self.clock.raw, settings.Ts)
             self.last_stamp: float | None = None
@@ -148,8 +155,7 @@ class OpenLoop:
             self.cursor = StreamCursor(as_samples(stream))
             self.last = -1  # index of the newest sample given to the reference
             self.next = 0
-        if self.lag and self.next < math.inf:
-            self._prepare(self.next, None)
+        self._schedule(self.next, after=0)
 
     def update(self, tick: int) -> int:
         """Feed the reference the newest sample arrived by ``tick`` (None if none is new).
@@ -167,80 +173,78 @@ class OpenLoop:
         self.last = j if new else self.last
         return spent
 
+    def references(self, c0: int, c1: int, charged: tuple[list[int], ...],
+                   horizons: list) -> Iterator[np.ndarray]:
+        """Yield r_{i+1..i+N} of ticks c0 … c1 − 1, each after the slices due on tick i have
+        run; their ns go to ``charged[part][i − c0]`` (:data:`CHARGED`: the predictor's update
+        with the gate, its learning, its forecast, the interpolation with the guard, the
+        forecast-error bookkeeping), each refresh's ``(tick, points)`` to ``horizons``."""
+        slices, period, first = self.slices, [], c0
+        for i in range(c0, c1):
+            refreshed = False
+            while slices and slices[0][0] <= i:
+                _, part, step = slices.popleft()
+                charged[part][i - c0] += step()
+                if part == self._INTERPOLATE:
+                    refreshed = True
+                    self._refreshed(i)
+            if refreshed or i == c0:
+                # views; later refreshes replace the arrays they view, never change them
+                period, first = self.reference.horizons(i, min(self.next, c1) - i), i
+                if refreshed:
+                    horizons.append((i, period[0]))
+            h = period[i - first]
+            yield self.hold if h is None else h
+
     def chunk(self, c0: int, c1: int) -> tuple[list, tuple[list[int], ...], list]:
-        """References r_{i+1..i+N} of ticks c0 … c1 − 1; the ns charged to each tick for each
-        part of a refresh (:data:`CHARGED`: the predictor's update with the gate, its learning,
-        its forecast, the interpolation with the guard, the forecast-error bookkeeping); each
-        refresh's ``(tick, points)``."""
-        refs, horizons = [], []
+        """:meth:`references` of ticks c0 … c1 − 1 at once: the references, the ns charged to
+        each tick for each part, each refresh's ``(tick, points)``."""
         charged = tuple([0] * (c1 - c0) for _ in CHARGED)
-        for part, carried in zip(charged, self.carry, strict=True):
-            part[0] += carried
-        self.carry = [0] * len(CHARGED)
-        i = c0
-        while i < c1:
-            refreshed = i >= self.next
-            if refreshed:
-                self._refresh(i, (c0, c1, charged))
-            stop = min(self.next, c1)
-            # views; later refreshes replace the arrays they view, never change them
-            period = self.reference.horizons(i, stop - i)
-            if refreshed:
-                horizons.append((i, period[0]))  # the refresh's forecast from tick i
-            refs.extend(self.hold if h is None else h for h in period)
-            i = stop
-        return refs, charged, horizons
+        horizons: list = []
+        return list(self.references(c0, c1, charged, horizons)), charged, horizons
 
-    def _charge(self, tick: int, part: int, ns: int, chunk) -> None:
-        """Add ``ns`` to ``tick``'s time of ``part`` (the chunk's first tick if earlier, the
-        next chunk's if later)."""
-        c0, c1, charged = chunk
-        if tick >= c1:
-            self.carry[part] += ns
-        else:
-            charged[part][max(tick, c0) - c0] += ns
+    def finish(self) -> None:
+        """After the run, untimed: what the last pipelined refresh queued for the ticks after
+        it (its bookkeeping, the next update, learning and forecast), so that the predictor's
+        counters and error statistics hold every sample that arrived in time for a refresh."""
+        if self.lag:
+            for _, part, step in self.slices:
+                if part != self._INTERPOLATE:
+                    step()
+        self.slices.clear()
 
-    def _refresh(self, i: int, chunk) -> None:
-        """The refresh on tick ``i``: its interpolation, then the forecast-error bookkeeping
-        (charged to tick i + 1 when pipelined); its update, learning and forecast ran on the
-        ticks before when pipelined, and the next refresh's are made now, charged to theirs."""
-        if not self.prepared:
-            self._prepare(i, chunk)
-        t_start = clock()
-        self.reference.interpolate()
-        self._charge(i, 3, clock() - t_start, chunk)
-        if self.score is not None:  # bookkeeping only: on the next tick when pipelined
+    def _timed(self, step: Callable[[], object]) -> Callable[[], int]:
+        def run() -> int:
             t_start = clock()
-            self.score()
-            self._charge(i + (1 if self.lag else 0), 4, clock() - t_start, chunk)
-        self.prepared = False
+            step()
+            return clock() - t_start
+        return run
+
+    def _refreshed(self, i: int) -> None:
+        """After the refresh on tick ``i``: queue its bookkeeping (on the next tick when
+        pipelined) and the next refresh."""
+        if self.score is not None:
+            self.slices.append((i + (1 if self.lag else 0), 4, self._timed(self.score)))
         if self.clock.mode == "sensor":
             arrival = self.queue.tick()
             self.next = math.inf if arrival is None else max(arrival + self.lag, i + 1)
         else:
             self.next = i + self.settings.downsample
-        if self.lag and self.next < math.inf:
-            self._prepare(self.next, chunk, after=i)
+        self._schedule(self.next, after=i)
 
-    def _prepare(self, r: int, chunk, after: int | None = None) -> None:
-        """The update, the learning and the forecast of the refresh on tick ``r``: on ticks
-        r − lag, r − lag + 1 and r − 1 (not before the refresh ``after`` they follow), timed
-        and charged to them."""
-        ticks = [r - self.lag, r - self.lag + 1, r - 1]
-        if after is not None:
-            ticks = [max(t, after) for t in ticks]
-        spent = [self._arrivals(ticks[0]) if self.clock.mode == "sensor"
-                 else self.update(ticks[0])]
-        for step in (self.reference.learn, self.reference.predict):
-            t_start = clock()
-            step()
-            spent.append(clock() - t_start)
-        for part, (tick, ns) in enumerate(zip(ticks, spent, strict=True)):
-            if chunk is None:  # before the run: charged to its first tick
-                self.carry[part] += ns
-            else:
-                self._charge(tick, part, ns, chunk)
-        self.prepared = True
+    def _schedule(self, r: float, after: int) -> None:
+        """Queue the update, the learning and the forecast of the refresh on tick ``r`` (ticks
+        r − lag, r − lag + 1 and r − 1 when pipelined, not before ``after``) and the refresh."""
+        if r == math.inf:
+            return
+        ticks = [r - self.lag, r - self.lag + 1, r - 1] if self.lag else [r, r, r]
+        t0, t1, t2 = (max(t, after) for t in ticks)
+        update = ((lambda: self._arrivals(t0)) if self.clock.mode == "sensor"
+                  else (lambda: self.update(t0)))
+        ref = self.reference
+        self.slices.extend(((t0, 0, update), (t1, 1, self._timed(ref.learn)),
+                            (t2, 2, self._timed(ref.predict)),
+                            (r, self._INTERPOLATE, self._timed(ref.interpolate))))
 
     def _arrivals(self, tick: int) -> int:
         """Feed every raw sample arrived by ``tick``, each once, with its own stamp; a gap in
@@ -338,7 +342,7 @@ def run_closed_loop(
     side = make_tick(robot, arm, settings.Ts, plant_settings, mismatch, observer_settings,
                      hardware)
     record = Recorder(robot, settings, truth, anchor, trace_file)
-    chunk = ds * max(1, chunk_ticks // ds)  # ticks per open-loop pass (a multiple of ds)
+    chunk = ds * max(1, chunk_ticks // ds)  # ticks per chunk of records (a multiple of ds)
     with quiet_gc():
         try:
             open_loop = OpenLoop(reference, stream, truth.center, settings, np.tile(anchor, (N, 1)),
@@ -346,11 +350,13 @@ def run_closed_loop(
             u_prev = None
             for c0 in range(0, n, chunk):
                 c1 = min(c0 + chunk, n)
-                refs, charged, horizons = open_loop.chunk(c0, c1)
-                log = record.start_chunk(refs, charged, u_prev)
+                charged, horizons = tuple([0] * (c1 - c0) for _ in CHARGED), []
+                log = record.start_chunk(c1 - c0, charged, u_prev)
+                refs = open_loop.references(c0, c1, charged, horizons)
                 run_ticks(side, controller, c0, c1, refs, charged, log, yardstick, progress)
                 u_prev = log["u_prev"]
                 record.end_chunk(c0, c1, log, horizons)
+            open_loop.finish()
         finally:
             record.close()
     counts = dict(getattr(getattr(reference, "predictor", None), "counts", {}) or {})
@@ -358,15 +364,17 @@ def run_closed_loop(
     return record.result(controller_stats(controller), counts, side.dynamics + note)
 
 
-def run_ticks(side, controller, c0: int, c1: int, refs: list,
+def run_ticks(side, controller, c0: int, c1: int, refs: Iterator[np.ndarray],
               charged: tuple[list[int], ...], log: dict, yardstick=None,
               progress=None) -> None:
     """Steps 4–6 for ticks c0 … c1 − 1, written into row k = i − c0 of the chunk's records ``log``
     (:meth:`~sim.loop.results.Recorder.start_chunk`).
 
-    ``side`` is the robot's side of the tick (:mod:`sim.plant.tick`). The tick's time is from
-    the encoder reading to the commanded torque (its parts: ``sense``, ``controller``,
-    ``actuate``), plus the refresh's parts that the open-loop part ``charged`` it.
+    ``side`` is the robot's side of the tick (:mod:`sim.plant.tick`); ``refs`` yields each
+    tick's reference after the refresh slices of that tick have run
+    (:meth:`OpenLoop.references`). The tick's time is from the encoder reading to the commanded
+    torque (its parts: ``sense``, ``controller``, ``actuate``), plus the slices ``charged`` to
+    it.
     ``yardstick(x̂, r, u_{−1})`` is timed on every 16th tick with the tick's own inputs (the
     least of three calls, :func:`sim.loop.metrics.warm_ns`).
     """
@@ -374,12 +382,13 @@ def run_ticks(side, controller, c0: int, c1: int, refs: list,
     sense, actuate, advance, step = side.sense, side.actuate, side.advance, controller.step
     q_log, tau_mpc_log, tau_log = log["q"], log["tau_mpc"], log["tau"]
     tick_ns, parts, yard_ns = log["tick_ns"], log["parts_ns"], log["yardstick_ns"]
+    ref_log = log["refs"]
     u_prev = log.get("u_prev")
-    for k, i in enumerate(range(c0, c1)):
+    for k, (i, ref) in enumerate(zip(range(c0, c1), refs, strict=True)):
+        ref_log[k] = ref
         t_start = clock()
         x_hat = sense()
         t_sensed = clock()
-        ref = refs[k]
         u = step(x_hat, ref)
         t_stepped = clock()
         tau = actuate(u)

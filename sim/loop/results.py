@@ -115,14 +115,14 @@ class Recorder:
         self.horizon2, self.n_horizons = np.zeros(N), np.zeros(N, dtype=np.int64)
         self.saturated_ticks = 0
 
-    def start_chunk(self, refs: list, charged: tuple[list[int], ...],
+    def start_chunk(self, m: int, charged: tuple[list[int], ...],
                     u_prev: np.ndarray | None) -> dict:
-        """The chunk's per-tick records, preallocated (the loop writes rows, allocates
-        nothing): q, τ_mpc and the commanded τ (m, nv), the tick and its parts [ns], the chunk's
-        references, the yardstick [ns]; the predictor's update and forecast [ns] as the open-loop
-        part charged them; u_{−1} carried from the last chunk."""
-        m, nq, nv = len(refs), self.robot.nq, self.robot.nv
-        return {"q": np.empty((m, nq)), "refs": refs, "tau_mpc": np.empty((m, nv)),
+        """The records of a chunk of ``m`` ticks, preallocated (the loop writes rows, allocates
+        nothing): q, τ_mpc and the commanded τ (m, nv), the tick and its parts [ns], the
+        references, the yardstick [ns]; the refresh slices' ns per part (:data:`CHARGED`),
+        written as they run; u_{−1} carried from the last chunk."""
+        nq, nv = self.robot.nq, self.robot.nv
+        return {"q": np.empty((m, nq)), "refs": [None] * m, "tau_mpc": np.empty((m, nv)),
                 "tau": np.empty((m, nv)), "tick_ns": np.empty(m, dtype=np.int64),
                 "parts_ns": np.empty((m, 3), dtype=np.int64), "yardstick_ns": [],
                 "charged": charged, "u_prev": u_prev}

@@ -36,10 +36,24 @@ def test_simulate_json_document(capsys, tmp_path):
 
 def test_simulate_summary_and_plot(capsys, tmp_path):
     png = tmp_path / "fig.png"
-    code, out, _ = run_cli(capsys, "simulate", "--predictor", "exact", *FAST, "--plot", str(png))
+    code, out, _ = run_cli(capsys, "simulate", "--predictor", "exact", *FAST, "--plot", str(png),
+                           "--host-stalls", "0.05")
     assert code == 0
     assert "tracking error" in out and "controller tick" in out
+    assert "a busy loop of 0.05 s stalled" in out  # the host's stalls beside the tick
     assert png.stat().st_size > 10_000
+
+
+def test_simulate_reports_the_host_stalls_in_gain_ticks(capsys):
+    code, out, _ = run_cli(capsys, "simulate", "--predictor", "exact", *FAST, "--json",
+                           "--host-stalls", "0.05")
+    assert code == 0
+    doc = json.loads(out)
+    stalls = doc["host_stalls"]
+    assert stalls["seconds"] == 0.05 and stalls["floor_us"] == 20.0
+    assert 0 <= stalls["over_50_g"] <= stalls["stalls"]
+    g = doc["gain_tick_us"]["p50"]
+    assert stalls["longest_g"] == pytest.approx(stalls["longest_us"] / g)
 
 
 @pytest.mark.parametrize(
@@ -53,6 +67,7 @@ def test_simulate_summary_and_plot(capsys, tmp_path):
         (["--set", "mpc.nonsense=1"], "nonsense"),
         (["--set", "loop"], "SECTION.KEY=VALUE"),
         (["--duration", "0"], "duration"),
+        (["--host-stalls", "-1"], "--host-stalls"),
     ],
 )
 def test_bad_options_give_one_line_error_and_exit_2(capsys, argv, message):

@@ -108,3 +108,57 @@ def test_a_gap_in_the_time_stamps_is_fed_as_missing_samples():
     missing = [k for k, u in enumerate(spy.updates) if u[1] is None]
     assert missing == [10, 11, 12, 30]
     assert len(spy.updates) == 50  # one slot per 40 ms up to the last sample, 1.96 s
+
+
+class Stamped:
+    """A reference that notes how many control ticks had run when each slice of it ran."""
+
+    def __init__(self, done: list[int]) -> None:
+        self.done, self.calls = done, []
+
+    def _note(self, name: str) -> None:
+        self.calls.append((name, self.done[0]))
+
+    def update(self, tick, z, stamp):
+        self._note("update")
+
+    def learn(self):
+        self._note("learn")
+
+    def predict(self):
+        self._note("predict")
+
+    def interpolate(self):
+        self._note("interpolate")
+
+    def score(self):
+        self._note("score")
+
+    def horizons(self, tick, count):
+        return [None] * count
+
+
+@pytest.mark.parametrize("pipelined", [True, False])
+def test_each_slice_runs_on_its_own_tick_between_the_control_ticks(pipelined):
+    """A refresh on tick r: update, learning, forecast on ticks r − 3, r − 2, r − 1, the
+    interpolation on r, the bookkeeping on r + 1 when pipelined; all on r otherwise. Each runs
+    after the control ticks before its own and before its own tick's, and is charged to it."""
+    settings = LoopSettings(duration=0.1, settling=0.0, pipelined_refresh=pipelined)
+    raw = _raw(257.0, 0.2)
+    done = [0]  # control ticks run so far
+    spy = Stamped(done)
+    open_loop = OpenLoop(spy, raw, np.zeros(3), settings, np.zeros((50, 3)),
+                         predictor_clock(settings, raw))
+    ds, n = settings.downsample, settings.ticks
+    charged = tuple([0] * n for _ in range(5))
+    for _ in open_loop.references(0, n, charged, []):
+        done[0] += 1  # the control tick that uses the reference
+    calls = spy.calls
+    names = ["update", "learn", "predict", "interpolate", "score"]
+    refreshes = [ds * k for k in range(1, n // ds - 1)]  # after the first, within the run
+    for r in refreshes:
+        offsets = [-3, -2, -1, 0, 1] if pipelined else [0, 0, 0, 0, 0]
+        for name, offset in zip(names, offsets, strict=True):
+            assert (name, r + offset) in calls, (name, r, offset)
+            assert charged[names.index(name)][r + offset] > 0
+    assert [c[0] for c in calls[:4]] == names[:4]  # each refresh in the order it always had
