@@ -466,6 +466,10 @@ def format_table(result: dict) -> str:
         f"tracking on the linear model: RMS {result['tracking_rms_mm']:.4f} mm, "
         f"max {result['tracking_max_mm']:.3f} mm (includes the reference jumps)",
     ]
+    if "host_stalls" in result:
+        from rhmpc.studies.run_report import stall_line
+
+        lines.append("host: " + stall_line(result["host_stalls"]))
     if "c_tick_us" in result:
         r = result["ratio_c_tick_to_python"]
         lines += [

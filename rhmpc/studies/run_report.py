@@ -47,7 +47,7 @@ def format_summary(doc: dict, settling_rule: str | None = None) -> str:
     if doc.get("outlier_gate"):
         lines.insert(-1, "  outlier gate     " + _gate_line(doc["outlier_gate"]))
     if doc.get("host_stalls"):
-        lines.append("  host             " + _stall_line(doc["host_stalls"]))
+        lines.append("  host             " + stall_line(doc["host_stalls"]))
     hr = doc.get("heart_rate") or {}
     if hr.get("observations"):  # ω̂ of the EKF/WFLC against the true heart rate
         lock = hr["lock_time_s"]
@@ -83,15 +83,15 @@ def _gate_line(gate: dict) -> str:
             f"{gate.get('gate_unlocked', 0)}, retracted {gate.get('retracted', 0)} samples")
 
 
-def _stall_line(stalls: dict) -> str:
-    """What the host took from a busy loop after the run (:func:`sim.loop.metrics.host_stalls`)."""
+def stall_line(stalls: dict) -> str:
+    """What the host took from a busy loop (:func:`sim.loop.metrics.host_stalls`), in a line."""
     over = next((k for k in stalls if k.startswith("over_")), None)
     longest = f"{stalls['longest_us']:.0f} µs" + (
         f" = {stalls['longest_g']:.0f} g" if "longest_g" in stalls else "")
     return (f"a busy loop of {stalls['seconds']:g} s stalled {stalls['stalls']} times ≥ "
             f"{stalls.get('floor_us', 20):g} µs"
             + (f", {stalls[over]} of them > {over[5:-2]} g" if over else "")
-            + f"; the longest {longest}, a floor under the tick's maximum on this host")
+            + f"; the longest {longest}, a floor under a tick's maximum on this host")
 
 
 def _in_gain_ticks(doc: dict) -> str:

@@ -63,10 +63,14 @@ def test_cli_bench_json_and_table(capsys):
     r = json.loads(capsys.readouterr().out)
     assert {"tick_us", "solve_us", "iterations", "fallbacks", "u0_error_max_frac",
             "gain_tick_us", "exact_tick_us"} <= set(r)
-    assert main(["bench", "--ticks", "100", "--warmup", "0", "--robot", "finger_edu"]) == 0
-    assert "p99" in capsys.readouterr().out
+    assert main(["bench", "--ticks", "100", "--warmup", "0", "--robot", "finger_edu",
+                 "--host-stalls", "0.05"]) == 0
+    out = capsys.readouterr().out
+    assert "p99" in out and "host: a busy loop of 0.05 s stalled" in out
     assert main(["bench", "--ticks", "0"]) == 2
     assert "--ticks" in capsys.readouterr().err
+    assert main(["bench", "--host-stalls", "-2"]) == 2
+    assert "--host-stalls" in capsys.readouterr().err
 
 
 @pytest.mark.skipif(missing_toolchain() is not None, reason=missing_toolchain() or "")
