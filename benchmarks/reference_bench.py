@@ -36,7 +36,8 @@ def refreshes(changes: dict):
     cfg = RunConfig().replace(**changes)
     run, loop = build_run(cfg), cfg.loop
     ref, ds, n = run.reference, loop.downsample, loop.ticks
-    open_loop = OpenLoop(ref, run.stream, run.center, loop, hold=None)  # updates tick −1
+    open_loop = OpenLoop(ref, run.stream, run.center, loop, hold=None)
+    open_loop.finish()  # the first refresh's update, learning and forecast (ticks −3 … −1)
     for i in range(0, n, ds):
         ref.forecast()
         yield i, run, open_loop.cursor

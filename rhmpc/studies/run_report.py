@@ -85,12 +85,12 @@ def _gate_line(gate: dict) -> str:
 
 def stall_line(stalls: dict) -> str:
     """What the host took from a busy loop (:func:`sim.loop.metrics.host_stalls`), in a line."""
-    over = next((k for k in stalls if k.startswith("over_")), None)
+    over = stalls.get("over_g")
     longest = f"{stalls['longest_us']:.0f} µs" + (
         f" = {stalls['longest_g']:.0f} g" if "longest_g" in stalls else "")
     return (f"a busy loop of {stalls['seconds']:g} s stalled {stalls['stalls']} times ≥ "
-            f"{stalls.get('floor_us', 20):g} µs"
-            + (f", {stalls[over]} of them > {over[5:-2]} g" if over else "")
+            f"{stalls['floor_us']:g} µs"
+            + (f", {stalls[f'over_{over:g}_g']} of them > {over:g} g" if over else "")
             + f"; the longest {longest}, a floor under a tick's maximum on this host")
 
 

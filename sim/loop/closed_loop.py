@@ -106,8 +106,9 @@ class RawQueue:
 
 
 class OpenLoop:
-    """Steps 1–3, tick by tick: each slice of a refresh runs on its own tick, between the
-    control ticks, as a controller with one thread runs it; its time is charged to that tick.
+    """Steps 1–3, tick by tick: each refresh slice runs on its own tick, between control ticks.
+
+    As a controller with one thread runs it; its time is charged to that tick.
 
     Parameters
     ----------
@@ -125,16 +126,22 @@ class OpenLoop:
     clock : PredictorClock, optional
         When the predictor runs (:mod:`sim.loop.clock`); default every ``downsample`` ticks.
 
+    Notes
+    -----
     The slices wait in a queue, in the order they run, each with its tick: a refresh on tick r
     queues its forecast-error bookkeeping (tick r + 1 when pipelined), then the next refresh's
     update, learning and forecast (ticks r' − 3, r' − 2, r' − 1, not before r) and its
     interpolation (tick r'). :meth:`references` runs those due on each tick before it yields
-    the tick's reference; a slice held behind an earlier one runs on the next tick with it.
+    the tick's reference. A slice queued behind a later one waits for it: when the next
+    refresh is due on tick r + 1 (a burst of arrivals, or ``downsample`` ≤ 3), its update,
+    learning and forecast run on tick r + 1 after the bookkeeping, up to five slices on one
+    tick. The order of the calls, hence every result, is that of the refresh run at once.
     """
 
     #: The most missing samples filled before a sample after a gap in its time stamps.
     MAX_FILL = 50
-    _INTERPOLATE = 3  # the part (index in CHARGED) whose slice is a refresh
+    # the parts of a refresh (indices into CHARGED)
+    _UPDATE, _LEARN, _FORECAST, _INTERPOLATE, _SCORE = range(len(CHARGED))
 
     def __init__(self, reference, stream, center: np.ndarray, settings: LoopSettings,
                  hold: np.ndarray | None, clock: PredictorClock | None = None) -> None:
@@ -155,7 +162,7 @@ class OpenLoop:
             self.cursor = StreamCursor(as_samples(stream))
             self.last = -1  # index of the newest sample given to the reference
             self.next = 0
-        self._schedule(self.next, after=0)
+        self._schedule(self.next, after=-self.lag)  # run on tick 0 when due before it
 
     def update(self, tick: int) -> int:
         """Feed the reference the newest sample arrived by ``tick`` (None if none is new).
@@ -197,16 +204,18 @@ class OpenLoop:
             yield self.hold if h is None else h
 
     def chunk(self, c0: int, c1: int) -> tuple[list, tuple[list[int], ...], list]:
-        """:meth:`references` of ticks c0 … c1 − 1 at once: the references, the ns charged to
-        each tick for each part, each refresh's ``(tick, points)``."""
+        """:meth:`references` of ticks c0 … c1 − 1 at once, without control ticks between
+        them (for a study of the open loop alone): the references, the ns charged to each tick
+        for each part, each refresh's ``(tick, points)``."""
         charged = tuple([0] * (c1 - c0) for _ in CHARGED)
         horizons: list = []
         return list(self.references(c0, c1, charged, horizons)), charged, horizons
 
     def finish(self) -> None:
-        """After the run, untimed: what the last pipelined refresh queued for the ticks after
-        it (its bookkeeping, the next update, learning and forecast), so that the predictor's
-        counters and error statistics hold every sample that arrived in time for a refresh."""
+        """Run, untimed, what a pipelined refresh queued past the last tick run (its
+        bookkeeping, the next refresh's update, learning and forecast; not an interpolation):
+        a pipelined refresh makes them as soon as it has placed its points. Without the
+        pipeline nothing is made ahead, and nothing runs."""
         if self.lag:
             for _, part, step in self.slices:
                 if part != self._INTERPOLATE:
@@ -224,7 +233,8 @@ class OpenLoop:
         """After the refresh on tick ``i``: queue its bookkeeping (on the next tick when
         pipelined) and the next refresh."""
         if self.score is not None:
-            self.slices.append((i + (1 if self.lag else 0), 4, self._timed(self.score)))
+            self.slices.append((i + (1 if self.lag else 0), self._SCORE,
+                                self._timed(self.score)))
         if self.clock.mode == "sensor":
             arrival = self.queue.tick()
             self.next = math.inf if arrival is None else max(arrival + self.lag, i + 1)
@@ -242,8 +252,8 @@ class OpenLoop:
         update = ((lambda: self._arrivals(t0)) if self.clock.mode == "sensor"
                   else (lambda: self.update(t0)))
         ref = self.reference
-        self.slices.extend(((t0, 0, update), (t1, 1, self._timed(ref.learn)),
-                            (t2, 2, self._timed(ref.predict)),
+        self.slices.extend(((t0, self._UPDATE, update), (t1, self._LEARN, self._timed(ref.learn)),
+                            (t2, self._FORECAST, self._timed(ref.predict)),
                             (r, self._INTERPOLATE, self._timed(ref.interpolate))))
 
     def _arrivals(self, tick: int) -> int:
@@ -307,10 +317,11 @@ def run_closed_loop(
         ``step(x, ref) -> τ_mpc`` and a ``stats`` mapping
         (:class:`rhmpc.control.mpc.RecedingHorizonMPC`).
     reference
-        ``place(origin)``, the two halves of a refresh ``update(tick, z, stamp)`` and
-        ``forecast()``, and ``horizons(tick, count)`` → the (N, 3) points of ticks tick … tick +
-        count − 1, None before the first sample (:mod:`rhmpc.control.reference`); the loop
-        places it at the workspace anchor before the run.
+        ``place(origin)``, the slices of a refresh ``update(tick, z, stamp)``, ``learn()``,
+        ``predict()``, ``interpolate()`` and optionally ``score()``, and ``horizons(tick,
+        count)`` → the (N, 3) points of ticks tick … tick + count − 1, None before the first
+        sample (:mod:`rhmpc.control.reference`); the loop places it at the workspace anchor
+        before the run.
     truth, center
         The centred POI truth over at least ``ticks + horizon + 1`` ticks: an array from
         :func:`poi_truth` with its ``center``, or an object with ``window(i0, i1)``, ``n_ticks``
@@ -330,7 +341,8 @@ def run_closed_loop(
         with the tick's own inputs, so that tick times can be stated as ratios to it measured in
         the same run (``LoopResult.yardstick_us``); not part of the tick, its result is not used.
     chunk_ticks
-        Ticks per chunk (rounded down to a multiple of ``downsample``, at least one period).
+        Ticks per chunk of records (rounded down to a multiple of ``downsample``, at least one
+        period).
     """
     n, N, ds = settings.ticks, settings.horizon, settings.downsample
     if not hasattr(truth, "window"):

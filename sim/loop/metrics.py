@@ -22,7 +22,11 @@ def warm_ns(fn: Callable[..., object], *args, repeats: int = 3) -> int:
     return best
 
 
-def host_stalls(seconds: float, floor_ns: int = 20_000,
+#: The shortest gap :func:`host_stalls` keeps [ns]: longer than any pause of the loop itself.
+STALL_FLOOR_NS = 20_000
+
+
+def host_stalls(seconds: float, floor_ns: int = STALL_FLOOR_NS,
                 clock: Callable[[], int] = time.perf_counter_ns) -> np.ndarray:
     """The host's stalls: every gap of at least ``floor_ns`` between consecutive readings of
     ``clock`` [ns] in a loop that does nothing else for ``seconds``; returns the gaps [ns].
@@ -47,7 +51,7 @@ def host_stalls(seconds: float, floor_ns: int = 20_000,
 
 
 def stall_summary(gaps_ns: np.ndarray, seconds: float, gain_us: float | None = None,
-                  over_g: float = 50.0, floor_ns: int = 20_000) -> dict:
+                  over_g: float = 50.0, floor_ns: int = STALL_FLOOR_NS) -> dict:
     """:func:`host_stalls`' gaps (of at least ``floor_ns``) as a document: how many, how many
     longer than ``over_g`` gain ticks, and the longest, in µs and (given ``gain_us``) in g."""
     gaps_us = np.asarray(gaps_ns, dtype=float) / 1e3
@@ -56,6 +60,7 @@ def stall_summary(gaps_ns: np.ndarray, seconds: float, gain_us: float | None = N
            "longest_us": longest}
     if gain_us is not None and gain_us > 0:
         doc["longest_g"] = longest / gain_us
+        doc["over_g"] = float(over_g)  # the threshold of the count below [g]
         doc[f"over_{over_g:g}_g"] = int(np.count_nonzero(gaps_us > over_g * gain_us))
     return doc
 

@@ -114,13 +114,14 @@ class Stamped:
     """A reference that notes how many control ticks had run when each slice of it ran."""
 
     def __init__(self, done: list[int]) -> None:
-        self.done, self.calls = done, []
+        self.done, self.calls, self.updates = done, [], []
 
     def _note(self, name: str) -> None:
         self.calls.append((name, self.done[0]))
 
     def update(self, tick, z, stamp):
         self._note("update")
+        self.updates.append((tick, z))
 
     def learn(self):
         self._note("learn")
@@ -138,27 +139,64 @@ class Stamped:
         return [None] * count
 
 
-@pytest.mark.parametrize("pipelined", [True, False])
-def test_each_slice_runs_on_its_own_tick_between_the_control_ticks(pipelined):
-    """A refresh on tick r: update, learning, forecast on ticks r − 3, r − 2, r − 1, the
-    interpolation on r, the bookkeeping on r + 1 when pipelined; all on r otherwise. Each runs
-    after the control ticks before its own and before its own tick's, and is charged to it."""
-    settings = LoopSettings(duration=0.1, settling=0.0, pipelined_refresh=pipelined)
-    raw = _raw(257.0, 0.2)
+def _drive(rate: float, pipelined: bool, latency: float = 0.0, duration: float = 0.3):
+    """Run an open loop over a stamped spy, one control tick per reference."""
+    settings = LoopSettings(duration=duration, settling=0.0, pipelined_refresh=pipelined)
+    raw = _raw(rate, 0.5, latency=latency)
     done = [0]  # control ticks run so far
     spy = Stamped(done)
     open_loop = OpenLoop(spy, raw, np.zeros(3), settings, np.zeros((50, 3)),
                          predictor_clock(settings, raw))
-    ds, n = settings.downsample, settings.ticks
+    n = settings.ticks
     charged = tuple([0] * n for _ in range(5))
     for _ in open_loop.references(0, n, charged, []):
         done[0] += 1  # the control tick that uses the reference
-    calls = spy.calls
-    names = ["update", "learn", "predict", "interpolate", "score"]
-    refreshes = [ds * k for k in range(1, n // ds - 1)]  # after the first, within the run
-    for r in refreshes:
-        offsets = [-3, -2, -1, 0, 1] if pipelined else [0, 0, 0, 0, 0]
-        for name, offset in zip(names, offsets, strict=True):
-            assert (name, r + offset) in calls, (name, r, offset)
-            assert charged[names.index(name)][r + offset] > 0
-    assert [c[0] for c in calls[:4]] == names[:4]  # each refresh in the order it always had
+    return spy, open_loop, charged, n
+
+
+NAMES = ["update", "learn", "predict", "interpolate", "score"]
+
+
+@pytest.mark.parametrize("pipelined", [True, False])
+def test_each_slice_runs_on_its_own_tick_between_the_control_ticks(pipelined):
+    """A refresh on tick r: update, learning, forecast on ticks r − 3, r − 2, r − 1, the
+    interpolation on r, the bookkeeping on r + 1 when pipelined; all on r otherwise. Each runs
+    after the control ticks before its own, before its own tick's, and is charged to it."""
+    spy, _, charged, n = _drive(257.0, pipelined)  # the downsample clock: every 15 ticks
+    offsets = [-3, -2, -1, 0, 1] if pipelined else [0, 0, 0, 0, 0]
+    for r in range(15, n - 15, 15):
+        for part, (name, offset) in enumerate(zip(NAMES, offsets, strict=True)):
+            assert (name, r + offset) in spy.calls, (name, r, offset)
+            assert charged[part][r + offset] > 0
+    # the first refresh, on tick 0: what falls before the run runs on tick 0, as it always did
+    first = [name for name, done in spy.calls if done == 0]
+    assert first == NAMES[:4] + ([] if pipelined else ["score"])
+    assert spy.updates[0] == ((-3, None) if pipelined else (0, spy.updates[0][1]))
+
+
+def test_on_the_sensor_clock_each_refresh_follows_its_sample_by_the_pipeline():
+    """25 Hz, 12 ms latency: the update on the tick the sample arrives, the interpolation
+    three ticks later, every refresh's slices in order."""
+    spy, _, _, _ = _drive(25.0, True, latency=0.012)
+    updates = [done for name, done in spy.calls if name == "update"]
+    refreshes = [done for name, done in spy.calls if name == "interpolate"]
+    assert len(updates) == len(refreshes) >= 7
+    assert [r - u for u, r in zip(updates, refreshes, strict=True)] == [3] * len(updates)
+    assert updates[0] == arrival_tick(0.012, TS)
+    order = [name for name, _ in spy.calls if name != "score"]
+    assert order == NAMES[:4] * len(updates)
+
+
+@pytest.mark.parametrize("pipelined", [True, False])
+def test_after_the_run_finish_makes_what_a_pipelined_refresh_made_ahead(pipelined):
+    # 601 ticks: the last refresh is on the last tick, 600
+    spy, open_loop, _, n = _drive(257.0, pipelined, duration=0.3005)
+    assert n == 601 and ("interpolate", 600) in spy.calls
+    before = len(spy.calls)
+    open_loop.finish()
+    after = [name for name, _ in spy.calls[before:]]
+    if pipelined:  # the last refresh's bookkeeping and the next update, learning, forecast
+        assert after == ["score", "update", "learn", "predict"]
+    else:
+        assert after == []
+    assert not open_loop.slices

@@ -30,7 +30,8 @@ def test_host_stalls_of_a_host_that_never_stalls_is_empty():
 def test_stall_summary_in_microseconds_and_gain_ticks():
     doc = stall_summary(np.array([20_000, 150_000, 300_000]), 1.0, gain_us=2.0)
     assert doc == {"seconds": 1.0, "floor_us": 20.0, "stalls": 3, "longest_us": 300.0,
-                   "longest_g": 150.0, "over_50_g": 2}
+                   "longest_g": 150.0, "over_g": 50.0, "over_50_g": 2}
+    assert stall_summary(np.array([150_000]), 1.0, gain_us=2.0, over_g=80.0)["over_80_g"] == 0
     assert stall_summary(np.array([], dtype=np.int64), 0.5) == {
         "seconds": 0.5, "floor_us": 20.0, "stalls": 0, "longest_us": 0.0}
 
