@@ -6,6 +6,7 @@ import argparse
 import json
 import sys
 
+from rhmpc.cli.simulate import add_host_stalls_option, check_host_stalls, host_stalls_document
 from rhmpc.control.settings import MPCSettings
 from rhmpc.errors import UsageError
 from rhmpc.studies.bench import format_table, run_bench
@@ -37,9 +38,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "cmake and a C compiler) next to the Python one, timed inside C and from Python",
     )
     p.add_argument("--gc", action="store_true", help="leave the garbage collector on in the loop")
-    p.add_argument("--host-stalls", type=float, default=0.0, metavar="SECONDS",
-                   help="after the ticks, time a busy loop for SECONDS and report the host's "
-                   "stalls (sim.loop.metrics.host_stalls; default 0: off)")
+    add_host_stalls_option(p, "the ticks")
     p.add_argument("--json", action="store_true", help="print machine-readable JSON")
     p.set_defaults(func=run)
 
@@ -51,8 +50,7 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--warmup must be >= 0, got {args.warmup}")
     if args.jump_mm < 0 or args.jump_every < 0:
         raise UsageError("--jump-mm and --jump-every must be >= 0")
-    if not 0.0 <= args.host_stalls <= 600.0:
-        raise UsageError(f"--host-stalls must be between 0 and 600 s, got {args.host_stalls:g}")
+    check_host_stalls(args.host_stalls)
     if args.controller == "c":
         from rhmpc.control.export import missing_toolchain
 
@@ -72,10 +70,8 @@ def run(args: argparse.Namespace) -> int:
     if sys.stderr.isatty():
         print(file=sys.stderr)
     if args.host_stalls > 0:
-        from sim.loop.metrics import host_stalls, stall_summary
-
-        result["host_stalls"] = stall_summary(host_stalls(args.host_stalls), args.host_stalls,
-                                              result["gain_tick_us"]["p50"])
+        result["host_stalls"] = host_stalls_document(args.host_stalls,
+                                                     result["gain_tick_us"]["p50"])
     if args.json:
         print(json.dumps(result, indent=2))
     else:

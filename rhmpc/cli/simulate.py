@@ -76,11 +76,35 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--plot", metavar="FILE.png", help="tracking figure (Tuna Figs 10-11 style)")
     p.add_argument("--trace", metavar="FILE.npz", help="write every tick to an NPZ file as the "
                    "run goes (chunked; read it with sim.loop.trace.read_trace)")
+    add_host_stalls_option(p, "the run")
+    p.set_defaults(func=run)
+
+
+#: The longest busy loop ``--host-stalls`` runs [s].
+MAX_HOST_STALLS_S = 600.0
+
+
+def add_host_stalls_option(p: argparse.ArgumentParser, after: str) -> None:
+    """``--host-stalls SECONDS``: the host's stalls, timed after ``after``."""
     p.add_argument("--host-stalls", type=float, default=0.0, metavar="SECONDS",
-                   help="after the run, time a busy loop for SECONDS and report the host's "
+                   help=f"after {after}, time a busy loop for SECONDS and report the host's "
                    "stalls beside the tick's maximum (sim.loop.metrics.host_stalls; default 0: "
                    "off)")
-    p.set_defaults(func=run)
+
+
+def check_host_stalls(seconds: float) -> None:
+    """A one-line error for a ``--host-stalls`` outside 0 … :data:`MAX_HOST_STALLS_S`."""
+    if not 0.0 <= seconds <= MAX_HOST_STALLS_S:
+        raise UsageError(f"--host-stalls must be between 0 and {MAX_HOST_STALLS_S:g} s, "
+                         f"got {seconds:g}")
+
+
+def host_stalls_document(seconds: float, gain_us: float | None) -> dict:
+    """The host's stalls in a busy loop of ``seconds``, in µs and in gain ticks of ``gain_us``
+    (:func:`sim.loop.metrics.stall_summary`)."""
+    from sim.loop.metrics import host_stalls, stall_summary
+
+    return stall_summary(host_stalls(seconds), seconds, gain_us)
 
 
 def add_recording_options(p: argparse.ArgumentParser) -> None:
@@ -191,8 +215,7 @@ def run(args: argparse.Namespace) -> int:
     if trace and not Path(trace).resolve().parent.is_dir():
         raise UsageError(f"--trace {trace}: no such directory")
     stalls = getattr(args, "host_stalls", 0.0)
-    if not 0.0 <= stalls <= 600.0:
-        raise UsageError(f"--host-stalls must be between 0 and 600 s, got {stalls:g}")
+    check_host_stalls(stalls)
     try:
         from rhmpc.control.yardstick import GainTick  # timed in the same run
 
@@ -203,10 +226,8 @@ def run(args: argparse.Namespace) -> int:
             raise UsageError(str(exc)) from None
         raise
     if stalls > 0:
-        from sim.loop.metrics import host_stalls, stall_summary
-
         g = (doc.get("gain_tick_us") or {}).get("p50")
-        doc["host_stalls"] = stall_summary(host_stalls(stalls), stalls, g)
+        doc["host_stalls"] = host_stalls_document(stalls, g)
     if args.out:
         Path(args.out).write_text(json.dumps(doc, indent=2) + "\n")
     if args.plot:
