@@ -91,6 +91,7 @@ def document(config: RunConfig, run: Run, result: LoopResult, wall: float,
         "wall_s": wall,
         "real_time_factor": config.loop.duration / wall,
         "plant_dynamics": result.plant_dynamics,
+        "tick_loop": result.tick_loop,
         "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,  # Linux: KiB
         "settings": config.to_dict(),
         "versions": versions(),

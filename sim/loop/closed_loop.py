@@ -47,7 +47,7 @@ import numpy as np
 from robots import LinearArm, Robot
 from sim.loop.clock import PredictorClock, arrival_tick, predictor_clock
 from sim.loop.metrics import warm_ns
-from sim.loop.results import CHARGED, LoopResult, Recorder
+from sim.loop.results import CHARGED, YARDSTICK_EVERY, LoopResult, Recorder
 from sim.loop.settings import LoopSettings
 from sim.loop.streams import BLOCK, ArrayTruth, SampleSource, StreamCursor, as_samples
 from sim.plant import HardwareSettings, ModelMismatch, ObserverSettings, PlantSettings
@@ -180,14 +180,16 @@ class OpenLoop:
         self.last = j if new else self.last
         return spent
 
-    def references(self, c0: int, c1: int, charged: tuple[list[int], ...],
-                   horizons: list) -> Iterator[np.ndarray]:
-        """Yield r_{i+1..i+N} of ticks c0 … c1 − 1, each after the slices due on tick i have
-        run; their ns go to ``charged[part][i − c0]`` (:data:`CHARGED`: the predictor's update
-        with the gate, its learning, its forecast, the interpolation with the guard, the
-        forecast-error bookkeeping), each refresh's ``(tick, points)`` to ``horizons``."""
-        slices, period, first = self.slices, [], c0
-        for i in range(c0, c1):
+    def segments(self, c0: int, c1: int, charged: tuple[list[int], ...],
+                 horizons: list) -> Iterator[tuple[int, list[np.ndarray]]]:
+        """Yield ``(i, refs)`` over ticks c0 … c1 − 1, in order: the references r_{i+1..i+N} of
+        ticks i … i + len(refs) − 1, after the slices due on tick i have run; none is due on the
+        others, so their control ticks may run back to back. The slices' ns go to
+        ``charged[part][i − c0]`` (:data:`CHARGED`: the predictor's update with the gate, its
+        learning, its forecast, the interpolation with the guard, the forecast-error
+        bookkeeping), each refresh's ``(tick, points)`` to ``horizons``."""
+        slices, period, first, i, hold = self.slices, [], c0, c0, self.hold
+        while i < c1:
             refreshed = False
             while slices and slices[0][0] <= i:
                 _, part, step = slices.popleft()
@@ -200,8 +202,16 @@ class OpenLoop:
                 period, first = self.reference.horizons(i, min(self.next, c1) - i), i
                 if refreshed:
                     horizons.append((i, period[0]))
-            h = period[i - first]
-            yield self.hold if h is None else h
+            j = min(slices[0][0], c1) if slices else c1  # the next tick with a slice
+            yield i, [hold if h is None else h for h in period[i - first : j - first]]
+            i = j
+
+    def references(self, c0: int, c1: int, charged: tuple[list[int], ...],
+                   horizons: list) -> Iterator[np.ndarray]:
+        """:meth:`segments` tick by tick: r_{i+1..i+N} of ticks c0 … c1 − 1, each after the
+        slices due on tick i have run."""
+        for _, refs in self.segments(c0, c1, charged, horizons):
+            yield from refs
 
     def chunk(self, c0: int, c1: int) -> tuple[list, tuple[list[int], ...], list]:
         """:meth:`references` of ticks c0 … c1 − 1 at once, without control ticks between
@@ -359,13 +369,17 @@ def run_closed_loop(
         try:
             open_loop = OpenLoop(reference, stream, truth.center, settings, np.tile(anchor, (N, 1)),
                                  predictor_clock(settings, stream))
+            compiled, loop = compiled_ticks(controller, side, settings)
             u_prev = None
             for c0 in range(0, n, chunk):
                 c1 = min(c0 + chunk, n)
                 charged, horizons = tuple([0] * (c1 - c0) for _ in CHARGED), []
                 log = record.start_chunk(c1 - c0, charged, u_prev)
-                refs = open_loop.references(c0, c1, charged, horizons)
-                run_ticks(side, controller, c0, c1, refs, charged, log, yardstick, progress)
+                segments = open_loop.segments(c0, c1, charged, horizons)
+                if compiled is not None:
+                    compiled.run(c0, segments, log, yardstick, progress)
+                else:
+                    run_ticks(side, controller, c0, segments, log, yardstick, progress)
                 u_prev = log["u_prev"]
                 record.end_chunk(c0, c1, log, horizons)
             open_loop.finish()
@@ -373,51 +387,115 @@ def run_closed_loop(
             record.close()
     counts = dict(getattr(getattr(reference, "predictor", None), "counts", {}) or {})
     note = f" ({side.dynamics_note})" if side.dynamics_note else ""
-    return record.result(controller_stats(controller), counts, side.dynamics + note)
+    return record.result(controller_stats(controller), counts, side.dynamics + note, loop)
 
 
-def run_ticks(side, controller, c0: int, c1: int, refs: Iterator[np.ndarray],
-              charged: tuple[list[int], ...], log: dict, yardstick=None,
-              progress=None) -> None:
-    """Steps 4–6 for ticks c0 … c1 − 1, written into row k = i − c0 of the chunk's records ``log``
-    (:meth:`~sim.loop.results.Recorder.start_chunk`).
+def compiled_ticks(controller, side, settings: LoopSettings) -> tuple[CompiledTicks | None, str]:
+    """The compiled ticks where the controller and the robot's side are both compiled and
+    ``settings.compiled_ticks`` allows them, and the loop's name for the run's document:
+    ``"compiled"``, or ``"python"`` with the reason."""
+    control = getattr(controller, "compiled_tick", None)
+    if not settings.compiled_ticks:
+        why = "loop.compiled_ticks = false"
+    elif control is None:
+        why = "the controller has no compiled tick"
+    elif not hasattr(side, "run_ticks"):
+        why = f"the plant runs on {side.dynamics}"
+    else:
+        return CompiledTicks(side, control, settings.horizon), "compiled"
+    return None, f"python ({why})"
 
-    ``side`` is the robot's side of the tick (:mod:`sim.plant.tick`); ``refs`` yields each
-    tick's reference after the refresh slices of that tick have run
-    (:meth:`OpenLoop.references`). The tick's time is from the encoder reading to the commanded
-    torque (its parts: ``sense``, ``controller``, ``actuate``), plus the slices ``charged`` to
-    it.
-    ``yardstick(x̂, r, u_{−1})`` is timed on every 16th tick with the tick's own inputs (the
-    least of three calls, :func:`sim.loop.metrics.warm_ns`).
+
+def run_ticks(side, controller, c0: int, segments: Iterator[tuple[int, list[np.ndarray]]],
+              log: dict, yardstick=None, progress=None) -> None:
+    """Steps 4–6 in Python, for the ticks of ``segments`` (:meth:`OpenLoop.segments`, whose
+    refresh slices run as it is iterated), written into row k = i − c0 of the chunk's records
+    ``log`` (:meth:`~sim.loop.results.Recorder.start_chunk`).
+
+    ``side`` is the robot's side of the tick (:mod:`sim.plant.tick`). The tick's time is from
+    the encoder reading to the commanded torque (its parts: ``sense``, ``controller``,
+    ``actuate``), plus the slices charged to it. ``yardstick(x̂, r, u_{−1})`` is timed on every
+    16th tick with the tick's own inputs (the least of three calls,
+    :func:`sim.loop.metrics.warm_ns`).
     """
-    updates, learning, forecasts, interpolations, scoring = charged
     sense, actuate, advance, step = side.sense, side.actuate, side.advance, controller.step
     q_log, tau_mpc_log, tau_log = log["q"], log["tau_mpc"], log["tau"]
-    tick_ns, parts, yard_ns = log["tick_ns"], log["parts_ns"], log["yardstick_ns"]
-    ref_log = log["refs"]
-    u_prev = log.get("u_prev")
-    for k, (i, ref) in enumerate(zip(range(c0, c1), refs, strict=True)):
-        ref_log[k] = ref
-        t_start = clock()
-        x_hat = sense()
-        t_sensed = clock()
-        u = step(x_hat, ref)
-        t_stepped = clock()
-        tau = actuate(u)
-        t_end = clock()
-        tick_ns[k] = (t_end - t_start + updates[k] + learning[k] + forecasts[k]
-                      + interpolations[k] + scoring[k])
-        parts[k] = (t_sensed - t_start, t_stepped - t_sensed, t_end - t_stepped)
-        if yardstick is not None and i % 16 == 7 and u_prev is not None:
-            yard_ns.append(warm_ns(yardstick, x_hat, ref, u_prev))
-        u_prev = u
-        tau_mpc_log[k] = u
-        tau_log[k] = tau
-        advance()
-        q_log[k] = side.q
-        if progress is not None and (i + 1) % 2000 == 0:
-            progress(i + 1)
+    parts, ref0, yard_ns = log["parts_ns"], log["ref0"], log["yardstick_ns"]
+    u_prev = log["u_prev"]
+    for i0, refs in segments:
+        k0 = i0 - c0
+        ref0[k0 : k0 + len(refs)] = [r[0] for r in refs]
+        for k, ref in enumerate(refs, k0):
+            t_start = clock()
+            x_hat = sense()
+            t_sensed = clock()
+            u = step(x_hat, ref)
+            t_stepped = clock()
+            tau = actuate(u)
+            t_end = clock()
+            parts[k] = (t_sensed - t_start, t_stepped - t_sensed, t_end - t_stepped)
+            if yardstick is not None and (c0 + k) % YARDSTICK_EVERY == 7 and u_prev is not None:
+                yard_ns.append(warm_ns(yardstick, x_hat, ref, u_prev))
+            u_prev = u
+            tau_mpc_log[k] = u
+            tau_log[k] = tau
+            advance()
+            q_log[k] = side.q
+        _report(progress, i0, i0 + len(refs))
     log["u_prev"] = u_prev
+
+
+class CompiledTicks:
+    """Steps 4–6 in C: the control ticks between two refresh slices in one call.
+
+    A compiled controller (its ``compiled_tick``, :class:`rhmpc.control.export.CompiledTick`)
+    on the compiled robot side (:meth:`sim.plant.native.NativeTick.run_ticks`): the same C
+    functions in the same order as :func:`run_ticks` calls them through Python, hence the same
+    results, timed at the same places; what is gone is the interpreter between them, as in a
+    deployed controller. The refresh slices still run in Python, each on its tick, between
+    two calls. The yardstick is timed after each call, on the inputs the C ticks kept.
+    """
+
+    #: The most ticks of one call (the references of a call are copied into one array).
+    CAPACITY = 256
+
+    def __init__(self, side, control, horizon: int) -> None:
+        self.side, self.control = side, control
+        self.refs = np.empty((self.CAPACITY, horizon, 3))
+
+    def run(self, c0: int, segments: Iterator[tuple[int, list[np.ndarray]]], log: dict,
+            yardstick=None, progress=None) -> None:
+        """As :func:`run_ticks`, for the chunk whose first tick is c0."""
+        phase = (7 - c0) % YARDSTICK_EVERY
+        self.side.bind(self.control, log, self.refs, YARDSTICK_EVERY, phase)
+        u_first = self.control.take_u_prev()
+        if u_first is not None:
+            u_first = u_first.ctypes.data
+        for i0, refs in segments:
+            for s in range(0, len(refs), self.CAPACITY):
+                part, k0 = refs[s : s + self.CAPACITY], i0 - c0 + s
+                np.stack(part, out=self.refs[: len(part)])
+                self.side.run_ticks(k0, len(part), u_first)
+                u_first = None
+                if yardstick is not None:
+                    self._yardstick(yardstick, log, k0, len(part), phase)
+            _report(progress, i0, i0 + len(refs))
+        log["u_prev"] = log["tau_mpc"][-1].copy()
+
+    def _yardstick(self, yardstick, log: dict, k0: int, count: int, phase: int) -> None:
+        """The yardstick on the kept x̂ of rows k0 … k0 + count − 1, their references and u_{−1}."""
+        every, tau_mpc = YARDSTICK_EVERY, log["tau_mpc"]
+        for k in range(k0 + (phase - k0) % every, k0 + count, every):
+            u_prev = tau_mpc[k - 1] if k > 0 else log["u_prev"]
+            if u_prev is not None:
+                x_hat = log["x_saved"][k // every]
+                log["yardstick_ns"].append(warm_ns(yardstick, x_hat, self.refs[k - k0], u_prev))
+
+
+def _report(progress, i0: int, i1: int) -> None:
+    """``progress(done)`` at each multiple of 2000 ticks in (i0, i1], once, with the last."""
+    if progress is not None and i1 // 2000 > i0 // 2000:
+        progress(i1 // 2000 * 2000)
 
 
 def controller_stats(controller) -> dict:

@@ -24,6 +24,8 @@ CHARGED = ("predictor_update", "predictor_learn", "forecast", "interpolation", "
 #: The parts of a control tick, timed separately: the encoders and the observer, the
 #: controller, the cancellation (the commanded torque), and the refresh slices (CHARGED).
 TICK_PARTS = ("sense", "controller", "actuate", *CHARGED)
+#: The yardstick is timed on the ticks i ≡ 7 (mod this) (``run_closed_loop(yardstick=…)``).
+YARDSTICK_EVERY = 16
 
 
 def embed3(p: np.ndarray) -> np.ndarray:
@@ -63,6 +65,8 @@ class LoopResult:
     saturated_ticks: int = 0
     predictor_counts: dict = field(default_factory=dict)
     plant_dynamics: str = "pinocchio"  # who integrated the plant (and why not native)
+    #: who ran the control ticks: "compiled" (C, between the refresh slices), or "python (why)"
+    tick_loop: str = "python"
 
     time = property(lambda self: self.trace["time"])  # [s], the instant of the state (i+1)·Ts
     ee = property(lambda self: self.trace["ee"])  # (n, 3) end-effector position [m]
@@ -118,19 +122,22 @@ class Recorder:
     def start_chunk(self, m: int, charged: tuple[list[int], ...],
                     u_prev: np.ndarray | None) -> dict:
         """The records of a chunk of ``m`` ticks, preallocated (the loop writes rows, allocates
-        nothing): q, τ_mpc and the commanded τ (m, nv), the tick and its parts [ns], the
-        references, the yardstick [ns]; the refresh slices' ns per part (:data:`CHARGED`),
-        written as they run; u_{−1} carried from the last chunk."""
+        nothing): q, τ_mpc and the commanded τ (m, nv), the tick's parts [ns] (m, 3), the first
+        reference point (m, 3), x̂ where the yardstick needs it (compiled ticks), the yardstick
+        [ns]; the refresh slices' ns per part (:data:`CHARGED`), written as they run; u_{−1}
+        carried from the last chunk."""
         nq, nv = self.robot.nq, self.robot.nv
-        return {"q": np.empty((m, nq)), "refs": [None] * m, "tau_mpc": np.empty((m, nv)),
-                "tau": np.empty((m, nv)), "tick_ns": np.empty(m, dtype=np.int64),
-                "parts_ns": np.empty((m, 3), dtype=np.int64), "yardstick_ns": [],
+        return {"q": np.empty((m, nq)), "ref0": np.empty((m, 3)), "tau_mpc": np.empty((m, nv)),
+                "tau": np.empty((m, nv)), "parts_ns": np.empty((m, 3), dtype=np.int64),
+                "x_saved": np.empty((m // YARDSTICK_EVERY + 1, 2 * nv)), "yardstick_ns": [],
                 "charged": charged, "u_prev": u_prev}
 
     def end_chunk(self, c0: int, c1: int, log, horizons: list) -> None:
         settings, N = self.settings, self.settings.horizon
-        q_log, ref0, tau_mpc, tau_cmd = log["q"], log["refs"], log["tau_mpc"], log["tau"]
-        tick_ns = log["tick_ns"]
+        q_log, ref0, tau_mpc, tau_cmd = log["q"], log["ref0"], log["tau_mpc"], log["tau"]
+        parts = log["parts_ns"]
+        charged = np.array(log["charged"], dtype=np.int64)  # (parts, m)
+        tick_ns = parts.sum(axis=1) + charged.sum(axis=0)  # the control tick and its slices
         self.yardstick.add(np.array(log["yardstick_ns"], dtype=np.int64))
         m = c1 - c0
         if self.chain is not None:
@@ -149,12 +156,11 @@ class Recorder:
         s = max(settings.settling_ticks - c0, 0)
         self.tracking.add(ee[s:] - poi[s:], tau_mpc[s:], tau[s:])
         self.ticks.add(tick_ns[s:])
-        parts = log["parts_ns"]
         for k, name in enumerate(("sense", "controller", "actuate")):
             self.parts[name].add(parts[s:, k])
         self.control.add(parts[s:].sum(axis=1))
-        for charged, name in zip(log["charged"], CHARGED, strict=True):
-            self.parts[name].add(np.array(charged, dtype=np.int64)[s:])
+        for row, name in zip(charged, CHARGED, strict=True):
+            self.parts[name].add(row[s:])
         # horizon prediction error per lead tick, refreshes after settling
         for tick, h in horizons:
             if tick >= settings.settling_ticks and h is not None \
@@ -165,7 +171,7 @@ class Recorder:
                 self.n_horizons += finite
         ticks = np.arange(c0, c1)
         chunk = {"tick": ticks, "time": (ticks + 1) * settings.Ts, "ee": ee, "poi": poi,
-                 "reference0": np.array([r[0] for r in ref0]), "tau_mpc": tau_mpc,
+                 "reference0": ref0, "tau_mpc": tau_mpc,
                  "tau_command": tau_cmd,
                  "tau": tau, "tick_ns": tick_ns}
         self.trace.add(chunk)
@@ -177,7 +183,8 @@ class Recorder:
             self.file.close()
             self.file = None
 
-    def result(self, stats: dict, counts: dict, dynamics: str = "pinocchio") -> LoopResult:
+    def result(self, stats: dict, counts: dict, dynamics: str = "pinocchio",
+               loop: str = "python") -> LoopResult:
         with np.errstate(invalid="ignore", divide="ignore"):
             horizon_error = np.sqrt(self.horizon2 / self.n_horizons)  # NaN where no refresh
         return LoopResult(
@@ -188,5 +195,5 @@ class Recorder:
             control_tick_us=self.control.stats_us(), horizon_error=horizon_error,
             controller_stats=stats,
             saturated_ticks=self.saturated_ticks, predictor_counts=counts,
-            plant_dynamics=dynamics,
+            plant_dynamics=dynamics, tick_loop=loop,
         )

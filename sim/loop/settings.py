@@ -73,6 +73,12 @@ class LoopSettings:
         predictor's learning (where it defers it), its forecast, and on the refresh tick the
         interpolation, guard and placement. False: the whole refresh on the refresh tick, with
         the newest sample arrived by that tick.
+    compiled_ticks : bool
+        Run the control ticks between two refresh slices in one C call where the controller
+        and the robot's side are both compiled (``--controller c`` on the native plant): the
+        same functions in the same order, hence the same results, without the interpreter
+        between them, as in a deployed controller. False: one tick at a time from Python, as
+        with the Python controller.
     """
 
     Ts: float = 0.5e-3
@@ -89,6 +95,7 @@ class LoopSettings:
     settling: float = 5.0
     poi_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
     pipelined_refresh: bool = True
+    compiled_ticks: bool = True
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.Ts) and self.Ts > 0):

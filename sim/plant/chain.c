@@ -10,8 +10,10 @@
  * motors' output rates w = S q' (S the motor map) and reaches the joints as S^T f(w). The
  * reference is Pinocchio (tests/sim/plant/test_native.py compares every function with it).
  */
+#define _POSIX_C_SOURCE 199309L /* clock_gettime */
 #include <math.h>
 #include <string.h>
+#include <time.h>
 
 #define MAXJ 8
 
@@ -480,6 +482,66 @@ void tick_advance(tick_t *t) {
         double s = 0;
         for (int l = 0; l < 3 * n; l++) s += t->predict[k][l] * t->post[l];
         t->prior[k] = s;
+    }
+}
+
+/* ---- Control ticks in one call (sim/plant/native.py NativeTick.run_ticks): a compiled
+ * controller between the encoders and the cancellation, with no interpreter between ticks. ---- */
+
+/* A compiled controller's tick (rhmpc_tick_ext of an exported controller): u from the state x,
+ * the N reference points ref, u_{-1} (NULL: the controller's own last u) and the extra per-tick
+ * inputs (NULL: the controller's own). */
+typedef int (*control_fn)(void *state, const double *x, const double *ref, const double *u_prev,
+                          const double *extra, double *u);
+
+/* A chunk of ticks' records, row 0 first (sim/loop/results.py Recorder.start_chunk). */
+typedef struct {
+    control_fn control;
+    void *state;                /* the controller's */
+    double *last;               /* its output u (nu = n), read as u_{-1} by the next tick */
+    long long *parts;           /* (m, 3): sense, control, actuate [ns] */
+    double *tau_mpc, *tau, *q;  /* (m, n): u, the commanded torque, q after the tick */
+    double *ref0;               /* (m, 3): the first reference point */
+    double *x_saved;            /* (m / every + 1, 2n): x_hat of rows k = phase (mod every) */
+    const double *refs;         /* the N reference points of each tick of a call, in turn */
+    int ref_size;               /* 3 N */
+    int every, phase;
+} records_t;
+
+static long long now_ns(void) {
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);  /* time.perf_counter_ns's clock on Linux */
+    return (long long)ts.tv_sec * 1000000000LL + ts.tv_nsec;
+}
+
+/* Rows k0 .. k0 + count - 1: per tick, the encoders and the observer (tick_sense), the controller
+ * on x_hat and the tick's N points r->refs[k - k0] (ref_size doubles each), the commanded torque
+ * (tick_actuate) and the plant (tick_advance) -- the calls and the order of the loop's Python
+ * path (sim/loop/closed_loop.py run_ticks), timed at the same places. u_first: u_{-1} of the
+ * first tick, or NULL. */
+void tick_run(tick_t *t, const records_t *r, int k0, int count, const double *u_first) {
+    int n = t->plant->n, nx = 2 * n;
+    size_t row = n * sizeof(double);
+    for (int k = k0; k < k0 + count; k++) {
+        const double *ref = r->refs + (size_t)(k - k0) * r->ref_size;
+        long long t0 = now_ns();
+        tick_sense(t);
+        long long t1 = now_ns();
+        r->control(r->state, t->post, ref, k == k0 ? u_first : NULL, NULL, r->last);
+        long long t2 = now_ns();
+        memcpy(t->u, r->last, row);
+        tick_actuate(t);
+        long long t3 = now_ns();
+        r->parts[3 * k] = t1 - t0;
+        r->parts[3 * k + 1] = t2 - t1;
+        r->parts[3 * k + 2] = t3 - t2;
+        memcpy(r->tau_mpc + (size_t)k * n, r->last, row);
+        memcpy(r->tau + (size_t)k * n, t->tau, row);
+        memcpy(r->ref0 + 3 * (size_t)k, ref, 3 * sizeof(double));
+        if (r->every > 0 && k % r->every == r->phase)
+            memcpy(r->x_saved + (size_t)(k / r->every) * nx, t->post, nx * sizeof(double));
+        tick_advance(t);
+        memcpy(r->q + (size_t)k * n, t->q, row);
     }
 }
 

@@ -15,6 +15,7 @@ import time
 import weakref
 from collections.abc import Callable
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -52,6 +53,21 @@ class _Public(ctypes.Structure):
 
 
 _in_use: dict[str, weakref.ref] = {}
+
+
+class CompiledTick(NamedTuple):
+    """A controller's tick as a C function, for a loop that runs ticks in C
+    (:meth:`sim.plant.native.NativeTick.run_ticks`).
+
+    ``int function(void *state, const double *x, const double *ref, const double *u_prev,
+    const double *extra, double *u)`` (``rhmpc_tick_ext`` of ``rhmpc.h``) with ``extra`` NULL;
+    ``u_prev`` NULL but on a tick after :meth:`CController.take_u_prev` returned an array.
+    """
+
+    function: int  #: address of the tick function
+    state: int  #: address of the controller's state (``rhmpc_t``)
+    output: np.ndarray  #: (nu,) where the tick writes u; the controller's u_{−1} next tick
+    take_u_prev: Callable[[], np.ndarray | None]  #: :meth:`CController.take_u_prev`
 
 #: The binding's implementations of ``step``: ``"auto"`` is the extension where it builds.
 BINDINGS = ("auto", "extension", "ctypes")
@@ -197,7 +213,7 @@ class CController:
         self._addr = self._state.ctypes.data
         self._pub = _Public.from_address(self._addr)
         self._u_in, self._tau = np.zeros(self.nu), np.zeros(self.nu)
-        tick = ctypes.cast(lib.rhmpc_tick_ext, ctypes.c_void_p).value
+        tick = self._tick_address = ctypes.cast(lib.rhmpc_tick_ext, ctypes.c_void_p).value
         self._core = step_type(tick, self._addr, (self._state, lib),
                                (self.N, self.nx, self.nu, self.ny, self.n_extra), self._tau,
                                self._u_in, np.zeros(self.n_extra), extra_inputs)
@@ -254,6 +270,23 @@ class CController:
             raise ValueError(f"u_prev must be {self.nu} finite torques [N·m], got {value!r}")
         self._u_in[:] = value
         self._core.u_pending = 1
+
+    def take_u_prev(self) -> np.ndarray | None:
+        """The u_{−1} assigned for the next tick (:attr:`u_prev`, :meth:`reset`), handed over
+        once to a caller that runs the tick itself (:attr:`compiled_tick`); None if none."""
+        if not self._core.u_pending:
+            return None
+        self._core.u_pending = 0
+        return self._u_in
+
+    @property
+    def compiled_tick(self) -> CompiledTick | None:
+        """The tick as a C function for a loop in C (:class:`CompiledTick`), or None when its
+        extra inputs come from Python (``extra_source == "python"``). Such a loop leaves
+        :attr:`call_ns` alone; the counters and :attr:`u_prev` follow its ticks."""
+        if self.extra_source == "python":
+            return None
+        return CompiledTick(self._tick_address, self._addr, self._tau, self.take_u_prev)
 
     def step(self, x: np.ndarray, ref: np.ndarray) -> np.ndarray:
         """One tick in C: τ_mpc (nu,) [N·m] for ``x`` (nx,) and ``ref`` (N, 3), as ``mpc.step``.

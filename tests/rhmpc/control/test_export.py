@@ -533,3 +533,42 @@ def test_level_2_matches_python_under_heavy_saturation(arm, cache):
         if py.stats.level == 2:
             solves.append(py.stats.box_iterations)
     assert len(solves) > 30 and max(solves) >= 10  # the dual active set was needed and ran
+
+
+@needs_cc
+def test_compiled_ticks_run_the_python_loops_ticks_to_the_bit(monkeypatch, cache):
+    """The control ticks between two refresh slices in one C call (``loop.compiled_ticks``)
+    call the same C functions in the same order as the loop's Python path: the same run to
+    the bit, with a u_{−1} handed over to the first tick and the yardstick on the same
+    inputs."""
+    from rhmpc.experiment import RunConfig, build_run
+    from sim.loop import run_closed_loop
+
+    monkeypatch.setenv("RHMPC_CACHE_DIR", str(cache))
+    runs = {}
+    for compiled in (True, False):
+        config = RunConfig().replace(**{"loop.duration": 2.0, "loop.settling": 0.5,
+                                        "loop.compiled_ticks": compiled})
+        run = build_run(config, "c")
+        run.controller.u_prev = np.array([0.02, -0.01, 0.005])
+        seen = []
+        result = run_closed_loop(
+            run.robot, run.arm, run.controller, run.reference, run.truth, run.center,
+            run.stream, config.loop, plant_settings=config.plant, mismatch=config.mismatch,
+            observer_settings=config.observer,
+            yardstick=lambda x, r, u, seen=seen: seen.append((x.copy(), r.copy(), u.copy())))
+        runs[compiled] = result, run.controller.stats, seen
+    (fast, fast_stats, fast_seen), (slow, slow_stats, slow_seen) = runs[True], runs[False]
+    assert fast.tick_loop == "compiled"
+    assert slow.tick_loop == "python (loop.compiled_ticks = false)"
+    for name in ("ee", "reference0", "tau_mpc", "tau_command", "tau"):
+        np.testing.assert_array_equal(fast.trace[name], slow.trace[name], err_msg=name)
+    assert fast.tracking == slow.tracking
+    timing = {"parts_ns", "solve_time"}
+    assert {k: v for k, v in dataclasses.asdict(fast_stats).items() if k not in timing} == \
+        {k: v for k, v in dataclasses.asdict(slow_stats).items() if k not in timing}
+    assert fast_stats.ticks == 4000
+    assert len(fast_seen) == len(slow_seen) == 3 * (4000 // 16)
+    for a, b in zip(fast_seen, slow_seen, strict=True):
+        for u, v in zip(a, b, strict=True):
+            np.testing.assert_array_equal(u, v)

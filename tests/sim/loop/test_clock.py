@@ -200,3 +200,26 @@ def test_after_the_run_finish_makes_what_a_pipelined_refresh_made_ahead(pipeline
     else:
         assert after == []
     assert not open_loop.slices
+
+
+@pytest.mark.parametrize(("rate", "pipelined"), [(257.0, True), (257.0, False), (25.0, True)])
+def test_segments_cover_the_ticks_with_the_slices_on_their_first_ticks(rate, pipelined):
+    """The ticks of a segment run back to back: every tick once, in order, and every slice
+    before the first tick of a segment (the compiled ticks run a segment in one call)."""
+    settings = LoopSettings(duration=0.3, settling=0.0, pipelined_refresh=pipelined)
+    raw = _raw(rate, 0.5, latency=0.012 if rate < 100 else 0.0)
+    done = [0]
+    spy = Stamped(done)
+    open_loop = OpenLoop(spy, raw, np.zeros(3), settings, np.zeros((50, 3)),
+                         predictor_clock(settings, raw))
+    n = settings.ticks
+    charged = tuple([0] * n for _ in range(5))
+    starts = []
+    for i, refs in open_loop.segments(0, n, charged, []):
+        assert i == done[0] and len(refs) >= 1
+        starts.append(i)
+        done[0] += len(refs)  # the segment's control ticks
+    assert done[0] == n
+    sliced = {tick for part in charged for tick, ns in enumerate(part) if ns > 0}
+    assert sliced <= set(starts)
+    assert {t for _, t in spy.calls} <= set(starts) | {n}
