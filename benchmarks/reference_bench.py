@@ -61,10 +61,11 @@ def one(job):
         if i < int(loop.settling / loop.Ts):
             continue
         period = run.reference.horizons(i, min(ds, n - i))
+        if period is None:  # before the first sample
+            continue
         truth = run.truth.window(i + 1, i + len(period) + N)
         for k, h in enumerate(period):
-            if h is not None:
-                errs.append(np.linalg.norm(h[N - 1] - truth[k + N - 1]))
+            errs.append(np.linalg.norm(h[N - 1] - truth[k + N - 1]))
     e = 1e3 * np.asarray(errs)
     e = e[np.isfinite(e)]  # the recorded stream has gaps (missing samples)
     counts = dict(run.reference.predictor.counts)

@@ -95,6 +95,22 @@ def interpolation_matrix(s: np.ndarray, n_nodes: int) -> np.ndarray:
     return W.reshape(n, n_nodes)
 
 
+def windows(points: np.ndarray, first: int, count: int, N: int) -> np.ndarray:
+    """Rows ``first + k … first + k + N − 1`` of ``points`` (n, d) for k < count, as one
+    read-only (count, N, d) array: a view of overlapping windows, or a copy when it runs past
+    the last row (the last window is then repeated: a skipped refresh holds its points)."""
+    last = points.shape[0] - N
+    if first + count - 1 > last or not points.flags.c_contiguous:
+        starts = np.minimum(np.arange(first, first + count), last)
+        out = points[starts[:, None] + np.arange(N)]
+    else:
+        row = points.strides[0]
+        out = np.ndarray((count, N, points.shape[1]), points.dtype, points, first * row,
+                         (row, row, points.strides[1]))
+    out.flags.writeable = False
+    return out
+
+
 def _origin(origin) -> np.ndarray:
     origin = np.array(origin, dtype=float).reshape(-1)
     if origin.shape != (3,) or not np.all(np.isfinite(origin)):
@@ -319,19 +335,17 @@ class PredictedReference:
         Shape (N, d) in centred coordinates, or (N, 3) in the workspace after :meth:`place`.
         A view of an array that the next ``refresh`` replaces (it is never changed in place).
         """
-        return self.horizons(tick, 1)[0]
+        points = self.horizons(tick, 1)
+        return None if points is None else points[0]
 
-    def horizons(self, tick: int, count: int) -> list[np.ndarray | None]:
-        """``[horizon(tick), …, horizon(tick + count − 1)]`` from the current refresh."""
+    def horizons(self, tick: int, count: int) -> np.ndarray | None:
+        """:meth:`horizon` of ticks tick … tick + count − 1 from the current refresh, as one
+        read-only (count, N, d) array (:func:`windows`), or None before the first valid
+        sample."""
         dense = self._dense if self._origin is None else self._placed
         if dense is None:
-            return [None] * count
-        N, last = self.N, dense.shape[0] - self.N
-        first = tick + 1 - self._first
-        starts = range(first, first + count)
-        if first + count - 1 > last:  # a refresh was skipped: hold the last points
-            starts = [min(k, last) for k in starts]
-        return [dense[k : k + N] for k in starts]
+            return None
+        return windows(dense, tick + 1 - self._first, count, self.N)
 
 
 class ExactReference:
@@ -449,8 +463,8 @@ class ExactReference:
         """r_{tick+1} … r_{tick+N}: (N, d) centred, or (N, 3) in the workspace after ``place``."""
         return self.horizons(tick, 1)[0]
 
-    def horizons(self, tick: int, count: int) -> list[np.ndarray]:
-        """``[horizon(tick), …, horizon(tick + count − 1)]`` (views of arrays never changed)."""
+    def horizons(self, tick: int, count: int) -> np.ndarray:
+        """:meth:`horizon` of ticks tick … tick + count − 1 as one read-only (count, N, d)
+        array (:func:`windows`; a view of an array never changed)."""
         points = self._cover(tick + 1, tick + count + self.N)
-        N, w0 = self.N, self._w0
-        return [points[k - w0 : k - w0 + N] for k in range(tick + 1, tick + 1 + count)]
+        return windows(points, tick + 1 - self._w0, count, self.N)

@@ -121,8 +121,9 @@ class OpenLoop:
     center : ndarray
         The POI's mean over the run, subtracted from every sample [m].
     settings : LoopSettings
-    hold : ndarray, shape (N, 3)
-        The points used before the first sample (the POI's mean position) [m].
+    hold : ndarray, shape (N, 3), optional
+        The points used before the first sample (the POI's mean position; default the
+        origin) [m].
     clock : PredictorClock, optional
         When the predictor runs (:mod:`sim.loop.clock`); default every ``downsample`` ticks.
 
@@ -140,12 +141,16 @@ class OpenLoop:
 
     #: The most missing samples filled before a sample after a gap in its time stamps.
     MAX_FILL = 50
+    #: The most ticks whose references are fetched at once (a period without a refresh, such
+    #: as after a recording's last sample, is fetched in pieces of this many ticks).
+    PERIOD = 256
     # the parts of a refresh (indices into CHARGED)
     _UPDATE, _LEARN, _FORECAST, _INTERPOLATE, _SCORE = range(len(CHARGED))
 
     def __init__(self, reference, stream, center: np.ndarray, settings: LoopSettings,
                  hold: np.ndarray | None, clock: PredictorClock | None = None) -> None:
-        self.reference, self.center, self.settings, self.hold = reference, center, settings, hold
+        self.reference, self.center, self.settings = reference, center, settings
+        self.hold = np.zeros((settings.horizon, 3)) if hold is None else hold
         self.score = getattr(reference, "score", None)  # optional: the predictor's bookkeeping
         self.clock = clock or PredictorClock("downsample", settings.downsample * settings.Ts,
                                              settings.downsample, math.inf)
@@ -181,14 +186,16 @@ class OpenLoop:
         return spent
 
     def segments(self, c0: int, c1: int, charged: tuple[list[int], ...],
-                 horizons: list) -> Iterator[tuple[int, list[np.ndarray]]]:
-        """Yield ``(i, refs)`` over ticks c0 … c1 − 1, in order: the references r_{i+1..i+N} of
-        ticks i … i + len(refs) − 1, after the slices due on tick i have run; none is due on the
+                 horizons: list) -> Iterator[tuple[int, np.ndarray, int]]:
+        """Yield ``(i, refs, address)`` over ticks c0 … c1 − 1, in order: ``refs`` (count, N, 3)
+        holds r_{i+1..i+N} of ticks i … i + count − 1 (a read-only view whose first point is at
+        ``address`` in memory), after the slices due on tick i have run; none is due on the
         others, so their control ticks may run back to back. The slices' ns go to
-        ``charged[part][i − c0]`` (:data:`CHARGED`: the predictor's update with the gate, its
-        learning, its forecast, the interpolation with the guard, the forecast-error
-        bookkeeping), each refresh's ``(tick, points)`` to ``horizons``."""
-        slices, period, first, i, hold = self.slices, [], c0, c0, self.hold
+        ``charged[part][i − c0]``
+        (:data:`CHARGED`: the predictor's update with the gate, its learning, its forecast,
+        the interpolation with the guard, the forecast-error bookkeeping), each refresh's
+        ``(tick, points)`` to ``horizons``."""
+        slices, i, end = self.slices, c0, c0
         while i < c1:
             refreshed = False
             while slices and slices[0][0] <= i:
@@ -197,20 +204,24 @@ class OpenLoop:
                 if part == self._INTERPOLATE:
                     refreshed = True
                     self._refreshed(i)
-            if refreshed or i == c0:
-                # views; later refreshes replace the arrays they view, never change them
-                period, first = self.reference.horizons(i, min(self.next, c1) - i), i
+            if refreshed or i == end:
+                count = min(self.next, c1, i + self.PERIOD) - i
+                block = self.reference.horizons(i, count)
                 if refreshed:
-                    horizons.append((i, period[0]))
-            j = min(slices[0][0], c1) if slices else c1  # the next tick with a slice
-            yield i, [hold if h is None else h for h in period[i - first : j - first]]
+                    horizons.append((i, None if block is None else block[0]))
+                if block is None:  # before the first sample
+                    block = np.broadcast_to(self.hold, (count, *self.hold.shape))
+                first, end, stride = i, i + count, block.strides[0]
+                address = block.__array_interface__["data"][0]
+            j = min(slices[0][0], end) if slices else end  # the next tick with a slice
+            yield i, block[i - first : j - first], address + (i - first) * stride
             i = j
 
     def references(self, c0: int, c1: int, charged: tuple[list[int], ...],
                    horizons: list) -> Iterator[np.ndarray]:
         """:meth:`segments` tick by tick: r_{i+1..i+N} of ticks c0 … c1 − 1, each after the
         slices due on tick i have run."""
-        for _, refs in self.segments(c0, c1, charged, horizons):
+        for _, refs, _ in self.segments(c0, c1, charged, horizons):
             yield from refs
 
     def chunk(self, c0: int, c1: int) -> tuple[list, tuple[list[int], ...], list]:
@@ -402,11 +413,11 @@ def compiled_ticks(controller, side, settings: LoopSettings) -> tuple[CompiledTi
     elif not hasattr(side, "run_ticks"):
         why = f"the plant runs on {side.dynamics}"
     else:
-        return CompiledTicks(side, control, settings.horizon), "compiled"
+        return CompiledTicks(side, control), "compiled"
     return None, f"python ({why})"
 
 
-def run_ticks(side, controller, c0: int, segments: Iterator[tuple[int, list[np.ndarray]]],
+def run_ticks(side, controller, c0: int, segments: Iterator[tuple[int, np.ndarray, int]],
               log: dict, yardstick=None, progress=None) -> None:
     """Steps 4–6 in Python, for the ticks of ``segments`` (:meth:`OpenLoop.segments`, whose
     refresh slices run as it is iterated), written into row k = i − c0 of the chunk's records
@@ -422,9 +433,9 @@ def run_ticks(side, controller, c0: int, segments: Iterator[tuple[int, list[np.n
     q_log, tau_mpc_log, tau_log = log["q"], log["tau_mpc"], log["tau"]
     parts, ref0, yard_ns = log["parts_ns"], log["ref0"], log["yardstick_ns"]
     u_prev = log["u_prev"]
-    for i0, refs in segments:
+    for i0, refs, _ in segments:
         k0 = i0 - c0
-        ref0[k0 : k0 + len(refs)] = [r[0] for r in refs]
+        ref0[k0 : k0 + len(refs)] = refs[:, 0]
         for k, ref in enumerate(refs, k0):
             t_start = clock()
             x_hat = sense()
@@ -456,40 +467,36 @@ class CompiledTicks:
     two calls. The yardstick is timed after each call, on the inputs the C ticks kept.
     """
 
-    #: The most ticks of one call (the references of a call are copied into one array).
-    CAPACITY = 256
-
-    def __init__(self, side, control, horizon: int) -> None:
+    def __init__(self, side, control) -> None:
         self.side, self.control = side, control
-        self.refs = np.empty((self.CAPACITY, horizon, 3))
 
-    def run(self, c0: int, segments: Iterator[tuple[int, list[np.ndarray]]], log: dict,
+    def run(self, c0: int, segments: Iterator[tuple[int, np.ndarray, int]], log: dict,
             yardstick=None, progress=None) -> None:
         """As :func:`run_ticks`, for the chunk whose first tick is c0."""
         phase = (7 - c0) % YARDSTICK_EVERY
-        self.side.bind(self.control, log, self.refs, YARDSTICK_EVERY, phase)
+        self.side.bind(self.control, log, YARDSTICK_EVERY, phase)
         u_first = self.control.take_u_prev()
-        if u_first is not None:
-            u_first = u_first.ctypes.data
-        for i0, refs in segments:
-            for s in range(0, len(refs), self.CAPACITY):
-                part, k0 = refs[s : s + self.CAPACITY], i0 - c0 + s
-                np.stack(part, out=self.refs[: len(part)])
-                self.side.run_ticks(k0, len(part), u_first)
-                u_first = None
-                if yardstick is not None:
-                    self._yardstick(yardstick, log, k0, len(part), phase)
+        u_first = None if u_first is None else u_first.ctypes.data
+        for i0, refs, address in segments:
+            if refs.strides[1:] != (24, 8):
+                raise ValueError(f"the compiled ticks read (N, 3) C-ordered float64 points, got "
+                                 f"strides {refs.strides[1:]}")
+            self.side.run_ticks(i0 - c0, len(refs), address, refs.strides[0] // 8, u_first)
+            u_first = None
+            if yardstick is not None:
+                self._yardstick(yardstick, log, i0 - c0, refs, phase)
             _report(progress, i0, i0 + len(refs))
         log["u_prev"] = log["tau_mpc"][-1].copy()
 
-    def _yardstick(self, yardstick, log: dict, k0: int, count: int, phase: int) -> None:
-        """The yardstick on the kept x̂ of rows k0 … k0 + count − 1, their references and u_{−1}."""
+    def _yardstick(self, yardstick, log: dict, k0: int, refs: np.ndarray, phase: int) -> None:
+        """The yardstick on the kept x̂ of rows k0 … k0 + len(refs) − 1, their references and
+        u_{−1}."""
         every, tau_mpc = YARDSTICK_EVERY, log["tau_mpc"]
-        for k in range(k0 + (phase - k0) % every, k0 + count, every):
+        for k in range(k0 + (phase - k0) % every, k0 + len(refs), every):
             u_prev = tau_mpc[k - 1] if k > 0 else log["u_prev"]
             if u_prev is not None:
                 x_hat = log["x_saved"][k // every]
-                log["yardstick_ns"].append(warm_ns(yardstick, x_hat, self.refs[k - k0], u_prev))
+                log["yardstick_ns"].append(warm_ns(yardstick, x_hat, refs[k - k0], u_prev))
 
 
 def _report(progress, i0: int, i1: int) -> None:

@@ -503,8 +503,6 @@ typedef struct {
     double *tau_mpc, *tau, *q;  /* (m, n): u, the commanded torque, q after the tick */
     double *ref0;               /* (m, 3): the first reference point */
     double *x_saved;            /* (m / every + 1, 2n): x_hat of rows k = phase (mod every) */
-    const double *refs;         /* the N reference points of each tick of a call, in turn */
-    int ref_size;               /* 3 N */
     int every, phase;
 } records_t;
 
@@ -515,15 +513,17 @@ static long long now_ns(void) {
 }
 
 /* Rows k0 .. k0 + count - 1: per tick, the encoders and the observer (tick_sense), the controller
- * on x_hat and the tick's N points r->refs[k - k0] (ref_size doubles each), the commanded torque
+ * on x_hat and its N reference points (N x 3, C-ordered, at refs + (k - k0) ref_step: the
+ * ticks' points may overlap, as windows of one array do), the commanded torque
  * (tick_actuate) and the plant (tick_advance) -- the calls and the order of the loop's Python
  * path (sim/loop/closed_loop.py run_ticks), timed at the same places. u_first: u_{-1} of the
  * first tick, or NULL. */
-void tick_run(tick_t *t, const records_t *r, int k0, int count, const double *u_first) {
+void tick_run(tick_t *t, const records_t *r, int k0, int count, const double *refs,
+              long ref_step, const double *u_first) {
     int n = t->plant->n, nx = 2 * n;
     size_t row = n * sizeof(double);
     for (int k = k0; k < k0 + count; k++) {
-        const double *ref = r->refs + (size_t)(k - k0) * r->ref_size;
+        const double *ref = refs + (k - k0) * ref_step;
         long long t0 = now_ns();
         tick_sense(t);
         long long t1 = now_ns();

@@ -369,8 +369,8 @@ class _Records(ctypes.Structure):
     """``records_t`` of sim/chain.c: a chunk's records for :meth:`NativeTick.run_ticks`."""
 
     _fields_ = [(name, ctypes.c_void_p) for name in (
-        "control", "state", "last", "parts", "tau_mpc", "tau", "q", "ref0", "x_saved",
-        "refs")] + [("ref_size", _i), ("every", _i), ("phase", _i)]
+        "control", "state", "last", "parts", "tau_mpc", "tau", "q", "ref0", "x_saved")] + [
+        ("every", _i), ("phase", _i)]
 
 
 class NativeTick:
@@ -433,48 +433,51 @@ class NativeTick:
         self._actuate = functools.partial(lib.tick_actuate, self._ptr)
         self.advance = functools.partial(lib.tick_advance, self._ptr)
         vp = ctypes.c_void_p
-        lib.tick_run.argtypes = [vp, vp, _i, _i, vp]
+        lib.tick_run.argtypes = [vp, vp, _i, _i, vp, ctypes.c_long, vp]
         lib.tick_run.restype = None
         self._records = _Records()
         self._run = functools.partial(lib.tick_run, self._ptr, ctypes.addressof(self._records))
         self._keep: tuple = ()
 
-    def bind(self, control, log: dict, refs: np.ndarray, every: int, phase: int) -> None:
-        """Point :meth:`run_ticks` at a compiled controller, a chunk's records and the array
-        that holds the references of each call.
+    def bind(self, control, log: dict, every: int, phase: int) -> None:
+        """Point :meth:`run_ticks` at a compiled controller and at a chunk's records.
 
         Parameters
         ----------
         control
-            The controller's tick in C: ``function``, ``state``, ``output`` (nv,) and
-            ``take_u_prev()`` (:class:`rhmpc.control.export.CompiledTick`).
+            The controller's tick in C: ``function``, ``state``, ``output`` (nv,)
+            (:class:`rhmpc.control.export.CompiledTick`).
         log : dict
             The chunk's records (:meth:`sim.loop.results.Recorder.start_chunk`): ``parts_ns``
-            (m, 3) int64, ``tau_mpc``, ``tau``, ``q`` (m, nv), ``ref0`` (m, 3), all C-ordered.
-        refs : ndarray, shape (capacity, N, 3)
-            Where the caller puts the references of the ticks of each :meth:`run_ticks`.
+            (m, 3) int64, ``tau_mpc``, ``tau``, ``q`` (m, nv), ``ref0`` (m, 3), ``x_saved``,
+            all C-ordered.
         every, phase : int
-            x̂ of the rows k ≡ phase (mod every) is kept in row k // every of ``log["x_saved"]``
+            x̂ of the rows k ≡ phase (mod every) is kept in row k // every of ``x_saved``
             (every = 0: none).
         """
         arrays = [np.asarray(control.output)] + [log[k] for k in (
-            "parts_ns", "tau_mpc", "tau", "q", "ref0", "x_saved")] + [refs]
+            "parts_ns", "tau_mpc", "tau", "q", "ref0", "x_saved")]
         for a in arrays:
             if not (a.flags.c_contiguous and a.flags.writeable):
                 raise ValueError("the compiled ticks write C-contiguous, writeable arrays only")
         r = self._records
         r.control, r.state = control.function, control.state
-        r.last, r.parts, r.tau_mpc, r.tau, r.q, r.ref0, r.x_saved, r.refs = (
+        r.last, r.parts, r.tau_mpc, r.tau, r.q, r.ref0, r.x_saved = (
             a.ctypes.data for a in arrays)
-        r.ref_size, r.every, r.phase = refs[0].size, every, phase
+        r.every, r.phase = every, phase
         self._keep = (control, arrays)  # alive while the C side points at them
 
-    def run_ticks(self, k0: int, count: int, u_first: int | None = None) -> None:
+    def run_ticks(self, k0: int, count: int, refs: int, ref_step: int,
+                  u_first: int | None = None) -> None:
         """Rows k0 … k0 + count − 1 of the bound records in one C call (:meth:`bind`): per tick
-        ``sense``, the controller on x̂ and the tick's row of the bound ``refs`` (row 0 for
-        row k0), ``actuate`` and ``advance``, timed at the places the Python loop times them.
-        ``u_first``: the address of u_{−1} for the first tick, or None."""
-        self._run(k0, count, u_first)
+        ``sense``, the controller on x̂ and the tick's N reference points, ``actuate`` and
+        ``advance``, timed at the places the Python loop times them.
+
+        ``refs`` is the address of the first tick's points, a C-ordered (N, 3) float64 block;
+        tick k's are ``ref_step`` doubles further per tick (3 for overlapping windows of one
+        array). ``u_first``: the address of u_{−1} for the first tick, or None.
+        """
+        self._run(k0, count, refs, ref_step, u_first)
 
     def sense(self) -> np.ndarray:
         """x̂ = [q − q0; q̇] from the encoders (a view of the C state: read, don't keep)."""

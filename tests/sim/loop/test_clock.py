@@ -70,7 +70,7 @@ class Spy:
         pass
 
     def horizons(self, tick, count):
-        return [None] * count
+        return None
 
 
 @pytest.mark.parametrize("pipelined", [True, False])
@@ -136,7 +136,7 @@ class Stamped:
         self._note("score")
 
     def horizons(self, tick, count):
-        return [None] * count
+        return None
 
 
 def _drive(rate: float, pipelined: bool, latency: float = 0.0, duration: float = 0.3):
@@ -215,7 +215,7 @@ def test_segments_cover_the_ticks_with_the_slices_on_their_first_ticks(rate, pip
     n = settings.ticks
     charged = tuple([0] * n for _ in range(5))
     starts = []
-    for i, refs in open_loop.segments(0, n, charged, []):
+    for i, refs, _ in open_loop.segments(0, n, charged, []):
         assert i == done[0] and len(refs) >= 1
         starts.append(i)
         done[0] += len(refs)  # the segment's control ticks
