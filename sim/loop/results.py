@@ -161,14 +161,7 @@ class Recorder:
         self.control.add(parts[s:].sum(axis=1))
         for row, name in zip(charged, CHARGED, strict=True):
             self.parts[name].add(row[s:])
-        # horizon prediction error per lead tick, refreshes after settling
-        for tick, h in horizons:
-            if tick >= settings.settling_ticks and h is not None \
-                    and tick + N < self.truth.n_ticks and np.all(np.isfinite(h)):
-                err2 = np.square(h - placed[tick - c0 + self.lead]).sum(axis=1)
-                finite = np.isfinite(err2)  # no truth at some leads: skipped per lead
-                self.horizon2 += np.where(finite, err2, 0.0)
-                self.n_horizons += finite
+        self._horizon_errors(c0, horizons, placed)
         ticks = np.arange(c0, c1)
         chunk = {"tick": ticks, "time": (ticks + 1) * settings.Ts, "ee": ee, "poi": poi,
                  "reference0": ref0, "tau_mpc": tau_mpc,
@@ -177,6 +170,25 @@ class Recorder:
         self.trace.add(chunk)
         if self.file is not None:
             self.file.add(chunk)
+
+    def _horizon_errors(self, c0: int, horizons: list, placed: np.ndarray) -> None:
+        """Add the squared miss of each refresh's N points (after settling) to the running sum
+        per lead tick; a refresh with a non-finite point is left out, a lead without truth is
+        skipped for that refresh alone."""
+        N, settling = self.settings.horizon, self.settings.settling_ticks
+        kept = [(tick, h) for tick, h in horizons
+                if tick >= settling and h is not None and tick + N < self.truth.n_ticks]
+        if not kept:
+            return
+        points = np.array([h for _, h in kept])  # (refreshes, N, 3)
+        finite_points = np.isfinite(points).all(axis=(1, 2))
+        ticks = np.array([tick for tick, _ in kept])[finite_points]
+        err2 = np.square(points[finite_points] - placed[ticks[:, None] - c0 + self.lead]).sum(
+            axis=2)
+        finite = np.isfinite(err2)  # no truth at some leads: skipped per lead
+        for row in np.where(finite, err2, 0.0):  # in order: the sums of the refresh-by-refresh
+            self.horizon2 += row
+        self.n_horizons += finite.sum(axis=0)
 
     def close(self) -> None:
         if self.file is not None:
