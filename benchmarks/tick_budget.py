@@ -2,13 +2,15 @@
 
 ``rhmpc simulate --predictor generalized --duration 60 --seed 2 --json`` with the Python
 controller and with ``--controller c`` (where a C toolchain and cmake are), two runs each, in
-fresh processes. For each run: the tick's percentiles in multiples of the gain tick g timed in
-the same run, the same without the refresh slices (sense + controller + actuate: the tick with
-the predictor in a task of its own), the p99 of each part, and the wall time per simulated
-second beside the ticks' own work per simulated second (the mean tick × 2000 ticks), which no
-simulator of this controller can undercut. After each run, in the same process, a busy loop as
-long as a 60-s run's loop (``--host-stalls``) measures what the host takes from it: the floor
-under the tick's maximum. Writes ``docs/results/tick_budget``.
+fresh processes; and once with the C controller's ticks called one at a time from Python
+(``--set loop.compiled_ticks=false``), for the cost of the interpreter between them. For each
+run: the tick's percentiles in multiples of the gain tick g timed in the same run, the same
+without the refresh slices (sense + controller + actuate: the tick with the predictor in a task
+of its own), the p99 of each part, and the wall time per simulated second beside the ticks' own
+work per simulated second (the mean tick × 2000 ticks), which no simulator of this controller
+can undercut. After each run, in the same process, a busy loop as long as a 60-s run's loop
+(``--host-stalls``) measures what the host takes from it: the floor under the tick's maximum.
+Writes ``docs/results/tick_budget``.
 
     python benchmarks/tick_budget.py [--quick]
 """
@@ -26,11 +28,11 @@ PARTS = ("sense", "controller", "actuate", "predictor_update", "predictor_learn"
          "interpolation", "scoring")
 
 
-def simulate(duration: float, controller: str, stalls: float) -> dict | None:
+def simulate(duration: float, controller: str, stalls: float, *extra: str) -> dict | None:
     """One main-job run's document, or None where the controller cannot be built."""
     cmd = [sys.executable, "-m", "rhmpc.cli", "simulate", "--predictor", "generalized",
            "--duration", f"{duration:g}", "--seed", "2", "--json", "--controller", controller,
-           "--host-stalls", f"{stalls:g}"]
+           "--host-stalls", f"{stalls:g}", *extra]
     run = subprocess.run(cmd, capture_output=True, text=True)
     if run.returncode != 0:
         print(f"simulate --controller {controller}: {run.stderr.strip()}", file=sys.stderr)
@@ -38,7 +40,7 @@ def simulate(duration: float, controller: str, stalls: float) -> dict | None:
     doc = json.loads(run.stdout)
     keep = ("gain_tick_us", "tick_us", "tick_ratio_to_gain", "control_tick_ratio_to_gain",
             "tick_parts_ratio_to_gain", "wall_per_simulated_s_g", "tick_per_simulated_s_g",
-            "real_time_factor", "rms_error_mm", "host_stalls")
+            "real_time_factor", "rms_error_mm", "host_stalls", "tick_loop")
     return {"command": " ".join(["rhmpc", *cmd[3:]]), **{k: doc[k] for k in keep}}
 
 
@@ -61,6 +63,9 @@ def main() -> None:
             doc = simulate(duration, controller, stalls)
             if doc is not None:
                 runs[f"{controller} {k}"] = doc
+    doc = simulate(duration, "c", stalls, "--set", "loop.compiled_ticks=false")
+    if doc is not None:
+        runs["c, ticks from Python"] = doc
     ticks = R.table(
         ["run", "g [µs]", "p50 [g]", "p99 [g]", "p99.9 [g]", "max [g]",
          "p99 without slices [g]", "max without slices [g]",
@@ -86,7 +91,9 @@ def main() -> None:
                   "controller's real computation, which a simulator of it cannot undercut. "
                   "The host's stalls are those of a loop that does nothing but read the clock "
                   "(`rhmpc simulate --host-stalls`), right after the run in the same process: "
-                  "a tick that one of them lands in lasts at least as long.")
+                  "a tick that one of them lands in lasts at least as long. The C "
+                  "controller's runs call its ticks from C between the refresh slices "
+                  "(`loop.compiled_ticks`), but the one marked \"ticks from Python\".")
 
 
 if __name__ == "__main__":
