@@ -98,8 +98,11 @@ def interpolation_matrix(s: np.ndarray, n_nodes: int) -> np.ndarray:
 def windows(points: np.ndarray, first: int, count: int, N: int) -> np.ndarray:
     """Rows ``first + k … first + k + N − 1`` of ``points`` (n, d) for k < count, as one
     read-only (count, N, d) array: a view of overlapping windows, or a copy when it runs past
-    the last row (the last window is then repeated: a skipped refresh holds its points)."""
+    the last row (the last window is then repeated: a skipped refresh holds its points).
+    ``points`` must hold at least N rows."""
     last = points.shape[0] - N
+    if last < 0:
+        raise ValueError(f"{points.shape[0]} points cannot make windows of {N}")
     if first + count - 1 > last or not points.flags.c_contiguous:
         starts = np.minimum(np.arange(first, first + count), last)
         out = points[starts[:, None] + np.arange(N)]

@@ -16,9 +16,11 @@ Time is integer ticks of ``Ts`` (seconds = tick·Ts). Each tick ``i``:
 6. the plant integrates one tick with the (clipped) torque held.
 
 Steps 1–3 are open-loop — the heart and its sensor do not see the robot — but they run tick
-by tick all the same, interleaved with steps 4–6 (:meth:`OpenLoop.references`): each slice of a
+by tick all the same, interleaved with steps 4–6 (:meth:`OpenLoop.segments`): each slice of a
 refresh runs on the tick it is charged to, between two control ticks, as in a controller with
 one thread, so that its time is taken with the caches the control ticks leave behind. The
+control ticks between two slices run one at a time from Python (:func:`run_ticks`), or, for a
+compiled controller on the compiled plant, in one C call (:class:`CompiledTicks`). The
 heart's and the sensor's samples are made a block at a time (:mod:`sim.loop.streams`), and the
 records are kept per chunk of ≈ 10 s of ticks (:mod:`sim.loop.results`).
 
@@ -47,7 +49,7 @@ import numpy as np
 from robots import LinearArm, Robot
 from sim.loop.clock import PredictorClock, arrival_tick, predictor_clock
 from sim.loop.metrics import warm_ns
-from sim.loop.results import CHARGED, YARDSTICK_EVERY, LoopResult, Recorder
+from sim.loop.results import CHARGED, YARDSTICK_EVERY, YARDSTICK_PHASE, LoopResult, Recorder
 from sim.loop.settings import LoopSettings
 from sim.loop.streams import BLOCK, ArrayTruth, SampleSource, StreamCursor, as_samples
 from sim.plant import HardwareSettings, ModelMismatch, ObserverSettings, PlantSettings
@@ -187,14 +189,13 @@ class OpenLoop:
 
     def segments(self, c0: int, c1: int, charged: tuple[list[int], ...],
                  horizons: list) -> Iterator[tuple[int, np.ndarray, int]]:
-        """Yield ``(i, refs, address)`` over ticks c0 … c1 − 1, in order: ``refs`` (count, N, 3)
-        holds r_{i+1..i+N} of ticks i … i + count − 1 (a read-only view whose first point is at
-        ``address`` in memory), after the slices due on tick i have run; none is due on the
-        others, so their control ticks may run back to back. The slices' ns go to
-        ``charged[part][i − c0]``
-        (:data:`CHARGED`: the predictor's update with the gate, its learning, its forecast,
-        the interpolation with the guard, the forecast-error bookkeeping), each refresh's
-        ``(tick, points)`` to ``horizons``."""
+        """Yield ``(i, refs, address)`` over ticks c0 … c1 − 1, in order: ``refs`` holds
+        r_{i+1..i+N} of ticks i … i + count − 1 (a read-only (count, N, d) view, d = 3 once
+        placed, whose first point is at ``address`` in memory), after the slices due on tick i
+        have run; none is due on the others, so their control ticks may run back to back. The
+        slices' ns go to ``charged[part][i − c0]`` (:data:`CHARGED`: the predictor's update
+        with the gate, its learning, its forecast, the interpolation with the guard, the
+        forecast-error bookkeeping), each refresh's ``(tick, points)`` to ``horizons``."""
         slices, i, end = self.slices, c0, c0
         while i < c1:
             refreshed = False
@@ -206,9 +207,11 @@ class OpenLoop:
                     self._refreshed(i)
             if refreshed or i == end:
                 count = min(self.next, c1, i + self.PERIOD) - i
+                if count < 1:
+                    raise RuntimeError(f"no tick to run at tick {i} (next refresh {self.next})")
                 block = self.reference.horizons(i, count)
-                if refreshed:
-                    horizons.append((i, None if block is None else block[0]))
+                if refreshed:  # a copy: the block may be a copy of many windows
+                    horizons.append((i, None if block is None else block[0].copy()))
                 if block is None:  # before the first sample
                     block = np.broadcast_to(self.hold, (count, *self.hold.shape))
                 first, end, stride = i, i + count, block.strides[0]
@@ -340,9 +343,9 @@ def run_closed_loop(
     reference
         ``place(origin)``, the slices of a refresh ``update(tick, z, stamp)``, ``learn()``,
         ``predict()``, ``interpolate()`` and optionally ``score()``, and ``horizons(tick,
-        count)`` → the (N, 3) points of ticks tick … tick + count − 1, None before the first
-        sample (:mod:`rhmpc.control.reference`); the loop places it at the workspace anchor
-        before the run.
+        count)`` → the points of ticks tick … tick + count − 1 as one (count, N, 3) array, None
+        before the first sample (:mod:`rhmpc.control.reference`); the loop places it at the
+        workspace anchor before the run.
     truth, center
         The centred POI truth over at least ``ticks + horizon + 1`` ticks: an array from
         :func:`poi_truth` with its ``center``, or an object with ``window(i0, i1)``, ``n_ticks``
@@ -358,9 +361,10 @@ def run_closed_loop(
         Write every tick to this NPZ file as the run goes (:class:`sim.loop.trace.TraceFile`).
     yardstick
         A reference computation ``yardstick(x̂, r, u_{−1})`` (the gain tick g of
-        :class:`rhmpc.control.yardstick.GainTick`) timed after the controller on every 16th tick,
-        with the tick's own inputs, so that tick times can be stated as ratios to it measured in
-        the same run (``LoopResult.yardstick_us``); not part of the tick, its result is not used.
+        :class:`rhmpc.control.yardstick.GainTick`) timed on every 16th tick after the controller
+        (after the call, with the compiled ticks), with the tick's own inputs, so that tick
+        times can be stated as ratios to it measured in the same run
+        (``LoopResult.yardstick_us``); not part of the tick, its result is not used.
     chunk_ticks
         Ticks per chunk of records (rounded down to a multiple of ``downsample``, at least one
         period).
@@ -412,6 +416,9 @@ def compiled_ticks(controller, side, settings: LoopSettings) -> tuple[CompiledTi
         why = "the controller has no compiled tick"
     elif not hasattr(side, "run_ticks"):
         why = f"the plant runs on {side.dynamics}"
+    elif control.dims != (settings.horizon, 2 * side.nv, side.nv, 3):
+        why = (f"the controller's (N, nx, nu, ny) {control.dims} are not the loop's "
+               f"{(settings.horizon, 2 * side.nv, side.nv, 3)}")
     else:
         return CompiledTicks(side, control), "compiled"
     return None, f"python ({why})"
@@ -445,7 +452,8 @@ def run_ticks(side, controller, c0: int, segments: Iterator[tuple[int, np.ndarra
             tau = actuate(u)
             t_end = clock()
             parts[k] = (t_sensed - t_start, t_stepped - t_sensed, t_end - t_stepped)
-            if yardstick is not None and (c0 + k) % YARDSTICK_EVERY == 7 and u_prev is not None:
+            if (yardstick is not None and (c0 + k) % YARDSTICK_EVERY == YARDSTICK_PHASE
+                    and u_prev is not None):
                 yard_ns.append(warm_ns(yardstick, x_hat, ref, u_prev))
             u_prev = u
             tau_mpc_log[k] = u
@@ -469,24 +477,33 @@ class CompiledTicks:
 
     def __init__(self, side, control) -> None:
         self.side, self.control = side, control
+        self.points = (control.dims[0], 3)  # a tick's reference points
 
     def run(self, c0: int, segments: Iterator[tuple[int, np.ndarray, int]], log: dict,
             yardstick=None, progress=None) -> None:
         """As :func:`run_ticks`, for the chunk whose first tick is c0."""
-        phase = (7 - c0) % YARDSTICK_EVERY
+        phase = (YARDSTICK_PHASE - c0) % YARDSTICK_EVERY
         self.side.bind(self.control, log, YARDSTICK_EVERY, phase)
-        u_first = self.control.take_u_prev()
-        u_first = None if u_first is None else u_first.ctypes.data
+        first = True
         for i0, refs, address in segments:
-            if refs.strides[1:] != (24, 8):
-                raise ValueError(f"the compiled ticks read (N, 3) C-ordered float64 points, got "
-                                 f"strides {refs.strides[1:]}")
-            self.side.run_ticks(i0 - c0, len(refs), address, refs.strides[0] // 8, u_first)
-            u_first = None
+            self._check(refs)
+            u_first = self.control.take_u_prev() if first else None
+            self.side.run_ticks(i0 - c0, len(refs), address, refs.strides[0] // 8,
+                                None if u_first is None else u_first.ctypes.data)
+            first = False
             if yardstick is not None:
                 self._yardstick(yardstick, log, i0 - c0, refs, phase)
             _report(progress, i0, i0 + len(refs))
         log["u_prev"] = log["tau_mpc"][-1].copy()
+
+    def _check(self, refs: np.ndarray) -> None:
+        """The C ticks read each tick's points as N × 3 C-ordered doubles: anything else is an
+        error here, not memory read amiss."""
+        if refs.dtype != np.float64 or refs.shape[1:] != self.points \
+                or refs.strides[1:] != (24, 8):
+            raise ValueError(f"the compiled ticks read {self.points} C-ordered float64 points a "
+                             f"tick, got {refs.dtype} {refs.shape[1:]}, strides "
+                             f"{refs.strides[1:]}")
 
     def _yardstick(self, yardstick, log: dict, k0: int, refs: np.ndarray, phase: int) -> None:
         """The yardstick on the kept x̂ of rows k0 … k0 + len(refs) − 1, their references and

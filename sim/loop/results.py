@@ -24,8 +24,9 @@ CHARGED = ("predictor_update", "predictor_learn", "forecast", "interpolation", "
 #: The parts of a control tick, timed separately: the encoders and the observer, the
 #: controller, the cancellation (the commanded torque), and the refresh slices (CHARGED).
 TICK_PARTS = ("sense", "controller", "actuate", *CHARGED)
-#: The yardstick is timed on the ticks i ≡ 7 (mod this) (``run_closed_loop(yardstick=…)``).
-YARDSTICK_EVERY = 16
+#: The yardstick is timed on the ticks i ≡ YARDSTICK_PHASE (mod YARDSTICK_EVERY)
+#: (``run_closed_loop(yardstick=…)``).
+YARDSTICK_EVERY, YARDSTICK_PHASE = 16, 7
 
 
 def embed3(p: np.ndarray) -> np.ndarray:

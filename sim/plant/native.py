@@ -58,7 +58,7 @@ _d, _i = ctypes.c_double, ctypes.c_int
 
 
 class _Chain(ctypes.Structure):
-    """``chain_t`` of sim/chain.c."""
+    """``chain_t`` of sim/plant/chain.c."""
 
     _fields_ = [
         ("n", _i), ("nb", _i), ("parent", _i * MAX_JOINTS), ("coord", _i * MAX_JOINTS),
@@ -113,6 +113,10 @@ def _compile() -> ctypes.CDLL | None:
     for f in (library.chain_aba, library.chain_rnea, library.chain_midpoint, library.chain_point,
               library.chain_mass, library.hw_integrate, library.chain_offset):
         f.restype = None
+    # tick_run calls a compiled controller whose workspace is static: it keeps the GIL, so that
+    # no other thread enters the controller meanwhile (rhmpc.control.export.binding)
+    library.tick_run_gil = ctypes.PYFUNCTYPE(None, ptr, ptr, _i, _i, ptr, ctypes.c_long, ptr)(
+        ctypes.cast(library.tick_run, ptr).value)
     _library = library
     return library
 
@@ -352,7 +356,7 @@ class HardwareStep:
 
 
 class _Tick(ctypes.Structure):
-    """``tick_t`` of sim/chain.c."""
+    """``tick_t`` of sim/plant/chain.c."""
 
     _fields_ = [
         ("plant", ctypes.c_void_p), ("model", ctypes.c_void_p), ("h", _d), ("substeps", _i),
@@ -366,7 +370,7 @@ class _Tick(ctypes.Structure):
 
 
 class _Records(ctypes.Structure):
-    """``records_t`` of sim/chain.c: a chunk's records for :meth:`NativeTick.run_ticks`."""
+    """``records_t`` of sim/plant/chain.c: a chunk's records for :meth:`NativeTick.run_ticks`."""
 
     _fields_ = [(name, ctypes.c_void_p) for name in (
         "control", "state", "last", "parts", "tau_mpc", "tau", "q", "ref0", "x_saved")] + [
@@ -432,12 +436,12 @@ class NativeTick:
         self._sense = functools.partial(lib.tick_sense, self._ptr)
         self._actuate = functools.partial(lib.tick_actuate, self._ptr)
         self.advance = functools.partial(lib.tick_advance, self._ptr)
-        vp = ctypes.c_void_p
-        lib.tick_run.argtypes = [vp, vp, _i, _i, vp, ctypes.c_long, vp]
-        lib.tick_run.restype = None
+        self.nv = nv
         self._records = _Records()
-        self._run = functools.partial(lib.tick_run, self._ptr, ctypes.addressof(self._records))
+        self._run = functools.partial(lib.tick_run_gil, self._ptr,
+                                      ctypes.addressof(self._records))
         self._keep: tuple = ()
+        self._rows = 0  # rows of the bound records
 
     def bind(self, control, log: dict, every: int, phase: int) -> None:
         """Point :meth:`run_ticks` at a compiled controller and at a chunk's records.
@@ -457,9 +461,16 @@ class NativeTick:
         """
         arrays = [np.asarray(control.output)] + [log[k] for k in (
             "parts_ns", "tau_mpc", "tau", "q", "ref0", "x_saved")]
-        for a in arrays:
-            if not (a.flags.c_contiguous and a.flags.writeable):
-                raise ValueError("the compiled ticks write C-contiguous, writeable arrays only")
+        m, n = log["parts_ns"].shape[0], self.nv
+        shapes = [((n,), np.float64), ((m, 3), np.int64), ((m, n), np.float64),
+                  ((m, n), np.float64), ((m, n), np.float64), ((m, 3), np.float64),
+                  ((m // every + 1 if every else 0, 2 * n), np.float64)]
+        for a, (shape, dtype) in zip(arrays, shapes, strict=True):
+            if not (a.flags.c_contiguous and a.flags.writeable) or a.dtype != dtype \
+                    or a.shape[0] < shape[0] or a.shape[1:] != shape[1:]:
+                raise ValueError(f"the compiled ticks write C-contiguous, writeable {dtype} "
+                                 f"arrays {shape}, got {a.dtype} {a.shape}")
+        self._rows = m
         r = self._records
         r.control, r.state = control.function, control.state
         r.last, r.parts, r.tau_mpc, r.tau, r.q, r.ref0, r.x_saved = (
@@ -477,6 +488,8 @@ class NativeTick:
         tick k's are ``ref_step`` doubles further per tick (3 for overlapping windows of one
         array). ``u_first``: the address of u_{−1} for the first tick, or None.
         """
+        if not 0 <= k0 <= k0 + count <= self._rows:
+            raise ValueError(f"rows {k0}…{k0 + count - 1} are outside the {self._rows} bound")
         self._run(k0, count, refs, ref_step, u_first)
 
     def sense(self) -> np.ndarray:

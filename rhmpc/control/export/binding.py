@@ -68,6 +68,7 @@ class CompiledTick(NamedTuple):
     state: int  #: address of the controller's state (``rhmpc_t``)
     output: np.ndarray  #: (nu,) where the tick writes u; the controller's u_{−1} next tick
     take_u_prev: Callable[[], np.ndarray | None]  #: :meth:`CController.take_u_prev`
+    dims: tuple[int, int, int, int]  #: (N, nx, nu, ny): what the tick reads and writes
 
 #: The binding's implementations of ``step``: ``"auto"`` is the extension where it builds.
 BINDINGS = ("auto", "extension", "ctypes")
@@ -286,7 +287,8 @@ class CController:
         :attr:`call_ns` alone; the counters and :attr:`u_prev` follow its ticks."""
         if self.extra_source == "python":
             return None
-        return CompiledTick(self._tick_address, self._addr, self._tau, self.take_u_prev)
+        return CompiledTick(self._tick_address, self._addr, self._tau, self.take_u_prev,
+                            (self.N, self.nx, self.nu, self.ny))
 
     def step(self, x: np.ndarray, ref: np.ndarray) -> np.ndarray:
         """One tick in C: τ_mpc (nu,) [N·m] for ``x`` (nx,) and ``ref`` (N, 3), as ``mpc.step``.

@@ -539,10 +539,12 @@ def test_level_2_matches_python_under_heavy_saturation(arm, cache):
 def test_compiled_ticks_run_the_python_loops_ticks_to_the_bit(monkeypatch, cache):
     """The control ticks between two refresh slices in one C call (``loop.compiled_ticks``)
     call the same C functions in the same order as the loop's Python path: the same run to
-    the bit, with a u_{−1} handed over to the first tick and the yardstick on the same
-    inputs."""
+    the bit, with a u_{−1} handed over to the first tick, the yardstick on the same inputs,
+    and chunks of 600 ticks (u_{−1} and the yardstick's phase carried across them)."""
     from rhmpc.experiment import RunConfig, build_run
     from sim.loop import run_closed_loop
+    from sim.loop.closed_loop import compiled_ticks
+    from sim.plant.tick import make_tick
 
     monkeypatch.setenv("RHMPC_CACHE_DIR", str(cache))
     runs = {}
@@ -555,7 +557,7 @@ def test_compiled_ticks_run_the_python_loops_ticks_to_the_bit(monkeypatch, cache
         result = run_closed_loop(
             run.robot, run.arm, run.controller, run.reference, run.truth, run.center,
             run.stream, config.loop, plant_settings=config.plant, mismatch=config.mismatch,
-            observer_settings=config.observer,
+            observer_settings=config.observer, chunk_ticks=600,
             yardstick=lambda x, r, u, seen=seen: seen.append((x.copy(), r.copy(), u.copy())))
         runs[compiled] = result, run.controller.stats, seen
     (fast, fast_stats, fast_seen), (slow, slow_stats, slow_seen) = runs[True], runs[False]
@@ -572,3 +574,9 @@ def test_compiled_ticks_run_the_python_loops_ticks_to_the_bit(monkeypatch, cache
     for a, b in zip(fast_seen, slow_seen, strict=True):
         for u, v in zip(a, b, strict=True):
             np.testing.assert_array_equal(u, v)
+    # a controller of other sizes than the loop's is left to the Python path, which says so
+    side = make_tick(run.robot, run.arm, config.loop.Ts, config.plant, config.mismatch,
+                     config.observer)
+    other = dataclasses.replace(config.loop, horizon=20, compiled_ticks=True)
+    ticks, loop = compiled_ticks(run.controller, side, other)
+    assert ticks is None and "(N, nx, nu, ny) (50, 6, 3, 3)" in loop

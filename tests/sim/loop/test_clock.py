@@ -215,11 +215,35 @@ def test_segments_cover_the_ticks_with_the_slices_on_their_first_ticks(rate, pip
     n = settings.ticks
     charged = tuple([0] * n for _ in range(5))
     starts = []
-    for i, refs, _ in open_loop.segments(0, n, charged, []):
-        assert i == done[0] and len(refs) >= 1
+    for i, refs, address in open_loop.segments(0, n, charged, []):
+        assert i == done[0] and 1 <= len(refs) <= OpenLoop.PERIOD
+        assert address == refs.__array_interface__["data"][0]
         starts.append(i)
         done[0] += len(refs)  # the segment's control ticks
     assert done[0] == n
     sliced = {tick for part in charged for tick, ns in enumerate(part) if ns > 0}
     assert sliced <= set(starts)
     assert {t for _, t in spy.calls} <= set(starts) | {n}
+
+
+@pytest.mark.parametrize("downsample", [15, 700])
+def test_segments_hold_each_ticks_own_points(downsample):
+    """Each tick of a segment gets its own r_{i+1..i+N}, also when a period is longer than the
+    points fetched at once (``OpenLoop.PERIOD``): the exact reference over known points."""
+    from rhmpc.control.reference import ExactReference
+
+    settings = LoopSettings(duration=1.0, settling=0.0, downsample=downsample)
+    n, N = settings.ticks, settings.horizon
+    truth = np.arange(3.0 * (n + N + 1)).reshape(-1, 3)
+    exact = ExactReference(truth, N)
+    exact.place(np.zeros(3))
+    open_loop = OpenLoop(exact, ideal_stream(HarmonicHeart(), 1.1), np.zeros(3), settings,
+                         np.zeros((N, 3)))
+    charged = tuple([0] * n for _ in range(5))
+    ticks = 0
+    for i, refs, address in open_loop.segments(0, n, charged, []):
+        assert address == refs.__array_interface__["data"][0]
+        for k, ref in enumerate(refs):
+            np.testing.assert_array_equal(ref, truth[i + k + 1 : i + k + 1 + N])
+        ticks += len(refs)
+    assert ticks == n
