@@ -2,7 +2,8 @@
 
 =================  ==============================================================
 ``settings``       :class:`LoopSettings`: rate, horizon, refresh, gate, duration
-``closed_loop``    :func:`run_closed_loop`: the open-loop part per chunk, one tick body
+``closed_loop``    :func:`run_closed_loop`: the open loop, its refresh slices tick by tick
+``ticks``          the control ticks between two slices, from Python or in one C call
 ``streams``        sensor samples and POI truth read block by block (flat memory)
 ``results``        :class:`LoopResult`, the recorder of each chunk
 ``metrics``        running tracking statistics, tick histograms, heart-rate score

@@ -19,8 +19,8 @@ Steps 1–3 are open-loop — the heart and its sensor do not see the robot — 
 by tick all the same, interleaved with steps 4–6 (:meth:`OpenLoop.segments`): each slice of a
 refresh runs on the tick it is charged to, between two control ticks, as in a controller with
 one thread, so that its time is taken with the caches the control ticks leave behind. The
-control ticks between two slices run one at a time from Python (:func:`run_ticks`), or, for a
-compiled controller on the compiled plant, in one C call (:class:`CompiledTicks`). The
+control ticks between two slices run one at a time from Python, or, for a compiled controller
+on the compiled plant, in one C call (:mod:`sim.loop.ticks`). The
 heart's and the sensor's samples are made a block at a time (:mod:`sim.loop.streams`), and the
 records are kept per chunk of ≈ 10 s of ticks (:mod:`sim.loop.results`).
 
@@ -48,10 +48,10 @@ import numpy as np
 
 from robots import LinearArm, Robot
 from sim.loop.clock import PredictorClock, arrival_tick, predictor_clock
-from sim.loop.metrics import warm_ns
-from sim.loop.results import CHARGED, YARDSTICK_EVERY, YARDSTICK_PHASE, LoopResult, Recorder
+from sim.loop.results import CHARGED, LoopResult, Recorder
 from sim.loop.settings import LoopSettings
 from sim.loop.streams import BLOCK, ArrayTruth, SampleSource, StreamCursor, as_samples
+from sim.loop.ticks import compiled_ticks, run_ticks
 from sim.plant import HardwareSettings, ModelMismatch, ObserverSettings, PlantSettings
 from sim.plant.tick import make_tick
 
@@ -134,8 +134,8 @@ class OpenLoop:
     The slices wait in a queue, in the order they run, each with its tick: a refresh on tick r
     queues its forecast-error bookkeeping (tick r + 1 when pipelined), then the next refresh's
     update, learning and forecast (ticks r' − 3, r' − 2, r' − 1, not before r) and its
-    interpolation (tick r'). :meth:`references` runs those due on each tick before it yields
-    the tick's reference. A slice queued behind a later one waits for it: when the next
+    interpolation (tick r'). :meth:`segments` runs those due on a tick before it yields the
+    references from that tick on. A slice queued behind a later one waits for it: when the next
     refresh is due on tick r + 1 (a burst of arrivals, or ``downsample`` ≤ 3), its update,
     learning and forecast run on tick r + 1 after the bookkeeping, up to five slices on one
     tick. The order of the calls, hence every result, is that of the refresh run at once.
@@ -403,123 +403,6 @@ def run_closed_loop(
     counts = dict(getattr(getattr(reference, "predictor", None), "counts", {}) or {})
     note = f" ({side.dynamics_note})" if side.dynamics_note else ""
     return record.result(controller_stats(controller), counts, side.dynamics + note, loop)
-
-
-def compiled_ticks(controller, side, settings: LoopSettings) -> tuple[CompiledTicks | None, str]:
-    """The compiled ticks where the controller and the robot's side are both compiled and
-    ``settings.compiled_ticks`` allows them, and the loop's name for the run's document:
-    ``"compiled"``, or ``"python"`` with the reason."""
-    control = getattr(controller, "compiled_tick", None)
-    if not settings.compiled_ticks:
-        why = "loop.compiled_ticks = false"
-    elif control is None:
-        why = "the controller has no compiled tick"
-    elif not hasattr(side, "run_ticks"):
-        why = f"the plant runs on {side.dynamics}"
-    elif control.dims != (settings.horizon, 2 * side.nv, side.nv, 3):
-        why = (f"the controller's (N, nx, nu, ny) {control.dims} are not the loop's "
-               f"{(settings.horizon, 2 * side.nv, side.nv, 3)}")
-    else:
-        return CompiledTicks(side, control), "compiled"
-    return None, f"python ({why})"
-
-
-def run_ticks(side, controller, c0: int, segments: Iterator[tuple[int, np.ndarray, int]],
-              log: dict, yardstick=None, progress=None) -> None:
-    """Steps 4–6 in Python, for the ticks of ``segments`` (:meth:`OpenLoop.segments`, whose
-    refresh slices run as it is iterated), written into row k = i − c0 of the chunk's records
-    ``log`` (:meth:`~sim.loop.results.Recorder.start_chunk`).
-
-    ``side`` is the robot's side of the tick (:mod:`sim.plant.tick`). The tick's time is from
-    the encoder reading to the commanded torque (its parts: ``sense``, ``controller``,
-    ``actuate``), plus the slices charged to it. ``yardstick(x̂, r, u_{−1})`` is timed on every
-    16th tick with the tick's own inputs (the least of three calls,
-    :func:`sim.loop.metrics.warm_ns`).
-    """
-    sense, actuate, advance, step = side.sense, side.actuate, side.advance, controller.step
-    q_log, tau_mpc_log, tau_log = log["q"], log["tau_mpc"], log["tau"]
-    parts, ref0, yard_ns = log["parts_ns"], log["ref0"], log["yardstick_ns"]
-    u_prev = log["u_prev"]
-    for i0, refs, _ in segments:
-        k0 = i0 - c0
-        ref0[k0 : k0 + len(refs)] = refs[:, 0]
-        for k, ref in enumerate(refs, k0):
-            t_start = clock()
-            x_hat = sense()
-            t_sensed = clock()
-            u = step(x_hat, ref)
-            t_stepped = clock()
-            tau = actuate(u)
-            t_end = clock()
-            parts[k] = (t_sensed - t_start, t_stepped - t_sensed, t_end - t_stepped)
-            if (yardstick is not None and (c0 + k) % YARDSTICK_EVERY == YARDSTICK_PHASE
-                    and u_prev is not None):
-                yard_ns.append(warm_ns(yardstick, x_hat, ref, u_prev))
-            u_prev = u
-            tau_mpc_log[k] = u
-            tau_log[k] = tau
-            advance()
-            q_log[k] = side.q
-        _report(progress, i0, i0 + len(refs))
-    log["u_prev"] = u_prev
-
-
-class CompiledTicks:
-    """Steps 4–6 in C: the control ticks between two refresh slices in one call.
-
-    A compiled controller (its ``compiled_tick``, :class:`rhmpc.control.export.CompiledTick`)
-    on the compiled robot side (:meth:`sim.plant.native.NativeTick.run_ticks`): the same C
-    functions in the same order as :func:`run_ticks` calls them through Python, hence the same
-    results, timed at the same places; what is gone is the interpreter between them, as in a
-    deployed controller. The refresh slices still run in Python, each on its tick, between
-    two calls. The yardstick is timed after each call, on the inputs the C ticks kept.
-    """
-
-    def __init__(self, side, control) -> None:
-        self.side, self.control = side, control
-        self.points = (control.dims[0], 3)  # a tick's reference points
-
-    def run(self, c0: int, segments: Iterator[tuple[int, np.ndarray, int]], log: dict,
-            yardstick=None, progress=None) -> None:
-        """As :func:`run_ticks`, for the chunk whose first tick is c0."""
-        phase = (YARDSTICK_PHASE - c0) % YARDSTICK_EVERY
-        self.side.bind(self.control, log, YARDSTICK_EVERY, phase)
-        first = True
-        for i0, refs, address in segments:
-            self._check(refs)
-            u_first = self.control.take_u_prev() if first else None
-            self.side.run_ticks(i0 - c0, len(refs), address, refs.strides[0] // 8,
-                                None if u_first is None else u_first.ctypes.data)
-            first = False
-            if yardstick is not None:
-                self._yardstick(yardstick, log, i0 - c0, refs, phase)
-            _report(progress, i0, i0 + len(refs))
-        log["u_prev"] = log["tau_mpc"][-1].copy()
-
-    def _check(self, refs: np.ndarray) -> None:
-        """The C ticks read each tick's points as N × 3 C-ordered doubles: anything else is an
-        error here, not memory read amiss."""
-        if refs.dtype != np.float64 or refs.shape[1:] != self.points \
-                or refs.strides[1:] != (24, 8):
-            raise ValueError(f"the compiled ticks read {self.points} C-ordered float64 points a "
-                             f"tick, got {refs.dtype} {refs.shape[1:]}, strides "
-                             f"{refs.strides[1:]}")
-
-    def _yardstick(self, yardstick, log: dict, k0: int, refs: np.ndarray, phase: int) -> None:
-        """The yardstick on the kept x̂ of rows k0 … k0 + len(refs) − 1, their references and
-        u_{−1}."""
-        every, tau_mpc = YARDSTICK_EVERY, log["tau_mpc"]
-        for k in range(k0 + (phase - k0) % every, k0 + len(refs), every):
-            u_prev = tau_mpc[k - 1] if k > 0 else log["u_prev"]
-            if u_prev is not None:
-                x_hat = log["x_saved"][k // every]
-                log["yardstick_ns"].append(warm_ns(yardstick, x_hat, refs[k - k0], u_prev))
-
-
-def _report(progress, i0: int, i1: int) -> None:
-    """``progress(done)`` at each multiple of 2000 ticks in (i0, i1], once, with the last."""
-    if progress is not None and i1 // 2000 > i0 // 2000:
-        progress(i1 // 2000 * 2000)
 
 
 def controller_stats(controller) -> dict:

@@ -1,28 +1,21 @@
 """The robot's side of the tick compiled: an accelerator, checked against Pinocchio.
 
-Pinocchio is the reference for the plant's dynamics (:class:`~sim.plant.tick.ArmTick`). In
-the closed loop, the Python tick around the MPC — encoders, observer, cancellation (one RNEA),
-the plant's explicit-midpoint step (four ABA calls) — costs ≈ 27 µs a tick, most of it
-argument conversion and interpreter overhead around calls of ≈ 1 µs of arithmetic each
-(``pin.aba`` measured 1.3–1.9 µs per call from Python). :class:`NativeTick` runs the same
-operations in three C calls a tick, and makes the whole 2-kHz simulation ≈ 2.1× faster: a 20-s
-main job's loop takes 1.5–2.2 s against 3.3–4.7 s with Pinocchio (same runs, shared host; the
-ratio holds, the absolute times vary with the load). That is what keeps a simulated second
-within the wall-time budget; it is used where it builds (``PlantSettings.dynamics = "auto"``).
+Pinocchio is the reference for the plant's dynamics (:class:`~sim.plant.tick.ArmTick`); in the
+closed loop its Python tick is mostly argument conversion and interpreter overhead around calls
+of about a microsecond of arithmetic each. :class:`NativeTick` runs the same operations in three
+C calls a tick, or all the ticks between two refresh slices in one (:meth:`NativeTick.run_ticks`,
+with a compiled controller); it is used where it builds (``PlantSettings.dynamics = "auto"``).
+Why this and not Pinocchio's own C++, and what it measured: the decision record "The compiled
+plant".
 
 ``sim/plant/chain.c`` holds Featherstone's articulated-body algorithm and recursive
 Newton–Euler for a chain of revolute joints, with the parameters read from the Pinocchio model
 (joint placements and axes, spatial inertias, rotor armature, gravity) and the plant's friction
 ``D q̇ + F_c tanh(q̇/v_s)``. A model with mimic bodies (the PHANToM's parallelogram) has its
 forward dynamics as M(q)⁻¹(τ − h) with h and the n columns of M by recursive Newton–Euler,
-all from one set of body transforms: 1.6 µs a call from Python on the PHANToM (3.5 µs when
-every column recomputed the transforms), ≈ 5 µs for the four calls of a tick's midpoint
-step, ``-O3``. Pinocchio's own C++ was measured as the alternative: its ABA costs
-about the same (1.0 µs against 1.1 µs per call in C, 3 joints), but the ``pin`` wheel ships no
-Eigen or urdfdom headers (the model would be rebuilt from the same parameters anyway), its
-templates need Boost.MPL limits set by hand, and the first build takes ≈ 2.5 min against < 1 s.
-The C file is compiled with the system's C compiler at first use into a cache directory
-(``$RHMPC_CACHE``, default ``~/.cache/rhmpc``) and loaded with :mod:`ctypes`.
+all from one set of body transforms. The C file is compiled with the system's C compiler
+(``-O3``) at first use into a cache directory (``$RHMPC_CACHE``, default ``~/.cache/rhmpc``) and
+loaded with :mod:`ctypes`.
 
 Pinocchio stays the reference: ``tests/sim/plant/test_native.py`` compares ABA, RNEA and the
 end-point with ``pin.aba``, ``pin.rnea`` and the frame placement at random states (1e-15
@@ -103,16 +96,13 @@ def _compile() -> ctypes.CDLL | None:
         unavailable_reason = f"compiling {_SOURCE.name} failed: {exc} {detail.decode()[:200]}"
         return None
     ptr = ctypes.c_void_p
-    library.chain_aba.argtypes = [ptr, ptr, ptr, ptr, ptr]
-    library.chain_rnea.argtypes = [ptr, ptr, ptr, ptr, ptr]
-    library.chain_midpoint.argtypes = [ptr, ptr, ptr, ptr, _d, _i]
-    library.chain_point.argtypes = [ptr, ptr, _i, _i, ptr, ptr]
-    library.chain_mass.argtypes = [ptr, ptr, ptr]
-    library.hw_integrate.argtypes = [ptr, ptr, ptr, ptr]
-    library.chain_offset.argtypes = [ptr, ptr, ptr, ptr, ptr, _i, ptr, ptr]
-    for f in (library.chain_aba, library.chain_rnea, library.chain_midpoint, library.chain_point,
-              library.chain_mass, library.hw_integrate, library.chain_offset):
-        f.restype = None
+    signatures = {"chain_aba": [ptr] * 5, "chain_rnea": [ptr] * 5, "chain_mass": [ptr] * 3,
+                  "chain_midpoint": [ptr, ptr, ptr, ptr, _d, _i], "hw_integrate": [ptr] * 4,
+                  "chain_point": [ptr, ptr, _i, _i, ptr, ptr], "tick_sense": [ptr],
+                  "chain_offset": [ptr, ptr, ptr, ptr, ptr, _i, ptr, ptr],
+                  "tick_actuate": [ptr], "tick_advance": [ptr]}
+    for name, argtypes in signatures.items():
+        getattr(library, name).argtypes, getattr(library, name).restype = argtypes, None
     # tick_run calls a compiled controller whose workspace is static: it keeps the GIL, so that
     # no other thread enters the controller meanwhile (rhmpc.control.export.binding)
     library.tick_run_gil = ctypes.PYFUNCTYPE(None, ptr, ptr, _i, _i, ptr, ctypes.c_long, ptr)(
@@ -430,8 +420,6 @@ class NativeTick:
         self.q = view("q", nv)  #: the plant's joint angles [rad] (changed in place)
         self.v = view("v", nv)
         self._ptr = ctypes.c_void_p(address)
-        for name in ("tick_sense", "tick_actuate", "tick_advance"):
-            getattr(lib, name).argtypes, getattr(lib, name).restype = [ctypes.c_void_p], None
         # the compiled functions bound to this tick (no Python frame of their own)
         self._sense = functools.partial(lib.tick_sense, self._ptr)
         self._actuate = functools.partial(lib.tick_actuate, self._ptr)

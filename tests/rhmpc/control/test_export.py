@@ -543,7 +543,7 @@ def test_compiled_ticks_run_the_python_loops_ticks_to_the_bit(monkeypatch, cache
     and chunks of 600 ticks (u_{−1} and the yardstick's phase carried across them)."""
     from rhmpc.experiment import RunConfig, build_run
     from sim.loop import run_closed_loop
-    from sim.loop.closed_loop import compiled_ticks
+    from sim.loop.ticks import compiled_ticks
     from sim.plant.tick import make_tick
 
     monkeypatch.setenv("RHMPC_CACHE_DIR", str(cache))
