@@ -3,7 +3,8 @@
 Layers, from the bottom (peers of one layer do not import each other):
 
 0. ``robots``, ``predictors``
-1. ``sim``, itself in floors: ``sim.heart`` and ``sim.plant``; ``sim.recordings`` and
+1. ``sim``, itself in floors: ``sim.compiled`` (C sources compiled at first use);
+   ``sim.heart`` and ``sim.plant``; ``sim.recordings`` and
    ``sim.sensors`` (they read ``sim.heart``'s motion sources); ``sim.sources`` (a scenario or a
    recording); ``sim.loop``
 2. ``rhmpc.control`` (with ``rhmpc.errors``, which every part of ``rhmpc`` may use)
@@ -32,6 +33,7 @@ LAYERS: tuple[tuple[str, float, str], ...] = (
     ("robots", 0, "robots"),
     ("predictors", 0, "predictors"),
     ("sim", 1, "sim"),
+    ("sim.compiled", 0.9, "sim.compiled"),
     ("sim.heart", 1.0, "sim.heart"),
     ("sim.plant", 1.0, "sim.plant"),
     ("sim.recordings", 1.1, "sim.recordings"),

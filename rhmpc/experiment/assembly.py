@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from predictors import make_predictor, settings_for
+from rhmpc.control.compiled_reference import compile_reference
 from rhmpc.control.mpc import RecedingHorizonMPC
 from rhmpc.control.reference import ExactReference, PredictedReference
 from rhmpc.errors import UsageError
@@ -55,6 +56,9 @@ class Run:
         Simulated time [s].
     clock : PredictorClock
         When the predictor runs: every ``downsample`` ticks, or on each raw sample.
+    refresh : str
+        Who runs the predictor's refresh: ``"compiled"`` (C), ``"python (why)"``, or
+        ``"none"`` for the exact reference.
     """
 
     config: RunConfig
@@ -68,6 +72,7 @@ class Run:
     label: str
     duration: float
     clock: PredictorClock
+    refresh: str = "none"
 
 
 def build_stream(config: RunConfig, heart: HeartSource, duration: float,
@@ -138,11 +143,14 @@ def build_controller(config: RunConfig, arm: LinearArm,
 
 
 def build_reference(config: RunConfig, truth: SourceTruth, heart: HeartSource,
-                    clock: PredictorClock) -> ExactReference | PredictedReference:
-    """The exact future (``predictor = "exact"``) or the predictor's forecast on ``clock``."""
+                    clock: PredictorClock) -> tuple[ExactReference | PredictedReference, str]:
+    """The exact future (``predictor = "exact"``) or the predictor's forecast on ``clock``,
+    and who runs its refresh (:attr:`Run.refresh`): the compiled twin of the Python pipeline
+    where ``loop.compiled_refresh`` allows it and it exists
+    (:func:`rhmpc.control.compiled_reference.compile_reference`)."""
     loop = config.loop
     if config.predictor == "exact":
-        return ExactReference(truth, loop.horizon)
+        return ExactReference(truth, loop.horizon), "none"
     settings = dict(config.predictor_settings)
     if config.predictor in config.predictor_params and "params" not in settings:
         settings["params"] = config.predictor_params[config.predictor]
@@ -161,7 +169,10 @@ def build_reference(config: RunConfig, truth: SourceTruth, heart: HeartSource,
     phase = getattr(heart.motion, "phase", None)
     if hasattr(predictor, "heart_rate_hz") and hasattr(phase, "rate"):
         reference.monitor = HeartRateScore(phase.rate, loop.settling)  # ω̂ against the true rate
-    return reference
+    if not loop.compiled_refresh:
+        return reference, "python (loop.compiled_refresh = false)"
+    compiled, why = compile_reference(reference, dim=truth.center.shape[0])
+    return (compiled, "compiled") if compiled is not None else (reference, f"python ({why})")
 
 
 def build_run(config: RunConfig, implementation: str = "python") -> Run:
@@ -194,6 +205,6 @@ def build_run(config: RunConfig, implementation: str = "python") -> Run:
     truth = SourceTruth(recorded if config.ground_truth == "recorded" else heart.motion,
                         loop.ticks + loop.horizon + 1, loop.Ts)
     clock = predictor_clock(loop, stream)
-    reference = build_reference(config, truth, heart, clock)
+    reference, refresh = build_reference(config, truth, heart, clock)
     return Run(config, robot, arm, controller, reference, truth, truth.center, stream,
-               heart.label, loop.duration, clock)
+               heart.label, loop.duration, clock, refresh)

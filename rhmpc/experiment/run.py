@@ -92,6 +92,7 @@ def document(config: RunConfig, run: Run, result: LoopResult, wall: float,
         "real_time_factor": config.loop.duration / wall,
         "plant_dynamics": result.plant_dynamics,
         "tick_loop": result.tick_loop,
+        "refresh": run.refresh,
         "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,  # Linux: KiB
         "settings": config.to_dict(),
         "versions": versions(),

@@ -39,7 +39,8 @@ def format_summary(doc: dict, settling_rule: str | None = None) -> str:
         f"  wall time        {doc['wall_s']:.1f} s ({doc['real_time_factor']:.1f}× real time)"
         + (f", peak memory {doc['peak_rss_mb']:.0f} MB" if "peak_rss_mb" in doc else "")
         + ("; control ticks in C between the refresh slices"
-           if doc.get("tick_loop") == "compiled" else ""),
+           if doc.get("tick_loop") == "compiled" else "")
+        + ("; predictor refresh in C" if doc.get("refresh") == "compiled" else ""),
     ]
     counts = doc.get("predictor_counts") or {}
     if counts:  # what the predictor and the safety layers did (missing samples, outliers, …)

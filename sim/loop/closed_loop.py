@@ -177,15 +177,10 @@ class OpenLoop:
         Returns the time [ns] of the controller's part. The sensor's delivery is not timed: it
         is the simulated world, which makes the samples a block at a time.
         """
-        Ts = self.settings.Ts
-        j = self.cursor.newest(tick * Ts + 1e-12)
-        new = j >= 0 and j != self.last
-        t_j, z_j = self.cursor.sample(j) if new else (tick * Ts, None)
+        z, stamp = self._sample(tick)
         t_start = clock()
-        self.reference.update(tick, None if z_j is None else z_j - self.center, t_j)
-        spent = clock() - t_start
-        self.last = j if new else self.last
-        return spent
+        self.reference.update(tick, z, stamp)
+        return clock() - t_start
 
     def segments(self, c0: int, c1: int, charged: tuple[list[int], ...],
                  horizons: list) -> Iterator[tuple[int, np.ndarray, int]]:
@@ -219,6 +214,48 @@ class OpenLoop:
             j = min(slices[0][0], end) if slices else end  # the next tick with a slice
             yield i, block[i - first : j - first], address + (i - first) * stride
             i = j
+
+    def plan(self, c0: int, c1: int) -> dict | None:
+        """The slices :meth:`segments` would run on ticks c0 … c1 − 1, in the order it would run
+        them, as arrays for a compiled refresh to run (:meth:`sim.loop.ticks.CompiledTicks.run`),
+        without running them; None with the sensor clock, whose arrivals decide how many
+        updates a slice makes.
+
+        Returns ``row`` (tick − c0), ``part`` (:data:`CHARGED`'s index) and, for an update,
+        ``tick`` (the tick it is for), ``z`` (its centred sample, a row per slice), ``stamp``
+        [s] and ``fresh`` (a new sample, else none). The queue and the stream's cursor move on
+        as if the slices had run: the next refreshes are queued on the interpolation's tick.
+        """
+        if self.clock.mode == "sensor":
+            return None
+        slices, events, at = self.slices, [], c0
+        while slices and max(slices[0][0], at) < c1:
+            tick, part, _ = slices.popleft()
+            at = max(tick, at)
+            events.append((at - c0, part, tick, *(self._sample(tick) if part == self._UPDATE
+                                                    else (None, 0.0))))
+            if part == self._INTERPOLATE:
+                self._refreshed(at)
+        d = self.center.shape[0]
+        z = np.zeros((len(events), d))
+        for k, (_, _, _, z_k, _) in enumerate(events):
+            if z_k is not None:
+                z[k] = z_k
+        return {"row": np.array([e[0] for e in events], dtype=np.intc),
+                "part": np.array([e[1] for e in events], dtype=np.intc),
+                "tick": np.array([e[2] for e in events], dtype=np.int64), "z": z,
+                "stamp": np.array([e[4] for e in events], dtype=float),
+                "fresh": np.array([e[3] is not None for e in events], dtype=np.uint8)}
+
+    def _sample(self, tick: int) -> tuple[np.ndarray | None, float]:
+        """The update of ``tick``'s arguments (:meth:`update`): the centred newest sample
+        arrived by then and its time, or None and the tick's time when none is new."""
+        j = self.cursor.newest(tick * self.settings.Ts + 1e-12)
+        if j < 0 or j == self.last:
+            return None, tick * self.settings.Ts
+        self.last = j
+        t_j, z_j = self.cursor.sample(j)
+        return z_j - self.center, t_j
 
     def references(self, c0: int, c1: int, charged: tuple[list[int], ...],
                    horizons: list) -> Iterator[np.ndarray]:
@@ -385,9 +422,21 @@ def run_closed_loop(
             open_loop = OpenLoop(reference, stream, truth.center, settings, np.tile(anchor, (N, 1)),
                                  predictor_clock(settings, stream))
             compiled, loop = compiled_ticks(controller, side, settings)
+            slices = None  # the refresh slices run from the compiled ticks, where they can
+            if compiled is not None and hasattr(reference, "slices") \
+                    and open_loop.clock.mode != "sensor":
+                slices, loop = reference.slices(open_loop.hold), "compiled with the refresh"
             u_prev = None
             for c0 in range(0, n, chunk):
                 c1 = min(c0 + chunk, n)
+                if slices is not None:
+                    charged = np.zeros((len(CHARGED), c1 - c0), dtype=np.int64)
+                    log = record.start_chunk(c1 - c0, charged, u_prev)
+                    horizons = compiled.run_planned(c0, c1, open_loop.plan(c0, c1), slices,
+                                                    log, yardstick, progress)
+                    u_prev = log["u_prev"]
+                    record.end_chunk(c0, c1, log, horizons)
+                    continue
                 charged, horizons = tuple([0] * (c1 - c0) for _ in CHARGED), []
                 log = record.start_chunk(c1 - c0, charged, u_prev)
                 segments = open_loop.segments(c0, c1, charged, horizons)

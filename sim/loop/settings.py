@@ -79,6 +79,13 @@ class LoopSettings:
         same functions in the same order, hence the same results, without the interpreter
         between them, as in a deployed controller. False: one tick at a time from Python, as
         with the Python controller.
+    compiled_refresh : bool
+        Run the predictor's refresh (the outlier gate, the predictor, the interpolation, the
+        guard and the placement) in C where it has a compiled twin (the one-step and the
+        generalized RLS predictors with a known unit,
+        :mod:`rhmpc.control.compiled_reference`) and a C compiler is found: the same
+        equations in the same order, equal to the Python pipeline to rounding. False: the
+        Python pipeline, the reference of the compiled one.
     """
 
     Ts: float = 0.5e-3
@@ -96,6 +103,7 @@ class LoopSettings:
     poi_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
     pipelined_refresh: bool = True
     compiled_ticks: bool = True
+    compiled_refresh: bool = True
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.Ts) and self.Ts > 0):

@@ -22,6 +22,8 @@ from sim.loop.results import YARDSTICK_EVERY, YARDSTICK_PHASE
 from sim.loop.settings import LoopSettings
 
 clock = time.perf_counter_ns
+#: Ticks between two calls of ``progress``.
+PROGRESS = 2000
 
 
 def compiled_ticks(controller, side, settings: LoopSettings) -> tuple[CompiledTicks | None, str]:
@@ -115,6 +117,40 @@ class CompiledTicks:
             _report(progress, i0, i0 + len(refs))
         log["u_prev"] = log["tau_mpc"][-1].copy()
 
+    def run_planned(self, c0: int, c1: int, plan: dict, slices, log: dict, yardstick=None,
+                    progress=None) -> list:
+        """Ticks c0 … c1 − 1 with their refresh slices in C too: ``slices``
+        (:class:`rhmpc.control.compiled_reference.CompiledSlices`) runs the chunk's ``plan``
+        (:meth:`~sim.loop.closed_loop.OpenLoop.plan`) from the ticks, each slice on its own tick
+        before the tick's points are read, timed into ``log["charged"]``. One C call per
+        :data:`PROGRESS` ticks; the yardstick is timed after the chunk on the kept x̂ and
+        points. Returns each refresh's ``(tick, points)``."""
+        m, every = c1 - c0, YARDSTICK_EVERY
+        phase = (YARDSTICK_PHASE - c0) % every
+        log["ref_saved"] = np.empty((m // every + 1, slices.points))
+        slices.load(c0, m, plan, log["charged"])
+        self.side.bind(self.control, log, every, phase, slices)
+        u_first = self.control.take_u_prev()
+        k0 = 0
+        while k0 < m:
+            k1 = min((c0 + k0) // PROGRESS * PROGRESS + PROGRESS - c0, m)
+            self.side.run_ticks(k0, k1 - k0, 0, 0,
+                                None if u_first is None else u_first.ctypes.data)
+            u_first = None
+            _report(progress, c0 + k0, c0 + k1)
+            k0 = k1
+        horizons = slices.finish()
+        if yardstick is not None:
+            tau_mpc, shape = log["tau_mpc"], self.points
+            for k in range(phase, m, every):
+                u_prev = tau_mpc[k - 1] if k > 0 else log["u_prev"]
+                if u_prev is not None:
+                    log["yardstick_ns"].append(warm_ns(
+                        yardstick, log["x_saved"][k // every],
+                        log["ref_saved"][k // every].reshape(shape), u_prev))
+        log["u_prev"] = log["tau_mpc"][-1].copy()
+        return horizons
+
     def _check(self, refs: np.ndarray) -> None:
         """The C ticks read each tick's points as N × 3 C-ordered doubles: anything else is an
         error here, not memory read amiss."""
@@ -136,6 +172,7 @@ class CompiledTicks:
 
 
 def _report(progress, i0: int, i1: int) -> None:
-    """``progress(done)`` at each multiple of 2000 ticks in (i0, i1], once, with the last."""
-    if progress is not None and i1 // 2000 > i0 // 2000:
-        progress(i1 // 2000 * 2000)
+    """``progress(done)`` at each multiple of :data:`PROGRESS` ticks in (i0, i1], once, with
+    the last."""
+    if progress is not None and i1 // PROGRESS > i0 // PROGRESS:
+        progress(i1 // PROGRESS * PROGRESS)

@@ -494,6 +494,10 @@ void tick_advance(tick_t *t) {
 typedef int (*control_fn)(void *state, const double *x, const double *ref, const double *u_prev,
                           const double *extra, double *u);
 
+/* The reference points of row k, after the refresh slices due on it have run (the compiled
+ * refresh's plan_points, rhmpc/control/refresh.c), or NULL: the points come from `refs`. */
+typedef const double *(*points_fn)(void *plan, int k);
+
 /* A chunk of ticks' records, row 0 first (sim/loop/results.py Recorder.start_chunk). */
 typedef struct {
     control_fn control;
@@ -504,6 +508,10 @@ typedef struct {
     double *ref0;               /* (m, 3): the first reference point */
     double *x_saved;            /* (m / every + 1, 2n): x_hat of rows k = phase (mod every) */
     int every, phase;
+    points_fn points;           /* NULL, or the points of each row with its slices run */
+    void *plan;                 /* points' state */
+    double *ref_saved;          /* NULL, or (m / every + 1, N, 3): the points of those rows */
+    int ref_len;                /* 3 N */
 } records_t;
 
 static long long now_ns(void) {
@@ -514,16 +522,16 @@ static long long now_ns(void) {
 
 /* Rows k0 .. k0 + count - 1: per tick, the encoders and the observer (tick_sense), the controller
  * on x_hat and its N reference points (N x 3, C-ordered, at refs + (k - k0) ref_step: the
- * ticks' points may overlap, as windows of one array do), the commanded torque
- * (tick_actuate) and the plant (tick_advance) -- the calls and the order of the loop's Python
- * path (sim/loop/closed_loop.py run_ticks), timed at the same places. u_first: u_{-1} of the
- * first tick, or NULL. */
+ * ticks' points may overlap, as windows of one array do; or from r->points, which first runs
+ * the refresh slices due on the row), the commanded torque (tick_actuate) and the plant
+ * (tick_advance) -- the calls and the order of the loop's Python path (sim/loop/ticks.py
+ * run_ticks), timed at the same places. u_first: u_{-1} of the first tick, or NULL. */
 void tick_run(tick_t *t, const records_t *r, int k0, int count, const double *refs,
               long ref_step, const double *u_first) {
     int n = t->plant->n, nx = 2 * n;
     size_t row = n * sizeof(double);
     for (int k = k0; k < k0 + count; k++) {
-        const double *ref = refs + (k - k0) * ref_step;
+        const double *ref = r->points ? r->points(r->plan, k) : refs + (k - k0) * ref_step;
         long long t0 = now_ns();
         tick_sense(t);
         long long t1 = now_ns();
@@ -538,8 +546,12 @@ void tick_run(tick_t *t, const records_t *r, int k0, int count, const double *re
         memcpy(r->tau_mpc + (size_t)k * n, r->last, row);
         memcpy(r->tau + (size_t)k * n, t->tau, row);
         memcpy(r->ref0 + 3 * (size_t)k, ref, 3 * sizeof(double));
-        if (r->every > 0 && k % r->every == r->phase)
+        if (r->every > 0 && k % r->every == r->phase) {
             memcpy(r->x_saved + (size_t)(k / r->every) * nx, t->post, nx * sizeof(double));
+            if (r->ref_saved)
+                memcpy(r->ref_saved + (size_t)(k / r->every) * r->ref_len, ref,
+                       (size_t)r->ref_len * sizeof(double));
+        }
         tick_advance(t);
         memcpy(r->q + (size_t)k * n, t->q, row);
     }

@@ -13,9 +13,8 @@ Newton–Euler for a chain of revolute joints, with the parameters read from the
 (joint placements and axes, spatial inertias, rotor armature, gravity) and the plant's friction
 ``D q̇ + F_c tanh(q̇/v_s)``. A model with mimic bodies (the PHANToM's parallelogram) has its
 forward dynamics as M(q)⁻¹(τ − h) with h and the n columns of M by recursive Newton–Euler,
-all from one set of body transforms. The C file is compiled with the system's C compiler
-(``-O3``) at first use into a cache directory (``$RHMPC_CACHE``, default ``~/.cache/rhmpc``) and
-loaded with :mod:`ctypes`.
+all from one set of body transforms. The C file is compiled with the system's C compiler at
+first use into a cache directory and loaded with :mod:`ctypes` (:mod:`sim.compiled`).
 
 Pinocchio stays the reference: ``tests/sim/plant/test_native.py`` compares ABA, RNEA and the
 end-point with ``pin.aba``, ``pin.rnea`` and the frame placement at random states (1e-15
@@ -27,18 +26,14 @@ from __future__ import annotations
 
 import ctypes
 import functools
-import hashlib
-import os
-import shutil
-import subprocess
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from sim.compiled import load
+
 MAX_JOINTS = 8
 _SOURCE = Path(__file__).with_name("chain.c")
-_FLAGS = ("-O3", "-shared", "-fPIC", "-std=c99")
 _AXES = {"JointModelRX": (1.0, 0.0, 0.0), "JointModelRY": (0.0, 1.0, 0.0),
          "JointModelRZ": (0.0, 0.0, 1.0)}
 
@@ -64,36 +59,14 @@ class _Chain(ctypes.Structure):
     ]
 
 
-def cache_dir() -> Path:
-    """Where the compiled library is kept: ``$RHMPC_CACHE`` or ``~/.cache/rhmpc``."""
-    return Path(os.environ.get("RHMPC_CACHE") or Path.home() / ".cache" / "rhmpc")
-
-
 def _compile() -> ctypes.CDLL | None:
     """The library, compiled at the first call (once per source version); None if impossible."""
     global _library, _tried, unavailable_reason
     if _tried:
         return _library
     _tried = True
-    compiler = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
-    if compiler is None:
-        unavailable_reason = "no C compiler (cc/gcc) on PATH"
-        return None
-    source = _SOURCE.read_bytes()
-    key = hashlib.sha256(source + " ".join(_FLAGS).encode()).hexdigest()[:16]
-    target = cache_dir() / f"chain-{key}.so"
-    try:
-        if not target.exists():
-            target.parent.mkdir(parents=True, exist_ok=True)
-            with tempfile.TemporaryDirectory(dir=target.parent) as tmp:
-                built = Path(tmp) / target.name
-                subprocess.run([compiler, *_FLAGS, "-o", str(built), str(_SOURCE), "-lm"],
-                               check=True, capture_output=True, timeout=120)
-                os.replace(built, target)  # atomic: concurrent runs see all or nothing
-        library = ctypes.CDLL(str(target))
-    except (OSError, subprocess.SubprocessError) as exc:
-        detail = getattr(exc, "stderr", b"") or b""
-        unavailable_reason = f"compiling {_SOURCE.name} failed: {exc} {detail.decode()[:200]}"
+    library, unavailable_reason = load(_SOURCE, "chain")
+    if library is None:
         return None
     ptr = ctypes.c_void_p
     signatures = {"chain_aba": [ptr] * 5, "chain_rnea": [ptr] * 5, "chain_mass": [ptr] * 3,
@@ -303,13 +276,10 @@ class _Hardware(ctypes.Structure):
 
 class HardwareStep:
     """The hardware-like plant's tick compiled (``hw_integrate``): the equations of
-    :class:`sim.plant.hardware.HardwareTick`, whose Python steps are the reference.
-
-    Parameters are those of the tick: the arm's chain, its motor map S, output torque per
-    ampere η K_t, friction (Coulomb, viscous, stiction ratio, Stribeck and smoothing rates),
-    rotor inertias, cable stiffness and damping (None: rigid), home posture, current lag τ_e
-    and step h.
-    """
+    :class:`sim.plant.hardware.HardwareTick`, whose Python steps are the reference, with its
+    parameters: the arm's chain, motor map S, torque per ampere η K_t, friction (Coulomb,
+    viscous, stiction, Stribeck, smoothing), rotor inertias, cables (None: rigid), home
+    posture, current lag τ_e and step h."""
 
     def __init__(self, chain: NativeChain, *, S, gain, coulomb, damping, ratio, v_stribeck,
                  v_smooth, rotor, cables, q0, tau_e, h, steps) -> None:
@@ -362,9 +332,10 @@ class _Tick(ctypes.Structure):
 class _Records(ctypes.Structure):
     """``records_t`` of sim/plant/chain.c: a chunk's records for :meth:`NativeTick.run_ticks`."""
 
-    _fields_ = [(name, ctypes.c_void_p) for name in (
-        "control", "state", "last", "parts", "tau_mpc", "tau", "q", "ref0", "x_saved")] + [
-        ("every", _i), ("phase", _i)]
+    _fields_ = [*((k, ctypes.c_void_p) for k in ("control", "state", "last", "parts", "tau_mpc",
+                                                  "tau", "q", "ref0", "x_saved")),
+                ("every", _i), ("phase", _i), ("points", ctypes.c_void_p),
+                ("plan", ctypes.c_void_p), ("ref_saved", ctypes.c_void_p), ("ref_len", _i)]
 
 
 class NativeTick:
@@ -431,7 +402,7 @@ class NativeTick:
         self._keep: tuple = ()
         self._rows = 0  # rows of the bound records
 
-    def bind(self, control, log: dict, every: int, phase: int) -> None:
+    def bind(self, control, log: dict, every: int, phase: int, plan=None) -> None:
         """Point :meth:`run_ticks` at a compiled controller and at a chunk's records.
 
         Parameters
@@ -446,14 +417,20 @@ class NativeTick:
         every, phase : int
             x̂ of the rows k ≡ phase (mod every) is kept in row k // every of ``x_saved``
             (every = 0: none).
+        plan : optional
+            A chunk's refresh slices (:class:`rhmpc.control.compiled_reference.CompiledSlices`):
+            each tick runs those due on it and reads its points there; the kept x̂'s points go
+            to ``log["ref_saved"]``. None: the points are :meth:`run_ticks`' ``refs``.
         """
-        arrays = [np.asarray(control.output)] + [log[k] for k in (
-            "parts_ns", "tau_mpc", "tau", "q", "ref0", "x_saved")]
+        names = ("parts_ns", "tau_mpc", "tau", "q", "ref0", "x_saved") + (
+            () if plan is None else ("ref_saved",))
+        arrays = [np.asarray(control.output)] + [log[k] for k in names]
         m, n = log["parts_ns"].shape[0], self.nv
+        kept = m // every + 1 if every else 0
         shapes = [((n,), np.float64), ((m, 3), np.int64), ((m, n), np.float64),
                   ((m, n), np.float64), ((m, n), np.float64), ((m, 3), np.float64),
-                  ((m // every + 1 if every else 0, 2 * n), np.float64)]
-        for a, (shape, dtype) in zip(arrays, shapes, strict=True):
+                  ((kept, 2 * n), np.float64), ((kept, getattr(plan, "points", 0)), np.float64)]
+        for a, (shape, dtype) in zip(arrays, shapes[: len(arrays)], strict=True):
             if not (a.flags.c_contiguous and a.flags.writeable) or a.dtype != dtype \
                     or a.shape[0] < shape[0] or a.shape[1:] != shape[1:]:
                 raise ValueError(f"the compiled ticks write C-contiguous, writeable {dtype} "
@@ -462,20 +439,19 @@ class NativeTick:
         r = self._records
         r.control, r.state = control.function, control.state
         r.last, r.parts, r.tau_mpc, r.tau, r.q, r.ref0, r.x_saved = (
-            a.ctypes.data for a in arrays)
+            a.ctypes.data for a in arrays[:7])
         r.every, r.phase = every, phase
-        self._keep = (control, arrays)  # alive while the C side points at them
+        r.points, r.plan, r.ref_saved, r.ref_len = (None, None, None, 0) if plan is None else (
+            plan.function, plan.state, arrays[7].ctypes.data, plan.points)
+        self._keep = (control, arrays, plan)  # alive while the C side points at them
 
     def run_ticks(self, k0: int, count: int, refs: int, ref_step: int,
                   u_first: int | None = None) -> None:
         """Rows k0 … k0 + count − 1 of the bound records in one C call (:meth:`bind`): per tick
         ``sense``, the controller on x̂ and the tick's N reference points, ``actuate`` and
-        ``advance``, timed at the places the Python loop times them.
-
-        ``refs`` is the address of the first tick's points, a C-ordered (N, 3) float64 block;
-        tick k's are ``ref_step`` doubles further per tick (3 for overlapping windows of one
-        array). ``u_first``: the address of u_{−1} for the first tick, or None.
-        """
+        ``advance``, timed as the Python loop times them. ``refs``: the address of the first
+        tick's C-ordered (N, 3) float64 points, the next ``ref_step`` doubles further (3 for
+        overlapping windows; unused with a plan). ``u_first``: u_{−1}'s address, or None."""
         if not 0 <= k0 <= k0 + count <= self._rows:
             raise ValueError(f"rows {k0}…{k0 + count - 1} are outside the {self._rows} bound")
         self._run(k0, count, refs, ref_step, u_first)

@@ -536,11 +536,21 @@ def test_level_2_matches_python_under_heavy_saturation(arm, cache):
 
 
 @needs_cc
-def test_compiled_ticks_run_the_python_loops_ticks_to_the_bit(monkeypatch, cache):
+@pytest.mark.parametrize(("changes", "planned"), [
+    ({}, True), ({"loop.pipelined_refresh": False, "loop.downsample": 10}, True),
+    ({"predictor": "one-step", "loop.downsample": 4, "loop.predictor_clock": "downsample"},
+     True),
+    ({"loop.downsample": 7}, False)])  # the sensor's clock (257 Hz): the slices from Python
+def test_compiled_ticks_run_the_python_loops_ticks_to_the_bit(monkeypatch, cache, changes,
+                                                              planned):
     """The control ticks between two refresh slices in one C call (``loop.compiled_ticks``)
     call the same C functions in the same order as the loop's Python path: the same run to
     the bit, with a u_{−1} handed over to the first tick, the yardstick on the same inputs,
-    and chunks of 600 ticks (u_{−1} and the yardstick's phase carried across them)."""
+    and chunks of 600 ticks (u_{−1} and the yardstick's phase carried across them). With the
+    compiled refresh the slices run from the C ticks too (``OpenLoop.plan``), each on its own
+    tick: the same run again, and so without them (the slices called from Python between the
+    C calls)."""
+    from rhmpc.control.compiled_reference import CompiledReference
     from rhmpc.experiment import RunConfig, build_run
     from sim.loop import run_closed_loop
     from sim.loop.ticks import compiled_ticks
@@ -548,32 +558,47 @@ def test_compiled_ticks_run_the_python_loops_ticks_to_the_bit(monkeypatch, cache
 
     monkeypatch.setenv("RHMPC_CACHE_DIR", str(cache))
     runs = {}
-    for compiled in (True, False):
+    for way in ("planned", "segments", "python"):
         config = RunConfig().replace(**{"loop.duration": 2.0, "loop.settling": 0.5,
-                                        "loop.compiled_ticks": compiled})
+                                        "loop.compiled_ticks": way != "python", **changes})
         run = build_run(config, "c")
+        assert run.refresh == "compiled"
         run.controller.u_prev = np.array([0.02, -0.01, 0.005])
         seen = []
-        result = run_closed_loop(
-            run.robot, run.arm, run.controller, run.reference, run.truth, run.center,
-            run.stream, config.loop, plant_settings=config.plant, mismatch=config.mismatch,
-            observer_settings=config.observer, chunk_ticks=600,
-            yardstick=lambda x, r, u, seen=seen: seen.append((x.copy(), r.copy(), u.copy())))
-        runs[compiled] = result, run.controller.stats, seen
-    (fast, fast_stats, fast_seen), (slow, slow_stats, slow_seen) = runs[True], runs[False]
-    assert fast.tick_loop == "compiled"
+        with monkeypatch.context() as patch:
+            if way == "segments":
+                patch.delattr(CompiledReference, "slices")
+            result = run_closed_loop(
+                run.robot, run.arm, run.controller, run.reference, run.truth, run.center,
+                run.stream, config.loop, plant_settings=config.plant,
+                mismatch=config.mismatch, observer_settings=config.observer, chunk_ticks=600,
+                yardstick=lambda x, r, u, seen=seen: seen.append((x.copy(), r.copy(),
+                                                                  u.copy())))
+        runs[way] = (result, run.controller.stats, seen, dict(run.reference.predictor.counts),
+                     run.reference.predictor.forecast_error_rms)
+    slow, slow_stats, slow_seen, slow_counts, slow_rms = runs["python"]
+    assert runs["planned"][0].tick_loop == ("compiled with the refresh" if planned
+                                            else "compiled")
+    assert runs["segments"][0].tick_loop == "compiled"
     assert slow.tick_loop == "python (loop.compiled_ticks = false)"
-    for name in ("ee", "reference0", "tau_mpc", "tau_command", "tau"):
-        np.testing.assert_array_equal(fast.trace[name], slow.trace[name], err_msg=name)
-    assert fast.tracking == slow.tracking
-    timing = {"parts_ns", "solve_time"}
-    assert {k: v for k, v in dataclasses.asdict(fast_stats).items() if k not in timing} == \
-        {k: v for k, v in dataclasses.asdict(slow_stats).items() if k not in timing}
-    assert fast_stats.ticks == 4000
-    assert len(fast_seen) == len(slow_seen) == 3 * (4000 // 16)
-    for a, b in zip(fast_seen, slow_seen, strict=True):
-        for u, v in zip(a, b, strict=True):
-            np.testing.assert_array_equal(u, v)
+    for fast, fast_stats, fast_seen, counts, rms in (runs["planned"], runs["segments"]):
+        for name in ("ee", "reference0", "tau_mpc", "tau_command", "tau"):
+            np.testing.assert_array_equal(fast.trace[name], slow.trace[name], err_msg=name)
+        assert fast.tracking == slow.tracking
+        np.testing.assert_array_equal(fast.horizon_error, slow.horizon_error)
+        assert counts == slow_counts and counts["updates"] > 100
+        np.testing.assert_array_equal(rms, slow_rms)
+        timing = {"parts_ns", "solve_time"}
+        assert {k: v for k, v in dataclasses.asdict(fast_stats).items() if k not in timing} == \
+            {k: v for k, v in dataclasses.asdict(slow_stats).items() if k not in timing}
+        assert fast_stats.ticks == 4000
+        assert len(fast_seen) == len(slow_seen) == 3 * (4000 // 16)
+        for a, b in zip(fast_seen, slow_seen, strict=True):
+            for u, v in zip(a, b, strict=True):
+                np.testing.assert_array_equal(u, v)
+        # every slice was charged to a tick: five parts, each about once a refresh
+        assert fast.tick_parts_us["predictor_update"]["p50"] == 0.0
+        assert fast.tick_parts_us["interpolation"]["max"] > 0.0
     # a controller of other sizes than the loop's is left to the Python path, which says so
     side = make_tick(run.robot, run.arm, config.loop.Ts, config.plant, config.mismatch,
                      config.observer)

@@ -74,8 +74,9 @@ def test_streamed_run_is_the_run_on_whole_arrays(tmp_path, predictor):
     from sim.recordings import RecordedMotion
     from sim.sensors import sensor_from_name
 
-    config = small_config(predictor=predictor, seed=5, **{
-        "loop.duration": 4.0, "loop.settling": 1.0, "plant.dynamics": "pinocchio"})
+    config = small_config(predictor=predictor, seed=5, **{  # the Python refresh, as below
+        "loop.duration": 4.0, "loop.settling": 1.0, "plant.dynamics": "pinocchio",
+        "loop.compiled_refresh": False})
     loop, run = config.loop, build_run(config)
     streamed = run_closed_loop(  # chunks of 600 ticks: 14 chunk boundaries
         run.robot, run.arm, run.controller, run.reference, run.truth, None, run.stream, loop,
@@ -140,5 +141,26 @@ def test_predictor_params_pick_each_predictors_named_set():
     assert chosen.reference.predictor.settings == named("yuen2008")
     mm = build_run(small_config(predictor="ekf", predictor_settings={"unit": 1e-3}))
     assert mm.reference.predictor.settings.unit == 1e-3  # a unit the user sets is kept
-    other = build_run(small_config(predictor="one-step", predictor_params=params))
+    other = build_run(small_config(predictor="one-step", predictor_params=params,
+                                   **{"loop.compiled_refresh": False}))
     assert type(other.reference.predictor).__name__ == "OneStepRLS"
+    assert other.refresh == "python (loop.compiled_refresh = false)"
+
+
+def test_the_rls_predictors_refresh_in_c_and_the_others_say_why_not():
+    """``loop.compiled_refresh`` (default on): the RLS predictors' refresh runs in C
+    (:mod:`rhmpc.control.compiled_reference`) where a compiler is found, and the run's document
+    says so; a predictor without a compiled twin keeps the Python refresh, with the reason."""
+    from rhmpc.control import compiled_reference
+
+    if compiled_reference.load_library() is None:
+        pytest.skip(f"no compiled refresh: {compiled_reference.unavailable_reason}")
+    run = build_run(small_config(predictor="generalized"))
+    assert run.refresh == "compiled"
+    assert type(run.reference).__name__ == "CompiledReference"
+    _, doc = run_experiment(small_config(predictor="one-step"))
+    assert doc["refresh"] == "compiled"
+    assert doc["predictor_counts"]["updates"] > 0 and doc["outlier_gate"] is not None
+    ekf = build_run(small_config(predictor="ekf"))
+    assert ekf.refresh.startswith("python (") and "EKF" in ekf.refresh
+    assert build_run(small_config(predictor="exact")).refresh == "none"
