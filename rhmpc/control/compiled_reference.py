@@ -265,15 +265,17 @@ class CompiledReference:
         public = self._public  # the arguments are written into the C state, then one call
         public.tick, public.stamp = tick, stamp
         if z is None:
-            self._update_none()
+            code = self._update_none()
         elif z.__class__ is np.ndarray and z.shape == self._shape:
             self._z[:] = z
-            self._update_z()
+            code = self._update_z()
         else:
             self._stage(z)
-            self._update_z()
+            code = self._update_z()
             if self._shape is None and public.d:
                 self._shape = (public.d,)
+        if code:
+            raise ValueError(self.update_error(code, stamp))
 
     def _stage(self, z) -> None:
         """Copy a sample of another type or shape into the C state, checking its size."""
@@ -303,7 +305,7 @@ class CompiledReference:
         made = self._interpolate(spare[1])
         if made:
             if made < 0:
-                raise MemoryError("the compiled refresh could not grow its forecast arrays")
+                raise MemoryError(self.failure)
             self._spare, self._live = self._live, spare
             self._points = spare[0]
 
@@ -364,6 +366,20 @@ class CompiledReference:
         return CompiledSlices(self, hold)
 
     # -- state ---------------------------------------------------------------------------
+    @staticmethod
+    def update_error(code: int, stamp: float) -> str:
+        """The one-line error of ``refresh_update``'s (negative) code."""
+        return {-1: "the sample's size is not 1 … 3 before the predictor knows its dimension",
+                -3: f"the sample's time stamp must be finite, got {stamp!r}"}.get(
+                    code, f"refresh_update failed ({code})")
+
+    @property
+    def failure(self) -> str | None:
+        """Why a forecast failed (until :meth:`reset`), or None."""
+        return {0: None, 1: "the compiled refresh could not grow its forecast arrays",
+                2: "the latency asks for a forecast of a million points or more"
+                }[self._public.failed]
+
     @property
     def locked(self) -> bool:
         """True while the outlier gate rejects samples outside it (False without a gate)."""

@@ -14,12 +14,16 @@ is the same to the bit, without a Python frame between them.
 from __future__ import annotations
 
 import ctypes
+import math
 
 import numpy as np
 
 __all__ = ["CompiledSlices"]
 
 _i, _ll, _p = ctypes.c_int, ctypes.c_longlong, ctypes.c_void_p
+#: The parts of a refresh (sim.loop.results.CHARGED): update, learning, forecast,
+#: interpolation, bookkeeping.
+PARTS = 5
 
 
 class _Plan(ctypes.Structure):
@@ -27,7 +31,8 @@ class _Plan(ctypes.Structure):
 
     _fields_ = [
         ("ref", _p), ("count", _i), ("next", _i), ("row", _p), ("part", _p), ("tick", _p),
-        ("z", _p), ("d", _i), ("stamp", _p), ("fresh", _p), ("charged", _p), ("m", _i),
+        ("z", _p), ("d", _i), ("stamp", _p), ("fresh", _p), ("charged", _p), ("error", _i),
+        ("m", _i),
         ("c0", _ll),
         ("buffer", _p * 2), ("live", _i), ("has_points", _i), ("hold", _p), ("h_tick", _p),
         ("h_points", _p), ("h_valid", _p), ("h_count", _i), ("h_cap", _i),
@@ -77,18 +82,23 @@ class CompiledSlices:
         arrays = {"row": np.intc, "part": np.intc, "tick": np.int64, "z": np.float64,
                   "stamp": np.float64, "fresh": np.uint8}
         plan = {k: np.ascontiguousarray(plan[k], dtype=t) for k, t in arrays.items()}
-        count = plan["row"].shape[0]
-        if plan["z"].shape != (count, d) or charged.shape[1] != m or charged.dtype != np.int64 \
-                or not charged.flags.c_contiguous:
+        count, row, part = plan["row"].shape[0], plan["row"], plan["part"]
+        if plan["z"].shape != (count, d) or charged.shape != (PARTS, m) \
+                or charged.dtype != np.int64 or not charged.flags.c_contiguous:
             raise ValueError(f"a plan of {count} slices needs z ({count}, {d}) and charged "
-                             f"(parts, {m}) int64, got {plan['z'].shape}, {charged.shape}")
+                             f"({PARTS}, {m}) int64, got {plan['z'].shape}, {charged.shape}")
+        if any(plan[k].shape != (count,) for k in ("row", "part", "tick", "stamp", "fresh")) \
+                or (count and (row[0] < 0 or row[-1] >= m or np.any(np.diff(row) < 0)
+                               or part.min() < 0 or part.max() >= PARTS)):
+            raise ValueError(f"a plan's slices run on rows 0 … {m - 1} in order, parts 0 … "
+                             f"{PARTS - 1}, one entry of each array per slice")
         buffers = (np.empty((ref.span, 3)), np.empty((ref.span, 3)))
         if ref._points is not None:
             buffers[0][:] = ref._points
         interpolations = int(np.count_nonzero(plan["part"] == 3))
         h = (np.empty(interpolations, dtype=np.int64),
              np.empty((interpolations, ref.N, 3)), np.zeros(interpolations, dtype=np.uint8))
-        p.count, p.next, p.m, p.c0 = count, 0, m, c0
+        p.count, p.next, p.m, p.c0, p.error = count, 0, m, c0, 0
         p.d = d
         p.row, p.part, p.tick, p.z, p.stamp, p.fresh = (
             plan[k].ctypes.data for k in ("row", "part", "tick", "z", "stamp", "fresh"))
@@ -103,6 +113,8 @@ class CompiledSlices:
         """Each refresh's ``(tick, points)`` (None before the first sample); the reference
         reads the last points from now on. Every slice loaded must have run."""
         p, ref = self._plan, self.reference
+        if p.error:
+            raise ValueError(ref.failure if p.error == -1 else ref.update_error(p.error, math.nan))
         if p.next != p.count:
             raise RuntimeError(f"{p.count - p.next} of the chunk's slices did not run")
         _, _, buffers, (ticks, points, valid) = self._keep

@@ -74,7 +74,7 @@ typedef struct {
     int nz;                 /* components of the staged sample while d is unknown */
     int has_points;         /* a refresh has produced points since the last reset */
     int placed;             /* points are origin + E r_c, (span, 3) */
-    int failed;             /* a K-sized array could not grow */
+    int failed;             /* a forecast failed: 1 a K-sized array could not grow, 2 K >= 1e6 */
     int errors_k;           /* K of LeadErrorRMS */
 } refresh_public_t;
 
@@ -967,6 +967,7 @@ refresh_t *refresh_create(const refresh_config_t *cfg) {
  * interpolation windows, like the Python one's matrices, is kept) */
 void refresh_reset(refresh_t *s) {
     predictor_reset(s);
+    s->pub.failed = 0;
     s->pub.has_points = 0;
     s->pub.first = 0;
     s->pending = s->points_ready = 0;
@@ -987,8 +988,9 @@ double *refresh_input(refresh_t *s) { return s->zin; }
 
 /* PredictedReference.update: the gate, then the predictor's update with z (NULL: none new)
  * measured at stamp [s], on tick `tick`. Returns -1 (and does nothing) if d is unknown and
- * pub.nz is not 1 ... dcap, else 0. */
+ * pub.nz is not 1 ... dcap, -3 if the stamp is not finite, else 0. */
 int refresh_update(refresh_t *s, const double *z, long long tick, double stamp) {
+    if (!isfinite(stamp)) return -3;
     int nz = s->dim_known ? s->pub.d : s->pub.nz;
     if (z != NULL && !s->dim_known && (nz < 1 || nz > s->cfg.dcap)) return -1;
     int valid = z != NULL && isfinite(sumsq(z, nz));  /* np.vdot: a square that overflows too */
@@ -1043,7 +1045,7 @@ void refresh_predict(refresh_t *s) {
     if (!(latency > 0.0)) latency = 0.0;  /* max(0.0, x) */
     double steps = ceil(latency / s->cfg.dt - 1e-9);
     if (!(steps < 1e6) || !ensure_k(s, s->cfg.prediction_points + (int)steps)) {
-        s->pub.failed = 1;
+        s->pub.failed = steps < 1e6 ? 1 : 2;
         return;
     }
     int K = s->cfg.prediction_points + (int)steps, d = s->pub.d;
@@ -1132,7 +1134,7 @@ int refresh_interpolate(refresh_t *s, double *out) {
     for (int i = 0; i < span; i++) {
         double si = leads[i] + shift, m = floor_exact(si);
         if (m > top) m = top;
-        if (m < 0.0) m = 0.0;
+        if (!(m >= 0.0)) m = 0.0;  /* also a NaN: the window stays inside the nodes */
         double u = si - m, u2 = u * u;  /* the rows of _LAGRANGE times (u^2, u, 1) */
         double w0 = 0.5 * u2 + -1.5 * u + 1.0, w1 = -1.0 * u2 + 2.0 * u + 0.0,
                w2 = 0.5 * u2 + -0.5 * u + 0.0;
@@ -1209,6 +1211,7 @@ typedef struct {
     const double *stamp;
     const unsigned char *fresh; /* an update has a new sample (else none: NULL is passed) */
     long long *charged;         /* (N_SLICES, m) [ns], added to */
+    int error;                  /* 0, or the first failure: an update's code, -1 a forecast's */
     int m;
     long long c0;
     /* the points the ticks read: two arrays (span, 3) taken in turn, or hold before any */
@@ -1240,17 +1243,22 @@ static const double *plan_window(const plan_t *p, int k) {
 static void plan_slice(plan_t *p, int e, int k) {
     refresh_t *s = p->ref;
     switch (p->part[e]) {
-    case S_UPDATE:
-        refresh_update(s, p->fresh[e] ? p->z + (size_t)e * p->d : NULL, p->tick[e],
-                       p->stamp[e]);
+    case S_UPDATE: {
+        int code = refresh_update(s, p->fresh[e] ? p->z + (size_t)e * p->d : NULL, p->tick[e],
+                                  p->stamp[e]);
+        if (code < 0 && !p->error) p->error = code;
         break;
+    }
     case S_LEARN: refresh_learn(s); break;
     case S_FORECAST: refresh_predict(s); break;
     case S_SCORE: refresh_score(s); break;
-    case S_INTERPOLATE:
-        if (refresh_interpolate(s, p->buffer[1 - p->live]) == 1) {
+    case S_INTERPOLATE: {
+        int made = refresh_interpolate(s, p->buffer[1 - p->live]);
+        if (made == 1) {
             p->live = 1 - p->live;
             p->has_points = 1;
+        } else if (made < 0 && !p->error) {
+            p->error = -1;
         }
         if (p->h_count < p->h_cap) {  /* the refresh's points on its own tick */
             int i = p->h_count++, size = 3 * s->cfg.horizon;
@@ -1261,6 +1269,7 @@ static void plan_slice(plan_t *p, int e, int k) {
                        (size_t)size * sizeof(double));
         }
         break;
+    }
     }
 }
 

@@ -15,6 +15,8 @@ a 0.5-m sample, and a sensor latency that grows during the run.
 
 from __future__ import annotations
 
+import ctypes
+
 import numpy as np
 import pytest
 
@@ -395,3 +397,66 @@ def test_what_has_no_compiled_twin_says_why(monkeypatch):
     monkeypatch.setattr(cr, "unavailable_reason", "no C compiler (cc/gcc) on PATH")
     compiled, why = cr.compile_reference(reference(unit=1.0), dim=3)
     assert compiled is None and "compiler" in why
+
+
+def test_a_time_stamp_that_is_not_finite_is_refused():
+    """A NaN or inf stamp is a one-line error before anything changes (the Python pipeline
+    would fail later, in its interpolation)."""
+    pred = make_predictor("generalized", dt=DT, unit=1.0)
+    compiled, _ = cr.compile_reference(PredictedReference(pred, TS, N, DS), dim=3)
+    compiled.place(ORIGIN)
+    for bad in (np.nan, np.inf):
+        with pytest.raises(ValueError, match="time stamp must be finite"):
+            compiled.update(0, np.full(3, 1e-3), bad)
+    assert compiled.predictor.counts == {}
+    compiled.refresh(0, np.full(3, 1e-3), 0.0)
+    assert compiled.horizon(0) is not None
+
+
+def test_a_failed_forecast_says_why_and_reset_recovers():
+    """A latency that asks for a million points fails the forecast with a one-line error until
+    reset(); after it the twin works again, as the Python pipeline does."""
+    pred = make_predictor("one-step", dt=DT, unit=1.0)
+    compiled, _ = cr.compile_reference(PredictedReference(pred, TS, N, DS), dim=3)
+    compiled.place(ORIGIN)
+    compiled.update(10**9, np.full(3, 1e-3), 0.0)  # measured 500 000 s before its tick
+    compiled.predict()
+    with pytest.raises(MemoryError, match="million points"):
+        compiled.interpolate()
+    assert compiled.failure is not None
+    compiled.reset()
+    assert compiled.failure is None
+    compiled.refresh(0, np.full(3, 1e-3), 0.0)
+    np.testing.assert_allclose(compiled.horizon(0), np.tile(ORIGIN + 1e-3, (N, 1)))
+
+
+def test_the_compiled_slices_refuse_a_malformed_plan_and_report_a_failed_one():
+    """CompiledSlices.load checks the plan it hands to C (rows in order inside the chunk, known
+    parts, one entry per slice); a slice that fails in C is reported by finish()."""
+    pred = make_predictor("generalized", dt=DT, unit=1.0)
+    compiled, _ = cr.compile_reference(PredictedReference(pred, TS, N, DS), dim=3)
+    compiled.place(ORIGIN)
+    slices = compiled.slices(np.tile(ORIGIN, (N, 1)))
+    m = 30
+
+    def plan(rows, parts, stamps=None):
+        count = len(rows)
+        return {"row": rows, "part": parts, "tick": np.arange(count),
+                "z": np.full((count, 3), 1e-3),
+                "stamp": np.zeros(count) if stamps is None else stamps,
+                "fresh": np.ones(count, dtype=np.uint8)}
+
+    charged = np.zeros((5, m), dtype=np.int64)
+    for bad in (plan([0, 1], [0, 9]), plan([3, 1], [0, 1]), plan([0, m], [0, 1]),
+                {**plan([0, 1], [0, 1]), "tick": np.arange(1)}):
+        with pytest.raises(ValueError, match="a plan's slices"):
+            slices.load(0, m, bad, charged)
+    with pytest.raises(ValueError, match="charged"):
+        slices.load(0, m, plan([0], [0]), np.zeros((5, m - 1), dtype=np.int64))
+    slices.load(0, m, plan([0, 1, 2, 3], [0, 1, 2, 3], np.array([np.nan, 0, 0, 0])), charged)
+    function = ctypes.CFUNCTYPE(ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int)(slices.function)
+    for k in range(4):
+        assert function(slices.state, k)  # a tick's points: never NULL
+    assert (charged[:4, :4].diagonal() > 0).all()  # each slice timed on its own row
+    with pytest.raises(ValueError, match="time stamp must be finite"):
+        slices.finish()
