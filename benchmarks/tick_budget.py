@@ -2,8 +2,10 @@
 
 ``rhmpc simulate --predictor generalized --duration 60 --seed 2 --json`` with the Python
 controller and with ``--controller c`` (where a C toolchain and cmake are), two runs each, in
-fresh processes; and once with the C controller's ticks called one at a time from Python
-(``--set loop.compiled_ticks=false``), for the cost of the interpreter between them. For each
+fresh processes; once with the C controller's ticks called one at a time from Python
+(``--set loop.compiled_ticks=false``), for the cost of the interpreter between them; and once
+with the Python controller and the predictor's Python refresh (``--set
+loop.compiled_refresh=false``), for what the compiled refresh saves. For each
 run: the tick's percentiles in multiples of the gain tick g timed in the same run, the same
 without the refresh slices (sense + controller + actuate: the tick with the predictor in a task
 of its own), the p99 of each part, and the wall time per simulated second beside the ticks' own
@@ -40,7 +42,7 @@ def simulate(duration: float, controller: str, stalls: float, *extra: str) -> di
     doc = json.loads(run.stdout)
     keep = ("gain_tick_us", "tick_us", "tick_ratio_to_gain", "control_tick_ratio_to_gain",
             "tick_parts_ratio_to_gain", "wall_per_simulated_s_g", "tick_per_simulated_s_g",
-            "real_time_factor", "rms_error_mm", "host_stalls", "tick_loop")
+            "real_time_factor", "rms_error_mm", "host_stalls", "tick_loop", "refresh")
     return {"command": " ".join(["rhmpc", *cmd[3:]]), **{k: doc[k] for k in keep}}
 
 
@@ -63,9 +65,12 @@ def main() -> None:
             doc = simulate(duration, controller, stalls)
             if doc is not None:
                 runs[f"{controller} {k}"] = doc
-    doc = simulate(duration, "c", stalls, "--set", "loop.compiled_ticks=false")
-    if doc is not None:
-        runs["c, ticks from Python"] = doc
+    for label, controller, setting in (
+            ("c, ticks from Python", "c", "loop.compiled_ticks=false"),
+            ("python, Python refresh", "python", "loop.compiled_refresh=false")):
+        doc = simulate(duration, controller, stalls, "--set", setting)
+        if doc is not None:
+            runs[label] = doc
     ticks = R.table(
         ["run", "g [µs]", "p50 [g]", "p99 [g]", "p99.9 [g]", "max [g]",
          "p99 without slices [g]", "max without slices [g]",
@@ -91,9 +96,11 @@ def main() -> None:
                   "controller's real computation, which a simulator of it cannot undercut. "
                   "The host's stalls are those of a loop that does nothing but read the clock "
                   "(`rhmpc simulate --host-stalls`), right after the run in the same process: "
-                  "a tick that one of them lands in lasts at least as long. The C "
-                  "controller's runs call its ticks from C between the refresh slices "
-                  "(`loop.compiled_ticks`), but the one marked \"ticks from Python\".")
+                  "a tick that one of them lands in lasts at least as long. The predictor's "
+                  "refresh is compiled (`loop.compiled_refresh`) but in the run marked "
+                  "\"Python refresh\"; the C controller's runs call its ticks and the refresh "
+                  "slices from C (`loop.compiled_ticks`), but the one marked \"ticks from "
+                  "Python\", which calls both from Python.")
 
 
 if __name__ == "__main__":
