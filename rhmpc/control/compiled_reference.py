@@ -357,6 +357,12 @@ class CompiledReference:
             return None
         return windows(points, tick + 1 - self._public.first, count, self.N)
 
+    def adopt(self, live: np.ndarray, spare: np.ndarray) -> None:
+        """From now on the points are ``live``'s (written by C elsewhere, e.g. the compiled
+        slices), and ``spare`` takes the next refresh's turn."""
+        self._live, self._spare = (live, live.ctypes.data), (spare, spare.ctypes.data)
+        self._points = live
+
     def slices(self, hold: np.ndarray):
         """The slices of a chunk run from compiled control ticks
         (:class:`~rhmpc.control.compiled_slices.CompiledSlices`), with ``hold`` (N, 3) the

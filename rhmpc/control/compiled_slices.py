@@ -119,9 +119,7 @@ class CompiledSlices:
             raise RuntimeError(f"{p.count - p.next} of the chunk's slices did not run")
         _, _, buffers, (ticks, points, valid) = self._keep
         if p.has_points:
-            live, spare = buffers[p.live], buffers[1 - p.live]
-            ref._live, ref._spare = (live, live.ctypes.data), (spare, spare.ctypes.data)
-            ref._points = live
+            ref.adopt(buffers[p.live], buffers[1 - p.live])
         self._keep = ()
         return [(int(t), points[k] if valid[k] else None)
                 for k, t in enumerate(ticks[: p.h_count])]

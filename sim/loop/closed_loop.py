@@ -226,7 +226,7 @@ class OpenLoop:
         [s] and ``fresh`` (a new sample, else none). The queue and the stream's cursor move on
         as if the slices had run: the next refreshes are queued on the interpolation's tick.
         """
-        if self.clock.mode == "sensor":
+        if not self.plannable:
             return None
         slices, events, at = self.slices, [], c0
         while slices and max(slices[0][0], at) < c1:
@@ -246,6 +246,11 @@ class OpenLoop:
                 "tick": np.array([e[2] for e in events], dtype=np.int64), "z": z,
                 "stamp": np.array([e[4] for e in events], dtype=float),
                 "fresh": np.array([e[3] is not None for e in events], dtype=np.uint8)}
+
+    @property
+    def plannable(self) -> bool:
+        """Whether :meth:`plan` can plan the slices ahead: not with the sensor's clock."""
+        return self.clock.mode != "sensor"
 
     def _sample(self, tick: int) -> tuple[np.ndarray | None, float]:
         """The update of ``tick``'s arguments (:meth:`update`): the centred newest sample
@@ -423,27 +428,24 @@ def run_closed_loop(
                                  predictor_clock(settings, stream))
             compiled, loop = compiled_ticks(controller, side, settings)
             slices = None  # the refresh slices run from the compiled ticks, where they can
-            if compiled is not None and hasattr(reference, "slices") \
-                    and open_loop.clock.mode != "sensor":
+            if compiled is not None and hasattr(reference, "slices") and open_loop.plannable:
                 slices, loop = reference.slices(open_loop.hold), "compiled with the refresh"
             u_prev = None
             for c0 in range(0, n, chunk):
                 c1 = min(c0 + chunk, n)
+                charged = (np.zeros((len(CHARGED), c1 - c0), dtype=np.int64)  # written by C
+                           if slices is not None else tuple([0] * (c1 - c0) for _ in CHARGED))
+                horizons: list = []
+                log = record.start_chunk(c1 - c0, charged, u_prev)
                 if slices is not None:
-                    charged = np.zeros((len(CHARGED), c1 - c0), dtype=np.int64)
-                    log = record.start_chunk(c1 - c0, charged, u_prev)
                     horizons = compiled.run_planned(c0, c1, open_loop.plan(c0, c1), slices,
                                                     log, yardstick, progress)
-                    u_prev = log["u_prev"]
-                    record.end_chunk(c0, c1, log, horizons)
-                    continue
-                charged, horizons = tuple([0] * (c1 - c0) for _ in CHARGED), []
-                log = record.start_chunk(c1 - c0, charged, u_prev)
-                segments = open_loop.segments(c0, c1, charged, horizons)
-                if compiled is not None:
-                    compiled.run(c0, segments, log, yardstick, progress)
                 else:
-                    run_ticks(side, controller, c0, segments, log, yardstick, progress)
+                    segments = open_loop.segments(c0, c1, charged, horizons)
+                    if compiled is not None:
+                        compiled.run(c0, segments, log, yardstick, progress)
+                    else:
+                        run_ticks(side, controller, c0, segments, log, yardstick, progress)
                 u_prev = log["u_prev"]
                 record.end_chunk(c0, c1, log, horizons)
             open_loop.finish()

@@ -113,7 +113,8 @@ class CompiledTicks:
                                 None if u_first is None else u_first.ctypes.data)
             first = False
             if yardstick is not None:
-                self._yardstick(yardstick, log, i0 - c0, refs, phase)
+                self._yardstick(yardstick, log, i0 - c0, i0 - c0 + len(refs), phase,
+                                lambda k, k0=i0 - c0, refs=refs: refs[k - k0])
             _report(progress, i0, i0 + len(refs))
         log["u_prev"] = log["tau_mpc"][-1].copy()
 
@@ -141,13 +142,8 @@ class CompiledTicks:
             k0 = k1
         horizons = slices.finish()
         if yardstick is not None:
-            tau_mpc, shape = log["tau_mpc"], self.points
-            for k in range(phase, m, every):
-                u_prev = tau_mpc[k - 1] if k > 0 else log["u_prev"]
-                if u_prev is not None:
-                    log["yardstick_ns"].append(warm_ns(
-                        yardstick, log["x_saved"][k // every],
-                        log["ref_saved"][k // every].reshape(shape), u_prev))
+            saved = log["ref_saved"].reshape(-1, *self.points)
+            self._yardstick(yardstick, log, 0, m, phase, lambda k: saved[k // every])
         log["u_prev"] = log["tau_mpc"][-1].copy()
         return horizons
 
@@ -160,15 +156,15 @@ class CompiledTicks:
                              f"tick, got {refs.dtype} {refs.shape[1:]}, strides "
                              f"{refs.strides[1:]}")
 
-    def _yardstick(self, yardstick, log: dict, k0: int, refs: np.ndarray, phase: int) -> None:
-        """The yardstick on the kept x̂ of rows k0 … k0 + len(refs) − 1, their references and
+    def _yardstick(self, yardstick, log: dict, k0: int, k1: int, phase: int, points) -> None:
+        """The yardstick on the kept x̂ of rows k0 … k1 − 1, their points (``points(k)``) and
         u_{−1}."""
         every, tau_mpc = YARDSTICK_EVERY, log["tau_mpc"]
-        for k in range(k0 + (phase - k0) % every, k0 + len(refs), every):
+        for k in range(k0 + (phase - k0) % every, k1, every):
             u_prev = tau_mpc[k - 1] if k > 0 else log["u_prev"]
             if u_prev is not None:
                 x_hat = log["x_saved"][k // every]
-                log["yardstick_ns"].append(warm_ns(yardstick, x_hat, refs[k - k0], u_prev))
+                log["yardstick_ns"].append(warm_ns(yardstick, x_hat, points(k), u_prev))
 
 
 def _report(progress, i0: int, i1: int) -> None:
