@@ -38,8 +38,9 @@ def format_summary(doc: dict, settling_rule: str | None = None) -> str:
         + (f", failures {fails}" if fails else ""),
         f"  wall time        {doc['wall_s']:.1f} s ({doc['real_time_factor']:.1f}× real time)"
         + (f", peak memory {doc['peak_rss_mb']:.0f} MB" if "peak_rss_mb" in doc else "")
-        + ("; control ticks in C between the refresh slices"
-           if doc.get("tick_loop") == "compiled" else "")
+        + {"compiled": "; control ticks in C between the refresh slices",
+           "compiled with the refresh": "; control ticks and refresh slices in C"}.get(
+               doc.get("tick_loop"), "")
         + ("; predictor refresh in C" if doc.get("refresh") == "compiled" else ""),
     ]
     counts = doc.get("predictor_counts") or {}
