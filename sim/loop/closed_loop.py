@@ -403,7 +403,7 @@ def run_closed_loop(
         Write every tick to this NPZ file as the run goes (:class:`sim.loop.trace.TraceFile`).
     yardstick
         A reference computation ``yardstick(x̂, r, u_{−1})`` (the gain tick g of
-        :class:`rhmpc.control.yardstick.GainTick`) timed on every 16th tick after the controller
+        :class:`rhmpc.control.yardstick.GainTick`) timed on every 64th tick after the controller
         (after the call, with the compiled ticks), with the tick's own inputs, so that tick
         times can be stated as ratios to it measured in the same run
         (``LoopResult.yardstick_us``); not part of the tick, its result is not used.

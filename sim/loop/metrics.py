@@ -107,7 +107,8 @@ class TickHistogram:
             return
         bins = ns // self.resolution
         inside = bins < self.counts.size
-        self.counts += np.bincount(bins[inside], minlength=self.counts.size)
+        counted = np.bincount(bins[inside])  # up to the longest tick: not the whole span
+        self.counts[: counted.size] += counted
         self.overflow.extend(ns[~inside].tolist())
         self.n += int(ns.size)
         self.total += int(ns.sum())

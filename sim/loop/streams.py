@@ -21,6 +21,7 @@ changes its last bits (≤ 1e-19 m for millimetre motion, far below anything pri
 
 from __future__ import annotations
 
+import bisect
 import math
 
 import numpy as np
@@ -219,12 +220,14 @@ class StreamCursor:
         a = self._b * self.size
         self._previous = self._current
         self._current = self.samples.block(a, min(a + self.size, self.n))
+        self._arrival = self._current[2].tolist()  # bisect on floats: no NumPy call a tick
 
     def newest(self, now: float) -> int:
-        while (self._current[2].size and self._current[2][-1] <= now
-               and (self._b + 1) * self.size < self.n):
+        arrival = self._arrival
+        while arrival and arrival[-1] <= now and (self._b + 1) * self.size < self.n:
             self._advance()
-        k = int(np.searchsorted(self._current[2], now, side="right")) - 1
+            arrival = self._arrival
+        k = bisect.bisect_right(arrival, now) - 1  # searchsorted(…, "right") − 1
         return self._b * self.size + k  # k = −1: the previous block's last sample (or −1)
 
     def sample(self, j: int) -> tuple[float, np.ndarray]:

@@ -54,7 +54,7 @@ def run_ticks(side, controller, c0: int, segments: Iterator[tuple[int, np.ndarra
     ``side`` is the robot's side of the tick (:mod:`sim.plant.tick`). The tick's time is from
     the encoder reading to the commanded torque (its parts: ``sense``, ``controller``,
     ``actuate``), plus the slices charged to it. ``yardstick(x̂, r, u_{−1})`` is timed on every
-    16th tick with the tick's own inputs (the least of three calls,
+    64th tick with the tick's own inputs (the least of three calls,
     :func:`sim.loop.metrics.warm_ns`).
     """
     sense, actuate, advance, step = side.sense, side.actuate, side.advance, controller.step

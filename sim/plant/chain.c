@@ -6,7 +6,8 @@
  * armature. Body i's pose in its parent: (R_p Rot(a, qb_i), p_p), qb_i = s_i q[c_i] + o_i: a
  * body follows one degree of freedom, scaled and offset (mimic joints: a closed linkage such as a
  * parallelogram written as a tree). Without mimic bodies qb = q and the dynamics are ABA; with
- * them, M(q) = sum of RNEA columns and q'' = M^-1 (tau - h) by Cholesky. Friction acts on the
+ * them, M(q) by the composite-rigid-body algorithm, h by RNEA and q'' = M^-1 (tau - h) by
+ * Cholesky; both with transforms and inertias kept in their structured form. Friction acts on the
  * motors' output rates w = S q' (S the motor map) and reaches the joints as S^T f(w). The
  * reference is Pinocchio (tests/sim/plant/test_native.py compares every function with it).
  */
@@ -16,6 +17,14 @@
 #include <time.h>
 
 #define MAXJ 8
+
+/* The small spatial helpers inlined: the compilers' heuristics leave them as calls, which
+ * doubles the cost of RNEA. */
+#if defined(__GNUC__)
+#define SPATIAL static inline __attribute__((always_inline))
+#else
+#define SPATIAL static inline
+#endif
 
 typedef struct {
     int n;                      /* degrees of freedom */
@@ -82,14 +91,14 @@ static void mat6T_vec(const double A[36], const double x[6], double y[6]) {
     }
 }
 
-static void cross3(const double a[3], const double b[3], double c[3]) {
+SPATIAL void cross3(const double a[3], const double b[3], double c[3]) {
     c[0] = a[1] * b[2] - a[2] * b[1];
     c[1] = a[2] * b[0] - a[0] * b[2];
     c[2] = a[0] * b[1] - a[1] * b[0];
 }
 
 /* motion cross product v x m */
-static void crm(const double v[6], const double m[6], double out[6]) {
+SPATIAL void crm(const double v[6], const double m[6], double out[6]) {
     double t[3];
     cross3(v, m, out);
     cross3(v, m + 3, out + 3);
@@ -98,7 +107,7 @@ static void crm(const double v[6], const double m[6], double out[6]) {
 }
 
 /* force cross product v x* f */
-static void crf(const double v[6], const double f[6], double out[6]) {
+SPATIAL void crf(const double v[6], const double f[6], double out[6]) {
     double t[3];
     cross3(v, f, out);
     cross3(v + 3, f + 3, t);
@@ -179,41 +188,166 @@ static void expand(const chain_t *m, const double *x, int with_offset, double *x
         xb[i] = m->scale[i] * x[m->coord[i]] + (with_offset ? m->offset[i] : 0.0);
 }
 
-/* The bodies' motion transforms X_i (parent -> body i) at the body angles qb. */
-static void body_transforms(const chain_t *m, const double *qb, double X[][36]) {
-    double R[9];
-    for (int i = 0; i < m->nb; i++) transform(m, i, qb[i], X[i], R);
+/* ---- Spatial algebra by its structure (Featherstone, Rigid Body Dynamics Algorithms, 2008,
+ * sec. 2.8 and table 2.8; Pinocchio's SE3 and Inertia): a transform as a rotation and a
+ * translation, a rigid-body inertia as a mass, a first moment and a rotational inertia. ---- */
+
+/* Body i's pose in its parent: E = R^T (parent -> body coordinates) and the joint origin p in
+ * the parent [m]; the motion transform X = [E 0; -E p x  E]. */
+typedef struct {
+    double E[9], p[3];
+} pose_t;
+
+/* A rigid-body inertia about a body's origin: mass m [kg], first moment h = m c [kg m] and
+ * rotational inertia I_o [kg m^2]; the spatial inertia [I_o  h x; -h x  m 1]. */
+typedef struct {
+    double m, h[3], I[9];
+} rbi_t;
+
+/* The coordinate axis that body i turns about with an identity placement rotation, or -1. */
+static int plane_axis(const chain_t *m, int i) {
+    static const double I3[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+    const double *a = m->axis[i];
+    if (memcmp(m->Rp[i], I3, sizeof I3) != 0) return -1;
+    for (int k = 0; k < 3; k++)
+        if (a[k] == 1.0 && a[(k + 1) % 3] == 0.0 && a[(k + 2) % 3] == 0.0) return k;
+    return -1;
 }
 
-/* RNEA over the bodies with their transforms X, body rates qd (NULL: at rest) and body
- * accelerations qdd, gravity on or off, projected on the degrees of freedom:
- * tau_j = sum over the bodies i following j of s_i (a_i . f_i); no armature. */
-static void body_rnea(const chain_t *m, double X[][36], const double *qd, const double *qdd,
-                      int gravity, double *tau) {
+/* The bodies' poses at the body angles qb: E = Rot(e_k, -q) directly for a joint about
+ * coordinate axis k of an unrotated placement (RX, RY, RZ), else from the general transform. */
+static void poses(const chain_t *m, const double *qb, pose_t *X) {
+    double D[36], R[9];
+    for (int i = 0; i < m->nb; i++) {
+        pose_t *P = &X[i];
+        int k = plane_axis(m, i), u = (k + 1) % 3, w = (k + 2) % 3;
+        memcpy(P->p, m->pp[i], sizeof P->p);
+        if (k < 0) {
+            transform(m, i, qb[i], D, R);
+            for (int r = 0; r < 3; r++)
+                for (int l = 0; l < 3; l++) P->E[3 * r + l] = R[3 * l + r];
+            continue;
+        }
+        double c = cos(qb[i]), s = sin(qb[i]);
+        memset(P->E, 0, sizeof P->E);
+        P->E[4 * k] = 1.0;
+        P->E[4 * u] = P->E[4 * w] = c;
+        P->E[3 * u + w] = s;
+        P->E[3 * w + u] = -s;
+    }
+}
+
+/* out = E x and out = E^T x */
+SPATIAL void rot(const pose_t *X, const double x[3], double out[3]) {
+    const double *E = X->E;
+    for (int r = 0; r < 3; r++) out[r] = E[3 * r] * x[0] + E[3 * r + 1] * x[1] + E[3 * r + 2] * x[2];
+}
+
+SPATIAL void rotT(const pose_t *X, const double x[3], double out[3]) {
+    const double *E = X->E;
+    for (int r = 0; r < 3; r++) out[r] = E[r] * x[0] + E[3 + r] * x[1] + E[6 + r] * x[2];
+}
+
+/* out = I x (3 x 3, row-major) */
+SPATIAL void mat3_vec(const double I[9], const double x[3], double out[3]) {
+    for (int r = 0; r < 3; r++) out[r] = I[3 * r] * x[0] + I[3 * r + 1] * x[1] + I[3 * r + 2] * x[2];
+}
+
+/* A motion vector from the parent's coordinates to the body's: (E w, E (v - p x w)). */
+SPATIAL void motion_in(const pose_t *X, const double v[6], double out[6]) {
+    double pw[3], d[3];
+    cross3(X->p, v, pw);
+    for (int k = 0; k < 3; k++) d[k] = v[3 + k] - pw[k];
+    rot(X, v, out);
+    rot(X, d, out + 3);
+}
+
+/* A force from the body's coordinates to the parent's, X^T f: (E^T n + p x E^T f, E^T f). */
+SPATIAL void force_out(const pose_t *X, const double f[6], double out[6]) {
+    double n[3], pf[3];
+    rotT(X, f + 3, out + 3);
+    rotT(X, f, n);
+    cross3(X->p, out + 3, pf);
+    for (int k = 0; k < 3; k++) out[k] = n[k] + pf[k];
+}
+
+/* Body i's inertia, read from its spatial inertia: m = I[3][3], h from the block h x. */
+SPATIAL void rbi_of(const chain_t *m, int i, rbi_t *out) {
+    const double *S = m->inertia[i];
+    out->m = S[21];
+    out->h[0] = -S[6 * 1 + 5];
+    out->h[1] = S[6 * 0 + 5];
+    out->h[2] = -S[6 * 0 + 4];
+    for (int k = 0; k < 3; k++)
+        for (int l = 0; l < 3; l++) out->I[3 * k + l] = S[6 * k + l];
+}
+
+/* f = I v: (I_o w + h x v, m v - h x w). */
+SPATIAL void rbi_apply(const rbi_t *I, const double v[6], double f[6]) {
+    double hv[3], hw[3];
+    cross3(I->h, v + 3, hv);
+    cross3(I->h, v, hw);
+    mat3_vec(I->I, v, f);
+    for (int k = 0; k < 3; k++) {
+        f[k] += hv[k];
+        f[3 + k] = I->m * v[3 + k] - hw[k];
+    }
+}
+
+/* parent += the child's inertia in the parent's coordinates, X^T I X: with R = E^T and
+ * g = R h, h' = g + m p and I_o' = R I_o R^T - (p g^T + g p^T - 2 (g.p) 1) - m (p p^T - |p|^2 1)
+ * (the parallel-axis theorem from the child's origin to the parent's). */
+static void rbi_add_out(const pose_t *X, const rbi_t *I, rbi_t *parent) {
+    const double *p = X->p;
+    double g[3], B[9], A[9], col[3], out[3];
+    rotT(X, I->h, g);
+    for (int l = 0; l < 3; l++) {  /* B = R I_o, column by column; then A = R B^T = R I_o R^T */
+        col[0] = I->I[l], col[1] = I->I[3 + l], col[2] = I->I[6 + l];
+        rotT(X, col, out);
+        B[l] = out[0], B[3 + l] = out[1], B[6 + l] = out[2];
+    }
+    for (int l = 0; l < 3; l++) {
+        rotT(X, B + 3 * l, out);
+        A[l] = out[0], A[3 + l] = out[1], A[6 + l] = out[2];
+    }
+    double gp = g[0] * p[0] + g[1] * p[1] + g[2] * p[2];
+    double pp = p[0] * p[0] + p[1] * p[1] + p[2] * p[2];
+    for (int k = 0; k < 3; k++) {
+        for (int l = 0; l < 3; l++) {
+            double d = (k == l) ? 2.0 * gp + I->m * pp : 0.0;
+            parent->I[3 * k + l] += A[3 * k + l] - (p[k] * g[l] + g[k] * p[l]) -
+                                    I->m * p[k] * p[l] + d;
+        }
+        parent->h[k] += g[k] + I->m * p[k];
+    }
+    parent->m += I->m;
+}
+
+/* RNEA over the bodies at their poses X, body rates qd and accelerations qdd, with gravity,
+ * projected on the degrees of freedom: tau_j = sum over the bodies i following j of
+ * s_i (a_i . n_i); no armature. */
+static void body_rnea(const chain_t *m, const pose_t *X, const double *qd, const double *qdd,
+                      double *tau) {
     int nb = m->nb;
     double v[MAXJ][6], a[MAXJ][6], f[MAXJ][6], zero[6] = {0};
     double a0[6] = {0, 0, 0, -m->gravity[0], -m->gravity[1], -m->gravity[2]};
-    if (!gravity) a0[3] = a0[4] = a0[5] = 0.0;
     for (int i = 0; i < nb; i++) {
         const double *ax = m->axis[i];
         int p = m->parent[i];
+        double vJ[6] = {ax[0] * qd[i], ax[1] * qd[i], ax[2] * qd[i], 0, 0, 0};
         double t[6], h[6];
-        if (qd) {
-            double vJ[6] = {ax[0] * qd[i], ax[1] * qd[i], ax[2] * qd[i], 0, 0, 0};
-            mat6_vec(X[i], p < 0 ? zero : v[p], v[i]);
-            for (int k = 0; k < 6; k++) v[i][k] += vJ[k];
-            crm(v[i], vJ, t);
-        }
-        mat6_vec(X[i], p < 0 ? a0 : a[p], a[i]);
-        if (qd)
-            for (int k = 0; k < 6; k++) a[i][k] += t[k];
-        a[i][0] += ax[0] * qdd[i]; a[i][1] += ax[1] * qdd[i]; a[i][2] += ax[2] * qdd[i];
-        mat6_vec(m->inertia[i], a[i], f[i]);
-        if (qd) {
-            mat6_vec(m->inertia[i], v[i], h);
-            crf(v[i], h, t);
-            for (int k = 0; k < 6; k++) f[i][k] += t[k];
-        }
+        rbi_t I;
+        motion_in(&X[i], p < 0 ? zero : v[p], v[i]);
+        for (int k = 0; k < 3; k++) v[i][k] += vJ[k];
+        crm(v[i], vJ, t);
+        motion_in(&X[i], p < 0 ? a0 : a[p], a[i]);
+        for (int k = 0; k < 6; k++) a[i][k] += t[k];
+        for (int k = 0; k < 3; k++) a[i][k] += ax[k] * qdd[i];
+        rbi_of(m, i, &I);
+        rbi_apply(&I, a[i], f[i]);
+        rbi_apply(&I, v[i], h);
+        crf(v[i], h, t);
+        for (int k = 0; k < 6; k++) f[i][k] += t[k];
     }
     for (int j = 0; j < m->n; j++) tau[j] = 0.0;
     for (int i = nb - 1; i >= 0; i--) {
@@ -222,42 +356,60 @@ static void body_rnea(const chain_t *m, double X[][36], const double *qd, const 
         int p = m->parent[i];
         if (p >= 0) {
             double t[6];
-            mat6T_vec(X[i], f[i], t);
+            force_out(&X[i], f[i], t);
             for (int k = 0; k < 6; k++) f[p][k] += t[k];
         }
     }
 }
+
 /* tau = RNEA(q, qd, qdd) = M(q) qdd + C(q, qd) qd + g(q), M with the armature. */
 void chain_rnea(const chain_t *m, const double *q, const double *qd, const double *qdd,
                 double *tau) {
-    double qb[MAXJ], vb[MAXJ], ab[MAXJ], X[MAXJ][36];
+    double qb[MAXJ], vb[MAXJ], ab[MAXJ];
+    pose_t X[MAXJ];
     expand(m, q, 1, qb);
     expand(m, qd, 0, vb);
     expand(m, qdd, 0, ab);
-    body_transforms(m, qb, X);
-    body_rnea(m, X, vb, ab, 1, tau);
+    poses(m, qb, X);
+    body_rnea(m, X, vb, ab, tau);
     for (int j = 0; j < m->n; j++) tau[j] += m->armature[j] * qdd[j];
 }
 
-/* M(q) (with the armature) from n RNEA columns with the bodies' transforms X, at rest, no
- * gravity. */
-static void body_mass(const chain_t *m, double X[][36], double M[MAXJ][MAXJ]) {
-    int n = m->n;
-    double ab[MAXJ], e[MAXJ], col[MAXJ];
-    for (int j = 0; j < n; j++) {
-        for (int k = 0; k < n; k++) e[k] = (k == j);
-        expand(m, e, 0, ab);
-        body_rnea(m, X, NULL, ab, 0, col);
-        for (int k = 0; k < n; k++) M[k][j] = col[k];
-        M[j][j] += m->armature[j];
+/* M(q) with the armature by the composite-rigid-body algorithm (Featherstone 2008, table 6.2)
+ * over the bodies at their poses X, projected on the degrees of freedom:
+ * M_jk = sum over the bodies i following j and l following k of s_i s_l Mb_il. */
+static void body_mass(const chain_t *m, const pose_t *X, double M[MAXJ][MAXJ]) {
+    rbi_t C[MAXJ];
+    for (int i = 0; i < m->nb; i++) rbi_of(m, i, &C[i]);
+    for (int i = m->nb - 1; i > 0; i--)
+        if (m->parent[i] >= 0) rbi_add_out(&X[i], &C[i], &C[m->parent[i]]);
+    for (int j = 0; j < m->n; j++)
+        for (int k = 0; k < m->n; k++) M[j][k] = (j == k) ? m->armature[j] : 0.0;
+    for (int i = 0; i < m->nb; i++) {
+        const double *ax = m->axis[i];
+        double F[6], t[6];  /* F = C_i S_i, S_i = (axis; 0) */
+        mat3_vec(C[i].I, ax, F);
+        cross3(ax, C[i].h, F + 3);
+        int ci = m->coord[i];
+        M[ci][ci] += m->scale[i] * m->scale[i] * (ax[0] * F[0] + ax[1] * F[1] + ax[2] * F[2]);
+        for (int j = i; m->parent[j] >= 0;) {
+            force_out(&X[j], F, t);
+            memcpy(F, t, sizeof F);
+            j = m->parent[j];
+            const double *aj = m->axis[j];
+            double Mij = m->scale[i] * m->scale[j] * (aj[0] * F[0] + aj[1] * F[1] + aj[2] * F[2]);
+            M[ci][m->coord[j]] += Mij;
+            M[m->coord[j]][ci] += Mij;
+        }
     }
 }
 
 /* M(q) with the armature, n x n row-major. */
 void chain_mass(const chain_t *m, const double *q, double *out) {
-    double qb[MAXJ], M[MAXJ][MAXJ], X[MAXJ][36];
+    double qb[MAXJ], M[MAXJ][MAXJ];
+    pose_t X[MAXJ];
     expand(m, q, 1, qb);
-    body_transforms(m, qb, X);
+    poses(m, qb, X);
     body_mass(m, X, M);
     for (int k = 0; k < m->n; k++)
         for (int j = 0; j < m->n; j++) out[m->n * k + j] = M[k][j];
@@ -288,15 +440,16 @@ static void spd_solve(int n, double A[MAXJ][MAXJ], const double *b, double *x) {
     }
 }
 
-/* h(q, q') = C(q, q') q' + g(q) and M(q) with the armature, from one set of body transforms:
- * the bias by RNEA at zero acceleration, M from n RNEA columns at rest (mimic bodies). */
+/* h(q, q') = C(q, q') q' + g(q) and M(q) with the armature, from one set of body poses: the
+ * bias by RNEA at zero acceleration, M by the composite-rigid-body algorithm (mimic bodies). */
 static void bias_and_mass(const chain_t *m, const double *q, const double *qd, double *h,
                           double M[MAXJ][MAXJ]) {
-    double qb[MAXJ], vb[MAXJ], zero[MAXJ] = {0}, X[MAXJ][36];
+    double qb[MAXJ], vb[MAXJ], zero[MAXJ] = {0};
+    pose_t X[MAXJ];
     expand(m, q, 1, qb);
     expand(m, qd, 0, vb);
-    body_transforms(m, qb, X);
-    body_rnea(m, X, vb, zero, 1, h);
+    poses(m, qb, X);
+    body_rnea(m, X, vb, zero, h);
     body_mass(m, X, M);
 }
 

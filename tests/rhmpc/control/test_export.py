@@ -29,6 +29,7 @@ from rhmpc.control.mpc import RecedingHorizonMPC
 from rhmpc.control.settings import MPCSettings
 from rhmpc.studies.bench import heart_like_reference
 from robots import linearize, load_robot
+from sim.loop.results import YARDSTICK_EVERY, YARDSTICK_PHASE
 
 NO_TOOLCHAIN = missing_toolchain()
 needs_cc = pytest.mark.skipif(NO_TOOLCHAIN is not None, reason=NO_TOOLCHAIN or "")
@@ -592,7 +593,8 @@ def test_compiled_ticks_run_the_python_loops_ticks_to_the_bit(monkeypatch, cache
         assert {k: v for k, v in dataclasses.asdict(fast_stats).items() if k not in timing} == \
             {k: v for k, v in dataclasses.asdict(slow_stats).items() if k not in timing}
         assert fast_stats.ticks == 4000
-        assert len(fast_seen) == len(slow_seen) == 3 * (4000 // 16)
+        timed = len(range(YARDSTICK_PHASE, 4000, YARDSTICK_EVERY))  # three calls each
+        assert len(fast_seen) == len(slow_seen) == 3 * timed
         for a, b in zip(fast_seen, slow_seen, strict=True):
             for u, v in zip(a, b, strict=True):
                 np.testing.assert_array_equal(u, v)
