@@ -47,13 +47,16 @@ class TappedDelayLine:
         self.measured = np.zeros(int(length), dtype=bool)  # which rows are measurements
 
     def push(self, z: np.ndarray, measured: bool = True, expected: np.ndarray | None = None
-             ) -> None:
+             ) -> bool:
         """Shift by one sample and write ``z`` as the newest row.
 
         ``expected``: the owner's forecast of a measured ``z``; after fills it repairs them.
+        Returns whether it did (the ramp; the cubic of a short gap follows a sample later).
         """
         buf = self.buf
-        if measured and self.fills and expected is not None and np.isfinite(expected).all():
+        repaired = bool(measured and self.fills and expected is not None
+                        and np.isfinite(expected).all())
+        if repaired:
             g = min(self.fills, buf.shape[0] - 1)  # buf[0] is fill g, buf[g−1] fill 1
             ramp = np.arange(self.fills, self.fills - g, -1) / (self.fills + 1.0)
             buf[:g] += ramp[:, None] * (np.asarray(z) - expected)
@@ -66,6 +69,7 @@ class TappedDelayLine:
         self.fills = 0 if measured else self.fills + 1
         if self.real_run == 2:
             self._interpolate_gap()
+        return repaired
 
     def _interpolate_gap(self) -> None:
         """Rows 0, 1 measured: replace a gap of g rows below them by the cubic through rows
@@ -99,11 +103,13 @@ class DelayLinePredictor(Predictor):
         """ẑ (d,) of the sample after the newest-first block ``past`` (N, d)."""
 
     def _push(self, z: np.ndarray) -> None:
-        """Push a measurement; after a gap its forecast repairs the fills (TappedDelayLine)."""
+        """Push a measurement; after a gap its forecast repairs the fills (TappedDelayLine),
+        counted in ``counts["repaired"]``."""
         self.learn()  # the deferred learning reads the rows this push moves
         line = self.line
         fills = line.fills and self.ready
-        line.push(z, expected=self._next(line.buf[: self.settings.order]) if fills else None)
+        if line.push(z, expected=self._next(line.buf[: self.settings.order]) if fills else None):
+            self.counts["repaired"] += 1
 
     def _missing(self) -> None:
         # run open-loop: the model's own one-step forecast fills the gap

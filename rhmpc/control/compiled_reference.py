@@ -60,7 +60,8 @@ __all__ = ["COUNTS", "CompiledReference", "compile_reference", "load_library"]
 _SOURCE = Path(__file__).with_name("refresh.c")
 #: The names of the C counters, in the order of ``refresh_public_t.counts``.
 COUNTS = ("updates", "missing", "outliers_rejected", "gate_unlocked", "retracted",
-          "forecast_clamped", "forecast_nonfinite", "rls_reset", "rls_bound", "reference_guard")
+          "forecast_clamped", "forecast_nonfinite", "rls_reset", "rls_bound", "reference_guard",
+          "repaired")
 #: Forecast points beyond ``prediction_points`` allocated at creation (a longer forecast, from
 #: a longer latency, reallocates the K-sized arrays once).
 K_MARGIN = 32

@@ -25,7 +25,7 @@
 /* indices of refresh_public_t.counts: the names of the Python predictor's Counter */
 enum {
     C_UPDATES, C_MISSING, C_OUTLIERS_REJECTED, C_GATE_UNLOCKED, C_RETRACTED, C_FORECAST_CLAMPED,
-    C_FORECAST_NONFINITE, C_RLS_RESET, C_RLS_BOUND, C_REFERENCE_GUARD, N_COUNTS
+    C_FORECAST_NONFINITE, C_RLS_RESET, C_RLS_BOUND, C_REFERENCE_GUARD, C_REPAIRED, N_COUNTS
 };
 
 #define ENVELOPE_BLOCKS 8   /* RangeEnvelope(blocks=8) */
@@ -568,12 +568,13 @@ static void line_interpolate_gap(refresh_t *s) {
 }
 
 /* TappedDelayLine.push: after g fills, a measurement z with the forecast `expected` of it
- * corrects fill i (oldest first, i = 1 ... g) by (i/(g+1)) (z - expected) */
+ * corrects fill i (oldest first, i = 1 ... g) by (i/(g+1)) (z - expected), a repair counted */
 static void line_push(refresh_t *s, const double *z, int measured, const double *expected) {
     int d = s->pub.d, L = s->L;
     double *buf = s->buf;
     if (measured && s->fills && expected != NULL && all_finite(expected, d)) {
         int g = s->fills < L - 1 ? s->fills : L - 1;
+        s->pub.counts[C_REPAIRED]++;
         double diff[3];
         for (int c = 0; c < d; c++) diff[c] = z[c] - expected[c];
         for (int i = 0; i < g; i++) {

@@ -48,7 +48,7 @@ class PlantSettings:
         end-effector against RK4 with 500 steps (tests/sim/test_plant.py), at half the cost of RK4
         with 2 steps. One step of 0.5 ms: 1.4 µm per tick (measured 1.36 against 0.36 µm, worst
         of 100 random states), which moved a 20-s run's RMS error by 0.06 % and would save
-        ≈ 1.3 µs of a ≈ 20-µs tick with the native dynamics: not worth a 4× larger local error.
+        half of the native midpoint step's ≈ 2 µs a tick: not worth a 4× larger local error.
     stiction_velocity : float
         Velocity scale ``v_s`` of the smoothed Coulomb friction [rad/s].
     dynamics : str

@@ -8,17 +8,21 @@ with a compiled controller); it is used where it builds (``PlantSettings.dynamic
 Why this and not Pinocchio's own C++, and what it measured: the decision record "The compiled
 plant".
 
-``sim/plant/chain.c`` holds Featherstone's articulated-body algorithm and recursive
-Newton–Euler for a chain of revolute joints, with the parameters read from the Pinocchio model
-(joint placements and axes, spatial inertias, rotor armature, gravity) and the plant's friction
-``D q̇ + F_c tanh(q̇/v_s)``. A model with mimic bodies (the PHANToM's parallelogram) has its
-forward dynamics as M(q)⁻¹(τ − h) with h and the n columns of M by recursive Newton–Euler,
-all from one set of body transforms. The C file is compiled with the system's C compiler at
-first use into a cache directory and loaded with :mod:`ctypes` (:mod:`sim.compiled`).
+``sim/plant/chain.c`` holds Featherstone's articulated-body algorithm, recursive Newton–Euler
+and the composite-rigid-body algorithm for a chain of revolute joints, with the parameters read
+from the Pinocchio model (joint placements and axes, spatial inertias, rotor armature, gravity)
+and the plant's friction ``D q̇ + F_c tanh(q̇/v_s)``. A model with mimic bodies (the PHANToM's
+parallelogram) has its forward dynamics as M(q)⁻¹(τ − h), h by recursive Newton–Euler and M by
+the composite-rigid-body algorithm, from one set of body poses, with the spatial algebra in its
+structured form (a transform as a rotation and a translation, an inertia as a mass, a first
+moment and a rotational inertia; Featherstone 2008, §2.8), as Pinocchio computes it. The C
+file is compiled with the system's C compiler at first use into a cache directory and loaded
+with :mod:`ctypes` (:mod:`sim.compiled`).
 
-Pinocchio stays the reference: ``tests/sim/plant/test_native.py`` compares ABA, RNEA and the
-end-point with ``pin.aba``, ``pin.rnea`` and the frame placement at random states (1e-15
-relative), and a whole closed-loop run with both ticks. Where no compiler is found, or the model
+Pinocchio stays the reference: ``tests/sim/plant/test_native.py`` compares ABA, RNEA, M and the
+end-point with ``pin.aba``, ``pin.rnea``, ``pin.crba`` and the frame placement at random states
+(1e-15 relative), on the PHANToM and on a tree of rotated placements and an unaligned axis, and
+a whole closed-loop run with both ticks. Where no compiler is found, or the model
 has other joints than revolute ones, :func:`load_chain` returns None with the reason
 (``unavailable_reason``) and the loop runs on Pinocchio.
 """

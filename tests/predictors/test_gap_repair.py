@@ -137,3 +137,23 @@ def test_retract_replaces_the_newest_sample_by_its_forecast():
         for k in range(1500):
             p.update(z[k])
         assert not p.retract() and "retracted" not in p.counts
+
+
+@pytest.mark.parametrize("name", ["one-step", "generalized"])
+def test_each_repaired_gap_is_counted_once(name):
+    """``counts["repaired"]``: one a gap whose fills the returning measurement corrected; none
+    for gaps before the predictor is ready (its fills are holds, nothing to correct)."""
+    t = np.arange(0.0, 6.0, 1 / 133)
+    z = np.c_[np.sin(2 * np.pi * 1.2 * t), np.cos(2 * np.pi * 0.3 * t)] * 1e-3
+    predictor = make_predictor(name, 1 / 133, unit=1.0)
+    gaps = {3: 2, 400: 1, 500: 3, 600: 7}  # start: length; the first before it is ready
+    k = 0
+    while k < len(t):
+        if k in gaps:
+            for _ in range(gaps[k]):
+                predictor.update(None)
+            k += gaps[k]
+        predictor.update(z[k])
+        k += 1
+    assert predictor.counts["missing"] == sum(gaps.values())
+    assert predictor.counts["repaired"] == 3
