@@ -159,7 +159,9 @@ class OpenLoop:
         # ticks from a refresh's update to its interpolation: update, learning, forecast and
         # interpolation each on its own tick when pipelined, all on the refresh tick otherwise
         self.lag = REFRESH_LAG if settings.pipelined_refresh else 0
-        self.slices: collections.deque = collections.deque()  # (tick, part, step() -> ns)
+        self.slices: collections.deque = collections.deque()  # (tick, part), run by _run
+        self._steps = {self._LEARN: reference.learn, self._FORECAST: reference.predict,
+                       self._INTERPOLATE: reference.interpolate, self._SCORE: self.score}
         if self.clock.mode == "sensor":
             self.queue = RawQueue(self.clock.raw, settings.Ts)
             self.last_stamp: float | None = None
@@ -195,8 +197,8 @@ class OpenLoop:
         while i < c1:
             refreshed = False
             while slices and slices[0][0] <= i:
-                _, part, step = slices.popleft()
-                charged[part][i - c0] += step()
+                tick, part = slices.popleft()
+                charged[part][i - c0] += self._run(tick, part)
                 if part == self._INTERPOLATE:
                     refreshed = True
                     self._refreshed(i)
@@ -228,24 +230,29 @@ class OpenLoop:
         """
         if not self.plannable:
             return None
-        slices, events, at = self.slices, [], c0
+        slices, at = self.slices, c0
+        rows, parts, ticks, stamps, samples = [], [], [], [], {}  # samples: event -> z
         while slices and max(slices[0][0], at) < c1:
-            tick, part, _ = slices.popleft()
+            tick, part = slices.popleft()
             at = max(tick, at)
-            events.append((at - c0, part, tick, *(self._sample(tick) if part == self._UPDATE
-                                                    else (None, 0.0))))
+            stamp = 0.0
+            if part == self._UPDATE:
+                z_k, stamp = self._sample(tick)
+                if z_k is not None:
+                    samples[len(rows)] = z_k
+            rows.append(at - c0)
+            parts.append(part)
+            ticks.append(tick)
+            stamps.append(stamp)
             if part == self._INTERPOLATE:
                 self._refreshed(at)
-        d = self.center.shape[0]
-        z = np.zeros((len(events), d))
-        for k, (_, _, _, z_k, _) in enumerate(events):
-            if z_k is not None:
-                z[k] = z_k
-        return {"row": np.array([e[0] for e in events], dtype=np.intc),
-                "part": np.array([e[1] for e in events], dtype=np.intc),
-                "tick": np.array([e[2] for e in events], dtype=np.int64), "z": z,
-                "stamp": np.array([e[4] for e in events], dtype=float),
-                "fresh": np.array([e[3] is not None for e in events], dtype=np.uint8)}
+        z, fresh = np.zeros((len(rows), self.center.shape[0])), np.zeros(len(rows), np.uint8)
+        if samples:
+            index = np.fromiter(samples, dtype=np.intp, count=len(samples))
+            z[index], fresh[index] = np.array(list(samples.values())), 1
+        return {"row": np.array(rows, dtype=np.intc), "part": np.array(parts, dtype=np.intc),
+                "tick": np.array(ticks, dtype=np.int64), "z": z,
+                "stamp": np.array(stamps, dtype=float), "fresh": fresh}
 
     @property
     def plannable(self) -> bool:
@@ -283,24 +290,26 @@ class OpenLoop:
         a pipelined refresh makes them as soon as it has placed its points. Without the
         pipeline nothing is made ahead, and nothing runs."""
         if self.lag:
-            for _, part, step in self.slices:
+            for tick, part in self.slices:
                 if part != self._INTERPOLATE:
-                    step()
+                    self._run(tick, part)
         self.slices.clear()
 
-    def _timed(self, step: Callable[[], object]) -> Callable[[], int]:
-        def run() -> int:
-            t_start = clock()
-            step()
-            return clock() - t_start
-        return run
+    def _run(self, tick: int, part: int) -> int:
+        """Run the slice ``part`` (:data:`CHARGED`'s index) queued on ``tick``; its time [ns]:
+        the update's own (:meth:`update`, :meth:`_arrivals`), the others' whole call."""
+        if part == self._UPDATE:
+            return self._arrivals(tick) if self.clock.mode == "sensor" else self.update(tick)
+        step = self._steps[part]
+        t_start = clock()
+        step()
+        return clock() - t_start
 
     def _refreshed(self, i: int) -> None:
         """After the refresh on tick ``i``: queue its bookkeeping (on the next tick when
         pipelined) and the next refresh."""
         if self.score is not None:
-            self.slices.append((i + (1 if self.lag else 0), self._SCORE,
-                                self._timed(self.score)))
+            self.slices.append((i + (1 if self.lag else 0), self._SCORE))
         if self.clock.mode == "sensor":
             arrival = self.queue.tick()
             self.next = math.inf if arrival is None else max(arrival + self.lag, i + 1)
@@ -315,12 +324,8 @@ class OpenLoop:
             return
         ticks = [r - self.lag, r - self.lag + 1, r - 1] if self.lag else [r, r, r]
         t0, t1, t2 = (max(t, after) for t in ticks)
-        update = ((lambda: self._arrivals(t0)) if self.clock.mode == "sensor"
-                  else (lambda: self.update(t0)))
-        ref = self.reference
-        self.slices.extend(((t0, self._UPDATE, update), (t1, self._LEARN, self._timed(ref.learn)),
-                            (t2, self._FORECAST, self._timed(ref.predict)),
-                            (r, self._INTERPOLATE, self._timed(ref.interpolate))))
+        self.slices.extend(((t0, self._UPDATE), (t1, self._LEARN), (t2, self._FORECAST),
+                            (r, self._INTERPOLATE)))
 
     def _arrivals(self, tick: int) -> int:
         """Feed every raw sample arrived by ``tick``, each once, with its own stamp; a gap in

@@ -189,7 +189,7 @@ static void expand(const chain_t *m, const double *x, int with_offset, double *x
 }
 
 /* ---- Spatial algebra by its structure (Featherstone, Rigid Body Dynamics Algorithms, 2008,
- * sec. 2.8 and table 2.8; Pinocchio's SE3 and Inertia): a transform as a rotation and a
+ * chapter 2; Pinocchio's SE3 and Inertia): a transform as a rotation and a
  * translation, a rigid-body inertia as a mass, a first moment and a rotational inertia. ---- */
 
 /* Body i's pose in its parent: E = R^T (parent -> body coordinates) and the joint origin p in
@@ -375,7 +375,7 @@ void chain_rnea(const chain_t *m, const double *q, const double *qd, const doubl
     for (int j = 0; j < m->n; j++) tau[j] += m->armature[j] * qdd[j];
 }
 
-/* M(q) with the armature by the composite-rigid-body algorithm (Featherstone 2008, table 6.2)
+/* M(q) with the armature by the composite-rigid-body algorithm (Featherstone 2008, chapter 6)
  * over the bodies at their poses X, projected on the degrees of freedom:
  * M_jk = sum over the bodies i following j and l following k of s_i s_l Mb_il. */
 static void body_mass(const chain_t *m, const pose_t *X, double M[MAXJ][MAXJ]) {
