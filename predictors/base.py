@@ -74,15 +74,17 @@ class PredictorSettings:
 def as_sample(z, d: int | None) -> np.ndarray | None:
     """Return ``z`` as a float (d,) array, or ``None`` if it is missing.
 
-    ``None`` and samples with any non-finite component are missing.  A sample of
-    the wrong size raises ``ValueError`` (that is a wiring bug, not a dropout).
+    ``None``, samples with any non-finite component and samples whose squared norm
+    overflows (‖z‖ > 1e154: no measurement, and no gate or filter can compute with it) are
+    missing.  A sample of the wrong size raises ``ValueError`` (that is a wiring bug, not a
+    dropout).
     """
     if z is None:
         return None
     x = np.array(z, dtype=float).reshape(-1)  # a copy: callers may reuse buffers
     if d is not None and x.shape[0] != d:
         raise ValueError(f"sample has {x.shape[0]} components, predictor has d={d}")
-    if not np.isfinite(x).all():
+    if not math.isfinite(float(np.vdot(x, x))):  # NaN, ±inf or an overflow; vdot: no warning
         return None
     return x
 

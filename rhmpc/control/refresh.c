@@ -732,11 +732,12 @@ static void predictor_missing(refresh_t *s) {
     line_push(s, s->fill, 0, NULL);
 }
 
-/* Predictor.update: z (NULL, or any non-finite component: missing) of nz components */
+/* Predictor.update: z (NULL, a non-finite component or a square that overflows: missing) of
+ * nz components */
 static void predictor_update(refresh_t *s, const double *z, int nz) {
     if (s->deferred) predictor_learn(s);
     predictor_score(s);
-    int valid = z != NULL && all_finite(z, nz);
+    int valid = z != NULL && isfinite(sumsq(z, nz));
     s->n_upd++;
     if (!valid) {
         s->pub.counts[C_MISSING]++;

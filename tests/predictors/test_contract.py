@@ -32,7 +32,8 @@ def test_shapes_reset_and_missing_kinds(name):
     p.update(None)
     p.update([np.nan, 0.0, 0.0])
     p.update(np.array([0.0, np.inf, 0.0]))
-    assert p.counts["missing"] == before + 3
+    p.update(np.full(3, 1e200))  # finite, but its squared norm overflows: no measurement
+    assert p.counts["missing"] == before + 4
     assert np.isfinite(p.predict(4)).all()
     with pytest.raises(ValueError):
         p.update(np.zeros(2))  # wrong dimension is a wiring bug, not a dropout
