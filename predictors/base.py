@@ -48,7 +48,7 @@ import numpy as np
 
 from predictors.monitor import LeadErrorRMS, RangeEnvelope, infer_unit
 
-__all__ = ["Predictor", "PredictorSettings", "as_sample"]
+__all__ = ["Predictor", "PredictorSettings", "as_sample", "is_measured"]
 
 
 @dataclass(frozen=True)
@@ -71,22 +71,23 @@ class PredictorSettings:
             raise ValueError(f"unit must be > 0 [m per data unit] or None, got {unit!r}")
 
 
-def as_sample(z, d: int | None) -> np.ndarray | None:
-    """Return ``z`` as a float (d,) array, or ``None`` if it is missing.
+def is_measured(z) -> bool:
+    """Whether ``z`` is a measurement: not ``None``, every component finite and ‖z‖² too
+    (‖z‖ > 1e154 is no measurement, and no gate or filter can compute with it)."""
+    return z is not None and math.isfinite(float(np.vdot(z, z)))  # vdot: no FP warning
 
-    ``None``, samples with any non-finite component and samples whose squared norm
-    overflows (‖z‖ > 1e154: no measurement, and no gate or filter can compute with it) are
-    missing.  A sample of the wrong size raises ``ValueError`` (that is a wiring bug, not a
-    dropout).
+
+def as_sample(z, d: int | None) -> np.ndarray | None:
+    """Return ``z`` as a float (d,) array, or ``None`` if it is missing (not
+    :func:`is_measured`).  A sample of the wrong size raises ``ValueError`` (that is a wiring
+    bug, not a dropout).
     """
     if z is None:
         return None
     x = np.array(z, dtype=float).reshape(-1)  # a copy: callers may reuse buffers
     if d is not None and x.shape[0] != d:
         raise ValueError(f"sample has {x.shape[0]} components, predictor has d={d}")
-    if not math.isfinite(float(np.vdot(x, x))):  # NaN, ±inf or an overflow; vdot: no warning
-        return None
-    return x
+    return x if is_measured(x) else None
 
 
 class Predictor(ABC):

@@ -51,6 +51,7 @@ import math
 
 import numpy as np
 
+from predictors.base import is_measured
 from rhmpc.control.gate import OutlierGate
 from sim.loop import embed3
 
@@ -215,7 +216,7 @@ class PredictedReference:
 
     def update(self, tick: int, z: np.ndarray | None, stamp: float) -> None:
         """First half of a refresh: the outlier gate and the predictor's update with ``z``."""
-        valid = z is not None and math.isfinite(float(np.vdot(z, z)))  # vdot: no FP warning
+        valid = is_measured(z)  # the predictors' test (as_sample): what is not gated is not learnt
         if valid and self._forecast is not None:
             gate, counts = self.gate, self.predictor.counts
             miss2 = gate.miss2(z, self._forecast)  # judged once, used twice

@@ -237,20 +237,19 @@ static void poses(const chain_t *m, const double *qb, pose_t *X) {
     }
 }
 
+/* out = A x (3 x 3, row-major) */
+SPATIAL void mat3_vec(const double A[9], const double x[3], double out[3]) {
+    for (int r = 0; r < 3; r++) out[r] = A[3 * r] * x[0] + A[3 * r + 1] * x[1] + A[3 * r + 2] * x[2];
+}
+
 /* out = E x and out = E^T x */
 SPATIAL void rot(const pose_t *X, const double x[3], double out[3]) {
-    const double *E = X->E;
-    for (int r = 0; r < 3; r++) out[r] = E[3 * r] * x[0] + E[3 * r + 1] * x[1] + E[3 * r + 2] * x[2];
+    mat3_vec(X->E, x, out);
 }
 
 SPATIAL void rotT(const pose_t *X, const double x[3], double out[3]) {
     const double *E = X->E;
     for (int r = 0; r < 3; r++) out[r] = E[r] * x[0] + E[3 + r] * x[1] + E[6 + r] * x[2];
-}
-
-/* out = I x (3 x 3, row-major) */
-SPATIAL void mat3_vec(const double I[9], const double x[3], double out[3]) {
-    for (int r = 0; r < 3; r++) out[r] = I[3 * r] * x[0] + I[3 * r + 1] * x[1] + I[3 * r + 2] * x[2];
 }
 
 /* A motion vector from the parent's coordinates to the body's: (E w, E (v - p x w)). */
