@@ -193,3 +193,61 @@ def forward_dynamics(model: pin.Model, data: pin.Data, q: np.ndarray, v: np.ndar
     M = np.triu(M) + np.triu(M, 1).T
     h = pin.nonLinearEffects(model, data, q, v)
     return scipy.linalg.cho_solve(scipy.linalg.cho_factor(M), np.subtract(tau, h))
+
+
+#: Pinocchio joints about a coordinate axis.
+_AXES = {"JointModelRX": (1.0, 0.0, 0.0), "JointModelRY": (0.0, 1.0, 0.0),
+         "JointModelRZ": (0.0, 0.0, 1.0)}
+
+
+@dataclass(frozen=True)
+class Body:
+    """A body of a tree of revolute joints, for code that computes the dynamics itself (the
+    plant's compiled kernel, the exported controller's model).
+
+    Its parent (−1 the base), the degree of freedom it follows as qb = scale·q[coord] + offset
+    about ``axis`` (unit, body frame; a mimic joint has scale and offset, the PHANToM's
+    parallelogram), its joint placement (R, p) in the parent, and its inertia about its origin:
+    mass m [kg], first moment h = m c [kg·m] and rotational inertia I_o = I_c + m(cᵀc 1 − c cᵀ)
+    [kg·m²] (the parallel-axis theorem)."""
+
+    parent: int
+    coord: int
+    scale: float
+    offset: float
+    axis: np.ndarray
+    R: np.ndarray
+    p: np.ndarray
+    mass: float
+    h: np.ndarray
+    I_o: np.ndarray
+
+
+def bodies(model: pin.Model) -> list[Body]:
+    """The bodies of ``model``, root first; ValueError for a joint that is not revolute (RX, RY,
+    RZ, revolute-unaligned, or a mimic of one)."""
+    data = model.createData()
+    pin.forwardKinematics(model, data, pin.neutral(model))
+    out = []
+    for i, joint in enumerate(model.joints[1:], start=1):
+        name = joint.shortname()
+        if name in _AXES or name == "JointModelRevoluteUnaligned":
+            axis = np.array(_AXES.get(name) or np.asarray(joint.extract().axis), dtype=float)
+            coord, scale, offset = joint.idx_v, 1.0, 0.0
+        elif name == "JointModelMimic":
+            mimic = joint.extract()
+            S = np.asarray(data.joints[i].S).reshape(6, -1)[:, 0]  # (linear; angular)
+            if np.abs(S[:3]).max() > 0 or mimic.scaling == 0:
+                raise ValueError(f"joint {model.names[i]}: a mimic joint that is not "
+                                 "revolute")
+            axis, coord = S[3:] / mimic.scaling, joint.idx_v
+            scale, offset = float(mimic.scaling), float(mimic.offset)
+        else:
+            raise ValueError(f"joint {model.names[i]} ({name}) is not revolute")
+        inertia, placement = model.inertias[i], model.jointPlacements[i]
+        c, m = np.asarray(inertia.lever), float(inertia.mass)
+        I_o = np.asarray(inertia.inertia) + m * (c @ c * np.eye(3) - np.outer(c, c))
+        out.append(Body(int(model.parents[i]) - 1, int(coord), scale, offset, axis,
+                        np.asarray(placement.rotation), np.asarray(placement.translation),
+                        m, m * c, I_o))
+    return out

@@ -34,8 +34,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--jump-every", type=int, default=1000, help="ticks between jumps (1000)")
     p.add_argument(
         "--controller", choices=("python", "c"), default="python",
-        help="'c' also runs the compiled controller of `rhmpc export` (built once, cached; needs "
-        "cmake and a C compiler) next to the Python one, timed inside C and from Python",
+        help="'c' also runs the whole controller of `rhmpc export` (built once, cached; needs a "
+        "C compiler) in a loop of its own on the same reference, every tick timed inside C, "
+        "refresh ticks included",
     )
     p.add_argument("--gc", action="store_true", help="leave the garbage collector on in the loop")
     add_host_stalls_option(p, "the ticks")

@@ -13,10 +13,11 @@ import argparse
 import dataclasses
 import inspect
 import re
+import textwrap
 from typing import Any
 
 from rhmpc.cli.presets import PRESETS, add_preset_option, apply_preset
-from rhmpc.cli.simulate import DEFAULT_DURATION, DEFAULT_SETTLING, parse_value
+from rhmpc.cli.simulate import parse_value
 from rhmpc.errors import UsageError
 from rhmpc.experiment import RunConfig
 from rhmpc.experiment.config import FREE_TABLES, SECTIONS, read_toml
@@ -46,6 +47,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_preset_option(show)
     show.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
                       help="override one setting (repeatable), as in rhmpc simulate")
+    show.add_argument("--long", action="store_true",
+                      help="each setting's whole description, not its first sentence")
     p.set_defaults(func=run, action=None)
 
 
@@ -83,13 +86,29 @@ def unit_of(description: str) -> str | None:
     return None
 
 
-def summary(description: str) -> str:
-    """The description's first sentence, without units and markup, at most DESCRIPTION_CHARS."""
-    first = _SENTENCE_END.split(description, maxsplit=1)[0].rstrip(".")
-    first = re.sub(r"\s+", " ", _UNIT.sub("", first).replace("``", "")).strip()
+def summary(description: str, long: bool = False) -> str:
+    """The description's first sentence (``long``: all of it), without units and markup; the
+    short form at most DESCRIPTION_CHARS, cut at a word."""
+    text = description if long else _SENTENCE_END.split(description, maxsplit=1)[0].rstrip(".")
+    text = re.sub(r":\w+:`~?([^`]+)`", r"\1", text)  # Sphinx roles: their target's name
+    text = re.sub(r"\s+", " ", _UNIT.sub("", text).replace("``", "")).strip()
     for mark in ",.;:":
-        first = first.replace(f" {mark}", mark)
-    return first if len(first) <= DESCRIPTION_CHARS else first[: DESCRIPTION_CHARS - 1] + "…"
+        text = text.replace(f" {mark}", mark)
+    if long or len(text) <= DESCRIPTION_CHARS:
+        return text
+    return text[: DESCRIPTION_CHARS].rsplit(" ", 1)[0] + " … (--long)"
+
+
+def _settings(prefix: str, settings: Any) -> dict[str, Any]:
+    """Dotted key → value of every field of a settings object, nested ones recursively."""
+    out: dict[str, Any] = {}
+    for g in dataclasses.fields(settings):
+        value = getattr(settings, g.name)
+        if dataclasses.is_dataclass(value):
+            out.update(_settings(f"{prefix}{g.name}.", value))
+        else:
+            out[f"{prefix}{g.name}"] = value
+    return out
 
 
 def _flat(config: RunConfig) -> dict[str, Any]:
@@ -98,8 +117,7 @@ def _flat(config: RunConfig) -> dict[str, Any]:
     for f in dataclasses.fields(config):
         value = getattr(config, f.name)
         if f.name in SECTIONS:
-            for g in dataclasses.fields(value):
-                out[f"{f.name}.{g.name}"] = getattr(value, g.name)
+            out.update(_settings(f"{f.name}.", value))
         elif f.name in TABLES:
             out.update({f"{f.name}.{k}": v for k, v in value.items()})
         else:
@@ -120,9 +138,8 @@ def _file_keys(data: dict, prefix: str = "") -> list[str]:
 
 def effective(args: argparse.Namespace) -> tuple[RunConfig, RunConfig, dict[str, str]]:
     """(the run's settings, the defaults, dotted key → where its value was set)."""
-    defaults = RunConfig().replace(**{"loop.duration": DEFAULT_DURATION,
-                                      "loop.settling": DEFAULT_SETTLING})
-    sources = {"loop.duration": "rhmpc simulate", "loop.settling": "rhmpc simulate"}
+    defaults = RunConfig()
+    sources: dict[str, str] = {}
     config = defaults
     if args.config:
         data = read_toml(args.config)
@@ -152,21 +169,24 @@ def _value(value: Any) -> str:
 
 
 def _key_lines(key: str, name: str, value: Any, default: Any, doc: tuple[str, str] | None,
-               source: str | None) -> list[str]:
-    """The comment line and the ``name = value`` line of one setting."""
-    text = summary(doc[1]) if doc else ""
+               source: str | None, long: bool = False) -> list[str]:
+    """The comment line(s) and the ``name = value`` line of one setting."""
+    text = summary(doc[1], long) if doc else ""
     unit = unit_of(doc[1]) if doc else None
     head = " ".join(part for part in (text, f"[{unit}]" if unit else "") if part)
     notes = ("default " + ("unset" if default is None else _value(default))
              + f", source: {source or 'default'}")
     comment = f"# {head} — {notes}" if head else f"# {notes}"
+    if long:
+        comment = "\n".join(textwrap.wrap(comment, 100, subsequent_indent="#   "))
     if value is None:
         return [comment, f"# {name} =   (unset)"]
     return [comment, f"{name} = {_value(value)}"]
 
 
-def render(config: RunConfig, defaults: RunConfig, sources: dict[str, str]) -> str:
-    """The run's settings as commented TOML (module docstring)."""
+def render(config: RunConfig, defaults: RunConfig, sources: dict[str, str],
+           long: bool = False) -> str:
+    """The run's settings as commented TOML (module docstring); ``long``: whole descriptions."""
     flat, base = _flat(config), _flat(defaults)
     docs = attribute_docs(RunConfig)
     lines = ["# rhmpc run settings. Above each key: its description [unit] — default, source.",
@@ -174,18 +194,32 @@ def render(config: RunConfig, defaults: RunConfig, sources: dict[str, str]) -> s
     for f in dataclasses.fields(config):
         if f.name not in SECTIONS and f.name not in TABLES:
             lines += _key_lines(f.name, f.name, flat[f.name], base[f.name], docs.get(f.name),
-                                sources.get(f.name))
+                                sources.get(f.name), long)
     for table in TABLES:
         lines += ["", f"[{table}]", f"# {summary(docs[table][1])}"]
         lines += _table_lines(config, table, flat, sources)
-    for section, cls in SECTIONS.items():
-        lines += ["", f"[{section}]", f"# {cls.__module__}.{cls.__qualname__}"]
-        section_docs = attribute_docs(cls)
-        for g in dataclasses.fields(cls):
-            key = f"{section}.{g.name}"
-            lines += _key_lines(key, g.name, flat[key], base[key], section_docs.get(g.name),
-                                sources.get(key))
+    for section in SECTIONS:
+        lines += _section_lines(section, getattr(config, section), flat, base, sources, long)
     return "\n".join(lines) + "\n"
+
+
+def _section_lines(section: str, settings: Any, flat: dict[str, Any], base: dict[str, Any],
+                   sources: dict[str, str], long: bool) -> list[str]:
+    """A section's table, then its nested tables (``[mpc.osqp]``)."""
+    cls = type(settings)
+    lines = ["", f"[{section}]", f"# {cls.__module__}.{cls.__qualname__}"]
+    docs, nested = attribute_docs(cls), []
+    for g in dataclasses.fields(cls):
+        if dataclasses.is_dataclass(getattr(settings, g.name)):
+            nested.append(g.name)
+            continue
+        key = f"{section}.{g.name}"
+        lines += _key_lines(key, g.name, flat[key], base[key], docs.get(g.name),
+                            sources.get(key), long)
+    for name in nested:
+        lines += _section_lines(f"{section}.{name}", getattr(settings, name), flat, base,
+                                sources, long)
+    return lines
 
 
 def _table_lines(config: RunConfig, table: str, flat: dict[str, Any],
@@ -232,5 +266,5 @@ def run(args: argparse.Namespace) -> int:
     if args.action is None:
         raise UsageError("choose an action: show")
     config, defaults, sources = effective(args)
-    print(render(config, defaults, sources), end="")
+    print(render(config, defaults, sources, args.long), end="")
     return 0

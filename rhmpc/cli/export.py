@@ -1,4 +1,4 @@
-"""`rhmpc export`: the controller of one robot and one set of settings as a C library."""
+"""`rhmpc export`: the whole real-time controller of one robot and one set of settings, as C."""
 
 from __future__ import annotations
 
@@ -13,45 +13,57 @@ from robots import ROBOTS
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "export",
-        help="write the MPC as a self-contained C library (OSQP codegen + the tick)",
-        description="Write OUTDIR: the controller's tick in C (screening, shifted warm start, "
-        "fallback chain plan -> LQ -> zero, torque clipping), OSQP's generated solver for its QP "
-        "(vectors mode), its numbers as const arrays from the same CondensedQP the Python "
-        "controller uses, a header documenting units and layouts, and a CMakeLists.txt. Build "
-        "with: cmake -S OUTDIR -B BUILD && cmake --build BUILD.",
+        help="write the real-time controller as a self-contained C library",
+        description="Write OUTDIR: the whole controller in C, from a sensor sample and the "
+        "encoders to the motor torques: the outlier gate, the one-step or generalized RLS "
+        "predictor and the interpolation of its forecast (rhmpc_refresh); the observer, the "
+        "output offset, the MPC (screening cascade, OSQP's generated solver, fallbacks, "
+        "envelope) and the cancellation with the controller's model (rhmpc_step); a header "
+        "documenting units and layouts, an example loop and a CMakeLists.txt. Build with: "
+        "cmake -S OUTDIR -B BUILD && cmake --build BUILD.",
     )
-    p.add_argument("outdir", metavar="OUTDIR", help="directory to write (created if needed)")
-    p.add_argument("--robot", choices=ROBOTS,
-                   help="robot (default: the config's, else phantom)")
+    p.add_argument("outdir", metavar="OUTDIR", help="directory to write (created if needed; "
+                   "must be empty unless --force)")
+    p.add_argument("--robot", choices=ROBOTS, help="robot (default: the config's, else phantom)")
     p.add_argument("--config", metavar="FILE.toml",
-                   help="a run's settings (rhmpc simulate --config); its [mpc] and loop.Ts are "
-                   "exported")
+                   help="a run's settings (rhmpc simulate --config): its [mpc], [reference], "
+                   "[loop] Ts and downsample, [observer], [mismatch], predictor and "
+                   "predictor_settings are exported")
+    p.add_argument("--predictor", choices=("one-step", "generalized"),
+                   help="the predictor (default: the config's, else generalized)")
+    p.add_argument("--rate", type=float, metavar="HZ", default=257.0,
+                   help="the sensor's sample rate [Hz] (default 257, a sonomicrometer): a "
+                   "sensor slower than every loop.downsample ticks refreshes the reference on "
+                   "each sample, at its own rate; a faster one every downsample ticks")
+    p.add_argument("--force", action="store_true",
+                   help="write into a non-empty OUTDIR, replacing only the files the export "
+                   "writes")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     from rhmpc.control.export import ExportError, export_controller
-    from rhmpc.control.mpc import RecedingHorizonMPC
     from rhmpc.experiment import RunConfig, load_config
-    from robots import linearize, load_robot
+    from rhmpc.experiment.assembly import deployable
 
     config = load_config(args.config) if args.config else RunConfig()
-    robot = args.robot or config.robot
+    changes = {k: v for k, v in (("robot", args.robot), ("predictor", args.predictor)) if v}
+    config = config.replace(**changes)
     outdir = Path(args.outdir)
-    if outdir.exists() and not outdir.is_dir():
-        raise UsageError(f"{outdir}: exists and is not a directory")
-    mpc = RecedingHorizonMPC(linearize(load_robot(robot), Ts=config.loop.Ts), config.mpc)
+    controller = deployable(config, args.rate)
     try:
-        info = export_controller(mpc, outdir, robot=robot)
-    except ExportError as exc:
+        info = export_controller(controller, outdir, robot=config.robot, force=args.force)
+    except (ExportError, OSError) as exc:
         raise UsageError(str(exc)) from None
-    q = mpc.qp
+    q, ref = controller.mpc.qp, controller.reference
     build = shlex.quote(str(outdir.with_name(outdir.name + "-build")))
     src = shlex.quote(str(outdir))
-    print(f"rhmpc export: {robot}, N = {q.N}, {q.nz} QP variables, {q.A.shape[0]} constraints, "
+    print(f"rhmpc export: {config.robot}, {config.predictor} predictor every "
+          f"{1e3 * ref.dt:g} ms, N = {q.N}, {q.nz} QP variables, {q.A.shape[0]} constraints, "
           f"{len(info.files)} files in {outdir} (key {info.key})")
     for note in info.notes:
         print(f"note:  {note}")
     print(f"build: cmake -S {src} -B {build} && cmake --build {build}")
+    print(f"run:   {build}/rhmpc_example 2    (a fixed-rate loop with a fake sensor)")
     print(f"API:   {outdir / 'rhmpc.h'} (units and array layouts)")
     return 0

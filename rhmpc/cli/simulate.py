@@ -10,11 +10,11 @@ from pathlib import Path
 from rhmpc.cli.presets import add_preset_option, apply_preset
 from rhmpc.errors import UsageError
 from rhmpc.experiment import RunConfig, check_sensor, load_config, run_experiment
+from sim.loop.settings import DEFAULT_SETTLING, LoopSettings
 from sim.recordings.matfile import parse_indices
 
-#: Default run length [s] and settling window [s] of ``rhmpc simulate``.
-DEFAULT_DURATION = 30.0
-DEFAULT_SETTLING = 10.0
+#: Default run length [s] of every command (``LoopSettings.duration``).
+DEFAULT_DURATION = LoopSettings.duration
 #: The settling rule when neither --settling nor a config file sets it.
 SETTLING_RULE = (f"settling by default {DEFAULT_SETTLING:g} s, or a third of a run shorter than "
                  f"{3 * DEFAULT_SETTLING:g} s")
@@ -140,11 +140,7 @@ def parse_value(text: str):
 
 def config_from_args(args: argparse.Namespace) -> RunConfig:
     """The run's settings: defaults < --config file < --preset < explicit options < --set."""
-    if args.config:
-        config = load_config(args.config)
-    else:
-        config = RunConfig().replace(**{"loop.duration": DEFAULT_DURATION,
-                                        "loop.settling": DEFAULT_SETTLING})
+    config = load_config(args.config) if args.config else RunConfig()
     config = apply_preset(config, getattr(args, "preset", None))
     changes: dict = {}
     for name in ("predictor", "scenario", "data", "seed", "robot", "sensor", "rr"):
@@ -162,16 +158,13 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
         if args.duration is None and not args.config:  # default: the whole recording
             from sim.recordings import load_recording
 
-            whole = load_recording(args.data, **changes["data_read"]).duration
-            changes["loop.duration"] = whole
-            changes["loop.settling"] = min(DEFAULT_SETTLING, whole / 3)
+            changes["loop.duration"] = load_recording(args.data,
+                                                      **changes["data_read"]).duration
     elif any(getattr(args, k, None) is not None
              for k in ("var", "rows", "cols", "data_rate", "units")):
         raise UsageError("--var, --rows, --cols, --rate and --units need --data FILE")
     if args.duration is not None:
         changes["loop.duration"] = args.duration
-        if args.settling is None and not args.config:
-            changes["loop.settling"] = min(DEFAULT_SETTLING, args.duration / 3)
     if args.settling is not None:
         changes["loop.settling"] = args.settling
     for item in args.set:
@@ -197,10 +190,10 @@ def settling_rule(args: argparse.Namespace) -> str:
 def check_scoring(config: RunConfig) -> None:
     """A run must be scored on at least :data:`MIN_SCORED` seconds after settling."""
     loop = config.loop
-    scored = loop.duration - loop.settling
+    scored = loop.duration - loop.settling_s
     if scored < MIN_SCORED:
         raise UsageError(
-            f"the run is scored on {scored:.3g} s after {loop.settling:.3g} s of settling; "
+            f"the run is scored on {scored:.3g} s after {loop.settling_s:.3g} s of settling; "
             f"at least {MIN_SCORED:g} s is needed (raise --duration or lower --settling)")
 
 

@@ -162,7 +162,9 @@ class RecedingHorizonMPC:
         # OSQP is always set up: the C export generates its code, and reset() seeds it.
         self._osqp_solver = OSQPSolver(qp, s, want_dual=self._ws_dual)
         self._osqp = self._osqp_solver.osqp
-        self._solver = (ActiveSetSolver(qp, s.max_iter) if s.solver == "daqp"
+        # DAQP's work per tick is bounded by the QP's size: at most one change of its active
+        # set per constraint row (each a rank-one update of its factorisation)
+        self._solver = (ActiveSetSolver(qp, qp.A.shape[0]) if s.solver == "daqp"
                         else self._osqp_solver)
 
     def _update_q(self) -> None:

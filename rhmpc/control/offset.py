@@ -11,11 +11,8 @@ estimated joint state, since the output is a known function of it::
 so the predicted output starts on the true forward kinematics every tick. What is left is the
 change of the Jacobian over the horizon's motion (second order in the planned motion).
 
-The forward kinematics run compiled where the robot's chain builds
-(:class:`sim.plant.native.NativeOffset`: one C call, ≈ 1 µs with its argument copy, against
-≈ 3 µs through Pinocchio's Python bindings, the same end-point to 1e-15 m), else through
-Pinocchio. The controller writes x into its parameter vector anyway; :meth:`OutputOffset.evaluate`
-reads it there (the ``state`` array), which saves the copy.
+The forward kinematics are Pinocchio's. The controller writes x into its parameter vector
+anyway; :meth:`OutputOffset.evaluate` reads it there (the ``state`` array), which saves the copy.
 """
 
 from __future__ import annotations
@@ -33,8 +30,6 @@ class OutputOffset:
         The linearised arm; ``arm.robot`` gives the forward kinematics.
     out : ndarray (3,), optional
         Where every evaluation writes d (e.g. a controller's parameter slot); default its own.
-    compiled : bool
-        Use the compiled chain where it builds (else Pinocchio).
     state : ndarray (2nv,), optional
         Where x is read: :meth:`__call__` writes its x there, :meth:`evaluate` reads what the
         caller wrote (e.g. the state slot of the same parameter vector); default its own.
@@ -45,7 +40,7 @@ class OutputOffset:
         If the arm does not carry its robot (``robots.linearize`` keeps it).
     """
 
-    def __init__(self, arm, out: np.ndarray | None = None, compiled: bool = True,
+    def __init__(self, arm, out: np.ndarray | None = None,
                  state: np.ndarray | None = None) -> None:
         robot = getattr(arm, "robot", None)
         if robot is None:
@@ -67,18 +62,6 @@ class OutputOffset:
         self.out = np.zeros(3) if out is None else out
         #: where :meth:`evaluate` reads x (2nv,): the caller's copy of the state
         self.state = np.zeros(2 * nq) if state is None else state
-        self.compiled = self._compiled(robot) if compiled else None
-
-    def _compiled(self, robot):
-        """The compiled offset writing to :attr:`out`, or None where the chain does not build."""
-        from sim.plant.native import NativeOffset, load_chain
-
-        chain = load_chain(robot.model)
-        if chain is None:
-            return None
-        frame = robot.model.frames[self._fid]
-        return NativeOffset(chain, frame.parentJoint, frame.placement.translation, self._q0,
-                            self._C, self._y0, out=self.out, state=self.state)
 
     def __call__(self, x: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """The offset d (3,) [m] at the state ``x`` = [q − q0; q̇], written into :attr:`state`
@@ -92,8 +75,6 @@ class OutputOffset:
 
     def evaluate(self) -> np.ndarray:
         """The offset at the x the caller wrote into :attr:`state`, in :attr:`out` (the array)."""
-        if self.compiled is not None:
-            return self.compiled.evaluate()
         x = self.state
         q = np.add(self._q0, x[: self._nq], out=self._q)
         pin.forwardKinematics(self._model, self._data, q)

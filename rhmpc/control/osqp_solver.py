@@ -37,15 +37,17 @@ class OSQPSolver:
 
     def __init__(self, qp: CondensedQP, s: MPCSettings, want_dual: bool) -> None:
         self.osqp = osqp.OSQP()
-        extra = {"time_limit": s.time_limit} if s.time_limit > 0 else {}
+        o = s.osqp
+        extra = {"time_limit": o.time_limit} if o.time_limit > 0 else {}
         self.osqp.setup(
             sp.csc_matrix(np.triu(qp.P)), qp.f0.copy(), sp.csc_matrix(qp.A), qp.l0.copy(),
-            qp.u0.copy(), verbose=False, eps_abs=s.eps_abs, eps_rel=s.eps_rel,
-            max_iter=s.max_iter, rho=s.rho,
-            adaptive_rho=s.adaptive_rho, adaptive_rho_interval=s.adaptive_rho_interval,
-            adaptive_rho_tolerance=s.adaptive_rho_tolerance, check_termination=s.check_termination,
-            check_dualgap=s.check_dualgap,
-            polishing=s.polish, scaling=s.scaling, warm_starting=s.warm_start != "none", **extra,
+            qp.u0.copy(), verbose=False, eps_abs=o.eps_abs, eps_rel=o.eps_rel,
+            max_iter=s.max_iter, rho=o.rho, adaptive_rho=o.adaptive_rho,
+            adaptive_rho_interval=o.adaptive_rho_interval,
+            adaptive_rho_tolerance=o.adaptive_rho_tolerance,
+            check_termination=o.check_termination, check_dualgap=o.check_dualgap,
+            polishing=o.polish, scaling=o.scaling, warm_starting=s.warm_start != "none",
+            **extra,
         )
         self._raw = getattr(self.osqp, "_solver", None)
         self._want_dual = want_dual

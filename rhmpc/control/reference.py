@@ -1,17 +1,21 @@
 """From predictor samples to the MPC's N control-rate reference points.
 
-The predictor runs with period ``dt``: every ``downsample`` ticks on the newest sample delivered
-to the control rate (``dt = downsample·Ts``, 7.5 ms in the paper), or once per raw sample of a
-slower sensor (``dt`` its sample period, :mod:`sim.loop.clock`). Each refresh takes the newest
-measured sample ``z(t_a)``, measured at ``t_a`` (the anchor; a sensor's latency makes it older
-than the current tick), and forecasts ``K`` points::
+A refresh runs on each sample's arrival (the loop decides when: once per raw sample of a slow
+sensor, or every ``downsample`` ticks on the newest sample of a fast one), in one call::
+
+    refresh(tick, z, stamp):  gate → predictor.update(z) → predictor.predict(K)
+                              → interpolation → guard → placement
+
+It takes the newest measured sample ``z(t_a)``, measured at ``t_a`` (the anchor; a sensor's
+latency makes it older than the current tick), and forecasts ``K`` points at the predictor's
+period ``dt``::
 
     nodes  t_a + k·dt,  k = 0 … K      values  z(t_a), ẑ(t_a + dt), …, ẑ(t_a + K·dt)
 
-Each control tick ``t`` between two predictor updates takes its N points
-``r_j = r(t + j·Ts), j = 1 … N`` from a piecewise-quadratic (3-node Lagrange) interpolation of
-these nodes: with ``s = (τ − t_a)/dt`` and the window of nodes ``m, m+1, m+2``
-(``m = min(⌊s⌋, K − 2)``), ``u = s − m``::
+Each control tick ``t`` until the next refresh takes its N points ``r_j = r(t + j·Ts),
+j = 1 … N`` from a piecewise-quadratic (3-node Lagrange) interpolation of these nodes: with
+``s = (τ − t_a)/dt`` and the window of nodes ``m, m+1, m+2`` (``m = min(⌊s⌋, K − 2)``),
+``u = s − m``::
 
     r(τ) = ½(u−1)(u−2)·z_m − u(u−2)·z_{m+1} + ½u(u−1)·z_{m+2}
 
@@ -20,11 +24,11 @@ downsample 15 that is at most the last 2.5 ms of the last horizon before the nex
 ``K = prediction_points + ⌈latency/dt⌉`` so that a sensor's latency is predicted across (Yuen et
 al. 2009's delay compensation).
 
-Outlier gate (innovation gating): while *locked*, a sample whose miss e = z − ẑ (ẑ the
-forecast made for it one period earlier) has ‖e‖ > max(floor, 4·e_rms) is treated as missing
-(the floor is given, or 4 × the robust RMS of the first misses on the data themselves);
-e_rms² is the exponentially weighted mean of ‖e‖² over the accepted samples (weight 1/50), so
-a predictor with larger one-step errors gets a proportionally wider gate. Rejections
+Outlier gate (innovation gating, :mod:`rhmpc.control.gate`): while *locked*, a sample whose miss
+e = z − ẑ (ẑ the forecast made for it one period earlier) has ‖e‖ > max(floor, 4·e_rms) is
+treated as missing (the floor is given, or 4 × the robust RMS of the first misses on the data
+themselves); e_rms² is the exponentially weighted mean of ‖e‖² over the accepted samples (weight
+1/50), so a predictor with larger one-step errors gets a proportionally wider gate. Rejections
 are counted in the predictor's ``counts["outliers_rejected"]``. After ``max_rejections``
 consecutive rejections the gate *unlocks* and accepts every sample (a real jump, or a forecast
 gone wrong: gating on a wrong forecast would run the predictor open-loop and let it diverge)
@@ -41,19 +45,97 @@ that cannot retract (the default) keep the plain gate.
 
 Placement: both references work in centred heart coordinates (d = 1 or 3 axes); after
 ``place(origin)`` their ``horizon`` returns workspace points ``r = origin + E r_c`` (N, 3), with
-``E`` embedding a 1-D motion along x. The closed loop places once, so the offset is added once
-per refresh instead of once per tick.
+``E`` embedding a 1-D motion along x.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
 from predictors.base import is_measured
 from rhmpc.control.gate import OutlierGate
-from sim.loop import embed3
+
+__all__ = ["ExactReference", "PredictedReference", "ReferenceSettings", "embed3",
+           "interpolation_matrix", "quadratic_weights", "windows"]
+
+
+@dataclass(frozen=True)
+class ReferenceSettings:
+    """How a predictor's samples become the MPC's reference (the ``[reference]`` table).
+
+    Attributes
+    ----------
+    prediction_points : int
+        Points the predictor forecasts per refresh, before latency compensation (4: Tuna et
+        al. 2013 §VIII-B, M = 4 at 7.5 ms covers the 25-ms horizon).
+    outlier_gate : float or str
+        A sensor sample farther from its one-step forecast than max(floor, 4 × the running RMS
+        forecast miss) is treated as missing (echo outliers: the heart cannot jump millimetres
+        between two samples). ``"auto"`` (default): the floor is 4 × the RMS one-step miss of
+        the predictor on the data themselves, measured over ``gate_calibration`` seconds after
+        as many seconds of convergence (misses beyond 5 × their median left out, so that an
+        outlier in that window does not widen the gate); every sample is accepted until then.
+        A number: that floor [m]; 0 disables the gate. The choice is recorded in the design
+        decisions (outlier gate).
+    gate_calibration : float
+        Length of the ``"auto"`` gate's convergence and of its calibration, each, in the
+        predictor's own forecasts [s] (5 s: several beats).
+    outlier_max_rejections : int
+        After this many consecutive rejected samples the gate opens (a real jump, or a forecast
+        gone wrong) until 20 samples in a row fall inside it again [samples]. Default 3: a
+        sonomicrometer's cycle slip lasts up to 8 ms and the causal playback adds one raw period
+        (3.9 ms at 257 Hz), so it reaches ⌈11.9 / 7.5⌉ + 1 = 3 samples of the predictor.
+    guard_speed : float
+        Reference guard: forecasts farther from the last accepted sample than ``guard_margin +
+        guard_speed · lead`` mean a diverged predictor; the reference then holds that sample and
+        the predictor restarts. Above the fastest POI motion of the replicas (0.21 m/s); 0
+        disables [m/s].
+    guard_margin : float
+        Constant part of the guard's reach [m].
+    """
+
+    prediction_points: int = 4
+    outlier_gate: float | str = "auto"
+    gate_calibration: float = 5.0
+    outlier_max_rejections: int = 3
+    guard_speed: float = 0.3
+    guard_margin: float = 2e-3
+
+    def __post_init__(self) -> None:
+        for name, least in (("prediction_points", 2), ("outlier_max_rejections", 0)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < least:
+                raise ValueError(f"{name} must be an integer >= {least}, got {value!r}")
+        gate = self.outlier_gate
+        if gate != "auto" and not (isinstance(gate, int | float) and not isinstance(gate, bool)
+                                   and math.isfinite(gate) and gate >= 0):
+            raise ValueError(f"outlier_gate must be 'auto' or a number >= 0 [m], got {gate!r}")
+        for name, positive in (("gate_calibration", True), ("guard_speed", False),
+                               ("guard_margin", True)):
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and math.isfinite(value)
+                    and (value > 0 if positive else value >= 0)):
+                raise ValueError(f"{name} must be a finite number {'>' if positive else '>='} "
+                                 f"0, got {value!r}")
+
+    @property
+    def gate_floor(self) -> float | None:
+        """The outlier gate's fixed floor [m] (0: no gate), or None for one from the data."""
+        return None if self.outlier_gate == "auto" else float(self.outlier_gate)
+
+
+def embed3(p: np.ndarray) -> np.ndarray:
+    """(n, d) positions with d ≤ 3 as (n, 3), missing axes zero (1-D motion along x)."""
+    p = np.atleast_2d(p)
+    if p.shape[1] == 3:
+        return p
+    out = np.zeros((p.shape[0], 3))
+    out[:, : p.shape[1]] = p
+    return out
+
 
 #: The three Lagrange weights on nodes m, m+1, m+2 as polynomials in u = s − m, in the basis
 #: (u², u, 1): ½(u−1)(u−2), −u(u−2), ½u(u−1).
@@ -123,13 +205,14 @@ def _origin(origin) -> np.ndarray:
 
 
 class PredictedReference:
-    """The N-point reference from a predictor, refreshed once per predictor period.
+    """The N-point reference from a predictor, refreshed on each sample's arrival.
 
     Parameters
     ----------
     predictor : predictors.Predictor
         Runs at its ``dt`` (``downsample · Ts``, or a slow sensor's sample period); fed centred
-        heart coordinates [m].
+        heart coordinates [m]. A multi-point predictor (``multi_point``) also gets the other
+        tracked points' samples of each refresh.
     Ts : float
         Control period [s].
     horizon : int
@@ -137,65 +220,55 @@ class PredictedReference:
     refresh_ticks : int
         The most ticks one refresh must cover until the next (``downsample``, or a slow
         sensor's period with a margin); at least ``dt / Ts``.
-    prediction_points : int
-        Forecast points per update before latency compensation (4 in Tuna et al.).
-    outlier_gate : float or None
-        Floor of the :class:`OutlierGate` [m]; 0 disables the gate; None calibrates the floor
-        on the first ``gate_calibration`` misses.
-    max_rejections, relock, gate_calibration : int
-        See :class:`OutlierGate`.
-    guard_speed, guard_margin : float
-        Reference guard: a forecast point farther from the last accepted sample than
-        ``guard_margin + guard_speed · (its time − that sample's time)`` [m/s, m] means the
-        predictor has diverged: the reference holds that sample and the predictor is reset (it
-        relearns; until it is ready it holds too). ``guard_speed`` 0 disables the guard.
+    settings : ReferenceSettings, optional
+        Forecast points, outlier gate and guard (default: :class:`ReferenceSettings`).
     """
 
-    def __init__(
-        self, predictor, Ts: float, horizon: int, refresh_ticks: int, prediction_points: int = 4,
-        *, outlier_gate: float | None = 0.0, max_rejections: int = 2, relock: int = 20,
-        gate_calibration: int = 100, guard_speed: float = 0.0, guard_margin: float = 2e-3,
-    ) -> None:
-        if prediction_points < 2:
-            raise ValueError(f"prediction_points must be >= 2, got {prediction_points}")
-        self.gate = None if outlier_gate == 0 else OutlierGate(
-            outlier_gate, max_rejections, relock, gate_calibration)
-        if not (guard_speed >= 0 and guard_margin > 0):
-            raise ValueError("guard_speed must be >= 0 [m/s] and guard_margin > 0 [m]")
-        self.guard_speed, self.guard_margin = guard_speed, guard_margin
+    #: Consecutive samples inside the gate after which an unlocked gate locks again.
+    RELOCK = 20
+
+    def __init__(self, predictor, Ts: float, horizon: int, refresh_ticks: int,
+                 settings: ReferenceSettings | None = None) -> None:
+        self.settings = settings or ReferenceSettings()
+        s = self.settings
         self.predictor = predictor
-        self.Ts, self.N, self.refresh_ticks = Ts, horizon, refresh_ticks
+        self.Ts, self.N, self.refresh_ticks = float(Ts), int(horizon), int(refresh_ticks)
         self.dt = float(predictor.dt)
         if not self.dt <= refresh_ticks * Ts * (1 + 1e-9):
             raise ValueError(f"predictor dt {self.dt} s is longer than refresh_ticks·Ts = "
                              f"{refresh_ticks * Ts} s")
-        self.prediction_points = prediction_points
-        #: optional ``observe(t, heart_rate_hz)`` scorer of the predictor's heart-rate estimate
-        #: (:class:`sim.loop.metrics.HeartRateScore`), called after every forecast
+        floor = s.gate_floor
+        self.gate = None if floor == 0 else OutlierGate(
+            floor, s.outlier_max_rejections, self.RELOCK,
+            math.ceil(s.gate_calibration / self.dt))
+        self.prediction_points = s.prediction_points
+        self._multi_point = bool(getattr(predictor, "multi_point", False))
+        #: optional ``observe(t, heart_rate_hz)`` scorer of the predictor's heart-rate estimate,
+        #: called after every forecast
         self.monitor = None
-        # ticks a refresh covers: its period, plus the two ticks a pipelined loop runs between
-        # an update and its interpolation, while it reads the previous refresh's points
-        self._span = refresh_ticks + horizon + 2
-        self._lead = np.arange(1, self._span + 1) * (Ts / self.dt)  # (τ − now)/dt per point
+        self._span = self.refresh_ticks + self.N  # ticks a refresh covers: its period + N
+        self._lead = np.arange(1, self._span + 1) * (self.Ts / self.dt)  # (τ − now)/dt
         # Interpolation matrices by (nodes, (now − t0)/Ts): with sensor stamps on the tick grid
         # only a few offsets occur, so a refresh is one small product instead of a rebuild.
         self._matrices: dict[tuple[int, float], np.ndarray] = {}
-        self._origin: np.ndarray | None = None
+        self._origin = np.zeros(3)
         self.reset()
 
     def place(self, origin) -> None:
-        """From now on ``horizon`` returns workspace points origin + E r_c, shape (N, 3) [m]."""
+        """From now on :meth:`horizon` returns workspace points origin + E r_c (N, 3) [m]."""
         self._origin = _origin(origin)
-        self._placed = None if self._dense is None else self._origin + embed3(self._dense)
+        self._hold = np.broadcast_to(self._origin, (self.N, 3))
+        if self._dense is not None:
+            self._placed = self._origin + embed3(self._dense)
 
     def reset(self) -> None:
+        """Forget the predictor, the gate and the points."""
         self.predictor.reset()
-        self._dense: np.ndarray | None = None
-        self._placed: np.ndarray | None = None
-        self._first = 0
-        self._pending: tuple | None = None  # (tick, accepted z or None): updated, not predicted
-        self._points: tuple | None = None  # (tick, z, points, latency): predicted, not placed
-        self._anchor: float | None = None
+        self._dense: np.ndarray | None = None  # (span, d) centred points of the last refresh
+        self._placed = np.broadcast_to(self._origin, (self._span, 3))  # until the first sample
+        self._hold = np.broadcast_to(self._origin, (self.N, 3))
+        self._first = 0  # tick of the first point
+        self._anchor: float | None = None  # t_a of the newest node [s]
         self._forecast: np.ndarray | None = None  # ẑ of the next sample, made one period ago
         self._second: np.ndarray | None = None  # ẑ of the sample after it, made then too
         self._before: np.ndarray | None = None  # ẑ of the next sample made two periods ago
@@ -205,83 +278,56 @@ class PredictedReference:
         if self.gate is not None:
             self.gate.reset()
 
-    def refresh(self, tick: int, z: np.ndarray | None, stamp: float) -> None:
-        """Feed the newest sample ``z`` measured at ``stamp`` [s] (None = no new sample).
-
-        :meth:`update` then :meth:`forecast`, the two halves a pipelined loop runs on
-        consecutive ticks.
-        """
-        self.update(tick, z, stamp)
-        self.forecast()
-
-    def update(self, tick: int, z: np.ndarray | None, stamp: float) -> None:
-        """First half of a refresh: the outlier gate and the predictor's update with ``z``."""
-        valid = is_measured(z)  # the predictors' test (as_sample): what is not gated is not learnt
-        if valid and self._forecast is not None:
-            gate, counts = self.gate, self.predictor.counts
-            miss2 = gate.miss2(z, self._forecast)  # judged once, used twice
-            if (self._before is not None and not gate.inside(z, self._forecast, miss2)
-                    and gate.inside(z, self._before) and self.predictor.retract()):
-                gate.accept(z, self._before, counts)  # the previous sample was the outlier
-            elif not gate.accept(z, self._forecast, counts, miss2):
-                z, valid = None, False
-        self.predictor.update(z)
-        self._pending = self._points = None
-        if valid:
+    def refresh(self, tick: int, z: np.ndarray | None, stamp: float,
+                others: np.ndarray | None = None) -> None:
+        """A sample's arrival on ``tick``: ``z`` measured at ``stamp`` [s] (None or NaN: none
+        new), and ``others`` the other tracked points' samples of that instant (a multi-point
+        predictor reads them). Gate, update, forecast, interpolation, guard, placement."""
+        z = self._gated(z)
+        if z is None and self._anchor is None:
+            return  # nothing measured yet (nor lost): keep holding
+        if self._multi_point:
+            self.predictor.update(z, others)
+        else:
+            self.predictor.update(z)
+        if z is not None:
             self._anchor, self._held, self._held_stamp = stamp, np.array(z, dtype=float), stamp
-        elif self._anchor is None:
-            return  # nothing measured yet: keep holding
         else:
             self._anchor += self.dt  # the predictor advanced one period open-loop
-        self._pending = (tick, z if valid else None)
-
-    def forecast(self) -> None:
-        """Forecast, interpolate and guard the points of the last :meth:`update`:
-        :meth:`predict` then :meth:`interpolate`, the slices a pipelined loop runs on
-        consecutive ticks.
-
-        The points are those of the update's tick; until this runs, :meth:`horizons` reads the
-        previous refresh's points.
-        """
-        self.predict()
-        self.interpolate()
-
-    def learn(self) -> None:
-        """The predictor's learning from the last :meth:`update`, where it defers it
-        (:meth:`predictors.base.Predictor.learn`); otherwise it ran in the update."""
-        learn = getattr(self.predictor, "learn", None)
-        if learn is not None:
-            learn()
-
-    def score(self) -> None:
-        """The predictor's forecast-error bookkeeping (:meth:`predictors.base.Predictor.score`),
-        which a pipelined loop runs on the tick after the interpolation."""
-        score = getattr(self.predictor, "score", None)
-        if score is not None:
-            score()
-
-    def predict(self) -> None:
-        """The predictor's forecast from the last :meth:`update`, ``K = prediction_points +
-        ⌈latency/dt⌉`` points (the gate keeps the one- and two-step ones)."""
-        if self._pending is None:
-            return
-        (tick, z), self._pending = self._pending, None
         latency = max(0.0, tick * self.Ts - self._anchor)
         points = self.predictor.predict(self.prediction_points
                                         + math.ceil(latency / self.dt - 1e-9))
-        if self.gate is not None:
-            ready = getattr(self.predictor, "ready", True)
-            # the two-step forecast made before this refresh's sample, if one was accepted
-            self._before = self._second if z is not None else None
-            self._forecast = points[0] if ready else None
-            self._second = points[1] if ready else None
-        self._points = (tick, z, points, latency)
+        self._keep_forecasts(points, measured=z is not None)
+        self._interpolate(tick, z, points, latency)
 
-    def interpolate(self) -> None:
-        """The N-point references of the last :meth:`predict`: interpolated, guarded, placed."""
-        if self._points is None:
+    def _gated(self, z: np.ndarray | None) -> np.ndarray | None:
+        """``z`` if it is a measurement the gate accepts (retracting the previous sample where
+        it was the outlier), else None."""
+        if not is_measured(z):  # the predictors' test (as_sample): what is not gated is not learnt
+            return None
+        if self._forecast is None:
+            return z
+        gate, counts = self.gate, self.predictor.counts
+        miss2 = gate.miss2(z, self._forecast)  # judged once, used twice
+        if (self._before is not None and not gate.inside(z, self._forecast, miss2)
+                and gate.inside(z, self._before) and self.predictor.retract()):
+            gate.accept(z, self._before, counts)  # the previous sample was the outlier
+            return z
+        return z if gate.accept(z, self._forecast, counts, miss2) else None
+
+    def _keep_forecasts(self, points: np.ndarray, measured: bool) -> None:
+        """Keep the one- and two-step forecasts the gate judges the next samples by."""
+        if self.gate is None:
             return
-        (tick, z, points, latency), self._points = self._points, None
+        ready = getattr(self.predictor, "ready", True)
+        # the two-step forecast made before this refresh's sample, if one was accepted
+        self._before = self._second if measured else None
+        self._forecast = points[0] if ready else None
+        self._second = points[1] if ready else None
+
+    def _interpolate(self, tick: int, z: np.ndarray | None, points: np.ndarray,
+                     latency: float) -> None:
+        """The points of the ticks after ``tick``: interpolated, guarded, placed."""
         now = tick * self.Ts
         if z is not None:
             nodes = np.concatenate((np.reshape(z, (1, -1)), points))
@@ -292,14 +338,13 @@ class PredictedReference:
             nodes, t0 = points, self._anchor + self.dt
         self._dense = self._interpolation(nodes.shape[0], now - t0) @ nodes
         self._first = tick + 1
-        if self.guard_speed > 0 and self._held is not None:
+        s = self.settings
+        if s.guard_speed > 0 and self._held is not None:
             lead = now + self._span * self.Ts - self._held_stamp  # [s] to the last point
-            gap = np.subtract(self._dense, self._held)
-            np.abs(gap, out=gap)
-            if gap.flat[gap.argmax()] > self.guard_margin + self.guard_speed * lead:
+            gap = np.abs(self._dense - self._held)
+            if gap.flat[gap.argmax()] > s.guard_margin + s.guard_speed * lead:
                 self._diverged()
-        if self._origin is not None:
-            self._placed = self._origin + embed3(self._dense)
+        self._placed = self._origin + embed3(self._dense)
         if self.monitor is not None:
             self.monitor.observe(now, self.predictor.heart_rate_hz)
 
@@ -333,52 +378,52 @@ class PredictedReference:
         """Mean age of the newest sample when a forecast is made from it [s] (NaN if none)."""
         return self.age_sum / self.age_count if self.age_count else math.nan
 
-    def horizon(self, tick: int) -> np.ndarray | None:
-        """r_{tick+1} … r_{tick+N}, or None before the first valid sample.
+    def horizon(self, tick: int) -> np.ndarray:
+        """r_{tick+1} … r_{tick+N} in the workspace (N, 3) [m]: the points of the last refresh
+        (a skipped refresh holds its last N), or the origin before the first sample. A read-only
+        view of an array that the next refresh replaces."""
+        if self._dense is None:
+            return self._hold
+        start = min(max(tick + 1 - self._first, 0), self._span - self.N)
+        return self._placed[start : start + self.N]
 
-        Shape (N, d) in centred coordinates, or (N, 3) in the workspace after :meth:`place`.
-        A view of an array that the next ``refresh`` replaces (it is never changed in place).
-        """
-        points = self.horizons(tick, 1)
-        return None if points is None else points[0]
 
-    def horizons(self, tick: int, count: int) -> np.ndarray | None:
-        """:meth:`horizon` of ticks tick … tick + count − 1 from the current refresh, as one
-        read-only (count, N, d) array (:func:`windows`), or None before the first valid
-        sample."""
-        dense = self._dense if self._origin is None else self._placed
-        if dense is None:
-            return None
-        return windows(dense, tick + 1 - self._first, count, self.N)
+class _ArrayTruth:
+    """Centred truth from an array of positions at ticks 0 … n − 1."""
+
+    def __init__(self, truth: np.ndarray) -> None:
+        self.truth = np.array(truth, dtype=float).reshape(len(truth), -1)
+        if not np.all(np.isfinite(self.truth).any(axis=0)):
+            raise ValueError("the exact reference has no finite sample on some axis")
+        self.n_ticks, self.dim = self.truth.shape
+
+    def window(self, i0: int, i1: int) -> np.ndarray:
+        return self.truth[i0:i1]
 
 
 class ExactReference:
     """"Exact reference information" (Tuna et al.): the true future, no predictor.
 
     ``truth`` is the centred POI position at every tick of the run plus a horizon's margin: an
-    array (n, d), or a truth read in windows (``window(i0, i1)``, ``n_ticks``:
-    :class:`sim.loop.streams.SourceTruth`), which keeps memory flat in run length. Gaps in it (NaN:
-    dropouts of a recorded stream used as the truth) are bridged linearly between the finite
-    ticks around them (constant before the first and after the last), so that the MPC is never
-    handed NaN; the metrics still skip those ticks. Read in windows of ``window`` ticks, forward
-    in time (reading backwards restarts from tick 0), the points are those of the whole array.
+    array (n, d), or a truth read in windows (``window(i0, i1)``, ``n_ticks``, ``dim``), which
+    keeps memory flat in run length. Gaps in it (NaN: dropouts of a recorded stream used as the
+    truth) are bridged linearly between the finite ticks around them (constant before the first
+    and after the last), so that the MPC is never handed NaN; the metrics still skip those
+    ticks. Read in windows of ``window`` ticks, forward in time (reading backwards restarts from
+    tick 0), the points are those of the whole array.
     """
 
-    def __init__(self, truth, horizon: int, window: int = 8192) -> None:
-        if not hasattr(truth, "window"):
-            from sim.loop.streams import ArrayTruth
+    predictor = None
 
-            array = np.array(truth, dtype=float)
-            if not np.all(np.isfinite(array).any(axis=0)):
-                raise ValueError("the exact reference has no finite sample on some axis")
-            truth = ArrayTruth(array, np.zeros(array.shape[1]))
-        self._truth, self.N, self._size = truth, horizon, int(window)
-        self._origin: np.ndarray | None = None
+    def __init__(self, truth, horizon: int, window: int = 8192) -> None:
+        self._truth = truth if hasattr(truth, "window") else _ArrayTruth(truth)
+        self.N, self._size = horizon, int(window)
+        self._origin = np.zeros(3)
         self._restart()
 
     def _restart(self) -> None:
         self._w0 = 0  # tick of self._points[0]
-        self._points = np.empty((0, 3 if self._origin is not None else self._truth.dim))
+        self._points = np.empty((0, 3))
         self._last: list[tuple[int, float] | None] = [None] * self._truth.dim  # finite, before
 
     def _bridged(self, a: int, b: int) -> np.ndarray:
@@ -428,47 +473,29 @@ class ExactReference:
             self._w0 = min(start, end)
             while end < stop:
                 b = min(end + self._size, self._truth.n_ticks)
-                new = self._bridged(end, b)
-                parts.append(new if self._origin is None else self._origin + embed3(new))
+                parts.append(self._origin + embed3(self._bridged(end, b)))
                 end = b
             self._points = np.concatenate(parts)
         return self._points
 
     def place(self, origin) -> None:
-        """From now on ``horizon`` returns workspace points origin + E r_c, shape (N, 3) [m]."""
+        """From now on :meth:`horizon` returns workspace points origin + E r_c (N, 3) [m]."""
         self._origin = _origin(origin)
         self._restart()
 
     def reset(self) -> None:
         pass
 
-    def refresh(self, tick: int, z: np.ndarray | None, stamp: float) -> None:
-        pass
-
-    def update(self, tick: int, z: np.ndarray | None, stamp: float) -> None:
-        pass
-
-    def forecast(self) -> None:
-        pass
-
-    def learn(self) -> None:
-        pass
-
-    def predict(self) -> None:
-        pass
-
-    def interpolate(self) -> None:
-        pass
-
-    def score(self) -> None:
+    def refresh(self, tick: int, z: np.ndarray | None, stamp: float,
+                others: np.ndarray | None = None) -> None:
         pass
 
     def horizon(self, tick: int) -> np.ndarray:
-        """r_{tick+1} … r_{tick+N}: (N, d) centred, or (N, 3) in the workspace after ``place``."""
+        """r_{tick+1} … r_{tick+N} in the workspace (N, 3) [m]."""
         return self.horizons(tick, 1)[0]
 
     def horizons(self, tick: int, count: int) -> np.ndarray:
-        """:meth:`horizon` of ticks tick … tick + count − 1 as one read-only (count, N, d)
+        """:meth:`horizon` of ticks tick … tick + count − 1 as one read-only (count, N, 3)
         array (:func:`windows`; a view of an array never changed)."""
         points = self._cover(tick + 1, tick + count + self.N)
         return windows(points, tick + 1 - self._w0, count, self.N)

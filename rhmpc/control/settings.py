@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
 #: Default move-blocking of the MPC inputs [ticks]: short blocks first, longer ones towards the end
@@ -37,6 +37,71 @@ def _finite(name: str, value: float, *, positive: bool = False, nonneg: bool = F
 def _integer(name: str, value: int, minimum: int) -> None:
     if not isinstance(value, int) or isinstance(value, bool) or value < minimum:
         raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
+
+
+@dataclass(frozen=True)
+class OSQPSettings:
+    """OSQP's own options, passed to its ``setup`` (Stellato et al., "OSQP: an operator
+    splitting solver for quadratic programs", Math. Prog. Comp. 12, 2020; the names of its
+    settings documentation).
+
+    Attributes
+    ----------
+    eps_abs, eps_rel : float
+        Termination tolerances (on the scaled problem, inputs normalised by u_max) [-].
+    rho : float
+        ADMM step size [-].
+    adaptive_rho : bool
+        Let OSQP adapt rho (each change refactorises the KKT matrix inside the tick; the
+        exported C cannot).
+    adaptive_rho_interval : int
+        Iterations between rho adaptations; 0 = OSQP's automatic choice, which depends on
+        measured setup time and so is not reproducible [-].
+    adaptive_rho_tolerance : float
+        Rho is only changed when the new estimate differs by more than this factor [-].
+    check_termination : int
+        OSQP checks its residuals every this many iterations [-].
+    check_dualgap : bool
+        Also require the duality gap to be below the tolerance to stop. Off: the envelope's
+        slack penalty ρ₁ s turns slack noise of ~1e-6 into a gap of ~1e-3, so with the gap
+        check OSQP runs into ``max_iter`` on every tick where a slack is active.
+    polish : bool
+        Solution polishing (an extra reduced KKT factorisation per tick; the exported C cannot).
+    scaling : int
+        Ruiz equilibration iterations (0 = rely on the physical scaling) [-].
+    time_limit : float
+        Wall-clock limit per solve [s]; 0 disables (the exported C has no timer: it is bounded
+        by ``max_iter``).
+    """
+
+    eps_abs: float = 1e-3
+    eps_rel: float = 0.0
+    rho: float = 3.0
+    adaptive_rho: bool = False
+    adaptive_rho_interval: int = 25
+    adaptive_rho_tolerance: float = 5.0
+    check_termination: int = 5
+    check_dualgap: bool = False
+    polish: bool = False
+    scaling: int = 0
+    time_limit: float = 0.0
+
+    def __post_init__(self) -> None:
+        _finite("eps_abs", self.eps_abs, nonneg=True)
+        _finite("eps_rel", self.eps_rel, nonneg=True)
+        if self.eps_abs == 0 and self.eps_rel == 0:
+            raise ValueError("eps_abs and eps_rel cannot both be 0")
+        _finite("time_limit", self.time_limit, nonneg=True)
+        _finite("rho", self.rho, positive=True)
+        _integer("check_termination", self.check_termination, 1)
+        _integer("adaptive_rho_interval", self.adaptive_rho_interval, 0)
+        _finite("adaptive_rho_tolerance", self.adaptive_rho_tolerance, positive=True)
+        if self.adaptive_rho_tolerance < 1:
+            raise ValueError("adaptive_rho_tolerance must be >= 1")
+        _integer("scaling", self.scaling, 0)
+        for name in ("adaptive_rho", "check_dualgap", "polish"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"{name} must be true or false, got {getattr(self, name)!r}")
 
 
 @dataclass(frozen=True)
@@ -115,41 +180,24 @@ class MPCSettings:
     envelope_quadratic : float
         ρ₂, quadratic slack weight [-]; it keeps the Hessian positive definite in the slacks.
     solver : str
-        ``"osqp"`` (ADMM; the eps_*, rho, … settings below; what ``rhmpc export`` generates as
-        C) or ``"daqp"`` (dual active set, exact, hot-started; ``max_iter`` caps its active-set
-        changes). Both solve the same QP, only on ticks that screening does not settle. Measured:
-        once envelope rows are active OSQP needs 450–3900 iterations, so those ticks fall back
-        (plan, braking: safe, but the arm stops tracking); DAQP solves them exactly in ≤ 5.
-        Choose ``"daqp"`` when the envelope is expected to bind.
-    eps_abs, eps_rel : float
-        OSQP termination tolerances (on the scaled problem, inputs normalised by u_max) [-].
+        ``"osqp"`` (ADMM, with the options of ``osqp``; what ``rhmpc export`` generates as C)
+        or ``"daqp"`` (dual active set, exact, hot-started). Both solve the same QP, only on
+        ticks that screening does not settle (an envelope row binds). Choose ``"daqp"`` for a
+        Python study where the envelope is expected to bind: it solves those ticks exactly in a
+        few changes of its active set, where ADMM needs hundreds of iterations (the validation
+        pages measure both).
     max_iter : int
-        Iteration cap per tick: OSQP's ADMM iterations, or DAQP's active-set changes [-].
-        Chosen by measurement (``rhmpc bench``, 3000 ticks, bound-active ticks): OSQP needs
-        p99 35 / max 40, DAQP p99 2 / max 5; 100 leaves headroom for both. A cap in iterations
-        rather than time keeps runs reproducible; past it the plan fallback applies.
-    time_limit : float
-        OSQP wall-clock limit per solve [s]; 0 disables.
-    rho : float
-        OSQP ADMM step size [-].
-    adaptive_rho : bool
-        Let OSQP adapt rho (each change refactorises the KKT matrix inside the tick).
-    adaptive_rho_interval : int
-        Iterations between rho adaptations; 0 = OSQP's automatic choice, which depends on
-        measured setup time and so is not reproducible [-].
-    adaptive_rho_tolerance : float
-        Rho is only changed when the new estimate differs by more than this factor [-].
-    check_termination : int
-        OSQP checks its residuals every this many iterations [-].
-    check_dualgap : bool
-        OSQP also requires the duality gap to be below the tolerance to stop. Off by default:
-        the envelope's slack penalty ρ₁ s turns slack noise of ~1e-6 into a gap of ~1e-3, so
-        with the gap check OSQP ran into ``max_iter`` on every bound tick (measured with
-        ``rhmpc bench``); without it the first input is within 0.13 % of τ_max of DAQP's.
-    polish : bool
-        OSQP solution polishing (an extra reduced KKT factorisation per tick).
-    scaling : int
-        OSQP Ruiz equilibration iterations (0 = rely on the physical scaling) [-].
+        OSQP's work per tick: its ADMM iterations [-] (DAQP, exact, is bounded by the QP's size:
+        at most one change of its active set per constraint row). A real-time bound: 10 ADMM iterations of the PHANToM's QP keep a tick that reaches the
+        solver to about a fifth of the 0.5-ms period in the exported C (each iteration is a
+        solve with the factorised KKT matrix; ``rhmpc bench --controller c`` measures it). A
+        solve that reaches it is not used: the tick takes the fallback at once (the shifted
+        plan, then the clipped LQ input or braking) and the next tick's solve starts from its
+        iterate, shifted (its QP is nearly the same), so that a solve that needs more
+        iterations finishes over a few ticks. A cap in iterations rather than time keeps runs
+        reproducible.
+    osqp : OSQPSettings
+        OSQP's own options, passed through (the ``[mpc.osqp]`` table).
     warm_start : str
         ``"shift"`` (previous primal and dual shifted one tick), ``"shift_primal"`` (primal
         shifted, OSQP's dual kept), ``"keep"`` (OSQP's previous iterate as is) or ``"none"``
@@ -199,18 +247,8 @@ class MPCSettings:
     envelope_penalty: float = 1e3
     envelope_quadratic: float = 1e2
     solver: str = "osqp"
-    eps_abs: float = 1e-3
-    eps_rel: float = 0.0
-    max_iter: int = 100
-    time_limit: float = 0.0
-    rho: float = 3.0
-    adaptive_rho: bool = False
-    adaptive_rho_interval: int = 25
-    adaptive_rho_tolerance: float = 5.0
-    check_termination: int = 5
-    check_dualgap: bool = False
-    polish: bool = False
-    scaling: int = 0
+    max_iter: int = 10
+    osqp: OSQPSettings = field(default_factory=lambda: OSQPSettings())
     warm_start: str = "shift_primal"
     screening: bool = True
     box_screening: bool = True
@@ -227,8 +265,11 @@ class MPCSettings:
         self._check_weights()
         self._check_envelope()
         self._check_solver()
-        for name in ("adaptive_rho", "check_dualgap", "polish", "screening", "box_screening",
-                     "offset_correction", "joint_envelope"):
+        if isinstance(self.osqp, dict):
+            object.__setattr__(self, "osqp", from_dict(OSQPSettings, self.osqp))
+        if not isinstance(self.osqp, OSQPSettings):
+            raise ValueError(f"osqp must be a table of OSQP's options, got {self.osqp!r}")
+        for name in ("screening", "box_screening", "offset_correction", "joint_envelope"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name} must be true or false, got {getattr(self, name)!r}")
 
@@ -297,19 +338,7 @@ class MPCSettings:
     def _check_solver(self) -> None:
         if self.solver not in SOLVERS:
             raise ValueError(f"solver must be one of {SOLVERS}, got {self.solver!r}")
-        _finite("eps_abs", self.eps_abs, nonneg=True)
-        _finite("eps_rel", self.eps_rel, nonneg=True)
-        if self.eps_abs == 0 and self.eps_rel == 0:
-            raise ValueError("eps_abs and eps_rel cannot both be 0")
         _integer("max_iter", self.max_iter, 1)
-        _finite("time_limit", self.time_limit, nonneg=True)
-        _finite("rho", self.rho, positive=True)
-        _integer("check_termination", self.check_termination, 1)
-        _integer("adaptive_rho_interval", self.adaptive_rho_interval, 0)
-        _finite("adaptive_rho_tolerance", self.adaptive_rho_tolerance, positive=True)
-        if self.adaptive_rho_tolerance < 1:
-            raise ValueError("adaptive_rho_tolerance must be >= 1")
-        _integer("scaling", self.scaling, 0)
         if self.warm_start not in WARM_STARTS:
             raise ValueError(f"warm_start must be one of {WARM_STARTS}, got {self.warm_start!r}")
         _integer("plan_fallback_ticks", self.plan_fallback_ticks, 0)
@@ -325,24 +354,30 @@ S = TypeVar("S")
 
 
 def to_dict(settings: Any) -> dict[str, Any]:
-    """Settings dataclass → TOML-friendly ``dict`` (tuples → lists, ``None`` fields dropped)."""
+    """Settings dataclass → TOML-friendly ``dict`` (tuples → lists, nested settings → tables,
+    ``None`` fields dropped)."""
     out: dict[str, Any] = {}
     for f in dataclasses.fields(settings):
         value = getattr(settings, f.name)
         if value is None:
             continue
+        if dataclasses.is_dataclass(value):
+            value = to_dict(value)
         out[f.name] = list(value) if isinstance(value, tuple) else value
     return out
 
 
 def from_dict(cls: type[S], data: dict[str, Any]) -> S:
-    """``dict`` (e.g. a parsed TOML table) → settings dataclass ``cls``.
+    """``dict`` (e.g. a parsed TOML table) → settings dataclass ``cls`` (a nested table builds
+    its nested settings).
 
     Raises
     ------
     ValueError
         On unknown keys or values the dataclass rejects.
     """
+    if not isinstance(data, dict):
+        raise ValueError(f"{cls.__name__} must be a table, got {data!r}")
     names = [f.name for f in dataclasses.fields(cls)]
     unknown = sorted(set(data) - set(names))
     if unknown:
@@ -350,3 +385,28 @@ def from_dict(cls: type[S], data: dict[str, Any]) -> S:
                          f"valid: {', '.join(names)}")
     kwargs = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items()}
     return cls(**kwargs)
+
+
+def replace_settings(settings: S, changes: dict[str, Any]) -> S:
+    """``dataclasses.replace`` with dotted names into nested settings (``"osqp.rho"``); a
+    ValueError names the valid keys of an unknown one."""
+    direct: dict[str, Any] = {}
+    nested: dict[str, dict[str, Any]] = {}
+    for key, value in changes.items():
+        head, _, rest = key.partition(".")
+        if rest:
+            nested.setdefault(head, {})[rest] = value
+        else:
+            direct[head] = value
+    names = [f.name for f in dataclasses.fields(settings)]
+    for head in [*direct, *nested]:
+        if head not in names:
+            raise ValueError(f"unknown {type(settings).__name__} setting {head!r}; valid: "
+                             f"{', '.join(names)}")
+    for head, sub in nested.items():
+        inner = getattr(settings, head)
+        if not dataclasses.is_dataclass(inner):
+            raise ValueError(f"{head} is not a table of settings")
+        direct[head] = replace_settings(inner, sub)
+    return dataclasses.replace(settings, **{
+        k: tuple(v) if isinstance(v, list) else v for k, v in direct.items()})

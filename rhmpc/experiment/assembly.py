@@ -6,27 +6,32 @@ sensor, plant, loop), ``predictors`` and the controller of :mod:`rhmpc.control`.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from predictors import make_predictor, settings_for
-from rhmpc.control.compiled_reference import compile_reference
+from rhmpc.control.cancellation import NonlinearityCancellation
+from rhmpc.control.controller import Controller
 from rhmpc.control.mpc import RecedingHorizonMPC
+from rhmpc.control.observer import JointObserver
 from rhmpc.control.reference import ExactReference, PredictedReference
 from rhmpc.errors import UsageError
 from rhmpc.experiment.config import RunConfig
 from robots import LinearArm, Robot, linearize, load_robot
-from sim.loop.clock import PredictorClock, predictor_clock
+from sim.loop.clock import PredictorClock, clock_for_rate, predictor_clock
 from sim.loop.metrics import HeartRateScore
 from sim.loop.streams import SampleSource, SourceTruth, UpsampledSamples, sensor_samples
+from sim.plant import make_plant
 from sim.sensors import DEFAULT_PLAYBACK, SampleStream, Sensor, playback, sensor_from_name
 from sim.sources import HeartSource, heart_source
 
 if TYPE_CHECKING:
     from rhmpc.control.export.binding import CController
+
+#: Who runs the controller: this package's Python, or the C of ``rhmpc export``.
+IMPLEMENTATIONS: tuple[str, ...] = ("python", "c")
 
 
 @dataclass
@@ -40,14 +45,14 @@ class Run:
         The plant's robot model.
     arm : LinearArm
         The controller's linear model about the home posture.
-    controller : RecedingHorizonMPC or CController
-        The Python MPC, or its compiled twin (``implementation="c"``).
-    reference : ExactReference or PredictedReference
-        What the MPC tracks: the true future, or a predictor's forecast.
+    plant
+        The plant (:func:`sim.plant.make_plant`).
+    controller : Controller or CController
+        The Python controller, or the exported C one (``implementation="c"``).
     truth : SourceTruth
         The centred POI truth, read per window.
-    center : ndarray, shape (d,)
-        The POI's mean over the run [m].
+    anchor : ndarray, shape (3,)
+        Where the centred motion's origin sits in the workspace [m].
     stream : SampleSource
         The sensor samples the controller sees, read in blocks.
     label : str
@@ -55,24 +60,25 @@ class Run:
     duration : float
         Simulated time [s].
     clock : PredictorClock
-        When the predictor runs: every ``downsample`` ticks, or on each raw sample.
-    refresh : str
-        Who runs the predictor's refresh: ``"compiled"`` (C), ``"python (why)"``, or
-        ``"none"`` for the exact reference.
+        When the reference refreshes: every ``downsample`` ticks, or on each raw sample.
     """
 
     config: RunConfig
     robot: Robot
     arm: LinearArm
-    controller: RecedingHorizonMPC | CController
-    reference: ExactReference | PredictedReference
+    plant: object
+    controller: Controller | CController
     truth: SourceTruth
-    center: np.ndarray
+    anchor: np.ndarray
     stream: SampleSource
     label: str
     duration: float
     clock: PredictorClock
-    refresh: str = "none"
+
+    @property
+    def reference(self):
+        """The controller's reference (the Python controller's; None for the C one)."""
+        return getattr(self.controller, "reference", None)
 
 
 def build_stream(config: RunConfig, heart: HeartSource, duration: float,
@@ -126,69 +132,84 @@ def check_sensor(config: RunConfig) -> None:
         make_sensor(config.sensor, 3, dict(config.sensor_settings))
 
 
-def build_controller(config: RunConfig, arm: LinearArm,
-                     implementation: str = "python") -> RecedingHorizonMPC | CController:
-    """The MPC of ``config.mpc`` on ``arm``: Python, or its compiled twin (``"c"``)."""
-    if config.mpc.horizon != config.loop.horizon:
-        raise UsageError(f"mpc.horizon ({config.mpc.horizon}) and loop.horizon "
-                         f"({config.loop.horizon}) must agree")
-    if implementation not in ("python", "c"):
-        raise UsageError(f"implementation must be 'python' or 'c', got {implementation!r}")
-    controller = RecedingHorizonMPC(arm, config.mpc)
-    if implementation == "c":
-        from rhmpc.control.export import compiled_controller  # cmake and a compiler at first use
-
-        controller = compiled_controller(controller, config.robot)
-    return controller
-
-
 def build_reference(config: RunConfig, truth: SourceTruth, heart: HeartSource,
-                    clock: PredictorClock) -> tuple[ExactReference | PredictedReference, str]:
-    """The exact future (``predictor = "exact"``) or the predictor's forecast on ``clock``,
-    and who runs its refresh (:attr:`Run.refresh`): the compiled twin of the Python pipeline
-    where ``loop.compiled_refresh`` allows it and it exists
-    (:func:`rhmpc.control.compiled_reference.compile_reference`)."""
-    loop = config.loop
+                    clock: PredictorClock) -> ExactReference | PredictedReference:
+    """The exact future (``predictor = "exact"``) or the predictor's forecast on ``clock``."""
+    N = config.mpc.horizon
     if config.predictor == "exact":
-        return ExactReference(truth, loop.horizon), "none"
+        return ExactReference(truth, N)
     settings = dict(config.predictor_settings)
     if config.predictor in config.predictor_params and "params" not in settings:
         settings["params"] = config.predictor_params[config.predictor]
     if "unit" not in settings and getattr(settings_for(config.predictor, **settings), "unit",
                                           1.0) is None:
-        # the loop feeds metres: no unit inference, which would hold the first 0.5 s and then
-        # replay it in one refresh (≈ 1 ms on one tick)
-        settings["unit"] = 1.0
+        settings["unit"] = 1.0  # the loop feeds metres: no unit inference
     predictor = make_predictor(config.predictor, dt=clock.dt, **settings)
-    reference = PredictedReference(
-        predictor, loop.Ts, loop.horizon, clock.refresh_ticks, loop.prediction_points,
-        outlier_gate=loop.gate_floor, max_rejections=loop.outlier_max_rejections,
-        gate_calibration=math.ceil(loop.gate_calibration / clock.dt),
-        guard_speed=loop.guard_speed, guard_margin=loop.guard_margin,
-    )
-    phase = getattr(heart.motion, "phase", None)
+    reference = PredictedReference(predictor, config.loop.Ts, N, clock.refresh_ticks,
+                                   config.reference)
+    phase = getattr(getattr(heart, "motion", None), "phase", None)
     if hasattr(predictor, "heart_rate_hz") and hasattr(phase, "rate"):
-        reference.monitor = HeartRateScore(phase.rate, loop.settling)  # ω̂ against the true rate
-    if not loop.compiled_refresh:
-        return reference, "python (loop.compiled_refresh = false)"
-    compiled, why = compile_reference(reference, dim=truth.center.shape[0])
-    return (compiled, "compiled") if compiled is not None else (reference, f"python ({why})")
+        reference.monitor = HeartRateScore(phase.rate, config.loop.settling_s)
+    return reference
+
+
+def build_controller(config: RunConfig, robot: Robot, arm: LinearArm, reference,
+                     implementation: str = "python") -> Controller | CController:
+    """The controller of ``config`` around ``reference`` (already placed): Python, or the C of
+    ``rhmpc export`` (``"c"``, built once and cached)."""
+    if implementation not in IMPLEMENTATIONS:
+        raise UsageError(f"implementation must be one of {', '.join(IMPLEMENTATIONS)}, "
+                         f"got {implementation!r}")
+    linear = config.plant.model == "linear"
+    cancellation = None if linear else NonlinearityCancellation(
+        robot, config.mismatch, config.plant.stiction_velocity)
+    delay = config.hardware.delay_ticks if config.plant.model == "hardware" else 0
+    controller = Controller(RecedingHorizonMPC(arm, config.mpc), reference,
+                            JointObserver(arm, robot.encoder_resolution, config.observer),
+                            cancellation, robot.torque_limit, delay)
+    if implementation == "c":
+        from rhmpc.control.export import controller_in_c  # a C compiler at first use
+
+        return controller_in_c(controller, config.robot)
+    return controller
+
+
+def deployable(config: RunConfig, sensor_rate: float) -> Controller:
+    """The Python controller of ``config`` for a sensor of ``sensor_rate`` [Hz] (what ``rhmpc
+    export`` generates from): the reference refreshes on each sample of a sensor slower than
+    every ``loop.downsample`` ticks, else every ``downsample`` ticks; placed at the tool's home
+    position plus ``loop.poi_offset``."""
+    if not (np.isfinite(sensor_rate) and sensor_rate > 0):
+        raise UsageError(f"the sensor's rate must be > 0 Hz, got {sensor_rate!r}")
+    robot = load_robot(config.robot)
+    arm = linearize(robot, Ts=config.loop.Ts)
+    clock = clock_for_rate(config.loop, sensor_rate)
+    if config.predictor == "exact":
+        raise UsageError("the controller to deploy needs a predictor ('exact' reads the future)")
+    reference = build_reference(config, None, None, clock)
+    reference.place(motion_anchor(config, arm))
+    return build_controller(config, robot, arm, reference)
+
+
+def motion_anchor(config: RunConfig, arm: LinearArm) -> np.ndarray:
+    """Where the centred motion's origin sits in the workspace [m] (``loop.placement``)."""
+    offset = np.asarray(config.loop.poi_offset, dtype=float)
+    return arm.y0 + offset if config.loop.placement == "centred" else offset
 
 
 def build_run(config: RunConfig, implementation: str = "python") -> Run:
-    """Build robot, controller, heart motion, sensor stream and reference for ``config``.
+    """Build robot, plant, controller, heart motion and sensor stream for ``config``.
 
-    ``implementation="c"``: the controller is the compiled one of ``rhmpc export`` (built once
-    and cached, :func:`rhmpc.control.export.compiled_controller`) instead of the Python one.
+    ``implementation="c"``: the controller is the C one of ``rhmpc export`` (built once and
+    cached, :func:`rhmpc.control.export.controller_in_c`) instead of the Python one.
     """
-    loop = config.loop
+    loop, N = config.loop, config.mpc.horizon
     heart_rng, sensor_rng = np.random.default_rng(config.seed).spawn(2)
     robot = load_robot(config.robot)
     arm = linearize(robot, Ts=loop.Ts)
-    controller = build_controller(config, arm, implementation)
     heart = heart_source(config.scenario, heart_rng, data=config.data,
                          data_read=config.data_read, rr=config.rr,
-                         needed=loop.duration + loop.horizon * loop.Ts + 1.0)
+                         needed=loop.duration + N * loop.Ts + 1.0)
     if config.data is not None and loop.duration > heart.duration:
         available = heart.duration
         digits = next((d for d in range(2, 10)
@@ -197,14 +218,19 @@ def build_run(config: RunConfig, implementation: str = "python") -> Run:
             f"{config.data}: the recording lasts {available:.{digits}f} s, the run asks for "
             f"{loop.duration:.{digits}f} s (set --duration)"
         )
-    stream = build_stream(config, heart, loop.duration + (loop.horizon + 1) * loop.Ts, sensor_rng)
+    stream = build_stream(config, heart, loop.duration + (N + 1) * loop.Ts, sensor_rng)
     # the truth, read per window: "recorded" — the sensor's samples as recorded (before their
     # delivery to the loop), linearly interpolated at the ticks, as the paper's prerecorded
     # data — or the true motion
     recorded = getattr(stream, "recorded", stream)
     truth = SourceTruth(recorded if config.ground_truth == "recorded" else heart.motion,
-                        loop.ticks + loop.horizon + 1, loop.Ts)
+                        loop.ticks + N + 1, loop.Ts,
+                        centred=loop.placement == "centred")
     clock = predictor_clock(loop, stream)
-    reference, refresh = build_reference(config, truth, heart, clock)
-    return Run(config, robot, arm, controller, reference, truth, truth.center, stream,
-               heart.label, loop.duration, clock, refresh)
+    anchor = motion_anchor(config, arm)
+    reference = build_reference(config, truth, heart, clock)
+    reference.place(anchor)
+    controller = build_controller(config, robot, arm, reference, implementation)
+    plant = make_plant(robot, arm, loop.Ts, config.plant, config.hardware)
+    return Run(config, robot, arm, plant, controller, truth, anchor, stream, heart.label,
+               loop.duration, clock)

@@ -8,14 +8,18 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from rhmpc.control.settings import MPCSettings, from_dict, to_dict
+from rhmpc.control.cancellation import ModelMismatch
+from rhmpc.control.observer import ObserverSettings
+from rhmpc.control.reference import ReferenceSettings
+from rhmpc.control.settings import MPCSettings, from_dict, replace_settings, to_dict
 from rhmpc.errors import UsageError
 from sim.loop import LoopSettings
-from sim.plant import HardwareSettings, ModelMismatch, ObserverSettings, PlantSettings
+from sim.plant import HardwareSettings, PlantSettings
 
 #: Sections of a run's TOML file and the settings class each one builds.
 SECTIONS: dict[str, type] = {
     "loop": LoopSettings,
+    "reference": ReferenceSettings,
     "mpc": MPCSettings,
     "plant": PlantSettings,
     "mismatch": ModelMismatch,
@@ -25,6 +29,23 @@ SECTIONS: dict[str, type] = {
 
 
 GROUND_TRUTHS: tuple[str, ...] = ("recorded", "true")
+
+#: The type of each top-level setting of a run (the sections check their own fields).
+TOP_LEVEL: dict[str, object] = {
+    "robot": str, "scenario": str, "data": (str, None), "data_read": dict, "rr": (str, None),
+    "sensor": str, "sensor_settings": dict, "predictor": str, "predictor_settings": dict,
+    "predictor_params": dict, "ground_truth": str, "seed": int,
+}
+KIND_NAMES = {str: "a name (a string)", (str, None): "a string or absent", dict: "a table",
+              int: "an integer"}
+
+
+def _is(value: Any, kind: object) -> bool:
+    """Whether ``value`` is of ``kind`` (a type, or (type, None) for an optional one); a bool is
+    not an integer."""
+    if isinstance(kind, tuple):
+        return value is None or isinstance(value, kind[0])
+    return isinstance(value, kind) and not (kind is int and isinstance(value, bool))
 
 #: Tables of a run's TOML file whose keys are free (passed on, checked by what takes them).
 FREE_TABLES: tuple[str, ...] = ("sensor_settings", "predictor_settings", "predictor_params")
@@ -73,7 +94,7 @@ class RunConfig:
         included) — or ``"true"`` — the noise-free motion.
     seed : int
         Seed of the run's ``numpy.random.Generator`` (heart variability, sensor noise).
-    loop, mpc, plant, mismatch, observer, hardware
+    loop, reference, mpc, plant, mismatch, observer, hardware
         Component settings (see their classes for units); ``hardware`` applies when
         ``plant.model = "hardware"``.
     """
@@ -91,6 +112,7 @@ class RunConfig:
     ground_truth: str = "recorded"
     seed: int = 0
     loop: LoopSettings = field(default_factory=LoopSettings)
+    reference: ReferenceSettings = field(default_factory=ReferenceSettings)
     mpc: MPCSettings = field(default_factory=MPCSettings)
     plant: PlantSettings = field(default_factory=PlantSettings)
     mismatch: ModelMismatch = field(default_factory=ModelMismatch)
@@ -98,6 +120,12 @@ class RunConfig:
     hardware: HardwareSettings = field(default_factory=HardwareSettings)
 
     def __post_init__(self) -> None:
+        for name, kind in TOP_LEVEL.items():
+            value = getattr(self, name)
+            if not _is(value, kind):
+                raise ValueError(f"{name} must be {KIND_NAMES[kind]}, got {value!r}")
+        if not 0 <= self.seed < 2**63:
+            raise ValueError(f"seed must be an integer in 0 … 2⁶³ − 1, got {self.seed!r}")
         if self.ground_truth not in GROUND_TRUTHS:
             raise ValueError(
                 f"ground_truth must be one of {', '.join(GROUND_TRUTHS)}, got {self.ground_truth!r}"
@@ -156,7 +184,7 @@ class RunConfig:
             if section in SECTIONS:
                 _check_keys(section, SECTIONS[section], values)
                 try:
-                    top[section] = dataclasses.replace(getattr(self, section), **values)
+                    top[section] = replace_settings(getattr(self, section), values)
                 except (TypeError, ValueError) as exc:
                     raise UsageError(f"[{section}] {exc}") from None
             elif section in FREE_TABLES:
@@ -179,7 +207,7 @@ class RunConfig:
 def _check_keys(section: str, cls: type, values: dict[str, Any]) -> None:
     """Raise ``UsageError`` listing the valid keys of ``[section]`` if ``values`` has others."""
     names = [f.name for f in dataclasses.fields(cls)]
-    unknown = [k for k in values if k not in names]
+    unknown = [k for k in values if k.partition(".")[0] not in names]
     if unknown:
         raise UsageError(f"unknown setting(s) {', '.join(f'{section}.{k}' for k in unknown)}; "
                          f"valid keys of [{section}]: {', '.join(names)}")

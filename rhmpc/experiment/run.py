@@ -36,7 +36,7 @@ def run_experiment(config: RunConfig, progress: bool = False, trace: str | None 
     time, the peak resident memory of the process so far (``peak_rss_mb``) and the package
     versions. ``trace``: write every tick to this NPZ file (:mod:`sim.loop.trace`).
     ``gain_tick``: the class of ``rhmpc bench``'s gain tick (``GainTick(mpc)(x, r, u_prev)``),
-    timed in the run on every 16th tick so that the document has ``gain_tick_us`` and the
+    timed in the run on every 64th tick so that the document has ``gain_tick_us`` and the
     tick's ratios to its p50 (``tick_ratio_to_gain``). ``implementation``: ``"python"`` or
     ``"c"`` (:func:`~rhmpc.experiment.assembly.build_run`).
     """
@@ -45,10 +45,8 @@ def run_experiment(config: RunConfig, progress: bool = False, trace: str | None 
     wall = time.perf_counter()
     try:
         result = run_closed_loop(
-            run.robot, run.arm, run.controller, run.reference, run.truth, run.center, run.stream,
-            config.loop, plant_settings=config.plant, mismatch=config.mismatch,
-            observer_settings=config.observer, hardware=config.hardware,
-            progress=callback, trace_file=trace,
+            run.plant, run.controller, run.truth, run.stream, config.loop, run.clock,
+            anchor=run.anchor, robot=run.robot, progress=callback, trace_file=trace,
             yardstick=None if gain_tick is None else _gain_tick(run.controller, gain_tick),
         )
     finally:
@@ -83,6 +81,7 @@ def document(config: RunConfig, run: Run, result: LoopResult, wall: float,
         "seed": config.seed,
         "sensor": config.sensor,
         "ground_truth": config.ground_truth,
+        "settling_s": config.loop.settling_s,
         **metrics,
         "fallbacks": int(stats.get("fallback_total", 0)),
         "controller": jsonable(stats),
@@ -91,8 +90,6 @@ def document(config: RunConfig, run: Run, result: LoopResult, wall: float,
         "wall_s": wall,
         "real_time_factor": config.loop.duration / wall,
         "plant_dynamics": result.plant_dynamics,
-        "tick_loop": result.tick_loop,
-        "refresh": run.refresh,
         "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,  # Linux: KiB
         "settings": config.to_dict(),
         "versions": versions(),
@@ -105,12 +102,11 @@ def document(config: RunConfig, run: Run, result: LoopResult, wall: float,
         doc["forecast_lead_s"] = run.clock.dt
         doc["predictor_unit_m"] = getattr(predictor, "unit", None)  # metres per data unit
     doc["predictor_clock"] = _clock_document(config, run)
-    gate = getattr(run.reference, "gate", None)
-    if gate is not None or predictor is not None:
-        counts = result.predictor_counts
+    if config.predictor != "exact":
+        counts, floor = result.predictor_counts, run.controller.gate_floor
         doc["outlier_gate"] = {
-            "setting": config.loop.outlier_gate,
-            "floor_mm": None if gate is None or gate.floor is None else 1e3 * gate.floor,
+            "setting": config.reference.outlier_gate,
+            "floor_mm": None if floor is None else 1e3 * floor,
             **{key: int(counts.get(key, 0))
                for key in ("outliers_rejected", "gate_unlocked", "retracted", "repaired")},
         }
@@ -140,7 +136,7 @@ def _clock_document(config: RunConfig, run: Run) -> dict[str, Any]:
     playback = None
     if clock.mode == "downsample" and config.sensor in ("sonomicrometry", "white", "recorded"):
         playback = config.sensor_settings.get("playback", DEFAULT_PLAYBACK)
-    age = getattr(run.reference, "mean_age", float("nan"))
+    age = run.controller.mean_age
     return {
         "mode": clock.mode,
         "dt_s": clock.dt,
@@ -152,10 +148,10 @@ def _clock_document(config: RunConfig, run: Run) -> dict[str, Any]:
 
 
 def _gain_tick(controller, gain_tick):
-    """``yardstick(x, r, u_prev)``: the controller's gain tick, or None if it has no gain to
-    time (a stand-in controller without the MPC's QP)."""
+    """``yardstick(x, r, u_prev)``: the gain tick of the controller's MPC (the C controller's:
+    that of the Python MPC it was generated from), or None if it has none (a stand-in)."""
     try:
-        return gain_tick(getattr(controller, "twin", controller))  # compiled: its Python twin
+        return gain_tick(controller.mpc)
     except AttributeError:
         return None
 

@@ -15,10 +15,13 @@ bounds (so that the QP has active constraints). Every tick measures, with
 * an *exact tick*: the same QP (same P, q, A, l, u) solved by the active-set solver DAQP,
   hot-started from its previous active set. Its u0 is the accuracy reference:
   ``u0_error = |u0_mpc − u0_exact| / τ_max`` per joint (τ_max = the robot's torque limit);
-* with ``controller="c"``, the compiled controller of ``rhmpc export`` (:mod:`rhmpc.control.
-  export`), fed the same state and reference and keeping its own u_{−1}: its tick measured inside
-  C (``clock_gettime(CLOCK_MONOTONIC)``) and as seen from Python (the ctypes call), and
-  ``c_vs_python_max_frac`` = max over the run of ``|τ_C − τ_Python|`` / τ_max.
+* with ``controller="c"``, the whole exported controller of ``rhmpc export``
+  (:mod:`rhmpc.control.export`: the generalized predictor's refresh, the observer, the MPC and
+  the cancellation) in a closed loop of its own on the same linear model and reference: a sensor
+  samples the reference every ``downsample`` ticks (one tick late), the model is driven by the
+  MPC torque, and every tick, refresh ticks included, is timed inside C
+  (``clock_gettime(CLOCK_MONOTONIC)``) beside the gain tick on the C's own state and points:
+  ``exported_tick_us`` and ``exported_tick_g``.
 """
 
 from __future__ import annotations
@@ -189,13 +192,12 @@ class _Ticks:
     """One run of the benchmark: the controllers it times and a column per measured figure."""
 
     COLUMNS = ("tick_ns", "every_ns", "gain_ns", "numpy_ns", "exact_ns", "parts_ns", "iters",
-               "exact_iters",
-               "u0_err", "every_err", "active", "screened", "level", "box_iters", "err",
-               "c_ns", "c_call_ns", "c_err", "c_level")
+               "exact_iters", "u0_err", "every_err", "active", "screened", "level", "box_iters",
+               "err")
 
-    def __init__(self, mpc: RecedingHorizonMPC, compiled, total: int) -> None:
+    def __init__(self, mpc: RecedingHorizonMPC, total: int) -> None:
         arm = mpc.arm
-        self.mpc, self.compiled, self.arm = mpc, compiled, arm
+        self.mpc, self.arm = mpc, arm
         self.every = RecedingHorizonMPC(arm, dataclasses.replace(mpc.settings, screening=False))
         self.gain, self.exact = GainTick(mpc), ExactTick(mpc)
         self.numpy_gain = numpy_gain_step(self.gain._K, self.gain._k0)
@@ -205,7 +207,7 @@ class _Ticks:
             dtype = float if name.endswith("err") else bool if name in ("active", "screened") \
                 else np.int64
             setattr(self, name, np.zeros(shape, dtype=dtype))
-        self.exact_failures = self.c_mismatch = 0
+        self.exact_failures = 0
 
     def tick(self, k: int, x: np.ndarray, ref: np.ndarray) -> np.ndarray:
         """Time every controller on tick ``k`` with state ``x`` and points ``ref``; returns τ."""
@@ -222,8 +224,6 @@ class _Ticks:
         every.u_prev = u_prev  # the same QP as the default controller's and DAQP's
         tau_every = every.step(x, ref)
         t4 = clock()
-        if self.compiled is not None:
-            self._compiled_tick(k, x, ref, tau)
         self.tick_ns[k], self.exact_ns[k] = t1 - t0, t3 - t2
         self.every_ns[k] = t4 - t3
         self.screened[k] = mpc.stats.screened > n_screened
@@ -235,14 +235,6 @@ class _Ticks:
         self.u0_err[k] = float(np.max(np.abs(tau - u_exact) / self.tau_max))
         self.every_err[k] = float(np.max(np.abs(tau_every - u_exact) / self.tau_max))
         return tau
-
-    def _compiled_tick(self, k: int, x: np.ndarray, ref: np.ndarray, tau: np.ndarray) -> None:
-        compiled, stats = self.compiled, self.mpc.stats
-        tau_c = compiled.step(x, ref)
-        self.c_level[k] = compiled.level
-        self.c_ns[k], self.c_call_ns[k] = compiled.tick_ns, compiled.call_ns
-        self.c_err[k] = float(np.max(np.abs(tau_c - tau) / self.tau_max))
-        self.c_mismatch += compiled.source != stats.source or compiled.status != stats.status
 
 
 def run_bench(
@@ -258,7 +250,6 @@ def run_bench(
     disable_gc: bool = True,
     progress: Callable[[int, int], None] | None = None,
     controller: str = "python",
-    cache: str | None = None,
 ) -> dict:
     """Run the benchmark and return its results (JSON-serialisable ``dict``).
 
@@ -277,8 +268,8 @@ def run_bench(
     disable_gc : bool
         Disable Python's garbage collector during the loop.
     controller : str
-        ``"python"``, or ``"c"`` to also run the exported C controller (built once into
-        ``cache``, default :func:`rhmpc.control.export.cache_root`) next to it.
+        ``"python"``, or ``"c"`` to also run the whole exported C controller in a loop of its
+        own on the same reference (built once and cached, :mod:`rhmpc.compiled`).
     """
     if ticks < 1:
         raise ValueError(f"ticks must be >= 1, got {ticks}")
@@ -289,13 +280,8 @@ def run_bench(
     t_build = time.perf_counter()
     mpc = RecedingHorizonMPC(arm, settings)
     build_s = time.perf_counter() - t_build
-    compiled = None
-    if controller == "c":
-        from rhmpc.control.export import compiled_controller
-
-        compiled = compiled_controller(mpc, robot if arm is None else f"{robot}-custom", cache)
     total = warmup + ticks
-    run = _Ticks(mpc, compiled, total)
+    run = _Ticks(mpc, total)
     traj = heart_like_reference(total + mpc.N + 1, arm.Ts, np.random.default_rng(seed), arm.y0,
                                 jump=jump, jump_every=jump_every)
     x = np.zeros(arm.nx)
@@ -317,8 +303,8 @@ def run_bench(
     header = {"robot": robot, "ticks": ticks, "warmup_ticks": warmup, "seed": seed,
               "gc_disabled": disable_gc, "build_s": build_s}
     result = {**header, **_summary(run, slice(warmup, total)), "settings": to_dict(settings)}
-    if compiled is not None:
-        result.update(_compiled_summary(run, slice(warmup, total)))
+    if controller == "c":
+        result.update(exported_ticks(robot, settings, traj, warmup, disable_gc))
     return result
 
 
@@ -368,32 +354,60 @@ def _summary(run: _Ticks, sl: slice) -> dict:
     }
 
 
-def _compiled_summary(run: _Ticks, sl: slice) -> dict:
-    """The compiled controller's figures over the timed ticks ``sl``."""
-    us = 1e-3
-    c, tick, g = run.c_ns[sl] * us, run.tick_ns[sl] * us, run.gain_ns[sl] * us
-    level = run.c_level[sl]
-    osqp = level == 3
-    compiled = run.compiled
+def exported_ticks(robot: str, settings: MPCSettings, traj: np.ndarray, warmup: int,
+                   disable_gc: bool = True) -> dict:
+    """The whole exported controller in a closed loop of its own on ``traj`` (n + N + 1, 3):
+    every tick timed inside C, refresh ticks included, beside the gain tick (see the module
+    docstring). Returns ``exported_tick_us``, ``exported_tick_g``, ``exported_refresh_us``,
+    its levels, fallbacks and the tracking of the linear model."""
+    from rhmpc.control.export import controller_in_c
+    from rhmpc.experiment import RunConfig
+    from rhmpc.experiment.assembly import deployable
+
+    config = RunConfig(robot=robot, mpc=settings)
+    python = deployable(config, 257.0)
+    c, arm, center = controller_in_c(python, robot), python.mpc.arm, traj.mean(axis=0)
+    c.place(center)
+    gain, every, n = GainTick(python.mpc), config.loop.downsample, traj.shape[0] - c.N - 1
+    tick_ns, gain_ns = np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64)
+    level, err, refreshed = np.zeros(n, dtype=np.int64), np.zeros(n), np.zeros(n, dtype=bool)
+    x, u_prev = np.zeros(arm.nx), np.zeros(arm.nu)
+    gc_was_enabled = gc.isenabled()
+    if disable_gc:
+        gc.collect()
+        gc.disable()
+    try:
+        for k in range(n):
+            refresh_ns = 0
+            if k % every == 1:  # a sample taken one tick ago arrives
+                c.refresh(k, traj[k - 1] - center, (k - 1) * arm.Ts)
+                refresh_ns, refreshed[k] = c.refresh_ns, True
+            c.step(k, arm.q0 + x[: arm.nu])
+            tick_ns[k], level[k] = c.step_ns + refresh_ns, c.stats.level
+            gain_ns[k] = warm_ns(gain, c.x_hat, c.horizon(k), u_prev)
+            u_prev = c.u
+            x = arm.A @ x + arm.B @ u_prev
+            err[k] = float(np.linalg.norm(arm.C @ x + arm.y0 - traj[k + 1]))
+    finally:
+        if disable_gc and gc_was_enabled:
+            gc.enable()
+    sl = slice(warmup, n)
+    us, g = tick_ns[sl] * 1e-3, np.median(gain_ns[sl]) * 1e-3
+    stats = c.stats
     return {
         "controller": "c",
-        "c_tick_us": _pct(c),
-        "c_tick_python_us": _pct(run.c_call_ns[sl] * us),
-        # the split that explains the tail: ticks on which OSQP ran (level 3) vs ticks the
-        # screening cascade settled (levels 1 and 2)
-        "c_osqp_ticks": int(osqp.sum()),
-        "c_levels": {str(v): int(np.sum(level == v)) for v in (0, 1, 2, 3)},
-        "c_level_tick_us": {str(v): _pct(c[level == v]) for v in (1, 2, 3)
-                            if np.any(level == v)},
-        "c_osqp_tick_us": _pct(c[osqp]) if osqp.any() else None,
-        "c_screened_tick_us": _pct(c[~osqp]) if (~osqp).any() else None,
-        "c_vs_python_max_frac": float(run.c_err.max()),  # warm-up included
-        "c_mismatched_ticks": int(run.c_mismatch),
-        "c_fallbacks": dict(compiled.stats.fallbacks),
-        "c_failures": dict(compiled.stats.failures),
-        "ratio_c_tick_to_python": _ratio(c, tick),
-        "ratio_c_tick_to_gain": _ratio(c, g),
-        "c_library": compiled.library,
+        "exported_tick_us": _pct(us),
+        "exported_tick_g": {k: v / g for k, v in _pct(us).items() if k != "mean"},
+        "exported_gain_tick_us": _pct(gain_ns[sl] * 1e-3),
+        "exported_refresh_tick_us": _pct(us[refreshed[sl]]) if refreshed[sl].any() else None,
+        "exported_levels": {str(v): int(np.sum(level[sl] == v)) for v in (0, 1, 2, 3)},
+        "exported_level_tick_us": {str(v): _pct(us[level[sl] == v]) for v in (1, 2, 3)
+                                   if np.any(level[sl] == v)},
+        "exported_fallbacks": dict(stats.fallbacks),
+        "exported_failures": dict(stats.failures),
+        "exported_predictor": config.predictor,
+        "exported_tracking_rms_mm": float(1e3 * np.sqrt(np.mean(err[sl] ** 2))),
+        "exported_library": c.library,
     }
 
 
@@ -438,9 +452,6 @@ def format_table(result: dict) -> str:
     ]
     g = result["gain_tick_us"]
     rows = list(_ROWS)
-    if "c_tick_us" in result:
-        rows[1:1] = [("C tick, inside C (CLOCK_MONOTONIC)", "c_tick_us"),
-                     ("C tick, seen from Python (ctypes)", "c_tick_python_us")]
     for label, key in rows:
         row = result[key]
         ratio = ""
@@ -470,17 +481,26 @@ def format_table(result: dict) -> str:
         from rhmpc.studies.run_report import stall_line
 
         lines.append("host: " + stall_line(result["host_stalls"]))
-    if "c_tick_us" in result:
-        r = result["ratio_c_tick_to_python"]
-        lines += [
-            f"C controller: max |τ_C − τ_Python| = {result['c_vs_python_max_frac']:.1e} τ_max, "
-            f"status/source different on {result['c_mismatched_ticks']} ticks; fallbacks "
-            f"{result['c_fallbacks']}; C tick / Python tick: p50 {r['p50']:.3f}, "
-            f"p99 {r['p99']:.3f}",
-        ]
-        for v, name in _LEVELS.items():
-            row = result["c_level_tick_us"].get(v)
-            if row is not None:
-                lines.append(f"  C tick on the {result['c_levels'][v]} level-{name} ticks: "
-                             f"p50 {row['p50']:.2f}, p99 {row['p99']:.2f}, max {row['max']:.2f} µs")
+    if "exported_tick_us" in result:
+        lines += _exported_lines(result)
     return "\n".join(lines)
+
+
+def _exported_lines(result: dict) -> list[str]:
+    """The exported controller's rows of :func:`format_table`."""
+    t, r, g = result["exported_tick_us"], result["exported_tick_g"], \
+        result["exported_gain_tick_us"]["p50"]
+    refresh = result["exported_refresh_tick_us"]
+    lines = [f"exported controller ({result['exported_predictor']} predictor, refresh, "
+             "observer, MPC, cancellation), every tick timed inside C:",
+             f"  tick p50 {t['p50']:.2f} µs, p99 {t['p99']:.2f} µs, max {t['max']:.1f} µs = "
+             f"{r['p50']:.2f} / {r['p99']:.2f} / {r['max']:.1f} g (g = {g:.2f} µs, same run)"]
+    if refresh:
+        lines.append(f"  refresh ticks: p50 {refresh['p50']:.2f} µs, p99 {refresh['p99']:.2f} "
+                     f"µs, max {refresh['max']:.1f} µs")
+    lines.append("  ticks per level (p50 / p99 / max µs): " + "; ".join(
+        _level_line(result, "exported_levels", "exported_level_tick_us")))
+    lines.append(f"  fallbacks {result['exported_fallbacks']}, failures "
+                 f"{result['exported_failures'] or 'none'}; tracking on the linear model RMS "
+                 f"{result['exported_tracking_rms_mm']:.4f} mm")
+    return lines

@@ -1,8 +1,32 @@
-"""One run's report: the summary a reader sees after ``rhmpc simulate``, and its figure."""
+"""One run's report: the summary a reader sees after ``rhmpc simulate``, and its figure
+(:func:`plot_run`, from :mod:`rhmpc.studies.figures`)."""
 
 from __future__ import annotations
 
-import numpy as np
+from rhmpc.studies.figures import plot_run as plot_run
+
+
+def _seconds(x: float) -> str:
+    """A duration [s] with as many digits as it needs (3 significant, no trailing zeros)."""
+    return f"{x:.3g}" if x < 100 else f"{x:.0f}"
+
+
+def _speed(factor: float) -> str:
+    """Simulated over wall time, as a reader says it."""
+    if factor >= 1:
+        return f"{factor:.3g}× faster than real time"
+    return f"{1 / factor:.3g}× slower than real time"
+
+
+def _placement(loop: dict) -> str:
+    """Where the motion was put in the robot's workspace."""
+    offset = loop.get("poi_offset", [0, 0, 0])
+    shift = "" if not any(offset) else " + poi_offset (" + ", ".join(
+        f"{1e3 * v:g}" for v in offset) + ") mm"
+    if loop.get("placement", "centred") == "absolute":
+        return "the motion's own coordinates as the robot's" + shift + " (placement absolute)"
+    return ("the motion centred on its mean, at the tool's home position" + shift
+            + " (set loop.placement = \"absolute\" to keep its own coordinates)")
 
 
 def format_summary(doc: dict, settling_rule: str | None = None) -> str:
@@ -16,12 +40,15 @@ def format_summary(doc: dict, settling_rule: str | None = None) -> str:
     fb = ctrl.get("fallbacks", {})
     fails = ctrl.get("failures", {})
     axes = ", ".join(f"{v:.3f}" for v in doc["rms_error_axis_mm"])
-    N, Ts = s.get("horizon", 50), s.get("Ts", 0.5e-3)
+    N, Ts = doc["settings"].get("mpc", {}).get("horizon", 50), s.get("Ts", 0.5e-3)
+    settling = doc.get("settling_s", s.get("settling") or 0.0)
+    sources = ", ".join(f"{k} {v}" for k, v in fb.items())
     lines = [
         f"rhmpc simulate: {doc['predictor']} on {doc['scenario']}, robot {doc['robot']}, "
-        f"sensor {doc['sensor']}, seed {doc['seed']}, {s['duration']:g} s "
-        f"(metrics after {s['settling']:g} s{rule}; error against the {doc['ground_truth']} "
-        "motion)",
+        f"sensor {doc['sensor']}, seed {doc['seed']}, {_seconds(s['duration'])} s "
+        f"(metrics after {_seconds(settling)} s{rule}; error against the "
+        f"{doc['ground_truth']} motion)",
+        f"  placement        {_placement(s)}",
         f"  tracking error   RMS {doc['rms_error_mm']:.3f} mm   max {doc['max_error_mm']:.3f} mm"
         f"   (RMS per axis x, y, z: {axes} mm)",
         f"  control effort   RMS {doc['rms_effort_mNm']:.1f} mN·m (MPC torque; with the "
@@ -31,17 +58,14 @@ def format_summary(doc: dict, settling_rule: str | None = None) -> str:
         f"{pred['lead_N']:.3f} mm at {1e3 * N * Ts:g} ms",
         f"  controller tick  p50 {tick['p50']:.1f} µs   p99 {tick['p99']:.1f} µs   "
         + (f"p99.9 {tick['p999']:.1f} µs   " if "p999" in tick else "")
-        + f"max {tick['max']:.1f} µs   (budget {1e6 * Ts:.0f} µs)"
+        + f"max {tick['max']:.1f} µs   (budget {1e6 * Ts:.0f} µs, refreshes included)"
         + (_in_gain_ticks(doc) if "gain_tick_us" in doc else ""),
-        f"  QP               {ctrl.get('ticks', 0)} ticks, fallbacks {doc['fallbacks']} "
-        f"(plan {fb.get('plan', 0)}, lq {fb.get('lq', 0)}, zero {fb.get('zero', 0)})"
-        + (f", failures {fails}" if fails else ""),
-        f"  wall time        {doc['wall_s']:.1f} s ({doc['real_time_factor']:.1f}× real time)"
+        f"  QP               {ctrl.get('ticks', 0)} ticks, fallbacks {doc['fallbacks']}"
+        + (f" ({sources})" if sources else "") + (f", failures {fails}" if fails else ""),
+        f"  wall time        {doc['wall_s']:.1f} s ({_speed(doc['real_time_factor'])})"
         + (f", peak memory {doc['peak_rss_mb']:.0f} MB" if "peak_rss_mb" in doc else "")
-        + {"compiled": "; control ticks in C between the refresh slices",
-           "compiled with the refresh": "; control ticks and refresh slices in C"}.get(
-               doc.get("tick_loop"), "")
-        + ("; predictor refresh in C" if doc.get("refresh") == "compiled" else ""),
+        + ("; the controller in C (rhmpc export): refresh, observer, MPC, cancellation"
+           if doc.get("implementation") == "c" else ""),
     ]
     counts = doc.get("predictor_counts") or {}
     if counts:  # what the predictor and the safety layers did (missing samples, outliers, …)
@@ -100,7 +124,7 @@ def stall_line(stalls: dict) -> str:
 
 def _in_gain_ticks(doc: dict) -> str:
     """The tick percentiles as multiples of the gain tick timed in the same run (×g), its
-    parts' p99, the tick without the refresh slices, and the wall time per simulated second."""
+    parts' p99, the tick without the refreshes, and the wall time per simulated second."""
     r, g = doc["tick_ratio_to_gain"], doc["gain_tick_us"]["p50"]
     parts = ", ".join(f"{name.replace('_', ' ')} {v['p99']:.1f}"
                       for name, v in doc.get("tick_parts_ratio_to_gain", {}).items())
@@ -110,51 +134,10 @@ def _in_gain_ticks(doc: dict) -> str:
         out += f"\n                   parts p99 [g]: {parts}"
     control = doc.get("control_tick_ratio_to_gain")
     if control:
-        out += (f"\n                   without the refresh slices: p99 {control['p99']:.1f} g, "
+        out += (f"\n                   without the refreshes: p99 {control['p99']:.1f} g, "
                 f"max {control['max']:.0f} g")
     if "tick_per_simulated_s_g" in doc:
         wall, ticks = doc["wall_per_simulated_s_g"], doc["tick_per_simulated_s_g"]
         out += (f"\n                   per simulated second: wall {wall:.0f} g, of which the "
                 f"ticks {ticks:.0f} g")
     return out
-
-
-def plot_run(result, path: str, title: str = "", zoom: tuple[float, float] | None = None) -> None:
-    """Tuna et al. Figs 10–11 style: the reference per axis, and the error magnitude.
-
-    Top row: POI position per axis [mm] over the run; bottom: ‖e‖ [mm] over the run superimposed
-    on the x-axis reference (right axis), then the same over a zoomed window (default: the
-    last 2 s).
-    """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    t = result.time
-    poi = 1e3 * (result.poi - np.nanmean(result.poi, axis=0))
-    err = 1e3 * np.linalg.norm(result.error, axis=1)
-    if zoom is None:
-        zoom = (max(t[0], t[-1] - 2.0), t[-1])
-    window = (t >= zoom[0]) & (t <= zoom[1])
-    settle = result.settings.settling
-
-    fig, axes = plt.subplots(3, 1, figsize=(11, 9), constrained_layout=True)
-    ax = axes[0]
-    for k, name in enumerate("xyz"):
-        ax.plot(t, poi[:, k], lw=0.6, label=f"{name}")
-    ax.set(xlabel="time [s]", ylabel="POI position [mm]", title=title or "reference per axis")
-    ax.axvspan(t[0], settle, color="0.9", label="settling (not scored)")
-    ax.legend(loc="upper right", ncol=4, fontsize=8)
-    for ax, mask, label in ((axes[1], slice(None), "whole run"), (axes[2], window, "zoom")):
-        ax.plot(t[mask], err[mask], color="C3", lw=0.7, label="‖error‖")
-        ax.set(xlabel="time [s]", ylabel="end-effector error [mm]", title=f"error, {label}")
-        twin = ax.twinx()
-        twin.plot(t[mask], poi[mask, 0], color="0.6", lw=0.6, label="x reference")
-        twin.set_ylabel("x reference [mm]", color="0.4")
-        ax.set_zorder(twin.get_zorder() + 1)
-        ax.patch.set_visible(False)
-        ax.legend(loc="upper left", fontsize=8)
-        twin.legend(loc="upper right", fontsize=8)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)

@@ -76,7 +76,13 @@ def sample_rate(samples: SampleSource) -> float:
 def predictor_clock(settings: LoopSettings, stream) -> PredictorClock:
     """The clock the predictor runs on for ``settings`` and the sensor ``stream``."""
     raw = raw_samples(stream)
-    rate = sample_rate(raw)
+    return clock_for_rate(settings, sample_rate(raw), raw)
+
+
+def clock_for_rate(settings: LoopSettings, rate: float,
+                   raw: SampleSource | None = None) -> PredictorClock:
+    """The clock the predictor runs on for ``settings`` and a sensor of ``rate`` [Hz] (its raw
+    samples ``raw``, which the ``"sensor"`` clock reads)."""
     period = settings.downsample * settings.Ts
     mode = settings.predictor_clock
     if mode == "auto":

@@ -8,38 +8,25 @@ grow with the run. :class:`LoopResult` is what the run returns.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
 import pinocchio as pin
 
+from rhmpc.control.reference import embed3
 from robots import Robot
 from sim.loop.metrics import RunningTracking, TickHistogram, rms
 from sim.loop.trace import DecimatedTrace, TraceFile
 
-#: The parts of a refresh charged to the ticks that run them: the predictor's update with the
-#: outlier gate, its learning (where it defers it), its forecast, the interpolation with the
-#: guard and placement, and the forecast-error bookkeeping (``Predictor.score``).
-CHARGED = ("predictor_update", "predictor_learn", "forecast", "interpolation", "scoring")
-#: The parts of a control tick, timed separately: the encoders and the observer, the
-#: controller, the cancellation (the commanded torque), and the refresh slices (CHARGED).
-TICK_PARTS = ("sense", "controller", "actuate", *CHARGED)
+#: The parts of a tick, timed separately: the controller's step (observer, MPC, cancellation)
+#: and the refreshes of its reference on that tick (gate, predictor, interpolation).
+TICK_PARTS = ("step", "refresh")
 #: The yardstick is timed on the ticks i ≡ YARDSTICK_PHASE (mod YARDSTICK_EVERY)
-#: (``run_closed_loop(yardstick=…)``): 1 875 samples for its p50 in a simulated minute, whose
-#: three calls each add ≈ 0.1 µs a tick to the run's wall time.
+#: (``run_closed_loop(yardstick=…)``): 1 875 samples for its p50 in a simulated minute.
 YARDSTICK_EVERY, YARDSTICK_PHASE = 64, 7
-
-
-def embed3(p: np.ndarray) -> np.ndarray:
-    """(n, d) positions with d ≤ 3 as (n, 3), missing axes zero (1-D motion along x)."""
-    if getattr(p, "ndim", 0) == 2 and p.shape[1] == 3:  # already (n, 3): the array, at once
-        return p
-    p = np.atleast_2d(p)
-    if p.shape[1] == 3:
-        return p
-    out = np.zeros((p.shape[0], 3))
-    out[:, : p.shape[1]] = p
-    return out
+#: The most refreshes (and their samples) a result keeps for figures.
+KEPT_REFRESHES = 4000
 
 
 @dataclass
@@ -47,9 +34,13 @@ class LoopResult:
     """What a run produced: its metrics, and a fixed-size trace of its ticks (SI units).
 
     The per-tick arrays (``time``, ``ee``, ``poi``, ``reference0``, ``tau_mpc``, ``tau``,
-    ``tick_ns``) are those of the decimated trace (:class:`sim.loop.trace.DecimatedTrace`:
-    every tick of a run up to 20 000 ticks long; beyond, every ``stride``-th tick plus the last
-    2 s at full rate). The metrics cover every tick after settling.
+    ``tick_ns``, and ``trace["q"]``) are those of the decimated trace
+    (:class:`sim.loop.trace.DecimatedTrace`: every tick of a run up to 20 000 ticks long; beyond,
+    every ``stride``-th tick plus the last 2 s at full rate). ``horizons`` holds the N points
+    each refresh made (ticks (R,), points (R, N, 3) [m]) and ``samples`` the sensor samples
+    that refreshed them, placed in the workspace (t (S,) [s], z (S, 3) [m], NaN for a missing
+    one), each of at most :data:`KEPT_REFRESHES` evenly spread refreshes. The metrics cover
+    every tick after settling.
     """
 
     settings: object  # sim.loop.LoopSettings
@@ -59,16 +50,16 @@ class LoopResult:
     tick_us: dict  # p50 / p99 / p999 / max / mean of the whole control tick [µs]
     yardstick_us: dict  # the same of the yardstick (gain tick) timed in the run [µs]
     tick_parts_us: dict  # the same per part of the tick (TICK_PARTS) [µs]
-    #: the same of the tick without the refresh slices (sense + controller + actuate) [µs]:
-    #: what it would cost with the predictor in a task of its own
+    #: the same of the tick without the refreshes (the step alone) [µs]: what it would cost
+    #: with the predictor in a task of its own
     control_tick_us: dict
     horizon_error: np.ndarray  # (N,) RMS error of the reference vs the truth per lead tick [m]
     controller_stats: dict = field(default_factory=dict)
     saturated_ticks: int = 0
     predictor_counts: dict = field(default_factory=dict)
     plant_dynamics: str = "pinocchio"  # who integrated the plant (and why not native)
-    #: who ran the control ticks: "compiled" (C, between the refresh slices), or "python (why)"
-    tick_loop: str = "python"
+    horizons: tuple = (np.zeros(0, dtype=np.int64), np.zeros((0, 0, 3)))
+    samples: tuple = (np.zeros(0), np.zeros((0, 3)))
 
     time = property(lambda self: self.trace["time"])  # [s], the instant of the state (i+1)·Ts
     ee = property(lambda self: self.trace["ee"])  # (n, 3) end-effector position [m]
@@ -98,10 +89,12 @@ class LoopResult:
 
 
 class Recorder:
-    """Turns each chunk's per-tick lists into running statistics, the trace and the trace file."""
+    """Turns each chunk's per-tick records into running statistics, the trace and the trace file."""
 
-    def __init__(self, robot: Robot, settings, truth, anchor, trace_file) -> None:
-        self.robot, self.settings, self.truth, self.anchor = robot, settings, truth, anchor
+    def __init__(self, robot: Robot, settings, horizon: int, truth, anchor, trace_file,
+                 clock) -> None:
+        self.robot, self.settings, self.N = robot, settings, horizon
+        self.truth, self.anchor = truth, np.asarray(anchor, dtype=float)
         self.model, self.data, self.fid = robot.model, robot.create_data(), robot.ee_frame_id
         from sim.plant.native import load_chain
 
@@ -113,73 +106,84 @@ class Recorder:
         self.ticks = TickHistogram()
         self.yardstick = TickHistogram()
         self.parts = {name: TickHistogram() for name in TICK_PARTS}
-        self.control = TickHistogram()  # sense + controller + actuate
         self.trace = DecimatedTrace(settings.ticks)
         self.file = None if trace_file is None else TraceFile(trace_file)
-        N = settings.horizon
-        self.lead = np.arange(1, N + 1)
-        self.horizon2, self.n_horizons = np.zeros(N), np.zeros(N, dtype=np.int64)
+        self.lead = np.arange(1, horizon + 1)
+        self.horizon2, self.n_horizons = np.zeros(horizon), np.zeros(horizon, dtype=np.int64)
         self.saturated_ticks = 0
+        expected = settings.duration / clock.dt + 1  # refreshes of the run
+        self.keep_every = max(1, int(np.ceil(expected / KEPT_REFRESHES)))
+        self.n_refreshes = 0
+        self.kept_horizons: list = []
+        self.kept_samples: list = []
+        self.u_prev = None
 
-    def start_chunk(self, m: int, charged: tuple[list[int], ...],
-                    u_prev: np.ndarray | None) -> dict:
-        """The records of a chunk of ``m`` ticks, preallocated (the loop writes rows, allocates
-        nothing): q, τ_mpc and the commanded τ (m, nv), the tick's parts [ns] (m, 3), the first
-        reference point (m, 3), x̂ where the yardstick needs it (compiled ticks), the yardstick
-        [ns]; the refresh slices' ns per part (:data:`CHARGED`), written as they run; u_{−1}
-        carried from the last chunk."""
-        nq, nv = self.robot.nq, self.robot.nv
-        return {"q": np.empty((m, nq)), "ref0": np.empty((m, 3)), "tau_mpc": np.empty((m, nv)),
-                "tau": np.empty((m, nv)), "parts_ns": np.empty((m, 3), dtype=np.int64),
-                "x_saved": np.empty((m // YARDSTICK_EVERY + 1, 2 * nv)), "yardstick_ns": [],
-                "charged": charged, "u_prev": u_prev}
+    def start_chunk(self, c0: int, c1: int) -> dict:
+        """The records of ticks c0 … c1 − 1, preallocated (the loop writes rows): q (m, nq), the
+        first reference point (m, 3), τ_mpc, the applied and the commanded τ (m, nv), the step's
+        and the refreshes' ns (m,); each refresh's ``(tick, points)`` and ``(stamp, z)``; the
+        yardstick [ns]; u_{−1} carried from the last chunk."""
+        m, nq, nv = c1 - c0, self.robot.nq, self.robot.nv
+        return {"q": np.empty((m, nq)), "ref0": np.empty((m, 3)), "u": np.empty((m, nv)),
+                "tau": np.empty((m, nv)), "cmd": np.empty((m, nv)),
+                "step_ns": np.zeros(m, dtype=np.int64), "refresh_ns": np.zeros(m, dtype=np.int64),
+                "horizons": [], "samples": [], "yardstick_ns": [], "u_prev": self.u_prev}
 
-    def end_chunk(self, c0: int, c1: int, log, horizons: list) -> None:
-        settings, N = self.settings, self.settings.horizon
-        q_log, ref0, tau_mpc, tau_cmd = log["q"], log["ref0"], log["tau_mpc"], log["tau"]
-        parts = log["parts_ns"]
-        charged = np.array(log["charged"], dtype=np.int64)  # (parts, m)
-        tick_ns = parts.sum(axis=1) + charged.sum(axis=0)  # the control tick and its slices
-        self.yardstick.add(np.array(log["yardstick_ns"], dtype=np.int64))
-        m = c1 - c0
+    def _ee(self, q_log: np.ndarray) -> np.ndarray:
+        """End-effector positions (m, 3) of the joint angles (m, nq)."""
         if self.chain is not None:
-            ee = self.chain.points(q_log, self.ee_joint, self.ee_point)
-        else:
-            model, data, fid = self.model, self.data, self.fid
-            ee = np.empty((m, 3))
-            for k, q in enumerate(q_log):
-                pin.forwardKinematics(model, data, q)
-                ee[k] = pin.updateFramePlacement(model, data, fid).translation
+            return self.chain.points(q_log, self.ee_joint, self.ee_point)
+        model, data, fid = self.model, self.data, self.fid
+        ee = np.empty((q_log.shape[0], 3))
+        for k, q in enumerate(q_log):
+            pin.forwardKinematics(model, data, q)
+            ee[k] = pin.updateFramePlacement(model, data, fid).translation
+        return ee
+
+    def end_chunk(self, c0: int, c1: int, log: dict) -> None:
+        """Fold the chunk's records into the statistics, the trace and the trace file."""
+        self.u_prev = log["u_prev"]
+        m, N = c1 - c0, self.N
+        ee = self._ee(log["q"])
         placed = self.anchor + embed3(self.truth.window(c0, c1 + N + 1))
         poi = placed[1 : m + 1]
         limit = self.robot.torque_limit
-        self.saturated_ticks += int((np.abs(tau_cmd) > limit).any(axis=1).sum())
-        tau = np.clip(tau_cmd, -limit, limit)  # what acted
-        s = max(settings.settling_ticks - c0, 0)
-        self.tracking.add(ee[s:] - poi[s:], tau_mpc[s:], tau[s:])
+        self.saturated_ticks += int((np.abs(log["cmd"]) > limit).any(axis=1).sum())
+        s = max(self.settings.settling_ticks - c0, 0)
+        tick_ns = log["step_ns"] + log["refresh_ns"]
+        self.tracking.add(ee[s:] - poi[s:], log["u"][s:], log["tau"][s:])
         self.ticks.add(tick_ns[s:])
-        for k, name in enumerate(("sense", "controller", "actuate")):
-            self.parts[name].add(parts[s:, k])
-        self.control.add(parts[s:].sum(axis=1))
-        for row, name in zip(charged, CHARGED, strict=True):
-            self.parts[name].add(row[s:])
-        self._horizon_errors(c0, horizons, placed)
+        self.parts["step"].add(log["step_ns"][s:])
+        self.parts["refresh"].add(log["refresh_ns"][s:])
+        self.yardstick.add(np.array(log["yardstick_ns"], dtype=np.int64))
+        self._horizon_errors(c0, log["horizons"], placed)
+        self._keep_refreshes(log["horizons"], log["samples"])
         ticks = np.arange(c0, c1)
-        chunk = {"tick": ticks, "time": (ticks + 1) * settings.Ts, "ee": ee, "poi": poi,
-                 "reference0": ref0, "tau_mpc": tau_mpc,
-                 "tau_command": tau_cmd,
-                 "tau": tau, "tick_ns": tick_ns}
+        chunk = {"tick": ticks, "time": (ticks + 1) * self.settings.Ts, "ee": ee, "poi": poi,
+                 "reference0": log["ref0"], "tau_mpc": log["u"], "tau_command": log["cmd"],
+                 "tau": log["tau"], "tick_ns": tick_ns, "q": log["q"]}
         self.trace.add(chunk)
         if self.file is not None:
             self.file.add(chunk)
+
+    def _keep_refreshes(self, horizons: list, samples: list) -> None:
+        """Every ``keep_every``-th refresh's points and sample, for the figures."""
+        start, every = self.n_refreshes, self.keep_every
+        for k, (horizon, sample) in enumerate(zip(horizons, samples, strict=False)):
+            if (start + k) % every == 0:
+                self.kept_horizons.append(horizon)
+                stamp, z = sample
+                z = np.full(3, np.nan) if z is None else self.anchor + embed3(z)[0]
+                self.kept_samples.append((stamp, z))
+        self.n_refreshes += len(horizons)
 
     def _horizon_errors(self, c0: int, horizons: list, placed: np.ndarray) -> None:
         """Add the squared miss of each refresh's N points (after settling) to the running sum
         per lead tick; a refresh with a non-finite point is left out, a lead without truth is
         skipped for that refresh alone."""
-        N, settling = self.settings.horizon, self.settings.settling_ticks
+        N, settling = self.N, self.settings.settling_ticks
         kept = [(tick, h) for tick, h in horizons
-                if tick >= settling and h is not None and tick + N < self.truth.n_ticks]
+                if tick >= settling and tick + N < self.truth.n_ticks]
         if not kept:
             return
         points = np.array([h for _, h in kept])  # (refreshes, N, 3)
@@ -188,9 +192,7 @@ class Recorder:
         err2 = np.square(points[finite_points] - placed[ticks[:, None] - c0 + self.lead]).sum(
             axis=2)
         finite = np.isfinite(err2)  # no truth at some leads: skipped per lead
-        # in order, refresh after refresh (a running sum, as np.add.accumulate makes it)
-        rows = np.vstack((self.horizon2, np.where(finite, err2, 0.0)))
-        self.horizon2 = np.add.accumulate(rows, axis=0)[-1]
+        self.horizon2 += np.where(finite, err2, 0.0).sum(axis=0)
         self.n_horizons += finite.sum(axis=0)
 
     def close(self) -> None:
@@ -198,17 +200,32 @@ class Recorder:
             self.file.close()
             self.file = None
 
-    def result(self, stats: dict, counts: dict, dynamics: str = "pinocchio",
-               loop: str = "python") -> LoopResult:
+    def result(self, controller, dynamics: str = "pinocchio") -> LoopResult:
         with np.errstate(invalid="ignore", divide="ignore"):
             horizon_error = np.sqrt(self.horizon2 / self.n_horizons)  # NaN where no refresh
+        ticks = np.array([t for t, _ in self.kept_horizons], dtype=np.int64)
+        points = (np.array([h for _, h in self.kept_horizons]) if self.kept_horizons
+                  else np.zeros((0, self.N, 3)))
+        stamps = np.array([t for t, _ in self.kept_samples], dtype=float)
+        samples = (np.array([z for _, z in self.kept_samples]) if self.kept_samples
+                   else np.zeros((0, 3)))
         return LoopResult(
             settings=self.settings, trace=self.trace.arrays(), stride=self.trace.stride,
             tracking=self.tracking.result(), tick_us=self.ticks.stats_us(),
             yardstick_us=self.yardstick.stats_us(),
             tick_parts_us={name: h.stats_us() for name, h in self.parts.items()},
-            control_tick_us=self.control.stats_us(), horizon_error=horizon_error,
-            controller_stats=stats,
-            saturated_ticks=self.saturated_ticks, predictor_counts=counts,
-            plant_dynamics=dynamics, tick_loop=loop,
+            control_tick_us=self.parts["step"].stats_us(), horizon_error=horizon_error,
+            controller_stats=controller_stats(controller), saturated_ticks=self.saturated_ticks,
+            predictor_counts=dict(controller.predictor_counts), plant_dynamics=dynamics,
+            horizons=(ticks, points), samples=(stamps, samples),
         )
+
+
+def controller_stats(controller) -> dict:
+    """The controller's counters as a plain dict, with ``fallback_total``."""
+    stats_obj = getattr(controller, "stats", None)
+    if dataclasses.is_dataclass(stats_obj):
+        stats = dataclasses.asdict(stats_obj)
+        stats["fallback_total"] = int(getattr(stats_obj, "fallback_total", 0))
+        return stats
+    return dict(stats_obj or {})

@@ -253,12 +253,15 @@ class SourceTruth:
     """Centred POI truth ``p(i·Ts) − mean`` of a motion source, evaluated per window.
 
     The mean over ticks 0 … n_ticks − 1 (NaN ignored per axis) is made in a first pass of
-    ``chunk`` ticks. ``source`` may instead be a sample source (``ground_truth = "recorded"``):
+    ``chunk`` ticks; ``centred=False`` keeps the motion's own coordinates (``center`` zero, the
+    mean still checked for a finite sample). ``source`` may instead be a sample source
+    (``ground_truth = "recorded"``):
     the truth is then the stream linearly interpolated at the tick times
     (:class:`sim.recordings.RecordedMotion` on the samples around each window).
     """
 
-    def __init__(self, source, n_ticks: int, Ts: float, chunk: int = 20_000) -> None:
+    def __init__(self, source, n_ticks: int, Ts: float, chunk: int = 20_000,
+                 centred: bool = True) -> None:
         self.source, self.n_ticks, self.Ts = source, int(n_ticks), float(Ts)
         total, count = None, None
         for i0 in range(0, self.n_ticks, chunk):
@@ -271,6 +274,8 @@ class SourceTruth:
             self.center = total / count
         if not np.all(np.isfinite(self.center)):
             raise ValueError("the heart motion has no finite sample over the run")
+        if not centred:
+            self.center = np.zeros_like(self.center)
         self.dim = self.center.size
 
     def _raw(self, i0: int, i1: int) -> np.ndarray:

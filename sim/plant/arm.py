@@ -56,10 +56,7 @@ class PlantSettings:
         ``"native"`` (the same equations compiled from C, :mod:`sim.plant.native`, within
         1e-15 relative of ``pin.aba``) or ``"auto"`` (native where a C compiler is found and the
         robot is a revolute chain, else Pinocchio; ``dynamics_note`` says why). Other
-        integrators always use Pinocchio. With the native dynamics the closed loop also runs
-        the encoders, the observer and the cancellation compiled
-        (:class:`sim.plant.native.NativeTick`, ≈ 2× faster simulation), the MPC staying in
-        Python.
+        integrators always use Pinocchio.
     """
 
     integrator: str = "midpoint"
@@ -162,6 +159,11 @@ class ArmPlant:
         """Place the arm at ``q`` (default home) with velocity ``v`` (default rest)."""
         self.q = self.robot.check_posture(self.robot.q0 if q is None else q).copy()
         self.v = np.zeros(self.robot.nv) if v is None else np.asarray(v, dtype=float).copy()
+
+    def encoders(self) -> np.ndarray:
+        """The encoders' joint angles q̃ = Δ·round(q/Δ) [rad] (q without an encoder model)."""
+        res = self.robot.encoder_resolution
+        return self.q if res is None else res * np.round(self.q / res)
 
     def friction(self, v: np.ndarray) -> np.ndarray:
         """Joint friction torque Sᵀ (D ω + F_c tanh(ω / v_s)), ω = S q̇, opposing the motion

@@ -1,20 +1,18 @@
-/* Rigid-body dynamics of a tree of revolute joints, for the plant's inner loop (sim/native.py).
+/* Rigid-body dynamics of a tree of revolute joints, for the plant's inner loop (sim/plant/native.py).
  *
- * Featherstone's articulated-body algorithm (ABA) and recursive Newton-Euler (RNEA) in body
- * coordinates, spatial vectors ordered (angular; linear), with the parameters of a Pinocchio
- * model: joint placement (R_p, p_p) in the parent body, joint axis a, spatial inertia and rotor
- * armature. Body i's pose in its parent: (R_p Rot(a, qb_i), p_p), qb_i = s_i q[c_i] + o_i: a
- * body follows one degree of freedom, scaled and offset (mimic joints: a closed linkage such as a
- * parallelogram written as a tree). Without mimic bodies qb = q and the dynamics are ABA; with
- * them, M(q) by the composite-rigid-body algorithm, h by RNEA and q'' = M^-1 (tau - h) by
- * Cholesky; both with transforms and inertias kept in their structured form. Friction acts on the
- * motors' output rates w = S q' (S the motor map) and reaches the joints as S^T f(w). The
- * reference is Pinocchio (tests/sim/plant/test_native.py compares every function with it).
+ * Recursive Newton-Euler (RNEA) and the composite-rigid-body algorithm (CRBA) in body coordinates,
+ * spatial vectors ordered (angular; linear), with the parameters of a Pinocchio model: joint
+ * placement (R_p, p_p) in the parent body, joint axis a, spatial inertia and rotor armature. Body
+ * i's pose in its parent: (R_p Rot(a, qb_i), p_p), qb_i = s_i q[c_i] + o_i: a body follows one
+ * degree of freedom, scaled and offset (mimic joints: a closed linkage such as a parallelogram
+ * written as a tree). The forward dynamics are q'' = M(q)^-1 (tau - h(q, q')), M by CRBA and h by
+ * RNEA from one set of body poses, transforms and inertias kept in their structured form.
+ * Friction acts on the motors' output rates w = S q' (S the motor map) and reaches the joints as
+ * S^T f(w). Dynamics only: no controller logic. The reference is Pinocchio
+ * (tests/sim/plant/test_native.py compares every function with it).
  */
-#define _POSIX_C_SOURCE 199309L /* clock_gettime */
 #include <math.h>
 #include <string.h>
-#include <time.h>
 
 #define MAXJ 8
 
@@ -33,7 +31,6 @@ typedef struct {
     int coord[MAXJ];            /* the degree of freedom body i follows */
     double scale[MAXJ];         /* qb_i = scale_i q[coord_i] + offset_i */
     double offset[MAXJ];
-    int projected;              /* some body is not simply "body i = degree of freedom i" */
     double Rp[MAXJ][9];         /* joint placement rotation, row-major */
     double pp[MAXJ][3];         /* joint placement translation [m] */
     double axis[MAXJ][3];       /* unit joint axis in the body frame */
@@ -46,50 +43,6 @@ typedef struct {
     double inv_stiction;        /* 1 / v_s [s/rad] */
     double gravity[3];          /* [m/s^2], e.g. (0, 0, -9.81) */
 } chain_t;
-
-/* X (6x6, row-major): motion transform from the parent's to body i's coordinates. */
-static void transform(const chain_t *m, int i, double q, double X[36], double R[9]) {
-    const double *a = m->axis[i], *P = m->Rp[i], *r = m->pp[i];
-    double s = sin(q), c = 1.0 - cos(q);
-    double K[9] = {0, -a[2], a[1], a[2], 0, -a[0], -a[1], a[0], 0};
-    double J[9];  /* Rot(a, q) = I + s K + c K^2 */
-    for (int k = 0; k < 3; k++)
-        for (int l = 0; l < 3; l++) {
-            double kk = K[3 * k] * K[l] + K[3 * k + 1] * K[3 + l] + K[3 * k + 2] * K[6 + l];
-            J[3 * k + l] = (k == l) + s * K[3 * k + l] + c * kk;
-        }
-    for (int k = 0; k < 3; k++)  /* R = P J */
-        for (int l = 0; l < 3; l++)
-            R[3 * k + l] = P[3 * k] * J[l] + P[3 * k + 1] * J[3 + l] + P[3 * k + 2] * J[6 + l];
-    double E[9];  /* E = R^T: parent -> body coordinates */
-    for (int k = 0; k < 3; k++)
-        for (int l = 0; l < 3; l++) E[3 * k + l] = R[3 * l + k];
-    double rx[9] = {0, -r[2], r[1], r[2], 0, -r[0], -r[1], r[0], 0};
-    memset(X, 0, 36 * sizeof(double));
-    for (int k = 0; k < 3; k++)
-        for (int l = 0; l < 3; l++) {
-            double er = E[3 * k] * rx[l] + E[3 * k + 1] * rx[3 + l] + E[3 * k + 2] * rx[6 + l];
-            X[6 * k + l] = E[3 * k + l];
-            X[6 * (k + 3) + l + 3] = E[3 * k + l];
-            X[6 * (k + 3) + l] = -er;
-        }
-}
-
-static void mat6_vec(const double A[36], const double x[6], double y[6]) {
-    for (int k = 0; k < 6; k++) {
-        double s = 0;
-        for (int l = 0; l < 6; l++) s += A[6 * k + l] * x[l];
-        y[k] = s;
-    }
-}
-
-static void mat6T_vec(const double A[36], const double x[6], double y[6]) {
-    for (int k = 0; k < 6; k++) {
-        double s = 0;
-        for (int l = 0; l < 6; l++) s += A[6 * l + k] * x[l];
-        y[k] = s;
-    }
-}
 
 SPATIAL void cross3(const double a[3], const double b[3], double c[3]) {
     c[0] = a[1] * b[2] - a[2] * b[1];
@@ -113,73 +66,6 @@ SPATIAL void crf(const double v[6], const double f[6], double out[6]) {
     cross3(v + 3, f + 3, t);
     out[0] += t[0]; out[1] += t[1]; out[2] += t[2];
     cross3(v, f + 3, out + 3);
-}
-
-/* A += X^T B X (6x6) */
-static void add_congruence(double A[36], const double X[36], const double B[36]) {
-    double BX[36];
-    for (int k = 0; k < 6; k++)
-        for (int l = 0; l < 6; l++) {
-            double s = 0;
-            for (int j = 0; j < 6; j++) s += B[6 * k + j] * X[6 * j + l];
-            BX[6 * k + l] = s;
-        }
-    for (int k = 0; k < 6; k++)
-        for (int l = 0; l < 6; l++) {
-            double s = 0;
-            for (int j = 0; j < 6; j++) s += X[6 * j + k] * BX[6 * j + l];
-            A[6 * k + l] += s;
-        }
-}
-
-/* ABA of a model without mimic bodies (qb = q). */
-static void body_aba(const chain_t *m, const double *q, const double *qd, const double *tau,
-                     double *qdd) {
-    int n = m->n;
-    double X[MAXJ][36], R[9], v[MAXJ][6], c[MAXJ][6], IA[MAXJ][36], pA[MAXJ][6];
-    double U[MAXJ][6], D[MAXJ], u[MAXJ], a[MAXJ][6], zero[6] = {0};
-    double a0[6] = {0, 0, 0, -m->gravity[0], -m->gravity[1], -m->gravity[2]};
-    for (int i = 0; i < n; i++) {
-        const double *ax = m->axis[i];
-        transform(m, i, q[i], X[i], R);
-        mat6_vec(X[i], m->parent[i] < 0 ? zero : v[m->parent[i]], v[i]);
-        double vJ[6] = {ax[0] * qd[i], ax[1] * qd[i], ax[2] * qd[i], 0, 0, 0};
-        for (int k = 0; k < 6; k++) v[i][k] += vJ[k];
-        crm(v[i], vJ, c[i]);
-        double h[6];
-        memcpy(IA[i], m->inertia[i], sizeof IA[i]);
-        mat6_vec(m->inertia[i], v[i], h);
-        crf(v[i], h, pA[i]);
-    }
-    for (int i = n - 1; i >= 0; i--) {
-        const double *ax = m->axis[i];
-        for (int k = 0; k < 6; k++)
-            U[i][k] = IA[i][6 * k] * ax[0] + IA[i][6 * k + 1] * ax[1] + IA[i][6 * k + 2] * ax[2];
-        D[i] = ax[0] * U[i][0] + ax[1] * U[i][1] + ax[2] * U[i][2] + m->armature[i];
-        u[i] = tau[i] - (ax[0] * pA[i][0] + ax[1] * pA[i][1] + ax[2] * pA[i][2]);
-        int p = m->parent[i];
-        if (p >= 0) {
-            double Ia[36], pa[6], t[6];
-            for (int k = 0; k < 6; k++)
-                for (int l = 0; l < 6; l++) Ia[6 * k + l] = IA[i][6 * k + l] - U[i][k] * U[i][l] / D[i];
-            mat6_vec(Ia, c[i], t);
-            for (int k = 0; k < 6; k++) pa[k] = pA[i][k] + t[k] + U[i][k] * u[i] / D[i];
-            add_congruence(IA[p], X[i], Ia);
-            mat6T_vec(X[i], pa, t);
-            for (int k = 0; k < 6; k++) pA[p][k] += t[k];
-        }
-    }
-    for (int i = 0; i < n; i++) {
-        const double *ax = m->axis[i];
-        double ap[6];
-        mat6_vec(X[i], m->parent[i] < 0 ? a0 : a[m->parent[i]], ap);
-        for (int k = 0; k < 6; k++) ap[k] += c[i][k];
-        double Ua = 0;
-        for (int k = 0; k < 6; k++) Ua += U[i][k] * ap[k];
-        qdd[i] = (u[i] - Ua) / D[i];
-        for (int k = 0; k < 6; k++) a[i][k] = ap[k];
-        a[i][0] += ax[0] * qdd[i]; a[i][1] += ax[1] * qdd[i]; a[i][2] += ax[2] * qdd[i];
-    }
 }
 
 /* Body angles (or rates, offset = 0) of the degrees of freedom x. */
@@ -214,18 +100,30 @@ static int plane_axis(const chain_t *m, int i) {
     return -1;
 }
 
+/* E = (R_p Rot(a, q))^T with Rot(a, q) = I + s K + (1 - c) K^2 (Rodrigues), K = a x. */
+static void general_rotation(const chain_t *m, int i, double q, double E[9]) {
+    const double *a = m->axis[i], *P = m->Rp[i];
+    double s = sin(q), c = 1.0 - cos(q), J[9];
+    double K[9] = {0, -a[2], a[1], a[2], 0, -a[0], -a[1], a[0], 0};
+    for (int k = 0; k < 3; k++)
+        for (int l = 0; l < 3; l++) {
+            double kk = K[3 * k] * K[l] + K[3 * k + 1] * K[3 + l] + K[3 * k + 2] * K[6 + l];
+            J[3 * k + l] = (k == l) + s * K[3 * k + l] + c * kk;
+        }
+    for (int k = 0; k < 3; k++)  /* E[l][k] = R[k][l], R = P J */
+        for (int l = 0; l < 3; l++)
+            E[3 * l + k] = P[3 * k] * J[l] + P[3 * k + 1] * J[3 + l] + P[3 * k + 2] * J[6 + l];
+}
+
 /* The bodies' poses at the body angles qb: E = Rot(e_k, -q) directly for a joint about
- * coordinate axis k of an unrotated placement (RX, RY, RZ), else from the general transform. */
+ * coordinate axis k of an unrotated placement (RX, RY, RZ), else the general rotation. */
 static void poses(const chain_t *m, const double *qb, pose_t *X) {
-    double D[36], R[9];
     for (int i = 0; i < m->nb; i++) {
         pose_t *P = &X[i];
         int k = plane_axis(m, i), u = (k + 1) % 3, w = (k + 2) % 3;
         memcpy(P->p, m->pp[i], sizeof P->p);
         if (k < 0) {
-            transform(m, i, qb[i], D, R);
-            for (int r = 0; r < 3; r++)
-                for (int l = 0; l < 3; l++) P->E[3 * r + l] = R[3 * l + r];
+            general_rotation(m, i, qb[i], P->E);
             continue;
         }
         double c = cos(qb[i]), s = sin(qb[i]);
@@ -452,22 +350,14 @@ static void bias_and_mass(const chain_t *m, const double *q, const double *qd, d
     body_mass(m, X, M);
 }
 
-/* q'' = M(q)^-1 (tau - h(q, q')) by Cholesky: the dynamics of a model with mimic bodies. */
-static void projected_fd(const chain_t *m, const double *q, const double *qd, const double *tau,
-                         double *qdd) {
+/* Forward dynamics: M(q) qdd + C(q, qd) qd + g(q) = tau, M with the armature, solved as
+ * qdd = M(q)^-1 (tau - h(q, qd)) by Cholesky. */
+void chain_forward(const chain_t *m, const double *q, const double *qd, const double *tau,
+                   double *qdd) {
     double h[MAXJ], M[MAXJ][MAXJ], b[MAXJ];
     bias_and_mass(m, q, qd, h, M);
     for (int i = 0; i < m->n; i++) b[i] = tau[i] - h[i];
     spd_solve(m->n, M, b, qdd);
-}
-
-/* qdd = forward dynamics: M(q) qdd + C(q, qd) qd + g(q) = tau, M with the armature. */
-void chain_aba(const chain_t *m, const double *q, const double *qd, const double *tau,
-               double *qdd) {
-    if (m->projected)
-        projected_fd(m, q, qd, tau, qdd);
-    else
-        body_aba(m, q, qd, tau, qdd);
 }
 
 /* Friction torque S^T (D w + F_c tanh(w / v_s)), w = S qd (S = I: D qd + F_c tanh(qd / v_s)). */
@@ -493,7 +383,7 @@ static void friction(const chain_t *m, const double *qd, double *out) {
 
 /* Explicit midpoint, `substeps` steps of h, torque held (sim.plant.ArmPlant._midpoint_steps):
  * qd_half = qd + h/2 a(q, qd), q_half = q + h/2 qd, q+ = q + h qd_half, qd+ = qd + h a(q_half,
- * qd_half), with a = ABA(q, qd, tau - friction(qd)). Updates q and qd in place. */
+ * qd_half), with a = forward dynamics(q, qd, tau - friction(qd)). Updates q and qd in place. */
 void chain_midpoint(const chain_t *m, double *q, double *qd, const double *tau, double h,
                     int substeps) {
     int n = m->n;
@@ -501,14 +391,14 @@ void chain_midpoint(const chain_t *m, double *q, double *qd, const double *tau, 
     for (int s = 0; s < substeps; s++) {
         friction(m, qd, f);
         for (int i = 0; i < n; i++) t[i] = tau[i] - f[i];
-        chain_aba(m, q, qd, t, a);
+        chain_forward(m, q, qd, t, a);
         for (int i = 0; i < n; i++) {
             vh[i] = qd[i] + hh * a[i];
             qh[i] = q[i] + hh * qd[i];
         }
         friction(m, vh, f);
         for (int i = 0; i < n; i++) t[i] = tau[i] - f[i];
-        chain_aba(m, qh, vh, t, a);
+        chain_forward(m, qh, vh, t, a);
         for (int i = 0; i < n; i++) {
             q[i] += h * vh[i];
             qd[i] += h * a[i];
@@ -516,200 +406,34 @@ void chain_midpoint(const chain_t *m, double *q, double *qd, const double *tau, 
     }
 }
 
-/* Position [m] in the world of `point` (body coordinates of joint `joint`) at configuration q,
- * for `count` configurations (rows of q, n each) -> out (count x 3). */
+/* Position [m] in the world of `point` (body coordinates of body `joint`) at configuration q,
+ * for `count` configurations (rows of q, n each) -> out (count x 3): world rotation R_i =
+ * R_parent E_i^T and origin o_i = o_parent + R_parent p_i, from the base to the body. */
 void chain_point(const chain_t *m, const double *q, int count, int joint, const double *point,
                  double *out) {
-    double X[36], R[MAXJ][9], p[MAXJ][3], Rl[9], qc[MAXJ];
+    double R[MAXJ][9], o[MAXJ][3], qc[MAXJ];
+    pose_t X[MAXJ];
     for (int c = 0; c < count; c++) {
         expand(m, q + (size_t)c * m->n, 1, qc);
+        poses(m, qc, X);
         for (int i = 0; i <= joint; i++) {
             int pa = m->parent[i];
-            transform(m, i, qc[i], X, Rl);
-            if (pa < 0) {
-                memcpy(R[i], Rl, sizeof Rl);
-                memcpy(p[i], m->pp[i], sizeof p[i]);
-            } else {
-                for (int k = 0; k < 3; k++) {
-                    for (int l = 0; l < 3; l++)
-                        R[i][3 * k + l] = R[pa][3 * k] * Rl[l] + R[pa][3 * k + 1] * Rl[3 + l] +
-                                          R[pa][3 * k + 2] * Rl[6 + l];
-                    p[i][k] = p[pa][k] + R[pa][3 * k] * m->pp[i][0] +
-                              R[pa][3 * k + 1] * m->pp[i][1] + R[pa][3 * k + 2] * m->pp[i][2];
-                }
+            const double *E = X[i].E;
+            for (int k = 0; k < 3; k++) {
+                for (int l = 0; l < 3; l++)
+                    R[i][3 * k + l] = pa < 0 ? E[3 * l + k] : R[pa][3 * k] * E[3 * l] +
+                                      R[pa][3 * k + 1] * E[3 * l + 1] + R[pa][3 * k + 2] * E[3 * l + 2];
+                o[i][k] = pa < 0 ? X[i].p[k] : o[pa][k] + R[pa][3 * k] * X[i].p[0] +
+                          R[pa][3 * k + 1] * X[i].p[1] + R[pa][3 * k + 2] * X[i].p[2];
             }
         }
         for (int k = 0; k < 3; k++)
-            out[3 * c + k] = p[joint][k] + R[joint][3 * k] * point[0] +
+            out[3 * c + k] = o[joint][k] + R[joint][3 * k] * point[0] +
                              R[joint][3 * k + 1] * point[1] + R[joint][3 * k + 2] * point[2];
     }
 }
 
-/* The output offset of a linearised arm, d = p(q0 + x_q) - (C x + y0) (rhmpc.control.offset):
- * the end-point of `point` in joint `joint`'s frame by forward kinematics at q = q0 + x[0..n-1],
- * minus the linear model's output; C is 3 x 2n, row-major. */
-void chain_offset(const chain_t *m, const double *x, const double *q0, const double *C,
-                  const double *y0, int joint, const double *point, double *out) {
-    int n = m->n;
-    double q[MAXJ], p[3];
-    for (int i = 0; i < n; i++) q[i] = q0[i] + x[i];
-    chain_point(m, q, 1, joint, point, p);
-    for (int r = 0; r < 3; r++) {
-        double lin = 0.0;
-        for (int k = 0; k < 2 * n; k++) lin += C[2 * n * r + k] * x[k];
-        out[r] = p[r] - (lin + y0[r]);
-    }
-}
-
-/* ---- The loop's tick around the MPC (sim/native.py NativeTick): encoders, observer,
- * cancellation and plant, the same operations in the same order as sim/loop.py's Python path
- * (sim.sensors encoder quantisation, sim.plant.observer.JointObserver, sim.plant). ---- */
-
-typedef struct {
-    const chain_t *plant;       /* the true arm */
-    const chain_t *model;       /* the controller's model (mismatch), for the cancellation */
-    double h;                   /* integration step [s] */
-    int substeps;
-    int quantise;               /* encoders present */
-    double resolution[MAXJ], inv_resolution[MAXJ];
-    double tau_max[MAXJ];
-    double correct[2 * MAXJ][3 * MAXJ + 1];  /* x = C [x_prior; q~; 1] */
-    double predict[2 * MAXJ][3 * MAXJ];      /* x_prior = P [x; u] */
-    double q[MAXJ], v[MAXJ];    /* plant state */
-    double prior[3 * MAXJ + 1]; /* [x_prior; q~; 1] */
-    double post[3 * MAXJ];      /* [x; u_applied] */
-    double u[MAXJ];             /* MPC torque, written by the caller */
-    double tau[MAXJ];           /* commanded torque (before the clip) */
-    int saturated;
-} tick_t;
-
-/* Encoders and the observer's correction: post[0:2n] = x_hat. */
-void tick_sense(tick_t *t) {
-    int n = t->plant->n, nx = 2 * n;
-    for (int i = 0; i < n; i++)
-        t->prior[nx + i] = t->quantise ? rint(t->q[i] * t->inv_resolution[i]) * t->resolution[i]
-                                       : t->q[i];
-    t->prior[3 * n] = 1.0;
-    for (int k = 0; k < nx; k++) {
-        double s = 0;
-        for (int l = 0; l <= 3 * n; l++) s += t->correct[k][l] * t->prior[l];
-        t->post[k] = s;
-    }
-}
-
-/* Commanded torque tau = u + RNEA_model(q~, v_hat, 0) + D v_hat + F_c tanh(v_hat / v_s). */
-void tick_actuate(tick_t *t) {
-    const chain_t *m = t->model;
-    int n = m->n;
-    double zero[MAXJ] = {0}, bias[MAXJ];
-    const double *q = t->prior + 2 * n, *v = t->post + n;
-    chain_rnea(m, q, v, zero, bias);
-    if (m->mapped) {
-        double f[MAXJ];
-        friction(m, v, f);
-        for (int i = 0; i < n; i++) t->tau[i] = t->u[i] + bias[i] + f[i];
-        return;
-    }
-    for (int i = 0; i < n; i++)
-        t->tau[i] = t->u[i] + bias[i] + m->damping[i] * v[i] +
-                    m->coulomb[i] * tanh(v[i] * m->inv_stiction);
-}
-
-/* Clip, integrate one tick, and predict the observer with the MPC torque that acted. */
-void tick_advance(tick_t *t) {
-    int n = t->plant->n, nx = 2 * n;
-    double applied[MAXJ];
-    t->saturated = 0;
-    for (int i = 0; i < n; i++) {
-        double a = t->tau[i];
-        if (a < -t->tau_max[i]) a = -t->tau_max[i];
-        if (a > t->tau_max[i]) a = t->tau_max[i];
-        applied[i] = a;
-        if (a != t->tau[i]) t->saturated = 1;
-    }
-    chain_midpoint(t->plant, t->q, t->v, applied, t->h, t->substeps);
-    for (int i = 0; i < n; i++)
-        t->post[nx + i] = t->saturated ? t->u[i] + (applied[i] - t->tau[i]) : t->u[i];
-    for (int k = 0; k < nx; k++) {
-        double s = 0;
-        for (int l = 0; l < 3 * n; l++) s += t->predict[k][l] * t->post[l];
-        t->prior[k] = s;
-    }
-}
-
-/* ---- Control ticks in one call (sim/plant/native.py NativeTick.run_ticks): a compiled
- * controller between the encoders and the cancellation, with no interpreter between ticks. ---- */
-
-/* A compiled controller's tick (rhmpc_tick_ext of an exported controller): u from the state x,
- * the N reference points ref, u_{-1} (NULL: the controller's own last u) and the extra per-tick
- * inputs (NULL: the controller's own). */
-typedef int (*control_fn)(void *state, const double *x, const double *ref, const double *u_prev,
-                          const double *extra, double *u);
-
-/* The reference points of row k, after the refresh slices due on it have run (the compiled
- * refresh's plan_points, rhmpc/control/refresh.c), or NULL: the points come from `refs`. */
-typedef const double *(*points_fn)(void *plan, int k);
-
-/* A chunk of ticks' records, row 0 first (sim/loop/results.py Recorder.start_chunk). */
-typedef struct {
-    control_fn control;
-    void *state;                /* the controller's */
-    double *last;               /* its output u (nu = n), read as u_{-1} by the next tick */
-    long long *parts;           /* (m, 3): sense, control, actuate [ns] */
-    double *tau_mpc, *tau, *q;  /* (m, n): u, the commanded torque, q after the tick */
-    double *ref0;               /* (m, 3): the first reference point */
-    double *x_saved;            /* (m / every + 1, 2n): x_hat of rows k = phase (mod every) */
-    int every, phase;
-    points_fn points;           /* NULL, or the points of each row with its slices run */
-    void *plan;                 /* points' state */
-    double *ref_saved;          /* NULL, or (m / every + 1, N, 3): the points of those rows */
-    int ref_len;                /* 3 N */
-} records_t;
-
-static long long now_ns(void) {
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);  /* time.perf_counter_ns's clock on Linux */
-    return (long long)ts.tv_sec * 1000000000LL + ts.tv_nsec;
-}
-
-/* Rows k0 .. k0 + count - 1: per tick, the encoders and the observer (tick_sense), the controller
- * on x_hat and its N reference points (N x 3, C-ordered, at refs + (k - k0) ref_step: the
- * ticks' points may overlap, as windows of one array do; or from r->points, which first runs
- * the refresh slices due on the row), the commanded torque (tick_actuate) and the plant
- * (tick_advance) -- the calls and the order of the loop's Python path (sim/loop/ticks.py
- * run_ticks), timed at the same places. u_first: u_{-1} of the first tick, or NULL. */
-void tick_run(tick_t *t, const records_t *r, int k0, int count, const double *refs,
-              long ref_step, const double *u_first) {
-    int n = t->plant->n, nx = 2 * n;
-    size_t row = n * sizeof(double);
-    for (int k = k0; k < k0 + count; k++) {
-        const double *ref = r->points ? r->points(r->plan, k) : refs + (k - k0) * ref_step;
-        long long t0 = now_ns();
-        tick_sense(t);
-        long long t1 = now_ns();
-        r->control(r->state, t->post, ref, k == k0 ? u_first : NULL, NULL, r->last);
-        long long t2 = now_ns();
-        memcpy(t->u, r->last, row);
-        tick_actuate(t);
-        long long t3 = now_ns();
-        r->parts[3 * k] = t1 - t0;
-        r->parts[3 * k + 1] = t2 - t1;
-        r->parts[3 * k + 2] = t3 - t2;
-        memcpy(r->tau_mpc + (size_t)k * n, r->last, row);
-        memcpy(r->tau + (size_t)k * n, t->tau, row);
-        memcpy(r->ref0 + 3 * (size_t)k, ref, 3 * sizeof(double));
-        if (r->every > 0 && k % r->every == r->phase) {
-            memcpy(r->x_saved + (size_t)(k / r->every) * nx, t->post, nx * sizeof(double));
-            if (r->ref_saved)
-                memcpy(r->ref_saved + (size_t)(k / r->every) * r->ref_len, ref,
-                       (size_t)r->ref_len * sizeof(double));
-        }
-        tick_advance(t);
-        memcpy(r->q + (size_t)k * n, t->q, row);
-    }
-}
-
-/* ---- The hardware-like plant's tick (sim/plant/hardware.py HardwareTick): motor currents
+/* ---- The hardware-like plant's tick (sim/plant/hardware.py HardwarePlant): motor currents
  * through a first-order lag, Stribeck friction on the motors' output rates, optional two-mass
  * cables; the same equations as the Python reference there. ---- */
 
@@ -761,7 +485,7 @@ static void hw_rates(const hw_t *w, const double *x, const double *cur, double *
         dx[j] = v[j];
     }
     if (!w->cables) {
-        chain_aba(w->arm, q, v, joint, dx + n);
+        chain_forward(w->arm, q, v, joint, dx + n);
         return;
     }
     double h[MAXJ], M[MAXJ][MAXJ], b[MAXJ];

@@ -1,7 +1,7 @@
 """A hardware-like plant: I/O delay, DAC, current amplifier, friction with stiction, cables.
 
-The robot's side of a tick as :class:`~sim.plant.tick.ArmTick` (sense, actuate, advance), with
-what the ideal plant leaves out between the controller's torque and the arm. Per motor k, with
+The plant as :class:`~sim.plant.arm.ArmPlant` (encoders, step), with what the ideal plant leaves
+out between the controller's torque and the arm. Per motor k, with
 the motors' output angles θ = S (q − q0) (S the robot's motor map), transmission ratio η_k and
 torque constant K_t:
 
@@ -34,8 +34,8 @@ torque constant K_t:
 Pinocchio gives M and h (:func:`robots.model.forward_dynamics`'s equations), or the compiled
 chain (:mod:`sim.plant.native`, checked against Pinocchio) where it builds; the ODE is
 integrated by explicit midpoint steps, each with the current's exact mean over the step. The
-controller's side is unchanged: the observer, the cancellation with the controller's own model
-(:class:`~sim.plant.cancellation.NonlinearityCancellation`), the MPC.
+controller is unchanged: it knows its own I/O delay (its observer predicts with the torque that
+acts over each tick), not what the DAC, amplifier and cables make of it.
 """
 
 from __future__ import annotations
@@ -49,8 +49,6 @@ import scipy.linalg
 
 from robots import LinearArm, Robot
 from sim.plant import native
-from sim.plant.cancellation import NonlinearityCancellation
-from sim.plant.observer import JointObserver
 
 ERRORS_FROM = ("true", "encoders")
 
@@ -195,8 +193,8 @@ def _check_drives(robot: Robot) -> None:
                          f"robot {robot.name!r} has none")
 
 
-class HardwareTick:
-    """The robot's side of a tick on the hardware-like plant (module equations).
+class HardwarePlant:
+    """The hardware-like plant (module equations): torques in, encoder angles out.
 
     Parameters
     ----------
@@ -205,12 +203,6 @@ class HardwareTick:
     Ts : float
         Control period [s].
     settings : HardwareSettings
-    cancellation : NonlinearityCancellation
-        The controller's cancellation (its own model).
-    observer : JointObserver
-        The controller's observer; it predicts with the MPC torque that acts over the tick (the
-        controller knows its own I/O delay), not with what the DAC, amplifier and cables make
-        of it.
     dynamics : str
         Who computes M and h: ``"pinocchio"`` (the reference), ``"native"`` (the compiled
         chain) or ``"auto"`` (native where it builds).
@@ -219,7 +211,6 @@ class HardwareTick:
     dynamics_note = "hardware-like plant"
 
     def __init__(self, robot: Robot, Ts: float, settings: HardwareSettings,
-                 cancellation: NonlinearityCancellation, observer: JointObserver,
                  dynamics: str = "auto") -> None:
         _check_drives(robot)
         self._chain = None if dynamics == "pinocchio" else native.load_chain(robot.model)
@@ -227,7 +218,6 @@ class HardwareTick:
             raise ValueError(f"native plant dynamics unavailable: {native.unavailable_reason}")
         self.dynamics = "pinocchio" if self._chain is None else "native"
         self.robot, self.Ts, self.settings = robot, float(Ts), settings
-        self.cancellation, self.observer = cancellation, observer
         n, S = robot.nv, robot.motor_map
         self._S, self._S_inv = S, np.linalg.inv(S)
         self._gain = robot.gear_ratio * settings.torque_constant  # output torque per ampere
@@ -252,8 +242,7 @@ class HardwareTick:
             v_stribeck=settings.stribeck_velocity, v_smooth=settings.friction_smoothing,
             rotor=self._rotor, cables=(self.k, self.c) if self._cables else None, q0=robot.q0,
             tau_e=settings.current_time_constant, h=self._h, steps=settings.steps)
-        self._pending = [(gravity.copy(), np.zeros(n))] * settings.delay_ticks
-        self._q_meas, self._u, self._tau = robot.q0.copy(), np.zeros(n), gravity
+        self._pending = [gravity.copy()] * settings.delay_ticks
         self.saturated = False
 
     def encoders(self) -> np.ndarray:
@@ -268,28 +257,14 @@ class HardwareTick:
         (``HardwareSettings.error_from``)."""
         return self.encoders() if self.settings.error_from == "encoders" else self.q_arm
 
-    def sense(self) -> np.ndarray:
-        """x̂ = [q − q0; q̇] from the motor encoders (the observer's storage)."""
-        self._q_meas = self.encoders()
-        return self.observer.correct(self._q_meas)
-
-    def actuate(self, u: np.ndarray) -> np.ndarray:
-        """The commanded torque τ = u + ĝ + Ĉq̇ + f̂ at the estimate [N·m]."""
-        self._u = np.array(u, dtype=float)
-        self._tau = self.cancellation.torque(self._q_meas, self.observer.x[self.robot.nv:], u)
-        return self._tau
-
-    def advance(self) -> None:
-        """Delay, DAC, amplifier and one tick of the arm; the observer predicts with the MPC
-        torque that acts (plus what the DAC's clipping took off it)."""
-        self._pending.append((self._tau, self._u))
-        tau, u = self._pending.pop(0)
+    def step(self, tau: np.ndarray) -> None:
+        """The I/O delay, the DAC, the amplifier and one tick of the arm with ``tau`` [N·m]."""
+        self._pending.append(np.array(tau, dtype=float))
+        tau = self._pending.pop(0)
         wanted = (self._S_inv.T @ tau) / self._gain
         command = dac(wanted, self.settings.dac_bits, self.settings.dac_range)
         self.saturated = bool(np.any(np.abs(wanted) > self.settings.dac_range))
         self._integrate(command)
-        applied = self._S.T @ (self._gain * command)
-        self.observer.predict(u + (applied - tau) if self.saturated else u)
 
     def _integrate(self, command: np.ndarray) -> None:
         """Explicit midpoint steps over the tick, each with the current's exact mean over the
@@ -331,7 +306,7 @@ class HardwareTick:
         """q̈ = (M(q) − Sᵀ J_r S)⁻¹ (τ − h(q, q̇)) with cables, M(q)⁻¹ (τ − h) without."""
         chain = self._chain
         if chain is not None and not self._cables:
-            return chain.aba(q, v, joint)
+            return chain.forward_dynamics(q, v, joint)
         if chain is not None:
             M = chain.mass(q) - self._rotor_matrix
             return np.linalg.solve(M, joint - chain.rnea(q, v, np.zeros_like(v)))
@@ -341,22 +316,20 @@ class HardwareTick:
         return scipy.linalg.cho_solve(scipy.linalg.cho_factor(M), joint - bias)
 
 
-class LinearTick:
-    """The robot's side of a tick on the MPC's own linear model (Tuna et al.'s Table I plant,
-    "a linearized, reduced order model of the actual hardware").
+class LinearPlant:
+    """The MPC's own linear model as the plant (Tuna et al.'s Table I plant, "a linearized,
+    reduced order model of the actual hardware").
 
     The arm is x⁺ = A x + B τ (the :class:`~robots.LinearArm`, gravity, Coriolis and friction
-    absent, so nothing is cancelled: τ = u, clipped to the torque limits); the encoders quantise
-    q = q0 + x_q per joint and the observer estimates x̂ as in :class:`~sim.plant.tick.ArmTick`.
-    The loop scores the forward kinematics of q.
+    absent, so nothing is cancelled), τ clipped to the torque limits; the encoders quantise
+    q = q0 + x_q per joint. The loop scores the forward kinematics of q.
     """
 
     dynamics, dynamics_note = "linear", None
 
-    def __init__(self, robot: Robot, arm: LinearArm, observer: JointObserver) -> None:
-        self.robot, self.arm, self.observer = robot, arm, observer
+    def __init__(self, robot: Robot, arm: LinearArm) -> None:
+        self.robot, self.arm = robot, arm
         self._x = np.zeros(arm.nx)
-        self._u = np.zeros(arm.nu)
         self._limit = robot.torque_limit
         self.saturated = False
 
@@ -365,19 +338,13 @@ class LinearTick:
         """The plant's joint angles q0 + x_q [rad]."""
         return self.arm.q0 + self._x[: self.arm.nu]
 
-    def sense(self) -> np.ndarray:
-        """x̂ from the quantised joint angles (the observer's storage)."""
+    def encoders(self) -> np.ndarray:
+        """The quantised joint angles Δ·round(q/Δ) [rad]."""
         q, res = self.q, self.robot.encoder_resolution
-        return self.observer.correct(q if res is None else res * np.round(q / res))
+        return q if res is None else res * np.round(q / res)
 
-    def actuate(self, u: np.ndarray) -> np.ndarray:
-        """τ = u [N·m]: the linear plant has nothing to cancel."""
-        self._u = np.array(u, dtype=float)
-        return self._u
-
-    def advance(self) -> None:
-        """x⁺ = A x + B clip(u); the observer predicts with the torque that acted."""
-        applied = np.clip(self._u, -self._limit, self._limit)
-        self.saturated = bool(np.any(applied != self._u))
+    def step(self, tau: np.ndarray) -> None:
+        """x⁺ = A x + B clip(τ)."""
+        applied = np.clip(tau, -self._limit, self._limit)
+        self.saturated = bool(np.any(applied != tau))
         self._x = self.arm.A @ self._x + self.arm.B @ applied
-        self.observer.predict(applied)

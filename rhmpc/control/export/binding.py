@@ -1,9 +1,11 @@
-"""Binding of an exported controller: :class:`CController`, a drop-in for ``mpc.step``.
+"""The exported controller in a Python loop: :class:`CController`, the two calls of ``rhmpc.h``.
 
-The library is loaded with ctypes (setup, counters, fault injection); the per-tick call goes
-through the ``_rhmpc_step`` extension (:mod:`.extension`), or through ctypes where that cannot
-be built. The library's OSQP workspace is a set of static globals, so one library image holds
-one controller; a second live :class:`CController` on the same file loads a private copy of it.
+``rhmpc simulate --controller c`` runs the C that ``rhmpc export`` writes in place of the whole
+Python controller: the library is built once per distinct export (:func:`controller_in_c`, with
+the one build helper :mod:`rhmpc.compiled`) and called through :mod:`ctypes`. Its durations are
+the C's own (``clock_gettime`` inside ``rhmpc_refresh`` and ``rhmpc_step``). The library's OSQP
+workspace is a set of static globals, so one library image holds one controller; a second live
+:class:`CController` on the same file loads a private copy of it.
 """
 
 from __future__ import annotations
@@ -11,19 +13,16 @@ from __future__ import annotations
 import ctypes
 import shutil
 import tempfile
-import time
 import weakref
-from collections.abc import Callable
+from collections import Counter
 from pathlib import Path
-from typing import NamedTuple
 
 import numpy as np
 
-from rhmpc.control.mpc import MPCStats
+from rhmpc.compiled import build, compiler
+from rhmpc.control.fallback import MPCStats
 
-from . import extension
-from .build import ToolchainError
-from .generate import EXTRA_SOURCES
+from .generate import ExportError, _generate_into
 
 #: Status names in the order of ``enum rhmpc_status`` (rhmpc.h); 0 = solved.
 STATUS_NAMES = (
@@ -32,99 +31,44 @@ STATUS_NAMES = (
     "non_convex", "interrupted", "unsolved",
 )
 SOURCE_NAMES = ("qp", "plan", "lq", "brake", "zero")
-
-
-class _Public(ctypes.Structure):
-    """The documented leading fields of ``rhmpc_t``."""
-
-    _fields_ = (
-        ("ticks", ctypes.c_longlong),
-        ("screened", ctypes.c_longlong),
-        ("failures", ctypes.c_longlong * len(STATUS_NAMES)),
-        ("fallbacks", ctypes.c_longlong * len(SOURCE_NAMES)),
-        ("status", ctypes.c_int),
-        ("source", ctypes.c_int),
-        ("iterations", ctypes.c_int),
-        ("tick_ns", ctypes.c_longlong),
-        ("boxed", ctypes.c_longlong),
-        ("level", ctypes.c_int),
-        ("box_iterations", ctypes.c_int),
-    )
-
+COUNT_NAMES = ("updates", "missing", "outliers_rejected", "gate_unlocked", "retracted",
+               "forecast_clamped", "forecast_nonfinite", "rls_reset", "rls_bound",
+               "reference_guard", "repaired", "forecast_capped")
 
 _in_use: dict[str, weakref.ref] = {}
 
 
-class CompiledTick(NamedTuple):
-    """A controller's tick as a C function, for a loop that runs ticks in C
-    (:meth:`sim.plant.native.NativeTick.run_ticks`).
-
-    ``int function(void *state, const double *x, const double *ref, const double *u_prev,
-    const double *extra, double *u)`` (``rhmpc_tick_ext`` of ``rhmpc.h``) with ``extra`` NULL;
-    ``u_prev`` NULL but on a tick after :meth:`CController.take_u_prev` returned an array.
-    """
-
-    function: int  #: address of the tick function
-    state: int  #: address of the controller's state (``rhmpc_t``)
-    output: np.ndarray  #: (nu,) where the tick writes u; the controller's u_{−1} next tick
-    take_u_prev: Callable[[], np.ndarray | None]  #: :meth:`CController.take_u_prev`
-    dims: tuple[int, int, int, int]  #: (N, nx, nu, ny): what the tick reads and writes
-
-#: The binding's implementations of ``step``: ``"auto"`` is the extension where it builds.
-BINDINGS = ("auto", "extension", "ctypes")
+class ToolchainError(OSError):
+    """No C compiler, or the build failed (the message says which, in one line)."""
 
 
-class _CtypesStep:
-    """``step`` in Python over ctypes: the fallback where the extension cannot be built.
-
-    Same constructor and attributes as ``_rhmpc_step.Step`` (see ``rhmpc_step.c``).
-    """
-
-    def __init__(self, tick, ctl, keep, dims, last, u_in, extra, extra_inputs=None) -> None:
-        vp = ctypes.c_void_p
-        # PYFUNCTYPE holds the GIL during the call, as the extension does: the library's OSQP
-        # workspace is static and must not be entered from two threads at once.
-        self._tick = ctypes.PYFUNCTYPE(ctypes.c_int, vp, vp, vp, vp, vp, vp)(tick)
-        self._ctl, self._keep = ctl, keep
-        N, nx, _, ny, _ = dims
-        self._x, self._ref = np.zeros(nx), np.zeros((N, ny))
-        self._last, self._extra, self._extra_inputs = last, extra, extra_inputs
-        self._ptr = [a.ctypes.data for a in (self._x, self._ref, u_in, extra, last)]
-        self.u_pending = 0
-        self.call_ns = 0
-
-    def step(self, x: np.ndarray, ref: np.ndarray) -> np.ndarray:
-        """τ_mpc (nu,) for ``x`` (nx,) and ``ref`` (N, ny), a new array (as ``Step.step``)."""
-        t0 = time.perf_counter_ns()
-        x = np.asarray(x, dtype=float)
-        ref = np.asarray(ref, dtype=float)
-        if x.shape != self._x.shape or ref.shape != self._ref.shape:
-            raise ValueError(f"step expects x {self._x.shape} and ref {self._ref.shape}, "
-                             f"got {x.shape}, {ref.shape}")
-        self._x[:] = x
-        self._ref[...] = ref
-        px, pr, pu, pe, pt = self._ptr
-        if self._extra_inputs is not None and np.isfinite(x).all():
-            self._extra[:] = self._extra_inputs(x)
-        u_in = pu if self.u_pending else None
-        self.u_pending = 0
-        self._tick(self._ctl, px, pr, u_in, pe if self._extra_inputs is not None else None, pt)
-        self.call_ns = time.perf_counter_ns() - t0
-        return self._last.copy()
+def missing_toolchain() -> str | None:
+    """None if a C compiler is on the PATH, else a one-line reason."""
+    return None if compiler() else "the C controller needs a C compiler (cc or gcc; or $CC)"
 
 
-def _step_type(binding: str) -> tuple[type, str | None]:
-    """The implementation of ``step`` for ``binding`` and why it is ctypes under ``"auto"``."""
-    if binding not in BINDINGS:
-        raise ValueError(f"binding must be one of {BINDINGS}, got {binding!r}")
-    if binding == "ctypes":
-        return _CtypesStep, None
-    module, reason = extension.load()
-    if module is not None:
-        return module.Step, None
-    if binding == "extension":
-        raise ToolchainError(f"the compiled binding is unavailable: {reason}")
-    return _CtypesStep, reason
+def _public(dims: dict) -> type[ctypes.Structure]:
+    """``rhmpc_public_t`` of rhmpc.h for these dimensions."""
+    ll, i, d = ctypes.c_longlong, ctypes.c_int, ctypes.c_double
+    nx, nu, span = dims["NX"], dims["NU"], dims["SPAN"]
+
+    class Public(ctypes.Structure):
+        _fields_ = (
+            ("ticks", ll), ("screened", ll), ("boxed", ll),
+            ("failures", ll * dims["N_STATUS"]), ("fallbacks", ll * dims["N_SOURCES"]),
+            ("counts", ll * dims["N_COUNTS"]),
+            ("status", i), ("source", i), ("iterations", i), ("level", i),
+            ("box_iterations", i), ("saturated", i), ("step_ns", ll), ("refresh_ns", ll),
+            ("x_hat", d * nx), ("u", d * nu), ("tau_command", d * nu), ("tau", d * nu),
+            ("first", ll), ("points", d * (3 * span)), ("gate_floor", d),
+            ("gate_locked", i), ("ready", i), ("age_sum", d), ("age_count", ll),
+        )
+
+    return Public
+
+
+_DIMS = ("N", "NX", "NU", "NY", "NV", "M", "NPAR", "NZ", "NEXTRA", "D", "SPAN", "N_STATUS",
+         "N_SOURCES", "N_COUNTS")
 
 
 def _load(path: str) -> tuple[str, ctypes.CDLL, tempfile.TemporaryDirectory | None]:
@@ -137,119 +81,81 @@ def _load(path: str) -> tuple[str, ctypes.CDLL, tempfile.TemporaryDirectory | No
         shutil.copy2(path, copy)
         path = str(copy)
     lib = ctypes.CDLL(path)
-    vp, ll = ctypes.c_void_p, ctypes.c_longlong
-    lib.rhmpc_init.argtypes = (vp,)
-    lib.rhmpc_init.restype = None
-    lib.rhmpc_force_failures.argtypes = (vp, ll)
-    lib.rhmpc_force_failures.restype = None
-    lib.rhmpc_sizeof.restype = ll
-    lib.rhmpc_dims.argtypes = (vp,)
-    lib.rhmpc_dims.restype = None
+    vp, ll, d = ctypes.c_void_p, ctypes.c_longlong, ctypes.c_double
+    for name, args, result in (("rhmpc_init", (vp,), None), ("rhmpc_place", (vp, vp), None),
+                               ("rhmpc_refresh", (vp, ll, d, vp), ctypes.c_int),
+                               ("rhmpc_step", (vp, ll, vp, vp), ctypes.c_int),
+                               ("rhmpc_force_failures", (vp, ll), None),
+                               ("rhmpc_sizeof", (), ll), ("rhmpc_public_sizeof", (), ll),
+                               ("rhmpc_dims", (vp,), None)):
+        getattr(lib, name).argtypes, getattr(lib, name).restype = args, result
     return path, lib, private
 
 
 class CController:
-    """The compiled controller behind the ``RecedingHorizonMPC.step`` contract.
-
-    ``step`` is the compiled binding's own (``_rhmpc_step``, :mod:`.extension`): argument
-    conversion, shape checks, u_{−1}, the tick and the output array in one C call, no Python
-    frame; the output offset's forward kinematics runs inside the tick, in C.
-
-    Measured overhead (PHANToM, default settings; Python 3.11, gcc, a 2-core host shared with
-    other jobs): ``step()`` timed from Python with ``time.perf_counter_ns`` around each call,
-    minus the tick's own ``tick_ns``, over 19 000 ticks of the bench trajectory (heart-like
-    motion, 2-mm jumps), GC off, five runs. The compiled binding adds 0.30–0.32 µs p50 and
-    0.5–0.8 µs p99 to the tick (the timer pair itself is 0.07 µs of that; the new output array
-    0.08 µs); the ctypes fallback 2.0–2.1 µs p50 and 2.5–4.3 µs p99; a ctypes wrapper that
-    evaluates the offset with Pinocchio in Python, 6.9–7.1 µs p50 and 15–19 µs p99.
-
-    Where the extension cannot be built the same ``step`` runs in Python over ctypes
-    (:attr:`binding` says which, :attr:`binding_note` why).
+    """The exported controller behind the calls of :class:`rhmpc.control.controller.Controller`.
 
     Parameters
     ----------
     library : path
-        The shared library built from an export (:func:`~.build.build_cached`).
-    dims : tuple[int, int, int, int] | None
-        Expected (N, nx, nu, ny), checked against the library's.
-    extra_inputs : callable | None
-        ``extra_inputs(x) -> (n_extra,)``: the per-tick inputs of the QP after u_{−1}, evaluated
-        in Python before each finite-state tick. Needed only if the library does not compute
-        them itself (:attr:`extra_source` ``"caller"``); given, it replaces the library's own.
-    binding : {"auto", "extension", "ctypes"}
-        ``"auto"``: the extension, else ctypes. ``"extension"`` raises
-        :class:`~.build.ToolchainError` if it cannot be built.
-
-    Attributes
-    ----------
-    binding : str
-        ``"extension"`` or ``"ctypes"``.
-    binding_note : str | None
-        Why ``"auto"`` fell back to ctypes (one line), else None.
-    extra_source : str
-        Where the extra per-tick inputs come from: ``"zero"``, ``"fk"`` (in C), ``"caller"``
-        (the library's setting) or ``"python"`` (``extra_inputs``).
-    call_ns : int
-        Duration of the last ``step`` inside the binding, the tick included [ns].
+        The shared library built from an export (:func:`controller_in_c`).
+    mpc : RecedingHorizonMPC
+        The Python MPC it was generated from (its gain tick is the timing yardstick).
     """
 
-    def __init__(
-        self,
-        library: str | Path,
-        dims: tuple[int, int, int, int] | None = None,
-        extra_inputs: Callable[[np.ndarray], np.ndarray] | None = None,
-        binding: str = "auto",
-    ) -> None:
-        step_type, self.binding_note = _step_type(binding)
+    def __init__(self, library: str | Path, mpc) -> None:
         path, lib, self._private = _load(str(Path(library).resolve()))
         _in_use[path] = weakref.ref(self)
-        self.library, self._lib = path, lib
-        self._read_dims(dims)
-        extra_inputs = self._extra_inputs(extra_inputs)
-        self.u_max = np.ctypeslib.as_array(
-            (ctypes.c_double * self.nu).in_dll(lib, "rhmpc_u_max")).copy()
-        self.u_max.setflags(write=False)
-        size = int(lib.rhmpc_sizeof())
-        self._state = np.zeros(size // 8 + 2, dtype=np.float64)  # 8-byte aligned
+        self.library, self._lib, self.mpc = path, lib, mpc
+        raw = np.zeros(len(_DIMS), dtype=np.intc)
+        lib.rhmpc_dims(raw.ctypes.data)
+        self.dims = dict(zip(_DIMS, (int(v) for v in raw), strict=True))
+        self.N, self.nu, self.span = self.dims["N"], self.dims["NU"], self.dims["SPAN"]
+        public = _public(self.dims)
+        if ctypes.sizeof(public) != lib.rhmpc_public_sizeof():
+            raise ToolchainError(f"library {path}: rhmpc_public_t does not match the binding")
+        self._state = np.zeros(int(lib.rhmpc_sizeof()) // 8 + 2)  # 8-byte aligned
         self._addr = self._state.ctypes.data
-        self._pub = _Public.from_address(self._addr)
-        self._u_in, self._tau = np.zeros(self.nu), np.zeros(self.nu)
-        tick = self._tick_address = ctypes.cast(lib.rhmpc_tick_ext, ctypes.c_void_p).value
-        self._core = step_type(tick, self._addr, (self._state, lib),
-                               (self.N, self.nx, self.nu, self.ny, self.n_extra), self._tau,
-                               self._u_in, np.zeros(self.n_extra), extra_inputs)
-        self.binding = "ctypes" if step_type is _CtypesStep else "extension"
-        self.step = self._core.step  # the binding's own: no Python frame per tick
+        self._pub = public.from_address(self._addr)
+        self._points = np.ctypeslib.as_array(self._pub.points).reshape(self.span, 3)
+        self._points.flags.writeable = False
+        self._q, self._tau, self._z = np.zeros(self.nu), np.zeros(self.nu), np.zeros(3)
+        self.torque_limit = np.ctypeslib.as_array(
+            (ctypes.c_double * self.nu).in_dll(lib, "rhmpc_tau_max")).copy()
+        self._origin = np.zeros(3)
         self.reset()
 
-    def _read_dims(self, expected: tuple[int, int, int, int] | None) -> None:
-        d = np.zeros(9, dtype=np.intc)
-        self._lib.rhmpc_dims(d.ctypes.data)
-        self.N, self.nx, self.nu, self.ny, self.nv, self.m, self.npar, self.nz, self.n_extra = (
-            int(v) for v in d)
-        if expected is not None and tuple(expected) != (self.N, self.nx, self.nu, self.ny):
-            raise ValueError(f"library {self.library} is for (N, nx, nu, ny) = "
-                             f"{(self.N, self.nx, self.nu, self.ny)}, expected {tuple(expected)}")
-
-    def _extra_inputs(self, given: Callable | None) -> Callable | None:
-        """The callable the binding evaluates per tick (None: the library's own inputs); sets
-        :attr:`extra_source`."""
-        source = getattr(self._lib, "rhmpc_extra_source", None)
-        source = EXTRA_SOURCES[source()] if source is not None else "caller"
-        if self.n_extra and given is None and source == "caller":
-            raise ValueError(f"library {self.library} takes {self.n_extra} extra per-tick "
-                             "inputs; give extra_inputs")
-        given = given if self.n_extra else None
-        self.extra_source = "python" if given is not None else source
-        return given
-
-    def reset(self, u_prev: np.ndarray | None = None) -> None:
-        """Forget the plan and warm start, zero the counters, u_{−1} = ``u_prev`` (default 0)."""
+    def reset(self) -> None:
+        """At rest at the home posture: no plan, no points, zero counters (placed as before)."""
         self._lib.rhmpc_init(self._addr)
-        self._tau[:] = 0.0
-        self._core.u_pending = 0
-        if u_prev is not None:
-            self.u_prev = u_prev
+        self.place(self._origin)
+
+    def place(self, origin) -> None:
+        """Where the centred motion sits in the workspace [m]."""
+        self._origin = np.array(origin, dtype=float).reshape(3)
+        self._lib.rhmpc_place(self._addr, self._origin.ctypes.data)
+
+    def refresh(self, tick: int, z: np.ndarray | None, stamp: float,
+                others: np.ndarray | None = None) -> None:
+        """``rhmpc_refresh``: a sample ``z`` (3,) [m] measured at ``stamp`` [s], or None."""
+        if z is None:
+            status = self._lib.rhmpc_refresh(self._addr, tick, stamp, None)
+        else:
+            self._z[:] = z
+            status = self._lib.rhmpc_refresh(self._addr, tick, stamp, self._z.ctypes.data)
+        if status != 0:
+            raise ValueError(f"rhmpc_refresh: the stamp {stamp!r} is not a finite time")
+
+    def step(self, tick: int, q: np.ndarray) -> np.ndarray:
+        """``rhmpc_step``: the torques τ [N·m] from the encoders' angles ``q`` [rad]."""
+        self._q[:] = q
+        self._lib.rhmpc_step(self._addr, tick, self._q.ctypes.data, self._tau.ctypes.data)
+        return self._tau.copy()
+
+    def horizon(self, tick: int) -> np.ndarray:
+        """The points r_{tick+1..tick+N} the step of ``tick`` tracks (a read-only view)."""
+        start = min(max(tick + 1 - self._pub.first, 0), self.span - self.N)
+        return self._points[start : start + self.N]
 
     def force_failures(self, count: int = 1) -> None:
         """Make the next ``count`` solves report ``"injected"`` (the solve still runs)."""
@@ -257,92 +163,76 @@ class CController:
             raise ValueError(f"count must be >= 0, got {count}")
         self._lib.rhmpc_force_failures(self._addr, int(count))
 
-    @property
-    def u_prev(self) -> np.ndarray:
-        """u_{−1} of the next tick [N·m] (the last returned torque unless assigned)."""
-        if self._core.u_pending:
-            return np.clip(self._u_in, -self.u_max, self.u_max)
-        return self._tau.copy()
+    def _vector(self, name: str) -> np.ndarray:
+        return np.array(getattr(self._pub, name))
 
-    @u_prev.setter
-    def u_prev(self, value: np.ndarray) -> None:
-        value = np.asarray(value, dtype=float)
-        if value.shape != (self.nu,) or not np.all(np.isfinite(value)):
-            raise ValueError(f"u_prev must be {self.nu} finite torques [N·m], got {value!r}")
-        self._u_in[:] = value
-        self._core.u_pending = 1
-
-    def take_u_prev(self) -> np.ndarray | None:
-        """The u_{−1} assigned for the next tick (:attr:`u_prev`, :meth:`reset`), handed over
-        once to a caller that runs the tick itself (:attr:`compiled_tick`); None if none."""
-        if not self._core.u_pending:
-            return None
-        self._core.u_pending = 0
-        return self._u_in
+    u = property(lambda self: self._vector("u"), doc="The last MPC torque [N·m].")
+    tau_command = property(lambda self: self._vector("tau_command"),
+                           doc="The last torque before the clip [N·m].")
+    x_hat = property(lambda self: self._vector("x_hat"), doc="The last state estimate.")
+    saturated = property(lambda self: bool(self._pub.saturated))
+    step_ns = property(lambda self: int(self._pub.step_ns), doc="The last step's time [ns].")
+    refresh_ns = property(lambda self: int(self._pub.refresh_ns),
+                          doc="The last refresh's time [ns].")
 
     @property
-    def compiled_tick(self) -> CompiledTick | None:
-        """The tick as a C function for a loop in C (:class:`CompiledTick`), or None when its
-        extra inputs come from Python (``extra_source == "python"``). Such a loop leaves
-        :attr:`call_ns` alone; the counters and :attr:`u_prev` follow its ticks."""
-        if self.extra_source == "python":
-            return None
-        return CompiledTick(self._tick_address, self._addr, self._tau, self.take_u_prev,
-                            (self.N, self.nx, self.nu, self.ny))
-
-    def step(self, x: np.ndarray, ref: np.ndarray) -> np.ndarray:
-        """One tick in C: τ_mpc (nu,) [N·m] for ``x`` (nx,) and ``ref`` (N, 3), as ``mpc.step``.
-
-        A new array on every call. An instance's ``step`` is its binding's own method (bound in
-        ``__init__``); this one documents it and forwards to it.
-        """
-        return self._core.step(x, ref)
+    def predictor_counts(self) -> Counter:
+        """The reference's events, with the Python predictor's names."""
+        return Counter({name: int(n) for name, n in zip(COUNT_NAMES, self._pub.counts,
+                                                        strict=True) if n})
 
     @property
-    def call_ns(self) -> int:
-        """Duration of the last ``step`` inside the binding, the tick included [ns]."""
-        return int(self._core.call_ns)
+    def gate_floor(self) -> float | None:
+        floor = float(self._pub.gate_floor)
+        return None if not np.isfinite(floor) else floor
 
     @property
-    def tick_ns(self) -> int:
-        return int(self._pub.tick_ns)
-
-    @property
-    def screened(self) -> int:
-        """Ticks solved by screening (OSQP not called) since the last reset."""
-        return int(self._pub.screened)
-
-    @property
-    def boxed(self) -> int:
-        """Ticks solved by level 2 of the screening cascade (the torque-box QP)."""
-        return int(self._pub.boxed)
-
-    @property
-    def level(self) -> int:
-        """Cascade level of the last tick's QP solution (1, 2, 3; 0 = no QP)."""
-        return int(self._pub.level)
-
-    @property
-    def source(self) -> str:
-        """Where the last torque came from: ``"qp"``, ``"plan"``, ``"lq"`` or ``"zero"``."""
-        return SOURCE_NAMES[self._pub.source] if self._pub.ticks else "none"
-
-    @property
-    def status(self) -> str:
-        """Last tick: ``"solved"`` or the reason the QP result was not used."""
-        return STATUS_NAMES[self._pub.status] if self._pub.ticks else "none"
+    def mean_age(self) -> float:
+        count = self._pub.age_count
+        return self._pub.age_sum / count if count else float("nan")
 
     @property
     def stats(self) -> MPCStats:
-        """The counters in the form of :class:`MPCStats` (``parts_ns[0]`` = the C tick)."""
+        """The counters in the form of :class:`MPCStats` (``parts_ns[0]`` = the C step)."""
         pub = self._pub
-        failures = {STATUS_NAMES[i]: int(n) for i, n in enumerate(pub.failures) if n}
-        # the sources the Python controller's statistics have (which fallbacks it knows)
-        fallbacks = {name: int(pub.fallbacks[SOURCE_NAMES.index(name)])
-                     for name in MPCStats().fallbacks}
+        ticks = int(pub.ticks)
         return MPCStats(
-            ticks=int(pub.ticks), status=self.status, source=self.source,
+            ticks=ticks, status=STATUS_NAMES[pub.status] if ticks else "none",
+            source=SOURCE_NAMES[pub.source] if ticks else "none",
             iterations=int(pub.iterations), screened=int(pub.screened), boxed=int(pub.boxed),
             level=int(pub.level), box_iterations=int(pub.box_iterations), solve_time=0.0,
-            parts_ns=[int(pub.tick_ns), 0, 0, 0], failures=failures, fallbacks=fallbacks,
+            parts_ns=[int(pub.step_ns), 0, 0, 0],
+            failures={STATUS_NAMES[i]: int(n) for i, n in enumerate(pub.failures) if n},
+            fallbacks={name: int(pub.fallbacks[SOURCE_NAMES.index(name)])
+                       for name in MPCStats().fallbacks},
         )
+
+
+def build_library(controller, robot: str) -> Path:
+    """Export ``controller`` and build its shared library, once per distinct export (the cache
+    of :mod:`rhmpc.compiled`); raises :class:`ToolchainError` or :class:`ExportError`."""
+    with tempfile.TemporaryDirectory(prefix="rhmpc-export-") as tmp:
+        out = Path(tmp)
+        _generate_into(controller, robot, out)
+        sources = [out / n for n in ("rhmpc.c", "rhmpc_mpc.c", "rhmpc_reference.c",
+                                     "rhmpc_model.c", "rhmpc_data.c",
+                                     "osqp/rhmpc_osqp_workspace.c")]
+        sources += sorted((out / "osqp" / "src").glob("*.c"))
+        include = (out, out / "osqp", out / "osqp" / "inc" / "public",
+                   out / "osqp" / "inc" / "private")
+        library, reason = build(sources, "rhmpc-controller", include)
+    if library is None:
+        raise ToolchainError(reason)
+    return library
+
+
+def controller_in_c(controller, robot: str) -> CController:
+    """The C of ``controller`` (a :class:`~rhmpc.control.controller.Controller` whose reference
+    is placed), built and loaded, placed where the Python one is."""
+    try:
+        library = build_library(controller, robot)
+    except ExportError as exc:
+        raise ExportError(f"--controller c: {exc}") from None
+    c = CController(library, controller.mpc)
+    c.place(controller.reference._origin)
+    return c

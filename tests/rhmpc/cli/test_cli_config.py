@@ -10,7 +10,7 @@ import pytest
 from rhmpc.cli import main
 from rhmpc.cli.config import attribute_docs, summary, unit_of
 from rhmpc.cli.presets import PRESETS
-from rhmpc.cli.simulate import DEFAULT_DURATION, DEFAULT_SETTLING
+from rhmpc.control.reference import ReferenceSettings
 from rhmpc.experiment import RunConfig, load_config
 from rhmpc.experiment.config import SECTIONS
 from sim.loop import LoopSettings
@@ -26,13 +26,11 @@ def _show(capsys, tmp_path: Path, *argv: str) -> tuple[str, RunConfig]:
 
 def test_show_round_trips_to_the_same_settings(capsys, tmp_path: Path) -> None:
     _, config = _show(capsys, tmp_path)
-    assert config == RunConfig().replace(**{"loop.duration": DEFAULT_DURATION,
-                                            "loop.settling": DEFAULT_SETTLING})
+    assert config == RunConfig()  # the defaults of every command
     _, config = _show(capsys, tmp_path, "--preset", "tuna2013", "--set", "predictor=ekf",
                          "--set", "sensor_settings.playback=\"hold\"", "--set",
                          "mpc.blocks=[25, 25]", "--set", "loop.poi_offset=[0.001, 0.0, 0.0]")
     expected = RunConfig().replace(**{
-        "loop.duration": DEFAULT_DURATION, "loop.settling": DEFAULT_SETTLING,
         **PRESETS["tuna2013"], "predictor": "ekf", "sensor_settings.playback": "hold",
         "mpc.blocks": (25, 25), "loop.poi_offset": (1e-3, 0.0, 0.0)})
     assert config == expected
@@ -49,9 +47,10 @@ def test_show_states_unit_default_and_source(capsys, tmp_path: Path) -> None:
 
     assert "[-] — default 0.0001, source: preset tuna2013" in comment("effort_weight = 50.0")
     assert "default 0.1, source: --set" in comment("rate_weight = 0.3")
-    assert comment("Ts = 0.0005").startswith("# Control period (2 kHz in the paper) [s]")
+    assert comment("Ts = 0.0005").startswith("# Control period (0.5 ms: 2 kHz in Tuna et al.")
     assert "[m/s]" in comment("guard_speed = 0.3")
-    assert "source: rhmpc simulate" in comment(f"duration = {DEFAULT_DURATION}")
+    assert "[s] — default 30.0, source: default" in comment("duration = 30.0")
+    assert "osqp.rho" not in text and "[mpc.osqp]" in lines and "rho = 3.0" in lines
     assert "# joint_lower =   (unset)" in lines  # unset keys stay out, commented
     for section in SECTIONS:
         assert f"[{section}]" in lines
@@ -61,12 +60,13 @@ def test_show_states_unit_default_and_source(capsys, tmp_path: Path) -> None:
 def test_units_come_from_the_attributes_sections() -> None:
     docs = attribute_docs(LoopSettings)
     assert {f.name for f in dataclasses.fields(LoopSettings)} <= set(docs)
-    assert unit_of(docs["outlier_gate"][1]) == "m"
+    assert unit_of(attribute_docs(ReferenceSettings)["outlier_gate"][1]) == "m"
     assert unit_of(docs["downsample"][1]) is None
     assert unit_of("R[0] = δ I [m²]; tiny") == "m²"  # an index is no unit
     assert unit_of("the step is ``Ts / substeps`` [s].") is None  # the literal's unit
     assert summary("Ticks between updates (15 → 7.5 ms, Tuna et al. Fig. 9). More.") == \
         "Ticks between updates (15 → 7.5 ms, Tuna et al. Fig. 9)"
+    assert summary("One. Two.", long=True) == "One. Two."
 
 
 @pytest.mark.parametrize("section", list(SECTIONS))
@@ -86,7 +86,8 @@ def test_unknown_keys_list_the_valid_ones(capsys, tmp_path: Path, section: str) 
 
 def test_unknown_sections_and_top_level_keys(capsys) -> None:
     assert main(["simulate", "--set", "foo.bar=1"]) == 2
-    assert "unknown section 'foo' in foo.bar; valid sections: loop, mpc" in capsys.readouterr().err
+    assert "unknown section 'foo' in foo.bar; valid sections: loop, reference, mpc" in \
+        capsys.readouterr().err
     assert main(["config", "show", "--set", "nope=1"]) == 2
     assert "unknown setting(s) nope; valid: data, data_read" in capsys.readouterr().err
     assert main(["config"]) == 2

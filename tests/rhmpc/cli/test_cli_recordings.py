@@ -27,9 +27,10 @@ def _args(*argv: str) -> argparse.Namespace:
 def test_default_duration_is_the_recording(tmp_path: Path) -> None:
     path = tmp_path / "rec.mat"
     scipy.io.savemat(path, {"X": X})
-    config = config_from_args(_args("--data", str(path), "--var", "X", "--rate", "100"))
+    config = config_from_args(_args("--data", str(path), "--var", "X", "--rate", "100",
+                                    "--units", "mm"))
     assert config.loop.duration == pytest.approx(19.99)
-    assert config.data_read == {"var": "X", "rate": 100.0}
+    assert config.data_read == {"var": "X", "rate": 100.0, "units": "mm"}
     csv = tmp_path / "rec.csv"
     t = np.arange(0, 20, 1 / 400)  # spans 19.9975 s
     csv.write_text("t,x,y,z\n" + "".join(f"{ti:.4f},1,2,3\n" for ti in t))

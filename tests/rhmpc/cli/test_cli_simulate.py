@@ -130,20 +130,18 @@ def test_compare_bad_options_exit_2_before_running(capsys, argv, message):
     assert code == 2 and message in err, err
 
 
-def test_the_summary_says_what_ran_in_c(capsys):
-    """The wall-time line names the compiled refresh and where the control ticks and the
-    refresh slices ran (the run document's ``refresh`` and ``tick_loop``)."""
-    from rhmpc.control.compiled_reference import load_library
+def test_the_summary_says_where_the_motion_is_and_what_ran(capsys):
+    """The summary states the motion's placement (re-centred on its mean unless set absolute),
+    the speed against real time and, with ``--controller c``, that the exported C ran."""
     from rhmpc.studies.run_report import format_summary
 
     code, out, _ = run_cli(capsys, "simulate", "--predictor", "generalized", *FAST, "--json")
     assert code == 0
     doc = json.loads(out)
-    wall = {k: next(line for line in format_summary({**doc, "tick_loop": k}).splitlines()
-                    if "wall time" in line) for k in ("python", "compiled",
-                                                      "compiled with the refresh")}
-    assert "in C" not in wall["python"].replace("predictor refresh in C", "")
-    assert "control ticks in C between the refresh slices" in wall["compiled"]
-    assert "control ticks and refresh slices in C" in wall["compiled with the refresh"]
-    if load_library() is not None:
-        assert doc["refresh"] == "compiled" and "predictor refresh in C" in wall["python"]
+    text = format_summary(doc)
+    assert "centred on its mean" in text and 'loop.placement = "absolute"' in text
+    assert "than real time" in text and "in C" not in text
+    absolute = {**doc, "settings": {**doc["settings"], "loop": {
+        **doc["settings"]["loop"], "placement": "absolute"}}}
+    assert "own coordinates" in format_summary(absolute)
+    assert "the controller in C" in format_summary({**doc, "implementation": "c"})

@@ -130,7 +130,7 @@ def test_several_points_predict_and_compare(tmp_path: Path,
     t = np.arange(0.0, 5.0, 1 / 25.0)
     X = np.vstack([heart(t, seed=k).T for k in range(4)])  # x1, y1, z1, x2, …
     path = tmp_path / "points.mat"
-    scipy.io.savemat(path, {"X": X})
+    scipy.io.savemat(path, {"X": X, "units": "mm"})
     argv = ["predict", "--data", str(path), "--rate", "25", "--predictors", "hold,one-step",
             "--warmup", "2", "--leads", "2"]
     assert main(argv) == 2
@@ -164,3 +164,52 @@ def test_rr_mitdb_100_from_outside_the_repository(tmp_path: Path,
     assert main(["predict", "--study", "rr", "--records", "1003", "--trials", "1",
                  "--predictors", "last-cycle", "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["rows"]
+
+
+@pytest.fixture(scope="module")
+def surface(tmp_path_factory) -> Path:
+    """A 12 × 400 MAT file (mm, 25 frames/s) of four points of one surface."""
+    from tests.predictors.helpers import tracked_points
+
+    pts = 1e3 * tracked_points(400, 0.04, seed=2, noise=20e-6)  # (T, 4, 3) [mm]
+    path = tmp_path_factory.mktemp("surface") / "surface.mat"
+    scipy.io.savemat(path, {"measures": pts.reshape(400, 12).T})
+    return path
+
+
+def test_predict_the_literatures_protocol(surface: Path, tmp_path: Path,
+                                          capsys: pytest.CaptureFixture[str]) -> None:
+    png = tmp_path / "leads.png"
+    argv = ["predict", "--data", str(surface), "--poi", "4", "--split", "250:350", "--leads",
+            "4", "--rate", "25", "--units", "mm", "--predictors",
+            "hold,one-step,st-rls,st-ridge,combination"]
+    assert main([*argv, "--json", "--plot", str(png)]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert png.stat().st_size > 0 and doc["protocol"] == "split"
+    fam = {r["predictor"]: r["family"] for r in doc["results"]}
+    assert fam == {"hold": "baseline", "one-step": "adaptive", "st-rls": "multi-point",
+                   "st-ridge": "learned", "combination": "combination"}
+    assert {r["source"] for r in doc["results"]} == {"surface.mat:p4"}
+    assert all(r["scored"] == 100 for r in doc["results"])
+    assert main([*argv, "--train", str(surface)]) == 0
+    out = capsys.readouterr().out
+    assert "fitted on training recordings" in out and "multi-point" in out
+
+
+@pytest.mark.parametrize(("extra", "message"), [
+    (["--poi", "4", "--points", "all"], "choose one"),
+    (["--poi", "0"], "numbered from 1"),
+    (["--poi", "5"], "no point 5"),
+    (["--poi", "4", "--split", "600"], "expected TRAIN:END"),
+    (["--poi", "4", "--split", "300:200"], "0 < TRAIN < END"),
+    (["--poi", "4", "--split", "500:600"], "the split starts scoring at sample 500"),
+    (["--poi", "4", "--split", "250:350", "--warmup", "2"], "takes no warm-up"),
+    (["--poi", "4", "--predictors", "st-ridge", "--warmup", "2"], "fitted before the run"),
+    (["--poi", "4", "--split", "250:350", "--train", "nope.mat"], "nope.mat: no such file"),
+])
+def test_protocol_refusals_are_one_line_exit_2(surface: Path, capsys: pytest.CaptureFixture[str],
+                                               extra: list[str], message: str) -> None:
+    argv = ["predict", "--data", str(surface), "--rate", "25", "--units", "mm", *extra]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and len(err.splitlines()) == 1 and "Traceback" not in err, err

@@ -12,12 +12,13 @@ import dataclasses
 import numpy as np
 import pytest
 
+from rhmpc.control.cancellation import NonlinearityCancellation
 from rhmpc.control.envelope import envelope_rows
 from rhmpc.control.fallback import brake_torque
 from rhmpc.control.mpc import RecedingHorizonMPC
 from rhmpc.control.settings import MPCSettings
 from robots import load_robot
-from sim.plant import ArmPlant, NonlinearityCancellation
+from sim.plant import ArmPlant
 
 N = 50
 

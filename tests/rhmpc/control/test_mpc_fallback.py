@@ -87,7 +87,8 @@ def test_failure_without_a_plan_uses_the_clipped_lq_input(arm, mpc):
 
 
 def test_real_solver_failure_max_iter_takes_the_fallback(arm):
-    mpc = RecedingHorizonMPC(arm, MPCSettings(solver="osqp", max_iter=1, check_termination=1,
+    mpc = RecedingHorizonMPC(arm, MPCSettings(solver="osqp", max_iter=1,
+                                              osqp={"check_termination": 1},
                                               box_screening=False))  # level 3 on bound ticks
     x = np.zeros(6)
     for k in range(5):
@@ -100,7 +101,7 @@ def test_real_solver_failure_max_iter_takes_the_fallback(arm):
 
 
 def test_time_limit_failure_takes_the_fallback(arm):
-    mpc = RecedingHorizonMPC(arm, MPCSettings(solver="osqp", time_limit=1e-7,  # 0.1 µs
+    mpc = RecedingHorizonMPC(arm, MPCSettings(solver="osqp", osqp={"time_limit": 1e-7},  # 0.1 µs
                                               box_screening=False))  # level 3 on bound ticks
     ref = np.tile(arm.y0 + np.array([3e-3, 0.0, 0.0]), (mpc.N, 1))
     for _ in range(3):
@@ -153,7 +154,8 @@ def _raise():
     ("infeasible", "primal_infeasible"),
 ])
 def test_injected_solver_faults_apply_the_shifted_plan(arm, monkeypatch, solver, fault, reason):
-    mpc = RecedingHorizonMPC(arm, MPCSettings(solver=solver, screening=False))
+    # OSQP on every tick with 100 iterations (not the real-time bound): only the faults fail
+    mpc = RecedingHorizonMPC(arm, MPCSettings(solver=solver, screening=False, max_iter=100))
     nv, m = mpc.qp.nv, mpc.qp.A.shape[0]
     fakes = {
         "exception": _raise,
@@ -206,7 +208,7 @@ def _warm_start_run(arm, mode):
     import daqp
 
     mpc = RecedingHorizonMPC(arm, MPCSettings(solver="osqp", warm_start=mode, screening=False,
-                                              offset_correction=False))
+                                              offset_correction=False, max_iter=100))
     qp = mpc.qp
     x = np.zeros(6)
     iters, errs = [], []
@@ -259,9 +261,9 @@ def test_returned_torque_is_not_aliased(arm, mpc):
         {"torque_margin": -0.1},
         {"terminal": "lqr"},
         {"warm_start": "hot"},
-        {"eps_abs": 0.0, "eps_rel": 0.0},
+        {"osqp": {"eps_abs": 0.0, "eps_rel": 0.0}},
         {"max_iter": 0},
-        {"rho": 0.0},
+        {"osqp": {"rho": 0.0}},
         {"joint_lower": (0.0, 0.0, 0.0)},
         {"joint_lower": (1.0,), "joint_upper": (0.0,)},
         {"plan_fallback_ticks": -1},
@@ -300,9 +302,10 @@ def test_settings_that_do_not_fit_the_arm_raise_at_build_time(arm):
 
 
 def test_settings_round_trip_through_a_dict():
-    s = MPCSettings(point_weights=tuple(np.linspace(1, 0.5, 50)), rho=1.5)
+    s = MPCSettings(point_weights=tuple(np.linspace(1, 0.5, 50)), osqp={"rho": 1.5})
     d = to_dict(s)
     assert isinstance(d["blocks"], list) and "joint_lower" not in d
+    assert d["osqp"]["rho"] == 1.5
     assert from_dict(MPCSettings, d) == s
     with pytest.raises(ValueError, match="unknown"):
         from_dict(MPCSettings, {"horizon": 50, "rhoo": 1.0})

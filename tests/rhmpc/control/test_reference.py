@@ -3,9 +3,22 @@
 import numpy as np
 import pytest
 
-from rhmpc.control.reference import ExactReference, PredictedReference, quadratic_weights
+from rhmpc.control.reference import (
+    ExactReference,
+    PredictedReference,
+    ReferenceSettings,
+    quadratic_weights,
+)
 
 TS, DS, N = 0.5e-3, 15, 50
+#: No gate, no guard: the interpolation alone.
+PLAIN = ReferenceSettings(outlier_gate=0.0, guard_speed=0.0)
+
+
+def plain(points: int = 4, **changes) -> ReferenceSettings:
+    """The reference without gate and guard, with ``points`` forecast points and ``changes``."""
+    return ReferenceSettings(**{"outlier_gate": 0.0, "guard_speed": 0.0,
+                                "prediction_points": points, **changes})
 
 
 class Scripted:
@@ -41,7 +54,7 @@ def test_weights_reproduce_quadratics_exactly():
 
 def build(f, latency_ticks=0, points=4):
     pred = Scripted(f)
-    ref = PredictedReference(pred, TS, N, DS, points)
+    ref = PredictedReference(pred, TS, N, DS, plain(points))
     for k in range(4):
         tick = k * DS
         stamp = (tick - latency_ticks) * TS
@@ -75,20 +88,26 @@ def test_latency_extends_the_forecast():
     np.testing.assert_allclose(ref.horizon(tick0)[:, 0], f(t), atol=1e-12)
 
 
-def test_missing_samples_keep_a_finite_reference_and_none_before_data():
+def test_missing_samples_keep_a_finite_reference_and_the_origin_before_data():
+    """Before the first sample the points hold the origin, and a missing sample then is no
+    event of the predictor (nothing was lost: nothing had come); after it, a missing sample
+    runs the predictor open-loop."""
     f = lambda t: np.sin(t)  # noqa: E731
-    ref = PredictedReference(Scripted(f), TS, N, DS)
+    pred = Scripted(f)
+    ref = PredictedReference(pred, TS, N, DS, PLAIN)
+    ref.place(np.array([0.1, 0.2, 0.3]))
     ref.refresh(0, None, 0.0)
-    assert ref.horizon(0) is None
+    np.testing.assert_array_equal(ref.horizon(0), np.tile([0.1, 0.2, 0.3], (N, 1)))
+    assert pred.t is None  # not updated before the first sample
     ref.refresh(DS, np.array([f(DS * TS), DS * TS]), DS * TS)
     ref.refresh(2 * DS, None, 2 * DS * TS)
     h = ref.horizon(2 * DS)
-    assert h.shape == (N, 2) and np.all(np.isfinite(h))
+    assert h.shape == (N, 3) and np.all(np.isfinite(h))
 
 
 def test_predictor_period_must_match():
     with pytest.raises(ValueError, match="refresh_ticks"):
-        PredictedReference(Scripted(np.sin, dt=0.01), TS, N, DS)
+        PredictedReference(Scripted(np.sin, dt=0.01), TS, N, DS, PLAIN)
 
 
 def test_exact_reference_slices_the_truth():
@@ -104,8 +123,8 @@ def test_outlier_gate_rejects_spikes_and_relocks_on_a_real_jump():
 
     dt = DS * TS
     pred = make_predictor("one-step", dt=dt)
-    ref = PredictedReference(pred, TS, N, DS, outlier_gate=1.5e-3, max_rejections=2, relock=20)
-    clean = PredictedReference(make_predictor("one-step", dt=dt), TS, N, DS)
+    ref = PredictedReference(pred, TS, N, DS, plain(outlier_gate=1.5e-3, outlier_max_rejections=2))
+    clean = PredictedReference(make_predictor("one-step", dt=dt), TS, N, DS, PLAIN)
     f = lambda t: 2e-3 * np.sin(2 * np.pi * 1.5 * t)  # noqa: E731
     n = 2000
     spikes = {1500, 1501}
@@ -163,7 +182,7 @@ class Diverging:
 
 def test_reference_guard_holds_the_last_sample_when_the_predictor_diverges():
     pred = Diverging()
-    ref = PredictedReference(pred, TS, N, DS, guard_speed=0.3, guard_margin=2e-3)
+    ref = PredictedReference(pred, TS, N, DS, plain(guard_speed=0.3, guard_margin=2e-3))
     z = np.array([5e-3, -2e-3, 1e-3])
     for k in range(49):
         ref.refresh(k * DS, z, k * DS * TS)
@@ -174,29 +193,28 @@ def test_reference_guard_holds_the_last_sample_when_the_predictor_diverges():
     np.testing.assert_array_equal(h, np.broadcast_to(z, h.shape))  # holds the last sample
     assert pred.n == 1  # restarted from the held sample
     # Without the guard the same forecasts would be handed to the MPC.
-    free = PredictedReference(Diverging(), TS, N, DS)
+    free = PredictedReference(Diverging(), TS, N, DS, PLAIN)
     for k in range(50):
         free.refresh(k * DS, z, k * DS * TS)
     assert np.abs(free.horizon(49 * DS)).max() > 0.01
 
 
-def test_placement_and_batched_horizons_match_single_lookups():
+def test_placement_and_a_skipped_refresh_holds_the_last_window():
     f = np.sin
     origin = np.array([0.1, -0.2, 0.3])
-    ref = PredictedReference(Scripted(f), TS, N, DS, 4)
+    ref = PredictedReference(Scripted(f), TS, N, DS, PLAIN)
     ref.place(origin)
     for k in range(3):
         t = k * DS * TS
         ref.refresh(k * DS, np.array([f(t), t]), t)
     tick = 2 * DS
-    batch = ref.horizons(tick, DS + 20)  # past the next refresh: the last points are held
-    for offset, h in enumerate(batch):
-        np.testing.assert_array_equal(h, ref.horizon(tick + offset))
-    assert batch[0].shape == (N, 3)
-    np.testing.assert_allclose(batch[0][:, 0] - origin[0], f((tick + np.arange(1, N + 1)) * TS),
+    h = ref.horizon(tick)
+    assert h.shape == (N, 3)
+    np.testing.assert_allclose(h[:, 0] - origin[0], f((tick + np.arange(1, N + 1)) * TS),
                                atol=1e-3)
-    np.testing.assert_array_equal(batch[0][:, 2], origin[2])  # 2-D sample: z axis is the origin
-    np.testing.assert_array_equal(batch[-1], batch[DS - 1 + 5])  # held
+    np.testing.assert_array_equal(h[:, 2], origin[2])  # 2-D sample: z axis is the origin
+    np.testing.assert_array_equal(ref.horizon(tick + 1)[:-1], h[1:])  # one tick later
+    np.testing.assert_array_equal(ref.horizon(tick + DS + 5), ref.horizon(tick + DS + 50))
 
     truth = np.arange(300.0)[:, None]
     exact = ExactReference(truth, N)
@@ -244,8 +262,8 @@ def _gated_run(z: np.ndarray, retract: bool, outlier: np.ndarray, k_out: int):
     pred = make_predictor("generalized", dt=dt)
     if not retract:
         pred.retract = lambda: False
-    ref = PredictedReference(pred, TS, N, DS, outlier_gate=0.15e-3, max_rejections=3)
-    clean = PredictedReference(make_predictor("generalized", dt=dt), TS, N, DS)
+    ref = PredictedReference(pred, TS, N, DS, plain(outlier_gate=0.15e-3))
+    clean = PredictedReference(make_predictor("generalized", dt=dt), TS, N, DS, PLAIN)
     worst = 0.0
     for k in range(k_out + 40):
         t = k * dt

@@ -6,11 +6,14 @@ import math
 import numpy as np
 import pytest
 
-from rhmpc.control.mpc import RecedingHorizonMPC
+from predictors import PREDICTORS, Predictor
 from rhmpc.control.reference import ExactReference, PredictedReference
 from rhmpc.experiment import RunConfig, build_run, run_experiment
+from rhmpc.experiment.assembly import build_controller
 from sim.loop import LoopSettings, run_closed_loop
 from sim.loop.closed_loop import poi_truth
+from sim.loop.streams import ArrayTruth
+from sim.plant import make_plant
 from sim.sources import heart_source
 
 DOCUMENTED_KEYS = {
@@ -58,7 +61,7 @@ def test_same_seed_same_numbers_other_seed_other_numbers():
 def test_truth_and_stream_start_together():
     run = build_run(small_config(ground_truth="true"))
     assert run.stream.block(0, 1)[0][0] == 0.0
-    assert run.truth.n_ticks == run.config.loop.ticks + run.config.loop.horizon + 1
+    assert run.truth.n_ticks == run.config.loop.ticks + run.config.mpc.horizon + 1
 
 
 @pytest.mark.parametrize("predictor", ["generalized", "exact"])
@@ -74,13 +77,12 @@ def test_streamed_run_is_the_run_on_whole_arrays(tmp_path, predictor):
     from sim.recordings import RecordedMotion
     from sim.sensors import sensor_from_name
 
-    config = small_config(predictor=predictor, seed=5, **{  # the Python refresh, as below
-        "loop.duration": 4.0, "loop.settling": 1.0, "plant.dynamics": "pinocchio",
-        "loop.compiled_refresh": False})
-    loop, run = config.loop, build_run(config)
+    config = small_config(predictor=predictor, seed=5, **{
+        "loop.duration": 4.0, "loop.settling": 1.0, "plant.dynamics": "pinocchio"})
+    loop, run, N = config.loop, build_run(config), config.mpc.horizon
     streamed = run_closed_loop(  # chunks of 600 ticks: 14 chunk boundaries
-        run.robot, run.arm, run.controller, run.reference, run.truth, None, run.stream, loop,
-        plant_settings=config.plant, trace_file=str(tmp_path / "run.npz"), chunk_ticks=600)
+        run.plant, run.controller, run.truth, run.stream, loop, run.clock, anchor=run.anchor,
+        robot=run.robot, trace_file=str(tmp_path / "run.npz"), chunk_ticks=600)
     doc = streamed.metrics()
 
     run = build_run(config)
@@ -89,26 +91,25 @@ def test_streamed_run_is_the_run_on_whole_arrays(tmp_path, predictor):
     source, origin = heart.motion, heart.origin
     sensor = sensor_from_name("sonomicrometry", dim=source.dim, rate=origin.sensor_rate,
                               upsample=1.0 / loop.Ts)
-    span = loop.duration + (loop.horizon + 1) * loop.Ts
+    span = loop.duration + (N + 1) * loop.Ts
     stream = sensor.measure(source, span, sensor_rng)
     # the target: the recording (the raw samples, before the delivery to 2 kHz), same draws
     raw = dataclasses.replace(sensor, stages=sensor.stages[:-1]).measure(
         source, span, np.random.default_rng(config.seed).spawn(2)[1])
     target = RecordedMotion(raw.t, raw.z)
-    center, truth = poi_truth(target, loop.ticks + loop.horizon + 1, loop.Ts)
+    center, truth = poi_truth(target, loop.ticks + N + 1, loop.Ts)
     if predictor == "exact":
-        reference = ExactReference(truth, loop.horizon)
+        reference = ExactReference(truth, N)
     else:
         dt = loop.downsample * loop.Ts
         reference = PredictedReference(
             make_predictor(predictor, dt=dt, unit=1.0),  # metres, as the loop says
-            loop.Ts, loop.horizon, loop.downsample,
-            loop.prediction_points, outlier_gate=loop.gate_floor,
-            max_rejections=loop.outlier_max_rejections,
-            gate_calibration=math.ceil(loop.gate_calibration / dt),
-            guard_speed=loop.guard_speed, guard_margin=loop.guard_margin)
-    whole = run_closed_loop(run.robot, run.arm, RecedingHorizonMPC(run.arm, config.mpc),
-                            reference, truth, center, stream, loop, plant_settings=config.plant)
+            loop.Ts, N, loop.downsample, config.reference)
+    reference.place(run.anchor)
+    controller = build_controller(config, run.robot, run.arm, reference)
+    whole = run_closed_loop(make_plant(run.robot, run.arm, loop.Ts, config.plant), controller,
+                            ArrayTruth(truth, center), stream, loop, run.clock,
+                            anchor=run.anchor, robot=run.robot)
     for key in ("rms_error_mm", "max_error_mm", "rms_effort_mNm"):
         np.testing.assert_allclose(doc[key], whole.metrics()[key], rtol=1e-9, err_msg=key)
     # every tick on disk, scored on whole arrays, gives the running statistics
@@ -141,26 +142,38 @@ def test_predictor_params_pick_each_predictors_named_set():
     assert chosen.reference.predictor.settings == named("yuen2008")
     mm = build_run(small_config(predictor="ekf", predictor_settings={"unit": 1e-3}))
     assert mm.reference.predictor.settings.unit == 1e-3  # a unit the user sets is kept
-    other = build_run(small_config(predictor="one-step", predictor_params=params,
-                                   **{"loop.compiled_refresh": False}))
+    other = build_run(small_config(predictor="one-step", predictor_params=params))
     assert type(other.reference.predictor).__name__ == "OneStepRLS"
-    assert other.refresh == "python (loop.compiled_refresh = false)"
 
 
-def test_the_rls_predictors_refresh_in_c_and_the_others_say_why_not():
-    """``loop.compiled_refresh`` (default on): the RLS predictors' refresh runs in C
-    (:mod:`rhmpc.control.compiled_reference`) where a compiler is found, and the run's document
-    says so; a predictor without a compiled twin keeps the Python refresh, with the reason."""
-    from rhmpc.control import compiled_reference
+def _rms_with_shifted_forecasts(monkeypatch, predictor: str, shift: float) -> float:
+    """RMS error of a short run whose predictor's forecasts are all moved by ``shift`` [m]."""
+    original = Predictor.predict
 
-    if compiled_reference.load_library() is None:
-        pytest.skip(f"no compiled refresh: {compiled_reference.unavailable_reason}")
-    run = build_run(small_config(predictor="generalized"))
-    assert run.refresh == "compiled"
-    assert type(run.reference).__name__ == "CompiledReference"
-    _, doc = run_experiment(small_config(predictor="one-step"))
-    assert doc["refresh"] == "compiled"
-    assert doc["predictor_counts"]["updates"] > 0 and doc["outlier_gate"] is not None
-    ekf = build_run(small_config(predictor="ekf"))
-    assert ekf.refresh.startswith("python (") and "EKF" in ekf.refresh
-    assert build_run(small_config(predictor="exact")).refresh == "none"
+    def shifted(self, steps):
+        return original(self, steps) + shift
+
+    monkeypatch.setattr(Predictor, "predict", shifted)
+    config = small_config(predictor=predictor, seed=1, **{"loop.duration": 1.2,
+                                                         "loop.settling": 0.6})
+    return run_experiment(config)[1]["rms_error_mm"]
+
+
+def _patched_run_changes(monkeypatch, predictor: str) -> None:
+    """The Python predictor is what runs: 1 mm added to every forecast moves the tool by
+    about 1 mm (the RMS by far more than 0.3 mm)."""
+    plain = _rms_with_shifted_forecasts(monkeypatch, predictor, 0.0)
+    shifted = _rms_with_shifted_forecasts(monkeypatch, predictor, 1e-3)
+    assert abs(shifted - plain) >= 0.3, (plain, shifted)
+
+
+@pytest.mark.parametrize("predictor", ["generalized", "one-step"])
+def test_a_patched_forecast_changes_the_closed_loop_run(monkeypatch, predictor):
+    _patched_run_changes(monkeypatch, predictor)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("predictor", sorted(set(PREDICTORS) - {"exact", "generalized",
+                                                               "one-step"}))
+def test_every_predictors_patched_forecast_changes_the_run(monkeypatch, predictor):
+    _patched_run_changes(monkeypatch, predictor)

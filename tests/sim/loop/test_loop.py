@@ -5,13 +5,22 @@ import dataclasses
 import numpy as np
 import pytest
 
+from rhmpc.control.cancellation import NonlinearityCancellation
+from rhmpc.control.controller import Controller
 from rhmpc.control.mpc import RecedingHorizonMPC
-from rhmpc.control.reference import ExactReference, PredictedReference
+from rhmpc.control.observer import JointObserver
+from rhmpc.control.reference import ExactReference, PredictedReference, ReferenceSettings
 from rhmpc.control.settings import MPCSettings
 from sim.loop import LoopSettings, poi_truth, run_closed_loop
+from sim.loop.clock import predictor_clock
+from sim.loop.streams import ArrayTruth
+from sim.plant import make_plant
 from tests.sim.loop.stand_ins import HarmonicHeart, ideal_stream
 
 SHORT = LoopSettings(duration=3.0, settling=1.0)
+N = 50
+#: The reference of these tests: a fixed gate floor instead of one calibrated on the data.
+GATED = ReferenceSettings(outlier_gate=0.0)
 
 
 @pytest.fixture(scope="module")
@@ -19,27 +28,73 @@ def world(phantom, arm):
     return phantom, arm
 
 
-def run_with(world, reference_of, stream_of=None, settings=SHORT, controller=None):
+def run_with(world, reference_of, stream_of=None, settings=SHORT, failures=0):
+    """A closed loop of ``settings`` on the harmonic heart with the reference ``reference_of``,
+    the default controller (its first ``failures`` solves made to fail) and the ideal plant."""
     robot, arm = world
     src = HarmonicHeart()
-    center, truth = poi_truth(src, settings.ticks + settings.horizon + 1, settings.Ts)
+    center, truth = poi_truth(src, settings.ticks + N + 1, settings.Ts)
     stream = (stream_of or (lambda s: ideal_stream(s, settings.duration + 0.1)))(src)
-    mpc = controller or RecedingHorizonMPC(arm, MPCSettings())
-    return run_closed_loop(robot, arm, mpc, reference_of(truth), truth, center, stream, settings)
+    reference = reference_of(truth)
+    reference.place(arm.y0)
+    controller = Controller(RecedingHorizonMPC(arm, MPCSettings()), reference,
+                            JointObserver(arm, robot.encoder_resolution),
+                            NonlinearityCancellation(robot), robot.torque_limit)
+    controller.mpc.force_failures(failures)
+    return run_closed_loop(make_plant(robot, arm, settings.Ts), controller,
+                           ArrayTruth(truth, center), stream, settings,
+                           predictor_clock(settings, stream), anchor=arm.y0, robot=robot)
 
 
-def predicted(name, **settings):
+def predicted(name, reference=GATED, **settings):
     from predictors import make_predictor
 
     def build(truth):
         pred = make_predictor(name, dt=SHORT.downsample * SHORT.Ts, **settings)
-        return PredictedReference(pred, SHORT.Ts, SHORT.horizon, SHORT.downsample)
+        return PredictedReference(pred, SHORT.Ts, N, SHORT.downsample, reference)
 
     return build
 
 
+class _Spy:
+    """A controller that records the calls of the loop: (kind, tick, stamp)."""
+
+    N = N
+
+    def __init__(self) -> None:
+        self.calls: list = []
+        self.u = self.tau_command = np.zeros(3)
+        self.x_hat = np.zeros(6)
+        self.step_ns = self.refresh_ns = 0
+        self.stats, self.predictor_counts = {}, {}
+
+    def refresh(self, tick, z, stamp, others=None):
+        self.calls.append(("refresh", tick, stamp))
+
+    def step(self, tick, q):
+        self.calls.append(("step", tick, None))
+        return np.zeros(3)
+
+    def horizon(self, tick):
+        return np.zeros((N, 3))
+
+
+def spy_run(stream, settings: LoopSettings) -> list:
+    """The calls a loop makes to its controller on ``stream`` (a linear plant that does not
+    move)."""
+    from robots import linearize, load_robot
+
+    robot = load_robot("phantom")
+    arm = linearize(robot, Ts=settings.Ts)
+    spy = _Spy()
+    truth = np.zeros((settings.ticks + N + 1, 3))
+    run_closed_loop(make_plant(robot, arm, settings.Ts), spy, truth, stream, settings,
+                    predictor_clock(settings, stream), anchor=arm.y0, robot=robot)
+    return spy.calls
+
+
 def test_exact_reference_tracks_far_below_the_heart_amplitude(world):
-    result = run_with(world, lambda truth: ExactReference(truth, SHORT.horizon))
+    result = run_with(world, lambda truth: ExactReference(truth, N))
     m = result.metrics()
     amplitude_mm = 1e3 * np.ptp(result.poi, axis=0).max()
     assert amplitude_mm > 5.0  # measured 11.0
@@ -54,7 +109,7 @@ def test_exact_reference_tracks_far_below_the_heart_amplitude(world):
 
 
 def test_no_prediction_is_much_worse_than_exact(world):
-    exact = run_with(world, lambda truth: ExactReference(truth, SHORT.horizon)).metrics()
+    exact = run_with(world, lambda truth: ExactReference(truth, N)).metrics()
     hold = run_with(world, predicted("hold")).metrics()
     assert hold["rms_error_mm"] > 3 * exact["rms_error_mm"]
 
@@ -110,8 +165,8 @@ def test_outlier_gate_keeps_the_robot_from_chasing_echo_spikes(world):
 
         def build(truth):
             pred = make_predictor("generalized", dt=SHORT.downsample * SHORT.Ts)
-            return PredictedReference(pred, SHORT.Ts, SHORT.horizon, SHORT.downsample,
-                                      outlier_gate=gate)
+            return PredictedReference(pred, SHORT.Ts, N, SHORT.downsample,
+                                      ReferenceSettings(outlier_gate=gate))
         return build
 
     with_gate = run_with(world, gated(1.5e-3), stream_of=spiky)
@@ -126,10 +181,7 @@ def test_outlier_gate_keeps_the_robot_from_chasing_echo_spikes(world):
 
 
 def test_scripted_solver_failures_are_survived_and_counted(world):
-    _robot, arm = world
-    mpc = RecedingHorizonMPC(arm, MPCSettings())
-    mpc.force_failures(40)
-    result = run_with(world, lambda truth: ExactReference(truth, SHORT.horizon), controller=mpc)
+    result = run_with(world, lambda truth: ExactReference(truth, N), failures=40)
     stats = result.controller_stats
     assert stats["failures"].get("injected") == 40
     assert stats["fallback_total"] == 40

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from sim.loop.closed_loop import newest_arrived, poi_truth
+from sim.loop.closed_loop import poi_truth
 from sim.loop.metrics import RunningTracking, TickHistogram, tracking_metrics
 from sim.loop.streams import (
     ArraySamples,
@@ -44,6 +44,11 @@ def test_upsampled_blocks_are_the_whole_stream_to_the_bit(upsample, latency):
         np.testing.assert_array_equal(t, whole.t)
         np.testing.assert_array_equal(z, whole.z)
         np.testing.assert_array_equal(arrival, whole.arrival)
+
+
+def newest_arrived(arrival: np.ndarray, n_ticks: int, Ts: float) -> np.ndarray:
+    """Index of the newest sample arrived by each tick's time (−1 before the first)."""
+    return np.searchsorted(arrival, np.arange(n_ticks) * Ts + 1e-12, side="right") - 1
 
 
 def test_cursor_finds_the_newest_arrived_sample_of_the_whole_stream():

@@ -1,26 +1,23 @@
 """The hardware-like plant, each effect against an independent reference."""
 
 import math
-from types import SimpleNamespace
 
 import numpy as np
 import pinocchio as pin
 import pytest
 
+from rhmpc.control.cancellation import ModelMismatch, NonlinearityCancellation
+from rhmpc.control.observer import JointObserver
 from robots import Robot, linearize
-from robots.linearize import zoh
-from sim.plant import HardwareSettings, ModelMismatch, PlantSettings
-from sim.plant.cancellation import NonlinearityCancellation
+from sim.plant import HardwareSettings, PlantSettings, make_plant
 from sim.plant.hardware import (
-    HardwareTick,
-    LinearTick,
+    HardwarePlant,
+    LinearPlant,
     cable_stiffness,
     dac,
     lagged,
     stribeck,
 )
-from sim.plant.observer import JointObserver
-from sim.plant.tick import make_tick
 
 TS = 0.5e-3
 J_LINK, J_ROTOR, ETA, KT = 2.0e-3, 1.5e-4, 10.0, 0.0234
@@ -47,25 +44,37 @@ def drum(coulomb: float = 0.0) -> Robot:
                  gear_ratio=np.array([ETA]), rotor_inertia=np.array([J_ROTOR]))
 
 
-def tick_of(robot: Robot, **settings) -> HardwareTick:
-    Ac, Bc = np.array([[0.0, 1.0], [0.0, 0.0]]), np.array([[0.0], [1.0 / (J_LINK + J_ROTOR)]])
-    A, B = zoh(Ac, Bc, TS)
-    arm = SimpleNamespace(A=A, B=B, q0=np.zeros(1), Ts=TS, nu=1)  # the drum's double integrator
+def tick_of(robot: Robot, **settings) -> HardwarePlant:
     hardware = HardwareSettings(**{**BARE, "torque_constant": KT, **settings})
-    nothing = ModelMismatch(friction_scale=0.0)  # the drum has no gravity: nothing cancelled
-    return HardwareTick(robot, TS, hardware, NonlinearityCancellation(robot, nothing),
-                        JointObserver(arm, None))
+    return HardwarePlant(robot, TS, hardware)
 
 
-def drive(tick: HardwareTick, torques) -> np.ndarray:
-    """Apply MPC torques tick by tick (nothing to cancel on the drum); the link angles."""
+def drive(plant: HardwarePlant, torques) -> np.ndarray:
+    """Apply torques tick by tick (the drum has no gravity: nothing to cancel); the link
+    angles."""
     out = []
     for u in torques:
-        tick.sense()
-        tick.actuate(np.atleast_1d(u))
-        tick.advance()
-        out.append(tick.q_arm[0])
+        plant.encoders()
+        plant.step(np.atleast_1d(u))
+        out.append(plant.q_arm[0])
     return np.array(out)
+
+
+def hold_home(robot: Robot, arm, plant, ticks: int, u_of=lambda i: 0.0,
+              mismatch: ModelMismatch | None = None) -> list:
+    """The controller's observer and cancellation around ``plant`` with the MPC torque
+    ``u_of(i)``: the arm's states after each tick."""
+    cancel = NonlinearityCancellation(robot, mismatch)
+    observer = JointObserver(arm, robot.encoder_resolution)
+    states = []
+    for i in range(ticks):
+        q = plant.encoders()
+        x = observer.correct(q)
+        u = np.broadcast_to(np.asarray(u_of(i), dtype=float), (robot.nv,))
+        plant.step(cancel.torque(q, x[robot.nv :], u))
+        observer.predict(u)
+        states.append(np.r_[plant.q_arm, plant.v, plant.theta_r, plant.current])
+    return states
 
 
 def test_delay_shifts_the_torque_by_one_tick_exactly():
@@ -81,12 +90,12 @@ def test_dac_rounds_to_its_step_and_clips():
     i = np.array([0.4 * step, 0.6 * step, -1.49 * step, 7.0, -7.0])
     np.testing.assert_allclose(dac(i, 12, 5.5), [0.0, step, -step, 5.5, -5.5])
     np.testing.assert_array_equal(dac(i[:3], 0, 5.5), i[:3])
-    tick = tick_of(drum(), dac_bits=12, dac_range=5.5)
-    tick.sense(), tick.actuate(np.array([0.6 * step * ETA * KT])), tick.advance()
-    assert tick.current[0] == pytest.approx(step, rel=1e-12)  # τ_e = 0: the DAC's output
-    assert not tick.saturated
-    tick.sense(), tick.actuate(np.array([6.0 * ETA * KT])), tick.advance()
-    assert tick.saturated and tick.current[0] == 5.5
+    plant = tick_of(drum(), dac_bits=12, dac_range=5.5)
+    plant.step(np.array([0.6 * step * ETA * KT]))
+    assert plant.current[0] == pytest.approx(step, rel=1e-12)  # τ_e = 0: the DAC's output
+    assert not plant.saturated
+    plant.step(np.array([6.0 * ETA * KT]))
+    assert plant.saturated and plant.current[0] == 5.5
 
 
 def test_current_and_motion_follow_the_first_order_lag():
@@ -117,7 +126,7 @@ def test_cable_resonance_is_the_two_mass_frequency():
         tick.theta_r = np.array([1e-3])  # a twisted cable, released
         twist = []
         for _ in range(400):
-            tick.advance()
+            tick.step(np.zeros(1))
             twist.append(tick.theta_r[0] - tick.q_arm[0])
         crossings = np.flatnonzero(np.diff(np.sign(twist)) != 0)
         measured = (len(crossings) - 1) / (2 * TS * (crossings[-1] - crossings[0]))
@@ -162,52 +171,44 @@ def test_hardware_plant_needs_drives(arm):
 
     ur5 = load_robot("ur5")
     with pytest.raises(ValueError, match="needs the robot's drives"):
-        make_tick(ur5, linearize(ur5), TS, PlantSettings(model="hardware"))
+        make_plant(ur5, linearize(ur5), TS, PlantSettings(model="hardware"))
 
 
 def test_phantom_rests_at_home_under_its_own_cancellation(phantom, arm):
     """Default hardware plant (delay, DAC, lag, stiction), the controller's model the plant's:
     at rest with zero MPC torque the tip stays within 0.02 mm over 1 s (what is left: the DAC's
     rounding of the gravity torque, creeping against the smoothed friction)."""
-    tick = make_tick(phantom, arm, TS, PlantSettings(model="hardware"))
-    assert isinstance(tick, HardwareTick)
-    drift = 0.0
-    for _ in range(2000):
-        tick.sense(), tick.actuate(np.zeros(3)), tick.advance()
-        drift = max(drift, np.linalg.norm(phantom.ee_position(tick.q_arm)
-                                          - phantom.ee_position(phantom.q0)))
+    plant = make_plant(phantom, arm, TS, PlantSettings(model="hardware"))
+    assert isinstance(plant, HardwarePlant)
+    states = hold_home(phantom, arm, plant, 2000)
+    drift = max(np.linalg.norm(phantom.ee_position(x[:3]) - phantom.ee_position(phantom.q0))
+                for x in states)
     assert drift < 2e-5
 
 
 def test_linear_plant_is_the_mpc_model(phantom, arm):
-    tick = make_tick(phantom, arm, TS, PlantSettings(model="linear"))
-    assert isinstance(tick, LinearTick)
+    plant = make_plant(phantom, arm, TS, PlantSettings(model="linear"))
+    assert isinstance(plant, LinearPlant)
     rng = np.random.default_rng(0)
     x = np.zeros(6)
     for _ in range(50):
         u = rng.normal(size=3) * 0.05
-        tick.sense(), tick.actuate(u), tick.advance()
+        plant.step(u)
         x = arm.A @ x + arm.B @ u
-    np.testing.assert_allclose(tick.q, arm.q0 + x[:3], atol=1e-15)
+    np.testing.assert_allclose(plant.q, arm.q0 + x[:3], atol=1e-15)
 
 
 @pytest.mark.parametrize("cables", [0.0, 80.0])
 def test_compiled_hardware_tick_is_the_pinocchio_one(phantom, arm, cables):
-    """The compiled tick (sim/plant/chain.c hw_integrate) against the Python steps on
+    """The compiled step (sim/plant/chain.c hw_integrate) against the Python steps on
     Pinocchio, rigid and with cables, the controller's model the Çavuşoğlu set: 400 ticks of
-    a swinging torque agree to 1e-13 (rad, rad/s, A; measured ≤ 5e-16)."""
+    a swinging torque agree to 1e-13 (rad, rad/s, A)."""
     hardware = HardwareSettings(cable_resonance=cables)
     mismatch = ModelMismatch(parameters="phantom-cavusoglu")
-    ticks = [make_tick(phantom, arm, TS, PlantSettings(model="hardware", dynamics=d), mismatch,
-                       hardware=hardware) for d in ("pinocchio", "native")]
-    if ticks[1].dynamics != "native":
+    plants = [make_plant(phantom, arm, TS, PlantSettings(model="hardware", dynamics=d),
+                         hardware) for d in ("pinocchio", "native")]
+    if plants[1].dynamics != "native":
         pytest.skip("no compiled chain")
-    worst = 0.0
-    for i in range(400):
-        u = 0.03 * math.sin(i / 20.0) * np.array([1.0, 0.5, -0.7])
-        for tick in ticks:
-            tick.sense(), tick.actuate(u), tick.advance()
-        a, b = ticks
-        worst = max(worst, np.abs(np.r_[a.q_arm - b.q_arm, a.v - b.v, a.theta_r - b.theta_r,
-                                        a.current - b.current]).max())
-    assert worst < 1e-13
+    swing = lambda i: 0.03 * math.sin(i / 20.0) * np.array([1.0, 0.5, -0.7])  # noqa: E731
+    a, b = (hold_home(phantom, arm, plant, 400, swing, mismatch) for plant in plants)
+    assert np.abs(np.array(a) - np.array(b)).max() < 1e-13

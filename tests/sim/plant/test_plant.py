@@ -4,8 +4,9 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from rhmpc.control.cancellation import ModelMismatch, NonlinearityCancellation
 from robots import load_robot
-from sim.plant import ArmPlant, ModelMismatch, NonlinearityCancellation, PlantSettings
+from sim.plant import ArmPlant, PlantSettings
 
 TS = 0.5e-3
 REACH = 0.4  # [m] bound on the lever from any joint axis to the PHANToM tip

@@ -4,8 +4,8 @@ velocity estimation from quantised encoders."""
 import numpy as np
 import pytest
 
+from rhmpc.control.observer import JointObserver, ObserverSettings
 from robots import linearize, load_robot
-from sim.plant.observer import JointObserver, ObserverSettings
 
 TS = 0.5e-3
 
