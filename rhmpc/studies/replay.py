@@ -1,0 +1,601 @@
+"""A closed-loop run replayed in 3-D: one HTML page that opens offline in any browser.
+
+:func:`write_replay` draws the arm from its Pinocchio model (links as cylinders between the joint
+frames, joints as short cylinders along their axes), the point of interest (POI), the tool, the
+measured samples and the forecast horizon of each refresh, and animates them at a fixed frame
+rate of simulated time. The page inlines meshcat's three.js viewer (the ``meshcat`` package's
+``main.min.js``), the scene as meshcat commands and the animation as base64 arrays, so it loads
+nothing from the network. Its controls: play and pause (also the space bar), a time slider, the
+playback speed, and two views (the whole arm, a close-up of the POI).
+
+Units: positions in metres (the workspace frame of the run), time in seconds.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import json
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import umsgpack
+
+with warnings.catch_warnings():  # meshcat's package imports its server's deprecated zmq loop
+    warnings.simplefilter("ignore", DeprecationWarning)
+    import meshcat
+    import meshcat.commands as mc
+    import meshcat.geometry as mg
+    from meshcat.path import Path as MeshcatPath
+
+#: Colours of the page (RGB hex), matching the figures of :mod:`rhmpc.studies.figures`.
+COLOURS = {"poi": 0xD62728, "tool": 0x1F77B4, "forecast": 0x2CA02C, "samples": 0xFF7F0E,
+           "link": 0xB8BCC2, "joint": 0x4A4F57}
+#: Path points drawn per animation frame (the POI's and the tool's paths).
+PATH_POINTS_PER_FRAME = 4
+#: Simulated seconds of the bright trail behind the POI and the tool.
+TRAIL_S = 1.0
+#: At most this many points of each forecast horizon are drawn (evenly spaced, both ends kept).
+HORIZON_POINTS = 25
+
+
+@dataclass(frozen=True)
+class ReplayInfo:
+    """What :func:`write_replay` wrote.
+
+    Attributes
+    ----------
+    path : pathlib.Path
+        The HTML file.
+    frames : int
+        Animation frames.
+    start, stop : float
+        The replayed span of the run [s].
+    fps : float
+        Frames per simulated second.
+    size : int
+        File size [bytes].
+    """
+
+    path: Path
+    frames: int
+    start: float
+    stop: float
+    fps: float
+    size: int
+
+
+def write_replay(path: str | Path, result, robot, *, fps: float = 60.0, max_frames: int = 3600,
+                 window: tuple[float, float] | None = None, title: str = "") -> ReplayInfo:
+    """Write a run's 3-D replay as one self-contained HTML file.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The page to write.
+    result : sim.loop.LoopResult
+        The run: its trace (``time``, ``ee``, ``poi`` and ``trace["q"]``, the joint angles),
+        ``settings.Ts``, and where present ``horizons`` = (ticks (R,), points (R, N, 3)), the
+        reference points of each refresh, and ``samples`` = (t (S,), z (S, 3)), the measured
+        samples placed in the workspace [m].
+    robot : robots.Robot
+        The arm the run drove (its Pinocchio model draws and poses it).
+    fps : float
+        Animation frames per simulated second.
+    max_frames : int
+        At most this many frames: a longer run is replayed over its last ``max_frames / fps``
+        seconds (the trace keeps those at full rate).
+    window : tuple of float, optional
+        The span to replay [s]; default: the whole run, or its end as above.
+    title : str
+        The page's heading.
+
+    Returns
+    -------
+    ReplayInfo
+        The file, its frame count, span and size.
+    """
+    if "q" not in result.trace:
+        raise ValueError("the run's trace holds no joint angles (trace['q']): nothing to pose "
+                         "the arm with")
+    t_frames = frame_times(np.asarray(result.time, float), fps, max_frames, window)
+    data = _animation(result, robot, t_frames, fps)
+    data["title"] = title or "rhmpc replay"
+    commands = scene_commands(robot, data.pop("_scene"))
+    page = _page(commands, data)
+    path = Path(path)
+    path.write_text(page, encoding="utf-8")
+    return ReplayInfo(path, t_frames.size, float(t_frames[0]), float(t_frames[-1]), float(fps),
+                      path.stat().st_size)
+
+
+def frame_times(time: np.ndarray, fps: float, max_frames: int,
+                window: tuple[float, float] | None = None) -> np.ndarray:
+    """The instants of the animation frames [s]: ``fps`` a simulated second over ``window``
+    (clipped to the trace), or over the whole trace, or over its last ``max_frames`` frames."""
+    if fps <= 0 or max_frames < 2:
+        raise ValueError("fps must be positive and max_frames at least 2")
+    lo, hi = float(time[0]), float(time[-1])
+    if window is not None:
+        lo, hi = max(lo, float(window[0])), min(hi, float(window[1]))
+        if hi <= lo:
+            raise ValueError(f"window {window} does not overlap the run [{time[0]}, {time[-1]}] s")
+    n = int(np.floor((hi - lo) * fps + 1e-9)) + 1
+    if n > max_frames:
+        lo, n = hi - (max_frames - 1) / fps, max_frames
+    return lo + np.arange(n) / fps
+
+
+def _interp(t: np.ndarray, time: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """``values`` (n, d) sampled at ``time`` (n,), linearly interpolated at ``t``."""
+    return np.stack([np.interp(t, time, values[:, k]) for k in range(values.shape[1])], axis=1)
+
+
+def _animation(result, robot, t_frames: np.ndarray, fps: float) -> dict:
+    """The page's arrays (base64) and numbers, and the scene's static part under ``_scene``."""
+    time = np.asarray(result.time, float)
+    q = _interp(t_frames, time, np.asarray(result.trace["q"], float))
+    poses, placements = joint_poses(robot, q)
+    t_path = t_frames[0] + np.arange((t_frames.size - 1) * PATH_POINTS_PER_FRAME + 1) / (
+        fps * PATH_POINTS_PER_FRAME)
+    poi_path = _interp(t_path, time, np.asarray(result.poi, float))
+    index, horizons = forecast_frames(result, t_frames)
+    samples, sample_counts = _samples(result, t_frames)
+    tool_path = _interp(t_path, time, np.asarray(result.ee, float))
+    scene = {"poi_path": poi_path, "tool_path": tool_path, "samples": samples,
+             "horizon_points": horizons.shape[1] if horizons.size else 2,
+             "placements": placements, "extent": _extent(
+                 np.vstack([poi_path, tool_path, samples]), placements),
+             "marker": float(np.clip(0.03 * _span(poi_path), 3e-4, 1.5e-3))}  # radius [m]
+    centre = np.nan_to_num(np.nanmean(poi_path, axis=0), nan=0.0)
+    return {
+        "frames": int(t_frames.size), "fps": float(fps), "t0": float(t_frames[0]),
+        "path_per_frame": PATH_POINTS_PER_FRAME, "trail": round(TRAIL_S * fps),
+        "joints": [robot.model.names[j] for j in range(1, robot.model.njoints)],
+        "poses": _b64(poses), "poi": _b64(_interp(t_frames, time, np.asarray(result.poi, float))),
+        "horizon_index": _b64(index, np.int32), "horizons": _b64(horizons),
+        "horizon_n": int(horizons.shape[1]) if horizons.size else 0,
+        "sample_counts": _b64(sample_counts, np.int32), "has_samples": bool(samples.size),
+        "centre": centre.tolist(), "arm_centre": (0.5 * (placements[0, :3] + centre)).tolist(),
+        "poi_span": _span(poi_path), "near_dir": _face_on(poi_path).tolist(),
+        "arm_span": _span(np.vstack([placements[:, :3], centre[None]])), "_scene": scene,
+    }
+
+
+def _span(points: np.ndarray) -> float:
+    """The largest extent of finite points along an axis [m] (0 without any)."""
+    finite = points[np.isfinite(points).all(axis=1)]
+    return float(np.ptp(finite, axis=0).max()) if finite.size else 0.0
+
+
+def _b64(array: np.ndarray, dtype=np.float32) -> str:
+    """An array as base64 of its little-endian values (float32 unless told)."""
+    return base64.b64encode(np.ascontiguousarray(array, dtype=np.dtype(dtype).newbyteorder("<"))
+                            .tobytes()).decode("ascii")
+
+
+def joint_poses(robot, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each joint frame's world placement per posture, by Pinocchio's forward kinematics.
+
+    Returns
+    -------
+    poses : numpy.ndarray
+        (F, J, 7): position [m] and unit quaternion (x, y, z, w) of joints 1…J per row of ``q``.
+    home : numpy.ndarray
+        (J, 7): the same at the first posture.
+    """
+    model, data = robot.model, robot.create_data()
+    poses = np.empty((q.shape[0], model.njoints - 1, 7))
+    for f, qf in enumerate(q):
+        pin.forwardKinematics(model, data, qf)
+        for j in range(1, model.njoints):
+            poses[f, j - 1] = pin.SE3ToXYZQUAT(data.oMi[j])
+    return poses, poses[0].copy()
+
+
+def forecast_frames(result, t_frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The newest refresh at each frame: its index into the returned horizons (−1: none yet,
+    or a forecast with a non-finite point), and the (U, n, 3) horizons the frames show [m]
+    (n ≤ :data:`HORIZON_POINTS` of the N points, evenly spaced from the first to the last)."""
+    horizons = getattr(result, "horizons", None)
+    if horizons is None or len(horizons[0]) == 0:
+        return np.full(t_frames.size, -1), np.zeros((0, 0, 3))
+    ticks, points = np.asarray(horizons[0]), np.asarray(horizons[1], float)
+    newest = np.searchsorted(ticks * result.settings.Ts, t_frames + 1e-12, side="right") - 1
+    finite = np.isfinite(points).all(axis=(1, 2))
+    newest = np.where((newest >= 0) & finite[np.maximum(newest, 0)], newest, -1)
+    used, index = np.unique(newest, return_inverse=True)
+    kept = used[used >= 0]
+    index = np.where(newest >= 0, index - (used[0] < 0), -1)
+    n = points.shape[1]
+    leads = np.unique(np.linspace(0, n - 1, min(n, HORIZON_POINTS)).round().astype(int))
+    return index, points[kept][:, leads]
+
+
+def _samples(result, t_frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The finite measured samples within the replayed span (S, 3) [m], and how many of them
+    had arrived at each frame."""
+    samples = getattr(result, "samples", None)
+    if samples is None or len(samples[0]) == 0:
+        return np.zeros((0, 3)), np.zeros(t_frames.size, dtype=np.int32)
+    t, z = np.asarray(samples[0], float), np.asarray(samples[1], float)
+    keep = (t >= t_frames[0]) & (t <= t_frames[-1]) & np.isfinite(z).all(axis=1)
+    t, z = t[keep], z[keep]
+    order = np.argsort(t, kind="stable")
+    return z[order], np.searchsorted(t[order], t_frames + 1e-12, side="right").astype(np.int32)
+
+
+def _extent(points: np.ndarray, placements: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Lower and upper corners of everything drawn [m]."""
+    allp = np.vstack([points[np.isfinite(points).all(axis=1)], placements[:, :3]])
+    return allp.min(axis=0), allp.max(axis=0)
+
+
+def _face_on(path: np.ndarray) -> np.ndarray:
+    """A viewing direction onto the plane the path spans most (its least-variance axis, turned
+    to the viewer's side, −y, and lifted a little)."""
+    finite = path[np.isfinite(path).all(axis=1)]
+    if finite.shape[0] < 3:
+        return np.array([0.5, -1.4, 0.25])
+    normal = np.linalg.svd(finite - finite.mean(axis=0), full_matrices=False)[2][-1]
+    normal = normal if normal[1] <= 0 else -normal
+    return normal + np.array([0.0, 0.0, 0.3])
+
+
+# -- the scene: meshcat commands -------------------------------------------------------------
+
+def scene_commands(robot, scene: dict) -> list[bytes]:
+    """The static scene as meshcat commands (msgpack), in the order the viewer runs them."""
+    cmds = (_setting_commands(scene["extent"]) + _arm_commands(robot, scene)
+            + _path_commands(scene) + _marker_commands(scene))
+    return [umsgpack.packb(c.lower()) for c in cmds]
+
+
+def _path(*parts: str):
+    return MeshcatPath(tuple(p for part in parts for p in part.split("/") if p))
+
+
+def _setting_commands(extent: tuple[np.ndarray, np.ndarray]) -> list:
+    """A light background, and the viewer's floor grid (20 m by 0.5 m) scaled to 1 m by 25 mm
+    just under the lowest drawn point."""
+    grid = np.diag([0.05, 0.05, 0.05, 1.0])
+    grid[2, 3] = float(extent[0][2]) - 0.02
+    return [mc.SetProperty("top_color", [0.97, 0.97, 0.98], _path("Background")),
+            mc.SetProperty("bottom_color", [0.78, 0.81, 0.86], _path("Background")),
+            mc.SetTransform(grid, _path("Grid")),
+            mc.SetProperty("visible", False, _path("Axes"))]
+
+
+def _arm_commands(robot, scene: dict) -> list:
+    """Each joint's group (``meshcat/replay/arm/<joint>``) with its parts at fixed local
+    placements; the player moves the groups."""
+    model = robot.model
+    reach = _reach(robot)
+    link = mg.MeshLambertMaterial(color=COLOURS["link"], transparent=True, opacity=0.55)
+    joint = mg.MeshLambertMaterial(color=COLOURS["joint"])
+    cmds = []
+    for j, parts in arm_parts(robot).items():
+        name = "base" if j == 0 else model.names[j]
+        for k, (kind, a, b) in enumerate(parts):
+            where = _path("meshcat/replay/arm", name, f"{kind}{k}")
+            if kind == "link":
+                geom, mat = mg.Cylinder(float(np.linalg.norm(b - a)), 0.012 * reach), link
+                pose = _segment_pose(a, b)
+            else:  # a joint: a short cylinder along its axis (b) at a
+                geom, mat = mg.Cylinder(0.05 * reach, 0.025 * reach), joint
+                pose = _segment_pose(a - 0.5 * b, a + 0.5 * b)
+            cmds += [mc.SetObject(geom, mat, where), mc.SetTransform(pose, where)]
+    tool = robot.model.frames[robot.ee_frame_id]
+    where = _path("meshcat/replay/arm", model.names[tool.parentJoint], "tool")
+    pose = np.eye(4)
+    pose[:3, 3] = tool.placement.translation
+    cmds += [mc.SetObject(mg.Sphere(scene["marker"]), mg.MeshLambertMaterial(
+        color=COLOURS["tool"]), where), mc.SetTransform(pose, where)]
+    base_pose = np.eye(4)
+    base_pose[:3, 3] = scene["placements"][0, :3]
+    floor = float(scene["extent"][0][2]) - 0.02
+    height = max(base_pose[2, 3] - floor, 1e-3)
+    cmds.append(mc.SetObject(mg.Cylinder(height, 0.06 * reach), joint,
+                             _path("meshcat/replay/arm/base/pedestal")))
+    cmds.append(mc.SetTransform(_segment_pose(np.array([*base_pose[:2, 3], floor]),
+                                              base_pose[:3, 3]),
+                                _path("meshcat/replay/arm/base/pedestal")))
+    return cmds
+
+
+def arm_parts(robot) -> dict[int, list[tuple[str, np.ndarray, np.ndarray]]]:
+    """What draws each joint's body, in the joint's frame: ``("link", a, b)``, a bar from a to b
+    (to each child joint and to each frame placed away from the joint; a body with neither, to
+    twice its centre of mass), and ``("joint", origin, axis)``, the revolute joint itself."""
+    model, data = robot.model, robot.create_data()
+    pin.forwardKinematics(model, data, robot.q0)
+    reach = _reach(robot)
+    parts: dict[int, list] = {j: [] for j in range(1, model.njoints)}
+    zero = np.zeros(3)
+    for j in range(1, model.njoints):
+        axis = np.asarray(data.joints[j].S).reshape(6, -1)[3:, 0]
+        if np.linalg.norm(axis) > 0.5:
+            parts[j].append(("joint", zero, axis / np.linalg.norm(axis)))
+        children = [np.array(model.jointPlacements[c].translation)
+                    for c in range(j + 1, model.njoints) if model.parents[c] == j]
+        ends = [e for e in children + [np.array(f.placement.translation) for f in model.frames
+                                       if f.parentJoint == j and f.type != pin.FrameType.JOINT]
+                if np.linalg.norm(e) > 0.02 * reach]
+        lever = np.array(model.inertias[j].lever)
+        if not children and not ends and np.linalg.norm(lever) > 0.02 * reach:
+            ends = [2.0 * lever]
+        parts[j] += [("link", zero, e) for e in _unique(ends)]
+    return parts
+
+
+def _unique(points: list[np.ndarray]) -> list[np.ndarray]:
+    out: list[np.ndarray] = []
+    for p in points:
+        if all(np.linalg.norm(p - o) > 1e-6 for o in out):
+            out.append(p)
+    return out
+
+
+def _reach(robot) -> float:
+    """The arm's size [m]: the farthest joint or frame origin from the base at home (≥ 0.1 m)."""
+    model, data = robot.model, robot.create_data()
+    pin.framesForwardKinematics(model, data, robot.q0)
+    far = [np.linalg.norm(m.translation) for m in (*data.oMi, *data.oMf)]
+    return max(float(max(far)), 0.1)
+
+
+def _segment_pose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The placement of a three.js cylinder (axis y, centred) that spans from a to b."""
+    d = b - a
+    y = d / np.linalg.norm(d)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(y[0]) < 0.9 else np.array([0.0, 0.0, 1.0])
+    x = np.cross(y, helper)
+    x /= np.linalg.norm(x)
+    pose = np.eye(4)
+    pose[:3, :3] = np.column_stack([x, y, np.cross(x, y)])
+    pose[:3, 3] = 0.5 * (a + b)
+    return pose
+
+
+def _path_commands(scene: dict) -> list:
+    """The POI's and the tool's paths (faint, whole; the player draws the trail) and the
+    measured samples (the player shows those of the trail's span)."""
+    cmds = []
+    for name in ("poi", "tool"):
+        pts = scene[f"{name}_path"].T.astype(np.float32)
+        faint = mg.LineBasicMaterial(color=COLOURS[name], transparent=True, opacity=0.3)
+        bright = mg.LineBasicMaterial(color=COLOURS[name])
+        cmds += [mc.SetObject(mg.Line(mg.PointsGeometry(pts), faint),
+                              path=_path(f"meshcat/replay/{name} path/whole")),
+                 mc.SetObject(mg.Line(mg.PointsGeometry(pts[:, :2]), bright),
+                              path=_path(f"meshcat/replay/{name} path/trail"))]
+    if scene["samples"].size:
+        cmds.append(mc.SetObject(mg.Points(mg.PointsGeometry(
+            scene["samples"].T.astype(np.float32)), _PixelPoints(COLOURS["samples"], 2.5)),
+            path=_path("meshcat/replay/samples")))
+    return cmds
+
+
+def _marker_commands(scene: dict) -> list:
+    """The POI (a sphere the player moves) and the forecast horizon (a line and its points)."""
+    radius = scene["marker"]
+    n = scene["horizon_points"]
+    line = mg.PointsGeometry(np.zeros((3, n), np.float32))
+    return [
+        mc.SetObject(mg.Sphere(radius), mg.MeshLambertMaterial(color=COLOURS["poi"]),
+                     _path("meshcat/replay/poi")),
+        mc.SetObject(mg.Line(line, mg.LineBasicMaterial(color=COLOURS["forecast"])),
+                     path=_path("meshcat/replay/forecast/line")),
+        mc.SetObject(mg.Points(mg.PointsGeometry(np.zeros((3, n), np.float32)),
+                               _PixelPoints(COLOURS["forecast"], 5.0)),
+                     path=_path("meshcat/replay/forecast/points")),
+    ]
+
+
+class _PixelPoints(mg.Material):
+    """Points of one colour and a fixed size on screen [px] (meshcat's own ``PointsMaterial``
+    asks for a colour per vertex)."""
+
+    def __init__(self, color: int, size: float) -> None:
+        super().__init__()
+        self.color, self.size = color, size
+
+    def lower(self, object_data: dict) -> dict:
+        return {"uuid": self.uuid, "type": "PointsMaterial", "color": self.color,
+                "size": self.size, "sizeAttenuation": False}
+
+
+# -- the page ----------------------------------------------------------------------------------
+
+def _viewer_js() -> str:
+    """meshcat's bundled viewer (three.js, its controls and the scene tree), minified."""
+    return (Path(meshcat.viewer_assets_path()) / "dist" / "main.min.js").read_text(
+        encoding="utf-8")
+
+
+def _page(commands: list[bytes], data: dict) -> str:
+    """The HTML: the viewer, the commands and the arrays as JSON, and the player."""
+    data = dict(data, commands=[base64.b64encode(c).decode("ascii") for c in commands])
+    payload = json.dumps(data, separators=(",", ":"), allow_nan=False).replace("</", "<\\/")
+    viewer = _viewer_js()
+    if "</script" in viewer.lower():
+        raise RuntimeError("meshcat's viewer script cannot be inlined (it holds '</script')")
+    return (_TEMPLATE.replace("@TITLE@", html.escape(data["title"]))
+            .replace("@LEGEND@", _legend())
+            .replace("@VIEWER@", viewer)
+            .replace("@DATA@", payload)
+            .replace("@PLAYER@", _PLAYER))
+
+
+def _legend() -> str:
+    items = (("poi", "POI (truth)"), ("tool", "tool"), ("forecast", "forecast horizon"),
+             ("samples", "measured samples"))
+    return "".join(f'<span><i style="background:#{COLOURS[k]:06x}"></i>{label}</span>'
+                   for k, label in items)
+
+
+_TEMPLATE = """<!DOCTYPE html>
+<html lang="en">
+<head>
+<meta charset="utf-8">
+<meta name="viewport" content="width=device-width, initial-scale=1">
+<title>@TITLE@</title>
+<style>
+  body { margin: 0; font: 13px/1.4 system-ui, sans-serif; color: #222; overflow: hidden; }
+  #meshcat-pane { width: 100vw; height: 100vh; overflow: hidden; }
+  #head { position: absolute; left: 10px; top: 8px; background: rgba(255,255,255,.85);
+          padding: 6px 10px; border-radius: 4px; max-width: 60vw; }
+  #head b { display: block; margin-bottom: 2px; }
+  #head span { margin-right: 12px; white-space: nowrap; }
+  #head i { display: inline-block; width: 10px; height: 10px; margin-right: 4px;
+            border-radius: 50%; vertical-align: -1px; }
+  #bar { position: absolute; left: 0; right: 0; bottom: 0; display: flex; gap: 8px;
+         align-items: center; padding: 6px 10px; background: rgba(255,255,255,.9); }
+  #bar input[type=range] { flex: 1; }
+  #bar button, #bar select { font: inherit; }
+  #clock { font-variant-numeric: tabular-nums; min-width: 9em; }
+</style>
+</head>
+<body>
+<div id="meshcat-pane"></div>
+<div id="head"><b>@TITLE@</b>@LEGEND@</div>
+<div id="bar">
+  <button id="play" title="play / pause (space)">Pause</button>
+  <input id="slider" type="range" min="0" value="0" step="1" aria-label="time">
+  <span id="clock">t = 0.000 s</span>
+  <label>speed <select id="speed">
+    <option value="0.1">0.1×</option><option value="0.25">0.25×</option>
+    <option value="0.5">0.5×</option><option value="1" selected>1×</option>
+  </select></label>
+  <button id="view-near" title="close-up of the POI">close-up</button>
+  <button id="view-arm" title="the whole arm">arm</button>
+</div>
+<script>
+@VIEWER@
+</script>
+<script type="application/json" id="replay-data">@DATA@</script>
+<script>
+@PLAYER@
+</script>
+</body>
+</html>
+"""
+
+_PLAYER = r"""
+(function () {
+  "use strict";
+  const D = JSON.parse(document.getElementById("replay-data").textContent);
+  const bytes = (b64) => Uint8Array.from(atob(b64), (c) => c.charCodeAt(0));
+  const f32 = (b64) => new Float32Array(bytes(b64).buffer);
+  const i32 = (b64) => new Int32Array(bytes(b64).buffer);
+  const viewer = new MeshCat.Viewer(document.getElementById("meshcat-pane"));
+  for (const c of D.commands) viewer.handle_command_bytearray(bytes(c));
+  const node = (p) => viewer.scene_tree.find(p.split("/"));
+  const object = (p) => node("meshcat/replay/" + p + "/<object>").object;
+
+  const F = D.frames, J = D.joints.length, N = D.horizon_n;
+  const poses = f32(D.poses), poi = f32(D.poi), horizons = f32(D.horizons);
+  const hindex = i32(D.horizon_index), scount = i32(D.sample_counts);
+  const groups = D.joints.map((name) => node("meshcat/replay/arm/" + name).object);
+  const poiMarker = node("meshcat/replay/poi").object;
+  const fLine = object("forecast/line"), fPoints = object("forecast/points");
+  fPoints.geometry = fLine.geometry;
+  const trails = ["poi path", "tool path"].map((name) => {
+    const whole = object(name + "/whole"), trail = object(name + "/trail");
+    trail.geometry.setAttribute("position", whole.geometry.attributes.position);
+    whole.frustumCulled = trail.frustumCulled = false;
+    return trail;
+  });
+  const samples = D.sample_counts && viewer.scene_tree.find(["meshcat", "replay"]).children
+    .samples ? object("samples") : null;
+  for (const o of [fLine, fPoints]) o.frustumCulled = false;
+
+  const slider = document.getElementById("slider"), clock = document.getElementById("clock");
+  const playButton = document.getElementById("play");
+  slider.max = F - 1;
+  const state = { frame: -1, time: D.t0, playing: true, speed: 1, shown: 0 };
+
+  function show(f) {
+    state.frame = f;
+    for (let j = 0; j < J; j++) {
+      const o = (f * J + j) * 7;
+      groups[j].position.set(poses[o], poses[o + 1], poses[o + 2]);
+      groups[j].quaternion.set(poses[o + 3], poses[o + 4], poses[o + 5], poses[o + 6]);
+    }
+    poiMarker.position.set(poi[3 * f], poi[3 * f + 1], poi[3 * f + 2]);
+    const h = hindex[f];
+    fLine.visible = fPoints.visible = h >= 0 && N > 0;
+    if (fLine.visible) {
+      const attr = fLine.geometry.attributes.position;
+      attr.array.set(horizons.subarray(h * N * 3, (h + 1) * N * 3));
+      attr.needsUpdate = true;
+    }
+    const end = f * D.path_per_frame + 1, start = Math.max(0, end - D.trail * D.path_per_frame);
+    for (const t of trails) t.geometry.setDrawRange(start, end - start);
+    if (samples) {
+      const first = scount[Math.max(0, f - D.trail)];
+      samples.geometry.setDrawRange(first, scount[f] - first);
+    }
+    slider.value = f;
+    clock.textContent = "t = " + (D.t0 + f / D.fps).toFixed(3) + " s";
+    state.shown += 1;
+    viewer.set_dirty();
+  }
+
+  function setPlaying(on) {
+    state.playing = on;
+    playButton.textContent = on ? "Pause" : "Play";
+  }
+  function seek(f) {
+    f = Math.max(0, Math.min(F - 1, f | 0));
+    state.time = D.t0 + f / D.fps;
+    show(f);
+  }
+  let last = null;
+  function step(now) {
+    if (state.playing && last !== null) {
+      const span = (F - 1) / D.fps;
+      state.time += Math.min(0.5, (now - last) / 1000) * state.speed;
+      if (state.time > D.t0 + span) state.time = D.t0 + (span > 0 ? (state.time - D.t0) % span : 0);
+    }
+    last = now;
+    const f = Math.min(F - 1, Math.max(0, Math.floor((state.time - D.t0) * D.fps + 1e-6)));
+    if (f !== state.frame) show(f);
+    requestAnimationFrame(step);
+  }
+
+  function look(target, span, dir) {
+    // three.js is y-up, the scene z-up: (x, y, z) -> (x, z, -y)
+    const cam = viewer.camera, d = Math.max(span, 1e-3);
+    const n = Math.hypot(dir[0], dir[1], dir[2]);
+    const p = target.map((v, k) => v + d * dir[k] / n);
+    cam.near = Math.max(1e-4, d / 200);
+    cam.position.set(p[0], p[2], -p[1]);
+    viewer.controls.target.set(target[0], target[2], -target[1]);
+    viewer.controls.update();
+    viewer.set_dirty();
+  }
+  const near = () => look(D.centre, Math.max(2.5 * D.poi_span, 0.015), D.near_dir);
+  const wide = () => look(D.arm_centre, 1.4 * D.arm_span, [0.6, -1.6, 0.5]);
+
+  playButton.onclick = () => setPlaying(!state.playing);
+  slider.oninput = () => { setPlaying(false); seek(+slider.value); };
+  document.getElementById("speed").onchange = (e) => { state.speed = +e.target.value; };
+  document.getElementById("view-near").onclick = near;
+  document.getElementById("view-arm").onclick = wide;
+  document.addEventListener("keydown", (e) => {
+    if (e.code === "Space") { e.preventDefault(); setPlaying(!state.playing); }
+  });
+  window.replay = { state, seek, play: () => setPlaying(true), pause: () => setPlaying(false),
+                    viewer };
+  // the address may say where to start: page.html#t=2.5 (seconds of the run), &paused, &arm
+  const hash = new URLSearchParams(location.hash.slice(1));
+  (hash.has("arm") ? wide : near)();
+  seek(hash.has("t") ? Math.round((+hash.get("t") - D.t0) * D.fps) : 0);
+  if (hash.has("paused")) setPlaying(false);
+  requestAnimationFrame(step);
+})();
+"""
