@@ -1,32 +1,78 @@
 """`rhmpc data`: list, show, export and plot heart-motion scenarios and recordings.
 
-``rhmpc data list``                 the named scenarios with their statistics
+``rhmpc data list``                 the named scenarios: what each replicates, its targets
+``rhmpc data list --measure``       … and their statistics measured on the synthetic motion
 ``rhmpc data show NAME``            p-p, RMS, heart-rate range, spectral peaks, predictability
 ``rhmpc data export NAME FILE``     write the motion (or a sensor's samples) to .csv/.npz
-``rhmpc data plot NAME FILE.png``   position per axis over time and its PSD (Tuna Fig. 2)
+``rhmpc data plot NAME FILE.png``   position per axis over time, heart rate and PSD
 
 NAME is a scenario name or the path of a recording (.csv/.npz/.mat; for .mat: ``--var``,
 ``--rows``/``--cols``, ``--rate``, ``--units``). Millimetres appear only here.
+
+A scenario's motion is synthesised in memory, so a ``--duration`` (or ``--rate``) whose work
+would not fit in the memory available is refused before any work, with the memory and time it
+would take; long work that fits says how long it will take before it starts.
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
+import math
+import os
 import sys
+import textwrap
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from rhmpc.errors import UsageError
+from rhmpc.errors import UsageError, one_line_warnings
 from sim.heart import DEFAULT_SCENARIO, SCENARIOS, SPECS, make_scenario
-from sim.heart.analysis import fill_gaps, motion_stats, predictability, psd
+from sim.heart.analysis import (
+    fill_gaps,
+    heart_rate_track,
+    motion_stats,
+    predictability,
+    psd,
+)
 from sim.heart.invivo import source_statistics, statistics_table
 from sim.heart.motion import MotionSource
 from sim.heart.scenarios import DEFAULT_SEED, missing_data
-from sim.recordings import export_source, load_recording, parse_indices, save_recording
+from sim.heart.specs import ScenarioSpec
+from sim.recordings import (
+    RecordedMotion,
+    export_source,
+    load_recording,
+    parse_indices,
+    save_recording,
+)
 from sim.sensors import SENSORS, sensor_from_name
+
+#: The heart rates --bpm accepts [beats/min]: from deep bradycardia to a fast tachycardia.
+BPM_RANGE = (20.0, 250.0)
+#: Memory a scenario takes per sample synthesised [B] (positions and their temporaries,
+#: measured at 430–490 B) and per second of motion [B] (its phase and variability tracks).
+BYTES_PER_SAMPLE = 500.0
+BYTES_PER_SECOND = 30e3
+#: Work per sample [s]: written to a CSV file (export), drawn (plot); and per second of motion
+#: for the statistics of ``show`` and ``list --measure`` (the 25-Hz predictability loop).
+EXPORT_SECONDS_PER_SAMPLE = 15e-6
+PLOT_SECONDS_PER_SAMPLE = 15e-6
+STATS_SECONDS_PER_SECOND = 5e-3
+#: Work longer than this is announced on stderr before it starts [s].
+ANNOUNCE_AFTER = 10.0
+#: The memory assumed available where the system does not say [B].
+FALLBACK_MEMORY = 8e9
+#: The rate a synthetic motion is drawn at, at least, so that slow sensors show its shape [Hz].
+PLOT_RATE = 250.0
+#: A record no longer than this many zoom windows is drawn whole, without a zoomed window [-].
+WHOLE_WINDOWS = 2.0
+#: Up to this many samples an axis is drawn as a line; beyond, as its min–max per pixel [-].
+LINE_POINTS = 20_000
+#: The width of the tables' text [characters].
+TABLE_WIDTH = 100
 
 
 @dataclass(frozen=True)
@@ -49,33 +95,41 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "and recordings: statistics, export and figures.")
     actions = parser.add_subparsers(dest="action", metavar="ACTION")
     common = argparse.ArgumentParser(add_help=False)
-    common.add_argument("--seed", type=int, default=DEFAULT_SEED,
-                        help="seed of the beat-to-beat variability (default %(default)s)")
+    common.add_argument("--seed", type=int, default=None,
+                        help=f"seed of the beat-to-beat variability (default {DEFAULT_SEED})")
     common.add_argument("--duration", type=float, help="seconds to use (default: the scenario's)")
-    common.add_argument("--bpm", type=float, help="constant heart rate [beats/min]")
+    common.add_argument("--bpm", type=float, help="constant heart rate [beats/min] "
+                        f"({BPM_RANGE[0]:g}–{BPM_RANGE[1]:g})")
     common.add_argument("--record", help="PhysioNet record whose annotated beats drive the "
                         "heart: a shipped name (mitdb-100, 1003) or a path without extension")
     common.add_argument("--var", help="MATLAB variable holding the positions (.mat files)")
     common.add_argument("--rows", type=parse_indices, help="0-based rows holding x,y,z (.mat)")
     common.add_argument("--cols", type=parse_indices, help="0-based columns holding x,y,z (.mat)")
     common.add_argument("--units", choices=("mm", "m", "um", "cm"),
-                        help="length unit when the file does not state it (default mm)")
+                        help="length unit when the file does not state it (a CSV file's "
+                        "default is mm; an NPZ or MAT file needs it)")
 
-    p_list = actions.add_parser("list", parents=[common], help="scenarios and their statistics")
+    p_list = actions.add_parser(
+        "list", parents=[common], help="the scenarios: what they replicate, their targets",
+        description="The named scenarios and their calibration targets, at once. --measure "
+        "(implied by --duration, --seed, --bpm and --record) also synthesises each one and "
+        "measures its statistics (several seconds).")
+    p_list.add_argument("--measure", action="store_true",
+                        help="also measure each scenario's statistics on its motion")
     p_list.add_argument("--json", action="store_true", help="machine-readable output")
 
     p_show = actions.add_parser("show", parents=[common], help="statistics of one scenario/file")
     p_show.add_argument("name", nargs="?", default=DEFAULT_SCENARIO,
                         help=f"scenario or recording file (default {DEFAULT_SCENARIO})")
     p_show.add_argument("--json", action="store_true", help="machine-readable output")
-    p_show.add_argument("--rate", type=float, help="sample rate of a .mat file without a time "
-                        "vector [Hz]")
+    p_show.add_argument("--rate", type=float, help="sample rate of a .mat file without sample "
+                        "times [Hz]")
 
     p_exp = actions.add_parser("export", parents=[common], help="write a scenario to .csv/.npz")
     p_exp.add_argument("name", help="scenario or recording file")
     p_exp.add_argument("file", help="output .csv (s, mm) or .npz (s, m)")
     p_exp.add_argument("--rate", type=float, help="sample rate [Hz] (default: the sensor's; for "
-                       "a .mat file without a time vector also its rate)")
+                       "a .mat file without sample times also its rate)")
     p_exp.add_argument("--sensor", choices=SENSORS,
                        help="write this sensor's noisy samples instead of the true motion")
     p_exp.add_argument("--force", action="store_true", help="overwrite an existing file")
@@ -83,37 +137,34 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p_plot = actions.add_parser("plot", parents=[common], help="figure: position and PSD")
     p_plot.add_argument("name", help="scenario or recording file")
     p_plot.add_argument("file", help="output image (.png, .pdf, .svg)")
-    p_plot.add_argument("--rate", type=float, help="sample rate of a .mat file without a time "
-                        "vector [Hz]")
+    p_plot.add_argument("--rate", type=float, help="sample rate of a .mat file without sample "
+                        "times [Hz]")
     p_plot.add_argument("--window", type=float, default=10.0,
-                        help="length of the zoomed time window [s] (default %(default)s)")
+                        help="length of the zoomed time window of a long record [s] (default "
+                        "%(default)s; a record up to twice as long is drawn whole)")
     p_plot.add_argument("--start", type=float, default=0.0,
                         help="start of the zoomed window [s] (default %(default)s)")
     parser.set_defaults(func=run, action=None)
 
 
 def run(args: argparse.Namespace) -> int:
-    """Dispatch to the action."""
+    """Dispatch to the action; a recording's warnings (``RecordingWarning``) are printed one
+    line each."""
     if args.action is None:
         raise UsageError("choose an action: list, show, export or plot")
-    return {"list": _list, "show": _show, "export": _export, "plot": _plot}[args.action](args)
+    action = {"list": _list, "show": _show, "export": _export, "plot": _plot}[args.action]
+    with one_line_warnings("rhmpc data"):
+        return action(args)
 
 
 def _target(name: str, args: argparse.Namespace) -> _Target:
     """Resolve NAME to a scenario (with the command-line overrides) or a recording."""
-    overrides: dict = {}
-    if args.bpm is not None:
-        if not args.bpm > 0:
-            raise UsageError(f"--bpm must be positive, got {args.bpm}")
-        overrides["heart_rate"] = args.bpm / 60.0
-    if args.record is not None:
-        overrides["record"] = args.record
-    if args.duration is not None:
-        if not args.duration > 0:
-            raise UsageError(f"--duration must be positive, got {args.duration}")
-        overrides["duration"] = args.duration
+    _check_options(args)
     if name in SPECS:
-        sc = make_scenario(name, np.random.default_rng(args.seed), **overrides)
+        spec = SPECS[name]
+        duration = spec.duration if args.duration is None else args.duration
+        _check_work(args.action, name, duration, _work_rate(args, spec.sensor_rate, True))
+        sc = make_scenario(name, np.random.default_rng(_seed(args)), **_overrides(args))
         return _Target(sc.name, sc.source, sc.sensor_rate, sc.duration, sc.description)
     path = Path(name)
     if path.suffix.lower() in {".csv", ".npz", ".txt", ".mat"} or path.exists():
@@ -121,11 +172,92 @@ def _target(name: str, args: argparse.Namespace) -> _Target:
             raise UsageError("--bpm and --record apply to scenarios, not recordings")
         rec = load_recording(path, **_read_options(args, path))
         duration = rec.duration if args.duration is None else min(args.duration, rec.duration)
+        _check_work(args.action, path.name, duration, _work_rate(args, rec.sample_rate, False))
         return _Target(path.name, rec, rec.sample_rate, duration, f"recording {path}",
                        float(rec.t[0]))
     raise UsageError(f"unknown scenario {name!r}; valid names: {', '.join(SCENARIOS)} "
-                     "(or the path of a .csv/.npz recording)")
+                     "(or the path of a .csv/.npz/.mat recording)")
 
+
+def _check_options(args: argparse.Namespace) -> None:
+    """Refuse a --bpm, --duration or --rate outside its range (one line)."""
+    if args.bpm is not None and not BPM_RANGE[0] <= args.bpm <= BPM_RANGE[1]:
+        raise UsageError(f"--bpm must be within {BPM_RANGE[0]:g}–{BPM_RANGE[1]:g} beats/min, "
+                         f"got {args.bpm:g}")
+    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
+        raise UsageError(f"--duration must be positive, got {args.duration:g}")
+    rate = getattr(args, "rate", None)
+    if rate is not None and not (math.isfinite(rate) and rate > 0):
+        raise UsageError(f"--rate must be positive, got {rate:g}")
+
+
+def _seed(args: argparse.Namespace) -> int:
+    return DEFAULT_SEED if args.seed is None else args.seed
+
+
+def _overrides(args: argparse.Namespace) -> dict:
+    """``make_scenario`` keywords from --bpm, --record and --duration."""
+    overrides: dict = {}
+    if args.bpm is not None:
+        overrides["heart_rate"] = args.bpm / 60.0
+    if args.record is not None:
+        overrides["record"] = args.record
+    if args.duration is not None:
+        overrides["duration"] = args.duration
+    return overrides
+
+
+def _work_rate(args: argparse.Namespace, rate: float, synthetic: bool) -> float:
+    """The rate [Hz] an action samples a source of natural ``rate`` at: export's --rate, the
+    drawing rate of a synthetic motion's plot."""
+    if args.action == "export" and args.rate is not None:
+        return args.rate
+    if args.action == "plot" and synthetic:
+        return max(rate, PLOT_RATE)
+    return rate
+
+
+def _work(action: str, duration: float, rate: float) -> tuple[float, float]:
+    """(memory [B], time [s]) that ``action`` takes on ``duration`` seconds at ``rate``."""
+    samples = duration * rate
+    memory = BYTES_PER_SAMPLE * samples + BYTES_PER_SECOND * duration
+    if action == "export":
+        return memory, EXPORT_SECONDS_PER_SAMPLE * samples
+    if action == "plot":
+        return memory, PLOT_SECONDS_PER_SAMPLE * samples
+    return memory, STATS_SECONDS_PER_SECOND * duration
+
+
+def _check_work(action: str, name: str, duration: float, rate: float) -> None:
+    """Refuse work that would not fit in memory, saying how much it would take; announce work
+    longer than :data:`ANNOUNCE_AFTER` on stderr."""
+    memory, seconds = _work(action, duration, rate)
+    available = _available_memory()
+    if memory > available:
+        per_second = _work(action, 1.0, rate)[0]
+        raise UsageError(
+            f"{_fmt(duration)} s of {name} at {_fmt(rate)} Hz is {duration * rate:.3g} "
+            f"samples: {action} would need about {_bytes(memory)} of memory and "
+            f"{_span(seconds)}; {_bytes(available)} is available, enough for about "
+            f"{available / per_second:.3g} s at this rate (lower --duration or --rate)")
+    if seconds > ANNOUNCE_AFTER:
+        print(f"rhmpc data: {action} of {_fmt(duration)} s of {name} at {_fmt(rate)} Hz "
+              f"takes about {_span(seconds)}", file=sys.stderr)
+
+
+def _available_memory() -> float:
+    """The memory available to a new allocation [B] (Linux: MemAvailable)."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return float(line.split()[1]) * 1024.0
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return float(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+    except (AttributeError, OSError, ValueError):
+        return FALLBACK_MEMORY
 
 
 def _read_options(args: argparse.Namespace, path: Path) -> dict:
@@ -141,47 +273,131 @@ def _read_options(args: argparse.Namespace, path: Path) -> dict:
 
 
 def _stats_row(target: _Target) -> dict:
-    stats = motion_stats(target.source, target.duration, target.rate, target.start)
+    """The statistics of ``target`` (mm, Hz, beats/min) as a JSON-friendly dict."""
+    with np.errstate(over="ignore", invalid="ignore"):  # outliers: the reader has warned
+        stats = motion_stats(target.source, target.duration, target.rate, target.start)
+        value = predictability(target.source, target.duration, target.start)
     row = {"name": target.name, "dim": int(target.source.dim),
-           "sensor_rate_hz": target.rate, "duration_s": round(target.duration, 3)}
+           "sensor_rate_hz": float(_fmt(target.rate, 6)),
+           "duration_s": round(target.duration, 3)}
     row.update(stats.as_dict())
-    value = predictability(target.source, target.duration, target.start)
+    if isinstance(target.source, RecordedMotion):  # the file's own samples, as the reader counts
+        rec = target.source
+        inside = (rec.t >= target.start) & (rec.t <= target.start + target.duration)
+        row["missing_fraction"] = round(float(np.mean(rec.missing[inside])), 5)
     row["predictability"] = None if not np.isfinite(value) else round(value, 4)
     row["description"] = target.description
     return row
 
 
 def _list(args: argparse.Namespace) -> int:
-    rows = []
+    """The scenarios' specifications, or (``--measure``) their measured statistics."""
+    measure = args.measure or any(getattr(args, k) is not None
+                                  for k in ("duration", "seed", "bpm", "record"))
+    if any(getattr(args, k) is not None for k in ("var", "rows", "cols", "units")):
+        raise UsageError("--var, --rows, --cols and --units apply to recordings, not to list")
+    names = []
     for name in SCENARIOS:
         if (missing := missing_data(name)) is not None:
             print(f"# {name}: skipped, needs {missing}", file=sys.stderr)
             continue
-        row = _stats_row(_target(name, args))
-        spec = SPECS[name]
-        row["target_peak_to_peak_mm"] = round(spec.peak_to_peak * 1e3, 3)
-        row["target_rms_mm"] = None if spec.rms is None else round(spec.rms * 1e3, 3)
-        rows.append(row)
+        names.append(name)
+    rows = _measured_rows(names, args) if measure else [_spec_row(SPECS[n]) for n in names]
     if args.json:
         print(json.dumps(rows, indent=2))
-        return 0
-    head = (f"{'name':<16} {'dim':>3} {'rate':>6} {'dur':>6} {'p-p':>7} {'(target)':>9} "
-            f"{'RMS':>6} {'(target)':>9} {'HR bpm':>12} {'predict.':>8}")
-    print(head)
-    print(f"{'':<16} {'':>3} {'[Hz]':>6} {'[s]':>6} {'[mm]':>7} {'':>9} {'[mm]':>6} {'':>9} "
-          f"{'':>12} {'RLS/hold':>8}")
-    for r in rows:
-        hr = r["heart_rate_bpm"]
-        hr_text = f"{hr[0]:.0f}" if abs(hr[1] - hr[0]) < 0.5 else f"{hr[0]:.0f}–{hr[1]:.0f}"
-        rms_t = "—" if r["target_rms_mm"] is None else f"{r['target_rms_mm']:.2f}"
-        print(f"{r['name']:<16} {r['dim']:>3} {r['sensor_rate_hz']:>6g} {r['duration_s']:>6g} "
-              f"{r['peak_to_peak_mm']:>7.2f} {r['target_peak_to_peak_mm']:>9.2f} "
-              f"{r['rms_mm']:>6.2f} {rms_t:>9} {hr_text:>12} {_pred_text(r):>8}")
-    print("All scenarios are synthetic, calibrated to the papers' reported statistics "
-          "(invivo-video: to an in-vivo recording's).")
-    print("predict.: one-step RLS / hold RMS error 120 ms (3 samples) ahead at 25 Hz on the "
-          "noise-free motion (line spectrum ≈ 0; mechanical phantom ≈ 0.12; in-vivo ≈ 0.69).")
+    elif measure:
+        print("\n".join(_measured_table(rows)))
+    else:
+        print("\n".join(_spec_table(rows)))
     return 0
+
+
+def _spec_row(spec: ScenarioSpec) -> dict:
+    """What a scenario replicates, from its specification alone (no synthesis)."""
+    return {"name": spec.name, "dim": spec.dim, "sensor_rate_hz": spec.sensor_rate,
+            "duration_s": spec.duration,
+            "target_peak_to_peak_mm": round(spec.peak_to_peak * 1e3, 3),
+            "target_rms_mm": None if spec.rms is None else round(spec.rms * 1e3, 3),
+            "heart": _heart_text(spec), "reported": list(spec.reported),
+            "description": spec.description}
+
+
+def _heart_text(spec: ScenarioSpec) -> str:
+    """The heart rate a scenario is built with, in words."""
+    from sim.heart.rr import STAIRCASE_LEVELS_HZ
+
+    variation = " + HRV" if spec.variable and spec.heart in ("constant", "staircase") else ""
+    if spec.heart == "staircase":
+        lo, hi = 60 * min(STAIRCASE_LEVELS_HZ), 60 * max(STAIRCASE_LEVELS_HZ)
+        return f"staircase {lo:.0f}–{hi:.0f}{variation}"
+    if spec.heart == "record":
+        return f"beats of {Path(str(spec.record)).parent.name or spec.record}"
+    if spec.heart == "invivo":
+        return f"{60 * spec.heart_rate:.0f}, beat to beat varying"
+    return f"{60 * spec.heart_rate:.0f}{variation}"
+
+
+def _spec_table(rows: list[dict]) -> list[str]:
+    """The table of :func:`_spec_row` rows, each with its description below."""
+    lines = [f"{'name':<16} {'dim':>3} {'rate':>6} {'dur':>6} {'p-p':>7} {'RMS':>6}  "
+             "heart rate",
+             f"{'':<16} {'':>3} {'[Hz]':>6} {'[s]':>6} {'[mm]':>7} {'[mm]':>6}  [beats/min]"]
+    for r in rows:
+        rms = "—" if r["target_rms_mm"] is None else f"{r['target_rms_mm']:.2f}"
+        lines.append(f"{r['name']:<16} {r['dim']:>3} {r['sensor_rate_hz']:>6g} "
+                     f"{r['duration_s']:>6g} {r['target_peak_to_peak_mm']:>7.2f} {rms:>6}  "
+                     f"{r['heart']}")
+        lines += textwrap.wrap(r["description"], TABLE_WIDTH, initial_indent=" " * 18,
+                               subsequent_indent=" " * 18)
+    lines.append("p-p and RMS: the calibration targets (— keeps the shape's own RMS). All "
+                 "scenarios are synthetic.")
+    lines.append("Measured statistics: rhmpc data list --measure (all, several seconds), "
+                 "rhmpc data show NAME (one).")
+    return lines
+
+
+def _measured_rows(names: list[str], args: argparse.Namespace) -> list[dict]:
+    """Each scenario's measured statistics beside its targets, with progress on stderr."""
+    from tqdm import tqdm
+
+    rows = []
+    with tqdm(names, desc="measuring", unit="scenario", leave=False, file=sys.stderr,
+              mininterval=0.5) as bar:
+        for name in bar:
+            bar.set_postfix_str(name)
+            row = _stats_row(_target(name, args))
+            spec = SPECS[name]
+            row["target_peak_to_peak_mm"] = round(spec.peak_to_peak * 1e3, 3)
+            row["target_rms_mm"] = None if spec.rms is None else round(spec.rms * 1e3, 3)
+            rows.append(row)
+    return rows
+
+
+def _measured_table(rows: list[dict]) -> list[str]:
+    """The table of measured statistics beside the targets."""
+    lines = [f"{'name':<16} {'dim':>3} {'rate':>6} {'dur':>6} {'p-p':>7} {'(target)':>9} "
+             f"{'RMS':>6} {'(target)':>9} {'HR bpm':>12} {'predict.':>8}",
+             f"{'':<16} {'':>3} {'[Hz]':>6} {'[s]':>6} {'[mm]':>7} {'':>9} {'[mm]':>6} "
+             f"{'':>9} {'':>12} {'RLS/hold':>8}"]
+    for r in rows:
+        rms_t = "—" if r["target_rms_mm"] is None else f"{r['target_rms_mm']:.2f}"
+        lines.append(f"{r['name']:<16} {r['dim']:>3} {r['sensor_rate_hz']:>6g} "
+                     f"{_fmt(r['duration_s']):>6} {r['peak_to_peak_mm']:>7.2f} "
+                     f"{r['target_peak_to_peak_mm']:>9.2f} {r['rms_mm']:>6.2f} {rms_t:>9} "
+                     f"{_bpm_text(r['heart_rate_bpm']):>12} {_pred_text(r):>8}")
+    lines.append("All scenarios are synthetic, calibrated to the papers' reported statistics "
+                 "(invivo-video: to an in-vivo recording's).")
+    lines.append("predict.: one-step RLS / hold RMS error 120 ms (3 samples) ahead at 25 Hz on "
+                 "the noise-free motion (line spectrum ≈ 0; mechanical phantom ≈ 0.12; in-vivo "
+                 "≈ 0.69).")
+    return lines
+
+
+def _bpm_text(hr: list) -> str:
+    """A heart-rate range [beats/min] as ``100`` or ``92–108``; — when unknown."""
+    if hr[0] is None:
+        return "—"
+    return f"{hr[0]:.0f}" if abs(hr[1] - hr[0]) < 0.5 else f"{hr[0]:.0f}–{hr[1]:.0f}"
 
 
 def _show(args: argparse.Namespace) -> int:
@@ -193,26 +409,40 @@ def _show(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(row, indent=2))
         return 0
-    hr = row["heart_rate_bpm"]
-    print(f"{row['name']}: {row['description']}")
-    print(f"  axes              {row['dim']}")
-    print(f"  sample rate       {row['sensor_rate_hz']:g} Hz")
-    print(f"  duration          {row['duration_s']:g} s")
-    print(f"  peak-to-peak      {row['peak_to_peak_mm']:.3f} mm (largest per-axis range)")
-    print(f"  RMS               {row['rms_mm']:.3f} mm (about the mean"
-          + (", 3-D)" if row["dim"] > 1 else ")"))
-    print("  RMS per axis      " + ", ".join(f"{v:.3f}" for v in row["rms_per_axis_mm"]) + " mm")
-    print(f"  heart rate        {hr[0]:.1f}–{hr[1]:.1f} beats/min")
-    peaks = ", ".join(f"{v:.2f}" for v in row["spectral_peaks_hz"])
-    print(f"  spectral peaks    {peaks or 'none'}" + (" Hz" if peaks else ""))
-    if row["missing_fraction"]:
-        print(f"  missing samples   {100 * row['missing_fraction']:.2f} %")
-    print(f"  predictability    {_pred_text(row)} (one-step RLS / hold RMS error, 120 ms ahead "
-          "at 25 Hz; phantom ≈ 0.12, in-vivo heart ≈ 0.69)")
+    print("\n".join(_show_lines(row)))
     if invivo:
         print("  the in-vivo recording's statistics (sim.heart.invivo, sampled at 25 Hz):")
         print("\n".join(statistics_table(row["regime"])))
     return 0
+
+
+def _show_lines(row: dict) -> list[str]:
+    """``data show``'s lines for a :func:`_stats_row` row."""
+    hr = row["heart_rate_bpm"]
+    hr_text = ("— (not estimable: too few complete samples, or values not finite)"
+               if hr[0] is None
+               else f"{hr[0]:.1f}–{hr[1]:.1f} beats/min" if abs(hr[1] - hr[0]) >= 0.05
+               else f"{hr[0]:.1f} beats/min")
+    if hr[0] is not None and row["description"].startswith("recording"):
+        hr_text += " (the spectral peak)"
+    peaks = ", ".join(f"{v:.2f}" for v in row["spectral_peaks_hz"])
+    lines = [
+        f"{row['name']}: {row['description']}",
+        f"  axes              {row['dim']}",
+        f"  sample rate       {_fmt(row['sensor_rate_hz'])} Hz",
+        f"  duration          {_fmt(row['duration_s'])} s",
+        f"  peak-to-peak      {_mm(row['peak_to_peak_mm'])} mm (largest per-axis range)",
+        f"  RMS               {_mm(row['rms_mm'])} mm (about the mean"
+        + (", 3-D)" if row["dim"] > 1 else ")"),
+        "  RMS per axis      " + ", ".join(_mm(v) for v in row["rms_per_axis_mm"]) + " mm",
+        f"  heart rate        {hr_text}",
+        f"  spectral peaks    {peaks or 'none'}" + (" Hz" if peaks else ""),
+    ]
+    if row["missing_fraction"]:
+        lines.append(f"  missing samples   {100 * row['missing_fraction']:.2f} %")
+    lines.append(f"  predictability    {_pred_text(row)} (one-step RLS / hold RMS error, 120 ms "
+                 "ahead at 25 Hz; phantom ≈ 0.12, in-vivo heart ≈ 0.69)")
+    return lines
 
 
 def _pred_text(row: dict) -> str:
@@ -221,19 +451,19 @@ def _pred_text(row: dict) -> str:
 
 
 def _export(args: argparse.Namespace) -> int:
-    target = _target(args.name, args)
     out = Path(args.file)
     if out.suffix.lower() not in {".csv", ".npz"}:
         raise UsageError(f"{out}: output must end in .csv or .npz")
     if out.exists() and not args.force:
         raise UsageError(f"{out} exists; pass --force to overwrite")
+    if not out.resolve().parent.is_dir():
+        raise UsageError(f"{out}: no such directory {out.parent}")
+    target = _target(args.name, args)
     rate = target.rate if args.rate is None else args.rate
-    if not rate > 0:
-        raise UsageError(f"--rate must be positive, got {rate}")
     comment = f"rhmpc {target.name}: {target.description}"
     if args.sensor:
         sensor = sensor_from_name(args.sensor, rate=args.rate, dim=int(target.source.dim))
-        stream = sensor.measure(target.source, target.duration, np.random.default_rng(args.seed),
+        stream = sensor.measure(target.source, target.duration, np.random.default_rng(_seed(args)),
                                 t0=target.start)
         save_recording(out, stream.t, stream.z, comment + f"; measured by {sensor.name}")
         n = len(stream)
@@ -250,89 +480,154 @@ def _plot(args: argparse.Namespace) -> int:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    if not (math.isfinite(args.window) and args.window > 0):
+        raise UsageError(f"--window must be positive, got {args.window:g}")
+    if not math.isfinite(args.start):
+        raise UsageError(f"--start must be a number of seconds, got {args.start:g}")
     target = _target(args.name, args)
-    if not args.window > 0:
-        raise UsageError(f"--window must be positive, got {args.window}")
     phase = getattr(target.source, "phase", None)
-    # a synthetic truth is drawn at ≥ 250 Hz so slow sensors (28 Hz) still show its shape
-    rate = max(target.rate, 250.0) if phase is not None else target.rate
+    rate = max(target.rate, PLOT_RATE) if phase is not None else target.rate
     n = round(target.duration * rate) + 1
     t = target.start + np.arange(n) / rate
     p = np.asarray(target.source.position(t)).reshape(n, -1) * 1e3
-    stats = motion_stats(target.source, target.duration, target.rate, target.start)
+    with np.errstate(over="ignore", invalid="ignore"):
+        stats = motion_stats(target.source, target.duration, target.rate, target.start)
+    heart = _heart_rate(t, p, rate, phase)
+    fig = _figure(plt, target, t, p, rate, heart, stats, args)
+    out = Path(args.file)
+    try:
+        fig.savefig(out, dpi=110)
+    except (OSError, ValueError) as exc:
+        raise UsageError(f"{out}: cannot write the figure ({exc})") from None
+    finally:
+        plt.close(fig)
+    print(f"wrote {out}")
+    return 0
+
+
+@dataclass(frozen=True)
+class _Heart:
+    """The heart rate a figure shows: over time, and its summary for the title."""
+
+    t: np.ndarray
+    bpm: np.ndarray
+    summary: str
+    how: str
+
+
+def _heart_rate(t: np.ndarray, p: np.ndarray, rate: float, phase) -> _Heart:
+    """The heart rate over time: a synthetic motion's own (its phase), or a recording's
+    spectral estimate over 10-s stretches; the title's text is the range of what is drawn."""
+    if phase is not None and hasattr(phase, "rate"):
+        bpm = 60 * np.asarray(phase.rate(t), dtype=float)
+        how = "the motion's heart rate"
+    else:
+        t, hz = heart_rate_track(t, fill_gaps(t, p), rate)
+        bpm, how = 60 * hz, "spectral peak of each 10-s stretch"
+    bpm_ok = bpm[np.isfinite(bpm)]
+    if not bpm_ok.size:
+        return _Heart(t, bpm, "unknown (record shorter than 10 s)", how)
+    lo, hi = float(np.min(bpm_ok)), float(np.max(bpm_ok))
+    summary = f"{lo:.0f} bpm" if hi - lo < 0.5 else f"{lo:.0f}–{hi:.0f} bpm"
+    return _Heart(t, bpm, summary, how)
+
+
+def _figure(plt, target: _Target, t: np.ndarray, p: np.ndarray, rate: float, heart: _Heart,
+            stats, args: argparse.Namespace):
+    """Positions per axis (the whole record, and a zoomed window if it is long), the heart
+    rate with the statistics, and the PSD."""
     dim = p.shape[1]
+    zoom = target.duration > WHOLE_WINDOWS * args.window
     height = 2.3 * dim + 4.2
     fig = plt.figure(figsize=(13, height))  # fixed margins: a layout engine costs seconds
     grid = fig.add_gridspec(dim + 2, 2, width_ratios=(2.2, 1.0),
                             height_ratios=(*([1.0] * dim), 0.6, 1.1), left=0.07, right=0.985,
                             top=1 - 0.95 / height, bottom=0.55 / height, hspace=0.6,
                             wspace=0.12)
-    _plot_positions(fig, grid, target, t, p, rate, args)
-    _plot_rate_and_stats(fig, grid[dim, 0], grid[dim, 1], target, t, phase, stats, dim)
+    _plot_positions(fig, grid, target, t, p, args, zoom)
+    _plot_heart_rate(fig.add_subplot(grid[dim, 0]), target, heart)
+    _plot_stats(fig.add_subplot(grid[dim, 1]), stats, dim)
     _plot_psd(fig.add_subplot(grid[dim + 1, :]), *psd(fill_gaps(t, p), rate, resolution=0.02),
               rate, stats)
-    hr = stats.heart_rate
-    hr_text = (f"{60 * hr[0]:.0f} bpm" if abs(hr[1] - hr[0]) * 60 < 0.5
-               else f"{60 * hr[0]:.0f}–{60 * hr[1]:.0f} bpm")
     fig.suptitle(f"{target.name}: p-p {stats.peak_to_peak * 1e3:.2f} mm, "
-                 f"RMS {stats.rms * 1e3:.2f} mm, heart rate {hr_text}, "
-                 f"{target.rate:g} Hz, {target.duration:g} s\n{target.description}",
-                 fontsize=10)
-    out = Path(args.file)
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
-    print(f"wrote {out}")
-    return 0
+                 f"RMS {stats.rms * 1e3:.2f} mm, heart rate {heart.summary}, "
+                 f"{_fmt(target.rate)} Hz, {_fmt(target.duration)} s\n"
+                 + "\n".join(textwrap.wrap(target.description, 170)), fontsize=10)
+    return fig
 
 
-def _plot_positions(fig, grid, target: _Target, t: np.ndarray, p: np.ndarray, rate: float,
-                    args: argparse.Namespace) -> None:
-    """Per axis: the whole record's min–max envelope, and a zoomed window."""
+def _plot_positions(fig, grid, target: _Target, t: np.ndarray, p: np.ndarray,
+                    args: argparse.Namespace, zoom: bool) -> None:
+    """Per axis: the whole record (full width when short), and a zoomed window when long."""
     dim = p.shape[1]
     labels = ("x", "y", "z") if dim == 3 else ("x",)
     end = target.start + target.duration
     w0 = min(max(args.start, target.start), max(end - args.window, target.start))
-    zoom = (t >= w0) & (t <= w0 + args.window)
+    inside = (t >= w0) & (t <= w0 + args.window)
     for d in range(dim):
-        ax = fig.add_subplot(grid[d, 0])
-        tb, lo, hi = _envelope(t, p[:, d], rate)
-        ax.fill_between(tb, lo, hi, color="0.6", lw=0)
+        ax = fig.add_subplot(grid[d, 0] if zoom else grid[d, :])
+        band = _draw_trace(ax, t, p[:, d], 1000 if zoom else 1400)
         ax.set_ylabel(f"{labels[d]} [mm]")
         ax.set_xlim(target.start, end)
         if d == 0:
-            ax.set_title("position over the whole record (min–max over 1.2 s)")
+            ax.set_title("position, the whole record" + (" (min–max per pixel)" if band else ""))
         if d == dim - 1:
             ax.set_xlabel("time [s]")
+        if not zoom:
+            continue
         ax.axvspan(w0, w0 + args.window, color="tab:orange", alpha=0.15, lw=0)
         axz = fig.add_subplot(grid[d, 1])
-        axz.plot(t[zoom], p[zoom, d], lw=0.9, color="tab:blue")
+        axz.plot(t[inside], p[inside, d], lw=0.9, color="tab:blue")
         axz.set_xlim(w0, w0 + args.window)
         if d == 0:
-            axz.set_title(f"{args.window:g} s window")
+            axz.set_title(f"{_fmt(args.window)} s from {_fmt(w0)} s")
         if d == dim - 1:
             axz.set_xlabel("time [s]")
 
 
-def _plot_rate_and_stats(fig, rate_cell, text_cell, target: _Target, t: np.ndarray, phase,
-                         stats, dim: int) -> None:
-    """The heart rate over time (synthetic motion only) and the statistics as text."""
-    ax_hr = fig.add_subplot(rate_cell)
-    if phase is not None:
-        ax_hr.plot(t, 60 * phase.rate(t), color="tab:red", lw=1.0)
-        ax_hr.set_xlim(target.start, target.start + target.duration)
-        ax_hr.set_ylabel("heart rate\n[beats/min]")
-        ax_hr.set_xlabel("time [s]")
-    else:
-        ax_hr.axis("off")
-        ax_hr.text(0.0, 0.5, "heart rate unknown for a recording", transform=ax_hr.transAxes)
-    ax_txt = fig.add_subplot(text_cell)
-    ax_txt.axis("off")
-    ax_txt.text(0.0, 1.0, "\n".join([
+def _draw_trace(ax, t: np.ndarray, y: np.ndarray, pixels: int) -> bool:
+    """``y`` over ``t`` as a line, or as its min–max over each of ``pixels`` columns when it
+    has more than :data:`LINE_POINTS` samples (which a line would draw the same, slowly).
+    Returns whether it drew the min–max band."""
+    if t.size <= LINE_POINTS:
+        ax.plot(t, y, lw=0.6, color="tab:blue")
+        return False
+    edges = np.linspace(0, t.size, pixels + 1).astype(int)
+    lo = np.full(pixels, np.nan)
+    hi = np.full(pixels, np.nan)
+    for i, (a, b) in enumerate(itertools.pairwise(edges)):
+        seg = y[a:b][np.isfinite(y[a:b])]
+        if seg.size:
+            lo[i], hi[i] = seg.min(), seg.max()
+    mid = t[np.minimum((edges[:-1] + edges[1:]) // 2, t.size - 1)]
+    ax.fill_between(mid, lo, hi, color="tab:blue", lw=0.6, edgecolor="tab:blue", step="mid")
+    return True
+
+
+def _plot_heart_rate(ax, target: _Target, heart: _Heart) -> None:
+    """The heart rate over time, as the title states it."""
+    if not heart.t.size:
+        ax.axis("off")
+        ax.text(0.0, 0.5, f"heart rate {heart.summary}", transform=ax.transAxes)
+        return
+    ax.plot(heart.t, heart.bpm, color="tab:red", lw=1.0, marker="" if heart.t.size > 60
+            else ".")
+    ax.set_xlim(target.start, target.start + target.duration)
+    ax.set_ylabel("heart rate\n[beats/min]")
+    ax.set_xlabel("time [s]")
+    ax.set_title(f"heart rate: {heart.how}", fontsize=9)
+
+
+def _plot_stats(ax, stats, dim: int) -> None:
+    """The statistics as text."""
+    ax.axis("off")
+    ax.text(0.0, 1.0, "\n".join([
         f"peak-to-peak  {stats.peak_to_peak * 1e3:.2f} mm (largest axis range)",
         f"RMS           {stats.rms * 1e3:.2f} mm (about the mean"
         + (", 3-D)" if dim > 1 else ")"),
-        "spectral peaks " + ", ".join(f"{v:.2f}" for v in stats.peaks[:6]) + " Hz",
-    ]), transform=ax_txt.transAxes, va="top", family="monospace", fontsize=8)
+        "spectral peaks " + (", ".join(f"{v:.2f}" for v in stats.peaks[:6]) or "none")
+        + (" Hz" if len(stats.peaks) else ""),
+    ]), transform=ax.transAxes, va="top", family="monospace", fontsize=8)
 
 
 def _plot_psd(ax, f: np.ndarray, s: np.ndarray, rate: float, stats) -> None:
@@ -342,7 +637,8 @@ def _plot_psd(ax, f: np.ndarray, s: np.ndarray, rate: float, stats) -> None:
     for d in range(dim):
         ax.semilogy(f, s[:, d], lw=0.9, label=labels[d])
     ax.set_xlim(0, min(30.0, rate / 2))
-    ax.set_ylim(max(np.max(s) * 1e-9, 1e-12), np.max(s) * 5)
+    top = float(np.max(s)) if np.isfinite(np.max(s)) and np.max(s) > 0 else 1.0
+    ax.set_ylim(max(top * 1e-9, 1e-12), top * 5)
     ax.set_xlabel("frequency [Hz]")
     ax.set_ylabel("PSD [mm²/Hz]")
     ax.set_title("power spectral density (Welch)")
@@ -351,15 +647,33 @@ def _plot_psd(ax, f: np.ndarray, s: np.ndarray, rate: float, stats) -> None:
         ax.axvline(fp, color="0.5", lw=0.5, ls=":")
 
 
-def _envelope(t: np.ndarray, y: np.ndarray, rate: float, window: float = 1.2,
-              points: int = 3000) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Rolling min/max of ``y`` over ``window`` seconds (about one beat), decimated to
-    ``points`` samples, so a long record plots as a clean band around the breathing."""
-    from scipy.ndimage import maximum_filter1d, minimum_filter1d
+def _fmt(x: float, digits: int = 4) -> str:
+    """``x`` to ``digits`` significant digits, without exponent or trailing zeros
+    (9.98667 → 9.987, 472.0 → 472, 257.069 → 257.1)."""
+    if not math.isfinite(x) or x == 0 or abs(x) >= 1e6:
+        return f"{x:.{digits}g}"
+    decimals = max(0, digits - 1 - math.floor(math.log10(abs(x))))
+    text = f"{x:.{decimals}f}"
+    return text.rstrip("0").rstrip(".") if "." in text else text
 
-    filled = np.where(np.isfinite(y), y, np.nanmean(y))
-    size = max(1, round(window * rate))
-    lo = minimum_filter1d(filled, size, mode="nearest")
-    hi = maximum_filter1d(filled, size, mode="nearest")
-    step = max(1, t.size // points)
-    return t[::step], lo[::step], hi[::step]
+
+def _mm(value: float) -> str:
+    """A length [mm] to the micrometre; with an exponent beyond a kilometre."""
+    return f"{value:.3f}" if abs(value) < 1e6 else f"{value:.3g}"
+
+
+def _bytes(n: float) -> str:
+    """A memory size in B, kB, MB, GB, TB, PB or EB."""
+    for unit in ("B", "kB", "MB", "GB", "TB", "PB"):
+        if abs(n) < 1000:
+            return f"{n:.3g} {unit}"
+        n /= 1000
+    return f"{n:.3g} EB"
+
+
+def _span(seconds: float) -> str:
+    """A time span in s, min, h, days or years."""
+    for unit, size in (("years", 365.25 * 86400), ("days", 86400), ("h", 3600), ("min", 60)):
+        if seconds >= size:
+            return f"{seconds / size:.3g} {unit}"
+    return f"{seconds:.2g} s"

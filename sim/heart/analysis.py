@@ -70,6 +70,62 @@ def spectral_peaks(f: np.ndarray, s: np.ndarray, fmin: float = 0.05, fmax: float
     return fb[idx[order]]
 
 
+#: The band searched for the heart rate of a recording [Hz] (42–210 beats/min).
+HEART_BAND = (0.7, 3.5)
+#: A recording's heart rate is estimated only from at least this many of the band's slowest
+#: periods of complete samples [-].
+MIN_BEATS = 2.0
+
+
+def spectral_heart_rate(f: np.ndarray, s: np.ndarray) -> float:
+    """The frequency [Hz] of the largest summed PSD ``s`` (n_f, dim) in :data:`HEART_BAND`;
+    NaN if the band holds no frequency or its power is not finite (overflowing samples)."""
+    band = (f >= HEART_BAND[0]) & (f <= HEART_BAND[1])
+    power = np.sum(np.reshape(s, (len(f), -1))[band], axis=1)
+    if not band.any() or not np.all(np.isfinite(power)):
+        return float("nan")
+    return float(f[band][np.argmax(power)])
+
+
+def heart_rate_track(t: np.ndarray, p: np.ndarray, rate: float, window: float = 10.0,
+                     hop: float = 2.0) -> tuple[np.ndarray, np.ndarray]:
+    """The heart rate of a recording over time: the spectral peak in :data:`HEART_BAND` of
+    each ``window``-second stretch, ``hop`` seconds apart (Hann window, mean removed, the
+    spectrum zero-padded to 0.01 Hz bins).
+
+    Parameters
+    ----------
+    t : ndarray, shape (n,)
+        Regular sample times [s].
+    p : ndarray, shape (n, dim)
+        Positions, gaps already filled (:func:`fill_gaps`).
+    rate : float
+        Sample rate [Hz].
+    window, hop : float
+        Length of a stretch and the step between stretches [s].
+
+    Returns
+    -------
+    (ndarray, ndarray)
+        The stretches' centre times [s] and heart rates [Hz]; empty when the record is
+        shorter than one window.
+    """
+    p = np.asarray(p, dtype=float).reshape(len(p), -1)
+    size, step = round(window * rate), max(1, round(hop * rate))
+    if size < 2 or size > len(p):
+        return np.zeros(0), np.zeros(0)
+    nfft = max(size, 1 << int(np.ceil(np.log2(rate / 0.01))))
+    f = np.fft.rfftfreq(nfft, 1.0 / rate)
+    taper = np.hanning(size)[:, None]
+    starts = np.arange(0, len(p) - size + 1, step)
+    rates = np.empty(starts.size)
+    for i, a in enumerate(starts):
+        x = p[a:a + size]
+        power = np.abs(np.fft.rfft((x - x.mean(axis=0)) * taper, n=nfft, axis=0)) ** 2
+        rates[i] = spectral_heart_rate(f, power)
+    return t[starts + size // 2], rates
+
+
 @dataclass(frozen=True)
 class MotionStats:
     """Summary of a motion record.
@@ -84,7 +140,9 @@ class MotionStats:
         Per-axis RMS about the mean [m].
     heart_rate : tuple of float
         (min, max) heart rate [Hz]; from the heart phase when the source has one, else the
-        strongest spectral peak in 0.7–3.5 Hz (min = max).
+        strongest spectral peak in :data:`HEART_BAND` (min = max), NaN when the complete
+        samples last less than :data:`MIN_BEATS` periods of the band's slowest rate or the
+        spectrum is not finite.
     peaks : tuple of float
         Strongest spectral peaks [Hz], strongest first.
     missing : float
@@ -104,7 +162,8 @@ class MotionStats:
             "peak_to_peak_mm": round(self.peak_to_peak * 1e3, 4),
             "rms_mm": round(self.rms * 1e3, 4),
             "rms_per_axis_mm": [round(v * 1e3, 4) for v in self.rms_per_axis],
-            "heart_rate_bpm": [round(v * 60, 2) for v in self.heart_rate],
+            "heart_rate_bpm": [round(v * 60, 2) if np.isfinite(v) else None
+                               for v in self.heart_rate],
             "spectral_peaks_hz": [round(v, 3) for v in self.peaks],
             "missing_fraction": round(self.missing, 5),
         }
@@ -128,8 +187,8 @@ def motion_stats(source: MotionSource, duration: float, rate: float,
         hr = np.asarray(phase.rate(t))
         heart_rate = (float(hr.min()), float(hr.max()))
     else:
-        band = (f >= 0.7) & (f <= 3.5)
-        f_h = float(f[band][np.argmax(np.sum(s[band], axis=1))]) if band.any() else float("nan")
+        enough = finite.shape[0] / rate >= MIN_BEATS / HEART_BAND[0]
+        f_h = spectral_heart_rate(f, s) if enough else float("nan")
         heart_rate = (f_h, f_h)
     per_axis = tuple(float(v) for v in np.sqrt(np.var(finite, axis=0)))
     return MotionStats(peak_to_peak(finite), rms_about_mean(finite), per_axis, heart_rate,

@@ -72,6 +72,11 @@ class ScenarioSpec:
     variable: bool = True
     hrv_band_powers: tuple[float, float, float] | None = None
 
+    @property
+    def dim(self) -> int:
+        """Number of motion axes: 1 at the mitral annulus (along its axis), else 3."""
+        return 1 if self.site == "mitral" else 3
+
 
 _SPECS: tuple[ScenarioSpec, ...] = (
     ScenarioSpec(

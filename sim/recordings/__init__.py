@@ -7,11 +7,14 @@
 ``matfile``     MATLAB ``.mat`` v5 and v7.3 (HDF5)
 ``points``      :func:`load_points`: files of several tracked points, point by point
 ``files``       :func:`load_recording`: any of them, by suffix
+``plausible``   :class:`RecordingWarning` on a recording unlikely to be heart motion as read
+                (its span, outliers, missing samples): :class:`Plausibility`
 ==============  =================================================================
 """
 
 from sim.recordings.files import load_recording
 from sim.recordings.matfile import load_mat, parse_indices
+from sim.recordings.plausible import Plausibility, RecordingWarning, check_recording
 from sim.recordings.points import load_points
 from sim.recordings.recorded import (
     LENGTH_UNITS,
@@ -22,6 +25,7 @@ from sim.recordings.recorded import (
 from sim.recordings.text import export_source, save_recording
 
 __all__ = [
-    "LENGTH_UNITS", "TIME_UNITS", "RecordedMotion", "RecordingError", "export_source",
-    "load_mat", "load_points", "load_recording", "parse_indices", "save_recording",
+    "LENGTH_UNITS", "TIME_UNITS", "Plausibility", "RecordedMotion", "RecordingError",
+    "RecordingWarning", "check_recording", "export_source", "load_mat", "load_points",
+    "load_recording", "parse_indices", "save_recording",
 ]

@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from sim.recordings.matfile import load_mat
+from sim.recordings.plausible import check_recording
 from sim.recordings.points import load_points, pick_point
 from sim.recordings.recorded import RecordedMotion, RecordingError, check_file
 from sim.recordings.text import read_csv, read_npz
@@ -20,13 +21,14 @@ def load_recording(path: str | Path, units: str | None = None, var: str | None =
     Parameters
     ----------
     path : str or Path
-        ``.csv`` (or ``.txt``) or ``.npz`` file.
+        ``.csv`` (or ``.txt``), ``.npz`` or ``.mat`` file.
     units : str, optional
         Length unit of the positions when the file does not state it (``"m"``, ``"mm"``,
-        ``"um"``, ``"cm"``). A CSV without units is in millimetres.
+        ``"um"``, ``"cm"``). A CSV without units is in millimetres; an NPZ or MAT file needs
+        its units, from the file or from here.
     var, rows, cols, rate : optional
         For ``.mat`` files: the variable, its 0-based rows or columns holding the coordinates,
-        and the sample rate [Hz] when the file has no time vector
+        and the sample rate [Hz] when the file has neither a time vector nor a rate
         (:func:`sim.recordings.matfile.load_mat`).
     point : int, optional
         In a file of several tracked points, the point to read, from 1
@@ -41,6 +43,13 @@ def load_recording(path: str | Path, units: str | None = None, var: str | None =
     ------
     RecordingError
         Naming the file, the line and the problem.
+
+    Warns
+    -----
+    RecordingWarning
+        When the recording is implausible as heart motion: a span outside 0.5–40 mm (with the
+        unit that would fit), outliers, or more than half of its samples missing
+        (:mod:`sim.recordings.plausible`).
     """
     path = Path(path)
     if point is not None:
@@ -48,10 +57,10 @@ def load_recording(path: str | Path, units: str | None = None, var: str | None =
     check_file(path)
     suffix = path.suffix.lower()
     if suffix == ".mat":
-        return load_mat(path, var=var, rows=rows, cols=cols, rate=rate, units=units)
-    if var is not None or rows is not None or cols is not None or rate is not None:
+        rec = load_mat(path, var=var, rows=rows, cols=cols, rate=rate, units=units)
+    elif var is not None or rows is not None or cols is not None or rate is not None:
         raise RecordingError(f"{path}: --var, --rows, --cols and --rate apply to .mat files")
-    if suffix in {".csv", ".txt"}:
+    elif suffix in {".csv", ".txt"}:
         rec = read_csv(path, units)
     elif suffix == ".npz":
         rec = read_npz(path, units)
@@ -60,4 +69,5 @@ def load_recording(path: str | Path, units: str | None = None, var: str | None =
                              "(use .csv, .npz or .mat)")
     if not np.any(np.all(np.isfinite(rec.z), axis=1)):
         raise RecordingError(f"{path}: no complete sample (all positions missing)")
+    check_recording(rec)
     return rec

@@ -3,9 +3,18 @@
 A recording is one numeric matrix (``var``) holding the three coordinates (or one) along one
 axis and the samples along the other. ``rows``/``cols`` pick the coordinates when the matrix
 holds more than three series; otherwise the axis of length 3 (or 1) is the coordinates' one.
-The sample times come from a time vector in the file (``t``, ``time``, ``timestamps``; seconds
-unless a string ``time_units`` says ``ms``) or from ``rate`` [Hz]; the length unit from a
-string variable ``units`` in the file or from ``units`` (``mm`` when neither says).
+
+Sample times
+    A time vector in the file (``t``, ``time``, ``timestamps``, ``t_s``; seconds unless a
+    string ``time_units`` says ``ms`` or ``us``), else a sample rate in the file (a scalar
+    ``fs``, ``Fs``, ``FS``, ``rate``, ``sample_rate``, ``sampling_rate`` or ``fps`` [Hz]), else
+    ``rate`` [Hz] (``--rate``). A ``rate`` that disagrees with the file's by more than 1 % is
+    refused: one of them is wrong.
+Length unit
+    A string variable ``units`` in the file (``mm``, ``m``, ``um``, ``cm``) or ``units``
+    (``--units``). One of them is required: unlike a CSV header, a MATLAB matrix carries no
+    convention, and millimetres and centimetres are both plausible for heart motion, so no
+    unit is assumed.
 
 Every problem raises :class:`~sim.recordings.RecordingError` naming the file and the problem.
 """
@@ -20,6 +29,10 @@ from sim.recordings.recorded import LENGTH_UNITS, TIME_UNITS, RecordedMotion, Re
 
 #: Names recognised as the time vector, in order of preference.
 TIME_NAMES = ("t", "time", "timestamps", "t_s")
+#: Names recognised as a scalar sample rate [Hz], in order of preference.
+RATE_NAMES = ("fs", "Fs", "FS", "rate", "sample_rate", "sampling_rate", "fps")
+#: Largest relative difference between a given rate and the file's own [-].
+RATE_TOLERANCE = 0.01
 #: At least this many samples [-].
 MIN_SAMPLES = 2
 
@@ -55,6 +68,8 @@ def _read_variables(path: Path) -> dict[str, object]:
             out[key] = "".join(np.asarray(value).ravel().tolist()).strip()
         elif isinstance(value, np.ndarray) and value.dtype.kind in "fiub":
             out[key] = np.asarray(value, dtype=float)
+        elif isinstance(value, np.ndarray) and value.dtype.kind == "c":
+            out[key] = np.asarray(value, dtype=complex)  # refused if it is the one read
     return out
 
 
@@ -136,9 +151,10 @@ def load_mat(path: str | Path, var: str | None = None, rows=None, cols=None,
     rows, cols : sequence of int, optional
         0-based rows (samples along columns) or columns (samples along rows) holding x, y, z.
     rate : float, optional
-        Sample rate [Hz] when the file has no time vector (required then).
+        Sample rate [Hz]; required when the file holds neither a time vector nor a rate, and
+        refused when it disagrees with the file's by more than :data:`RATE_TOLERANCE`.
     units : str, optional
-        Length unit (``m``, ``mm``, ``um``, ``cm``) when the file does not state it.
+        Length unit (``m``, ``mm``, ``um``, ``cm``); required when the file does not state it.
     points : bool
         Accept a matrix of several tracked points: 3P coordinates (x1, y1, z1, x2, …) along
         its shorter axis, returned as (n, 3P) (:func:`sim.recordings.points.load_points`).
@@ -152,6 +168,25 @@ def load_mat(path: str | Path, var: str | None = None, rows=None, cols=None,
     variables = _read_variables(path)
     arrays = {k: v for k, v in variables.items() if isinstance(v, np.ndarray)}
     time_key = next((k for k in TIME_NAMES if k in arrays), None)
+    var = _variable(path, arrays, var, time_key)
+    z = _select(path, arrays[var], var, rows, cols, points)
+    n = z.shape[0]
+    if n < MIN_SAMPLES:
+        raise RecordingError(f"{path}: variable {var!r} has {n} sample(s); at least "
+                             f"{MIN_SAMPLES} are needed")
+    t = _times(path, variables, None if time_key == var else time_key, n, rate)
+    if np.any(np.isinf(z)):
+        raise RecordingError(f"{path}: {var!r} has infinite values (use NaN for missing)")
+    if not np.any(np.all(np.isfinite(z), axis=1)):
+        raise RecordingError(f"{path}: {var!r} has no complete sample (all NaN)")
+    unit, origin = _units(path, variables.get("units"), units)
+    return RecordedMotion(t, z * LENGTH_UNITS[unit], str(path), unit, origin)
+
+
+def _variable(path: Path, arrays: dict[str, np.ndarray], var: str | None,
+              time_key: str | None) -> str:
+    """The variable holding the positions: ``var``, or the file's only matrix besides the
+    time vector; a complex one is refused."""
     if var is None:
         candidates = [k for k, v in arrays.items() if k != time_key and v.size > 3]
         if len(candidates) != 1:
@@ -161,38 +196,82 @@ def load_mat(path: str | Path, var: str | None = None, rows=None, cols=None,
     if var not in arrays:
         raise RecordingError(f"{path}: no numeric variable {var!r} (found "
                              f"{', '.join(sorted(arrays)) or 'none'})")
-    z = _select(path, arrays[var], var, rows, cols, points)
-    n = z.shape[0]
-    if n < MIN_SAMPLES:
-        raise RecordingError(f"{path}: variable {var!r} has {n} sample(s); at least "
-                             f"{MIN_SAMPLES} are needed")
-    if time_key is not None and time_key != var and rate is None:
-        t = arrays[time_key].ravel() * TIME_UNITS.get(str(variables.get("time_units", "s")), 1.0)
-        if t.size != n:
-            raise RecordingError(f"{path}: time vector {time_key!r} has {t.size} samples, "
-                                 f"{var!r} has {n}")
-        if not np.all(np.isfinite(t)):
-            raise RecordingError(f"{path}: time vector {time_key!r} is not finite everywhere")
-        bad = np.flatnonzero(np.diff(t) <= 0)
-        if bad.size:
-            raise RecordingError(f"{path}: time vector {time_key!r} does not increase at "
-                                 f"sample {bad[0] + 1} ({t[bad[0] + 1]:g} after {t[bad[0]]:g})")
-    elif rate is not None:
-        if not (np.isfinite(rate) and rate > 0):
-            raise RecordingError(f"{path}: the sample rate must be positive, got {rate}")
-        t = np.arange(n) / float(rate)
-    else:
-        raise RecordingError(f"{path}: no time vector ({', '.join(TIME_NAMES)}) in the file; "
-                             "give the sample rate (--rate HZ)")
-    file_units = variables.get("units")
+    if arrays[var].dtype.kind == "c":
+        raise RecordingError(f"{path}: variable {var!r} holds complex numbers; positions must "
+                             "be real (take the real part or the magnitude before saving)")
+    return var
+
+
+def _times(path: Path, variables: dict[str, object], time_key: str | None, n: int,
+           rate: float | None) -> np.ndarray:
+    """The n sample times [s]: the file's time vector, else its rate, else ``rate``."""
+    if rate is not None and not (np.isfinite(rate) and rate > 0):
+        raise RecordingError(f"{path}: the sample rate must be positive, got {rate}")
+    if time_key is not None:
+        t = _time_vector(path, variables, time_key, n)
+        _agree(path, f"the time vector {time_key!r}", 1.0 / np.median(np.diff(t)), rate)
+        return t
+    rate_key = next((k for k in RATE_NAMES if _scalar(variables.get(k)) is not None), None)
+    if rate_key is not None:
+        file_rate = _scalar(variables[rate_key])
+        if not (np.isfinite(file_rate) and file_rate > 0):
+            raise RecordingError(f"{path}: the sample rate {rate_key!r} in the file must be "
+                                 f"positive, got {file_rate:g}")
+        _agree(path, f"the rate {rate_key!r}", file_rate, rate)
+        return np.arange(n) / file_rate
+    if rate is None:
+        raise RecordingError(
+            f"{path}: the file has no sample times: give the sample rate with --rate HZ (e.g. "
+            f"--rate 25), or store a time vector ({', '.join(TIME_NAMES)}) [s] or a rate "
+            f"({', '.join(RATE_NAMES[:2])}) [Hz] in the file")
+    return np.arange(n) / float(rate)
+
+
+def _time_vector(path: Path, variables: dict[str, object], key: str, n: int) -> np.ndarray:
+    """The time vector ``key`` in seconds (its ``time_units``), checked: n finite samples that
+    increase strictly."""
+    unit = variables.get("time_units", "s")
+    if not isinstance(unit, str) or unit not in TIME_UNITS:
+        raise RecordingError(f"{path}: time_units {unit!r} is not a time unit "
+                             f"(use one of {', '.join(TIME_UNITS)})")
+    t = np.asarray(variables[key]).ravel() * TIME_UNITS[unit]
+    if t.size != n:
+        raise RecordingError(f"{path}: time vector {key!r} has {t.size} samples, the "
+                             f"positions have {n}")
+    if not np.all(np.isfinite(t)):
+        raise RecordingError(f"{path}: time vector {key!r} is not finite everywhere")
+    bad = np.flatnonzero(np.diff(t) <= 0)
+    if bad.size:
+        raise RecordingError(f"{path}: time vector {key!r} does not increase at "
+                             f"sample {bad[0] + 1} ({t[bad[0] + 1]:g} after {t[bad[0]]:g})")
+    return t
+
+
+def _agree(path: Path, what: str, file_rate: float, rate: float | None) -> None:
+    """Refuse a given ``rate`` that differs from the file's own by more than the tolerance."""
+    if rate is not None and abs(rate / file_rate - 1.0) > RATE_TOLERANCE:
+        raise RecordingError(
+            f"{path}: --rate {rate:g} Hz disagrees with {what} in the file ({file_rate:.6g} "
+            "Hz); leave --rate out, or correct the file (a time vector not in seconds needs "
+            "time_units 'ms' or 'us')")
+
+
+def _scalar(value: object) -> float | None:
+    """A one-element real numeric array's value, else None."""
+    if isinstance(value, np.ndarray) and value.size == 1 and value.dtype.kind == "f":
+        return float(value.ravel()[0])
+    return None
+
+
+def _units(path: Path, file_units: object, units: str | None) -> tuple[str, str]:
+    """The length unit and where it came from: the file's ``units``, else ``units``."""
     if isinstance(file_units, str) and units is not None and file_units != units:
         raise RecordingError(f"{path}: units {file_units!r} in the file disagree with {units!r}")
-    unit = file_units if isinstance(file_units, str) else (units or "mm")
+    unit = file_units if isinstance(file_units, str) else units
+    if unit is None:
+        raise RecordingError(f"{path}: the file does not state its length unit (a string "
+                             "variable 'units'); give it with --units mm, m, um or cm")
     if unit not in LENGTH_UNITS:
         raise RecordingError(f"{path}: unknown units {unit!r} "
                              f"(use one of {', '.join(sorted(LENGTH_UNITS))})")
-    if np.any(np.isinf(z)):
-        raise RecordingError(f"{path}: {var!r} has infinite values (use NaN for missing)")
-    if not np.any(np.all(np.isfinite(z), axis=1)):
-        raise RecordingError(f"{path}: {var!r} has no complete sample (all NaN)")
-    return RecordedMotion(t, z * LENGTH_UNITS[unit], name=str(path))
+    return unit, "file" if isinstance(file_units, str) else "option"

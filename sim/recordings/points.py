@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from sim.recordings.matfile import load_mat
+from sim.recordings.plausible import check_recording
 from sim.recordings.recorded import RecordedMotion, RecordingError, check_file
 from sim.recordings.text import read_csv, read_npz
 
@@ -62,18 +63,27 @@ def load_points(path: str | Path, units: str | None = None, var: str | None = No
     ------
     RecordingError
         Naming the file and the problem, also when a point has no complete sample.
+
+    Warns
+    -----
+    RecordingWarning
+        When the file is implausible as heart motion (:mod:`sim.recordings.plausible`): once
+        for its span, and for each point with more than half of its samples missing.
     """
     path = Path(path)
     wide = _wide(path, units, var, rows, cols, rate)
     if wide.dim <= 3:
         recordings = [wide]
     else:
-        recordings = [RecordedMotion(wide.t, wide.z[:, 3 * k:3 * k + 3], name=f"{path}:p{k + 1}")
+        recordings = [wide.with_samples(wide.t, wide.z[:, 3 * k:3 * k + 3], f"{path}:p{k + 1}")
                       for k in range(wide.dim // 3)]
     for k, rec in enumerate(recordings):
         if not np.any(np.all(np.isfinite(rec.z), axis=1)):
             where = f"point {k + 1}" if len(recordings) > 1 else "the recording"
             raise RecordingError(f"{path}: {where} has no complete sample (all missing)")
+    check_recording(wide, missing=False)  # the units once per file, the gaps per point
+    for rec in recordings:
+        check_recording(rec, span=False)
     return recordings
 
 

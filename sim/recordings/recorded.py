@@ -14,8 +14,11 @@ from sim.heart.motion import as_time_array
 
 #: Length units accepted in headers and flags, in metres.
 LENGTH_UNITS: dict[str, float] = {"m": 1.0, "mm": 1e-3, "um": 1e-6, "µm": 1e-6, "cm": 1e-2}
-#: Time units accepted in headers, in seconds.
-TIME_UNITS: dict[str, float] = {"s": 1.0, "ms": 1e-3}
+#: Time units accepted in headers and in a MATLAB file's ``time_units``, in seconds.
+TIME_UNITS: dict[str, float] = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6}
+#: Where the length unit of a recording came from: the file itself, the caller's ``units``
+#: (``--units`` on the command line), or the format's documented default (CSV: millimetres).
+UNIT_ORIGINS = ("file", "option", "default")
 #: Axis names, in order.
 AXES = ("x", "y", "z")
 
@@ -41,13 +44,19 @@ class RecordedMotion:
         Positions [m]; NaN marks dropouts.
     name : str
         Where it came from (shown by the CLI).
+    units : str, optional
+        The length unit the file was read in (a key of :data:`LENGTH_UNITS`), if known.
+    units_origin : str, optional
+        Where that unit came from, one of :data:`UNIT_ORIGINS`.
     """
 
-    def __init__(self, t: np.ndarray, z: np.ndarray, name: str = "recording") -> None:
+    def __init__(self, t: np.ndarray, z: np.ndarray, name: str = "recording",
+                 units: str | None = None, units_origin: str | None = None) -> None:
         self.t = np.asarray(t, dtype=float)
         self.z = np.asarray(z, dtype=float).reshape(self.t.size, -1)
         self.dim = self.z.shape[1]
         self.name = name
+        self.units, self.units_origin = units, units_origin
         self._missing = ~np.all(np.isfinite(self.z), axis=1)
 
     @property
@@ -57,12 +66,30 @@ class RecordedMotion:
 
     @property
     def sample_rate(self) -> float:
-        """1 / median sample interval [Hz]."""
-        return float(1.0 / np.median(np.diff(self.t)))
+        """The nominal sample rate [Hz]: intervals counted in steps of the median interval Δ̃,
+        k_i = max(1, round((t_{i+1} − t_i)/Δ̃)), and rate = Σ k_i / (t[-1] − t[0]).
+
+        Timestamps written with few decimals (1/30 s as 0.033 and 0.034) give the true rate,
+        not 1/Δ̃; a gap of about k intervals counts as k.
+        """
+        gaps = np.diff(self.t)
+        steps = np.maximum(np.rint(gaps / np.median(gaps)), 1.0)
+        return float(np.sum(steps) / (self.t[-1] - self.t[0]))
+
+    @property
+    def missing(self) -> np.ndarray:
+        """Per sample, whether any coordinate is missing (NaN), shape (n,)."""
+        return self._missing.copy()
+
+    def with_samples(self, t: np.ndarray, z: np.ndarray, name: str | None = None
+                     ) -> RecordedMotion:
+        """Other samples with this recording's name and units (``name`` replaces the name)."""
+        return RecordedMotion(t, z, self.name if name is None else name, self.units,
+                              self.units_origin)
 
     def starting_at(self, t0: float = 0.0) -> RecordedMotion:
         """The same recording with its time axis shifted so that it starts at ``t0`` [s]."""
-        return RecordedMotion(self.t - self.t[0] + t0, self.z, self.name)
+        return self.with_samples(self.t - self.t[0] + t0, self.z)
 
     def position(self, t: float | np.ndarray) -> np.ndarray:
         """p(t) [m]: shape (dim,) for a float, (n, dim) for an array; NaN where no data."""

@@ -8,8 +8,8 @@ A header line, then one sample per line::
     0.0000,1.25,-0.40,3.10
 
 Times are seconds and positions millimetres unless the header says otherwise with a unit
-suffix on each name, ``t_s``/``t[s]``/``t (ms)``, ``x_mm``/``x [m]``/``x(um)``; or the caller
-passes ``units=``. A file of several tracked points numbers them from 1, three columns each::
+suffix on each name, ``t_s``/``t[s]``/``t (ms)``/``t_us``, ``x_mm``/``x [m]``/``x(um)``; or the
+caller passes ``units=``. A file of several tracked points numbers them from 1, three columns each::
 
     t,x1,y1,z1,x2,y2,z2,x3,y3,z3
 
@@ -20,10 +20,10 @@ increasing.
 
 NPZ format
 ----------
-Arrays ``t`` (n,) [s] and ``position`` (n, dim) (``x`` is accepted for ``position``), and a
-string ``units`` (``"m"``, ``"mm"`` or ``"um"``) unless the caller passes ``units=``. Several
-tracked points: ``position`` of shape (n, P, 3), or (n, 3P) with point p (from 1) in columns
-3(p − 1) … 3p − 1.
+Arrays ``t`` (n,) [s] and ``position`` (n, dim) (``x`` is accepted for ``position``) of real
+numbers (complex ones are refused), and a string ``units`` (``"m"``, ``"mm"``, ``"um"`` or
+``"cm"``) unless the caller passes ``units=``. Several tracked points: ``position`` of shape
+(n, P, 3), or (n, 3P) with point p (from 1) in columns 3(p − 1) … 3p − 1.
 
 Every problem raises :class:`~sim.recordings.recorded.RecordingError` naming the file, the line
 (CSV) and what is wrong.
@@ -34,6 +34,8 @@ from __future__ import annotations
 import csv
 import io
 import re
+import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -52,14 +54,15 @@ _HEADER_FIELD = re.compile(
     r"^\s*(?P<name>[A-Za-z]+\d*)\s*(?:(?:_|\[|\()\s*(?P<unit>[A-Za-zµ]+)\s*[\])]?)?\s*$")
 
 
-def _unit_factor(path: Path, name: str, unit: str | None, table: dict[str, float]) -> float | None:
+def _unit_key(path: Path, name: str, unit: str | None, table: dict[str, float]) -> str | None:
+    """The key of ``table`` that a header's ``unit`` names (None when it names none)."""
     if unit is None:
         return None
     key = unit.lower() if unit.lower() in table else unit
     if key not in table:
         raise fail(path, f"unknown unit {unit!r} for column {name!r} "
                     f"(use one of {', '.join(sorted(table))})", 1)
-    return table[key]
+    return key
 
 
 def _point_names(count: int) -> list[str]:
@@ -75,8 +78,9 @@ def _columns_ok(names: list[str], points: bool) -> bool:
 
 
 def _parse_header(path: Path, fields: list[str], units: str | None,
-                  points: bool = False) -> tuple[int, float, float]:
-    """(columns, time factor [s/unit], length factor [m/unit]) from a header line."""
+                  points: bool = False) -> tuple[int, float, str, str]:
+    """(columns, time factor [s/unit], length unit, where the unit came from) from a header
+    line (:data:`~sim.recordings.recorded.UNIT_ORIGINS`)."""
     if all(_looks_numeric(f) for f in fields):
         raise fail(path, "missing header line: the first line must name the columns "
                     "(t,x,y,z or t,x)", 1)
@@ -94,21 +98,20 @@ def _parse_header(path: Path, fields: list[str], units: str | None,
                    + ("hold several tracked points: read them one by one (point = 1, 2, …)"
                       if several else "are not t,x,y,z or t,x (or t,x1,y1,z1,x2,… for several "
                       "tracked points)"), 1)
-    t_factor = _unit_factor(path, "t", parsed[0][1], TIME_UNITS) or 1.0
-    length = {_unit_factor(path, n, u, LENGTH_UNITS) for n, u in parsed[1:]}
-    if len(length) > 1:
+    t_key = _unit_key(path, "t", parsed[0][1], TIME_UNITS)
+    lengths = {_unit_key(path, n, u, LENGTH_UNITS) for n, u in parsed[1:]}
+    if len(lengths) > 1:
         raise fail(path, "position columns have different units (or only some state one)", 1)
-    header_factor = length.pop()
-    flag_factor = None
-    if units is not None:
-        if units not in LENGTH_UNITS:
-            raise RecordingError(f"{path}: unknown units flag {units!r} "
-                                 f"(use one of {', '.join(sorted(LENGTH_UNITS))})")
-        flag_factor = LENGTH_UNITS[units]
-    if header_factor is not None and flag_factor is not None and header_factor != flag_factor:
+    header_unit = lengths.pop()
+    if units is not None and units not in LENGTH_UNITS:
+        raise RecordingError(f"{path}: unknown units flag {units!r} "
+                             f"(use one of {', '.join(sorted(LENGTH_UNITS))})")
+    if header_unit is not None and units is not None \
+            and LENGTH_UNITS[header_unit] != LENGTH_UNITS[units]:
         raise fail(path, f"header units disagree with the units flag {units!r}", 1)
-    factor = header_factor or flag_factor or LENGTH_UNITS["mm"]
-    return len(names) - 1, t_factor, factor
+    unit, origin = ((header_unit, "file") if header_unit is not None
+                    else (units, "option") if units is not None else ("mm", "default"))
+    return len(names) - 1, TIME_UNITS[t_key or "s"], unit, origin
 
 
 def _looks_numeric(text: str) -> bool:
@@ -121,16 +124,12 @@ def _looks_numeric(text: str) -> bool:
 
 def read_csv(path: Path, units: str | None, points: bool = False) -> RecordedMotion:
     """A CSV recording (module docstring); ``points``: every column of a several-point file."""
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except UnicodeDecodeError as exc:
-        raise fail(path, f"not a text file ({exc.reason})") from None
-    rows = [(i + 1, row) for i, row in enumerate(csv.reader(io.StringIO(text)))
-            if row and not row[0].lstrip().startswith("#") and any(f.strip() for f in row)]
+    rows = _csv_rows(path)
     if not rows:
         raise fail(path, "empty file: no header and no samples")
     _, header = rows[0]
-    dim, t_factor, factor = _parse_header(path, header, units, points)
+    dim, t_factor, unit, origin = _parse_header(path, header, units, points)
+    factor = LENGTH_UNITS[unit]
     names = ["t", *AXES[:dim]] if dim <= 3 else _point_names(dim // 3)
     if len(rows) < 3:
         raise fail(path, f"needs at least two samples, found {len(rows) - 1}")
@@ -163,23 +162,29 @@ def read_csv(path: Path, units: str | None, points: bool = False) -> RecordedMot
         prev = values[0]
         t[k] = values[0] * t_factor
         z[k] = np.asarray(values[1:]) * factor
-    return RecordedMotion(t, z, name=str(path))
+    return RecordedMotion(t, z, str(path), unit, origin)
+
+
+def _csv_rows(path: Path) -> list[tuple[int, list[str]]]:
+    """The (line number, fields) of every line of a CSV file but comments and blank lines."""
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise fail(path, f"not a text file ({exc.reason})") from None
+    reader = csv.reader(io.StringIO(text))
+    try:
+        return [(reader.line_num, row) for row in reader
+                if row and not row[0].lstrip().startswith("#") and any(f.strip() for f in row)]
+    except csv.Error as exc:
+        limit = csv.field_size_limit()
+        problem = (f"a field longer than {limit} characters" if "field larger" in str(exc)
+                   else f"not a CSV line ({exc})")
+        raise fail(path, problem, reader.line_num) from None
 
 
 def read_npz(path: Path, units: str | None, points: bool = False) -> RecordedMotion:
     """An NPZ recording (module docstring); ``points``: every point of a several-point file."""
-    try:
-        data = np.load(path, allow_pickle=False)
-    except (ValueError, OSError) as exc:
-        raise fail(path, f"not a readable .npz archive ({exc})") from None
-    with data:
-        keys = set(data.files)
-        pos_key = "position" if "position" in keys else "x" if "x" in keys else None
-        if "t" not in keys or pos_key is None:
-            raise fail(path, f"needs arrays 't' and 'position'; found {sorted(keys)}")
-        t = np.asarray(data["t"], dtype=float)
-        z = np.asarray(data[pos_key], dtype=float)
-        file_units = str(data["units"]) if "units" in keys else None
+    t, z, pos_key, file_units = _npz_arrays(path)
     if t.ndim != 1:
         raise fail(path, f"'t' must be one-dimensional, got shape {t.shape}")
     shape = z.shape
@@ -195,13 +200,65 @@ def read_npz(path: Path, units: str | None, points: bool = False) -> RecordedMot
                    "by one (point = 1, 2, …)")
     if t.size < 2:
         raise fail(path, f"needs at least two samples, found {t.size}")
+    unit, origin = _npz_units(path, file_units, units)
+    _check_times(path, t)
+    if np.any(np.isinf(z)):
+        row = int(np.flatnonzero(np.any(np.isinf(z), axis=1))[0])
+        raise fail(path, f"sample {row}: position is infinite (use NaN for a missing sample)")
+    return RecordedMotion(t, z * LENGTH_UNITS[unit], str(path), unit, origin)
+
+
+def _npz_arrays(path: Path) -> tuple[np.ndarray, np.ndarray, str, str | None]:
+    """``t``, the positions, their array's name and the file's ``units`` (None if absent).
+
+    A file that is not a readable archive, or whose arrays are not real numbers (complex,
+    text, objects), raises :class:`~sim.recordings.recorded.RecordingError`.
+    """
+    try:
+        data = np.load(path, allow_pickle=False)
+    except (ValueError, OSError, EOFError, zipfile.BadZipFile) as exc:
+        raise fail(path, f"not a readable .npz archive ({exc})") from None
+    if not isinstance(data, np.lib.npyio.NpzFile):
+        raise fail(path, "holds a single .npy array, not an .npz archive of 't' and 'position'")
+    with data:
+        keys = set(data.files)
+        pos_key = "position" if "position" in keys else "x" if "x" in keys else None
+        if "t" not in keys or pos_key is None:
+            raise fail(path, f"needs arrays 't' and 'position'; found {sorted(keys)}")
+        try:  # the members are read (and decompressed) here
+            t, z = data["t"], data[pos_key]
+            file_units = str(data["units"]) if "units" in keys else None
+        except (ValueError, OSError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
+            raise fail(path, f"not a readable .npz archive ({exc})") from None
+    return _real(path, "t", t), _real(path, pos_key, z), pos_key, file_units
+
+
+def _real(path: Path, key: str, array: np.ndarray) -> np.ndarray:
+    """``array`` as float; complex, text or object arrays are refused, naming ``key``."""
+    kind = np.asarray(array).dtype.kind
+    if kind == "c":
+        raise fail(path, f"'{key}' holds complex numbers; positions and times must be real "
+                   "(take the real part or the magnitude before saving)")
+    if kind not in "fiub":
+        raise fail(path, f"'{key}' holds {np.asarray(array).dtype} values, not numbers")
+    return np.asarray(array, dtype=float)
+
+
+def _npz_units(path: Path, file_units: str | None, units: str | None) -> tuple[str, str]:
+    """The length unit of an NPZ file and its origin: the file's ``units``, else ``units``."""
     if units is not None and file_units is not None and units != file_units:
         raise fail(path, f"units {file_units!r} in the file disagree with the flag {units!r}")
     unit = file_units or units
     if unit is None:
-        raise fail(path, "no 'units' array in the file and no units given")
+        raise fail(path, "no 'units' array in the file and no units given (--units mm, m, um "
+                   "or cm)")
     if unit not in LENGTH_UNITS:
         raise fail(path, f"unknown units {unit!r} (use one of {', '.join(sorted(LENGTH_UNITS))})")
+    return unit, "file" if file_units is not None else "option"
+
+
+def _check_times(path: Path, t: np.ndarray) -> None:
+    """Refuse sample times that are not finite or do not increase strictly."""
     if not np.all(np.isfinite(t)):
         row = int(np.flatnonzero(~np.isfinite(t))[0])
         raise fail(path, f"sample {row}: time is not finite")
@@ -209,10 +266,6 @@ def read_npz(path: Path, units: str | None, points: bool = False) -> RecordedMot
     if bad.size:
         raise fail(path, f"sample {bad[0] + 1}: time {t[bad[0] + 1]:g} is not after "
                     f"{t[bad[0]]:g} (times must increase strictly)")
-    if np.any(np.isinf(z)):
-        row = int(np.flatnonzero(np.any(np.isinf(z), axis=1))[0])
-        raise fail(path, f"sample {row}: position is infinite (use NaN for a missing sample)")
-    return RecordedMotion(t, z * LENGTH_UNITS[unit], name=str(path))
 
 
 def save_recording(path: str | Path, t: np.ndarray, z: np.ndarray,

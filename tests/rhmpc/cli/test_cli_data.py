@@ -34,11 +34,32 @@ def test_list_json(capsys: pytest.CaptureFixture[str]) -> None:
 
 
 def test_list_table(capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["data", "list", "--duration", "10"]) == 0
+    assert main(["data", "list", "--duration", "10"]) == 0  # --duration: measured
     out = capsys.readouterr().out
     for name in available_scenarios():
         assert name in out
-    assert "p-p" in out and "target" in out
+    assert "p-p" in out and "target" in out and "RLS/hold" in out
+
+
+def test_list_reads_the_specifications_only(monkeypatch: pytest.MonkeyPatch,
+                                            capsys: pytest.CaptureFixture[str]) -> None:
+    """Without --measure nothing is synthesised: the list is as fast as the command starts."""
+    import rhmpc.cli.data
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("data list synthesised a scenario")
+
+    monkeypatch.setattr(rhmpc.cli.data, "make_scenario", refuse)
+    assert main(["data", "list"]) == 0
+    out = capsys.readouterr().out
+    assert "fixed-a2-top       3    257    472    8.39   3.55  100 + HRV" in out
+    assert "staircase 95–152 + HRV" in out and "--measure" in out
+    assert max(len(line) for line in out.splitlines()) <= 100
+    assert main(["data", "list", "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)
+    assert [r["name"] for r in rows] == list(available_scenarios())
+    assert rows[0]["target_peak_to_peak_mm"] == 8.39 and rows[0]["dim"] == 3
+    assert "heart_rate" in rows[0]["reported"]
 
 
 def test_show(capsys: pytest.CaptureFixture[str]) -> None:
@@ -101,6 +122,34 @@ def test_plot(tmp_path: Path) -> None:
     assert one.is_file()
 
 
+def test_plot_draws_short_records_whole_and_long_ones_with_a_zoom(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A record up to two windows long is one full-resolution line per axis; a longer one has
+    the zoomed window beside it; the title's heart rate is the range of the panel's."""
+    import rhmpc.cli.data
+
+    seen: dict = {}
+    figure = rhmpc.cli.data._figure
+
+    def spy(plt, target, t, p, rate, heart, stats, args):
+        fig = figure(plt, target, t, p, rate, heart, stats, args)
+        seen[target.name] = (fig, heart)
+        return fig
+
+    monkeypatch.setattr(rhmpc.cli.data, "_figure", spy)
+    rec = _heart_csv(tmp_path / "rec.csv", seconds=30.0)
+    for name, duration in (("fixed-a2-top", "15"), ("fixed-a2-top", "40"), (str(rec), "30")):
+        assert main(["data", "plot", name, str(tmp_path / "f.png"), "--duration", duration]) == 0
+        fig, heart = seen[Path(name).name]
+        title = fig._suptitle.get_text()
+        drawn = [a for a in fig.axes if a.lines]  # x, y, z (their zooms), heart rate, PSD
+        assert len(drawn) == (8 if float(duration) > 20 else 5)  # zoom: beyond 2 windows
+        lo, hi = np.nanmin(heart.bpm), np.nanmax(heart.bpm)
+        summary = f"{lo:.0f} bpm" if hi - lo < 0.5 else f"{lo:.0f}–{hi:.0f} bpm"
+        assert f"heart rate {summary}" in title
+    assert seen["rec.csv"][1].summary == "72 bpm"  # a 1.2-Hz heart, estimated per 10 s
+
+
 @pytest.mark.parametrize("argv, message", [
     (["data", "show", "fixed-a9-top"], "unknown scenario 'fixed-a9-top'; valid names"),
     (["data", "show", "missing.csv"], "missing.csv: no such file"),
@@ -137,7 +186,130 @@ def test_list_without_the_annotations(tmp_path: Path, monkeypatch: pytest.Monkey
     assert sim.heart.specs.missing_data("arrhythmia-apb") == tmp_path / "mitdb-100" / "100.atr"
     assert sim.heart.specs.missing_data("fixed-a2-top") is None
     assert "arrhythmia-apb" not in available_scenarios()
-    assert main(["data", "list", "--json", "--duration", "5"]) == 0
+    assert main(["data", "list", "--json"]) == 0
     captured = capsys.readouterr()
     assert "arrhythmia-apb" not in captured.out
     assert "# arrhythmia-apb: skipped, needs" in captured.err
+
+
+def _heart_csv(path: Path, seconds: float = 6.0, rate: float = 25.0, scale: float = 1.0,
+               missing_after: int | None = None) -> Path:
+    """A CSV of 5 mm of heart-like motion (1.2 Hz heart, 0.25 Hz breathing) [mm × scale]."""
+    t = np.arange(0.0, seconds, 1.0 / rate)
+    z = scale * np.column_stack([2.5 * np.sin(2 * np.pi * 1.2 * t),
+                                 1.5 * np.sin(2 * np.pi * 1.2 * t + 1),
+                                 2.0 * np.sin(2 * np.pi * 0.25 * t)])
+    if missing_after is not None:
+        z[missing_after:] = np.nan
+    np.savetxt(path, np.column_stack([t, z]), delimiter=",", header="t,x,y,z", comments="",
+               fmt="%.6f")
+    return path
+
+
+def _bad_inputs(d: Path) -> None:
+    """Write the bad input files of :data:`BAD_INPUTS` into ``d``."""
+    import scipy.io
+
+    (d / "fake.npz").write_bytes(b"PK\x03\x04" + b"\x00" * 200)
+    (d / "bigfield.csv").write_text("t,x,y,z\n0," + "1" * 140_000 + ",0,0\n")
+    t = np.arange(0.0, 6.0, 1 / 257)
+    x = np.column_stack([2 * np.sin(2 * np.pi * 1.6 * t), np.cos(2 * np.pi * 1.6 * t),
+                         1.5 * np.sin(2 * np.pi * 0.25 * t)])
+    np.savez(d / "complex.npz", t=t, position=(x / 1000).astype(complex) + 1j, units="m")
+    with (d / "array.npz").open("wb") as fh:
+        np.save(fh, x)
+    scipy.io.savemat(d / "fortnight.mat", {"X": x.T, "t": t, "time_units": "fortnight",
+                                           "units": "mm"})
+    scipy.io.savemat(d / "nounits.mat", {"X": x.T, "t": t})
+    scipy.io.savemat(d / "norate.mat", {"X": x.T, "units": "mm"})
+    scipy.io.savemat(d / "timed.mat", {"X": x.T, "t": t, "units": "mm"})
+    _heart_csv(d / "rec.csv")
+
+
+#: Bad input: the command, and the first line of stderr (exit code 2).
+BAD_INPUTS = [
+    (["export", "rec.csv", "out.csv", "--rate", "1e12"],
+     "5.96 s of rec.csv at 1e+12 Hz is 5.96e+12 samples: export would need about "),
+    (["show", "fake.npz"], "fake.npz: not a readable .npz archive (File is not a zip file)"),
+    (["show", "bigfield.csv"], "bigfield.csv, line 2: a field longer than 131072 characters"),
+    (["export", "fixed-a2-top", "big.csv", "--duration", "1e12"],
+     "1e+12 s of fixed-a2-top at 257 Hz is 2.57e+14 samples: export would need about "),
+    (["show", "complex.npz"], "complex.npz: 'position' holds complex numbers"),
+    (["show", "array.npz"], "array.npz: holds a single .npy array, not an .npz archive"),
+    (["show", "fortnight.mat"], "fortnight.mat: time_units 'fortnight' is not a time unit"),
+    (["show", "nounits.mat"], "nounits.mat: the file does not state its length unit"),
+    (["show", "norate.mat"], "norate.mat: the file has no sample times: give the sample rate "
+                             "with --rate HZ"),
+    (["show", "timed.mat", "--rate", "25"], "timed.mat: --rate 25 Hz disagrees with the time "
+                                            "vector 't' in the file (257 Hz)"),
+    (["show", "fixed-a2-top", "--bpm", "1e6"], "--bpm must be within 20–250 beats/min, got "
+                                               "1e+06"),
+    (["show", "fixed-a2-top", "--bpm", "nan"], "--bpm must be within 20–250 beats/min"),
+    (["show", "fixed-a2-top", "--duration", "inf"], "--duration must be positive, got inf"),
+    (["export", "fixed-a2-top", "out.csv", "--rate", "0"], "--rate must be positive, got 0"),
+    (["export", "fixed-a2-top", "no/such/dir/out.csv"], "no/such/dir/out.csv: no such "
+                                                        "directory"),
+    (["plot", "fixed-a2-top", "f.png", "--window", "nan"], "--window must be positive"),
+    (["plot", "fixed-a2-top", "no/such/dir/f.png", "--duration", "5"],
+     "no/such/dir/f.png: cannot write the figure"),
+]
+
+
+@pytest.mark.parametrize(("argv", "first_line"), BAD_INPUTS, ids=[" ".join(a)[:40]
+                                                                   for a, _ in BAD_INPUTS])
+def test_bad_input_is_one_line_and_exit_2(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                          capsys: pytest.CaptureFixture[str], argv: list[str],
+                                          first_line: str) -> None:
+    import rhmpc.cli.data
+
+    monkeypatch.chdir(tmp_path)
+    _bad_inputs(tmp_path)
+    if argv[0] == "export" and "1e12" in argv:  # refused before any synthesis
+        monkeypatch.setattr(rhmpc.cli.data, "make_scenario", None)
+    assert main(["data", *argv]) == 2
+    err = capsys.readouterr().err
+    assert err.splitlines()[0].startswith(f"rhmpc data: error: {first_line}")
+    assert err.count("\n") == 1 and "Traceback" not in err
+
+
+def test_units_warning_names_the_fix(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = _heart_csv(tmp_path / "rec.csv")
+    assert main(["data", "show", str(path), "--units", "m", "--json"]) == 0
+    captured = capsys.readouterr()
+    assert json.loads(captured.out)["peak_to_peak_mm"] > 4000  # as asked, with a warning
+    (line,) = captured.err.splitlines()
+    assert line.startswith("rhmpc data: warning: ")
+    assert line.endswith("if the file is in millimetres, pass --units mm")
+    assert main(["data", "show", str(path), "--json"]) == 0
+    assert capsys.readouterr().err == ""
+
+
+def test_a_recording_almost_all_missing(tmp_path: Path,
+                                        capsys: pytest.CaptureFixture[str]) -> None:
+    path = _heart_csv(tmp_path / "gaps.csv", missing_after=5)
+    assert main(["data", "show", str(path)]) == 0
+    captured = capsys.readouterr()
+    assert captured.err.splitlines() == [
+        f"rhmpc data: warning: {path}: 96.7 % of the samples are missing (5 of 150 complete, "
+        "about 0.2 s of data): what is computed from it rests on those"]
+    assert "heart rate        — (not estimable" in captured.out
+    assert "missing samples   96.67 %" in captured.out
+
+
+def test_long_work_is_announced(monkeypatch: pytest.MonkeyPatch,
+                                capsys: pytest.CaptureFixture[str]) -> None:
+    import rhmpc.cli.data
+
+    monkeypatch.setattr(rhmpc.cli.data, "ANNOUNCE_AFTER", 0.01)
+    assert main(["data", "show", "mitral-1d", "--duration", "5", "--json"]) == 0
+    err = capsys.readouterr().err
+    assert err.startswith("rhmpc data: show of 5 s of mitral-1d at 28 Hz takes about ")
+
+
+@pytest.mark.parametrize(("value", "text"), [(9.98667, "9.987"), (472.0, "472"),
+                                             (257.069, "257.1"), (0.040, "0.04"),
+                                             (29.96, "29.96"), (1e12, "1e+12")])
+def test_numbers_are_printed_with_sensible_digits(value: float, text: str) -> None:
+    from rhmpc.cli.data import _fmt
+
+    assert _fmt(value) == text

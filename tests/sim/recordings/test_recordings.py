@@ -8,7 +8,13 @@ import numpy as np
 import pytest
 
 from sim.heart import make_scenario
-from sim.recordings import RecordedMotion, RecordingError, load_recording, save_recording
+from sim.recordings import (
+    RecordedMotion,
+    RecordingError,
+    RecordingWarning,
+    load_recording,
+    save_recording,
+)
 from sim.sources import export_scenario
 
 
@@ -38,7 +44,8 @@ def test_one_dimensional_csv_and_units(tmp_path: Path) -> None:
     ms = load_recording(_write(tmp_path, "t_ms,x_um\n0,1000\n100,2000\n", "ms.csv"))
     np.testing.assert_allclose(ms.t, [0.0, 0.1])
     np.testing.assert_allclose(ms.position(0.1), [2e-3])
-    flag = load_recording(_write(tmp_path, "t,x\n0,1\n1,2\n", "flag.csv"), units="m")
+    with pytest.warns(RecordingWarning, match="spans 980 mm"):  # 1 m: not heart motion
+        flag = load_recording(_write(tmp_path, "t,x\n0,1\n1,2\n", "flag.csv"), units="m")
     np.testing.assert_allclose(flag.position(1.0), [2.0])
 
 
@@ -162,3 +169,61 @@ def test_resampling_at_own_rate_keeps_every_sample(tmp_path: Path) -> None:
     moved = rec.starting_at(0.0)
     np.testing.assert_allclose(moved.t[:3], [0.0, 0.1, 0.2])
     np.testing.assert_allclose(moved.position(0.2), [2e-3])
+
+
+def test_a_field_beyond_the_csv_limit_is_one_line(tmp_path: Path) -> None:
+    path = _write(tmp_path, "t,x,y,z\n0," + "1" * 140_000 + ",0,0\n", "big.csv")
+    with pytest.raises(RecordingError, match=r"big\.csv, line 2: a field longer than 131072 "
+                       "characters"):
+        load_recording(path)
+
+
+@pytest.mark.parametrize(("name", "content", "problem"), [
+    ("fake.npz", b"PK\x03\x04" + b"\x00" * 200, "not a readable .npz archive"),
+    ("cut.npz", None, "not a readable .npz archive"),
+    ("one.npz", "npy", "holds a single .npy array"),
+])
+def test_broken_npz_archives(tmp_path: Path, name: str, content, problem: str) -> None:
+    path = tmp_path / name
+    if content == "npy":
+        with path.open("wb") as fh:
+            np.save(fh, np.zeros((5, 3)))
+    elif content is None:  # a real archive cut short
+        np.savez(path, t=np.arange(50.0), position=np.zeros((50, 3)), units="mm")
+        path.write_bytes(path.read_bytes()[:300])
+    else:
+        path.write_bytes(content)
+    with pytest.raises(RecordingError, match=problem) as info:
+        load_recording(path)
+    assert str(info.value).startswith(str(path))
+
+
+@pytest.mark.parametrize(("arrays", "problem"), [
+    (dict(position=np.zeros((5, 3)) + 1j), "'position' holds complex numbers"),
+    (dict(position=np.full((5, 3), "a")), "'position' holds <U1 values, not numbers"),
+    (dict(position=np.zeros((5, 3)), t=np.arange(5) + 0j), "'t' holds complex numbers"),
+])
+def test_npz_values_must_be_real_numbers(tmp_path: Path, arrays: dict, problem: str) -> None:
+    path = tmp_path / "c.npz"
+    np.savez(path, **{"t": np.arange(5) / 10, "units": "m", **arrays})
+    with pytest.raises(RecordingError, match=problem):
+        load_recording(path)
+
+
+def test_rate_of_timestamps_written_with_few_decimals(tmp_path: Path) -> None:
+    """1/30 s written as 0.033 and 0.034: the rate is 30 Hz, not 1/median = 30.3 Hz."""
+    t = np.arange(600) / 30
+    lines = ["t,x"] + [f"{ti:.3f},{np.sin(ti):.4f}" for ti in t]
+    rec = load_recording(_write(tmp_path, "\n".join(lines) + "\n"))
+    assert rec.sample_rate == pytest.approx(30.0, rel=1e-4)
+    gappy = RecordedMotion(np.delete(t, [100, 101]), np.zeros((598, 1)))
+    assert gappy.sample_rate == pytest.approx(30.0, rel=1e-4)  # a gap counts its samples
+
+
+def test_units_are_kept_with_the_samples(tmp_path: Path) -> None:
+    rec = load_recording(_write(tmp_path, "t,x_um\n0,1000\n1,2000\n"))
+    assert (rec.units, rec.units_origin) == ("um", "file")
+    assert (rec.starting_at(5.0).units, rec.starting_at(5.0).units_origin) == ("um", "file")
+    np.savez(tmp_path / "r.npz", t=np.arange(3.0), position=np.array([[0.0], [0.5], [0.0]]))
+    npz = load_recording(tmp_path / "r.npz", units="cm")
+    assert (npz.units, npz.units_origin) == ("cm", "option")

@@ -44,11 +44,12 @@ def _v73(tmp_path: Path, **variables) -> Path:
 
 
 def test_v5_rows_with_rate(tmp_path: Path) -> None:
-    rec = load_recording(_v5(tmp_path, X=XYZ), var="X", rate=100.0)
+    rec = load_recording(_v5(tmp_path, X=XYZ), var="X", rate=100.0, units="mm")
     assert rec.dim == 3 and rec.t.size == T.size
     np.testing.assert_allclose(rec.t, T, atol=1e-12)
-    np.testing.assert_allclose(rec.z, XYZ.T * 1e-3)  # mm by default
+    np.testing.assert_allclose(rec.z, XYZ.T * 1e-3)
     assert rec.sample_rate == pytest.approx(100.0)
+    assert (rec.units, rec.units_origin) == ("mm", "option")
 
 
 def test_v5_samples_along_rows_with_time_vector_and_units(tmp_path: Path) -> None:
@@ -66,9 +67,10 @@ def test_rows_and_cols_pick_coordinates(tmp_path: Path) -> None:
                          units="mm")
     np.testing.assert_allclose(rec.z, XYZ.T * 1e-3)
     rec = load_recording(_v5(tmp_path, "c.mat", D=wide.T), var="D", cols=[3, 2, 1],
-                         rate=100.0)
+                         rate=100.0, units="mm")
     np.testing.assert_allclose(rec.z, XYZ[::-1].T * 1e-3)
-    one = load_recording(_v5(tmp_path, "one.mat", D=wide), var="D", rows=[2], rate=100.0)
+    one = load_recording(_v5(tmp_path, "one.mat", D=wide), var="D", rows=[2], rate=100.0,
+                         units="mm")
     assert one.dim == 1
 
 
@@ -76,7 +78,7 @@ def test_v73(tmp_path: Path) -> None:
     path = _v73(tmp_path, X=XYZ, units="mm")
     rec = load_recording(path, var="X", rate=100.0)
     np.testing.assert_allclose(rec.z, XYZ.T * 1e-3)
-    assert load_recording(_v73(tmp_path, X=XYZ.T, time=T), var="X").duration == \
+    assert load_recording(_v73(tmp_path, X=XYZ.T, time=T), var="X", units="mm").duration == \
         pytest.approx(T[-1])
 
 
@@ -88,7 +90,16 @@ def test_v73(tmp_path: Path) -> None:
     (dict(X=np.zeros((3, 1))), dict(var="X", rows=[0, 1, 2], rate=100.0), "1 sample"),
     (dict(X=XYZ, t=np.r_[T[:50], T[48:198]]), dict(var="X"), "does not increase"),
     (dict(X=XYZ, t=T[:10]), dict(var="X"), "has 10 samples"),
-    (dict(X=XYZ), dict(var="X"), "--rate"),
+    (dict(X=XYZ), dict(var="X"), "no sample times: give the sample rate with --rate HZ"),
+    (dict(X=XYZ), dict(var="X", rate=100.0), "does not state its length unit.*--units mm"),
+    (dict(X=XYZ + 1j, units="mm"), dict(var="X", rate=100.0), "'X' holds complex numbers"),
+    (dict(X=XYZ, t=T, time_units="fortnight"), dict(var="X", units="mm"),
+     "time_units 'fortnight' is not a time unit"),
+    (dict(X=XYZ, t=T, units="mm"), dict(var="X", rate=25.0),
+     r"--rate 25 Hz disagrees with the time vector 't' in the file \(100 Hz\)"),
+    (dict(X=XYZ, fs=100.0, units="mm"), dict(var="X", rate=25.0),
+     "disagrees with the rate 'fs'"),
+    (dict(X=XYZ, fs=-1.0, units="mm"), dict(var="X"), "'fs' in the file must be positive"),
     (dict(X=np.full((3, 50), np.nan)), dict(var="X", rate=100.0), "all NaN"),
     (dict(X=XYZ, Z=XYZ), dict(rate=100.0), "--var"),
 ])
@@ -109,3 +120,17 @@ def test_all_nan_csv_refused(tmp_path: Path) -> None:
     path.write_text("t,x,y,z\n0,,,\n0.01,nan,nan,nan\n0.02,,,\n")
     with pytest.raises(RecordingError, match="no complete sample"):
         load_recording(path)
+
+
+def test_time_units_in_microseconds_are_converted(tmp_path: Path) -> None:
+    rec = load_recording(_v5(tmp_path, X=XYZ, t=T * 1e6, time_units="us", units="mm"), var="X")
+    np.testing.assert_allclose(rec.t, T)
+    assert rec.sample_rate == pytest.approx(100.0)
+
+
+def test_the_rate_from_the_file_and_an_agreeing_option(tmp_path: Path) -> None:
+    path = _v5(tmp_path, X=XYZ, Fs=100.0, units="mm")
+    assert load_recording(path, var="X").sample_rate == pytest.approx(100.0)
+    assert load_recording(path, var="X", rate=100.2).sample_rate == pytest.approx(100.0)
+    timed = _v5(tmp_path, "timed.mat", X=XYZ, t=T, units="mm")
+    np.testing.assert_allclose(load_recording(timed, var="X", rate=100.0).t, T)

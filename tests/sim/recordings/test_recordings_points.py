@@ -35,7 +35,7 @@ def test_every_format_gives_the_points_in_order(tmp_path: Path, kind: str) -> No
         path = tmp_path / "p.mat"
         wide = P.reshape(T.size, -1)
         scipy.io.savemat(path, {"X": wide.T if kind == "mat-rows" else wide})
-        read = {"rate": 25.0}
+        read = {"rate": 25.0, "units": "mm"}
     points = load_points(path, **read)
     assert len(points) == 4
     for k, rec in enumerate(points):
@@ -60,7 +60,7 @@ def test_one_point_files_are_files_of_one_point(tmp_path: Path) -> None:
 def test_mat_rows_still_pick_one_point(tmp_path: Path) -> None:
     path = tmp_path / "p.mat"
     scipy.io.savemat(path, {"X": P.reshape(T.size, -1).T})
-    rec = load_recording(path, rate=25.0, rows=[3, 4, 5])
+    rec = load_recording(path, rate=25.0, rows=[3, 4, 5], units="mm")
     np.testing.assert_allclose(rec.z, P[:, 1] * 1e-3, atol=1e-12)
 
 
