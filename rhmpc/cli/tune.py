@@ -24,7 +24,8 @@ USAGE = ("rhmpc tune SPEC.toml [--jobs N | --scheduler ADDRESS] [--results FILE.
          "       rhmpc tune report RESULTS.jsonl [--spec SPEC.toml] [report options]")
 
 #: Options of one mode only (their argparse dest), to reject them in the other.
-RUN_ONLY = ("jobs", "scheduler", "results", "retry_failed", "dry_run", "seed", "preset")
+RUN_ONLY = ("jobs", "scheduler", "results", "retry_failed", "dry_run", "seed", "preset",
+            "quiet")
 REPORT_ONLY = ("spec",)
 
 
@@ -61,6 +62,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                      "(tuna2013: Tuna et al. 2013 Tables I-III)")
     run.add_argument("--dry-run", action="store_true", default=None,
                      help="list the points and what is left to run, run nothing")
+    run.add_argument("--quiet", action="store_true", default=None,
+                     help="no progress on stderr (warnings and errors still show)")
     rep = p.add_argument_group("report options")
     rep.add_argument("--spec", metavar="SPEC.toml",
                      help="(report) rank by this spec's objective and only its points")
@@ -97,7 +100,30 @@ def _extra(spec) -> dict:
             "evaluations_per_point": len(spec.evaluations())}
 
 
+def _check_outputs(args: argparse.Namespace) -> None:
+    """--plot and --best-toml must be writable before a sweep starts."""
+    from rhmpc.tuning.store import check_writable
+
+    for option, path in (("--plot", args.plot), ("--best-toml", args.best_toml)):
+        if path:
+            check_writable(path, option)
+
+
+def _speed(records: list[dict]) -> str:
+    """``; each ran 4.1× faster than real time`` from the successful records' timings."""
+    from rhmpc.tuning.progress import speed_phrase
+
+    ok = [r for r in records if r.get("status") == "ok"]
+    simulated = sum(float(r.get("settings", {}).get("loop", {}).get("duration", 0.0))
+                    for r in ok)
+    wall = sum(float(r.get("timing", {}).get("wall_s", 0.0)) for r in ok)
+    if not (simulated > 0 and wall > 0):
+        return ""
+    return f"; each ran {speed_phrase(simulated, wall)}"
+
+
 def sweep(args: argparse.Namespace, spec_path: Path) -> int:
+    from rhmpc.tuning.progress import format_duration, note
     from rhmpc.tuning.runner import pending, process_pool, run_sweep
     from rhmpc.tuning.spec import load_spec, with_sampler_seed
     from rhmpc.tuning.store import ResultsWriter, read_results
@@ -113,18 +139,19 @@ def sweep(args: argparse.Namespace, spec_path: Path) -> int:
         spec = with_sampler_seed(spec, args.seed, where=str(spec_path))
     if args.jobs is not None and args.jobs < 1:
         raise UsageError("--jobs must be >= 1")
+    _check_outputs(args)
     results_path = Path(args.results or f"{spec_path.stem}.results.jsonl")
     tasks = spec.tasks()
     points = list(dict.fromkeys(t.point for t in tasks))
     existing = read_results(results_path)
     todo, n_ok, n_failed = pending(tasks, existing, retry_failed=bool(args.retry_failed))
-    log = sys.stderr
-    print(f"rhmpc tune: sweep '{spec.name}': {len(points)} points × {len(spec.evaluations())} "
-          f"evaluations = {len(tasks)}; done {n_ok}, failed {n_failed}, to run {len(todo)}; "
-          f"results {results_path}", file=log)
+    quiet = bool(args.quiet)
+    note(f"rhmpc tune: sweep '{spec.name}': {len(points)} points × {len(spec.evaluations())} "
+         f"evaluations = {len(tasks)}; done {n_ok}, failed {n_failed}, to run {len(todo)}; "
+         f"results {results_path}", quiet)
     if existing.bad_lines:
         print(f"rhmpc tune: {results_path}: skipped {existing.bad_lines} unreadable line(s) "
-              "(e.g. one cut short by a crash)", file=log)
+              "(e.g. one cut short by a crash)", file=sys.stderr)
     if args.dry_run:
         _print_points(spec, tasks, existing)
         return 0
@@ -132,28 +159,29 @@ def sweep(args: argparse.Namespace, spec_path: Path) -> int:
     if todo:
         outcome = _execute(args, spec, todo, results_path, run_sweep, process_pool,
                            ResultsWriter)
-        print(f"rhmpc tune: {outcome.written} evaluation(s) in {outcome.elapsed_s:.1f} s = "
-              f"{outcome.evaluations_per_minute:.1f} evaluations per minute", file=log)
+        note(f"rhmpc tune: {outcome.written} evaluation(s) in "
+             f"{format_duration(outcome.elapsed_s)} = {outcome.evaluations_per_minute:.1f} "
+             f"evaluations per minute{_speed(outcome.records)}", quiet)
     code = report_records(args, read_results(results_path).records, spec.objective, points,
-                          str(results_path), title=f"sweep '{spec.name}'")
+                          str(results_path), title=f"sweep '{spec.name}'",
+                          log_keys=_log_keys(spec))
     if outcome is not None and outcome.interrupted:
         print(f"rhmpc tune: interrupted; {outcome.written} evaluation(s) written this time, "
               f"{len(todo) - outcome.written} left; run the same command again to resume",
-              file=log)
+              file=sys.stderr)
         return 130
     latest = read_results(results_path).latest()
     failed = sum(1 for t in tasks if latest.get(t.key, {}).get("status") == "failed")
     if failed:
         print(f"rhmpc tune: {failed} evaluation(s) failed (see the report; --retry-failed "
-              "runs them again)", file=log)
+              "runs them again)", file=sys.stderr)
         return 1
     return code
 
 
 def _execute(args, spec, todo, results_path, run_sweep, process_pool, ResultsWriter):
-    from tqdm import tqdm
-
     from rhmpc.tuning.objective import check_objective_metrics
+    from rhmpc.tuning.progress import Heartbeat, note, progress_bar
 
     client = None
     if args.scheduler:
@@ -179,9 +207,9 @@ def _execute(args, spec, todo, results_path, run_sweep, process_pool, ResultsWri
             return process_pool(window)
 
         where = f"{window} local process(es)"
-    print(f"rhmpc tune: running {len(todo)} evaluation(s) on {where}", file=sys.stderr)
-    bar = tqdm(total=len(todo), unit="eval", desc=f"tune {spec.name}", file=sys.stderr,
-               dynamic_ncols=True, smoothing=0.1)
+    quiet = bool(args.quiet)
+    note(f"rhmpc tune: running {len(todo)} evaluation(s) on {where}", quiet)
+    bar = progress_bar(len(todo), "eval", f"tune {spec.name}", quiet)
     failures = 0
     checked = False
 
@@ -201,7 +229,7 @@ def _execute(args, spec, todo, results_path, run_sweep, process_pool, ResultsWri
     try:
         with ResultsWriter(results_path) as writer:
             outcome = run_sweep(todo, writer, factory, window, extra=_extra(spec),
-                                on_result=on_result)
+                                on_result=on_result, heartbeat=Heartbeat(bar))
     finally:
         bar.close()
         if client is not None:
@@ -236,7 +264,7 @@ def report(args: argparse.Namespace, results_path: Path) -> int:
     if data.bad_lines:
         print(f"rhmpc tune report: {results_path}: skipped {data.bad_lines} unreadable "
               "line(s)", file=sys.stderr)
-    points = None
+    points, log_keys = None, None
     if args.spec:
         from rhmpc.tuning.spec import load_spec
 
@@ -244,16 +272,24 @@ def report(args: argparse.Namespace, results_path: Path) -> int:
         objective = spec.objective
         points = list(dict.fromkeys(t.point for t in spec.tasks()))
         title = f"sweep '{spec.name}'"
+        log_keys = _log_keys(spec)
     else:
         objective = objective_of(data.records)
         names = list(dict.fromkeys(r.get("sweep") for r in data.records if r.get("sweep")))
         title = f"sweep '{', '.join(names)}'" if names else str(results_path)
     if not data.records:
         raise UsageError(f"{results_path}: no results yet")
-    return report_records(args, data.records, objective, points, str(results_path), title)
+    return report_records(args, data.records, objective, points, str(results_path), title,
+                          log_keys)
 
 
-def report_records(args, records, objective, points, results: str, title: str) -> int:
+def _log_keys(spec) -> list[str]:
+    """The spec's parameters sampled on a log scale (plotted on log axes)."""
+    return [p.key for p in spec.parameters if p.is_range and p.scale == "log"]
+
+
+def report_records(args, records, objective, points, results: str, title: str,
+                   log_keys=None) -> int:
     """Print the ranked table (or JSON), write --best-toml and --plot; the exit code."""
     from rhmpc.tuning.objective import check_objective_metrics
     from rhmpc.tuning.report import best, best_toml, format_table, plot_objective, summarize
@@ -272,7 +308,8 @@ def report_records(args, records, objective, points, results: str, title: str) -
                              "successfully")
         Path(args.best_toml).write_text(best_toml(top, objective, results))
     if args.plot:
-        plot_objective(summaries, objective, args.plot, title=f"rhmpc tune: {title}")
+        plot_objective(summaries, objective, args.plot, title=f"rhmpc tune: {title}",
+                       log_keys=log_keys)
     if args.json:
         json.dump({"objective": objective.to_dict(), "results": results,
                    "points": [dict(rank=i, **s.to_dict()) for i, s in enumerate(summaries, 1)],

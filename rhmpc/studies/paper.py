@@ -9,7 +9,8 @@ Columns: fixed heart rate, animals 1 and 2 (top); varying, animals 1 and 3 (top)
 3 (side) — the scenarios ``fixed-a1-top`` … ``varying-a3-side`` replicate them.
 
 A run belongs beside the simulation table unless its plant is the hardware-like one
-(``plant.model = "hardware"``): :func:`paper_table` never sets one against the other's table.
+(``plant.model = "hardware"``): :func:`paper_table` never sets one against the other's table,
+and a cell whose runs all failed reads ``failed``.
 """
 
 from __future__ import annotations
@@ -17,6 +18,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
+
+from rhmpc.studies.comparison import grid
 
 #: Column order of the tables (scenario names of the replicas).
 COLUMNS = ("fixed-a1-top", "fixed-a2-top", "varying-a1-top", "varying-a3-top",
@@ -72,27 +75,42 @@ SETTING = {"I": "simulation", "II": "hardware", "III": "hardware"}
 
 
 def setting_of(docs: Sequence[dict]) -> str:
-    """``"hardware"`` when every run's plant is the hardware-like one, else ``"simulation"``."""
-    models = {d.get("settings", {}).get("plant", {}).get("model", "ideal") for d in docs}
+    """``"hardware"`` when every run's plant is the hardware-like one, else ``"simulation"``.
+
+    Documents without settings (a run that failed before it had any) do not count.
+    """
+    models = {d["settings"].get("plant", {}).get("model", "ideal") for d in docs
+              if isinstance(d.get("settings"), dict)}
     return "hardware" if models == {"hardware"} else "simulation"
 
 
 def ours(docs: Sequence[dict], predictor: str, scenario: str, metric: str) -> float | None:
     """Our cell: the maximum over the seeds run (Tuna's statistic); None if not run."""
     values = [d[metric] for d in docs if d.get("predictor") == predictor
-              and d.get("scenario") == scenario and metric in d]
+              and d.get("scenario") == scenario and metric in d and "error" not in d]
     return float(np.max(values)) if values else None
+
+
+def runs_of(docs: Sequence[dict], predictor: str, scenario: str) -> tuple[int, int]:
+    """(finished, failed) runs of one cell."""
+    rows = [d for d in docs if d.get("predictor") == predictor and d.get("scenario") == scenario]
+    failed = sum("error" in d for d in rows)
+    return len(rows) - failed, failed
 
 
 def _header(docs: Sequence[dict], setting: str) -> list[str]:
     """What our runs are, against which of Tuna's settings."""
-    plant = {d.get("settings", {}).get("plant", {}).get("model", "ideal") for d in docs}
-    seeds = {d.get("seed") for d in docs}
-    hw = {d.get("settings", {}).get("hardware", {}).get("error_from", "true") for d in docs}
+    runs = [d for d in docs if isinstance(d.get("settings"), dict)]
+    plant = {d["settings"].get("plant", {}).get("model", "ideal") for d in runs}
+    hw = {d["settings"].get("hardware", {}).get("error_from", "true") for d in runs}
+    n = _runs_per_cell(docs)
     tables = "Tables II–III" if setting == "hardware" else "Table I"
-    lines = [f"Our runs: plant {', '.join(sorted(plant))}; ours = the maximum over "
-             f"{len(seeds)} seed(s), Tuna's = the maximum over ten runs. Set beside {tables} "
-             f"({setting}) only."]
+    lines = [f"Our runs: plant {', '.join(sorted(plant)) or '-'}; set beside {tables} "
+             f"({setting}) only.",
+             f"Each cell: ours = the maximum over {n} run{'s' if n != 1 else ''}{_seeds(docs)}"
+             ", Tuna's = the maximum over ten runs."]
+    if any(runs_of(docs, p, s)[1] for p, s in _cells_run(docs)):
+        lines.append("(n=k): only k of our runs finished; failed: none did.")
     if setting == "simulation" and plant != {"linear"}:
         lines.append("Note: Tuna's Table I plant is a linearised reduced-order model; ours "
                      "here is not (plant.model = \"linear\" is, --preset tuna2013).")
@@ -102,32 +120,68 @@ def _header(docs: Sequence[dict], setting: str) -> list[str]:
     return lines
 
 
+def _cells_run(docs: Sequence[dict]) -> list[tuple]:
+    return list(dict.fromkeys((d.get("predictor"), d.get("scenario")) for d in docs))
+
+
+def _runs_per_cell(docs: Sequence[dict]) -> int:
+    counts: dict[tuple, int] = {}
+    for d in docs:
+        key = (d.get("predictor"), d.get("scenario"))
+        counts[key] = counts.get(key, 0) + 1
+    return max(counts.values(), default=0)
+
+
+def _seeds(docs: Sequence[dict]) -> str:
+    seeds = sorted({d["seed"] for d in docs if isinstance(d.get("seed"), int)})
+    if not seeds:
+        return ""
+    return f" (seed {seeds[0]})" if len(seeds) == 1 else f" (seeds {seeds[0]}–{seeds[-1]})"
+
+
+def _cell(docs, pred: str, scen: str, metric: str, paper: float, runs: int) -> str:
+    """``paper / ours / ours÷paper``, ``paper / failed`` or ``paper / -`` (not run)."""
+    mine = ours(docs, pred, scen, metric)
+    if mine is None:
+        return f"{paper:.3f} / {'failed' if runs_of(docs, pred, scen)[1] else '-'}"
+    n = runs_of(docs, pred, scen)[0]
+    return f"{paper:.3f} / {mine:.3f} / {mine / paper:.2f}" + (f" (n={n})" if n < runs else "")
+
+
 def _table(docs: Sequence[dict], table: str, metric: str, predictors: Sequence[str],
            cols: Sequence[str]) -> list[str]:
-    width = 25
-    out = ["", f"{_TITLES[table]}: {_METRICS[metric]} — paper / ours / ours÷paper",
-           f"{'':<13}" + "".join(f"{s:>{width}}" for s in cols)]
-    for pred, published in TUNA2013[(table, metric)].items():
-        if pred not in predictors:
-            continue
-        line = f"{pred:<13}"
-        for scen in cols:
-            mine, paper = ours(docs, pred, scen, metric), published[scen]
-            cell = (f"{paper:.3f} / -" if mine is None else
-                    f"{paper:.3f} / {mine:.3f} / {mine / paper:.2f}")
-            line += cell.rjust(width)
-        out.append(line)
-    return out
+    published = TUNA2013[(table, metric)]
+    rows = [p for p in published if p in predictors]
+    if not rows:
+        return []
+    runs = _runs_per_cell(docs)
+    return ["", *grid(f"{_TITLES[table]}: {_METRICS[metric]} — paper / ours / ours÷paper",
+                      rows, cols,
+                      lambda p, s: _cell(docs, p, s, metric, published[p][s], runs))]
 
 
 def paper_table(docs: Sequence[dict], predictors: Sequence[str],
-                scenarios: Sequence[str]) -> str:
+                scenarios: Sequence[str], setting: str | None = None) -> str:
     """Tuna's tables of our runs' setting beside ours (paper, ours, ours/paper for every cell),
     then one line per published finding: reproduced or not, with the measured cause.
 
-    Cells of predictors or scenarios that were not run show ``-``.
+    Parameters
+    ----------
+    docs : sequence of dict
+        Run documents; a document with ``error`` is a failed run.
+    predictors, scenarios : sequence of str
+        What was run.
+    setting : str, optional
+        ``"simulation"`` or ``"hardware"``: the runs' setting, as the caller configured them
+        (default: :func:`setting_of` the documents).
+
+    Returns
+    -------
+    str
+        The header, the tables (cells of predictors or scenarios that were not run show
+        ``-``, cells whose runs all failed ``failed``) and the findings.
     """
-    setting = setting_of(docs)
+    setting = setting or setting_of(docs)
     cols = [s for s in COLUMNS if s in scenarios]
     out = _header(docs, setting)
     for table, metric in TUNA2013:

@@ -6,12 +6,14 @@ a dead worker: a broken process pool is rebuilt and the evaluations it was runni
 again, up to ``max_attempts`` times each before being recorded as failed. A local
 ``ProcessPoolExecutor`` (:func:`process_pool`) and dask.distributed's ``Client.get_executor()``
 go through the same code.
+
+The workers of :func:`~rhmpc.tuning.workers.process_pool` die with the process that started them,
+so that a sweep killed with SIGKILL leaves no worker behind; the results file is intact and the
+same command resumes it.
 """
 
 from __future__ import annotations
 
-import multiprocessing
-import signal
 import time
 from collections import deque
 from collections.abc import Callable, Iterable
@@ -21,13 +23,15 @@ from concurrent.futures import (
     CancelledError,
     Executor,
     Future,
-    ProcessPoolExecutor,
     wait,
 )
 from dataclasses import dataclass, field
 
 from rhmpc.tuning.evaluate import Task, evaluate_task, record_for
 from rhmpc.tuning.store import ResultsFile, ResultsWriter
+from rhmpc.tuning.workers import process_pool, stop_executor
+
+__all__ = ["HEARTBEAT_S", "SweepOutcome", "pending", "process_pool", "run_sweep"]
 
 
 @dataclass
@@ -90,29 +94,8 @@ def pending(tasks: Iterable[Task], results: ResultsFile, retry_failed: bool = Fa
     return todo, ok, failed
 
 
-def _ignore_sigint() -> None:
-    """Worker initializer: Ctrl-C is handled by the parent, which stops the workers itself."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-
-
-def process_pool(jobs: int) -> ProcessPoolExecutor:
-    """A local pool of ``jobs`` fresh (spawned) processes that ignore Ctrl-C."""
-    return ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn"),
-                               initializer=_ignore_sigint)
-
-
-def _stop(executor: Executor, futures: Iterable[Future]) -> None:
-    """Cancel what is queued and stop the workers without waiting for running evaluations."""
-    for fut in futures:
-        fut.cancel()
-    terminate = getattr(executor, "terminate_workers", None)  # Python >= 3.14
-    if terminate is not None:
-        terminate()
-    elif isinstance(executor, ProcessPoolExecutor):
-        for process in list((getattr(executor, "_processes", None) or {}).values()):
-            if process.is_alive():
-                process.terminate()
-    executor.shutdown(wait=False)
+#: Longest wait between two calls of :func:`run_sweep`'s ``heartbeat`` [s].
+HEARTBEAT_S = 0.5
 
 
 def run_sweep(
@@ -124,6 +107,7 @@ def run_sweep(
     evaluate: Callable[..., dict] = evaluate_task,
     extra: dict | None = None,
     on_result: Callable[[dict], None] | None = None,
+    heartbeat: Callable[[], None] | None = None,
     max_attempts: int = 2,
 ) -> SweepOutcome:
     """Run ``tasks`` through executors from ``executor_factory``, appending each result.
@@ -146,6 +130,9 @@ def run_sweep(
     on_result : callable, optional
         Called with each written record (progress). Raising ``KeyboardInterrupt`` from it stops
         the sweep like Ctrl-C does.
+    heartbeat : callable, optional
+        Called at least every :data:`HEARTBEAT_S` seconds while evaluations are in flight
+        (e.g. to redraw a progress bar).
     max_attempts : int
         A task whose worker died this many times is recorded as failed.
 
@@ -162,7 +149,10 @@ def run_sweep(
         while sweep.queue or sweep.inflight:
             broken = sweep.submit(executor)
             if not broken:
-                done, _ = wait(list(sweep.inflight), return_when=FIRST_COMPLETED)
+                done, _ = wait(list(sweep.inflight), return_when=FIRST_COMPLETED,
+                               timeout=None if heartbeat is None else HEARTBEAT_S)
+                if heartbeat is not None:
+                    heartbeat()
                 for fut in done:
                     broken |= sweep.settle(fut, sweep.inflight.pop(fut))
             if broken:
@@ -256,4 +246,4 @@ class _Sweep:
             except BaseException:  # unfinished or broken: left for the resume
                 continue
             self.record(record)
-        _stop(executor, self.inflight)
+        stop_executor(executor, self.inflight)

@@ -28,6 +28,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -47,6 +48,9 @@ __all__ = [
     "parse_spec",
     "with_sampler_seed",
 ]
+
+#: Most evaluations (points × scenarios × seeds) one sweep may hold; split a larger sweep.
+MAX_EVALUATIONS = 20_000
 
 SPEC_KEYS = ("name", "base", "parameters", "sampler", "evaluate", "objective")
 SAMPLERS = ("grid", "random", "lhs")
@@ -87,6 +91,15 @@ class Parameter:
     @property
     def is_range(self) -> bool:
         return self.values is None
+
+    def axis_length(self) -> int:
+        """How many values this parameter takes on a grid (at most), without listing them."""
+        if self.values is not None:
+            return len(self.values)
+        assert self.num is not None
+        if self.integer:
+            return min(self.num, math.floor(self.high) - math.ceil(self.low) + 1)
+        return self.num
 
     def grid(self) -> tuple:
         """The values this parameter takes on a grid."""
@@ -258,6 +271,7 @@ def parse_spec(data: dict, where: str = "spec", root: Path | None = None,
     objective = _parse_objective(_table(data, "objective", where), where)
     spec = TuneSpec(name, base, parameters, method, budget, int(seed), include_base,
                     scenarios, seeds, objective)
+    _check_size(spec, where)
     _validate_points(spec, where)
     return spec
 
@@ -433,6 +447,31 @@ def _opt_float(value: Any) -> float | None:
     return None if value is None else float(value)
 
 
+def _check_size(spec: TuneSpec, where: str) -> None:
+    """Refuse a sweep of more than :data:`MAX_EVALUATIONS` evaluations before drawing a point,
+    saying how long it would take."""
+    from rhmpc.tuning.progress import format_duration
+
+    if spec.sampler == "grid":
+        axes = [p.axis_length() for p in spec.parameters]
+        points = math.prod(axes)
+        what = f"parameters: a grid of {' × '.join(map(str, axes)) or '1'} points"
+    else:
+        points = int(spec.budget or 0)
+        what = f"sampler.budget = {points:,} points"
+    points += spec.include_base
+    per_point = len(spec.evaluations())
+    total = points * per_point
+    if total <= MAX_EVALUATIONS:
+        return
+    cores = os.cpu_count() or 1
+    wall = total * spec.base.loop.duration / cores
+    raise UsageError(f"{where}: {what} × {per_point} evaluation(s) each = {total:,} "
+                     f"evaluations, above the limit of {MAX_EVALUATIONS:,} per sweep (at real-time "
+                     f"speed on {cores} core(s) they would take {format_duration(wall)}); lower "
+                     "it, or split the sweep")
+
+
 def _validate_points(spec: TuneSpec, where: str) -> None:
     """Every parameter and every point must build a valid run configuration."""
     from predictors.registry import settings_for
@@ -450,9 +489,6 @@ def _validate_points(spec: TuneSpec, where: str) -> None:
             config = apply_point(spec.base, assignment)
             if config.predictor != "exact":
                 settings_for(config.predictor, **dict(config.predictor_settings))
-            if config.mpc.horizon != config.loop.horizon:
-                raise UsageError(f"mpc.horizon ({config.mpc.horizon}) and loop.horizon "
-                                 f"({config.loop.horizon}) must agree")
         except (UsageError, TypeError, ValueError) as exc:
             text = ", ".join(f"{k} = {v!r}" for k, v in assignment.items())
             raise UsageError(f"{where}: parameters ({text}): {exc}") from None

@@ -67,6 +67,31 @@ def read_results(path: str | Path) -> ResultsFile:
     return out
 
 
+def check_writable(path: str | Path, option: str) -> None:
+    """Refuse an output file that cannot be written, before any run starts.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to be written later.
+    option : str
+        The option that named it (``--out``), for the message.
+
+    Raises
+    ------
+    UsageError
+        Its folder is missing or not writable, or the path is a folder.
+    """
+    path = Path(path)
+    folder = path.parent if str(path.parent) else Path(".")
+    if path.is_dir():
+        raise UsageError(f"{option} {path}: is a folder; give a file name")
+    if not folder.is_dir():
+        raise UsageError(f"{option} {path}: no folder {folder}")
+    if not os.access(folder, os.W_OK) or (path.exists() and not os.access(path, os.W_OK)):
+        raise UsageError(f"{option} {path}: not writable")
+
+
 class ResultsWriter:
     """Appends records to a results file, one durable line each; a context manager.
 
