@@ -12,29 +12,49 @@ from robots.model import Robot
 
 @dataclass(frozen=True, eq=False)
 class LinearArm:
-    """Discrete linear model of the arm about ``q0`` (gravity, Coriolis and friction cancelled).
+    r"""Discrete linear model of the arm about ``q0`` (gravity, Coriolis and friction cancelled).
 
-    Continuous time, with ``x = [q − q0; q̇]`` (rad, rad/s), ``u = τ`` (N·m)::
+    Continuous time, with the state :math:`x = [q - q_0;\ \dot q]` [rad, rad/s], the input
+    :math:`u = \tau` [N·m] and the end-effector position y [m]:
 
-        ẋ = Ac x + Bc u,   Ac = [[0, I], [0, 0]],   Bc = [[0], [M(q0)⁻¹]]
-        y = C x + y0,      C = [J(q0), 0],          y0 = p(q0)   (m)
+    .. math::
 
-    Discrete time at the sample period ``Ts`` (zero-order hold on ``u``)::
+        \dot x = A_c x + B_c u, \qquad
+        A_c = \begin{bmatrix} 0 & I \\ 0 & 0 \end{bmatrix}, \quad
+        B_c = \begin{bmatrix} 0 \\ M(q_0)^{-1} \end{bmatrix},
 
-        x⁺ = A x + B u,    [[A, B], [0, I]] = expm([[Ac, Bc], [0, 0]] · Ts)
+        y = C x + y_0, \qquad C = \begin{bmatrix} J(q_0) & 0 \end{bmatrix}, \quad
+        y_0 = p(q_0).
+
+    Discrete time at the sample period :math:`T_s` (zero-order hold on u, :func:`zoh`):
+
+    .. math::
+
+        x^+ = A x + B u, \qquad
+        \begin{bmatrix} A & B \\ 0 & I \end{bmatrix}
+        = \exp\left(\begin{bmatrix} A_c & B_c \\ 0 & 0 \end{bmatrix} T_s\right).
 
     Attributes
     ----------
-    A : (2n, 2n) discrete state matrix [-, s]
-    B : (2n, n) discrete input matrix [rad/(N·m), s·rad/(N·m)... per row block]
-    C : (3, 2n) output matrix [m/rad, 0]
-    y0 : (3,) end-effector position at q0 [m]
-    Ac, Bc : continuous-time matrices [1/s], [1/(kg·m²)]
-    q0 : (n,) linearisation posture [rad]
-    M0 : (n, n) joint-space inertia at q0 including armature [kg·m²]
-    Ts : sample period [s]
-    torque_limit : (n,) actuator saturation [N·m]
-    robot : Robot | None
+    A : ndarray, shape (2n, 2n)
+        Discrete state matrix, [I, Ts·I; 0, I] (the velocity columns in [s]).
+    B : ndarray, shape (2n, n)
+        Discrete input matrix: rows of q [rad/(N·m)], rows of q̇ [rad/(s·N·m)].
+    C : ndarray, shape (3, 2n)
+        Output matrix [J(q0), 0] [m/rad].
+    y0 : ndarray, shape (3,)
+        End-effector position at q0 [m].
+    Ac, Bc : ndarray
+        The continuous-time matrices; the lower block of Bc is M(q0)⁻¹ [1/(kg·m²)].
+    q0 : ndarray, shape (n,)
+        Linearisation posture [rad].
+    M0 : ndarray, shape (n, n)
+        Joint-space inertia at q0, armature included [kg·m²].
+    Ts : float
+        Sample period [s].
+    torque_limit : ndarray, shape (n,)
+        Actuator saturation [N·m].
+    robot : Robot or None
         The robot it was made from (forward kinematics for the MPC's output offset, joint limits
         for its envelope); ``None`` for a model given by its matrices only.
     """

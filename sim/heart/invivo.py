@@ -272,9 +272,13 @@ def fourier_basis(n: int, rate: float, breathing_hz: float, heart_hz: float,
 def fourier_fit(z: np.ndarray, rate: float, breathing_hz: float, heart_hz: float,
                 breathing_harmonics: int = 3, heart_harmonics: int = 5
                 ) -> tuple[np.ndarray, np.ndarray]:
-    """Least-squares fixed-frequency Fourier fit of ``z`` (n, d): (fit, its cardiac part).
+    r"""Least-squares fixed-frequency Fourier fit of ``z`` (n, d): (fit, its cardiac part).
 
-    z(t) ≈ c + Σ_{h≤H_b} [a_h sin 2πh f_b t + b_h cos …] + Σ_{h≤H_c} [d_h sin 2πh f_h t + …]
+    .. math::
+
+        z(t) \approx c + \sum_{h \le H_b} \bigl(a_h \sin 2\pi h f_b t + b_h \cos 2\pi h f_b t\bigr)
+                      + \sum_{h \le H_c} \bigl(d_h \sin 2\pi h f_h t + e_h \cos 2\pi h f_h t\bigr)
+
     (normal equations with a 1e-9 relative ridge).
     """
     A = fourier_basis(len(z), rate, breathing_hz, heart_hz, breathing_harmonics,

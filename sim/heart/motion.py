@@ -1,14 +1,19 @@
-"""Synthetic quasi-periodic heart motion: breathing plus a beat morphology driven by a heart phase.
+r"""Synthetic quasi-periodic heart motion: breathing plus a beat morphology driven by a heart phase.
 
 The point of interest moves as
 
-    p(t) = p₀ + b(t) + (1 + κ·cos(2π f_r t + ψ_κ)) · g(φ(t)) ⊙ h(φ(t)),
+.. math::
+
+    p(t) = p_0 + b(t) + \bigl(1 + \kappa \cos(2\pi f_r t + \psi_\kappa)\bigr)\,
+           g(\varphi(t)) \odot h(\varphi(t)),
 
 with
 
-* b(t) = Re Σ_{j=1}^{J} β_j e^{i2πj f_r t}, the breathing (ventilator: constant rate f_r),
-* h(φ) = Re Σ_{k=1}^{K} c_k e^{i2πkφ}, the beat morphology as a band-limited Fourier series
-  in the heart phase φ [cycles] (see :mod:`sim.heart.rr`),
+* :math:`b(t) = \operatorname{Re} \sum_{j=1}^{J} \beta_j e^{i 2\pi j f_r t}`, the breathing
+  (ventilator: constant rate :math:`f_r`),
+* :math:`h(\varphi) = \operatorname{Re} \sum_{k=1}^{K} c_k e^{i 2\pi k \varphi}`, the beat
+  morphology as a band-limited Fourier series in the heart phase φ [cycles] (see
+  :mod:`sim.heart.rr`),
 * g(φ), a per-axis gain that varies from beat to beat (seeded, interpolated linearly in φ),
 * κ, the breathing–heartbeat amplitude coupling.
 

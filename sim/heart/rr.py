@@ -1,9 +1,10 @@
-"""Heart phase: heart-rate profiles, RR intervals and the phase track built from them.
+r"""Heart phase: heart-rate profiles, RR intervals and the phase track built from them.
 
 The heart phase φ(t) counts heartbeats (cycles, not radians). Beat *i* starts when φ crosses
 the integer *i*. Two ways drive it:
 
-* a heart-rate profile f_h(t) [Hz], with φ(t) = φ(t₀) + ∫_{t₀}^{t} f_h(τ) dτ. The profile can be
+* a heart-rate profile :math:`f_h(t)` [Hz], with
+  :math:`\varphi(t) = \varphi(t_0) + \int_{t_0}^{t} f_h(\tau)\,d\tau`. The profile can be
   constant, or the pacemaker staircase of Tuna et al. §III-B;
 * a sequence of beat times t_i (from RR intervals). In that case φ(t_i) = i exactly, and φ is
   a monotone cubic (PCHIP) through the points (t_i, i). This is the beat-by-beat
@@ -57,9 +58,13 @@ class PhaseTrack:
 
     @classmethod
     def from_rate_knots(cls, t: np.ndarray, rate: np.ndarray, phase0: float = 0.0) -> PhaseTrack:
-        """Phase from a piecewise-linear heart-rate profile.
+        r"""Phase from a piecewise-linear heart-rate profile.
 
-        φ(t) = φ₀ + ∫_{t₀}^{t} f_h(τ) dτ, integrated exactly (piecewise quadratic).
+        .. math::
+
+            \varphi(t) = \varphi_0 + \int_{t_0}^{t} f_h(\tau)\,d\tau,
+
+        integrated exactly (piecewise quadratic).
 
         Parameters
         ----------
@@ -196,7 +201,8 @@ def staircase_phase(profile: StaircaseProfile, duration: float, phase0: float = 
 
 
 def beat_times_from_rr(rr: np.ndarray, start: float = 0.0) -> np.ndarray:
-    """Beat times t_0 = start, t_i = start + Σ_{j<i} RR_j [s] from RR intervals [s]."""
+    r"""Beat times :math:`t_0 = \text{start}`, :math:`t_i = \text{start} + \sum_{j<i} RR_j` [s]
+    from RR intervals [s]."""
     rr = np.asarray(rr, dtype=float)
     if rr.ndim != 1 or rr.size < 1:
         raise ValueError("need at least one RR interval")

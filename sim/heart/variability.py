@@ -1,23 +1,28 @@
-"""Physiological variability of the synthetic heart motion: seeded draws with cited magnitudes.
+r"""Physiological variability of the synthetic heart motion: seeded draws with cited magnitudes.
 
 A real heart is not a line spectrum. Five mechanisms make consecutive beats and breaths differ;
 each is one group of :class:`VariabilitySettings` and each can be switched off on its own
 (:meth:`VariabilitySettings.clean` switches all of them off and gives back the periodic replica
 of :mod:`sim.heart.motion` exactly):
 
-1. heart-rate variability, f_h(t) = f̄_h(t)·(1 + m_VLF(t) + m_LF(t) + m_RSA(t)): Gaussian
-   processes with flat spectra in the VLF (0.0033–0.04 Hz) and LF (0.04–0.15 Hz) bands, plus
-   respiratory sinus arrhythmia m_RSA = a·cos(2π φ_r(t) + ψ) locked to the breathing phase φ_r,
-   which puts the HF power at the breathing rate (Task Force 1996);
-2. beat-to-beat stroke variation: per-beat, per-axis gains g_i = 1 + s_i with s an AR(1) series
-   s_i = ρ s_{i−1} + σ√(1−ρ²) ε_i, and a per-beat timing offset of the wall motion δ_i
-   (the morphology: the same template shifted within the beat), AR(1) as well;
-3. breathing cycles of varying period and depth: breath durations T_j = T̄(1 + c_T ε_j) and
-   depths d_j = 1 + c_V ε_j, the breathing phase φ_r passing through the breath onsets;
+1. heart-rate variability,
+   :math:`f_h(t) = \bar f_h(t)\,\bigl(1 + m_\text{VLF}(t) + m_\text{LF}(t) + m_\text{RSA}(t)\bigr)`:
+   Gaussian processes with flat spectra in the VLF (0.0033–0.04 Hz) and LF (0.04–0.15 Hz)
+   bands, plus respiratory sinus arrhythmia
+   :math:`m_\text{RSA} = a \cos(2\pi \varphi_r(t) + \psi)` locked to the breathing phase
+   :math:`\varphi_r`, which puts the HF power at the breathing rate (Task Force 1996);
+2. beat-to-beat stroke variation: per-beat, per-axis gains :math:`g_i = 1 + s_i` with s an
+   AR(1) series :math:`s_i = \rho\, s_{i-1} + \sigma \sqrt{1 - \rho^2}\, \varepsilon_i`, and
+   a per-beat timing offset of the wall motion :math:`\delta_i` (the morphology: the same
+   template shifted within the beat), AR(1) as well;
+3. breathing cycles of varying period and depth: breath durations
+   :math:`T_j = \bar T (1 + c_T \varepsilon_j)` and depths :math:`d_j = 1 + c_V \varepsilon_j`,
+   the breathing phase :math:`\varphi_r` passing through the breath onsets;
 4. slow baseline drift: a Gaussian process per axis below ``drift_cutoff``;
-5. breathing–heartbeat coupling: the stroke gain (1 + κ cos(2π φ_r + ψ_κ)) follows the actual
-   (variable) breathing phase, and the heart's position follows lung volume through the breath
-   depths d_j (the breathing term b is scaled by the depth of the current breath).
+5. breathing–heartbeat coupling: the stroke gain
+   :math:`1 + \kappa \cos(2\pi \varphi_r + \psi_\kappa)` follows the actual (variable)
+   breathing phase, and the heart's position follows lung volume through the breath depths
+   :math:`d_j` (the breathing term b is scaled by the depth of the current breath).
 
 All draws use the injected :class:`numpy.random.Generator`.
 """
@@ -168,10 +173,16 @@ def ar1(rng: np.random.Generator, n: int, std: float, correlation: float,
 
 def breathing_phase(rng: np.random.Generator, rate: float, horizon: float,
                     period_cv: float, phase0: float = 0.0) -> PhaseTrack:
-    """Breathing phase φ_r(t) [cycles] through breath onsets of varying duration.
+    r"""Breathing phase φ_r(t) [cycles] through breath onsets of varying duration.
 
-    T_j = (1/f_r)(1 + c_T ε_j), ε_j ~ N(0, 1) clipped to ±2.5; φ_r(t_j) = j − φ₀ with the PCHIP
-    interpolant of :meth:`PhaseTrack.from_beat_times`, covering [−10 s, horizon + 10 s].
+    .. math::
+
+        T_j = \frac{1}{f_r}\,(1 + c_T \varepsilon_j), \qquad
+        \varepsilon_j \sim \mathcal{N}(0, 1) \text{ clipped to } \pm 2.5, \qquad
+        \varphi_r(t_j) = j - \varphi_0,
+
+    with the PCHIP interpolant of :meth:`PhaseTrack.from_beat_times`, covering
+    [−10 s, horizon + 10 s].
     """
     mean = 1.0 / rate
     n = int(np.ceil((horizon + 20.0) / (mean * (1 - 2.5 * period_cv)))) + 3
@@ -184,12 +195,18 @@ def breathing_phase(rng: np.random.Generator, rate: float, horizon: float,
 def modulated_phase(rng: np.random.Generator, knots_t: np.ndarray, knots_rate: np.ndarray,
                     horizon: float, settings: VariabilitySettings, breath: PhaseTrack,
                     phase0: float = 0.0) -> PhaseTrack:
-    """Heart phase with HRV: φ(t) = φ₀ + ∫ f̄_h(τ)(1 + m_VLF + m_LF + m_RSA)(τ) dτ.
+    r"""Heart phase with HRV.
 
-    The nominal profile f̄_h (piecewise linear through ``knots_t``, ``knots_rate``) is sampled on
-    a 4 Hz grid over [−10 s, horizon + 10 s], multiplied by 1 + m and integrated exactly as a
-    piecewise-linear rate. The parts have variances cv²·P_b/ΣP (``band_powers`` P, cv =
-    ``hrv_cv``); m_RSA = a cos(2π φ_r + ψ) with a²/2 its variance.
+    .. math::
+
+        \varphi(t) = \varphi_0 + \int \bar f_h(\tau)\,
+            \bigl(1 + m_\text{VLF} + m_\text{LF} + m_\text{RSA}\bigr)(\tau)\,d\tau
+
+    The nominal profile :math:`\bar f_h` (piecewise linear through ``knots_t``, ``knots_rate``)
+    is sampled on a 4 Hz grid over [−10 s, horizon + 10 s], multiplied by 1 + m and integrated
+    exactly as a piecewise-linear rate. The parts have variances
+    :math:`\mathrm{cv}^2 P_b / \sum P` (``band_powers`` P, cv = ``hrv_cv``);
+    :math:`m_\text{RSA} = a \cos(2\pi \varphi_r + \psi)` with :math:`a^2/2` its variance.
     """
     t = np.arange(-10.0, horizon + 10.0 + 1.0 / TACHOGRAM_RATE, 1.0 / TACHOGRAM_RATE)
     nominal = np.interp(t, knots_t, knots_rate)

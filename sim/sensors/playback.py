@@ -28,16 +28,22 @@ from sim.sensors.stream import SampleStream
 
 @dataclass(frozen=True)
 class Upsample:
-    """Resample the stream to a faster rate (the delivery of the samples to the 2-kHz loop).
+    r"""Resample the stream to a faster rate (the delivery of the samples to the 2-kHz loop).
 
-    ``"linear"``: z(τ_j) = z_k + (τ_j − t_k)/(t_{k+1} − t_k)·(z_{k+1} − z_k), NaN if either
-    neighbour is missing; ``"hold"``: z(τ_j) = z_k (zero-order hold). With ``causal`` the
-    interpolated sample arrives one raw period after τ_j (after its newer neighbour); without,
-    it arrives at τ_j + (arrival_k − t_k), as when a prerecorded file is played back
-    (:func:`deliver`).
+    At the output times :math:`\tau_j`, with k the newest raw sample at or before
+    :math:`\tau_j`:
+
+    .. math::
+
+        z(\tau_j) = z_k + \frac{\tau_j - t_k}{t_{k+1} - t_k}\,(z_{k+1} - z_k)
+        \quad \text{(linear)}, \qquad z(\tau_j) = z_k \quad \text{(hold)},
+
+    the linear one NaN if either neighbour is missing. With ``causal`` the interpolated sample
+    arrives one raw period after τ_j (after its newer neighbour); without, it arrives at
+    τ_j + (arrival_k − t_k), as when a prerecorded file is played back (:func:`deliver`).
 
     The class's defaults are the offline playback; the sensors' default is the causal
-    ``"hold"`` (:func:`playback`).
+    ``"linear"`` (:data:`sim.sensors.names.DEFAULT_PLAYBACK`, :func:`playback`).
 
     Attributes
     ----------

@@ -1,18 +1,30 @@
-"""The sonomicrometer from its physics (Sonometrics; Tuna et al. 2013 §III-A).
+r"""The sonomicrometer from its physics (Sonometrics; Tuna et al. 2013 §III-A).
 
 A POI crystal sutured on the heart and ``count`` reference crystals on a rigid base
 (:class:`~sim.sensors.crystals.CrystalArray`). Every sample, the instrument measures the time
 of flight of an ultrasound pulse from each reference crystal to the POI crystal, converts it to
 a range with the speed of sound it is set to, and solves the 3-D position by trilateration
-(:func:`~sim.sensors.trilateration.trilaterate`). Per range i and sample k::
+(:func:`~sim.sensors.trilateration.trilaterate`). Per range i and sample k:
 
-    d_i   = ‖x_k − b_i‖                               true distance, x_k = x₀ + p(t_k) − p(t₀)
-    δ_i   = (λ/4)·(g_i⁰ − g_i),  g_i = cos θ_i·cos φ_i    leading-edge error, |δ_i| ≤ λ/4
-    w_i   ~ N(0, σ_r²), white                          crystal-geometry error (§IX)
-    s_i   ∈ {0, λ}                                     cycle slip (echo outlier), rare
-    τ_i   = Δ·round((d_i + δ_i + w_i + s_i) / (c (1 + ε)) / Δ)   time of flight, counter step Δ
-    r_i   = c·τ_i                                      range with the set speed of sound c
-    z_k   = trilaterate(b, r) − x₀ + p(t₀)              back in the motion's frame
+.. math::
+
+    \begin{aligned}
+    d_i &= \lVert x_k - b_i \rVert,\quad x_k = x_0 + p(t_k) - p(t_0)
+        && \text{true distance} \\
+    \delta_i &= \tfrac{\lambda}{4}\,(g_i^0 - g_i),\quad g_i = \cos\theta_i \cos\phi_i
+        && \text{leading-edge error, } |\delta_i| \le \lambda/4 \\
+    w_i &\sim \mathcal{N}(0, \sigma_r^2) \text{ white}
+        && \text{crystal-geometry error (Tuna §IX)} \\
+    s_i &\in \{0, \lambda\}
+        && \text{cycle slip (echo outlier), rare} \\
+    \tau_i &= \Delta \operatorname{round}\Bigl(\frac{d_i + \delta_i + w_i + s_i}
+                                                {c\,(1 + \varepsilon)\,\Delta}\Bigr)
+        && \text{time of flight, counter step } \Delta \\
+    r_i &= c\,\tau_i
+        && \text{range with the set speed of sound } c \\
+    z_k &= \operatorname{trilaterate}(b, r) - x_0 + p(t_0)
+        && \text{back in the motion's frame}
+    \end{aligned}
 
 θ_i is the angle between the POI crystal's axis and the line to crystal i, φ_i that between the
 reference crystal's axis (the base's normal) and the line to the POI: the received amplitude

@@ -83,18 +83,25 @@ class Latency:
 
 @dataclass(frozen=True)
 class Sensor:
-    """A sampler followed by processing stages.
+    r"""A sampler followed by processing stages.
 
-    Sampling: t_k = t₀ + k/rate for k = 0 … ⌊duration·rate⌋, z_k = p(t_k), arrival_k = t_k;
-    then each stage in order.
+    Sampling, then each stage in order:
+
+    .. math::
+
+        t_k = t_0 + \frac{k}{\text{rate}}, \quad
+        k = 0, \dots, \lfloor \text{duration} \cdot \text{rate} \rfloor, \qquad
+        z_k = p(t_k), \qquad \text{arrival}_k = t_k.
 
     Attributes
     ----------
     rate : float
         Sample rate [Hz].
     stages : tuple
-        Processing stages (:class:`WhiteNoise`, :class:`EchoOutliers`, :class:`Dropouts`,
-        :class:`Latency`, :class:`Upsample`, or anything with ``apply(stream, rng)``).
+        Processing stages (:class:`~sim.sensors.white.WhiteNoise`,
+        :class:`~sim.sensors.events.EchoOutliers`, :class:`~sim.sensors.events.Dropouts`,
+        :class:`Latency`, :class:`~sim.sensors.playback.Upsample`, or anything with
+        ``apply(stream, rng)``).
     name : str
         Label for reports.
     """

@@ -1,15 +1,19 @@
-"""3-D position from ranges to crystals at known positions (trilateration).
+r"""3-D position from ranges to crystals at known positions (trilateration).
 
 The instrument's software solves, per sample, the nonlinear least-squares problem
 
-    x̂ = argmin_x Σ_i (‖x − b_i‖ − r_i)²,
+.. math::
 
-b_i the reference crystals, r_i the measured ranges (Ratcliffe et al. 1995; Sonometrics
-SonoSOFT). :func:`trilaterate` starts from the linearised closed form (the spheres minus the
-first one are planes: 2(b_i − b_0)ᵀx = ‖b_i‖² − ‖b_0‖² − r_i² + r_0²) and polishes it with
-Gauss–Newton steps, vectorised over the samples. For coplanar crystals (the paper's base) the
-linear system fixes only the in-plane coordinates; the normal one follows from the spheres,
-h² = mean_i(r_i² − ‖u − b_i‖²), on the side of the plane where the POI is.
+    \hat x = \arg\min_x \sum_i \bigl(\lVert x - b_i \rVert - r_i\bigr)^2,
+
+:math:`b_i` the reference crystals, :math:`r_i` the measured ranges (Ratcliffe et al. 1995;
+Sonometrics SonoSOFT). :func:`trilaterate` starts from the linearised closed form (the spheres
+minus the first one are planes,
+:math:`2 (b_i - b_0)^\mathsf{T} x = \lVert b_i \rVert^2 - \lVert b_0 \rVert^2 - r_i^2 + r_0^2`)
+and polishes it with Gauss–Newton steps, vectorised over the samples. For coplanar crystals (the
+paper's base) the linear system fixes only the in-plane coordinates u; the normal one follows
+from the spheres, :math:`h^2 = \operatorname{mean}_i \bigl(r_i^2 - \lVert u - b_i \rVert^2\bigr)`,
+on the side of the plane where the POI is.
 """
 
 from __future__ import annotations
