@@ -168,6 +168,40 @@ class Robot:
         )
         return J[:3].copy()
 
+    def clamp(self, q: np.ndarray) -> np.ndarray:
+        """``q`` moved into the joint limits: the box, then each coupled limit c·q ∈ [lo, hi]
+        by the least change along c (projections in turn, repeated a few times)."""
+        lower, upper = self.position_limits
+        q = np.clip(q, lower, upper)
+        for _ in range(4):
+            for c, lo, hi in self.coupling:
+                value = float(c @ q)
+                if not lo <= value <= hi:
+                    q = q + (min(max(value, lo), hi) - value) * c / float(c @ c)
+            q = np.clip(q, lower, upper)
+        return q
+
+    def distance_to_reach(self, point: np.ndarray, q: np.ndarray | None = None,
+                          iterations: int = 60) -> tuple[float, np.ndarray]:
+        """How far ``point`` [m] lies from the end-effector positions the joint limits allow,
+        and the posture that comes closest: projected Gauss–Newton on ‖p(q) − point‖² from
+        ``q`` (default home), each step q ← clamp(q + J⁺ (point − p(q))), damped. A local
+        search: a distance of 0 proves the point reachable; a positive one is an upper bound
+        of the true distance [m]."""
+        q = self.q0.copy() if q is None else np.asarray(q, dtype=float)
+        best = (np.inf, q)
+        for _ in range(iterations):
+            miss = np.asarray(point, dtype=float) - self.ee_position(q)
+            distance = float(np.linalg.norm(miss))
+            if distance < best[0]:
+                best = (distance, q)
+            if distance < 1e-7:
+                break
+            J = self.ee_jacobian(q)
+            step = J.T @ np.linalg.solve(J @ J.T + 1e-6 * np.eye(3), miss)
+            q = self.clamp(q + step)
+        return best
+
     def mass_matrix(self, q: np.ndarray) -> np.ndarray:
         """Joint-space inertia M(q) including armature [kg·m²] (CRBA, symmetrised)."""
         M = pin.crba(self.model, self._data, q)

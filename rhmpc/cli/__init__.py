@@ -19,7 +19,7 @@ import os
 import sys
 
 from rhmpc import __version__
-from rhmpc.errors import UsageError
+from rhmpc.errors import UsageError, one_line_warnings
 
 #: Subcommand modules, in the order ``rhmpc --help`` lists them.
 COMMANDS: tuple[str, ...] = (
@@ -47,14 +47,16 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 0
     try:
-        return int(args.func(args) or 0)
+        with one_line_warnings(f"rhmpc {args.command}"):
+            return int(args.func(args) or 0)
     except BrokenPipeError:
         # The reader went away (``rhmpc ... | head``): not an error of ours. Point stdout at
         # devnull so that the interpreter's final flush does not raise again.
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
     except (UsageError, ValueError, OSError) as exc:
-        print(f"rhmpc {args.command}: error: {exc}", file=sys.stderr)
+        text = " ".join(str(exc).split())  # one line, whatever the message holds
+        print(f"rhmpc {args.command}: error: {text}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"rhmpc {args.command}: interrupted", file=sys.stderr)

@@ -7,6 +7,8 @@ import json
 import sys
 from pathlib import Path
 
+import numpy as np
+
 from rhmpc.cli.presets import add_preset_option, apply_preset
 from rhmpc.errors import UsageError
 from rhmpc.experiment import RunConfig, check_sensor, load_config, run_experiment
@@ -71,9 +73,16 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="'c': the compiled controller of `rhmpc export` in the loop (built once, "
                    "cached; needs cmake and a C compiler)")
     add_run_options(p)
-    p.add_argument("--out", metavar="FILE.json", help="write the result document")
+    p.add_argument("--out", metavar="FILE", help="write the result document: FILE.json, or "
+                   "FILE.mat for MATLAB (the summary and the trace: time, error, ee, poi, "
+                   "torques, forecasts)")
     p.add_argument("--json", action="store_true", help="print the result document on stdout")
-    p.add_argument("--plot", metavar="FILE.png", help="tracking figure (Tuna Figs 10-11 style)")
+    p.add_argument("--plot", metavar="FILE.png", help="figures: per axis the POI, the tool and "
+                   "the 25-ms forecasts against the measured samples; the error; the torques "
+                   "against their limits")
+    p.add_argument("--view", metavar="FILE.html", help="a 3-D replay of the run: one "
+                   "self-contained page that opens offline (the arm, the POI's and the tool's "
+                   "paths, the forecasts; play, pause, time slider)")
     p.add_argument("--trace", metavar="FILE.npz", help="write every tick to an NPZ file as the "
                    "run goes (chunked; read it with sim.loop.trace.read_trace)")
     add_host_stalls_option(p, "the run")
@@ -197,6 +206,70 @@ def check_scoring(config: RunConfig) -> None:
             f"at least {MIN_SCORED:g} s is needed (raise --duration or lower --settling)")
 
 
+#: What each output option writes, by its file's suffix.
+OUTPUTS = {"out": (".json", ".mat"), "plot": (".png", ".pdf", ".svg"), "view": (".html",),
+           "trace": (".npz",)}
+
+
+def check_outputs(args: argparse.Namespace) -> None:
+    """Every output file can be written, checked before the run starts (a missing or
+    read-only directory, or a suffix the option does not write, is a one-line error)."""
+    import os
+
+    for option, suffixes in OUTPUTS.items():
+        path = getattr(args, option, None)
+        if not path:
+            continue
+        path = Path(path)
+        if path.suffix.lower() not in suffixes:
+            raise UsageError(f"--{option} {path}: the file must end in "
+                             f"{' or '.join(suffixes)}")
+        folder = path.resolve().parent
+        if not folder.is_dir():
+            raise UsageError(f"--{option} {path}: no such directory {folder}")
+        if not os.access(folder, os.W_OK) or (path.exists() and not os.access(path, os.W_OK)):
+            raise UsageError(f"--{option} {path}: cannot write there")
+
+
+def check_score(doc: dict) -> None:
+    """A run whose score is not finite says why (exit 2)."""
+    rms = doc.get("rms_error_mm")
+    if rms is not None and np.isfinite(rms):
+        return
+    excluded = doc.get("excluded") or {}
+    raise UsageError(
+        f"the run has no finite score (RMS {rms}): no tick after the settling has a finite "
+        f"error against the {doc.get('ground_truth')} motion ({excluded.get('unmeasured', 0)} "
+        f"recorded samples are no measurements, {excluded.get('outliers', 0)} were taken as "
+        "outliers); check the recording with rhmpc data show, or raise --duration")
+
+
+def write_outputs(args: argparse.Namespace, result, doc: dict) -> None:
+    """--out (JSON, or MATLAB's .mat), --plot and --view."""
+    if args.out and Path(args.out).suffix.lower() == ".mat":
+        from rhmpc.studies.matlab import write_mat
+
+        write_mat(args.out, result, doc)
+    elif args.out:
+        Path(args.out).write_text(json.dumps(doc, indent=2) + "\n")
+    if args.plot or getattr(args, "view", None):
+        from robots import load_robot
+
+        robot = load_robot(doc["robot"])
+    if args.plot:
+        from rhmpc.studies.figures import plot_run
+
+        plot_run(result, args.plot, title=f"{doc['predictor']} on {doc['scenario']} "
+                 f"({doc['robot']}): RMS error {doc['rms_error_mm']:.3f} mm",
+                 torque_limit=robot.torque_limit,
+                 joint_names=[robot.model.names[j] for j in range(1, robot.nv + 1)])
+    if getattr(args, "view", None):
+        from rhmpc.studies.replay import write_replay
+
+        write_replay(args.view, result, robot, title=f"{doc['predictor']} on "
+                     f"{doc['scenario']}: RMS error {doc['rms_error_mm']:.3f} mm")
+
+
 def run(args: argparse.Namespace) -> int:
     config = config_from_args(args)
     if args.controller == "c":
@@ -204,9 +277,8 @@ def run(args: argparse.Namespace) -> int:
 
         if reason := missing_toolchain():
             raise UsageError(reason)
+    check_outputs(args)
     trace = getattr(args, "trace", None)
-    if trace and not Path(trace).resolve().parent.is_dir():
-        raise UsageError(f"--trace {trace}: no such directory")
     stalls = getattr(args, "host_stalls", 0.0)
     check_host_stalls(stalls)
     try:
@@ -218,27 +290,21 @@ def run(args: argparse.Namespace) -> int:
         if trace and str(exc).startswith(f"{trace}:"):  # the trace file cannot be written
             raise UsageError(str(exc)) from None
         raise
+    check_score(doc)
     if stalls > 0:
         g = (doc.get("gain_tick_us") or {}).get("p50")
         doc["host_stalls"] = host_stalls_document(stalls, g)
-    if args.out:
-        Path(args.out).write_text(json.dumps(doc, indent=2) + "\n")
-    if args.plot:
-        from rhmpc.studies.run_report import plot_run
-
-        plot_run(result, args.plot, title=f"{doc['predictor']} on {doc['scenario']} "
-                 f"({doc['robot']}): RMS error {doc['rms_error_mm']:.3f} mm")
+    write_outputs(args, result, doc)
     if args.json:
         json.dump(doc, sys.stdout, indent=2)
         print()
-    else:
-        from rhmpc.studies.run_report import format_summary
+        return 0
+    from rhmpc.studies.run_report import format_summary
 
-        print(format_summary(doc, settling_rule(args)))
-        if args.out:
-            print(f"  result           {args.out}")
-        if args.plot:
-            print(f"  figure           {args.plot}")
-        if trace:
-            print(f"  trace            {trace} (every tick)")
+    print(format_summary(doc, settling_rule(args)))
+    for option, what in (("out", "result"), ("plot", "figure"), ("view", "3-D replay"),
+                         ("trace", "trace")):
+        if getattr(args, option, None):
+            print(f"  {what:<16} {getattr(args, option)}"
+                  + (" (every tick)" if option == "trace" else ""))
     return 0

@@ -43,7 +43,10 @@ Phase 2: dual active set (Goldfarb & Idnani, *Math. Program.* 27, 1–33, 1983)
 
     (``N`` the active bounds' normals σ_i e_i; a partial step drops bound j and continues
     with p). The dual objective rises at every step, so no active set repeats: it terminates
-    in finitely many steps in exact arithmetic. Each step is one Cholesky of ``W_𝒜𝒜``.
+    in finitely many steps in exact arithmetic. Each step is one Cholesky of ``W_𝒜𝒜``. Bounds
+    whose violations tie within rounding enter in the order of their index, so that the path,
+    and the number of solves, is the same on every processor: violations within ε_p of the
+    largest are a tie, broken by the lowest index.
     Solves of both phases count towards ``max_iter``; past it the tick goes to level 3.
 
 Certificate
@@ -75,6 +78,14 @@ from scipy.linalg.lapack import dpotrs as _potrs
 def _peak(v: np.ndarray) -> float:
     """max(v) by argmax (a quarter of ``max()``'s cost on a few dozen entries; NaN wins)."""
     return float(v[v.argmax()])
+
+
+def _most_violated(viol: np.ndarray, tie: float) -> int:
+    """The index of the largest violation, the lowest among those within ``tie`` of it (the
+    primal tolerance: violations the solver cannot tell apart, so that the rounding of one
+    processor or BLAS against another's never decides which bound enters next)."""
+    top = viol[viol.argmax()]
+    return int((viol >= top - tie).argmax())
 
 
 @dataclass(frozen=True)
@@ -235,7 +246,7 @@ class BoxQP:
         z[:] = z_star
         viol = np.abs(z, out=self._viol)
         viol -= 1.0
-        p = int(np.argmax(viol))
+        p = _most_violated(viol, st.primal_tol)
         # the active bounds in the order they were added: index, sign σ_i (+1: z_i ≤ 1,
         # −1: −z_i ≤ 1) and multiplier λ_i ≥ 0, in the first k entries of fixed buffers
         act_b, sig_b, lam_b = self._act, self._sig, self._lam
@@ -287,7 +298,7 @@ class BoxQP:
             z[p] = sp
             np.abs(z, out=viol)
             viol -= 1.0
-            p = int(np.argmax(viol))
+            p = _most_violated(viol, st.primal_tol)
         if k and _peak(-lam_b[:k]) > st.dual_tol * scale:
             return None
         self.mu[:] = 0.0

@@ -60,7 +60,8 @@ class NonlinearityCancellation:
         if self.mismatch.parameters is not None:
             robot = _same_joints(robot, load_robot(self.mismatch.parameters))
         self.motor_map = robot.motor_map
-        self._plain = np.array_equal(self.motor_map, np.eye(robot.nv))
+        self._rows = self.motor_map.tolist()  # S by rows (ω = S q̇) and by columns (Sᵀ f)
+        self._columns = self.motor_map.T.tolist()
         self.model = robot.model.copy()
         for i, inertia in enumerate(self.model.inertias):
             self.model.inertias[i] = pin.Inertia(
@@ -75,29 +76,26 @@ class NonlinearityCancellation:
         #: D̂ and F̂_c per joint, the friction the controller cancels [N·m·s/rad], [N·m]
         self.damping = np.broadcast_to(robot.damping * scale, (nv,)).copy()
         self.coulomb_friction = np.broadcast_to(robot.coulomb_friction * scale, (nv,)).copy()
-        self._damping_list = self.damping.tolist()
-        self._coulomb_list = self.coulomb_friction.tolist()
+        self._friction = list(zip(self.damping.tolist(), self.coulomb_friction.tolist(),
+                                  strict=True))
         self._zero = np.zeros(robot.nv)
 
     def torque(self, q: np.ndarray, v: np.ndarray, tau_mpc: np.ndarray | None = None) -> np.ndarray:
         """Cancellation torque [N·m] at the estimated state (q, q̇), plus ``tau_mpc`` if given.
 
         ``torque(q, v, u)`` is the commanded τ = u + ĝ + Ĉq̇ + f̂ in one pass (the loop's form).
+        The friction's few products run on Python floats: for three joints a dozen NumPy calls
+        would cost several times the arithmetic.
         """
-        bias = pin.rnea(self.model, self.data, q, v, self._zero).tolist()
         u = self._zero if tau_mpc is None else tau_mpc
         if u.shape != self._zero.shape or v.shape != self._zero.shape:
             raise ValueError(f"v and tau_mpc must have shape {self._zero.shape}")
-        if not self._plain:
-            w = self.motor_map @ v
-            f = self.damping * w + self.coulomb_friction * np.tanh(w * self._inv_stiction)
-            return u + np.array(bias) + self.motor_map.T @ f
-        inv_vs, tanh = self._inv_stiction, math.tanh
-        return np.array([  # floats, zip without strict= (shapes checked): see ArmPlant
-            t + b + d * x + c * tanh(x * inv_vs)
-            for t, b, d, c, x in zip(u.tolist(), bias, self._damping_list, self._coulomb_list,
-                                     v.tolist())
-        ])
+        bias = pin.rnea(self.model, self.data, q, v, self._zero).tolist()
+        rates, inv_vs, tanh = v.tolist(), self._inv_stiction, math.tanh
+        w = [sum(s * x for s, x in zip(row, rates)) for row in self._rows]  # ω = S q̇
+        f = [d * x + c * tanh(x * inv_vs) for (d, c), x in zip(self._friction, w)]
+        return np.array([t + b + sum(s * fk for s, fk in zip(column, f))  # + Sᵀ f
+                         for t, b, column in zip(u.tolist(), bias, self._columns)])
 
 
 def _same_joints(plant: Robot, model: Robot) -> Robot:

@@ -16,7 +16,9 @@ A step, with the reference's points r_{i+1..i+N} of tick i::
     observer.predict(u_{i−d} + (τ − τ_c)_{i−d})     the MPC torque that acts over the tick
 
 ``d`` is the input delay in ticks (the torque computed on tick i acts from tick i + d); the
-observer predicts with the torque that acts, including what the clip took off it.
+observer predicts with the torque that acts, including what the clip took off it. An encoder
+reading that is not finite is not fused (x̂ = x̂⁻), and a command that is not finite holds the
+last torque.
 """
 
 from __future__ import annotations
@@ -57,6 +59,8 @@ class Controller:
         self.mpc, self.reference, self.observer = mpc, reference, observer
         self.cancellation = cancellation
         self.torque_limit = np.asarray(torque_limit, dtype=float).copy()
+        self._bounds = list(zip((-self.torque_limit).tolist(), self.torque_limit.tolist(),
+                                strict=True))
         self.input_delay = input_delay
         self.nu = self.torque_limit.size
         self.N = mpc.N
@@ -85,6 +89,12 @@ class Controller:
         """The predictor's and the gate's event counts (empty without a predictor)."""
         predictor = getattr(self.reference, "predictor", None)
         return {} if predictor is None else dict(predictor.counts)
+
+    @property
+    def outliers(self) -> tuple[int, int]:
+        """(samples the gate rejected, samples retracted after the fact) so far."""
+        counts = getattr(getattr(self.reference, "predictor", None), "counts", None) or {}
+        return counts.get("outliers_rejected", 0), counts.get("retracted", 0)
 
     @property
     def gate_floor(self) -> float | None:
@@ -123,8 +133,13 @@ class Controller:
         u = self.mpc.step(x_hat, self.reference.horizon(tick))
         command = u if self.cancellation is None else self.cancellation.torque(
             q, x_hat[self.nu :], u)
-        tau = np.minimum(np.maximum(command, -self.torque_limit), self.torque_limit)
-        self.saturated = not np.array_equal(tau, command)
+        if not np.isfinite(np.vdot(command, command)):  # the cancellation of a faulty reading
+            command = self.tau  # hold the last torque
+        commanded = command.tolist()  # the clip on floats: a 3-vector is cheaper so
+        clipped = [min(max(c, lo), hi) for c, (lo, hi) in zip(commanded, self._bounds,
+                                                                 strict=True)]
+        self.saturated = clipped != commanded
+        tau = np.array(clipped) if self.saturated else command
         acting = u + (tau - command) if self.saturated else u
         if self.input_delay:
             self._acting.append(acting)

@@ -102,10 +102,14 @@ class JointObserver:
     def correct(self, q_measured: np.ndarray) -> np.ndarray:
         """Fuse the measured joint angles [rad]; returns the estimate x̂ = [q − q0; q̇].
 
-        The returned array is the filter's own storage: it is overwritten by the next
-        ``correct`` (copy it to keep it).
+        A reading that is not finite (an encoder fault) is not fused: the estimate is the
+        prediction x̂⁻, so that the state stays finite. The returned array is the filter's own
+        storage: it is overwritten by the next ``correct`` (copy it to keep it).
         """
         self._q_in[:] = q_measured
+        if not np.isfinite(np.vdot(self._q_in, self._q_in)):
+            self.x[:] = self.x_prior
+            return self.x
         return np.dot(self._correct_matrix, self._prior_q_one, out=self.x)
 
     def predict(self, u: np.ndarray) -> None:

@@ -188,14 +188,14 @@ class MPCSettings:
         pages measure both).
     max_iter : int
         OSQP's work per tick: its ADMM iterations [-] (DAQP, exact, is bounded by the QP's size:
-        at most one change of its active set per constraint row). A real-time bound: 10 ADMM iterations of the PHANToM's QP keep a tick that reaches the
-        solver to about a fifth of the 0.5-ms period in the exported C (each iteration is a
-        solve with the factorised KKT matrix; ``rhmpc bench --controller c`` measures it). A
-        solve that reaches it is not used: the tick takes the fallback at once (the shifted
-        plan, then the clipped LQ input or braking) and the next tick's solve starts from its
-        iterate, shifted (its QP is nearly the same), so that a solve that needs more
-        iterations finishes over a few ticks. A cap in iterations rather than time keeps runs
-        reproducible.
+        at most one change of its active set per constraint row). A real-time bound: each
+        iteration is a solve with the factorised KKT matrix, and 10 of them keep a tick that
+        reaches the solver well inside the 0.5-ms period in the exported C (``rhmpc bench
+        --controller c`` measures it; the validation pages give the figures). A solve that
+        reaches it is not used: the tick takes the fallback at once (the shifted plan, then the
+        clipped LQ input or braking) and the next tick's solve starts from its iterate, shifted
+        (its QP is nearly the same), so that a solve that needs more iterations finishes over a
+        few ticks. A cap in iterations rather than time keeps runs reproducible.
     osqp : OSQPSettings
         OSQP's own options, passed through (the ``[mpc.osqp]`` table).
     warm_start : str

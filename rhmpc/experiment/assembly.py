@@ -6,6 +6,7 @@ sensor, plant, loop), ``predictors`` and the controller of :mod:`rhmpc.control`.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -191,6 +192,37 @@ def deployable(config: RunConfig, sensor_rate: float) -> Controller:
     return build_controller(config, robot, arm, reference)
 
 
+#: Points of the POI's path checked against the arm's reach before a run.
+REACH_POINTS = 200
+#: Distances below this are reachable (the search's own tolerance) [m].
+REACH_TOLERANCE = 1e-4
+
+
+def check_reach(robot: Robot, truth, anchor: np.ndarray, ticks: int) -> float:
+    """The farthest the POI's path (``anchor`` + the centred truth over ``ticks``) lies from
+    the end-effector positions the joint limits allow [m] (:meth:`robots.Robot.
+    distance_to_reach` at :data:`REACH_POINTS` points); a path outside is warned about, with
+    the distance and the fix. The run goes on: the controller keeps the arm in its envelope and
+    takes its safe actions (a recorded jump can leave the workspace for a moment)."""
+    from rhmpc.control.reference import embed3
+
+    worst, at, q = 0.0, 0.0, robot.q0
+    for tick in np.linspace(0, ticks - 1, min(REACH_POINTS, ticks)).astype(int):
+        point = anchor + embed3(truth.window(int(tick), int(tick) + 1))[0]
+        if not np.all(np.isfinite(point)):
+            continue
+        distance, q = robot.distance_to_reach(point, q)
+        if distance > worst:
+            worst, at = distance, tick * truth.Ts if hasattr(truth, "Ts") else float(tick)
+    if worst <= REACH_TOLERANCE:
+        return worst
+    where = (f"the POI's path leaves the arm's workspace by up to {1e3 * worst:.1f} mm (at "
+             f"{at:.2f} s) within its joint limits")
+    warnings.warn(f"{where}: unreachable, the tool cannot follow there (bring it within reach "
+                  "with loop.poi_offset or loop.placement)", UserWarning, stacklevel=2)
+    return worst
+
+
 def motion_anchor(config: RunConfig, arm: LinearArm) -> np.ndarray:
     """Where the centred motion's origin sits in the workspace [m] (``loop.placement``)."""
     offset = np.asarray(config.loop.poi_offset, dtype=float)
@@ -228,6 +260,7 @@ def build_run(config: RunConfig, implementation: str = "python") -> Run:
                         centred=loop.placement == "centred")
     clock = predictor_clock(loop, stream)
     anchor = motion_anchor(config, arm)
+    check_reach(robot, truth, anchor, loop.ticks)
     reference = build_reference(config, truth, heart, clock)
     reference.place(anchor)
     controller = build_controller(config, robot, arm, reference, implementation)

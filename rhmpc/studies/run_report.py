@@ -67,13 +67,21 @@ def format_summary(doc: dict, settling_rule: str | None = None) -> str:
         + ("; the controller in C (rhmpc export): refresh, observer, MPC, cancellation"
            if doc.get("implementation") == "c" else ""),
     ]
-    counts = doc.get("predictor_counts") or {}
+    counts = dict(doc.get("predictor_counts") or {})
     if counts:  # what the predictor and the safety layers did (missing samples, outliers, …)
+        # a sample the gate rejects is missing for the predictor: "missing" counts the lost ones
+        counts["missing"] = counts.get("missing", 0) - counts.get("outliers_rejected", 0)
         events = ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in sorted(counts.items()))
         lines.insert(-1, f"  predictor        {events}")
         lines.insert(-1, "                   " + _clock_line(doc.get("predictor_clock") or {}))
     if doc.get("outlier_gate"):
         lines.insert(-1, "  outlier gate     " + _gate_line(doc["outlier_gate"]))
+    excluded = doc.get("excluded") or {}
+    if excluded.get("ticks") or excluded.get("unmeasured"):
+        lines.insert(3, f"                   the score leaves out {excluded.get('ticks', 0)} ticks "
+                     f"whose truth touches the {excluded.get('outliers', 0)} samples taken as "
+                     f"outliers, and the {excluded.get('unmeasured', 0)} recorded samples that "
+                     "are no measurements")
     if doc.get("host_stalls"):
         lines.append("  host             " + stall_line(doc["host_stalls"]))
     hr = doc.get("heart_rate") or {}

@@ -161,6 +161,18 @@ def quiet_gc() -> Iterator[None]:
         gc.unfreeze()
 
 
+def _note_outliers(before: tuple[int, int], after: tuple[int, int], stamp: float,
+                   log: dict) -> None:
+    """The stamp of a sample the gate rejected, or of the previous one if it was retracted
+    (``log["outliers"]``); the newest accepted sample's stamp in ``log["last_stamp"]``."""
+    if after[0] > before[0]:
+        log["outliers"].append(stamp)
+        return
+    if after[1] > before[1] and log["last_stamp"] is not None:
+        log["outliers"].append(log["last_stamp"])
+    log["last_stamp"] = stamp
+
+
 def run_closed_loop(plant, controller, truth, stream, settings: LoopSettings,
                     clock: PredictorClock, *, anchor: np.ndarray, robot,
                     progress: Callable[[int], None] | None = None,
@@ -236,9 +248,12 @@ def _run_ticks(plant, controller, refreshes: Refreshes, c0: int, c1: int, log: d
         k = i - c0
         spent, refreshed = 0, False
         for z, stamp in due(i):
+            before = controller.outliers
             refresh(i, z, stamp)
             spent += controller.refresh_ns
             refreshed = True
+            if z is not None:
+                _note_outliers(before, controller.outliers, stamp, log)
             samples.append((stamp, z))
         tau = step(i, plant.encoders())
         advance(tau)

@@ -58,6 +58,9 @@ class LoopResult:
     saturated_ticks: int = 0
     predictor_counts: dict = field(default_factory=dict)
     plant_dynamics: str = "pinocchio"  # who integrated the plant (and why not native)
+    #: what the score leaves out: the samples taken as outliers, the ticks whose truth touches
+    #: them, and the recorded samples that are no measurements (their truth is missing)
+    excluded: dict = field(default_factory=dict)
     horizons: tuple = (np.zeros(0, dtype=np.int64), np.zeros((0, 0, 3)))
     samples: tuple = (np.zeros(0), np.zeros((0, 3)))
 
@@ -85,6 +88,7 @@ class LoopResult:
             "mean": float(1e3 * rms(self.horizon_error)),
         }
         out["saturated_ticks"] = int(self.saturated_ticks)
+        out["excluded"] = dict(self.excluded)
         return out
 
 
@@ -116,7 +120,12 @@ class Recorder:
         self.n_refreshes = 0
         self.kept_horizons: list = []
         self.kept_samples: list = []
-        self.u_prev = None
+        self.u_prev, self.last_stamp = None, None
+        #: stamps of the samples the controller took as outliers [s], and the half-width of
+        #: the truth they touch: one raw sample period each side (the truth interpolates them)
+        self.outliers: list[float] = []
+        self.reach = 1.0 / clock.sensor_rate if np.isfinite(clock.sensor_rate) else clock.dt
+        self.excluded_ticks = 0
 
     def start_chunk(self, c0: int, c1: int) -> dict:
         """The records of ticks c0 … c1 − 1, preallocated (the loop writes rows): q (m, nq), the
@@ -127,7 +136,8 @@ class Recorder:
         return {"q": np.empty((m, nq)), "ref0": np.empty((m, 3)), "u": np.empty((m, nv)),
                 "tau": np.empty((m, nv)), "cmd": np.empty((m, nv)),
                 "step_ns": np.zeros(m, dtype=np.int64), "refresh_ns": np.zeros(m, dtype=np.int64),
-                "horizons": [], "samples": [], "yardstick_ns": [], "u_prev": self.u_prev}
+                "horizons": [], "samples": [], "yardstick_ns": [], "u_prev": self.u_prev,
+                "outliers": self.outliers, "last_stamp": self.last_stamp}
 
     def _ee(self, q_log: np.ndarray) -> np.ndarray:
         """End-effector positions (m, 3) of the joint angles (m, nq)."""
@@ -142,16 +152,17 @@ class Recorder:
 
     def end_chunk(self, c0: int, c1: int, log: dict) -> None:
         """Fold the chunk's records into the statistics, the trace and the trace file."""
-        self.u_prev = log["u_prev"]
+        self.u_prev, self.last_stamp = log["u_prev"], log["last_stamp"]
         m, N = c1 - c0, self.N
         ee = self._ee(log["q"])
         placed = self.anchor + embed3(self.truth.window(c0, c1 + N + 1))
         poi = placed[1 : m + 1]
+        scored = self._without_outliers(c0, poi)
         limit = self.robot.torque_limit
         self.saturated_ticks += int((np.abs(log["cmd"]) > limit).any(axis=1).sum())
         s = max(self.settings.settling_ticks - c0, 0)
         tick_ns = log["step_ns"] + log["refresh_ns"]
-        self.tracking.add(ee[s:] - poi[s:], log["u"][s:], log["tau"][s:])
+        self.tracking.add(ee[s:] - scored[s:], log["u"][s:], log["tau"][s:])
         self.ticks.add(tick_ns[s:])
         self.parts["step"].add(log["step_ns"][s:])
         self.parts["refresh"].add(log["refresh_ns"][s:])
@@ -165,6 +176,22 @@ class Recorder:
         self.trace.add(chunk)
         if self.file is not None:
             self.file.add(chunk)
+
+    def _without_outliers(self, c0: int, poi: np.ndarray) -> np.ndarray:
+        """``poi`` with NaN on the ticks whose recorded truth touches a sample the controller
+        took as an outlier (within one raw sample period of it): no score against them."""
+        if not self.outliers:
+            return poi
+        times = (c0 + 1 + np.arange(poi.shape[0])) * self.settings.Ts
+        stamps = np.asarray(self.outliers)
+        near = np.abs(times[:, None] - stamps[None, :]).min(axis=1) < self.reach
+        if not near.any():
+            return poi
+        settled = c0 + 1 + np.arange(poi.shape[0]) > self.settings.settling_ticks
+        self.excluded_ticks += int((near & settled).sum())
+        poi = poi.copy()
+        poi[near] = np.nan
+        return poi
 
     def _keep_refreshes(self, horizons: list, samples: list) -> None:
         """Every ``keep_every``-th refresh's points and sample, for the figures."""
@@ -218,6 +245,8 @@ class Recorder:
             controller_stats=controller_stats(controller), saturated_ticks=self.saturated_ticks,
             predictor_counts=dict(controller.predictor_counts), plant_dynamics=dynamics,
             horizons=(ticks, points), samples=(stamps, samples),
+            excluded={"outliers": len(self.outliers), "ticks": self.excluded_ticks,
+                      "unmeasured": len(getattr(self.truth, "unmeasured", ()))},
         )
 
 

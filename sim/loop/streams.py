@@ -249,20 +249,36 @@ class ArrayTruth:
         return self.truth[i0:i1]
 
 
+def measurements(z: np.ndarray) -> np.ndarray:
+    """Samples (n, d) with every one that is no measurement (a non-finite component, or a
+    squared norm that overflows: ‖z‖ > 1e154) set to NaN, as the predictors take them
+    (:func:`predictors.base.is_measured`): no score is taken against them."""
+    z = np.asarray(z, dtype=float)
+    with np.errstate(over="ignore", invalid="ignore"):
+        bad = ~np.isfinite(np.einsum("ij,ij->i", z, z))
+    if not bad.any():
+        return z
+    z = z.copy()
+    z[bad] = np.nan
+    return z
+
+
 class SourceTruth:
     """Centred POI truth ``p(i·Ts) − mean`` of a motion source, evaluated per window.
 
     The mean over ticks 0 … n_ticks − 1 (NaN ignored per axis) is made in a first pass of
     ``chunk`` ticks; ``centred=False`` keeps the motion's own coordinates (``center`` zero, the
     mean still checked for a finite sample). ``source`` may instead be a sample source
-    (``ground_truth = "recorded"``):
-    the truth is then the stream linearly interpolated at the tick times
-    (:class:`sim.recordings.RecordedMotion` on the samples around each window).
+    (``ground_truth = "recorded"``): the truth is then the stream linearly interpolated at the
+    tick times (:class:`sim.recordings.RecordedMotion` on the samples around each window), its
+    samples that are no measurements missing (:func:`measurements`).
     """
 
     def __init__(self, source, n_ticks: int, Ts: float, chunk: int = 20_000,
                  centred: bool = True) -> None:
         self.source, self.n_ticks, self.Ts = source, int(n_ticks), float(Ts)
+        #: indices of the recorded samples that are no measurements (missing for the truth)
+        self.unmeasured: set[int] = set()
         total, count = None, None
         for i0 in range(0, self.n_ticks, chunk):
             p = self._raw(i0, min(i0 + chunk, self.n_ticks))
@@ -286,6 +302,8 @@ class SourceTruth:
             a = max(self.source.index_at(t[0]) - 2, 0)
             b = min(self.source.index_at(t[-1]) + 3, len(self.source))
             ts, z, _ = self.source.block(a, b)
+            z = measurements(z)
+            self.unmeasured.update((a + np.flatnonzero(np.isnan(z).any(axis=1))).tolist())
             return RecordedMotion(ts, z, name="recorded stream").position(t)
         return np.asarray(self.source.position(t), dtype=float).reshape(t.size, -1)
 

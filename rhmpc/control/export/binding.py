@@ -182,6 +182,13 @@ class CController:
                                                         strict=True) if n})
 
     @property
+    def outliers(self) -> tuple[int, int]:
+        """(samples the gate rejected, samples retracted after the fact) so far."""
+        counts = self._pub.counts
+        return int(counts[COUNT_NAMES.index("outliers_rejected")]), int(
+            counts[COUNT_NAMES.index("retracted")])
+
+    @property
     def gate_floor(self) -> float | None:
         floor = float(self._pub.gate_floor)
         return None if not np.isfinite(floor) else floor

@@ -178,13 +178,33 @@ def test_iteration_cap_and_no_violation():
 
 
 def test_kkt_certificate_rejects_a_wrong_inverse(H_mpc):
-    """The residual is computed from H and q, not from W: a perturbed W is caught (all 30
-    torques past their bound: 25 active-set solves, above the default cap)."""
-    box = BoxQP(H_mpc, BoxQPSettings(max_iter=30))
-    q = -H_mpc @ np.full(30, 2.0)
+    """The residual is computed from H and q, not from W: a perturbed W is caught. All 30
+    torques past their bound: the dual active set adds each of the n = 30 bounds at least once
+    and drops some on the way; the cap 3 n leaves it room."""
+    n = H_mpc.shape[0]
+    box = BoxQP(H_mpc, BoxQPSettings(max_iter=3 * n))
+    q = -H_mpc @ np.full(n, 2.0)
     assert box.solve(q, box.unconstrained(q))
+    assert n <= box.iterations <= 3 * n
     box.W = box.W * (1 + 1e-4)
     assert not box.solve(q, -box.W @ q)
+
+
+def test_the_active_set_path_does_not_depend_on_rounding(H_mpc):
+    """Another processor's or BLAS's rounding (H perturbed by 1e-14, relative) leaves the path
+    of the degenerate problem above, where every violation ties, unchanged: the same number of
+    solves and the same minimiser (ties are broken by index within the primal tolerance)."""
+    rng = np.random.default_rng(5)
+    n = H_mpc.shape[0]
+    paths = set()
+    for trial in range(12):
+        H = H_mpc if trial == 0 else H_mpc * (1 + 1e-14 * rng.normal(size=H_mpc.shape))
+        H = 0.5 * (H + H.T)
+        box = BoxQP(H, BoxQPSettings(max_iter=3 * n))
+        q = -H @ np.full(n, 2.0)
+        assert box.solve(q, box.unconstrained(q))
+        paths.add((box.iterations, tuple(np.sign(np.round(box.z, 6)))))
+    assert len(paths) == 1, paths
 
 
 @pytest.mark.parametrize("kwargs", [dict(max_iter=0), dict(primal_tol=-1.0),

@@ -53,7 +53,8 @@ def pair(changes: dict, rate: float = 257.0):
     return python, controller_in_c(python, "phantom")
 
 
-def lockstep(python, c, ticks: int, samples, faults=None) -> tuple[np.ndarray, list]:
+def lockstep(python, c, ticks: int, samples, faults=None, reading=None
+             ) -> tuple[np.ndarray, list]:
     """Both controllers on the ideal plant driven by the Python torque; ``samples(k)`` gives
     the refreshes of tick k as (z, stamp); returns each tick's |τ_C − τ_Python| / τ_max and
     the ticks whose status, source or level differ."""
@@ -66,7 +67,7 @@ def lockstep(python, c, ticks: int, samples, faults=None) -> tuple[np.ndarray, l
         for z, stamp in samples(k):
             python.refresh(k, z, stamp)
             c.refresh(k, z, stamp)
-        q = plant.encoders()
+        q = plant.encoders() if reading is None else reading(k, plant.encoders())
         tp, tc = python.step(k, q), c.step(k, q)
         err[k] = np.max(np.abs(tc - tp) / python.torque_limit)
         ps, cs = python.stats, c.stats
@@ -111,8 +112,9 @@ def test_the_c_controller_is_the_python_one_tick_for_tick(variant):
 
 @needs_cc
 def test_faults_are_handled_alike():
-    """Forced solver failures, missing and non-finite samples, an echo outlier of 5 mm and a
-    1e200 sample: the same torques, counters and gate events."""
+    """Forced solver failures, missing and non-finite samples, an echo outlier of 5 mm, a 1e200
+    sample and encoder readings that are not finite: the same torques, counters and gate
+    events, and the torques stay finite."""
     python, c = pair({"reference.outlier_gate": 1e-3})
     base = bench_samples(python.mpc.arm.Ts, 3000)
 
@@ -133,7 +135,10 @@ def test_faults_are_handled_alike():
             python.mpc.force_failures(4)
             c.force_failures(4)
 
-    err, differ = lockstep(python, c, 3000, samples, faults)
+    def reading(k, q):
+        return np.full_like(q, np.nan) if k in (1200, 1201, 2500) else q
+
+    err, differ = lockstep(python, c, 3000, samples, faults, reading)
     assert differ == [] and err.max() <= TOL
     assert_same_counters(python, c)
     counts = python.predictor_counts

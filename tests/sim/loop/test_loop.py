@@ -66,7 +66,7 @@ class _Spy:
         self.u = self.tau_command = np.zeros(3)
         self.x_hat = np.zeros(6)
         self.step_ns = self.refresh_ns = 0
-        self.stats, self.predictor_counts = {}, {}
+        self.stats, self.predictor_counts, self.outliers = {}, {}, (0, 0)
 
     def refresh(self, tick, z, stamp, others=None):
         self.calls.append(("refresh", tick, stamp))

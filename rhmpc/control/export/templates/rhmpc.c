@@ -78,8 +78,12 @@ static void model_call(int (*f)(const double **, double **, long long *, double 
 int rhmpc_step(rhmpc_t *ctl, long long tick, const double q[RHMPC_NU], double tau[RHMPC_NU]) {
   long long t0 = now_ns();
   rhmpc_public_t *pub = &ctl->pub;
-  double *x = pub->x_hat, d[RHMPC_NEXTRA + 1] = {0}, acting[RHMPC_NU];
-  affine(rhmpc_correct, RHMPC_NX, ctl->x_prior, RHMPC_NX, q, RHMPC_NU, x);
+  double *x = pub->x_hat, d[RHMPC_NEXTRA + 1] = {0}, acting[RHMPC_NU], sum = 0.0;
+  for (int i = 0; i < RHMPC_NU; i++) sum += q[i] * q[i];
+  if (isfinite(sum)) /* a reading that is not finite is not fused: x_hat = x_prior */
+    affine(rhmpc_correct, RHMPC_NX, ctl->x_prior, RHMPC_NX, q, RHMPC_NU, x);
+  else
+    memcpy(x, ctl->x_prior, sizeof ctl->x_prior);
 #if RHMPC_OFFSET
   {
     const double *arg[1] = {x};
@@ -97,6 +101,10 @@ int rhmpc_step(rhmpc_t *ctl, long long tick, const double q[RHMPC_NU], double ta
 #else
   memcpy(pub->tau_command, pub->u, sizeof pub->u);
 #endif
+  sum = 0.0;
+  for (int i = 0; i < RHMPC_NU; i++) sum += pub->tau_command[i] * pub->tau_command[i];
+  if (!isfinite(sum)) /* the cancellation of a faulty reading: hold the last torque */
+    memcpy(pub->tau_command, pub->tau, sizeof pub->tau);
   pub->saturated = 0;
   for (int i = 0; i < RHMPC_NU; i++) {
     double c = pub->tau_command[i], lim = rhmpc_tau_max[i];

@@ -314,13 +314,16 @@ static int box_pdas(rhmpc_t *ctl, double dual_tol) {
   return 0;
 }
 
+/* The largest violation |z_i| - 1, and the lowest index within the primal tolerance of it (a
+ * tie: the rounding of one processor against another's never decides which bound enters). */
 static int argmax_violation(const double *z, double *viol) {
-  int p = 0;
   double best = fabs(z[0]) - 1.0;
   for (int i = 1; i < RHMPC_NZ; ++i) {
     double v = fabs(z[i]) - 1.0;
-    if (v > best) { best = v; p = i; }
+    if (v > best || v != v) best = v;
   }
+  int p = 0;
+  while (p < RHMPC_NZ - 1 && !(fabs(z[p]) - 1.0 >= best - RHMPC_BOX_PRIMAL_TOL)) p++;
   *viol = best;
   return p;
 }
