@@ -30,7 +30,7 @@ from scipy.signal import butter, sosfiltfilt
 from rhmpc.cli.presets import PRESETS
 from rhmpc.control.reference import ExactReference
 from rhmpc.experiment import RunConfig
-from rhmpc.experiment.assembly import build_run
+from rhmpc.experiment.assembly import build_controller, build_run
 from rhmpc.studies.paper import COLUMNS
 from sim.heart.analysis import fill_gaps
 from sim.loop import run_closed_loop
@@ -50,15 +50,16 @@ def lowpassed(truth, fc: float, Ts: float) -> ArrayTruth:
 
 
 def tracking(config: RunConfig, fc: float | None) -> dict:
-    """The run's tracking metrics; with ``fc``, the bound's reference instead of the run's."""
+    """The run's tracking metrics; with ``fc``, the bound's reference instead of the run's (the
+    same controller around it)."""
     run = build_run(config)
-    reference = run.reference
+    controller = run.controller
     if fc is not None:
-        reference = ExactReference(lowpassed(run.truth, fc, config.loop.Ts), config.loop.horizon)
-    result = run_closed_loop(
-        run.robot, run.arm, run.controller, reference, run.truth, run.center, run.stream,
-        config.loop, plant_settings=config.plant, mismatch=config.mismatch,
-        observer_settings=config.observer, hardware=config.hardware)
+        reference = ExactReference(lowpassed(run.truth, fc, config.loop.Ts), config.mpc.horizon)
+        reference.place(run.anchor)
+        controller = build_controller(config, run.robot, run.arm, reference)
+    result = run_closed_loop(run.plant, controller, run.truth, run.stream, config.loop,
+                             run.clock, anchor=run.anchor, robot=run.robot)
     return result.tracking
 
 

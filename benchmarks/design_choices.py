@@ -5,10 +5,11 @@ alternative, on the same run.
   as a fixed floor (0.25 mm) and no gate, on the main job (sonomicrometer, cycle slips);
 * predictor clock: a 25-Hz recording with the predictor on each raw sample (``sensor``)
   against every 15 ticks on the 2-kHz stream (``downsample``);
-* compiled plant: ``plant.dynamics = "auto"`` (the C chain) against Pinocchio — wall time and
-  the largest relative difference in the metrics;
-* compiled controller: ``--controller c`` against the Python controller (when cmake and a C
-  compiler are there).
+* the plant's dynamics kernel: ``plant.dynamics = "auto"`` (the compiled kernel,
+  ``sim/plant/chain.c``) against Pinocchio — wall time and the largest relative difference in
+  the metrics;
+* the exported controller: ``--controller c`` (the C that ``rhmpc export`` generates) against
+  the Python controller it is generated from (where a C compiler is found).
 
     python benchmarks/design_choices.py [--quick]
 """
@@ -46,8 +47,8 @@ def gate(duration: float) -> tuple[dict, str]:
         **{"loop.duration": duration, "loop.settling": min(20.0, duration / 3)})
     runs = {"auto (calibrated on the data)": run(base),
             "fixed 0.25 mm (the instrument's accuracy)": run(base.replace(
-                **{"loop.outlier_gate": 0.25e-3})),
-            "none": run(base.replace(**{"loop.outlier_gate": 0.0}))}
+                **{"reference.outlier_gate": 0.25e-3})),
+            "none": run(base.replace(**{"reference.outlier_gate": 0.0}))}
     rows = []
     for label, d in runs.items():
         g = d["outlier_gate"]
@@ -101,7 +102,7 @@ def controller(duration: float) -> tuple[dict | None, str | None]:
     try:
         c = run(base, "c")
     except Exception as exc:  # no toolchain: the record says so
-        print(f"compiled controller unavailable: {exc}")
+        print(f"exported controller unavailable: {exc}")
         return None, None
     py = run(base)
     diff = rel_diff(c, py)
@@ -122,8 +123,9 @@ def main() -> None:
     for name, fn, caption in (
             ("gate", lambda d: gate(max(d, 60.0)), "gate|Outlier gate, main job (60 s)"),
             ("clock", clock, "clock|Predictor clock, a 25-Hz recording (one-step)"),
-            ("plant", plant, "plant|Compiled plant against Pinocchio, main job"),
-            ("controller", controller, "controller|Compiled controller against Python, main job")):
+            ("plant", plant, "plant|The plant's compiled dynamics against Pinocchio, main job"),
+            ("controller", controller,
+             "controller|The exported controller (C) against the Python one, main job")):
         d, tab = fn(duration)
         data[name] = d
         if tab is not None:

@@ -3,7 +3,7 @@
 ``rhmpc simulate --predictor generalized --rr mitdb-100 --duration D --json`` in a fresh process:
 peak resident memory, wall time, real-time factor, RMS/max error, QP fallbacks.
 
-    python benchmarks/long_run.py [--quick]      # quick: 120 s; else 1800 s (about 2-3 min)
+    python benchmarks/long_run.py [--quick]      # quick: 120 s; else 120 s and 1800 s
 """
 
 from __future__ import annotations

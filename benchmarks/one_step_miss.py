@@ -1,8 +1,8 @@
 """One-step miss of a predictor behind the loop's gate, on each replica's sensor stream.
 
 The miss ‖z_{n+1} − ẑ_{n+1|n}‖ that the outlier gate tests, over 60 s of the closed loop's
-open-loop part (``rhmpc.experiment.build_run``: same sensor, delivery, gate), from 10 s on.
-Its RMS sets the gate's floor (4σ).
+open-loop part (``rhmpc.experiment.build_run``: same sensor, delivery, gate; driven as in
+``reference_bench.py``), from 10 s on. Its RMS sets the gate's floor (4σ).
 
     .venv/bin/python benchmarks/one_step_miss.py [--predictor generalized] [--seed 0]
 """
@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 
 import numpy as np
-from reference_bench import SCENARIOS, refreshes  # benchmarks/, this script's directory
+from reference_bench import SCENARIOS, drive  # benchmarks/, this script's directory
 
 
 def misses(scenario: str, predictor: str, seed: int) -> np.ndarray:
@@ -20,18 +20,16 @@ def misses(scenario: str, predictor: str, seed: int) -> np.ndarray:
     changes = {"scenario": scenario, "seed": seed, "predictor": predictor,
                "loop.duration": 60.0, "loop.settling": 10.0}
     out = []
-    for i, run, cursor in refreshes(changes):
-        loop, ref = run.config.loop, run.reference
-        tick = i + loop.downsample - 1  # the next update's tick
-        j = cursor.newest(tick * loop.Ts + 1e-12)
-        if tick < loop.ticks and ref._forecast is not None and i * loop.Ts > 10.0 and j >= 0:
-            out.append(np.linalg.norm(cursor.sample(j)[1] - run.center - ref._forecast))
+    for _, _, arrivals in drive(changes):
+        for z, stamp, forecast in arrivals:
+            if z is not None and forecast is not None and stamp > 10.0:
+                out.append(np.linalg.norm(z - forecast))
     m = 1e3 * np.asarray(out)
     return m[np.isfinite(m)]
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser()
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--predictor", default="generalized")
     ap.add_argument("--seed", type=int, default=0)
     a = ap.parse_args()

@@ -1,15 +1,16 @@
-"""Open-loop reference bench: the closed loop's heart → sensor → predictor → reference chain alone.
+"""Open-loop reference bench: the closed loop's heart → sensor → reference chain alone.
 
-Steps 1–3 of the closed loop (``sim.loop.closed_loop``) do not depend on the robot, so the
-reference the MPC would track is
-reproduced exactly without the arm: the run is built by ``rhmpc.experiment.build_run`` from the
-same settings as ``rhmpc simulate`` (scenario, ``--rr``, seed, sensor, outlier gate, guard), and
-only the predictor's refreshes are driven. Scored from ``settling`` on, against the recorded
-stream (the paper's ground truth, as ``simulate``): the reference's error at 25 ms (the last
-horizon point) — RMS, max — and the *episodes*: ticks where it exceeds 1 mm.
+The samples that refresh the reference, and the points it makes, do not depend on the robot, so
+the reference the MPC would track is reproduced exactly without the arm: the run is built by
+``rhmpc.experiment.build_run`` from the same settings as ``rhmpc simulate`` (scenario, ``--rr``,
+seed, sensor, ``[reference]`` table: outlier gate, guard), and only its reference is driven, by
+the loop's own delivery of the samples (:class:`sim.loop.closed_loop.Refreshes`: the same
+refresh on the same tick as in the closed loop). Scored from ``settling`` on, against the
+recorded stream (the paper's ground truth, as ``simulate``): the reference's error at 25 ms (the
+last horizon point) — RMS, max — and the *episodes*: ticks where it exceeds 1 mm.
 
     .venv/bin/python benchmarks/reference_bench.py --predictor generalized --seeds 0,3,7 \
-        [--scenarios fixed-a2-top,...] [--set predictor_settings.KEY=JSON ...] [--duration 60]
+        [--scenarios fixed-a2-top,...] [--set reference.KEY=VALUE ...] [--duration 60]
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
@@ -26,49 +28,65 @@ from rhmpc.studies.paper import COLUMNS
 SCENARIOS = COLUMNS  # Tuna et al. Tables I–III
 
 
-def refreshes(changes: dict):
-    """Build the run of ``changes`` (``RunConfig.replace`` keys) and drive its open-loop part:
-    yields ``(tick, run, cursor)`` after each refresh's forecast, before the next update (the
-    order of ``sim.loop``'s pipelined refresh)."""
+def drive(changes: dict) -> Iterator[tuple[int, object, list]]:
+    """Build the run of ``changes`` (``RunConfig.replace`` keys) and drive its reference.
+
+    Parameters
+    ----------
+    changes : dict
+        Settings of the run, as ``RunConfig.replace`` takes them (``"scenario"``,
+        ``"reference.outlier_gate"``, …).
+
+    Yields
+    ------
+    tick : int
+        Every tick of the run, in order, after the reference's refreshes of that tick.
+    run : rhmpc.experiment.assembly.Run
+        The run (``run.reference`` is the reference driven).
+    arrivals : list of (z, stamp, forecast)
+        The samples that refreshed the reference on this tick (centred [m]; None: no new
+        sample), their time [s], and the one-step forecast the outlier gate judged ``z`` by
+        (centred [m]; None while the gate has none).
+    """
     from rhmpc.experiment import RunConfig, build_run
-    from sim.loop.closed_loop import OpenLoop
+    from sim.loop.closed_loop import Refreshes
 
-    cfg = RunConfig().replace(**changes)
-    run, loop = build_run(cfg), cfg.loop
-    ref, ds, n = run.reference, loop.downsample, loop.ticks
-    open_loop = OpenLoop(ref, run.stream, run.center, loop, hold=None)
-    open_loop.finish()  # the first refresh's update, learning and forecast (ticks −3 … −1)
-    for i in range(0, n, ds):
-        ref.forecast()
-        yield i, run, open_loop.cursor
-        if i + ds - 1 < n:
-            open_loop.update(i + ds - 1)
+    config = RunConfig().replace(**changes)
+    run = build_run(config)
+    reference = run.reference
+    refreshes = Refreshes(run.stream, run.truth.center, config.loop, run.clock)
+    for tick in range(config.loop.ticks):
+        arrivals = []
+        for z, stamp in refreshes.due(tick):
+            forecast = getattr(reference, "_forecast", None)
+            arrivals.append((z, stamp, None if forecast is None else forecast.copy()))
+            reference.refresh(tick, z, stamp)
+        yield tick, run, arrivals
 
 
-def one(job):
+def one(job: tuple) -> tuple[str, int, dict]:
+    """Score one ``(scenario, seed, predictor, sets, duration, rr)`` job: RMS and max of the
+    25-ms error [mm], the time above 1 mm [ms], and the predictor's counts."""
     scenario, seed, predictor, sets, duration, rr = job
     from rhmpc.cli.simulate import parse_value
+    from rhmpc.control.reference import embed3
 
     changes = {"scenario": scenario, "seed": seed, "predictor": predictor, "rr": rr,
                "loop.duration": duration, "loop.settling": 10.0}
     for item in sets:
         key, _, value = item.partition("=")
         changes[key.strip()] = parse_value(value.strip())
-    errs = []
-    for i, run, _ in refreshes(changes):
-        loop = run.config.loop
-        ds, N, n = loop.downsample, loop.horizon, loop.ticks
-        if i < int(loop.settling / loop.Ts):
-            continue
-        period = run.reference.horizons(i, min(ds, n - i))
-        if period is None:  # before the first sample
-            continue
-        truth = run.truth.window(i + 1, i + len(period) + N)
-        for k, h in enumerate(period):
-            errs.append(np.linalg.norm(h[N - 1] - truth[k + N - 1]))
-    e = 1e3 * np.asarray(errs)
+    last, started = [], False
+    for tick, run, arrivals in drive(changes):
+        started = started or any(z is not None for z, _, _ in arrivals)
+        if started and tick >= run.config.loop.settling_ticks:
+            last.append(run.reference.horizon(tick)[-1] - run.anchor)
+    loop, N = run.config.loop, run.config.mpc.horizon
+    first = loop.ticks - len(last)
+    truth = embed3(run.truth.window(first + N, loop.ticks + N))
+    e = 1e3 * np.linalg.norm(np.asarray(last) - truth, axis=1)
     e = e[np.isfinite(e)]  # the recorded stream has gaps (missing samples)
-    counts = dict(run.reference.predictor.counts)
+    counts = dict(getattr(run.reference.predictor, "counts", {}))
     return scenario, seed, {
         "rms": float(math.sqrt(np.mean(e**2))), "max": float(e.max()),
         "episodes_ms": float(np.sum(e > 1.0) * loop.Ts * 1e3),
@@ -76,12 +94,13 @@ def one(job):
     }
 
 
-def main():
-    ap = argparse.ArgumentParser()
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--predictor", default="generalized")
     ap.add_argument("--scenarios", default=",".join(SCENARIOS))
     ap.add_argument("--seeds", default="0,3,7")
-    ap.add_argument("--set", action="append", default=[])
+    ap.add_argument("--set", action="append", default=[],
+                    help="SECTION.KEY=VALUE, e.g. reference.outlier_gate=0.0 (repeatable)")
     ap.add_argument("--duration", type=float, default=60.0)
     ap.add_argument("--rr", default=None)
     ap.add_argument("--jobs", type=int, default=2)

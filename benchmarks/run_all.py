@@ -20,7 +20,7 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 #: The benchmarks that write docs/results/NAME.json, in the order they run.
 SCRIPTS = ("headline", "tuna_tables", "hardware_sensitivity", "causal_bound", "yuen_noise",
-           "mpc_timing", "tick_budget", "predictor_table", "invivo_table", "design_choices",
+           "mpc_timing", "exported_tick", "predictor_table", "invivo_table", "design_choices",
            "long_run")
 MARK = re.compile(r"(<!-- results:(\w+) -->\n).*?(<!-- /results:\2 -->)", re.S)
 
@@ -42,9 +42,14 @@ def sync_readme(readme: Path = ROOT / "README.md") -> bool:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--only", default=",".join(SCRIPTS))
+    ap.add_argument("--only", default=",".join(SCRIPTS),
+                    help=f"comma-separated names among {', '.join(SCRIPTS)}")
     a = ap.parse_args()
-    for name in a.only.split(","):
+    names = [n.strip() for n in a.only.split(",") if n.strip()]
+    unknown = [n for n in names if n not in SCRIPTS]
+    if unknown:
+        ap.error(f"no benchmark named {', '.join(unknown)} (choose among {', '.join(SCRIPTS)})")
+    for name in names:
         t0 = time.perf_counter()
         cmd = [sys.executable, str(HERE / f"{name}.py"), *(["--quick"] if a.quick else [])]
         print(f"run_all: {name} …", file=sys.stderr, flush=True)

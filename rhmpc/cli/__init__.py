@@ -21,13 +21,26 @@ import sys
 from rhmpc import __version__
 from rhmpc.errors import UsageError, one_line_warnings
 
-#: Subcommand modules, in the order ``rhmpc --help`` lists them.
-COMMANDS: tuple[str, ...] = (
-    "simulate", "compare", "robots", "data", "bench", "predict", "tune", "export", "config",
-)
+#: Subcommands (modules of this package), in the order ``rhmpc --help`` lists them, with
+#: their one-line help.
+COMMANDS: dict[str, str] = {
+    "simulate": "run the closed loop once and print its tracking summary",
+    "compare": "predictors x scenarios (or recordings) in parallel: the Tuna Tables I/III "
+    "replica",
+    "robots": "list the registered robots",
+    "data": "list, show, export and plot heart-motion scenarios",
+    "bench": "time the MPC tick against a gain tick and an exact active-set solve",
+    "predict": "the predictors open loop: on recordings (--data) or in prediction studies",
+    "tune": "sweep settings (MPC weights, predictor order, downsampling...) in parallel, "
+    "resumably; 'tune report' ranks the results",
+    "export": "write the real-time controller as a self-contained C library",
+    "config": "show every setting of a run (TOML that --config reads back)",
+}
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The parser of every subcommand; with ``command``, that one's in full and the others by
+    name and help only, so that a command loads only its own modules (and what they import)."""
     parser = argparse.ArgumentParser(
         prog="rhmpc",
         description="Receding-horizon MPC with heart-motion prediction "
@@ -35,13 +48,18 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"rhmpc {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for name in COMMANDS:
-        importlib.import_module(f"rhmpc.cli.{name}").register(sub)
+    for name, summary in COMMANDS.items():
+        if command in (None, name):
+            importlib.import_module(f"rhmpc.cli.{name}").register(sub)
+        else:
+            sub.add_parser(name, help=summary)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    command = argv[0] if argv and argv[0] in COMMANDS else ""
+    parser = build_parser(command)
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help()
@@ -57,6 +75,11 @@ def main(argv: list[str] | None = None) -> int:
     except (UsageError, ValueError, OSError) as exc:
         text = " ".join(str(exc).split())  # one line, whatever the message holds
         print(f"rhmpc {args.command}: error: {text}", file=sys.stderr)
+        return 2
+    except MemoryError as exc:  # a setting or an input that sizes an array beyond the machine
+        text = " ".join(str(exc).split())
+        print(f"rhmpc {args.command}: error: out of memory{f' ({text})' if text else ''}: a "
+              "setting or an input asks for more than this machine has", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"rhmpc {args.command}: interrupted", file=sys.stderr)

@@ -6,6 +6,7 @@ import argparse
 import json
 import sys
 
+from rhmpc.cli import COMMANDS
 from rhmpc.cli.simulate import add_host_stalls_option, check_host_stalls, host_stalls_document
 from rhmpc.control.settings import MPCSettings
 from rhmpc.errors import UsageError
@@ -16,7 +17,7 @@ from robots import ROBOTS
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "bench",
-        help="time the MPC tick against a gain tick and an exact active-set solve",
+        help=COMMANDS["bench"],
         description="Run the MPC alone (closed loop with its linear model, not timed) on a "
         "heart-like reference with occasional jumps, and report per-tick p50/p99/max of the "
         "whole tick and its parts, OSQP iterations, fallbacks, and - measured in the same run - "

@@ -11,6 +11,7 @@ from concurrent.futures import FIRST_COMPLETED, Future, wait
 from dataclasses import dataclass
 from pathlib import Path
 
+from rhmpc.cli import COMMANDS
 from rhmpc.cli.simulate import (
     add_recording_options,
     add_run_options,
@@ -53,8 +54,7 @@ class Job:
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
-        "compare", help="predictors x scenarios (or recordings) in parallel: the Tuna Tables "
-        "I/III replica",
+        "compare", help=COMMANDS["compare"],
         description="Run every predictor on every scenario (or recording, --data) in closed "
         "loop (parallel processes) and print RMS (max) position error and RMS control effort "
         "per predictor and column, with the ratio to the 'exact' row on scenarios and to the "

@@ -16,6 +16,7 @@ import re
 import textwrap
 from typing import Any
 
+from rhmpc.cli import COMMANDS
 from rhmpc.cli.presets import PRESETS, add_preset_option, apply_preset
 from rhmpc.cli.simulate import parse_value
 from rhmpc.errors import UsageError
@@ -37,7 +38,7 @@ _SENTENCE_END = re.compile(r"(?<!e\.g)(?<!i\.e)(?<!et al)\.\s+(?=[A-Z(])")
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
-        "config", help="show every setting of a run (TOML that --config reads back)",
+        "config", help=COMMANDS["config"],
         description="Print every setting of a closed-loop run as TOML, with its description, "
         "unit, default and source in comments; `rhmpc simulate --config FILE.toml` reads it "
         "back. Values: defaults < --config < --preset < --set.")

@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from rhmpc.cli import COMMANDS
 from rhmpc.errors import UsageError, one_line_warnings
 from sim.heart import DEFAULT_SCENARIO, SCENARIOS, SPECS, make_scenario
 from sim.heart.analysis import (
@@ -90,7 +91,7 @@ class _Target:
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``rhmpc data`` and its actions."""
     parser = subparsers.add_parser(
-        "data", help="list, show, export and plot heart-motion scenarios",
+        "data", help=COMMANDS["data"],
         description="Heart-motion scenarios (synthetic replicas of the papers' data sets) "
         "and recordings: statistics, export and figures.")
     actions = parser.add_subparsers(dest="action", metavar="ACTION")

@@ -6,6 +6,7 @@ import argparse
 import shlex
 from pathlib import Path
 
+from rhmpc.cli import COMMANDS
 from rhmpc.errors import UsageError
 from robots import ROBOTS
 
@@ -13,7 +14,7 @@ from robots import ROBOTS
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "export",
-        help="write the real-time controller as a self-contained C library",
+        help=COMMANDS["export"],
         description="Write OUTDIR: the whole controller in C, from a sensor sample and the "
         "encoders to the motor torques: the outlier gate, the one-step or generalized RLS "
         "predictor and the interpolation of its forecast (rhmpc_refresh); the observer, the "

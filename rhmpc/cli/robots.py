@@ -7,13 +7,14 @@ import json
 
 import numpy as np
 
+from rhmpc.cli import COMMANDS
 from robots import ROBOTS, load_robot
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "robots",
-        help="list the registered robots",
+        help=COMMANDS["robots"],
         description="List the registered robots: DOF, home posture, end-effector position, "
         "torque limits and the conditioning of the end-effector Jacobian at home.",
     )

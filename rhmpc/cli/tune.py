@@ -17,6 +17,7 @@ import os
 import sys
 from pathlib import Path
 
+from rhmpc.cli import COMMANDS
 from rhmpc.errors import UsageError
 
 USAGE = ("rhmpc tune SPEC.toml [--jobs N | --scheduler ADDRESS] [--results FILE.jsonl] "
@@ -32,8 +33,7 @@ REPORT_ONLY = ("spec",)
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "tune", usage=USAGE,
-        help="sweep settings (MPC weights, predictor order, downsampling...) in parallel, "
-        "resumably; 'tune report' ranks the results",
+        help=COMMANDS["tune"],
         description="Run a sweep specification (base settings, parameters as grid lists or "
         "sampled ranges, scenarios and seeds, objective) through a local process pool or a "
         "Dask cluster. Every finished evaluation is appended to a JSON-lines results file; "

@@ -144,6 +144,8 @@ class BoxQP:
     mu : (n,) its bound multipliers (0 on free variables; ≥ 0 at +1, ≤ 0 at −1) [-]
     iterations : int
         Active-set solves of the last call (0 if it returned before the first).
+    capped : bool
+        Whether the last call stopped at ``max_iter`` solves without an answer.
     active : (n,) int8, sign of each active bound of the last call (0 = free)
     """
 
@@ -162,6 +164,7 @@ class BoxQP:
         self.z = np.zeros(n)
         self.mu = np.zeros(n)
         self.iterations = 0
+        self.capped = False
         self.active = np.zeros(n, dtype=np.int8)
         self._r = np.empty(n)
         self._viol = np.empty(n)
@@ -183,6 +186,7 @@ class BoxQP:
         """
         st = self.settings
         self.iterations = 0
+        self.capped = False
         if not _peak(np.abs(z_star)) > 1.0:
             return False
         scale = 1.0 + _peak(np.abs(q))
@@ -258,6 +262,7 @@ class BoxQP:
             while True:
                 it += 1
                 if it > st.max_iter:
+                    self.capped = True
                     return None
                 self.iterations = it
                 j = -1

@@ -12,9 +12,24 @@ each tick then only does::
     q_z = F_z p + f0_z                  (one mat-vec; the slacks' q is the constant ρ₁)
     level 2: the torque-box QP by active set (:mod:`rhmpc.control.box_qp`); if it converges, its
              KKT certificate holds and every envelope row holds at [z; 0]: v = [z; 0], done
+             if it stops at its cap (box_max_iter solves) and the solver is OSQP: the fallback
     level 3: solver.update(q, l, u) ; warm start ; solver.solve()   (DAQP: hot-started working
              set; OSQP: previous solution shifted one tick)
     τ = clip(u_max ∘ ẑ_0, −u_max, u_max)   if the status is "solved", else the fallback
+
+A capped level 2 goes to OSQP's level 3 no more: ADMM bounded at ``max_iter`` iterations never
+finished what ``box_max_iter`` exact active-set solves could not (measured on ``rhmpc bench``
+with reference jumps of 1 cm to 1 m: 0 of 13 055 capped ticks), so the tick takes the fallback
+at once; DAQP, exact, gets the tick.
+
+Back-off
+    A tick stream the solver cannot settle (a reference out of the arm's reach, an envelope the
+    state has left) would pay levels 2 and 3 on every tick for nothing. After k consecutive
+    failed ticks, levels 2 and 3 rest for ``min(2ᵏ − 1, backoff_max_ticks)`` ticks (binary
+    exponential back-off, as Ethernet's retransmissions: Metcalfe & Boggs, *Commun. ACM*
+    19(7), 1976), while level 1 still runs every tick and the fallback acts (reason
+    ``"backoff"``). Any solved tick ends the back-off. At the default 255, 0.4 % of the ticks
+    of such a stream try the solver.
 
 The screening cascade is exact, not an approximation. Level 1: with the slacks at 0 and every
 row satisfied, the point satisfies the QP's KKT conditions (zero multipliers on the envelope and
@@ -49,7 +64,12 @@ from robots.linearize import LinearArm
 _CONTINUE = frozenset({"max_iter", "time_limit", "solved_inaccurate", "injected"})
 
 #: Failure reasons counted in :attr:`MPCStats.failures` besides OSQP's statuses.
-EXTRA_REASONS = ("nonfinite_input", "nonfinite_solution", "solver_error", "injected")
+EXTRA_REASONS = ("nonfinite_input", "nonfinite_solution", "solver_error", "injected",
+                 "box_max_iter", "backoff")
+#: Failures that do not lengthen the back-off: no solve was tried, or the failure was injected.
+_NO_BACKOFF = frozenset({"nonfinite_input", "injected", "backoff"})
+#: Longest failure streak the back-off counts (2³⁰ ticks: beyond any ``backoff_max_ticks``).
+_STREAK_MAX = 30
 #: A slack above this [its unit] counts the tick as relaxing the envelope (``stats.relaxed``).
 RELAXED_SLACK = 1e-2
 
@@ -140,6 +160,7 @@ class RecedingHorizonMPC:
                          BoxQPSettings(max_iter=self.settings.box_max_iter))
         self._K_z = np.ascontiguousarray(self.box._negW @ self._F_z)
         self._box_on = self.settings.box_screening
+        self._box_final = self.settings.solver == "osqp"  # a capped level 2 ends the tick
         self._A_env = np.ascontiguousarray(qp.A[qp.nv:, : qp.nz])
         self._g_env = np.empty(qp.A.shape[0] - qp.nv)
         self._level = 0
@@ -191,6 +212,8 @@ class RecedingHorizonMPC:
         self._ws_x: np.ndarray | None = None
         self._ws_y: np.ndarray | None = None
         self._forced: list[str] = []
+        self._streak = 0  # consecutive failed ticks
+        self._rest = 0  # ticks levels 2 and 3 still rest
         self._last_screened = False
         self._ws_pending = False
         self.stats = MPCStats()
@@ -302,6 +325,10 @@ class RecedingHorizonMPC:
             np.dot(self._G, self._p[self._G_take], out=self._g)
             np.subtract(self.qp.l0, self._g, out=self._l)
             np.subtract(self.qp.u0, self._g, out=self._u)
+        if self._rest > 0 and not self._forced:
+            self._rest -= 1
+            stats.level = 1 if self._screen else 0
+            return self._unsolved(t0, "backoff")
         if self._screen and not self._forced:
             np.dot(self._F_z, self._p_ext, out=self._q_z)
             if self._box_on and self._box_solved():
@@ -309,10 +336,23 @@ class RecedingHorizonMPC:
                 v[: self._nz] = self.box.z
                 return self._screened_output(t0, v, 2)
             stats.box_iterations = self.box.iterations if self._box_on else 0
+            if self._box_on and self.box.capped and self._box_final:
+                stats.level = 2
+                return self._unsolved(t0, "box_max_iter")
         else:
             np.dot(self._F_ext, self._p_ext, out=self._q)
             stats.box_iterations = 0
         return self._solver_tick(t0)
+
+    def _unsolved(self, t0: int, reason: str) -> np.ndarray:
+        """A tick that ends without the solver (back-off, a capped level 2): the fallback."""
+        self._last_screened = False
+        stats = self.stats
+        stats.iterations = 0
+        stats.solve_time = 0.0
+        out = self._fallback(reason, inputs_finite=True)
+        stats.parts_ns[:] = [time.perf_counter_ns() - t0, 0, 0, 0]
+        return out
 
     def _set_parameters(self, x: np.ndarray, ref: np.ndarray) -> bool:
         """Write p = [x; r; u_{−1}; d(x)] (d: the offset correction); False if not all finite."""
@@ -325,6 +365,8 @@ class RecedingHorizonMPC:
             )
         self._p_x[:] = x
         self._p_r2[...] = ref
+        if not math.isfinite(np.vdot(x, x)):
+            return False  # (and no offset of a non-finite state)
         if self._offset is not None:
             self._offset.evaluate()  # d of the x in p, into p (NaN where x is not finite)
         return math.isfinite(np.vdot(self._p_ext, self._p_ext))  # NaN, ±inf, > 1e154: no warning
@@ -405,6 +447,7 @@ class RecedingHorizonMPC:
         self._p_u[:] = tau  # u_{−1} of the next tick (a copy: the caller owns tau)
         self._plan = z  # a fresh array from OSQP on every access of solution.x
         self._plan_age = 0
+        self._streak = 0
         if self._ws == "shift":
             self._ws_x = self._shift @ z
             self._ws_y = self._shift_dual @ y
@@ -425,6 +468,7 @@ class RecedingHorizonMPC:
         self._p_u[:] = tau
         self._plan = z
         self._plan_age = 0
+        self._streak = 0
         # The next OSQP solve starts from this plan shifted (computed only when it runs); all
         # multipliers are zero here.
         self._ws_pending = self._ws != "none"
@@ -473,6 +517,9 @@ class RecedingHorizonMPC:
         stats = self.stats
         stats.status = reason
         stats.failures[reason] = stats.failures.get(reason, 0) + 1
+        if reason not in _NO_BACKOFF:
+            self._streak = min(self._streak + 1, _STREAK_MAX)
+            self._rest = min(2**self._streak - 1, self.settings.backoff_max_ticks)
         self._plan_age += 1
         tau = None
         if self._plan is not None and self._plan_age <= self.settings.plan_fallback_ticks:

@@ -218,8 +218,14 @@ class MPCSettings:
         Cap on level 2's active-set solves (Cholesky factorisations of at most 30 × 30) per
         tick [-]; past it the tick goes to the solver. Measured on the PHANToM: the bench's and
         the closed loop's saturated ticks need 1–5; tight joint bounds with 2-mm reference
-        jumps up to 21 (p99 18); targets with 10–30 saturated blocks up to 40 (those mostly go
-        to level 3 at the default 24).
+        jumps up to 21 (p99 18); targets with 10–30 saturated blocks up to 40. Past the cap
+        the tick takes the fallback (with DAQP as the solver: goes to level 3).
+    backoff_max_ticks : int
+        Longest rest of levels 2 and 3 after consecutive failed ticks [ticks]: after k of
+        them the next ``min(2ᵏ − 1, backoff_max_ticks)`` ticks take the fallback unless level
+        1 settles them (:mod:`rhmpc.control.mpc`, "Back-off"). 255 keeps the ticks that try
+        the solver to 0.4 % of a stream it cannot settle (2⁸ = 256), below the 1 % that sets
+        a tick time's p99; 0 tries every tick.
     plan_fallback_ticks : int
         After a failed solve, the previous plan (shifted) is used for at most this many ticks
         since it was computed; later failures use the clipped unconstrained LQ solution [ticks].
@@ -253,6 +259,7 @@ class MPCSettings:
     screening: bool = True
     box_screening: bool = True
     box_max_iter: int = 24
+    backoff_max_ticks: int = 255
     plan_fallback_ticks: int = 10
 
     def __post_init__(self) -> None:
@@ -343,6 +350,9 @@ class MPCSettings:
             raise ValueError(f"warm_start must be one of {WARM_STARTS}, got {self.warm_start!r}")
         _integer("plan_fallback_ticks", self.plan_fallback_ticks, 0)
         _integer("box_max_iter", self.box_max_iter, 1)
+        _integer("backoff_max_ticks", self.backoff_max_ticks, 0)
+        if self.backoff_max_ticks > 2**30:
+            raise ValueError(f"backoff_max_ticks must be <= 2**30, got {self.backoff_max_ticks}")
 
     @property
     def block_lengths(self) -> tuple[int, ...]:

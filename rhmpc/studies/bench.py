@@ -198,7 +198,9 @@ class _Ticks:
     def __init__(self, mpc: RecedingHorizonMPC, total: int) -> None:
         arm = mpc.arm
         self.mpc, self.arm = mpc, arm
-        self.every = RecedingHorizonMPC(arm, dataclasses.replace(mpc.settings, screening=False))
+        # OSQP on every tick, as it is: no screening, and no back-off after its failures
+        self.every = RecedingHorizonMPC(arm, dataclasses.replace(mpc.settings, screening=False,
+                                                                 backoff_max_ticks=0))
         self.gain, self.exact = GainTick(mpc), ExactTick(mpc)
         self.numpy_gain = numpy_gain_step(self.gain._K, self.gain._k0)
         self.tau_max = np.asarray(arm.torque_limit, dtype=float)

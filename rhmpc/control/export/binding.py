@@ -28,7 +28,7 @@ from .generate import ExportError, _generate_into
 STATUS_NAMES = (
     "solved", "nonfinite_input", "nonfinite_solution", "solver_error", "injected",
     "solved_inaccurate", "primal_infeasible", "dual_infeasible", "max_iter", "time_limit",
-    "non_convex", "interrupted", "unsolved",
+    "non_convex", "interrupted", "unsolved", "box_max_iter", "backoff",
 )
 SOURCE_NAMES = ("qp", "plan", "lq", "brake", "zero")
 COUNT_NAMES = ("updates", "missing", "outliers_rejected", "gate_unlocked", "retracted",

@@ -115,6 +115,9 @@ def _check(mpc: RecedingHorizonMPC) -> None:
     unknown = set(MPCStats().fallbacks) - {"plan", "lq", "brake", "zero"}
     if unknown:
         raise ExportError(f"fallback source(s) {sorted(unknown)} are not exported yet")
+    if s.solver != "osqp":
+        raise ExportError(f"the exported controller's level 3 is OSQP's generated code, not "
+                          f"{s.solver}; set mpc.solver = \"osqp\"")
     if s.osqp.adaptive_rho:
         raise ExportError("adaptive_rho needs OSQP's KKT refactorisation, which the vectors-mode "
                           "embedded code does not have; set mpc.osqp.adaptive_rho = false")
@@ -318,6 +321,7 @@ def _mpc_subs(mpc: RecedingHorizonMPC) -> dict[str, object]:
         "NBC": len(qp.bound_columns), "OFFSET": int(_n_extra(mpc) > 0 and s.offset_correction),
         "BRAKE": int(_brakes(mpc)), "BRAKE_TICKS": s.block_lengths[0],
         "PLAN_FALLBACK_TICKS": s.plan_fallback_ticks, "MAX_ITER": s.max_iter,
+        "BACKOFF_MAX_TICKS": s.backoff_max_ticks,
         "WARM_START": _WARM_STARTS[s.warm_start], "WARM_START_NAME": s.warm_start,
         "SCREENING": int(s.screening), "PARAM_BOUNDS": int(qp.param_bounds),
         "BOX_SCREENING": int(s.box_screening), "BOX_MAX_ITER": mpc.box.settings.max_iter,

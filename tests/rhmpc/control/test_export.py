@@ -77,11 +77,11 @@ def lockstep(python, c, ticks: int, samples, faults=None, reading=None
     return err, differ
 
 
-def bench_samples(Ts: float, ticks: int, every: int = 15, seed: int = 0):
-    """The bench's heart-like motion with 2-mm jumps every 1000 ticks, sampled every ``every``
-    ticks one tick late, centred."""
+def bench_samples(Ts: float, ticks: int, every: int = 15, seed: int = 0, jump: float = 2e-3):
+    """The bench's heart-like motion with jumps of ``jump`` [m] every 1000 ticks, sampled every
+    ``every`` ticks one tick late, centred."""
     traj = heart_like_reference(ticks + 2, Ts, np.random.default_rng(seed), np.zeros(3),
-                                jump=2e-3, jump_every=1000)
+                                jump=jump, jump_every=1000)
 
     def samples(k):
         return [(traj[k - 1], (k - 1) * Ts)] if k % every == 1 else []
@@ -144,6 +144,19 @@ def test_faults_are_handled_alike():
     counts = python.predictor_counts
     assert counts["missing"] >= 10 and counts["outliers_rejected"] >= 3
     assert python.stats.failures.get("injected") == 16
+
+
+@needs_cc
+def test_an_unreachable_reference_backs_off_alike():
+    """Jumps of 1 m (out of the arm's reach): level 2 reaches its cap, the tick takes the
+    fallback, and levels 2 and 3 back off, tick for tick alike."""
+    python, c = pair({})
+    err, differ = lockstep(python, c, 3000, bench_samples(python.mpc.arm.Ts, 3000, jump=1.0))
+    assert differ == [] and err.max() <= TOL
+    assert_same_counters(python, c)
+    failures = python.stats.failures
+    assert failures.get("box_max_iter", 0) > 0 and failures.get("backoff", 0) > 0
+    assert "max_iter" not in failures  # a capped level 2 never reaches OSQP
 
 
 @needs_cc
@@ -221,6 +234,9 @@ def test_export_refuses_what_the_c_does_not_run(tmp_path):
     python = deployable(RunConfig(predictor="ekf"), 257.0)
     with pytest.raises(ExportError, match="one-step or generalized"):
         export_controller(python, tmp_path / "out", robot="phantom")
+    with pytest.raises(ExportError, match="daqp"):
+        export_controller(deployable(RunConfig().replace(**{"mpc.solver": "daqp"}), 257.0),
+                          tmp_path / "out", robot="phantom")
     with pytest.raises(ExportError, match="adaptive_rho"):
         export_controller(deployable(RunConfig().replace(**{"mpc.osqp.adaptive_rho": True}),
                                      257.0), tmp_path / "out", robot="phantom")

@@ -102,13 +102,59 @@ def test_real_solver_failure_max_iter_takes_the_fallback(arm):
 
 def test_time_limit_failure_takes_the_fallback(arm):
     mpc = RecedingHorizonMPC(arm, MPCSettings(solver="osqp", osqp={"time_limit": 1e-7},  # 0.1 µs
-                                              box_screening=False))  # level 3 on bound ticks
+                                              box_screening=False,  # level 3 on bound ticks
+                                              backoff_max_ticks=0))  # a solve on every tick
     ref = np.tile(arm.y0 + np.array([3e-3, 0.0, 0.0]), (mpc.N, 1))
     for _ in range(3):
         tau = mpc.step(np.zeros(6), ref)
         assert mpc.stats.status == "time_limit" and mpc.stats.source == "lq"
         assert np.all(np.abs(tau) <= mpc.u_max)
     assert mpc.stats.failures == {"time_limit": 3}
+
+
+def _failing(arm, **settings):
+    """An MPC whose level 3 always fails (a 0.1 µs time limit) on a torque-saturating target."""
+    mpc = RecedingHorizonMPC(arm, MPCSettings(solver="osqp", osqp={"time_limit": 1e-7},
+                                              box_screening=False, **settings))
+    return mpc, np.tile(arm.y0 + np.array([3e-3, 0.0, 0.0]), (mpc.N, 1))
+
+
+def test_consecutive_failures_back_off_exponentially_up_to_the_cap(arm):
+    mpc, ref = _failing(arm, backoff_max_ticks=3)
+    statuses = []
+    for _ in range(16):
+        mpc.step(np.zeros(6), ref)
+        statuses.append("T" if mpc.stats.status == "time_limit" else mpc.stats.status[0])
+    # solves after rests of 1, 3 and then the cap of 3 ticks (2² − 1 = 3 < 2³ − 1)
+    assert "".join(statuses) == "TbTbbbTbbbTbbbTb"
+    assert mpc.stats.failures == {"time_limit": 5, "backoff": 11}
+    assert mpc.stats.fallback_total == 16
+
+
+def test_a_solved_tick_ends_the_back_off(arm):
+    mpc, ref = _failing(arm)
+    for _ in range(3):  # failure, rest 1, failure: the next 3 ticks rest
+        mpc.step(np.zeros(6), ref)
+    assert mpc.stats.status == "time_limit"
+    tau = mpc.step(np.zeros(6), np.tile(arm.y0, (mpc.N, 1)))  # level 1 settles a resting tick
+    assert mpc.stats.status == "solved" and mpc.stats.level == 1
+    assert np.all(np.isfinite(tau))
+    mpc.step(np.zeros(6), ref)  # the rest was not over, but the streak is: one tick of rest
+    assert mpc.stats.status == "backoff"
+    mpc.step(np.zeros(6), ref)
+    mpc.step(np.zeros(6), ref)
+    assert mpc.stats.status == "backoff"  # the streak restarted at 1 after this failure
+
+
+def test_a_capped_box_qp_takes_the_fallback_with_osqp_and_goes_to_daqp(arm):
+    for solver, status, level in (("osqp", "box_max_iter", 2), ("daqp", None, 3)):
+        mpc = RecedingHorizonMPC(arm, MPCSettings(solver=solver, box_max_iter=2))
+        ref = np.tile(arm.y0 + np.array([0.3, -0.3, 0.3]), (mpc.N, 1))  # far out of reach
+        tau = mpc.step(np.zeros(6), ref)
+        assert mpc.box.capped and mpc.stats.level == level
+        assert np.all(np.isfinite(tau)) and np.all(np.abs(tau) <= mpc.u_max)
+        if status is not None:
+            assert mpc.stats.status == status and mpc.stats.iterations == 0
 
 
 @pytest.mark.parametrize("bad", ["x_nan", "x_inf", "ref_nan", "ref_inf", "ref_neg_inf"])

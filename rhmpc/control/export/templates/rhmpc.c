@@ -129,7 +129,7 @@ int rhmpc_step(rhmpc_t *ctl, long long tick, const double q[RHMPC_NU], double ta
 static const char *const status_names[RHMPC_N_STATUS] = {
     "solved", "nonfinite_input", "nonfinite_solution", "solver_error", "injected",
     "solved_inaccurate", "primal_infeasible", "dual_infeasible", "max_iter", "time_limit",
-    "non_convex", "interrupted", "unsolved"};
+    "non_convex", "interrupted", "unsolved", "box_max_iter", "backoff"};
 static const char *const source_names[RHMPC_N_SOURCES] = {"qp", "plan", "lq", "brake", "zero"};
 static const char *const count_names[RHMPC_N_COUNTS] = {
     "updates", "missing", "outliers_rejected", "gate_unlocked", "retracted", "forecast_clamped",

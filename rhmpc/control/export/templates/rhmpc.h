@@ -39,7 +39,8 @@
  *
  * Real time: no call allocates, does I/O or takes a lock. The work of a step is bounded: a few
  * dense mat-vecs, at most RHMPC_BOX_MAX_ITER small Cholesky solves and at most RHMPC_MAX_ITER
- * OSQP iterations; a refresh is one RLS update and at most RHMPC_KMAX forecast points. Both
+ * OSQP iterations (a level 2 that reaches its cap takes the fallback at once); after k failed
+ * steps in a row, levels 2 and 3 rest for min(2^k - 1, RHMPC_BACKOFF_MAX_TICKS) steps; a refresh is one RLS update and at most RHMPC_KMAX forecast points. Both
  * read the monotonic clock twice (clock_gettime(CLOCK_MONOTONIC)) to record their duration in
  * ctl.pub.step_ns / refresh_ns; build with -DRHMPC_NO_TIMING to leave that out.
  *
@@ -67,6 +68,7 @@ extern "C" {
 #define RHMPC_NBC @NBC@  /* parameters the bounds depend on (the state and the offset) */
 #define RHMPC_NEXTRA @NEXTRA@  /* the output offset d at the end of p */
 #define RHMPC_PLAN_FALLBACK_TICKS @PLAN_FALLBACK_TICKS@
+#define RHMPC_BACKOFF_MAX_TICKS @BACKOFF_MAX_TICKS@LL /* longest rest of levels 2-3 [ticks] */
 #define RHMPC_MAX_ITER @MAX_ITER@
 #define RHMPC_TS @TS@ /* control period [s] */
 #define RHMPC_INPUT_DELAY @INPUT_DELAY@ /* ticks from a torque's computation to its action */
@@ -105,6 +107,8 @@ enum rhmpc_status {
   RHMPC_NON_CONVEX,
   RHMPC_INTERRUPTED,
   RHMPC_UNSOLVED,
+  RHMPC_BOX_CAPPED,                     /* level 2 reached its cap: the fallback at once */
+  RHMPC_BACKOFF,                        /* levels 2-3 rest after failed ticks */
   RHMPC_N_STATUS
 };
 #define RHMPC_BAD_STAMP (-1)
@@ -152,6 +156,9 @@ typedef struct {
 /* The MPC's internal state (do not touch). */
 typedef struct {
   long long forced;                     /* pending injected failures */
+  long long rest;                       /* ticks levels 2 and 3 still rest (back-off) */
+  int streak;                           /* consecutive failed ticks */
+  int box_capped;                       /* level 2 stopped at RHMPC_BOX_MAX_ITER */
   int plan_valid, plan_age, ws_x_set, ws_y_set, ws_pending, last_screened;
   double p_ext[RHMPC_NPAR + 1];         /* [x; r; u_prev; d; 1] */
   double v_lq[RHMPC_NV];                /* the LQ fallback's plan */

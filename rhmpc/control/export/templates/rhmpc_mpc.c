@@ -8,7 +8,10 @@
  *   q_z = F_z [p; 1]                             (the slacks' part of q is the constant rho_1)
  *   level 1: z* = -W q_z; if l <= A [z*; 0] <= u: tau = u_max o z*_0, done    (exact)
  *   level 2: the torque-box QP by a primal-dual active set on W (rhmpc.control.box_qp): if it
- *            converges, its KKT residual is small and every envelope row holds: done (exact)
+ *            converges, its KKT residual is small and every envelope row holds: done (exact);
+ *            at its cap (RHMPC_BOX_MAX_ITER solves): the fallback
+ *   back-off: after k consecutive failed ticks, levels 2 and 3 rest for
+ *            min(2^k - 1, RHMPC_BACKOFF_MAX_TICKS) ticks (the fallback unless level 1 settles)
  *   level 3: osqp_update_data_vec; warm start (plan shifted one tick); osqp_solve
  *   solved: tau = clip(u_max o z_0)   else: plan shifted -> clipped LQ (or braking) -> zero
  * Dense maps used every tick are stored column-major (transposed), so that each mat-vec is a
@@ -167,6 +170,12 @@ static int fallback(rhmpc_t *ctl, int status, int inputs_finite, double tau[RHMP
   int source = -1;
   ctl->pub.status = status;
   ctl->pub.failures[status] += 1;
+  if (status != RHMPC_NONFINITE_INPUT && status != RHMPC_INJECTED && status != RHMPC_BACKOFF) {
+    /* back-off: after k consecutive failed ticks levels 2-3 rest min(2^k - 1, max) ticks */
+    if (ctl->mpc.streak < 30) ctl->mpc.streak += 1;
+    const long long rest = (1LL << ctl->mpc.streak) - 1;
+    ctl->mpc.rest = rest < RHMPC_BACKOFF_MAX_TICKS ? rest : RHMPC_BACKOFF_MAX_TICKS;
+  }
   ctl->mpc.plan_age += 1;
   if (ctl->mpc.plan_valid && ctl->mpc.plan_age <= RHMPC_PLAN_FALLBACK_TICKS) {
     int k = ctl->mpc.plan_age < RHMPC_N - 1 ? ctl->mpc.plan_age : RHMPC_N - 1;
@@ -346,7 +355,10 @@ static int box_dual(rhmpc_t *ctl, double dual_tol) {
     const double *wp = rhmpc_W + p * RHMPC_NZ;
     double lam_p = 0.0;
     for (;;) {
-      if (++it > RHMPC_BOX_MAX_ITER) return 0;
+      if (++it > RHMPC_BOX_MAX_ITER) {
+        ctl->mpc.box_capped = 1;
+        return 0;
+      }
       ctl->pub.box_iterations = it;
       int j = -1;
       double t;
@@ -407,6 +419,7 @@ static int box_solved(rhmpc_t *ctl) {
   const double *q = ctl->mpc.q;
   double zmax = 0.0, qmax = 0.0;
   ctl->pub.box_iterations = 0;
+  ctl->mpc.box_capped = 0;
   for (int i = 0; i < RHMPC_NZ; ++i) zmax = fabs(ctl->mpc.z_star[i]) > zmax ? fabs(ctl->mpc.z_star[i]) : zmax;
   if (!(zmax > 1.0)) return 0; /* z* is the box QP's minimiser: an envelope row rejected it */
   for (int i = 0; i < RHMPC_NZ; ++i) qmax = fabs(q[i]) > qmax ? fabs(q[i]) : qmax;
@@ -467,11 +480,20 @@ int rhmpc_mpc_tick(rhmpc_t *ctl, const double x[RHMPC_NX], const double *ref, co
       zsol = ctl->mpc.z_star;
       ctl->pub.level = 1;
       ctl->pub.screened += 1;
+    } else if (ctl->mpc.rest > 0) {
+      ctl->mpc.rest -= 1;
+      ctl->pub.level = 1;
+      ctl->mpc.last_screened = 0;
+      return fallback(ctl, RHMPC_BACKOFF, 1, tau);
 #if RHMPC_BOX_SCREENING
     } else if (box_solved(ctl)) {
       zsol = ctl->mpc.box_z;
       ctl->pub.level = 2;
       ctl->pub.boxed += 1;
+    } else if (ctl->mpc.box_capped) { /* ADMM would not finish it within MAX_ITER either */
+      ctl->pub.level = 2;
+      ctl->mpc.last_screened = 0;
+      return fallback(ctl, RHMPC_BOX_CAPPED, 1, tau);
 #endif
     }
     if (zsol != NULL) {
@@ -483,12 +505,17 @@ int rhmpc_mpc_tick(rhmpc_t *ctl, const double x[RHMPC_NX], const double *ref, co
       for (int i = RHMPC_NZ; i < RHMPC_NV; ++i) ctl->mpc.plan[i] = 0.0;
       ctl->mpc.plan_valid = 1;
       ctl->mpc.plan_age = 0;
+      ctl->mpc.streak = 0;
       ctl->mpc.ws_pending = RHMPC_WARM_START != RHMPC_WS_NONE;
       ctl->mpc.last_screened = 1;
       ctl->pub.status = RHMPC_SOLVED;
       ctl->pub.source = RHMPC_SOURCE_QP;
       return RHMPC_SOLVED;
     }
+  } else if (ctl->mpc.rest > 0 && ctl->mpc.forced == 0) {
+    ctl->mpc.rest -= 1;
+    ctl->mpc.last_screened = 0;
+    return fallback(ctl, RHMPC_BACKOFF, 1, tau);
   } else {
     matvec(rhmpc_F_ext, p, RHMPC_NV, NPE, ctl->mpc.q);
   }
@@ -555,6 +582,7 @@ int rhmpc_mpc_tick(rhmpc_t *ctl, const double x[RHMPC_NX], const double *ref, co
   memcpy(ctl->mpc.plan, z, sizeof(ctl->mpc.plan));
   ctl->mpc.plan_valid = 1;
   ctl->mpc.plan_age = 0;
+  ctl->mpc.streak = 0;
   if (RHMPC_WARM_START == RHMPC_WS_SHIFT) {
     spmv(CSR(shift), RHMPC_NV, z, ctl->mpc.ws_x);
     spmv(CSR(shift_dual), RHMPC_M, y, ctl->mpc.ws_y);

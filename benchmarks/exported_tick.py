@@ -1,0 +1,160 @@
+"""The exported controller's every tick, and the Python simulation's own speed.
+
+The real-time budget belongs to the controller that is deployed: the C that ``rhmpc export``
+generates (the predictor's refresh, the gate and the interpolation, the observer, the MPC with
+its cascade and fallbacks, the cancellation). ``rhmpc bench --controller c --json`` runs it in a
+closed loop of its own on a heart-like reference and times every tick inside C, refresh ticks
+included, beside the gain tick g of the same loop. Two references:
+
+* the bench's own, which jumps by 2 mm every 1000 ticks so that the torque bounds bind;
+* ``--jump-mm 1000``, jumps of 1 m: a reference the arm cannot reach, which keeps the solver and
+  the fallbacks busy (the worst case the tick must still fit).
+
+For each: p50, p99 and max in µs and in g, the refresh ticks alone, the ticks per level of the
+screening cascade, the fallbacks and the solver's failures, and the host's stalls measured right
+after (``--host-stalls``: a loop that only reads the clock; no tick that a stall lands in can be
+shorter). Where no C compiler is found, this part is skipped and the record says why.
+
+Then the Python simulation's speed on the main job, ``rhmpc simulate --predictor generalized
+--duration 60 --seed 2 --json``: the wall time per simulated second and the tick's parts (the
+controller's step, the reference's refreshes) in the gain tick of that run. That is how fast
+a study runs, not a real-time figure: the Python controller is the reference implementation.
+Writes ``docs/results/exported_tick``.
+
+    python benchmarks/exported_tick.py [--quick]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+
+import _results as R
+
+#: The references of the exported controller's runs: label → ``rhmpc bench`` options.
+REFERENCES = {"2-mm jumps": (), "1-m jumps (unreachable)": ("--jump-mm", "1000")}
+#: The fallbacks of the MPC, in the order it tries them.
+FALLBACKS = ("plan", "lq", "brake", "zero")
+
+
+def cli(*args: str) -> tuple[dict | None, str]:
+    """``rhmpc ARGS --json``'s document and its command line, or None and why it failed."""
+    cmd = [sys.executable, "-m", "rhmpc.cli", *args, "--json"]
+    command = " ".join(["rhmpc", *cmd[3:]])
+    run = subprocess.run(cmd, capture_output=True, text=True)
+    if run.returncode != 0:
+        print(f"{command}: {run.stderr.strip()}", file=sys.stderr)
+        return None, (run.stderr.strip().splitlines() or ["no message"])[-1]
+    return json.loads(run.stdout), command
+
+
+def exported(ticks: int, stalls: float) -> tuple[dict, str | None]:
+    """The exported controller's runs (label → their figures), or why there are none."""
+    from rhmpc.compiled import compiler
+
+    if compiler() is None:
+        return {}, "no C compiler (cc or gcc, or $CC) was found"
+    runs = {}
+    for label, options in REFERENCES.items():
+        doc, command = cli("bench", "--controller", "c", "--ticks", str(ticks),
+                           "--host-stalls", f"{stalls:g}", *options)
+        if doc is None:
+            return {}, f"`rhmpc bench --controller c` failed: {command}"
+        runs[label] = {"command": command,
+                       **{k: v for k, v in doc.items() if k.startswith("exported_")},
+                       "host_stalls": doc["host_stalls"]}
+    return runs, None
+
+
+def simulation(duration: float) -> tuple[dict | None, str]:
+    """The main job's document, reduced to its speed and the tick's parts."""
+    doc, command = cli("simulate", "--predictor", "generalized", "--duration", f"{duration:g}",
+                       "--seed", "2")
+    if doc is None:
+        return None, command
+    keep = ("gain_tick_us", "tick_us", "tick_parts_us", "tick_ratio_to_gain",
+            "tick_parts_ratio_to_gain", "wall_per_simulated_s_g", "tick_per_simulated_s_g",
+            "real_time_factor", "wall_s", "rms_error_mm", "plant_dynamics")
+    return {"command": command, "duration_s": duration, **{k: doc[k] for k in keep}}, command
+
+
+def exported_tables(runs: dict) -> dict[str, str]:
+    """The exported controller's tables: its tick, and its cascade levels and fallbacks."""
+    ticks = []
+    for label, d in runs.items():
+        us, g = d["exported_tick_us"], d["exported_tick_g"]
+        refresh, stalls = d["exported_refresh_tick_us"] or {}, d["host_stalls"]
+        ticks.append([label, R.fmt(d["exported_gain_tick_us"]["p50"], 2),
+                      R.fmt(us["p50"], 2), R.fmt(us["p99"], 2), R.fmt(us["max"], 1),
+                      R.fmt(g["p50"], 2), R.fmt(g["p99"], 1), R.fmt(g["max"], 0),
+                      R.fmt(refresh.get("p99"), 2), R.fmt(stalls["longest_us"], 0)])
+    levels = []
+    for label, d in runs.items():
+        count, level_us = d["exported_levels"], d["exported_level_tick_us"]
+        cells = [f"{count[v]} ({R.fmt(level_us[v]['p99'], 1)})" if v in level_us
+                 else str(count[v]) for v in ("1", "2", "3")]
+        fallbacks = d["exported_fallbacks"]
+        failures = ", ".join(f"{k} {n}" for k, n in sorted(d["exported_failures"].items()))
+        levels.append([label, *cells, *(str(fallbacks.get(k, 0)) for k in FALLBACKS),
+                       failures or "none"])
+    return {
+        "exported|The exported controller, every tick timed inside C (refresh ticks included)":
+            R.table(["reference", "g [µs]", "p50 [µs]", "p99 [µs]", "max [µs]", "p50 [g]",
+                     "p99 [g]", "max [g]", "refresh ticks p99 [µs]",
+                     "longest host stall [µs]"], ticks),
+        "exported-levels|Its ticks per level of the screening cascade (p99 [µs]), fallbacks "
+        "and the solver's failures":
+            R.table(["reference", "level 1", "level 2", "level 3",
+                     *(f"fallback: {k}" for k in FALLBACKS), "solver failures"], levels)}
+
+
+def simulation_table(d: dict) -> str:
+    """The Python simulation's speed and its tick's parts."""
+    tick, parts = d["tick_us"], d["tick_parts_us"]
+    return R.table(
+        ["simulated [s]", "g [µs]", "wall per simulated s [g]", "× real time",
+         "tick p50 [µs]", "tick p99 [µs]", "step p99 [µs]", "refresh p99 [µs]"],
+        [[R.fmt(d["duration_s"], 0), R.fmt(d["gain_tick_us"]["p50"], 2),
+          R.fmt(d["wall_per_simulated_s_g"], 0), R.fmt(d["real_time_factor"], 1),
+          R.fmt(tick["p50"], 1), R.fmt(tick["p99"], 1), R.fmt(parts["step"]["p99"], 1),
+          R.fmt(parts["refresh"]["p99"], 1)]])
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true",
+                    help="2000 ticks and a 10-s simulation instead of 20000 and 60 s")
+    a = ap.parse_args()
+    ticks, stalls, duration = (2000, 1.0, 10.0) if a.quick else (20000, 4.0, 60.0)
+    runs, skipped = exported(ticks, stalls)
+    sim, command = simulation(duration)
+    if sim is None:
+        sys.exit(f"rhmpc simulate failed: {command}")
+    tables = exported_tables(runs) if runs else {}
+    tables["simulation|The Python simulation's speed on the main job (not a real-time figure)"] \
+        = simulation_table(sim)
+    simulation_note = (
+        "The simulation's row is the Python reference implementation running a study (the "
+        "generalized predictor on fixed-a2-top, PHANToM, sonomicrometer): its step is the "
+        "controller's (observer, MPC, cancellation), its refresh the reference's (gate, "
+        "predictor, interpolation).")
+    if runs:
+        predictor = next(iter(runs.values()))["exported_predictor"]
+        notes = ("The exported controller runs in a closed loop of its own on the linear "
+                 f"model, with the {predictor} predictor refreshed from a sample of the "
+                 "reference every `loop.downsample` ticks; its g is the gain tick timed beside "
+                 "it in the same loop. A level's cell is its number of ticks, and in "
+                 "parentheses their p99. The host's longest stall is measured right after the "
+                 "ticks, in the same process: a tick's maximum near it is the host's, not the "
+                 "controller's. " + simulation_note)
+    else:
+        notes = f"The exported controller was not timed here: {skipped}. " + simulation_note
+    R.write("exported_tick", "The exported controller's tick, and the simulation's speed",
+            {"ticks": ticks, "host_stall_s": stalls, "exported": runs,
+             "exported_skipped": skipped, "simulation": sim}, tables, a.quick, notes=notes)
+
+
+if __name__ == "__main__":
+    main()
