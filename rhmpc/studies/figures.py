@@ -77,7 +77,7 @@ def plot_run(result, path: str | Path, title: str = "", zoom: tuple[float, float
         _position_row(axes[k], result, k, centre, spans)
     _error_row(axes[3], result, spans)
     _torque_row(axes[4], result, spans, torque_limit, joint_names)
-    _mark_spans(axes[:, 0], result.settings.settling, zoom, t[0])
+    _mark_spans(axes[:, 0], result.settings.settling_s, zoom, t[0])
     _mark_spans(axes[:, 1], None, spans[2], t[0])
     for ax, (lo, hi), what in zip(axes[0], spans, ("whole run", "zoom", "detail"), strict=True):
         ax.set_title(f"{what}, {lo:.{_decimals(hi - lo)}f}–{hi:.{_decimals(hi - lo)}f} s")
@@ -169,7 +169,7 @@ def _error_row(row, result, spans) -> None:
     t = np.asarray(result.time, float)
     err = 1e3 * np.linalg.norm(np.asarray(result.ee, float) - np.asarray(result.poi, float),
                                axis=1)
-    scored = t >= result.settings.settling
+    scored = t >= result.settings.settling_s
     rms = float(np.sqrt(np.mean(np.square(err[scored])))) if scored.any() else np.nan
     ax = row[0]
     ax.plot(t, np.where(err > 0, err, np.nan), color="0.55", lw=0.5, label="‖tool − POI‖")

@@ -42,7 +42,8 @@ def test_too_long_request_names_both_lengths(tmp_path: Path,
     csv = tmp_path / "rec.csv"
     t = np.arange(0, 20, 1 / 400)
     x = 3.0 * np.sin(2 * np.pi * 1.2 * t)  # a heart-like 6 mm [mm]: no word on its amplitude
-    csv.write_text("t,x,y,z\n" + "".join(f"{ti:.4f},{xi:.4f},2,3\n" for ti, xi in zip(t, x)))
+    rows = (f"{ti:.4f},{xi:.4f},2,3\n" for ti, xi in zip(t, x, strict=True))
+    csv.write_text("t,x,y,z\n" + "".join(rows))
     assert main(["simulate", "--data", str(csv), "--duration", "20"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1
