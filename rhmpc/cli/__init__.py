@@ -8,7 +8,8 @@ Each subcommand lives in its own module of this package (``rhmpc.cli.simulate``,
     does the work and returns the process exit code.
 
 Bad input raises :class:`rhmpc.errors.UsageError` (or ``ValueError``/``OSError`` from the
-libraries below); :func:`main` turns it into a one-line message on stderr and exit code 2.
+libraries below); :func:`main` turns it into a one-line message on stderr and exit code 2,
+as it does a ``MemoryError`` (a setting or an input that sizes an array beyond the machine).
 """
 
 from __future__ import annotations

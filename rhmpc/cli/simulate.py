@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from rhmpc.cli import COMMANDS
 from rhmpc.cli.presets import add_preset_option, apply_preset
 from rhmpc.errors import UsageError
 from rhmpc.experiment import RunConfig, check_sensor, load_config, run_experiment
@@ -55,7 +56,7 @@ def add_run_options(
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
-        "simulate", help="run the closed loop once and print its tracking summary",
+        "simulate", help=COMMANDS["simulate"],
         description="Closed loop at 2 kHz: heart motion -> sensor -> predictor (every "
         "downsample ticks) -> quadratic interpolation to 50 reference points -> MPC (OSQP) -> "
         "nonlinearity cancellation -> Pinocchio plant. Prints RMS/max tracking error, RMS "
@@ -86,6 +87,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--trace", metavar="FILE.npz", help="write every tick to an NPZ file as the "
                    "run goes (chunked; read it with sim.loop.trace.read_trace)")
     add_host_stalls_option(p, "the run")
+    p.add_argument("--fault", action="append", default=[], metavar="KIND@START[:ARG…]",
+                   help="inject a fault into the run (repeatable; the truth is untouched): "
+                   "freeze@START:DURATION (the sensor repeats its last sample), "
+                   "jump@START:OFFSET[:DURATION] (the stream steps by OFFSET, a length with its "
+                   "unit along x, 5mm, or x,y,z, 5,0,-2mm; to the end of the run by default), "
+                   "nan@START[:DURATION] (missing samples, default 0.5), "
+                   "stick@START:DURATION[:JOINTS] (encoder readings hold; 0-based joints, e.g. "
+                   "0,2; default all). Times in s, e.g. --fault freeze@14:0.3 --fault "
+                   "jump@20:5mm. The summary states each fault's errors and counts")
     p.set_defaults(func=run)
 
 
@@ -181,10 +191,25 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
         if not sep or not key:
             raise UsageError(f"--set {item!r}: expected SECTION.KEY=VALUE")
         changes[key.strip()] = parse_value(value.strip())
+    if getattr(args, "fault", None):
+        changes["faults.events"] = fault_events(config, changes, args.fault)
     config = config.replace(**changes)
     check_sensor(config)
     check_scoring(config)
     return config
+
+
+def fault_events(config: RunConfig, changes: dict, specs: list[str]) -> tuple[str, ...]:
+    """The run's faults and those of ``--fault``, each checked (a malformed one is a one-line
+    error naming it)."""
+    from sim.sensors.faults import parse_fault
+
+    for spec in specs:
+        try:
+            parse_fault(spec)
+        except ValueError as exc:
+            raise UsageError(f"--{exc}") from None
+    return (*changes.get("faults.events", config.faults.events), *specs)
 
 
 def settling_rule(args: argparse.Namespace) -> str:

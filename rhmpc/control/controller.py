@@ -11,14 +11,16 @@ A step, with the reference's points r_{i+1..i+N} of tick i::
 
     x̂ = observer.correct(q̃)                         x̂ = [q − q0; q̇]  (:mod:`.observer`)
     u = mpc.step(x̂, r)                               τ_mpc            (:mod:`.mpc`)
-    τ_c = u + ĝ(q̃) + Ĉ(q̃, q̂̇) q̂̇ + f̂(q̂̇)               the controller's model (:mod:`.cancellation`)
+    τ_c = u + ĝ(q̄) + Ĉ(q̄, q̂̇) q̂̇ + f̂(q̂̇)               the controller's model (:mod:`.cancellation`)
     τ = clip(τ_c, −τ_max, τ_max)                     what the actuators can apply
     observer.predict(u_{i−d} + (τ − τ_c)_{i−d})     the MPC torque that acts over the tick
 
 ``d`` is the input delay in ticks (the torque computed on tick i acts from tick i + d); the
-observer predicts with the torque that acts, including what the clip took off it. An encoder
-reading that is not finite is not fused (x̂ = x̂⁻), and a command that is not finite holds the
-last torque.
+observer predicts with the torque that acts, including what the clip took off it. ``q̄`` is the
+reading the observer fused: the encoders' angles, or the prediction for a joint whose reading
+it held out (past its innovation gate, or not finite). While a joint has been held for the
+observer's ``fault_timeout`` (an encoder fault), the MPC brakes instead of tracking
+(``mpc.brake``, failure ``encoder_fault``). A command that is not finite holds the last torque.
 """
 
 from __future__ import annotations
@@ -97,6 +99,11 @@ class Controller:
         return counts.get("outliers_rejected", 0), counts.get("retracted", 0)
 
     @property
+    def encoder_counts(self) -> dict:
+        """The observer's events: ``held`` (joint readings held out), ``reacquired``."""
+        return dict(self.observer.counts)
+
+    @property
     def gate_floor(self) -> float | None:
         """The outlier gate's floor [m] (None without a gate, or while it calibrates)."""
         gate = getattr(self.reference, "gate", None)
@@ -129,10 +136,14 @@ class Controller:
         """One control tick from the encoders' joint angles ``q`` [rad]: the torque τ to apply
         [N·m], within ±``torque_limit``."""
         start = clock()
-        x_hat = self.observer.correct(q)
-        u = self.mpc.step(x_hat, self.reference.horizon(tick))
+        observer = self.observer
+        x_hat = observer.correct(q)
+        if observer.faulted:
+            u = self.mpc.brake(x_hat)
+        else:
+            u = self.mpc.step(x_hat, self.reference.horizon(tick))
         command = u if self.cancellation is None else self.cancellation.torque(
-            q, x_hat[self.nu :], u)
+            observer.reading, x_hat[self.nu :], u)
         if not np.isfinite(np.vdot(command, command)):  # the cancellation of a faulty reading
             command = self.tau  # hold the last torque
         commanded = command.tolist()  # the clip on floats: a 3-vector is cheaper so

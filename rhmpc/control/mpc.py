@@ -65,9 +65,9 @@ _CONTINUE = frozenset({"max_iter", "time_limit", "solved_inaccurate", "injected"
 
 #: Failure reasons counted in :attr:`MPCStats.failures` besides OSQP's statuses.
 EXTRA_REASONS = ("nonfinite_input", "nonfinite_solution", "solver_error", "injected",
-                 "box_max_iter", "backoff")
+                 "box_max_iter", "backoff", "encoder_fault")
 #: Failures that do not lengthen the back-off: no solve was tried, or the failure was injected.
-_NO_BACKOFF = frozenset({"nonfinite_input", "injected", "backoff"})
+_NO_BACKOFF = frozenset({"nonfinite_input", "injected", "backoff", "encoder_fault"})
 #: Longest failure streak the back-off counts (2³⁰ ticks: beyond any ``backoff_max_ticks``).
 _STREAK_MAX = 30
 #: A slack above this [its unit] counts the tick as relaxing the envelope (``stats.relaxed``).
@@ -354,6 +354,23 @@ class RecedingHorizonMPC:
         stats.parts_ns[:] = [time.perf_counter_ns() - t0, 0, 0, 0]
         return out
 
+    def brake(self, x: np.ndarray, reason: str = "encoder_fault") -> np.ndarray:
+        """A tick without the QP, for a fault of the state's source: the torque that stops the
+        joints within the first move block (:func:`rhmpc.control.fallback.brake_torque`, from
+        the velocity of ``x``; zero if it is not finite), counted as a failure ``reason``."""
+        t0 = time.perf_counter_ns()
+        stats = self.stats
+        stats.ticks += 1
+        stats.level = stats.box_iterations = stats.iterations = 0
+        stats.solve_time = 0.0
+        self._last_screened = False
+        velocity = np.asarray(x, dtype=float)[self.nx // 2:]
+        ticks = self.settings.block_lengths[0]
+        tau = brake_torque(self.arm.M0, velocity, ticks, self.arm.Ts, self.u_max)
+        out = self._fallen_back(reason, tau, "brake")
+        stats.parts_ns[:] = [time.perf_counter_ns() - t0, 0, 0, 0]
+        return out
+
     def _set_parameters(self, x: np.ndarray, ref: np.ndarray) -> bool:
         """Write p = [x; r; u_{−1}; d(x)] (d: the offset correction); False if not all finite."""
         x = np.asarray(x, dtype=float)
@@ -514,6 +531,20 @@ class RecedingHorizonMPC:
 
     # -- fallback ------------------------------------------------------------------------------
     def _fallback(self, reason: str, *, inputs_finite: bool) -> np.ndarray:
+        """The fallback chain's torque (plan, clipped LQ or braking, zero), recorded."""
+        tau, source = None, "zero"
+        k = self._plan_age + 1  # the tick of the plan this one is
+        if self._plan is not None and k <= self.settings.plan_fallback_ticks:
+            b = self.qp.block_of_tick[min(k, self.N - 1)]
+            tau = self._plan[b * self.nu:(b + 1) * self.nu] * self._scale0
+            source = "plan"
+        if tau is None and inputs_finite:
+            tau, source = self._lq_or_brake()
+        return self._fallen_back(reason, tau, source)
+
+    def _fallen_back(self, reason: str, tau: np.ndarray | None, source: str) -> np.ndarray:
+        """The bookkeeping of a tick whose torque is not the QP's: the failure, the back-off,
+        the plan's age, τ (zero if not finite) clipped into u_{−1}, the next warm start."""
         stats = self.stats
         stats.status = reason
         stats.failures[reason] = stats.failures.get(reason, 0) + 1
@@ -521,14 +552,6 @@ class RecedingHorizonMPC:
             self._streak = min(self._streak + 1, _STREAK_MAX)
             self._rest = min(2**self._streak - 1, self.settings.backoff_max_ticks)
         self._plan_age += 1
-        tau = None
-        if self._plan is not None and self._plan_age <= self.settings.plan_fallback_ticks:
-            k = min(self._plan_age, self.N - 1)
-            b = self.qp.block_of_tick[k]
-            tau = self._plan[b * self.nu:(b + 1) * self.nu] * self._scale0
-            source = "plan"
-        if tau is None and inputs_finite:
-            tau, source = self._lq_or_brake()
         if tau is None or not np.all(np.isfinite(tau)):
             tau = np.zeros(self.nu)
             source = "zero"

@@ -11,6 +11,23 @@ controller estimates ``x = [q − q0; q̇]`` with the model it already has (the 
 ``L`` is the steady-state Kalman gain for an acceleration disturbance of standard deviation
 ``acceleration_noise`` (the unmodelled part: model mismatch, friction residue) entering as
 ``[Ts²/2 I; Ts I] w`` and the quantisation noise variance Δ²/12.
+
+Innovation gate (encoders that stick, a reading that is not finite)
+    The innovation ν_j = q̃_j − q0_j − x̂⁻_j of a healthy encoder has the steady-state variance
+    S_jj, S = H P⁻ Hᵀ + R (P⁻ the filter's a-priori covariance, R = diag(Δ²/12)). A reading
+    with some |ν_j| > γ √S_jj, or not finite, is held out whole (the joints' encoders share
+    one interface): the prediction stands in for it, x̂ = x̂⁻ (the innovation test of fault
+    detection: Mehra & Peschon, *Automatica* 7(5), 1971; Willsky, *Automatica* 12(6), 1976).
+    A stuck encoder shows as a reading that stays while the model, driven by the torque that
+    acts, moves on: the filter absorbs a steady acceleration a as the innovation bias
+    a Ts / L_v, so the gate sees an acceleration past γ √S L_v / Ts, which a loop fighting a
+    stuck joint reaches as its torque grows. A reading held for ``reacquire_ticks`` whose joints
+    past the gate have all changed since it was first held is alive (a disturbance the model
+    did not know, not a fault): the estimate's angles move to it, its velocity to the
+    reading's mean over the hold, and the next ``reacquire_ticks`` readings are fused whatever
+    their innovation while the filter settles. A reading held for
+    ``fault_timeout`` is an encoder fault: :attr:`JointObserver.faulted` tells the
+    controller to brake (on the predicted velocity, the best it has).
 """
 
 from __future__ import annotations
@@ -33,20 +50,54 @@ class ObserverSettings:
         Standard deviation of the unmodelled joint acceleration per tick [rad/s²].
     angle_noise : float
         Measurement noise used when the robot has no encoder model [rad].
+    innovation_gate : float
+        γ: a reading whose innovation exceeds γ √S_jj is held out [standard deviations of the
+        innovation]; 0 fuses every finite reading. Measured on the main job (generalized,
+        20–26 s): the largest healthy innovation is 3.0 √S on the ideal plant and 7.1 √S on
+        the hardware-like one (stiction break-away, the DAC's steps); all encoders stuck for
+        0.2 s: max error 1.5 mm at γ = 5, 3.7 mm at 6, 17 mm at 8, and the arm leaves its joint
+        limits without the gate. At γ = 5 the hardware-like plant's readings are held now and
+        then and taken again (invivo-video: 997 readings held of 40 000, RMS error 0.229 mm
+        against 0.227 mm ungated); the ideal plant's never.
+    reacquire_ticks : int
+        Ticks a reading is held before one that has changed is taken again [ticks].
+    fault_timeout : float
+        A reading held this long is an encoder fault: the controller brakes [s].
     """
 
     acceleration_noise: float = 20.0
     angle_noise: float = 1e-6
+    innovation_gate: float = 5.0
+    reacquire_ticks: int = 20
+    fault_timeout: float = 0.05
 
     def __post_init__(self) -> None:
-        for name in ("acceleration_noise", "angle_noise"):
+        for name in ("acceleration_noise", "angle_noise", "fault_timeout"):
             value = getattr(self, name)
-            if not (np.isfinite(value) and value > 0):
+            if not (isinstance(value, int | float) and np.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be a positive finite number, got {value!r}")
+        gate = self.innovation_gate
+        if not (isinstance(gate, int | float) and np.isfinite(gate) and gate >= 0):
+            raise ValueError(f"innovation_gate must be a finite number >= 0, got {gate!r}")
+        ticks = self.reacquire_ticks
+        if isinstance(ticks, bool) or not isinstance(ticks, int) or ticks < 1:
+            raise ValueError(f"reacquire_ticks must be an integer >= 1, got {ticks!r}")
 
 
 class JointObserver:
-    """Steady-state Kalman filter for ``x = [q − q0; q̇]`` from (quantised) joint angles."""
+    """Steady-state Kalman filter for ``x = [q − q0; q̇]`` from (quantised) joint angles, with
+    an innovation gate (module docstring).
+
+    Attributes
+    ----------
+    L : (2n, n) the steady-state Kalman gain
+    gate : (n,) γ √S_jj, the largest innovation fused per joint [rad]
+    held : int, ticks the reading has been held out in a row
+    counts : dict
+        ``held`` (readings held out), ``reacquired`` (readings taken again after a hold).
+    reading : (n,) the angles the last correction fused: the encoders', or the prediction
+        while the reading is held out [rad]
+    """
 
     def __init__(
         self,
@@ -65,7 +116,15 @@ class JointObserver:
         Qw = self.settings.acceleration_noise**2 * G @ G.T
         H = np.hstack([np.eye(n), np.zeros((n, n))])
         P = scipy.linalg.solve_discrete_are(self.A.T, H.T, Qw, np.diag(meas_var))
-        self.L = P @ H.T @ np.linalg.inv(H @ P @ H.T + np.diag(meas_var))
+        S = H @ P @ H.T + np.diag(meas_var)
+        self.L = P @ H.T @ np.linalg.inv(S)
+        gamma = self.settings.innovation_gate
+        # off (γ = 0): every finite reading (the largest float, so that ±inf is held out)
+        self.gate = (gamma * np.sqrt(np.diag(S)) if gamma > 0
+                     else np.full(n, np.finfo(float).max))
+        self.timeout_ticks = max(1, round(self.settings.fault_timeout / arm.Ts))
+        self.Ts = arm.Ts
+        self.n = n
         # Both steps as one mat-vec on preallocated storage (allocation-free at 2 kHz):
         #   correct: x̂ = [I − L H, L, −L q0] [x̂⁻; q̃; 1]      predict: x̂⁻ = [A, B] [x̂; u]
         self._correct_matrix = np.hstack([np.eye(2 * n) - self.L @ H, self.L,
@@ -77,7 +136,10 @@ class JointObserver:
         self.x_prior = self._prior_q_one[: 2 * n]
         self.x = self._post_and_u[: 2 * n]
         self._q_in = self._prior_q_one[2 * n : 3 * n]
+        self.reading = self._q_in
         self._u_in = self._post_and_u[2 * n :]
+        self._nu = np.zeros(n)
+        self._first = np.zeros(n)  # the reading when it was first held
         self.reset()
 
     @property
@@ -95,22 +157,67 @@ class JointObserver:
         return view
 
     def reset(self, x: np.ndarray | None = None) -> None:
-        """Start from ``x`` (default: at rest at q0)."""
+        """Start from ``x`` (default: at rest at q0); no reading held, counts zero."""
         self.x_prior[:] = 0.0 if x is None else np.asarray(x, dtype=float)
         self.x[:] = self.x_prior
+        self.held = 0
+        self._grace = 0
+        self.counts = {"held": 0, "reacquired": 0}
+
+    @property
+    def faulted(self) -> bool:
+        """Whether the reading has been held for ``fault_timeout``: an encoder fault."""
+        return self.held >= self.timeout_ticks
 
     def correct(self, q_measured: np.ndarray) -> np.ndarray:
         """Fuse the measured joint angles [rad]; returns the estimate x̂ = [q − q0; q̇].
 
-        A reading that is not finite (an encoder fault) is not fused: the estimate is the
-        prediction x̂⁻, so that the state stays finite. The returned array is the filter's own
-        storage: it is overwritten by the next ``correct`` (copy it to keep it).
+        A reading past the innovation gate, or not finite, is held out: x̂ = x̂⁻ (module
+        docstring). The returned array is the filter's own storage: it is overwritten by the
+        next ``correct`` (copy it to keep it).
         """
         self._q_in[:] = q_measured
-        if not np.isfinite(np.vdot(self._q_in, self._q_in)):
-            self.x[:] = self.x_prior
+        nu = np.subtract(self._q_in, self.q0, out=self._nu)
+        nu -= self.x_prior[: self.n]
+        if self._grace:  # after a hold: fused whatever it says, while the filter settles
+            self._grace -= 1
+        elif (self.held or not np.all(np.abs(nu) <= self.gate)) and self._hold(nu):
             return self.x
         return np.dot(self._correct_matrix, self._prior_q_one, out=self.x)
+
+    def _hold(self, nu: np.ndarray) -> bool:
+        """Whether the reading is held out (then x̂ = x̂⁻ and the prediction stands in for it);
+        a reading held ``reacquire_ticks`` whose joints past the gate have all changed since
+        is taken again."""
+        q = self._q_in
+        past = ~(np.abs(nu) <= self.gate)  # NaN is past
+        if not past.any():
+            self.held = 0
+            return False
+        if self.held >= self.settings.reacquire_ticks and np.all(np.isfinite(q)) \
+                and np.all(q[past] != self._first[past]):
+            self._reacquire(q)
+            return False
+        if self.held == 0:
+            self._first[:] = q
+        self.held += 1
+        self.counts["held"] += 1
+        np.add(self.q0, self.x_prior[: self.n], out=q)
+        self.x[:] = self.x_prior
+        return True
+
+    def _reacquire(self, q: np.ndarray) -> None:
+        """Take a reading that moved again: the angles become the estimate's, the velocity the
+        reading's mean over the hold (when its first reading was finite), and the next
+        ``reacquire_ticks`` readings are fused ungated while the filter settles."""
+        n = self.n
+        if np.all(np.isfinite(self._first)):
+            np.subtract(q, self._first, out=self.x_prior[n:])
+            self.x_prior[n:] /= self.held * self.Ts
+        np.subtract(q, self.q0, out=self.x_prior[:n])
+        self.held = 0
+        self._grace = self.settings.reacquire_ticks
+        self.counts["reacquired"] += 1
 
     def predict(self, u: np.ndarray) -> None:
         """Propagate with the applied MPC torque u [N·m] to the next tick."""

@@ -22,6 +22,7 @@ from rhmpc.errors import UsageError
 from rhmpc.experiment.config import RunConfig
 from robots import LinearArm, Robot, linearize, load_robot
 from sim.loop.clock import PredictorClock, clock_for_rate, predictor_clock
+from sim.loop.faults import FaultyEncoders, FaultySamples, split_faults
 from sim.loop.metrics import HeartRateScore
 from sim.loop.streams import SampleSource, SourceTruth, UpsampledSamples, sensor_samples
 from sim.plant import make_plant
@@ -62,6 +63,8 @@ class Run:
         Simulated time [s].
     clock : PredictorClock
         When the reference refreshes: every ``downsample`` ticks, or on each raw sample.
+    faults : tuple
+        The injected faults (:mod:`sim.sensors.faults`), already in ``stream`` and ``plant``.
     """
 
     config: RunConfig
@@ -75,6 +78,7 @@ class Run:
     label: str
     duration: float
     clock: PredictorClock
+    faults: tuple = ()
 
     @property
     def reference(self):
@@ -258,6 +262,9 @@ def build_run(config: RunConfig, implementation: str = "python") -> Run:
     truth = SourceTruth(recorded if config.ground_truth == "recorded" else heart.motion,
                         loop.ticks + N + 1, loop.Ts,
                         centred=loop.placement == "centred")
+    sensor_faults, encoder_faults = split_faults(config.faults.faults)
+    if sensor_faults:  # what the controller reads; the truth above is the clean stream's
+        stream = FaultySamples(stream, sensor_faults)
     clock = predictor_clock(loop, stream)
     anchor = motion_anchor(config, arm)
     check_reach(robot, truth, anchor, loop.ticks)
@@ -265,5 +272,10 @@ def build_run(config: RunConfig, implementation: str = "python") -> Run:
     reference.place(anchor)
     controller = build_controller(config, robot, arm, reference, implementation)
     plant = make_plant(robot, arm, loop.Ts, config.plant, config.hardware)
+    if encoder_faults:
+        try:
+            plant = FaultyEncoders(plant, encoder_faults, loop.Ts)
+        except ValueError as exc:
+            raise UsageError(f"[faults] {exc}") from None
     return Run(config, robot, arm, plant, controller, truth, anchor, stream, heart.label,
-               loop.duration, clock)
+               loop.duration, clock, config.faults.faults)

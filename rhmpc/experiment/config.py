@@ -15,6 +15,7 @@ from rhmpc.control.settings import MPCSettings, from_dict, replace_settings, to_
 from rhmpc.errors import UsageError
 from sim.loop import LoopSettings
 from sim.plant import HardwareSettings, PlantSettings
+from sim.sensors.faults import FaultSettings
 
 #: Sections of a run's TOML file and the settings class each one builds.
 SECTIONS: dict[str, type] = {
@@ -25,6 +26,7 @@ SECTIONS: dict[str, type] = {
     "mismatch": ModelMismatch,
     "observer": ObserverSettings,
     "hardware": HardwareSettings,
+    "faults": FaultSettings,
 }
 
 
@@ -97,6 +99,9 @@ class RunConfig:
     loop, reference, mpc, plant, mismatch, observer, hardware
         Component settings (see their classes for units); ``hardware`` applies when
         ``plant.model = "hardware"``.
+    faults
+        Faults injected into the run (:class:`sim.sensors.faults.FaultSettings`): each starts
+        within the run, and one with an end ends within it.
     """
 
     robot: str = "phantom"
@@ -118,6 +123,7 @@ class RunConfig:
     mismatch: ModelMismatch = field(default_factory=ModelMismatch)
     observer: ObserverSettings = field(default_factory=ObserverSettings)
     hardware: HardwareSettings = field(default_factory=HardwareSettings)
+    faults: FaultSettings = field(default_factory=FaultSettings)
 
     def __post_init__(self) -> None:
         for name, kind in TOP_LEVEL.items():
@@ -130,12 +136,16 @@ class RunConfig:
             raise ValueError(
                 f"ground_truth must be one of {', '.join(GROUND_TRUTHS)}, got {self.ground_truth!r}"
             )
+        self.faults.check(self.loop.duration)
 
     def to_dict(self) -> dict[str, Any]:
-        """TOML-ready nested dict (``None`` values left out)."""
+        """TOML-ready nested dict (``None`` values left out, and the ``faults`` table when it
+        injects none, so that a run's settings name only what it uses)."""
         out: dict[str, Any] = {}
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
+            if f.name == "faults" and value == FaultSettings():
+                continue
             if f.name in SECTIONS:
                 out[f.name] = to_dict(value)
             elif value is not None:

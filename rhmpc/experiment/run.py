@@ -5,6 +5,7 @@ from __future__ import annotations
 import platform
 import resource
 import time
+import warnings
 from importlib.metadata import PackageNotFoundError, version
 from typing import Any
 
@@ -13,6 +14,7 @@ import numpy as np
 from rhmpc.experiment.assembly import Run, build_run
 from rhmpc.experiment.config import RunConfig
 from sim.loop import LoopResult, run_closed_loop
+from sim.loop.faults import fault_marks, fault_report
 from sim.sensors import DEFAULT_PLAYBACK
 
 
@@ -38,9 +40,12 @@ def run_experiment(config: RunConfig, progress: bool = False, trace: str | None 
     ``gain_tick``: the class of ``rhmpc bench``'s gain tick (``GainTick(mpc)(x, r, u_prev)``),
     timed in the run on every 64th tick so that the document has ``gain_tick_us`` and the
     tick's ratios to its p50 (``tick_ratio_to_gain``). ``implementation``: ``"python"`` or
-    ``"c"`` (:func:`~rhmpc.experiment.assembly.build_run`).
+    ``"c"`` (:func:`~rhmpc.experiment.assembly.build_run`). With faults (``config.faults``),
+    the document's ``faults`` holds one record per fault (:func:`sim.loop.faults.fault_report`).
     """
     run = build_run(config, implementation)
+    loop = config.loop
+    marks = fault_marks(run.faults, config.faults.after_s, loop.Ts, loop.duration)
     bar, callback = _progress_bar(config, run.label) if progress else (None, None)
     wall = time.perf_counter()
     try:
@@ -48,6 +53,7 @@ def run_experiment(config: RunConfig, progress: bool = False, trace: str | None 
             run.plant, run.controller, run.truth, run.stream, config.loop, run.clock,
             anchor=run.anchor, robot=run.robot, progress=callback, trace_file=trace,
             yardstick=None if gain_tick is None else _gain_tick(run.controller, gain_tick),
+            marks=marks,
         )
     finally:
         if bar is not None:
@@ -72,7 +78,10 @@ def _progress_bar(config: RunConfig, label: str):
 def document(config: RunConfig, run: Run, result: LoopResult, wall: float,
              implementation: str, timed_gain: bool) -> dict[str, Any]:
     """The JSON document of a run (see :func:`run_experiment`)."""
-    metrics = result.metrics()
+    with warnings.catch_warnings():  # a metric with no finite tick is NaN, and said so by the CLI
+        warnings.filterwarnings("ignore", "Mean of empty slice", RuntimeWarning)
+        warnings.filterwarnings("ignore", "All-NaN slice encountered", RuntimeWarning)
+        metrics = result.metrics()
     stats = result.controller_stats
     doc = {
         "predictor": config.predictor,
@@ -87,6 +96,7 @@ def document(config: RunConfig, run: Run, result: LoopResult, wall: float,
         "controller": jsonable(stats),
         "implementation": implementation,
         "predictor_counts": jsonable(result.predictor_counts),
+        "encoder": jsonable(run.controller.encoder_counts),
         "wall_s": wall,
         "real_time_factor": config.loop.duration / wall,
         "plant_dynamics": result.plant_dynamics,
@@ -110,6 +120,10 @@ def document(config: RunConfig, run: Run, result: LoopResult, wall: float,
             **{key: int(counts.get(key, 0))
                for key in ("outliers_rejected", "gate_unlocked", "retracted", "repaired")},
         }
+    if run.faults:
+        loop = config.loop
+        doc["faults"] = jsonable(fault_report(config.faults.events, run.faults, result.segments,
+                                              config.faults.after_s, loop.Ts, loop.duration))
     monitor = getattr(run.reference, "monitor", None)
     if monitor is not None:
         doc["heart_rate"] = monitor.summary()

@@ -61,7 +61,8 @@ def format_summary(doc: dict, settling_rule: str | None = None) -> str:
         + f"max {tick['max']:.1f} µs   (budget {1e6 * Ts:.0f} µs, refreshes included)"
         + (_in_gain_ticks(doc) if "gain_tick_us" in doc else ""),
         f"  QP               {ctrl.get('ticks', 0)} ticks, fallbacks {doc['fallbacks']}"
-        + (f" ({sources})" if sources else "") + (f", failures {fails}" if fails else ""),
+        + (f" ({sources})" if sources else "")
+        + (", failures " + ", ".join(f"{k} {v}" for k, v in fails.items()) if fails else ""),
         f"  wall time        {doc['wall_s']:.1f} s ({_speed(doc['real_time_factor'])})"
         + (f", peak memory {doc['peak_rss_mb']:.0f} MB" if "peak_rss_mb" in doc else "")
         + ("; the controller in C (rhmpc export): refresh, observer, MPC, cancellation"
@@ -76,12 +77,19 @@ def format_summary(doc: dict, settling_rule: str | None = None) -> str:
         lines.insert(-1, "                   " + _clock_line(doc.get("predictor_clock") or {}))
     if doc.get("outlier_gate"):
         lines.insert(-1, "  outlier gate     " + _gate_line(doc["outlier_gate"]))
+    encoder = doc.get("encoder") or {}
+    if encoder.get("held"):  # the observer's innovation gate (rhmpc.control.observer)
+        lines.insert(-1, f"  encoders         {encoder['held']} readings held out past the "
+                     f"observer's gate, {encoder.get('reacquired', 0)} taken again once they "
+                     "moved")
     excluded = doc.get("excluded") or {}
     if excluded.get("ticks") or excluded.get("unmeasured"):
         lines.insert(3, f"                   the score leaves out {excluded.get('ticks', 0)} ticks "
                      f"whose truth touches the {excluded.get('outliers', 0)} samples taken as "
                      f"outliers, and the {excluded.get('unmeasured', 0)} recorded samples that "
                      "are no measurements")
+    for line in fault_lines(doc):
+        lines.insert(-1, line)
     if doc.get("host_stalls"):
         lines.append("  host             " + stall_line(doc["host_stalls"]))
     hr = doc.get("heart_rate") or {}
@@ -94,6 +102,44 @@ def format_summary(doc: dict, settling_rule: str | None = None) -> str:
                      + (f"locked from {lock:.2f} s" if lock is not None else "unlocked at the end")
                      + f" (true mean {hr['mean_true_bpm']:.1f} bpm)")
     return "\n".join(lines)
+
+
+#: How a fault record's counts read in the summary (:func:`sim.loop.faults.fault_report`).
+FAULT_COUNTS = {"missing": "samples missing", "outliers_rejected": "rejected",
+                "gate_unlocked": "gate unlocked", "retracted": "retracted",
+                "reference_guard": "reference guard", "encoder_held_ticks": "encoder ticks held",
+                "qp_failures": "QP failures", "fallback_plan": "plan", "fallback_lq": "lq",
+                "fallback_brake": "brake", "fallback_zero": "zero",
+                "saturated_ticks": "saturated ticks"}
+
+
+def fault_lines(doc: dict) -> list[str]:
+    """One line per injected fault (its window, the largest error during it and after it,
+    what was counted there, the joint envelope), then the run's joint envelope; none without
+    faults, unless the envelope did not hold."""
+    lines = []
+    for f in doc.get("faults") or []:
+        during, after = f.get("during") or {}, f.get("after") or {}
+        counts = {k: during.get("counts", {}).get(k, 0) + after.get("counts", {}).get(k, 0)
+                  for k in FAULT_COUNTS}
+        told = ", ".join(f"{FAULT_COUNTS[k]} {v}" for k, v in counts.items() if v) or "nothing"
+        held = during.get("envelope_held", True) and after.get("envelope_held", True)
+        error = _mm(during.get("max_error_mm")) + (
+            f", {_mm(after.get('max_error_mm'))} in the {_seconds(f['after_s'])} s after"
+            if after else " (to the end of the run)")
+        lines.append(f"  fault            {f['fault']} ({_seconds(f['start_s'])}–"
+                     f"{_seconds(f['end_s'])} s): max error {error}; counted: {told}; joint "
+                     f"envelope {'held' if held else 'NOT held'}")
+    envelope = doc.get("joint_envelope") or {}
+    if envelope and (lines or not envelope.get("held", True)):
+        lines.append(f"  joint envelope   {'held' if envelope['held'] else 'NOT held'}: least "
+                     f"margin {envelope['position_margin_rad']:.3f} rad to the joint limits, "
+                     f"{envelope['speed_margin_rad_s']:.2f} rad/s to the speed limits")
+    return lines
+
+
+def _mm(value: float | None) -> str:
+    return "—" if value is None else f"{value:.3f} mm"
 
 
 def _clock_line(clock: dict) -> str:

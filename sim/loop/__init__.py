@@ -8,6 +8,7 @@
 ``results``        :class:`LoopResult`, the recorder of each chunk
 ``metrics``        running tracking statistics, tick histograms, heart-rate score
 ``trace``          the decimated trace and the per-tick NPZ file
+``faults``         faults injected into the stream and the encoders, and their report
 =================  ==============================================================
 """
 

@@ -29,15 +29,22 @@ from __future__ import annotations
 
 import contextlib
 import gc
+import itertools
 import math
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 
 import numpy as np
 
 from sim.loop.clock import PredictorClock, arrival_tick
 from sim.loop.metrics import warm_ns
-from sim.loop.results import YARDSTICK_EVERY, YARDSTICK_PHASE, LoopResult, Recorder
+from sim.loop.results import (
+    YARDSTICK_EVERY,
+    YARDSTICK_PHASE,
+    LoopResult,
+    Recorder,
+    event_counts,
+)
 from sim.loop.settings import LoopSettings
 from sim.loop.streams import BLOCK, ArrayTruth, SampleSource, StreamCursor, as_samples
 
@@ -178,7 +185,7 @@ def run_closed_loop(plant, controller, truth, stream, settings: LoopSettings,
                     progress: Callable[[int], None] | None = None,
                     trace_file: str | None = None,
                     yardstick: Callable[[np.ndarray, np.ndarray, np.ndarray], object] | None = None,
-                    chunk_ticks: int = 20_000) -> LoopResult:
+                    chunk_ticks: int = 20_000, marks: Iterable[int] = ()) -> LoopResult:
     """Run the closed loop for ``settings.duration``, in chunks of ≈ 10 s of ticks.
 
     Parameters
@@ -213,6 +220,11 @@ def run_closed_loop(plant, controller, truth, stream, settings: LoopSettings,
         the same run (``LoopResult.yardstick_us``); not part of the tick, its result is not used.
     chunk_ticks
         Ticks per chunk of records.
+    marks
+        Ticks at which a chunk also ends and the controller's and the plant's event counts are
+        read (:func:`sim.loop.results.event_counts`): the result's ``segments`` then hold, for
+        each stretch between two marks, its largest error, its joint envelope and the counts
+        at its end (how an injected fault is measured, :mod:`sim.loop.faults`).
     """
     n, N = settings.ticks, controller.N
     if not hasattr(truth, "window"):
@@ -220,19 +232,27 @@ def run_closed_loop(plant, controller, truth, stream, settings: LoopSettings,
     if truth.n_ticks < n + N + 1:
         raise ValueError(f"truth covers {truth.n_ticks} ticks, the run needs {n + N + 1}")
     refreshes = Refreshes(stream, truth.center, settings, clock)
-    record = Recorder(robot, settings, N, truth, anchor, trace_file, clock)
+    marks = sorted({int(m) for m in marks if 0 < m < n})
+    record = Recorder(robot, settings, N, truth, anchor, trace_file, clock, bool(marks))
     with quiet_gc():
         try:
-            for c0 in range(0, n, chunk_ticks):
-                c1 = min(c0 + chunk_ticks, n)
+            for c0, c1 in chunks(n, chunk_ticks, marks):
                 log = record.start_chunk(c0, c1)
                 _run_ticks(plant, controller, refreshes, c0, c1, log, yardstick, progress)
                 record.end_chunk(c0, c1, log)
+                if marks:
+                    record.count(event_counts(controller, plant))
         finally:
             record.close()
     note = getattr(plant, "dynamics_note", None)
     dynamics = getattr(plant, "dynamics", "pinocchio") + (f" ({note})" if note else "")
     return record.result(controller, dynamics)
+
+
+def chunks(n: int, size: int, marks: Iterable[int] = ()) -> list[tuple[int, int]]:
+    """(c0, c1) of the chunks of ticks 0 … n − 1: every ``size`` ticks, and at each mark."""
+    edges = sorted({*range(0, n, size), *(m for m in marks if 0 < m < n), n})
+    return list(itertools.pairwise(edges))
 
 
 def _run_ticks(plant, controller, refreshes: Refreshes, c0: int, c1: int, log: dict,

@@ -63,6 +63,13 @@ class LoopResult:
     excluded: dict = field(default_factory=dict)
     horizons: tuple = (np.zeros(0, dtype=np.int64), np.zeros((0, 0, 3)))
     samples: tuple = (np.zeros(0), np.zeros((0, 3)))
+    #: the plant's joint angles against the robot's joint limits over the whole run
+    #: (:class:`JointEnvelope`): ``position_margin_rad``, ``speed_margin_rad_s``, ``held``
+    envelope: dict = field(default_factory=dict)
+    #: with ``run_closed_loop(marks=…)``, one record per stretch of ticks between marks
+    #: (:meth:`Recorder.count`): ``ticks`` (i0, i1), ``max_error_m`` (every tick, settling
+    #: included; NaN without truth), ``envelope`` and the event ``counts`` at its end
+    segments: tuple = ()
 
     time = property(lambda self: self.trace["time"])  # [s], the instant of the state (i+1)·Ts
     ee = property(lambda self: self.trace["ee"])  # (n, 3) end-effector position [m]
@@ -89,14 +96,56 @@ class LoopResult:
         }
         out["saturated_ticks"] = int(self.saturated_ticks)
         out["excluded"] = dict(self.excluded)
+        out["joint_envelope"] = dict(self.envelope)
         return out
+
+
+class JointEnvelope:
+    """The plant's joint angles against the robot's joint limits, chunk by chunk.
+
+    The position margin is the least of q − q_lower, q_upper − q and, for each coupled limit
+    lo ≤ c·q ≤ hi (:attr:`robots.Robot.coupling`), c·q − lo and hi − c·q [rad]; the speed
+    margin is the least of v_max − |q_{i+1} − q_i| / Ts, the mean speed over each tick [rad/s].
+    The envelope *held* when both stay ≥ 0 (the limits the MPC's envelope enforces by default,
+    :mod:`rhmpc.control.envelope`).
+    """
+
+    def __init__(self, robot: Robot, Ts: float) -> None:
+        self.lower, self.upper = robot.position_limits
+        self.coupling, self.vmax, self.Ts = robot.coupling, robot.velocity_limit, Ts
+        self.q_prev: np.ndarray | None = None
+        self.position, self.speed = np.inf, np.inf
+
+    def margins(self, q: np.ndarray) -> tuple[float, float]:
+        """(position [rad], speed [rad/s]) margins of the joint angles ``q`` (m, nq) that
+        follow the last chunk's; both also folded into the run's."""
+        gaps = [q - self.lower, self.upper - q]
+        for c, lo, hi in self.coupling:
+            cq = q @ c
+            gaps += [(cq - lo)[:, None], (hi - cq)[:, None]]
+        position = float(min(g.min() for g in gaps)) if q.size else np.inf
+        path = q if self.q_prev is None else np.vstack([self.q_prev, q])
+        speed = np.abs(np.diff(path, axis=0)) / self.Ts
+        speed = float((self.vmax - speed).min()) if speed.size else np.inf
+        self.q_prev = q[-1] if q.size else self.q_prev
+        self.position, self.speed = min(self.position, position), min(self.speed, speed)
+        return position, speed
+
+    @staticmethod
+    def document(position: float, speed: float) -> dict:
+        """``position_margin_rad``, ``speed_margin_rad_s`` and ``held`` (both ≥ 0)."""
+        return {"position_margin_rad": position, "speed_margin_rad_s": speed,
+                "held": bool(position >= 0 and speed >= 0)}
+
+    def result(self) -> dict:
+        return self.document(self.position, self.speed)
 
 
 class Recorder:
     """Turns each chunk's per-tick records into running statistics, the trace and the trace file."""
 
     def __init__(self, robot: Robot, settings, horizon: int, truth, anchor, trace_file,
-                 clock) -> None:
+                 clock, segmented: bool = False) -> None:
         self.robot, self.settings, self.N = robot, settings, horizon
         self.truth, self.anchor = truth, np.asarray(anchor, dtype=float)
         self.model, self.data, self.fid = robot.model, robot.create_data(), robot.ee_frame_id
@@ -126,6 +175,9 @@ class Recorder:
         self.outliers: list[float] = []
         self.reach = 1.0 / clock.sensor_rate if np.isfinite(clock.sensor_rate) else clock.dt
         self.excluded_ticks = 0
+        self.envelope = JointEnvelope(robot, settings.Ts)
+        #: per chunk, with ``segmented``: its ticks, max error and envelope (then its counts)
+        self.segments: list[dict] | None = [] if segmented else None
 
     def start_chunk(self, c0: int, c1: int) -> dict:
         """The records of ticks c0 … c1 − 1, preallocated (the loop writes rows): q (m, nq), the
@@ -168,6 +220,7 @@ class Recorder:
         self.parts["refresh"].add(log["refresh_ns"][s:])
         self.yardstick.add(np.array(log["yardstick_ns"], dtype=np.int64))
         self._horizon_errors(c0, log["horizons"], placed)
+        self._segment(c0, c1, ee - poi, log["q"])
         self._keep_refreshes(log["horizons"], log["samples"])
         ticks = np.arange(c0, c1)
         chunk = {"tick": ticks, "time": (ticks + 1) * self.settings.Ts, "ee": ee, "poi": poi,
@@ -176,6 +229,22 @@ class Recorder:
         self.trace.add(chunk)
         if self.file is not None:
             self.file.add(chunk)
+
+    def _segment(self, c0: int, c1: int, error: np.ndarray, q: np.ndarray) -> None:
+        """The chunk's envelope margins, and with ``segmented`` its record: every tick's
+        largest ‖p_ee − p_poi‖ [m] (NaN if no tick has truth) and its margins."""
+        margins = self.envelope.margins(q)
+        if self.segments is None:
+            return
+        norm = np.linalg.norm(error, axis=1)
+        finite = norm[np.isfinite(norm)]
+        self.segments.append({"ticks": (c0, c1),
+                              "max_error_m": float(finite.max()) if finite.size else np.nan,
+                              "envelope": JointEnvelope.document(*margins)})
+
+    def count(self, counts: dict) -> None:
+        """The event counts at the end of the last chunk (with ``segmented``)."""
+        self.segments[-1]["counts"] = dict(counts, saturated_ticks=self.saturated_ticks)
 
     def _without_outliers(self, c0: int, poi: np.ndarray) -> np.ndarray:
         """``poi`` with NaN on the ticks whose recorded truth touches a sample the controller
@@ -247,7 +316,21 @@ class Recorder:
             horizons=(ticks, points), samples=(stamps, samples),
             excluded={"outliers": len(self.outliers), "ticks": self.excluded_ticks,
                       "unmeasured": len(getattr(self.truth, "unmeasured", ()))},
+            envelope=self.envelope.result(), segments=tuple(self.segments or ()),
         )
+
+
+def event_counts(controller, plant) -> dict[str, int]:
+    """What the controller and the plant counted so far, flat: the predictor's and the gate's
+    counts, the MPC's fallbacks by kind (``fallback_plan`` …), its failed solves
+    (``qp_failures``) and the encoder readings a faulty plant held (``encoder_held_ticks``)."""
+    counts = {k: int(v) for k, v in controller.predictor_counts.items()}
+    stats = controller_stats(controller)
+    for kind, n in (stats.get("fallbacks") or {}).items():
+        counts[f"fallback_{kind}"] = int(n)
+    counts["qp_failures"] = int(sum((stats.get("failures") or {}).values()))
+    counts["encoder_held_ticks"] = int(getattr(plant, "held_ticks", 0))
+    return counts
 
 
 def controller_stats(controller) -> dict:

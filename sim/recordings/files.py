@@ -9,7 +9,7 @@ import numpy as np
 from sim.recordings.matfile import load_mat
 from sim.recordings.plausible import check_recording
 from sim.recordings.points import load_points, pick_point
-from sim.recordings.recorded import RecordedMotion, RecordingError, check_file
+from sim.recordings.recorded import RecordedMotion, RecordingError, check_file, check_rate
 from sim.recordings.text import read_csv, read_npz
 
 
@@ -69,5 +69,6 @@ def load_recording(path: str | Path, units: str | None = None, var: str | None =
                              "(use .csv, .npz or .mat)")
     if not np.any(np.all(np.isfinite(rec.z), axis=1)):
         raise RecordingError(f"{path}: no complete sample (all positions missing)")
+    check_rate(rec)
     check_recording(rec)
     return rec

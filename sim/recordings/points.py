@@ -21,7 +21,7 @@ import numpy as np
 
 from sim.recordings.matfile import load_mat
 from sim.recordings.plausible import check_recording
-from sim.recordings.recorded import RecordedMotion, RecordingError, check_file
+from sim.recordings.recorded import RecordedMotion, RecordingError, check_file, check_rate
 from sim.recordings.text import read_csv, read_npz
 
 
@@ -72,6 +72,7 @@ def load_points(path: str | Path, units: str | None = None, var: str | None = No
     """
     path = Path(path)
     wide = _wide(path, units, var, rows, cols, rate)
+    check_rate(wide)
     if wide.dim <= 3:
         recordings = [wide]
     else:

@@ -24,6 +24,9 @@ AXES = ("x", "y", "z")
 
 #: Times closer than this to a sample time count as that sample [s].
 SNAP = 1e-9
+#: Slowest sample rate of a heart-motion recording [Hz]: a beat (20–250 per minute) cannot be
+#: followed from fewer samples, and a slower file has its times in another unit than seconds.
+MIN_RATE = 1.0
 
 
 class RecordingError(ValueError):
@@ -115,6 +118,20 @@ def check_file(path: Path) -> None:
         raise RecordingError(f"{path}: no such file")
     if not path.is_file():
         raise RecordingError(f"{path}: not a file")
+
+
+def check_rate(rec: RecordedMotion) -> None:
+    """Raise :class:`RecordingError` when ``rec`` is sampled slower than :data:`MIN_RATE`,
+    naming the time unit that would make it plausible."""
+    rate = rec.sample_rate
+    if rate >= MIN_RATE:
+        return
+    unit = "ms" if rate * 1e3 >= MIN_RATE else "us"
+    raise RecordingError(
+        f"{rec.name}: one sample every {1 / rate:.3g} s ({rate:.3g} Hz) cannot follow a "
+        f"heartbeat (at least {MIN_RATE:g} Hz is needed); if the times are in "
+        f"{'milliseconds' if unit == 'ms' else 'microseconds'}, say so (a CSV header t_{unit}, "
+        f"a MATLAB variable time_units = '{unit}') or store an NPZ file's 't' in seconds")
 
 
 def fail(path: Path, problem: str, line: int | None = None) -> RecordingError:

@@ -12,6 +12,7 @@ comes from the injected ``numpy.random.Generator``.
 ``trilateration``      :func:`trilaterate`, 3-D positions from ranges
 ``white``              additive white Gaussian noise (:class:`WhiteNoise`, :func:`white`)
 ``events``             :class:`EchoOutliers`, :class:`Dropouts`
+``faults``             injected faults: a freeze, a jump, missing samples, stuck encoders
 ``playback``           delivery to the control rate: :class:`Upsample`, :data:`PLAYBACKS`
 ``ultrasound``         3-D ultrasound (Yuen et al.): 28 Hz, σ = 1.3 mm, 68 ms latency
 ``video``              stereo-endoscopic video tracking: 25 Hz, σ = 0.15 mm, one frame late

@@ -28,7 +28,7 @@ from .generate import ExportError, _generate_into
 STATUS_NAMES = (
     "solved", "nonfinite_input", "nonfinite_solution", "solver_error", "injected",
     "solved_inaccurate", "primal_infeasible", "dual_infeasible", "max_iter", "time_limit",
-    "non_convex", "interrupted", "unsolved", "box_max_iter", "backoff",
+    "non_convex", "interrupted", "unsolved", "box_max_iter", "backoff", "encoder_fault",
 )
 SOURCE_NAMES = ("qp", "plan", "lq", "brake", "zero")
 COUNT_NAMES = ("updates", "missing", "outliers_rejected", "gate_unlocked", "retracted",
@@ -62,6 +62,7 @@ def _public(dims: dict) -> type[ctypes.Structure]:
             ("x_hat", d * nx), ("u", d * nu), ("tau_command", d * nu), ("tau", d * nu),
             ("first", ll), ("points", d * (3 * span)), ("gate_floor", d),
             ("gate_locked", i), ("ready", i), ("age_sum", d), ("age_count", ll),
+            ("encoder_held", ll), ("encoder_reacquired", ll),
         )
 
     return Public
@@ -192,6 +193,12 @@ class CController:
     def gate_floor(self) -> float | None:
         floor = float(self._pub.gate_floor)
         return None if not np.isfinite(floor) else floor
+
+    @property
+    def encoder_counts(self) -> dict:
+        """The observer's events: ``held`` (readings held out), ``reacquired``."""
+        return {"held": int(self._pub.encoder_held),
+                "reacquired": int(self._pub.encoder_reacquired)}
 
     @property
     def mean_age(self) -> float:

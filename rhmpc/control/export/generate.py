@@ -307,6 +307,7 @@ def _controller_arrays(controller) -> dict[str, np.ndarray]:
     predict = np.hstack([controller.observer.predict_matrix, np.zeros((2 * n, 1))])
     return {"correct": np.asarray(controller.observer.correct_matrix), "predict": predict,
             "tau_max": controller.torque_limit, "q0": np.asarray(arm.q0, dtype=float),
+            "gate": np.asarray(controller.observer.gate, dtype=float),
             "y0": np.asarray(arm.y0, dtype=float)}
 
 
@@ -384,6 +385,8 @@ def _generate_into(controller, robot: str, out: Path) -> tuple[list[str], list[s
     notes = _notes(controller)
     subs = {"ROBOT": robot, "ROBOT_ID": "".join(c if c.isalnum() else "_" for c in robot),
             "VERSION": _version("rhmpc"), "OSQP_VERSION": _version("osqp"),
+            "REACQUIRE_TICKS": controller.observer.settings.reacquire_ticks,
+            "FAULT_TIMEOUT_TICKS": controller.observer.timeout_ticks,
             "INPUT_DELAY": controller.input_delay, "CANCEL": int(controller.cancellation
                                                                  is not None),
             **_mpc_subs(mpc), **_reference_subs(controller.reference),

@@ -113,8 +113,8 @@ def test_the_c_controller_is_the_python_one_tick_for_tick(variant):
 @needs_cc
 def test_faults_are_handled_alike():
     """Forced solver failures, missing and non-finite samples, an echo outlier of 5 mm, a 1e200
-    sample and encoder readings that are not finite: the same torques, counters and gate
-    events, and the torques stay finite."""
+    sample, encoder readings that are not finite and encoders stuck for 0.1 s: the same
+    torques, counters, gate and encoder events, and the torques stay finite."""
     python, c = pair({"reference.outlier_gate": 1e-3})
     base = bench_samples(python.mpc.arm.Ts, 3000)
 
@@ -135,7 +135,11 @@ def test_faults_are_handled_alike():
             python.mpc.force_failures(4)
             c.force_failures(4)
 
-    def reading(k, q):
+    stuck = {}
+
+    def reading(k, q):  # readings not finite, and encoders stuck for 0.1 s from tick 1600
+        if 1600 <= k < 1800:
+            return stuck.setdefault("q", q.copy())
         return np.full_like(q, np.nan) if k in (1200, 1201, 2500) else q
 
     err, differ = lockstep(python, c, 3000, samples, faults, reading)
@@ -144,6 +148,8 @@ def test_faults_are_handled_alike():
     counts = python.predictor_counts
     assert counts["missing"] >= 10 and counts["outliers_rejected"] >= 3
     assert python.stats.failures.get("injected") == 16
+    assert python.stats.failures.get("encoder_fault", 0) > 0  # the stuck encoders: braking
+    assert c.encoder_counts == python.encoder_counts and python.encoder_counts["held"] > 100
 
 
 @needs_cc

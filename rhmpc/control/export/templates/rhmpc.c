@@ -75,15 +75,54 @@ static void model_call(int (*f)(const double **, double **, long long *, double 
   f(arg, res, iw, w, 0);
 }
 
+/* The observer's innovation gate (JointObserver.correct): 1 if the reading is held out, then
+ * qf holds the prediction; 0 if it is fused (qf = q), maybe taken again after a hold. */
+static int held_out(rhmpc_t *ctl, const double q[RHMPC_NU], double qf[RHMPC_NU]) {
+  int past[RHMPC_NU], any = 0, finite = 1, moved = 1;
+  memcpy(qf, q, RHMPC_NU * sizeof(double));
+  if (ctl->grace > 0) { /* after a hold: fused whatever it says, while the filter settles */
+    ctl->grace -= 1;
+    return 0;
+  }
+  for (int j = 0; j < RHMPC_NU; j++) {
+    const double nu = (q[j] - rhmpc_q0[j]) - ctl->x_prior[j];
+    past[j] = !(fabs(nu) <= rhmpc_gate[j]); /* NaN is past */
+    any |= past[j];
+    finite &= isfinite(q[j]) != 0;
+    if (past[j] && !(q[j] != ctl->first[j])) moved = 0;
+  }
+  if (!any) {
+    ctl->held = 0;
+    return 0;
+  }
+  if (ctl->held >= RHMPC_REACQUIRE_TICKS && finite && moved) { /* alive: take it again */
+    int first_finite = 1;
+    for (int j = 0; j < RHMPC_NU; j++) first_finite &= isfinite(ctl->first[j]) != 0;
+    for (int j = 0; j < RHMPC_NU; j++) {
+      if (first_finite)
+        ctl->x_prior[RHMPC_NU + j] = (q[j] - ctl->first[j]) / ((double)ctl->held * RHMPC_TS);
+      ctl->x_prior[j] = q[j] - rhmpc_q0[j];
+    }
+    ctl->held = 0;
+    ctl->grace = RHMPC_REACQUIRE_TICKS;
+    ctl->pub.encoder_reacquired += 1;
+    return 0;
+  }
+  if (ctl->held == 0) memcpy(ctl->first, q, sizeof ctl->first);
+  ctl->held += 1;
+  ctl->pub.encoder_held += 1;
+  for (int j = 0; j < RHMPC_NU; j++) qf[j] = rhmpc_q0[j] + ctl->x_prior[j];
+  return 1;
+}
+
 int rhmpc_step(rhmpc_t *ctl, long long tick, const double q[RHMPC_NU], double tau[RHMPC_NU]) {
   long long t0 = now_ns();
   rhmpc_public_t *pub = &ctl->pub;
-  double *x = pub->x_hat, d[RHMPC_NEXTRA + 1] = {0}, acting[RHMPC_NU], sum = 0.0;
-  for (int i = 0; i < RHMPC_NU; i++) sum += q[i] * q[i];
-  if (isfinite(sum)) /* a reading that is not finite is not fused: x_hat = x_prior */
-    affine(rhmpc_correct, RHMPC_NX, ctl->x_prior, RHMPC_NX, q, RHMPC_NU, x);
-  else
+  double *x = pub->x_hat, d[RHMPC_NEXTRA + 1] = {0}, acting[RHMPC_NU], qf[RHMPC_NU], sum;
+  if (held_out(ctl, q, qf)) /* x_hat = x_prior */
     memcpy(x, ctl->x_prior, sizeof ctl->x_prior);
+  else
+    affine(rhmpc_correct, RHMPC_NX, ctl->x_prior, RHMPC_NX, qf, RHMPC_NU, x);
 #if RHMPC_OFFSET
   {
     const double *arg[1] = {x};
@@ -91,10 +130,12 @@ int rhmpc_step(rhmpc_t *ctl, long long tick, const double q[RHMPC_NU], double ta
     model_call(rhmpc_offset, arg, res);
   }
 #endif
-  int status = rhmpc_mpc_tick(ctl, x, rhmpc_horizon(ctl, tick), d, pub->u);
+  int status = ctl->held >= RHMPC_FAULT_TIMEOUT_TICKS
+                   ? rhmpc_mpc_brake(ctl, x, RHMPC_ENCODER_FAULT, pub->u)
+                   : rhmpc_mpc_tick(ctl, x, rhmpc_horizon(ctl, tick), d, pub->u);
 #if RHMPC_CANCEL
   {
-    const double *arg[3] = {q, x + RHMPC_NU, pub->u};
+    const double *arg[3] = {qf, x + RHMPC_NU, pub->u};
     double *res[1] = {pub->tau_command};
     model_call(rhmpc_cancel, arg, res);
   }
@@ -129,7 +170,7 @@ int rhmpc_step(rhmpc_t *ctl, long long tick, const double q[RHMPC_NU], double ta
 static const char *const status_names[RHMPC_N_STATUS] = {
     "solved", "nonfinite_input", "nonfinite_solution", "solver_error", "injected",
     "solved_inaccurate", "primal_infeasible", "dual_infeasible", "max_iter", "time_limit",
-    "non_convex", "interrupted", "unsolved", "box_max_iter", "backoff"};
+    "non_convex", "interrupted", "unsolved", "box_max_iter", "backoff", "encoder_fault"};
 static const char *const source_names[RHMPC_N_SOURCES] = {"qp", "plan", "lq", "brake", "zero"};
 static const char *const count_names[RHMPC_N_COUNTS] = {
     "updates", "missing", "outliers_rejected", "gate_unlocked", "retracted", "forecast_clamped",

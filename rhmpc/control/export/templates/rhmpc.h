@@ -72,6 +72,8 @@ extern "C" {
 #define RHMPC_MAX_ITER @MAX_ITER@
 #define RHMPC_TS @TS@ /* control period [s] */
 #define RHMPC_INPUT_DELAY @INPUT_DELAY@ /* ticks from a torque's computation to its action */
+#define RHMPC_REACQUIRE_TICKS @REACQUIRE_TICKS@ /* a held reading that moved is taken again */
+#define RHMPC_FAULT_TIMEOUT_TICKS @FAULT_TIMEOUT_TICKS@ /* a reading held this long: brake */
 
 /* The reference and its predictor (@PREDICTOR@, Tuna et al. 2013) */
 #define RHMPC_D 3                    /* coordinates of a sample */
@@ -109,6 +111,7 @@ enum rhmpc_status {
   RHMPC_UNSOLVED,
   RHMPC_BOX_CAPPED,                     /* level 2 reached its cap: the fallback at once */
   RHMPC_BACKOFF,                        /* levels 2-3 rest after failed ticks */
+  RHMPC_ENCODER_FAULT,                  /* the encoders' reading held out too long: brake */
   RHMPC_N_STATUS
 };
 #define RHMPC_BAD_STAMP (-1)
@@ -151,6 +154,8 @@ typedef struct {
   int gate_locked, ready;               /* the gate's and the predictor's states */
   double age_sum;                       /* sum of (tick Ts - stamp) over the forecasts [s] */
   long long age_count;
+  long long encoder_held;               /* encoder readings the observer held out */
+  long long encoder_reacquired;         /* held readings taken again once they moved */
 } rhmpc_public_t;
 
 /* The MPC's internal state (do not touch). */
@@ -212,6 +217,8 @@ typedef struct {
   rhmpc_mpc_t mpc;
   rhmpc_reference_t ref;
   double x_prior[RHMPC_NX];             /* the observer's prediction for the next step */
+  double first[RHMPC_NU];               /* the reading when it was first held */
+  int held, grace;                      /* ticks held in a row; ticks still fused ungated */
   double acting[RHMPC_INPUT_DELAY + 1][RHMPC_NU];  /* the MPC torques still to act (a ring) */
   int acting_next;
 } rhmpc_t;

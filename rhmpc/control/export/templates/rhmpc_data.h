@@ -84,11 +84,13 @@ extern const double rhmpc_y_plan[RHMPC_M];
  * (NX x (NX + NU + 1)) and the prediction [A, B, 0] (NX x (NX + NU + 1)), row-major. */
 extern const double rhmpc_correct[RHMPC_NX * (RHMPC_NX + RHMPC_NU + 1)];
 extern const double rhmpc_predict[RHMPC_NX * (RHMPC_NX + RHMPC_NU + 1)];
+extern const double rhmpc_gate[RHMPC_NU]; /* the observer's innovation gate per joint [rad] */
 
 /* The functions the controller's files share */
 void rhmpc_mpc_reset(rhmpc_t *ctl);
 int rhmpc_mpc_tick(rhmpc_t *ctl, const double x[RHMPC_NX], const double *ref, const double *d,
                    double tau[RHMPC_NU]);
+int rhmpc_mpc_brake(rhmpc_t *ctl, const double x[RHMPC_NX], int status, double tau[RHMPC_NU]);
 void rhmpc_reference_reset(rhmpc_t *ctl);
 int rhmpc_reference_refresh(rhmpc_t *ctl, long long tick, double stamp, const double *z);
 #endif

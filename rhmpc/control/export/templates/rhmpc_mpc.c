@@ -135,6 +135,17 @@ void rhmpc_force_failures(rhmpc_t *ctl, long long count) {
   if (count > 0) ctl->mpc.forced += count;
 }
 
+/* The torque that stops the joints within RHMPC_BRAKE_TICKS (fallback.brake_torque):
+ * tau = -M0 qdot / (RHMPC_BRAKE_TICKS Ts), clipped by the caller. */
+static void brake(const double qdot[RHMPC_NU], double tau[RHMPC_NU]) {
+  const double span = RHMPC_BRAKE_TICKS * RHMPC_TS;
+  for (int i = 0; i < RHMPC_NU; ++i) {
+    double s = 0.0;
+    for (int j = 0; j < RHMPC_NU; ++j) s += rhmpc_M0[i * RHMPC_NU + j] * qdot[j];
+    tau[i] = -s / span;
+  }
+}
+
 #if RHMPC_BRAKE
 /* The clipped LQ input if its whole clipped plan (slacks zero) keeps every constraint row
  * beyond the torque rows, else the torque that stops the joints within RHMPC_BRAKE_TICKS:
@@ -154,44 +165,25 @@ static int lq_or_brake(rhmpc_t *ctl, double tau[RHMPC_NU]) {
     for (int i = 0; i < RHMPC_NU; ++i) tau[i] = v[i] * rhmpc_u_max[i];
     return RHMPC_SOURCE_LQ;
   }
-  const double *qdot = ctl->mpc.p_ext + RHMPC_NX / 2;
-  const double span = RHMPC_BRAKE_TICKS * RHMPC_TS;
-  for (int i = 0; i < RHMPC_NU; ++i) {
-    double s = 0.0;
-    for (int j = 0; j < RHMPC_NU; ++j) s += rhmpc_M0[i * RHMPC_NU + j] * qdot[j];
-    tau[i] = -s / span;
-  }
+  brake(ctl->mpc.p_ext + RHMPC_NX / 2, tau);
   return RHMPC_SOURCE_BRAKE;
 }
 #endif
 
-/* The fallback chain: plan shifted to this tick -> clipped LQ input (or braking) -> zero. */
-static int fallback(rhmpc_t *ctl, int status, int inputs_finite, double tau[RHMPC_NU]) {
-  int source = -1;
+/* The bookkeeping of a step whose torque is not the QP's (RecedingHorizonMPC._fallen_back):
+ * the failure, the back-off, the plan's age, tau (zero if not finite, source -1: none)
+ * clipped into u_prev, the next warm start. */
+static int fallen_back(rhmpc_t *ctl, int status, int source, double tau[RHMPC_NU]) {
   ctl->pub.status = status;
   ctl->pub.failures[status] += 1;
-  if (status != RHMPC_NONFINITE_INPUT && status != RHMPC_INJECTED && status != RHMPC_BACKOFF) {
+  if (status != RHMPC_NONFINITE_INPUT && status != RHMPC_INJECTED && status != RHMPC_BACKOFF &&
+      status != RHMPC_ENCODER_FAULT) {
     /* back-off: after k consecutive failed ticks levels 2-3 rest min(2^k - 1, max) ticks */
     if (ctl->mpc.streak < 30) ctl->mpc.streak += 1;
     const long long rest = (1LL << ctl->mpc.streak) - 1;
     ctl->mpc.rest = rest < RHMPC_BACKOFF_MAX_TICKS ? rest : RHMPC_BACKOFF_MAX_TICKS;
   }
   ctl->mpc.plan_age += 1;
-  if (ctl->mpc.plan_valid && ctl->mpc.plan_age <= RHMPC_PLAN_FALLBACK_TICKS) {
-    int k = ctl->mpc.plan_age < RHMPC_N - 1 ? ctl->mpc.plan_age : RHMPC_N - 1;
-    int b = rhmpc_block_of_tick[k];
-    for (int i = 0; i < RHMPC_NU; ++i) tau[i] = ctl->mpc.plan[b * RHMPC_NU + i] * rhmpc_u_max[i];
-    source = RHMPC_SOURCE_PLAN;
-  }
-  if (source < 0 && inputs_finite) {
-#if RHMPC_BRAKE
-    source = lq_or_brake(ctl, tau);
-#else
-    matvec(rhmpc_gain, ctl->mpc.p_ext, RHMPC_NU, RHMPC_NPAR, tau);
-    for (int i = 0; i < RHMPC_NU; ++i) tau[i] += rhmpc_gain0[i];
-    source = RHMPC_SOURCE_LQ;
-#endif
-  }
   int finite = source >= 0;
   for (int i = 0; finite && i < RHMPC_NU; ++i) finite = isfinite(tau[i]);
   if (!finite) {
@@ -209,6 +201,37 @@ static int fallback(rhmpc_t *ctl, int status, int inputs_finite, double tau[RHMP
     ctl->mpc.ws_x_set = ctl->mpc.ws_y_set = 1;
   }
   return status;
+}
+
+/* The fallback chain: plan shifted to this tick -> clipped LQ input (or braking) -> zero. */
+static int fallback(rhmpc_t *ctl, int status, int inputs_finite, double tau[RHMPC_NU]) {
+  int source = -1;
+  const int k = ctl->mpc.plan_age + 1; /* the tick of the plan this one is */
+  if (ctl->mpc.plan_valid && k <= RHMPC_PLAN_FALLBACK_TICKS) {
+    int b = rhmpc_block_of_tick[k < RHMPC_N - 1 ? k : RHMPC_N - 1];
+    for (int i = 0; i < RHMPC_NU; ++i) tau[i] = ctl->mpc.plan[b * RHMPC_NU + i] * rhmpc_u_max[i];
+    source = RHMPC_SOURCE_PLAN;
+  }
+  if (source < 0 && inputs_finite) {
+#if RHMPC_BRAKE
+    source = lq_or_brake(ctl, tau);
+#else
+    matvec(rhmpc_gain, ctl->mpc.p_ext, RHMPC_NU, RHMPC_NPAR, tau);
+    for (int i = 0; i < RHMPC_NU; ++i) tau[i] += rhmpc_gain0[i];
+    source = RHMPC_SOURCE_LQ;
+#endif
+  }
+  return fallen_back(ctl, status, source, tau);
+}
+
+/* A step without the QP, for a fault of the state's source (RecedingHorizonMPC.brake): the
+ * torque that stops the joints of x within RHMPC_BRAKE_TICKS, counted as `status`. */
+int rhmpc_mpc_brake(rhmpc_t *ctl, const double x[RHMPC_NX], int status, double tau[RHMPC_NU]) {
+  ctl->pub.ticks += 1;
+  ctl->pub.level = ctl->pub.box_iterations = ctl->pub.iterations = 0;
+  ctl->mpc.last_screened = 0;
+  brake(x + RHMPC_NX / 2, tau);
+  return fallen_back(ctl, status, RHMPC_SOURCE_BRAKE, tau);
 }
 
 /* Every envelope row (rows NV..M) at [z; 0]: l <= A_env z <= u. The upper and lower row of a
