@@ -57,7 +57,7 @@ def drive(changes: dict) -> Iterator[tuple[int, object, list]]:
     refreshes = Refreshes(run.stream, run.truth.center, config.loop, run.clock)
     for tick in range(config.loop.ticks):
         arrivals = []
-        for z, stamp in refreshes.due(tick):
+        for z, stamp, _ in refreshes.due(tick):
             forecast = getattr(reference, "_forecast", None)
             arrivals.append((z, stamp, None if forecast is None else forecast.copy()))
             reference.refresh(tick, z, stamp)

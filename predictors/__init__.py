@@ -1,9 +1,20 @@
 """Heart-motion predictors, all on the `Predictor` contract of `predictors.base`.
 
-``make_predictor(name, dt, **settings)`` builds one by name; ``PREDICTORS`` lists them.
+``make_predictor(name, dt, **settings)`` builds one by name; ``PREDICTORS`` lists the online
+ones, ``LEARNED`` those fitted before the run (:mod:`predictors.learned`), and ``family(name)``
+tells which kind a name is.
 """
 
 from predictors.base import Predictor
-from predictors.registry import PREDICTORS, make_predictor, settings_for
+from predictors.registry import (
+    LEARNED,
+    PREDICTORS,
+    family,
+    make_predictor,
+    needs_torch,
+    predictor_names,
+    settings_for,
+)
 
-__all__ = ["PREDICTORS", "Predictor", "make_predictor", "settings_for"]
+__all__ = ["LEARNED", "PREDICTORS", "Predictor", "family", "make_predictor", "needs_torch",
+           "predictor_names", "settings_for"]

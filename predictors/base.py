@@ -4,8 +4,9 @@ A predictor is fed one sample per period ``dt`` and forecasts the next samples
 on the same grid::
 
     p.update(z)          # z: (d,) newest sample z_n; None / NaN / inf = missing
+    p.update(z, others)  # … and the other tracked points' samples at the same instant
     p.predict(steps)     # (steps, d): ẑ_{n+1} … ẑ_{n+steps}
-    p.reset()            # forget everything learnt
+    p.reset()            # forget everything learnt online
 
 Conventions (see ``../shared/DESIGN.md``):
 
@@ -31,14 +32,18 @@ Conventions (see ``../shared/DESIGN.md``):
   ``GUARD_MULTIPLE``; clipped forecasts are counted (``forecast_clamped``).  A
   non-finite forecast is replaced by the hold forecast, the learnt state is dropped and
   relearnt from the next samples (``forecast_nonfinite``).
-* ``forecast_error_rms``: the running RMS of past forecast misses at each lead.  Its
-  bookkeeping is deferred to :meth:`Predictor.score` (which the next ``update`` and the
-  property run first), so that a real-time loop can run it on a tick of its own.
+* ``forecast_error_rms``: the running RMS of past forecast misses at each lead, kept by
+  ``update`` (the sample scored) and ``predict`` (the forecast recorded).
+* Several tracked points.  ``others`` is an (P − 1, d) array of the other tracked points'
+  samples at the instant of ``z`` (a row with a NaN/inf component = that point missing), or
+  ``None`` when the stream has only the point of interest (POI).  A predictor that reads them
+  declares ``multi_point = True`` and finds them in ``self.others`` while it absorbs the
+  sample; the others ignore them.  A forecast issued after update n uses the samples ≤ n of
+  every point, never a later one.
 """
 
 from __future__ import annotations
 
-import functools
 import math
 from abc import ABC, abstractmethod
 from collections import Counter
@@ -48,7 +53,7 @@ import numpy as np
 
 from predictors.monitor import LeadErrorRMS, RangeEnvelope, infer_unit
 
-__all__ = ["Predictor", "PredictorSettings", "as_sample", "is_measured"]
+__all__ = ["Predictor", "PredictorSettings", "as_others", "as_sample", "is_measured"]
 
 
 @dataclass(frozen=True)
@@ -90,6 +95,23 @@ def as_sample(z, d: int | None) -> np.ndarray | None:
     return x if is_measured(x) else None
 
 
+def as_others(others, rows: int | None, d: int | None) -> np.ndarray | None:
+    """Return ``others`` as a float (rows, d) array (a copy) whose rows that are not
+    :func:`is_measured` are NaN, or ``None`` for ``None``.  A shape other than (rows, d) raises
+    ``ValueError`` (``rows``/``d`` ``None``: any)."""
+    if others is None:
+        return None
+    x = np.array(others, dtype=float)
+    if x.ndim != 2 or (rows is not None and x.shape[0] != rows) or (
+            d is not None and x.shape[1] != d):
+        want = f"({'P-1' if rows is None else rows}, {'d' if d is None else d})"
+        raise ValueError(f"others has shape {x.shape}, expected {want} (one row per other point)")
+    with np.errstate(over="ignore", invalid="ignore"):
+        bad = ~np.isfinite(np.einsum("ij,ij->i", x, x))
+    x[bad] = np.nan
+    return x
+
+
 class Predictor(ABC):
     """Base class: the `update`/`predict`/`reset` contract and its bookkeeping.
 
@@ -99,6 +121,11 @@ class Predictor(ABC):
     ``_update(z)``    absorb a valid sample z_n (a (d,) float array, not to be kept by reference),
     ``_missing()``    advance one period open-loop (no measurement),
     ``_predict(K)``   return (K, d) forecasts ẑ_{n+1..n+K}.
+
+    A ``multi_point`` subclass also reads ``self.others`` in ``_update`` and ``_missing``: the
+    other points' samples of the same instant, (P − 1, d) with NaN rows where missing (all NaN
+    when the caller passed none), P fixed by the first update (``self.points``, the stream's
+    layout: ``reset`` keeps it).
 
     The base class validates input, infers ``d`` and the unit, counts events, guards
     forecasts against divergence, scores them per lead, and serves the *hold* forecast
@@ -120,9 +147,13 @@ class Predictor(ABC):
         Number of ``update`` calls since the last reset (valid or missing).
     counts : collections.Counter
         ``updates``, ``missing``, and the reasons of numerical guards.
+    multi_point : bool
+        Class attribute: whether the predictor reads the other tracked points (``others``).
     """
 
     Settings: type[PredictorSettings] = PredictorSettings
+    #: whether ``update`` passes the other tracked points on (``self.others``)
+    multi_point = False
     #: G: forecasts are clipped to G recent ranges beyond the recent [min, max] [-]
     GUARD_MULTIPLE = 2.0
     #: window of the recent signal range [s]
@@ -144,28 +175,32 @@ class Predictor(ABC):
 
     # -- the contract -------------------------------------------------------------
     def reset(self) -> None:
-        """Forget all learnt state and counters (settings and ``dt`` are kept)."""
+        """Forget all state learnt online and the counters (settings, ``dt``, a model fitted
+        before the run and the number of tracked points are kept)."""
         self.n = 0
         self.counts: Counter[str] = Counter()
         self.ready = False
         self._last: np.ndarray | None = None
         self.d = None
+        # P, the tracked points with the POI (multi-point): the stream's layout, kept by reset
+        self.points: int | None = getattr(self, "points", None)
+        self.others: np.ndarray | None = None
         self.unit = getattr(self.settings, "unit", None)
         infer = hasattr(self.settings, "unit") and self.unit is None
         self._pending: list | None = [] if infer else None
-        self._deferred = None  # the last update's learning, if the subclass deferred it
-        self._unscored = None  # (n, z_n): the last sample, not yet scored against forecasts
-        self._unrecorded = None  # (n, forecast): the last forecast, not yet recorded
         self._allocated = False
         if self.settings.dim is not None:
             self._set_dim(int(self.settings.dim))
 
-    def update(self, z: np.ndarray | None) -> None:
-        """Absorb the newest sample z_n, shape (d,); ``None``/NaN/inf = missing."""
-        if self._deferred is not None:
-            self.learn()
-        self.score()
+    def update(self, z: np.ndarray | None, others: np.ndarray | None = None) -> None:
+        """Absorb the newest sample z_n, shape (d,); ``None``/NaN/inf = missing.
+
+        ``others``: the other tracked points' samples at the same instant, (P − 1, d), NaN rows
+        where missing, or ``None`` (read by a ``multi_point`` predictor only).
+        """
         x = as_sample(z, self.d)
+        if self.multi_point:
+            self._take_others(others, x)
         self.n += 1
         if x is None:
             self.counts["missing"] += 1
@@ -178,15 +213,13 @@ class Predictor(ABC):
         self.counts["updates"] += 1
         self._last = x
         self._envelope.tick(x)
-        self._unscored = (self.n, x)
+        self._errors.observe(self.n, x)
         self._absorb(x)
 
     def predict(self, steps: int) -> np.ndarray:
         """Forecast ẑ_{n+1} … ẑ_{n+steps} at this predictor's ``dt``; returns (steps, d)."""
         if int(steps) != steps or steps < 1:
             raise ValueError(f"steps must be a positive integer, got {steps!r}")
-        if self._deferred is not None:
-            self.learn()
         steps = int(steps)
         if not self.ready:
             if self._last is None:
@@ -194,7 +227,7 @@ class Predictor(ABC):
             out = np.repeat(self._last[None, :], steps, axis=0)
         else:
             out = self._guard(self._predict(steps))
-        self._unrecorded = (self.n, out.copy())  # the latest forecast of update n
+        self._errors.record(self.n, out)  # the latest forecast of update n (copied)
         return out
 
     def retract(self) -> bool:
@@ -206,42 +239,10 @@ class Predictor(ABC):
         (``counts["retracted"]``). Returns whether the predictor could; by default it cannot and
         nothing changes.
         """
-        if self._deferred is not None:
-            self.learn()
         if self._pending is not None or not self.ready or not self._retract():
             return False
         self.counts["retracted"] += 1
         return True
-
-    def learn(self) -> None:
-        """Finish the last :meth:`update`: a predictor may defer the learning of its weights
-        from the newest sample to here (:meth:`_defer`), so that a real-time loop can run it on
-        a tick of its own; :meth:`update`, :meth:`predict` and :meth:`retract` call it first,
-        so that the forecasts are the same whether or not the caller does."""
-        deferred, self._deferred = self._deferred, None
-        if deferred is not None:
-            deferred()
-            self._update_bounds()  # the guard's range, from the same update
-
-    def score(self) -> None:
-        """The forecast-error bookkeeping of the last :meth:`update` and :meth:`predict`: the
-        newest sample scored against the forecasts that reach it, then the newest forecast
-        recorded (:class:`predictors.monitor.LeadErrorRMS`). Deferred so that a real-time loop
-        can run it on a tick of its own; :meth:`update` and :attr:`forecast_error_rms` run it
-        first, so that the errors are the same whether or not the caller does."""
-        unscored, self._unscored = self._unscored, None
-        if unscored is not None:
-            self._errors.observe(*unscored)
-        unrecorded, self._unrecorded = self._unrecorded, None
-        if unrecorded is not None:
-            self._errors.record(*unrecorded)
-
-    def _defer(self, step, *args) -> None:
-        """Run ``step(*args)`` at the next :meth:`learn` (the arguments must stay valid until
-        then: no sample is pushed before it runs); a step still pending runs first."""
-        if self._deferred is not None:
-            self.learn()
-        self._deferred = functools.partial(step, *args)
 
     @property
     def forecast_error_rms(self) -> np.ndarray:
@@ -252,7 +253,6 @@ class Predictor(ABC):
         """
         if self.d is None:
             return np.full(0, np.nan)
-        self.score()
         return self._errors.rms()
 
     # -- for subclasses -----------------------------------------------------------
@@ -261,28 +261,50 @@ class Predictor(ABC):
         self._envelope = RangeEnvelope(d, round(self.RANGE_SECONDS / 8 / self.dt))
         self._errors = LeadErrorRMS(d, self.ERROR_MEMORY_SECONDS / self.dt)
         self._bounds_n = -1
-        if self._pending is None:
-            self._allocate(d)
+        self._allocate_when_known()
+
+    def _allocate_when_known(self) -> None:
+        """Allocate once d, the unit and (multi-point) the number of points are known."""
+        if (not self._allocated and self.d is not None and self._pending is None
+                and (self.points is not None or not self.multi_point)):
+            self._allocate(self.d)
             self._allocated = True
+
+    def _take_others(self, others, x: np.ndarray | None) -> None:
+        """``self.others`` of this update, (P − 1, d) with NaN rows where missing (counted in
+        ``others_missing``); P is fixed by the first update that has a dimension (a later
+        mismatch raises ``ValueError``)."""
+        if self.d is None and x is None:
+            return  # nothing to forecast yet
+        d = self.d if self.d is not None else x.shape[0]
+        if self.points is None:
+            self.points = 1 + (0 if others is None else as_others(others, None, d).shape[0])
+        rows = self.points - 1
+        if others is None:
+            self.others = np.full((rows, d), np.nan)
+        else:
+            self.others = as_others(others, rows, d)
+        lost = int(np.isnan(self.others[:, 0]).sum())
+        if lost:
+            self.counts["others_missing"] += lost
+        self._allocate_when_known()
 
     def _absorb(self, x: np.ndarray | None) -> None:
         """Pass a sample (``None`` = missing) on, or keep it until the unit is known."""
         if self._pending is None:
             self._update(x) if x is not None else self._missing()
             return
-        self._pending.append((self.n, x))
-        if sum(v is not None for _, v in self._pending) >= max(
+        self._pending.append((self.n, x, self.others))
+        if sum(v is not None for _, v, _ in self._pending) >= max(
             8, round(self.SCALE_SECONDS / self.dt)
         ):
             pending, self._pending = self._pending, None
-            self.unit = infer_unit(np.array([v for _, v in pending if v is not None]))
-            self._allocate(self.d)
-            self._allocated = True
-            n = self.n
-            for self.n, v in pending:  # replay on the subclass's own clock
-                self.learn()  # each replayed sample's deferred learning before the next
+            self.unit = infer_unit(np.array([v for _, v, _ in pending if v is not None]))
+            self._allocate_when_known()
+            n, others = self.n, self.others
+            for self.n, v, self.others in pending:  # replay on the subclass's own clock
                 self._update(v) if v is not None else self._missing()
-            self.n = n
+            self.n, self.others = n, others
 
     def _guard(self, f: np.ndarray) -> np.ndarray:
         """Clip a forecast to the recent range (``forecast_clamped``); relearn if non-finite.
@@ -311,8 +333,7 @@ class Predictor(ABC):
         return np.repeat(self._last[None, :], steps, axis=0)
 
     def _update_bounds(self) -> None:
-        """The guard's range [lo − G·r, hi + G·r] of the recent samples, once per update: with
-        a deferred learning (:meth:`learn`), else at the forecast."""
+        """The guard's range [lo − G·r, hi + G·r] of the recent samples, once per update."""
         if self.d is None or self._bounds_n == self.n or not self._envelope.known:
             return
         lo, hi = self._envelope.envelope()

@@ -105,7 +105,6 @@ class DelayLinePredictor(Predictor):
     def _push(self, z: np.ndarray) -> None:
         """Push a measurement; after a gap its forecast repairs the fills (TappedDelayLine),
         counted in ``counts["repaired"]``."""
-        self.learn()  # the deferred learning reads the rows this push moves
         line = self.line
         fills = line.fills and self.ready
         if line.push(z, expected=self._next(line.buf[: self.settings.order]) if fills else None):
@@ -113,7 +112,6 @@ class DelayLinePredictor(Predictor):
 
     def _missing(self) -> None:
         # run open-loop: the model's own one-step forecast fills the gap
-        self.learn()
         line = self.line
         fill = self._next(line.buf[: self.settings.order]) if self.ready else line.buf[0].copy()
         line.push(fill, measured=False)

@@ -240,7 +240,7 @@ class DualFourierEKF(FourierPredictor):
             self._rest.push(z)
         if not self.ready:
             self._start(z)
-            self._follow_later(learn=False)
+            self._follow(learn=False)
             return
         if s.init_seconds is not None:
             self._window.push(z)
@@ -251,7 +251,7 @@ class DualFourierEKF(FourierPredictor):
                 self.counts["lock_refit"] += 1
         elif self._rest is not None:
             self._rest.reject()
-        self._follow_later(learn=accepted)
+        self._follow(learn=accepted)
 
     def _rate(self) -> float:
         return float(self.x[self.iwc])

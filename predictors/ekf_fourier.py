@@ -327,7 +327,7 @@ class FourierEKF(FourierPredictor):
             rest.push(z)
         if not self.ready:
             self._collect(z)
-            self._follow_later(learn=False)
+            self._follow(learn=False)
             return
         self._window.push(z)
         self._time_update()
@@ -336,7 +336,7 @@ class FourierEKF(FourierPredictor):
             self._keep_lock()
         elif rest is not None:
             rest.reject()
-        self._follow_later(learn=accepted)
+        self._follow(learn=accepted)
 
     def _rate(self) -> float:
         return float(self.x[self.iw])

@@ -181,18 +181,11 @@ class FourierPredictor(Predictor):
         if self._rest is not None and self.ready:
             self._rest.follow(self._model, self._rate(), self._hph, learn)
 
-    def _follow_later(self, learn: bool) -> None:
-        """:meth:`_follow`, deferred to :meth:`~predictors.base.Predictor.learn` (a real-time
-        loop's learning tick; ``update`` and ``predict`` run it first, so the forecasts are the
-        same)."""
-        if self._rest is not None:
-            self._defer(self._follow, learn)
-
     def _rest_missing(self) -> None:
         """A missing sample reaches the non-periodic part (after the model has advanced)."""
         if self._rest is not None:
             self._rest.push(np.nan)
-            self._follow_later(learn=False)
+            self._follow(learn=False)
 
     def _predict(self, steps: int) -> np.ndarray:
         if self._rest is None:

@@ -1,22 +1,40 @@
-"""Predictors by name: ``make_predictor(name, dt, **settings)``."""
+"""Predictors by name: ``make_predictor(name, dt, **settings)``.
+
+``PREDICTORS`` holds the online predictors (ready to run once built), ``LEARNED`` the ones
+fitted before the run (``fit`` or a ``model`` file, :mod:`predictors.learned`); the neural
+ones are imported only when one is built, and need PyTorch (``pip install "rhmpc[learned]"``).
+``family(name)`` tells the kind of each: ``baseline``, ``adaptive``, ``multi-point``,
+``learned`` or ``combination``.
+"""
 
 from __future__ import annotations
 
 import dataclasses
-from typing import Any
+import importlib
+from typing import Any, NamedTuple
 
 from predictors.ar import AutoregressivePredictor
 from predictors.base import Predictor
+from predictors.combination import Combination
 from predictors.ekf_dual_fourier import DualFourierEKF
 from predictors.ekf_fourier import FourierEKF
 from predictors.hold import Hold
 from predictors.last_cycle import LastCycle
+from predictors.learned.ridge import RidgeSettings
+from predictors.learned.settings import (
+    GRU_PRESETS,
+    LSTM_PRESETS,
+    TCN_PRESETS,
+    NetworkSettings,
+)
 from predictors.oracle import Oracle
 from predictors.rls_generalized import GeneralizedRLS
 from predictors.rls_one_step import OneStepRLS
+from predictors.rls_spatiotemporal import SpatioTemporalRLS
 from predictors.wflc import WFLC
 
-__all__ = ["PREDICTORS", "make_predictor", "settings_for"]
+__all__ = ["LEARNED", "PREDICTORS", "family", "make_predictor", "needs_torch", "predictor_names",
+           "settings_for"]
 
 #: name → (class, default overrides of its settings dataclass)
 PREDICTORS: dict[str, tuple[type[Predictor], dict[str, Any]]] = {
@@ -28,21 +46,74 @@ PREDICTORS: dict[str, tuple[type[Predictor], dict[str, Any]]] = {
     "fading-ar": (AutoregressivePredictor, {"forgetting_factor": 0.985}),
     "last-cycle": (LastCycle, {}),
     "wflc": (WFLC, {}),
+    "st-rls": (SpatioTemporalRLS, {}),
+    "combination": (Combination, {}),
     "hold": (Hold, {}),
     "exact": (Oracle, {}),
 }
 
+
+class Learned(NamedTuple):
+    """Where a predictor fitted before the run lives, and its settings (no import needed)."""
+
+    module: str
+    cls: str
+    settings: type
+    presets: dict | None = None
+
+
+_NEURAL = "predictors.learned.neural"
+#: name → the predictors fitted before the run
+LEARNED: dict[str, Learned] = {
+    "ridge": Learned("predictors.learned.ridge", "Ridge", RidgeSettings),
+    "st-ridge": Learned("predictors.learned.ridge", "MultiPointRidge", RidgeSettings),
+    "lstm": Learned(_NEURAL, "LSTMPredictor", NetworkSettings, LSTM_PRESETS),
+    "st-lstm": Learned(_NEURAL, "MultiPointLSTM", NetworkSettings, LSTM_PRESETS),
+    "gru": Learned(_NEURAL, "GRUPredictor", NetworkSettings, GRU_PRESETS),
+    "st-gru": Learned(_NEURAL, "MultiPointGRU", NetworkSettings, GRU_PRESETS),
+    "tcn": Learned(_NEURAL, "TCNPredictor", NetworkSettings, TCN_PRESETS),
+    "st-tcn": Learned(_NEURAL, "MultiPointTCN", NetworkSettings, TCN_PRESETS),
+}
+
 #: the parameter set used when ``params`` is not given
 DEFAULT_PARAMS = {"ekf": "adaptive", "dual-ekf": "adaptive", "wflc": "adaptive",
-                  "last-cycle": "anchored"}
+                  "last-cycle": "anchored", "lstm": "zhang2022", "st-lstm": "zhang2022",
+                  "gru": "li2022", "st-gru": "li2022", "tcn": "xu2026", "st-tcn": "xu2026"}
+
+_FAMILIES = {"hold": "baseline", "last-cycle": "baseline", "exact": "baseline",
+             "st-rls": "multi-point", "combination": "combination"}
+
+
+def predictor_names() -> tuple[str, ...]:
+    """Every name ``make_predictor`` knows: the online ones, then those fitted before the run."""
+    return (*PREDICTORS, *LEARNED)
+
+
+def family(name: str) -> str:
+    """``baseline``, ``adaptive``, ``multi-point``, ``learned`` or ``combination``."""
+    if name not in PREDICTORS and name not in LEARNED:
+        raise ValueError(f"unknown predictor {name!r}; valid: {', '.join(predictor_names())}")
+    return "learned" if name in LEARNED else _FAMILIES.get(name, "adaptive")
+
+
+def needs_torch(name: str) -> bool:
+    """Whether predictor ``name`` needs PyTorch (the ``learned`` extra)."""
+    return name in LEARNED and LEARNED[name].module == _NEURAL
+
+
+def _settings_class(name: str) -> tuple[type, dict | None, dict]:
+    if name in PREDICTORS:
+        cls, overrides = PREDICTORS[name]
+        return cls.Settings, getattr(cls, "PRESETS", None), overrides
+    if name in LEARNED:
+        entry = LEARNED[name]
+        return entry.settings, entry.presets, {}
+    raise ValueError(f"unknown predictor {name!r}; valid: {', '.join(predictor_names())}")
 
 
 def settings_for(name: str, **settings: Any):
     """The frozen settings dataclass ``make_predictor(name, …)`` would use."""
-    if name not in PREDICTORS:
-        raise ValueError(f"unknown predictor {name!r}; valid: {', '.join(PREDICTORS)}")
-    cls, overrides = PREDICTORS[name]
-    presets = getattr(cls, "PRESETS", None)
+    settings_cls, presets, overrides = _settings_class(name)
     params = settings.pop("params", DEFAULT_PARAMS.get(name))
     if params is not None:
         if not presets:
@@ -52,7 +123,7 @@ def settings_for(name: str, **settings: Any):
         base = presets[params]
     else:
         base = None
-    valid = [f.name for f in dataclasses.fields(cls.Settings)]
+    valid = [f.name for f in dataclasses.fields(settings_cls)]
     unknown = sorted(set(settings) - set(valid))
     if unknown:
         valid += ["params"] if presets else []
@@ -60,7 +131,20 @@ def settings_for(name: str, **settings: Any):
             f"unknown setting(s) {', '.join(unknown)} for {name!r}; valid: {', '.join(valid)}"
         )
     merged = {**overrides, **settings}
-    return cls.Settings(**merged) if base is None else dataclasses.replace(base, **merged)
+    return settings_cls(**merged) if base is None else dataclasses.replace(base, **merged)
+
+
+def _learned_class(name: str) -> type[Predictor]:
+    """The class of a predictor fitted before the run, imported now."""
+    entry = LEARNED[name]
+    try:
+        module = importlib.import_module(entry.module)
+    except ModuleNotFoundError as exc:
+        if exc.name != "torch" and not str(exc.name).startswith("torch."):
+            raise
+        raise ImportError(f"predictor {name!r} needs PyTorch: pip install \"rhmpc[learned]\""
+                          ) from None
+    return getattr(module, entry.cls)
 
 
 def make_predictor(name: str, dt: float, **settings: Any) -> Predictor:
@@ -70,8 +154,14 @@ def make_predictor(name: str, dt: float, **settings: Any) -> Predictor:
     parameter sets takes ``params=`` one of its class's ``PRESETS`` (``ekf``: ``"adaptive"``,
     the default, ``"tuna2013-hrv"``, ``"tuna2013"``, ``"yuen2008"``; ``dual-ekf``: ``"adaptive"``,
     ``"fitted"``, ``"richa2010"``; ``wflc``: ``"adaptive"``, ``"pll"``, ``"yuen2009"``;
-    ``last-cycle``: ``"anchored"``, ``"yuen2008"``); other settings override it.
+    ``last-cycle``: ``"anchored"``, ``"yuen2008"``; ``lstm``, ``st-lstm``: ``"zhang2022"``, the
+    default, ``"xu2026"``; ``gru``, ``st-gru``: ``"li2022"``; ``tcn``, ``st-tcn``:
+    ``"xu2026"``); other settings override it.  ``combination`` builds its ``members`` by
+    name.  A predictor of ``LEARNED`` must be fitted (``fit``) or given a ``model`` file before
+    it runs; a neural one without PyTorch raises ``ImportError`` naming the extra to install.
     """
-    cls = PREDICTORS[name][0] if name in PREDICTORS else None
     s = settings_for(name, **settings)
+    if name == "combination":
+        return Combination(dt, s, [make_predictor(member, dt) for member in s.members])
+    cls = PREDICTORS[name][0] if name in PREDICTORS else _learned_class(name)
     return cls(dt, s)

@@ -78,9 +78,9 @@ class GeneralizedRLS(DelayLinePredictor):
         if line.real_run >= N + M:
             past, recent = line.buf[M : M + N], line.buf[:M]
             if s.correlated:
-                self._defer(self.rls.update, past.reshape(1, -1), recent.reshape(1, -1))
+                self.rls.update(past.reshape(1, -1), recent.reshape(1, -1))
             else:
-                self._defer(self.rls.update, past.T, recent.T)
+                self.rls.update(past.T, recent.T)
         self.ready = line.filled >= N
 
     def _block(self, past: np.ndarray) -> np.ndarray:
@@ -116,7 +116,6 @@ class GeneralizedRLS(DelayLinePredictor):
     @property
     def weights(self) -> np.ndarray:
         """V, rows [ẑ_{n+1}; …; ẑ_{n+M}]: (M·d, N·d) correlated, (d, M, N) independent."""
-        self.learn()
         W = self.rls.W
         if self.settings.correlated:
             d, M = self.d, self.settings.points

@@ -122,7 +122,7 @@ class OneStepRLS(DelayLinePredictor):
     def _update(self, z: np.ndarray) -> None:
         self._push(z)
         if self.line.real_run > self.settings.order:
-            self._defer(self.rls.update, *self._xy(self.line.buf))
+            self.rls.update(*self._xy(self.line.buf))
         self.ready = self.line.filled >= self.settings.order
 
     def _next(self, past: np.ndarray) -> np.ndarray:
@@ -151,7 +151,6 @@ class OneStepRLS(DelayLinePredictor):
     @property
     def weights(self) -> np.ndarray:
         """[A_1 … A_N] as (d, N·d) (correlated) or per-axis taps (d, N) (independent)."""
-        self.learn()
         if self.settings.correlated:
             return self.rls.W[0].copy()
         return self.rls.W[:, 0, :].copy()

@@ -343,10 +343,10 @@ class WFLC(FourierPredictor):
             self._filled += 1
             if self._filled >= self.n_init:
                 self._initialise()
-            self._follow_later(learn=False)
+            self._follow(learn=False)
             return
         self._adapt(z)
-        self._follow_later(learn=True)
+        self._follow(learn=True)
 
     def _rate(self) -> float:
         return self.omega0 / self.dt

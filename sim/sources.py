@@ -15,10 +15,11 @@ import numpy as np
 from sim.heart.motion import MotionSource
 from sim.heart.scenarios import SPECS, Scenario, make_scenario
 from sim.recordings.files import load_recording
+from sim.recordings.points import load_points, pick_point
 from sim.recordings.recorded import RecordedMotion
 from sim.recordings.text import export_source
 
-__all__ = ["HeartSource", "Shifted", "export_scenario", "heart_source"]
+__all__ = ["HeartSource", "Shifted", "export_scenario", "heart_source", "read_points"]
 
 
 class Shifted:
@@ -45,12 +46,16 @@ class HeartSource:
         How long it is defined [s].
     origin : Scenario or RecordedMotion
         The scenario (its sensor rate, phase track) or the recording (its samples).
+    others : ndarray (n, P − 1, d) or None
+        In a recording of several tracked points, the other points on the POI's samples
+        (``origin.t``) [m]; None otherwise.
     """
 
     motion: MotionSource
     label: str
     duration: float
     origin: Scenario | RecordedMotion
+    others: np.ndarray | None = None
 
 
 def heart_source(scenario: str, rng: np.random.Generator, *, data: str | None = None,
@@ -64,9 +69,10 @@ def heart_source(scenario: str, rng: np.random.Generator, *, data: str | None = 
     PhysioNet record whose beat annotations drive the heart phase.
     """
     if data is not None:
-        recording = load_recording(data, **(data_read or {}))
+        recording, others = read_points(data, data_read or {})
         motion = Shifted(recording, recording.t[0]) if recording.t[0] != 0 else recording
-        return HeartSource(motion, f"file:{Path(data).name}", recording.duration, recording)
+        return HeartSource(motion, f"file:{Path(data).name}", recording.duration, recording,
+                           others)
     overrides: dict = {"record": rr} if rr else {}
     spec = SPECS.get(scenario)  # an unknown name: make_scenario says so
     if spec is not None and needed > spec.duration:
@@ -74,6 +80,19 @@ def heart_source(scenario: str, rng: np.random.Generator, *, data: str | None = 
     made = make_scenario(scenario, rng=rng, **overrides)
     label = made.name + (f"+rr:{Path(rr).name}" if rr else "")
     return HeartSource(made.source, label, made.duration, made)
+
+
+def read_points(path: str, read: dict) -> tuple[RecordedMotion, np.ndarray | None]:
+    """The POI's recording (``read["point"]``, from 1, in a file of several tracked points)
+    and the other points on its samples, (n, P − 1, d) [m], or None for a file of one."""
+    read = dict(read)
+    point = read.pop("point", None)
+    if point is None:
+        return load_recording(path, **read), None
+    points = load_points(path, **read)
+    recording = pick_point(path, points, point)
+    rest = [p.z for i, p in enumerate(points) if i != point - 1]
+    return recording, (np.stack(rest, axis=1) if rest else None)
 
 
 def export_scenario(scenario: Scenario | str, path: str | Path, duration: float | None = None,

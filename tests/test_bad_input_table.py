@@ -230,7 +230,7 @@ CASES = [
      2, r"rhmpc simulate: error: rep\.csv, line 52: time 1\.96 is not after the previous time "
         r"1\.96 \(times must increase strictly\)$"),
     ("sim-data-too-short", [*DATA_SIM, "mm.csv", "--duration", "60"], {"mm.csv": csv()},
-     2, r"rhmpc simulate: error: mm\.csv: the recording lasts 5\.96 s, the run asks for 60\.00 s "
+     2, r"rhmpc simulate: error: mm\.csv: the recording lasts 6\.00 s, the run asks for 60\.00 s "
         r"\(set --duration\)$"),
     ("sim-data-and-scenario", ["simulate", "--data", "mm.csv", "--scenario", "fixed-a2-top"],
      {"mm.csv": csv()},

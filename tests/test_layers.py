@@ -124,6 +124,7 @@ def violations(root: Path) -> list[str]:
     return found
 
 
+@pytest.mark.slow
 def test_no_import_points_up_a_layer() -> None:
     assert violations(REPO) == []
 

@@ -21,6 +21,7 @@ from rhmpc.cli.simulate import (
 from rhmpc.errors import UsageError
 from rhmpc.experiment import RunConfig, run_experiment
 from rhmpc.studies.paper import COLUMNS
+from sim.recordings.shipped import resolve_all
 
 #: Tuna et al. Table I/II column order (fixed rate: animals 1, 2; varying: 1, 3 top; 1, 3 side).
 TABLE_SCENARIOS = COLUMNS
@@ -71,6 +72,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--points", metavar="all|N[,N...]", help="files of several tracked points "
                    "(CSV t,x1,y1,z1,x2,...; NPZ (n, P, 3); MAT 3P x n): one column per point "
                    "(all) or per chosen point, numbered from 1")
+    p.add_argument("--poi", type=int, metavar="N", help="with --data: only point N (numbered "
+                   "from 1) of files of several tracked points, the others given to the "
+                   "predictors that read them (the same as --points N)")
     p.add_argument("--seeds", type=int, default=1,
                    help="runs per cell, seeds SEED..SEED+S-1 (default 1); with 2 or more, each "
                    "cell is the mean and the 95%% interval of the mean (Student t)")
@@ -157,9 +161,10 @@ def _scenario_columns(args: argparse.Namespace) -> list[tuple[str, dict]]:
     """(column, settings) of each scenario."""
     from sim.heart import SCENARIOS, SPECS
 
-    if args.points is not None or any(getattr(args, k, None) is not None
-                                      for k in READ_OPTIONS):
-        raise UsageError("--points, --var, --rows, --cols, --rate and --units need --data FILE")
+    if args.points is not None or args.poi is not None or any(
+            getattr(args, k, None) is not None for k in READ_OPTIONS):
+        raise UsageError("--points, --poi, --var, --rows, --cols, --rate and --units need "
+                         "--data FILE")
     names = args.scenarios or ",".join(TABLE_SCENARIOS)
     scenarios = [s.strip() for s in names.split(",") if s.strip()]
     unknown = [s for s in scenarios if s not in SCENARIOS]
@@ -175,9 +180,13 @@ def _data_columns(args: argparse.Namespace) -> list[tuple[str, dict]]:
 
     if args.scenarios is not None or args.full or args.paper:
         raise UsageError("--scenarios, --full and --paper apply to scenarios, not --data")
-    read = recording_options(args)
     try:
-        files = file_points(args.data, parse_points(args.points), read)
+        data, read, poi = resolve_all(args.data, recording_options(args))
+        if args.poi is not None and args.points is not None:
+            raise UsageError("give --poi N or --points, not both")
+        if args.points is None and (args.poi or poi) is not None:
+            args.points = str(args.poi or poi)
+        files = file_points(data, parse_points(args.points), read)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     sensor = {} if args.sensor else {"sensor": "recorded"}

@@ -232,15 +232,12 @@ def _table_lines(config: RunConfig, table: str, flat: dict[str, Any],
     docs: dict[str, tuple[str, str]] = {}
     defaults: dict[str, Any] = {}
     if table == "predictor_settings":
-        from predictors import PREDICTORS, settings_for
+        from predictors import settings_for
 
-        cls = PREDICTORS[config.predictor][0].Settings
+        made = settings_for(config.predictor)
+        cls = type(made)
         docs = attribute_docs(cls)
-        try:
-            made = settings_for(config.predictor)
-            defaults = {g.name: getattr(made, g.name) for g in dataclasses.fields(made)}
-        except ValueError:
-            defaults = {}
+        defaults = {g.name: getattr(made, g.name) for g in dataclasses.fields(made)}
         lines.append(f"# {config.predictor}: {cls.__module__}.{cls.__qualname__}")
     for key, value in flat.items():
         if key.startswith(prefix):

@@ -470,7 +470,7 @@ def _export(args: argparse.Namespace) -> int:
         n = len(stream)
     else:
         export_source(target.source, out, target.duration, rate, target.start, comment)
-        n = round(target.duration * rate) + 1
+        n = max(1, round(target.duration * rate))
     print(f"wrote {n} samples of {target.name} to {out}")
     return 0
 

@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 from predictors import PREDICTORS
+from rhmpc.cli import COMMANDS
 from rhmpc.cli.simulate import add_recording_options, recording_options
 from rhmpc.errors import UsageError
 from rhmpc.studies.prediction import (
@@ -24,17 +25,18 @@ from rhmpc.studies.prediction import (
     run_study,
 )
 from rhmpc.studies.recordings import DEFAULT_LEADS, WARMUP_FRACTION, WARMUP_SECONDS
+from sim.recordings.shipped import resolve_all
 
 #: Options of the synthetic studies (``--study``) and of the recordings (``--data``).
 STUDY_OPTIONS = ("trials", "noise_mm", "delta_bpm", "records", "scenarios")
-DATA_OPTIONS = ("points", "leads", "warmup", "latency", "var", "rows", "cols", "data_rate",
-                "units")
+DATA_OPTIONS = ("points", "poi", "split", "train", "save_models", "leads", "warmup", "latency",
+                "var", "rows", "cols", "data_rate", "units")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "predict",
-        help="prediction studies: noise, heart-rate step, RR-driven, horizon",
+        help=COMMANDS["predict"],
         description="Monte Carlo prediction studies (--study). noise / hr-step / rr reproduce "
         "Yuen et al. 2008 §III-D (Tuna et al. 2013 Figs 12-13) on mitral-1d at 28 Hz: 30 s to "
         "initialise, then the RMS one-sample-ahead error against the truth over 10 s. horizon: "
@@ -43,7 +45,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         "own rate: RMS and max forecast error at leads 1..L samples and at the lead the closed "
         "loop needs, ceil((period + latency + 25 ms horizon) / period), with hold and "
         "last-cycle as baselines; the first max(10 s, 25 % of the file) are a warm-up, not "
-        "scored.",
+        "scored. With --poi N the predictors of point N that read the other tracked points "
+        "get them; --split TRAIN:END runs the literature's protocol: the learned predictors "
+        "are fitted on the frames before TRAIN (or on --train FILE...), every other one runs "
+        "from the first frame, and the forecasts issued in [TRAIN, END) are scored.",
     )
     what = p.add_mutually_exclusive_group()
     what.add_argument("--study", choices=STUDIES, help="which synthetic study")
@@ -56,11 +61,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="Monte Carlo trials per value (default 100; horizon 10)",
     )
     p.add_argument("--jobs", type=int, default=1, help="worker processes (default 1; 0 = all CPUs)")
-    p.add_argument("--seed", type=int, default=0, help="study seed (default 0)")
+    p.add_argument("--seed", type=int, default=0, help="study seed; with --data, the seed of the "
+                   "learned predictors' training (default 0)")
     p.add_argument(
         "--predictors",
         default=None,
-        help="comma-separated predictor names (default: the study's set)",
+        help="comma-separated predictor names (default: the study's set; with --data every "
+        "predictor, the learned ones with --split or --train)",
     )
     p.add_argument(
         "--noise-mm", default=None, help="σ_R values for --study noise [mm], e.g. 0.3,1,3"
@@ -83,6 +90,18 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--points", metavar="all|N[,N...]", help="files of several tracked points "
                    "(CSV t,x1,y1,z1,x2,...; NPZ (n, P, 3); MAT 3P x n): score every point and "
                    "their mean (all), or the points numbered from 1")
+    g.add_argument("--poi", type=int, metavar="N", help="the point of interest (numbered from 1) "
+                   "of a file of several tracked points: it is scored, and the predictors that "
+                   "read the other points (st-rls, st-ridge, st-lstm, ...) get their past")
+    g.add_argument("--split", metavar="TRAIN:END", help="the literature's protocol: fit the "
+                   "learned predictors on the frames before TRAIN, score the forecasts issued "
+                   "in [TRAIN, END) (frames from 0), e.g. 600:700")
+    g.add_argument("--train", nargs="+", metavar="FILE", help="fit the learned predictors on "
+                   "these recordings (same rate and layout; --poi applies) instead of the "
+                   "frames before TRAIN")
+    g.add_argument("--save-models", type=Path, metavar="DIR", help="write the fitted models "
+                   "to this folder (LABEL.NAME.npz or .pt), to load later with the predictor "
+                   "setting model=FILE")
     g.add_argument("--leads", type=int, help=f"score leads 1..L samples (default {DEFAULT_LEADS})")
     g.add_argument("--warmup", type=float, metavar="S", help="seconds not scored at the start "
                    f"(default: the longer of {WARMUP_SECONDS:g} s and "
@@ -208,35 +227,74 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def parse_split(text: str | None) -> tuple[int, int] | None:
+    """``--split TRAIN:END`` as (TRAIN, END) frames, or ``None``."""
+    if text is None:
+        return None
+    try:
+        train, end = (int(v) for v in text.split(":"))
+    except ValueError:
+        raise UsageError(f"--split {text!r}: expected TRAIN:END frames, e.g. 600:700") from None
+    if not 0 < train < end:
+        raise UsageError(f"--split {text!r}: expected 0 < TRAIN < END")
+    return train, end
+
+
 def _run_data(args: argparse.Namespace) -> int:
     """``--data``: every predictor on the recordings, open loop (rhmpc.studies.recordings)."""
+    from functools import partial
+
     from rhmpc.studies.recordings import (
         OpenLoopSettings,
         format_report,
         load_tracks,
         parse_points,
         plot_leads,
+        poi_tracks,
         run_open_loop,
+        training_series,
     )
 
     names = tuple(n.strip() for n in (args.predictors or "").split(",") if n.strip())
+    if args.poi is not None and args.points is not None:
+        raise UsageError("--poi N scores point N with the others as side information; "
+                         "--points scores points one by one: choose one")
+    if args.poi is not None and args.poi < 1:
+        raise UsageError(f"--poi {args.poi}: points are numbered from 1")
+    split = parse_split(args.split)
     try:
         settings = OpenLoopSettings(
             predictors=names, leads=DEFAULT_LEADS if args.leads is None else args.leads,
-            warmup=args.warmup, latency=0.0 if args.latency is None else args.latency)
-        tracks = load_tracks(args.data, parse_points(args.points), recording_options(args))
+            warmup=args.warmup, latency=0.0 if args.latency is None else args.latency,
+            split=split, seed=args.seed)
+        files, read, poi = resolve_all(args.data, recording_options(args))
+        if args.poi is not None or (poi is not None and args.points is None):
+            args.poi = poi if args.poi is None else args.poi
+            tracks = poi_tracks(files, args.poi, read)
+        else:
+            tracks = load_tracks(files, parse_points(args.points), read)
+        train = None
+        if args.train:
+            missing = [f for f in args.train if not Path(f).is_file()]
+            if missing:
+                raise UsageError(f"--train {missing[0]}: no such file")
+            train = partial(training_series, args.train, args.poi, read)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     if args.plot and not Path(args.plot).resolve().parent.is_dir():
         raise UsageError(f"--plot {args.plot}: no such directory")
+    if args.save_models is not None:
+        if split is None and train is None:
+            raise UsageError("--save-models needs --split TRAIN:END or --train FILE...")
+        args.save_models.mkdir(parents=True, exist_ok=True)
 
     def progress(what: str) -> None:
         if not args.json:
             print(f"rhmpc predict: {what}", file=sys.stderr, flush=True)
 
     try:
-        doc = run_open_loop(tracks, settings, progress)
-    except ValueError as exc:
+        doc = run_open_loop(tracks, settings, progress, train, args.save_models)
+    except (ValueError, ImportError) as exc:
         raise UsageError(str(exc)) from None
     _publish(args, doc, plot_leads, format_report)
     return 0

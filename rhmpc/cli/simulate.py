@@ -69,6 +69,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     src.add_argument("--data", metavar="FILE", help="a recording (CSV t,x,y,z in s and mm, NPZ, "
                      "or MATLAB .mat v5/v7.3); runs the whole recording unless --duration")
     add_recording_options(p)
+    p.add_argument("--poi", type=int, metavar="N", help="the point of interest (numbered from 1) "
+                   "of a --data file of several tracked points; a predictor that reads the "
+                   "other points (st-rls, st-ridge, st-lstm, ...) gets their samples")
+    p.add_argument("--train", nargs="+", metavar="FILE", help="recordings a predictor fitted "
+                   "before the run (ridge, lstm, ...) learns from, beside the run's own "
+                   "settling window (same rate and layout; --poi applies)")
     p.add_argument("--seed", type=int, help="seed of every random draw (default 0)")
     p.add_argument("--controller", choices=("python", "c"), default="python",
                    help="'c': the compiled controller of `rhmpc export` in the loop (built once, "
@@ -169,19 +175,30 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
     if getattr(args, "ground_truth", None):
         changes["ground_truth"] = args.ground_truth
     if getattr(args, "data", None):
-        if not Path(args.data).is_file():
-            raise UsageError(f"{args.data}: no such file")
+        from sim.recordings.shipped import SHIPPED, resolve
+
+        data, read, poi = resolve(args.data, recording_options(args))
+        if not Path(data).is_file():
+            raise UsageError(f"{args.data}: no such file (nor a shipped recording: "
+                             f"{', '.join(SHIPPED)})")
         if args.sensor is None:
             changes["sensor"] = "recorded"
-        changes["data_read"] = recording_options(args)
+        changes["data"], changes["data_read"] = data, read
+        poi = args.poi if getattr(args, "poi", None) is not None else poi
+        if poi is not None:
+            changes["data_read"]["point"] = poi
         if args.duration is None and not args.config:  # default: the whole recording
             from sim.recordings import load_recording
 
-            changes["loop.duration"] = load_recording(args.data,
-                                                      **changes["data_read"]).duration
+            changes["loop.duration"] = load_recording(data, **changes["data_read"]).duration
     elif any(getattr(args, k, None) is not None
-             for k in ("var", "rows", "cols", "data_rate", "units")):
-        raise UsageError("--var, --rows, --cols, --rate and --units need --data FILE")
+             for k in ("var", "rows", "cols", "data_rate", "units", "poi")):
+        raise UsageError("--var, --rows, --cols, --rate, --units and --poi need --data FILE")
+    if getattr(args, "train", None):
+        missing = [f for f in args.train if not Path(f).is_file()]
+        if missing:
+            raise UsageError(f"--train: no such file {', '.join(missing)}")
+        changes["train"] = tuple(args.train)
     if args.duration is not None:
         changes["loop.duration"] = args.duration
     if args.settling is not None:

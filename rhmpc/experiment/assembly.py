@@ -20,11 +20,18 @@ from rhmpc.control.observer import JointObserver
 from rhmpc.control.reference import ExactReference, PredictedReference
 from rhmpc.errors import UsageError
 from rhmpc.experiment.config import RunConfig
+from rhmpc.experiment.fitting import fit_predictor
 from robots import LinearArm, Robot, linearize, load_robot
 from sim.loop.clock import PredictorClock, clock_for_rate, predictor_clock
 from sim.loop.faults import FaultyEncoders, FaultySamples, split_faults
 from sim.loop.metrics import HeartRateScore
-from sim.loop.streams import SampleSource, SourceTruth, UpsampledSamples, sensor_samples
+from sim.loop.streams import (
+    PointsAt,
+    SampleSource,
+    SourceTruth,
+    UpsampledSamples,
+    sensor_samples,
+)
 from sim.plant import make_plant
 from sim.sensors import DEFAULT_PLAYBACK, SampleStream, Sensor, playback, sensor_from_name
 from sim.sources import HeartSource, heart_source
@@ -65,6 +72,8 @@ class Run:
         When the reference refreshes: every ``downsample`` ticks, or on each raw sample.
     faults : tuple
         The injected faults (:mod:`sim.sensors.faults`), already in ``stream`` and ``plant``.
+    points : PointsAt or None
+        The other tracked points of a recording, which the loop gives with each sample.
     """
 
     config: RunConfig
@@ -79,6 +88,7 @@ class Run:
     duration: float
     clock: PredictorClock
     faults: tuple = ()
+    points: PointsAt | None = None
 
     @property
     def reference(self):
@@ -233,11 +243,13 @@ def motion_anchor(config: RunConfig, arm: LinearArm) -> np.ndarray:
     return arm.y0 + offset if config.loop.placement == "centred" else offset
 
 
-def build_run(config: RunConfig, implementation: str = "python") -> Run:
+def build_run(config: RunConfig, implementation: str = "python", progress=None) -> Run:
     """Build robot, plant, controller, heart motion and sensor stream for ``config``.
 
     ``implementation="c"``: the controller is the C one of ``rhmpc export`` (built once and
-    cached, :func:`rhmpc.control.export.controller_in_c`) instead of the Python one.
+    cached, :func:`rhmpc.control.export.controller_in_c`) instead of the Python one. A
+    predictor that learns before the run is fitted (:mod:`rhmpc.experiment.fitting`);
+    ``progress(text)`` hears how that goes.
     """
     loop, N = config.loop, config.mpc.horizon
     heart_rng, sensor_rng = np.random.default_rng(config.seed).spawn(2)
@@ -277,5 +289,9 @@ def build_run(config: RunConfig, implementation: str = "python") -> Run:
             plant = FaultyEncoders(plant, encoder_faults, loop.Ts)
         except ValueError as exc:
             raise UsageError(f"[faults] {exc}") from None
-    return Run(config, robot, arm, plant, controller, truth, anchor, stream, heart.label,
-               loop.duration, clock, config.faults.faults)
+    points = None if heart.others is None else PointsAt(heart.origin.t - heart.origin.t[0],
+                                                        heart.others)
+    run = Run(config, robot, arm, plant, controller, truth, anchor, stream, heart.label,
+              loop.duration, clock, config.faults.faults, points)
+    fit_predictor(run, progress)
+    return run

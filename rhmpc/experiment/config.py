@@ -36,10 +36,10 @@ GROUND_TRUTHS: tuple[str, ...] = ("recorded", "true")
 TOP_LEVEL: dict[str, object] = {
     "robot": str, "scenario": str, "data": (str, None), "data_read": dict, "rr": (str, None),
     "sensor": str, "sensor_settings": dict, "predictor": str, "predictor_settings": dict,
-    "predictor_params": dict, "ground_truth": str, "seed": int,
+    "predictor_params": dict, "ground_truth": str, "seed": int, "train": tuple,
 }
 KIND_NAMES = {str: "a name (a string)", (str, None): "a string or absent", dict: "a table",
-              int: "an integer"}
+              int: "an integer", tuple: "a list of file names"}
 
 
 def _is(value: Any, kind: object) -> bool:
@@ -67,7 +67,11 @@ class RunConfig:
         A recording (CSV/NPZ/MAT, see ``sim.recordings``) to track instead of a scenario.
     data_read : dict
         How to read it: ``load_recording`` keywords ``var``, ``rows``, ``cols``, ``rate`` [Hz],
-        ``units`` (MATLAB files).
+        ``units`` (MATLAB files), and ``point`` (from 1), the POI in a file of several tracked
+        points (the others go to a multi-point predictor).
+    train : tuple of str
+        Recordings a predictor fitted before the run learns from (read as ``data``, the POI
+        first), besides the run's own samples of its settling window.
     rr : str | None
         PhysioNet record whose beat annotations drive the heart phase: a shipped name
         (``mitdb-100``, ``1003``) or a path without extension.
@@ -108,6 +112,7 @@ class RunConfig:
     scenario: str = "fixed-a2-top"
     data: str | None = None
     data_read: dict = field(default_factory=dict)
+    train: tuple[str, ...] = ()
     rr: str | None = None
     sensor: str = "sonomicrometry"
     sensor_settings: dict = field(default_factory=dict)
@@ -126,10 +131,14 @@ class RunConfig:
     faults: FaultSettings = field(default_factory=FaultSettings)
 
     def __post_init__(self) -> None:
+        if isinstance(self.train, list):  # as TOML reads it
+            object.__setattr__(self, "train", tuple(self.train))
         for name, kind in TOP_LEVEL.items():
             value = getattr(self, name)
             if not _is(value, kind):
                 raise ValueError(f"{name} must be {KIND_NAMES[kind]}, got {value!r}")
+        if not all(isinstance(f, str) for f in self.train):
+            raise ValueError(f"train must be a list of file names, got {self.train!r}")
         if not 0 <= self.seed < 2**63:
             raise ValueError(f"seed must be an integer in 0 … 2⁶³ − 1, got {self.seed!r}")
         if self.ground_truth not in GROUND_TRUTHS:
@@ -144,12 +153,14 @@ class RunConfig:
         out: dict[str, Any] = {}
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
-            if f.name == "faults" and value == FaultSettings():
+            if (f.name == "faults" and value == FaultSettings()) or (f.name == "train"
+                                                                       and not value):
                 continue
             if f.name in SECTIONS:
                 out[f.name] = to_dict(value)
             elif value is not None:
-                out[f.name] = dict(value) if isinstance(value, dict) else value
+                out[f.name] = (dict(value) if isinstance(value, dict)
+                               else list(value) if isinstance(value, tuple) else value)
         return out
 
     @classmethod

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import platform
 import resource
+import sys
 import time
 import warnings
 from importlib.metadata import PackageNotFoundError, version
@@ -43,7 +44,7 @@ def run_experiment(config: RunConfig, progress: bool = False, trace: str | None 
     ``"c"`` (:func:`~rhmpc.experiment.assembly.build_run`). With faults (``config.faults``),
     the document's ``faults`` holds one record per fault (:func:`sim.loop.faults.fault_report`).
     """
-    run = build_run(config, implementation)
+    run = build_run(config, implementation, _say if progress else None)
     loop = config.loop
     marks = fault_marks(run.faults, config.faults.after_s, loop.Ts, loop.duration)
     bar, callback = _progress_bar(config, run.label) if progress else (None, None)
@@ -53,13 +54,18 @@ def run_experiment(config: RunConfig, progress: bool = False, trace: str | None 
             run.plant, run.controller, run.truth, run.stream, config.loop, run.clock,
             anchor=run.anchor, robot=run.robot, progress=callback, trace_file=trace,
             yardstick=None if gain_tick is None else _gain_tick(run.controller, gain_tick),
-            marks=marks,
+            marks=marks, points=run.points,
         )
     finally:
         if bar is not None:
             bar.close()
     wall = time.perf_counter() - wall
     return result, document(config, run, result, wall, implementation, gain_tick is not None)
+
+
+def _say(text: str) -> None:
+    """A progress line on stderr (what fitting a predictor before the run is doing)."""
+    print(f"rhmpc: {text}", file=sys.stderr, flush=True)
 
 
 def _progress_bar(config: RunConfig, label: str):

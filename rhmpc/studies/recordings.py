@@ -25,24 +25,46 @@ Events
 Several points
     A file of several tracked points (:mod:`sim.recordings.points`) is scored point by point;
     with ``mean`` the study adds a row per predictor and lead whose errors are the means over
-    the points.
+    the points. With a point of interest (``poi``), that point is scored and every predictor
+    that reads the other points (``multi_point``) is fed them, sample by sample: at update n
+    the samples ≤ n of every point.
+The literature's protocol (``split`` = (TRAIN, END))
+    The predictors fitted before the run (``predictors.LEARNED``) are fitted on the samples
+    before TRAIN (all points, the POI first), or on other recordings (``train``); every other
+    predictor runs causally from the first sample; the forecasts issued in [TRAIN, END) are
+    scored, at leads 1 … L. Without ``split`` the warm-up rule holds, and the fitted
+    predictors take part only when there are training recordings.
+Families
+    Each row names its predictor's family (``predictors.family``): ``baseline``,
+    ``adaptive``, ``multi-point``, ``learned`` or ``combination``. The combination weighs the
+    other scored predictors that are not baselines, per lead, by their recent errors; in the
+    literature's protocol it scores nothing before TRAIN, where the fitted members' misses are
+    not forecast errors, and starts from their validation errors.
 """
 
 from __future__ import annotations
 
+import copy
 import math
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from predictors import PREDICTORS, make_predictor
+from predictors import LEARNED, family, make_predictor, needs_torch, predictor_names
+from predictors.combination import Combination, CombinationSettings
 from sim.recordings import RecordedMotion, load_points
 from sim.recordings.points import pick_point
 
 #: The baselines, first in every table: the newest sample held, and the previous cycle.
 BASELINES: tuple[str, ...] = ("hold", "last-cycle")
+#: The fitted predictors scored by default when there is something to fit them on: the ridge
+#: regressions, and the literature's networks where PyTorch is installed.
+FITTED_DEFAULTS: tuple[str, ...] = ("ridge", "st-ridge", "lstm", "st-lstm", "tcn", "st-tcn")
+#: The order of the families in the tables.
+FAMILIES: tuple[str, ...] = ("baseline", "adaptive", "multi-point", "learned", "combination")
 #: Leads 1 … DEFAULT_LEADS are scored [samples].
 DEFAULT_LEADS = 5
 #: Warm-up: the longer of this many seconds [s] …
@@ -54,9 +76,22 @@ REJECTED = ("innovation_rejected", "outliers_rejected")
 REPAIRED = ("forecast_clamped", "forecast_nonfinite", "retracted")
 
 
-def default_predictors() -> tuple[str, ...]:
-    """The baselines, then every other registered predictor (the oracle ``exact`` left out)."""
-    return (*BASELINES, *(n for n in PREDICTORS if n not in BASELINES and n != "exact"))
+def torch_available() -> bool:
+    """Whether PyTorch, the ``learned`` extra of the neural predictors, is installed."""
+    import importlib.util
+
+    return importlib.util.find_spec("torch") is not None
+
+
+def default_predictors(fitted: bool = False) -> tuple[str, ...]:
+    """The baselines, then every other online predictor (the oracle ``exact`` left out), the
+    fitted ones of :data:`FITTED_DEFAULTS` if ``fitted`` (the neural ones where PyTorch is
+    installed), by family, and the combination last."""
+    names = [n for n in predictor_names() if n != "exact" and n not in LEARNED]
+    if fitted:
+        names += [n for n in FITTED_DEFAULTS if not needs_torch(n) or torch_available()]
+    names = [*BASELINES, *(n for n in names if n not in BASELINES)]
+    return tuple(sorted(names, key=lambda n: FAMILIES.index(family(n))))
 
 
 @dataclass(frozen=True)
@@ -66,17 +101,24 @@ class OpenLoopSettings:
     Attributes
     ----------
     predictors : tuple[str, ...]
-        Predictor names (``predictors.PREDICTORS``, not ``exact``); empty = every one.
+        Predictor names (``predictors.predictor_names()``, not ``exact``); empty = the
+        defaults (:func:`default_predictors`).
     leads : int
         L: leads 1 … L are scored, and the closed loop's lead K_loop [samples].
     warmup : float | None
         Seconds excluded from the start of each recording [s]; ``None`` = the longer of
-        WARMUP_SECONDS and WARMUP_FRACTION of the recording.
+        WARMUP_SECONDS and WARMUP_FRACTION of the recording. Not with ``split``.
     latency : float
         λ, the delivery latency of the samples to the controller [s] (0: each sample is
         available at its timestamp).
     horizon : float
         N·Ts, the MPC's reach beyond the newest tick [s] (50 × 0.5 ms).
+    split : tuple[int, int] | None
+        (TRAIN, END) [samples, from 0, on the recording's grid]: the fitted predictors are
+        fitted on the samples before TRAIN (or on the training recordings), the forecasts
+        issued in [TRAIN, END) are scored. ``None``: the warm-up rule.
+    seed : int
+        Seed of the fitted predictors' random draws (their ``seed`` setting).
     """
 
     predictors: tuple[str, ...] = ()
@@ -84,11 +126,13 @@ class OpenLoopSettings:
     warmup: float | None = None
     latency: float = 0.0
     horizon: float = 0.025
+    split: tuple[int, int] | None = None
+    seed: int = 0
 
     def __post_init__(self) -> None:
-        bad = [n for n in self.predictors if n not in PREDICTORS or n == "exact"]
+        bad = [n for n in self.predictors if n not in predictor_names() or n == "exact"]
         if bad:
-            valid = ", ".join(default_predictors())
+            valid = ", ".join(default_predictors(fitted=True))
             raise ValueError(f"unknown predictor(s) {', '.join(bad)}; valid: {valid}")
         if isinstance(self.leads, bool) or not isinstance(self.leads, int) or self.leads < 1:
             raise ValueError(f"leads must be an integer >= 1, got {self.leads!r}")
@@ -98,10 +142,25 @@ class OpenLoopSettings:
             raise ValueError(f"the latency must be >= 0 [s], got {self.latency!r}")
         if not (math.isfinite(self.horizon) and self.horizon > 0):
             raise ValueError(f"the horizon must be > 0 [s], got {self.horizon!r}")
+        if self.split is not None:
+            train, end = self.split
+            if not 0 < train < end:
+                raise ValueError(f"the split TRAIN:END must have 0 < TRAIN < END [samples], "
+                                 f"got {train}:{end}")
+            if self.warmup is not None:
+                raise ValueError("a split scores from TRAIN: it takes no warm-up")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
+            raise ValueError(f"the seed must be an integer >= 0, got {self.seed!r}")
 
-    @property
-    def names(self) -> tuple[str, ...]:
-        return self.predictors or default_predictors()
+    def names(self, fitted: bool = False) -> tuple[str, ...]:
+        """The predictors to score; ``fitted``: whether there is something to fit on."""
+        if not self.predictors:
+            return default_predictors(fitted)
+        fit_needed = [n for n in self.predictors if n in LEARNED]
+        if fit_needed and not fitted:
+            raise ValueError(f"{', '.join(fit_needed)} must be fitted before the run: give a "
+                             "split TRAIN:END or training recordings")
+        return self.predictors
 
 
 @dataclass(frozen=True)
@@ -120,6 +179,9 @@ class Track:
         The file it came from.
     point : int | None
         Its point number in a file of several (from 1).
+    others : ndarray, shape (n, P − 1, d), or None
+        The other tracked points' positions at the same times [m] (NaN = missing), when ``z``
+        is the point of interest of a file of several.
     """
 
     label: str
@@ -127,12 +189,19 @@ class Track:
     z: np.ndarray
     file: str = ""
     point: int | None = None
+    others: np.ndarray | None = None
 
     @property
     def period(self) -> float:
         """Δ, the median sample interval [s] (to 12 significant digits: timestamps written in
         decimal make 1/25 s 0.03999999999999915)."""
         return _digits(float(np.median(np.diff(self.t))))
+
+    def points(self) -> np.ndarray:
+        """(n, P, d): the POI in row 0, then the other points."""
+        if self.others is None:
+            return self.z[:, None, :]
+        return np.concatenate([self.z[:, None, :], self.others], axis=1)
 
 
 def _digits(x: float) -> float:
@@ -192,6 +261,38 @@ def load_tracks(files: Sequence[str], points, read: dict) -> list[Track | list[T
     return out
 
 
+def poi_tracks(files: Sequence[str], poi: int, read: dict) -> list[Track]:
+    """Per file, the track of its point ``poi`` (from 1) with the other points as ``others``
+    (file order); a one-point file has ``poi`` 1 and no others."""
+    out = []
+    for label, f in zip(_labels(files), files, strict=True):
+        recordings = load_points(f, **read)
+        rec = pick_point(f, recordings, poi)
+        rest = [r.z for k, r in enumerate(recordings, 1) if k != poi]
+        others = np.stack(rest, axis=1) if rest else None
+        several = len(recordings) > 1
+        out.append(Track(f"{label}:p{poi}" if several else label, rec.t, rec.z, f,
+                         poi if several else None, others))
+    return out
+
+
+def training_series(files: Sequence[str], poi: int | None, read: dict,
+                    period: float) -> list[np.ndarray]:
+    """The recordings to fit on (``--train``): each (T, P, d) [m] on its grid, POI (point
+    ``poi``, or the only one) first. Their sample period must be ``period`` [s] (1 %): a model
+    runs at the period it was fitted at."""
+    out = []
+    for track in poi_tracks(files, 1 if poi is None else poi, read):
+        if not math.isclose(track.period, period, rel_tol=0.01):
+            raise ValueError(f"{track.file}: sampled every {1e3 * track.period:.4g} ms, the "
+                             f"scored recording every {1e3 * period:.4g} ms: fit on "
+                             "recordings of the same rate")
+        wide = track.points().reshape(track.t.size, -1)
+        _, grid = on_grid(track.t, wide, track.period)
+        out.append(grid.reshape(grid.shape[0], -1, track.z.shape[1]))
+    return out
+
+
 def loop_lead(period: float, latency: float, horizon: float) -> int:
     """K_loop = ⌈(Δ + λ + N·Ts)/Δ⌉ [samples] (module docstring), robust to rounding."""
     return max(1, math.ceil((period + latency + horizon) / period - 1e-9))
@@ -218,19 +319,28 @@ def on_grid(t: np.ndarray, z: np.ndarray, period: float) -> tuple[np.ndarray, np
     return t[0] + period * np.arange(grid.shape[0]), grid
 
 
-def forecast_errors(name: str, z: np.ndarray, period: float, first: int,
-                    depth: int) -> tuple[np.ndarray, dict[str, int]]:
-    """e_k(n) [m] for origins n ≥ ``first`` and leads k = 1 … ``depth``, and the events.
+def forecast_errors(predictor, z: np.ndarray, period: float, first: int, depth: int,
+                    others: np.ndarray | None = None, end: int | None = None
+                    ) -> tuple[np.ndarray, dict[str, int]]:
+    """e_k(n) [m] for origins n in [``first``, ``end``) and leads k = 1 … ``depth``, and the
+    events.
 
-    Returns an array (len(z), depth) — NaN where not scored (before ``first``, past the end,
-    or a missing target) — and the predictor's counters accumulated from ``first`` on.
+    ``predictor``: a name (built with ``make_predictor(name, dt=period)``) or a predictor;
+    ``others`` (n, P − 1, d): the other points, fed to a ``multi_point`` one. Returns an array
+    (len(z), depth) — NaN where not scored (outside [first, end), past the end, or a missing
+    target) — and the predictor's counters accumulated from ``first`` on (``update_us``: its
+    mean update-and-forecast time over the scored origins [µs]).
     """
-    predictor = make_predictor(name, dt=period)
+    if isinstance(predictor, str):
+        predictor = make_predictor(predictor, dt=period)
     n_total = z.shape[0]
+    end = n_total if end is None else min(end, n_total)
     forecasts = np.full((n_total, depth, z.shape[1]), np.nan)
     before: dict[str, int] = {}
-    for n in range(n_total):
-        predictor.update(z[n])
+    spent, timed = 0.0, 0
+    for n in range(end):
+        tic = time.perf_counter()
+        predictor.update(z[n], None if others is None else others[n])
         if n < first:
             continue
         if n == first:
@@ -239,73 +349,155 @@ def forecast_errors(name: str, z: np.ndarray, period: float, first: int,
             forecasts[n] = predictor.predict(depth)
         except RuntimeError:  # no valid sample yet
             continue
+        spent += time.perf_counter() - tic
+        timed += 1
     errors = np.full((n_total, depth), np.nan)
     for k in range(1, depth + 1):
         miss = forecasts[: n_total - k, k - 1] - z[k:]
         errors[: n_total - k, k - 1] = np.linalg.norm(miss, axis=1)
     counts = {key: int(v - before.get(key, 0)) for key, v in predictor.counts.items()}
-    return errors, {k: v for k, v in counts.items() if v}
+    counts = {k: v for k, v in counts.items() if v}
+    if timed:
+        counts["update_us"] = round(1e6 * spent / timed)
+    return errors, counts
 
 
 def _rows(track: Track, name: str, errors: np.ndarray, counts: dict, leads: list[int],
           k_loop: int) -> list[dict]:
     """One result row per lead of predictor ``name`` on ``track``."""
     period = track.period
+    counts = dict(counts)
+    fit_s, update_us = counts.pop("fit_s", None), counts.pop("update_us", None)
     out = []
     for k in leads:
         e = errors[:, k - 1]
         e = 1e3 * e[np.isfinite(e)]
         out.append({
-            "source": track.label, "predictor": name, "lead_samples": k,
-            "lead_s": _digits(k * period),
+            "source": track.label, "predictor": name, "family": family(name),
+            "lead_samples": k, "lead_s": _digits(k * period),
             "rms_error_mm": float(np.sqrt(np.mean(e**2))) if e.size else None,
             "max_error_mm": float(np.max(e)) if e.size else None,
             "scored": int(e.size), "loop_lead": k == k_loop,
             "rejected": sum(counts.get(c, 0) for c in REJECTED),
             "repaired": sum(counts.get(c, 0) for c in REPAIRED),
             "missing": counts.get("missing", 0), "counts": counts,
+            "fit_s": fit_s, "update_us": update_us,
         })
     return out
 
 
+def _origins(track: Track, t: np.ndarray, settings: OpenLoopSettings, last_lead: int
+             ) -> tuple[int, int, float]:
+    """(first, end, warm-up [s]): the origins scored, [first, end) on the grid ``t``."""
+    duration = float(track.t[-1] - track.t[0])
+    if settings.split is not None:
+        first, end = settings.split
+        if first + 1 >= t.size:
+            raise ValueError(f"{track.label}: holds {t.size} samples; the split starts "
+                             f"scoring at sample {first}")
+        return first, min(end, t.size), float(t[first] - t[0])
+    warmup = warmup_seconds(duration, settings.warmup)
+    first = int(np.searchsorted(t, t[0] + warmup - 1e-9))
+    if first + last_lead >= t.size:
+        raise ValueError(f"{track.label}: lasts {duration:.2f} s; a warm-up of {warmup:.2f} s "
+                         f"and a lead of {last_lead} samples leave nothing to score "
+                         "(shorten it with --warmup)")
+    return first, t.size, warmup
+
+
+def _fit(names, period: float, series: list[np.ndarray], leads: int, seed: int,
+         progress, save: Path | None = None, label: str = "") -> dict:
+    """name → (fitted predictor, seconds): every predictor of ``LEARNED`` among ``names``,
+    forecasting leads 1 … ``leads`` directly, fitted on ``series`` with the study's seed; each
+    saved in the folder ``save`` (``LABEL.NAME.npz``/``.pt``) if given."""
+    out = {}
+    for name in names:
+        if name not in LEARNED:
+            continue
+        extra = {"seed": seed} if "seed" in LEARNED[name].settings.__dataclass_fields__ else {}
+        p = make_predictor(name, dt=period, leads=leads, **extra)
+        say = None if progress is None else (
+            lambda text, name=name: progress(f"fit {name}: {text}"))
+        tic = time.perf_counter()
+        p.fit(series, say)
+        out[name] = (p, time.perf_counter() - tic)
+        if save is not None:
+            stem = "".join(c if c.isalnum() or c in "-_." else "-" for c in label)
+            p.save(save / f"{stem}.{name}{p.SUFFIX}")
+    return out
+
+
 def score_track(track: Track, settings: OpenLoopSettings,
-                progress: Callable[[str], None] | None = None) -> tuple[dict, list[dict]]:
+                progress: Callable[[str], None] | None = None,
+                train: list[np.ndarray] | None = None,
+                save: Path | None = None) -> tuple[dict, list[dict]]:
     """The source's description and the result rows of every predictor on ``track``.
+
+    ``train``: the recordings to fit the fitted predictors on (:func:`training_series`);
+    default, with a split, the track's samples before TRAIN. ``save``: a folder to write the
+    fitted models to (their ``save``).
 
     Raises
     ------
     ValueError
-        The warm-up leaves nothing to score (the message names the lengths).
+        The warm-up leaves nothing to score (the message names the lengths), a split beyond
+        the recording, or fitted predictors and nothing to fit them on.
     """
     period = track.period
-    t, z = on_grid(track.t, track.z, period)
-    duration = float(track.t[-1] - track.t[0])
-    warmup = warmup_seconds(duration, settings.warmup)
+    wide = track.points().reshape(track.t.size, -1)
+    t, wide = on_grid(track.t, wide, period)
+    grid = wide.reshape(wide.shape[0], -1, track.z.shape[1])
+    z, others = grid[:, 0], (grid[:, 1:] if grid.shape[1] > 1 else None)
     k_loop = loop_lead(period, settings.latency, settings.horizon)
     leads = sorted({*range(1, settings.leads + 1), k_loop})
-    first = int(np.searchsorted(t, t[0] + warmup - 1e-9))
-    if first + leads[-1] >= t.size:
-        raise ValueError(f"{track.label}: lasts {duration:.2f} s; a warm-up of {warmup:.2f} s "
-                         f"and a lead of {leads[-1]} samples leave nothing to score "
-                         "(shorten it with --warmup)")
+    first, end, warmup = _origins(track, t, settings, leads[-1])
+    if train is None and settings.split is not None:
+        train = [grid[:first]]
+    names = settings.names(fitted=train is not None)
+    fitted = _fit(names, period, train, leads[-1], settings.seed, progress, save,
+                  track.label) if train else {}
     rows: list[dict] = []
-    for name in settings.names:
+    for name in names:
         if progress is not None:
             progress(f"{name} on {track.label}")
-        errors, counts = forecast_errors(name, z, period, first, leads[-1])
+        if name == "combination":
+            predictor = _combination(names, fitted, period, leads[-1],
+                                     first if settings.split else 0)
+        elif name in fitted:
+            predictor = copy.deepcopy(fitted[name][0])
+        else:
+            predictor = make_predictor(name, dt=period)
+        errors, counts = forecast_errors(predictor, z, period, first, leads[-1], others, end)
+        if name in fitted:
+            counts["fit_s"] = round(fitted[name][1], 2)
         rows += _rows(track, name, errors, counts, leads, k_loop)
     _ratios(rows)
     source = {
         "label": track.label, "file": track.file, "point": track.point,
-        "rate_hz": _digits(1.0 / period), "period_s": period, "duration_s": duration,
+        "rate_hz": _digits(1.0 / period), "period_s": period,
+        "duration_s": float(track.t[-1] - track.t[0]),
         "samples": int(track.t.size), "missing": int(np.sum(~np.isfinite(z).all(axis=1))),
         "warmup_s": warmup, "loop_lead_samples": k_loop, "loop_lead_s": _digits(k_loop * period),
         "gap_samples": int(t.size - track.t.size),
         "regular": bool(np.allclose(np.diff(t), period, rtol=0.05)),
+        "points": grid.shape[1], "scored_from": first, "scored_to": end,
     }
     for row in rows:
         row["rate_hz"] = source["rate_hz"]
     return source, rows
+
+
+def _combination(names, fitted: dict, period: float, leads: int, score_from: int
+                 ) -> Combination:
+    """The combination of the other scored predictors that are not baselines (copies of the
+    fitted ones)."""
+    members = [n for n in names if family(n) not in ("baseline", "combination")]
+    if not members:
+        raise ValueError("the combination needs a scored predictor that is not a baseline")
+    instances = [copy.deepcopy(fitted[n][0]) if n in fitted else make_predictor(n, dt=period)
+                 for n in members]
+    s = CombinationSettings(members=tuple(members), leads=leads, score_from=score_from)
+    return Combination(period, s, instances)
 
 
 def _ratios(rows: list[dict]) -> None:
@@ -329,7 +521,7 @@ def mean_rows(label: str, rows: Sequence[dict]) -> list[dict]:
         rms = [g["rms_error_mm"] for g in group if g["rms_error_mm"] is not None]
         mx = [g["max_error_mm"] for g in group if g["max_error_mm"] is not None]
         out.append({
-            "source": label, "predictor": name, "lead_samples": k,
+            "source": label, "predictor": name, "family": family(name), "lead_samples": k,
             "lead_s": float(np.mean([g["lead_s"] for g in group])),
             "rms_error_mm": float(np.mean(rms)) if rms else None,
             "max_error_mm": float(np.mean(mx)) if mx else None,
@@ -343,38 +535,58 @@ def mean_rows(label: str, rows: Sequence[dict]) -> list[dict]:
 
 
 def run_open_loop(tracks: Sequence[Track | list[Track]], settings: OpenLoopSettings,
-                  progress: Callable[[str], None] | None = None) -> dict:
+                  progress: Callable[[str], None] | None = None,
+                  train: Callable[[float], list[np.ndarray]] | None = None,
+                  save: Path | None = None) -> dict:
     """Score every predictor on every track; a list of tracks (the points of one file) also
     gets its ``mean`` rows, labelled ``FILE:mean``.
+
+    ``train(period)``: the recordings to fit the fitted predictors on, on the grid of
+    ``period`` [s] (e.g. :func:`training_series`); default, with a split, each track's
+    samples before TRAIN. ``save``: a folder to write the fitted models to.
 
     Returns
     -------
     dict
         ``rate_hz`` and ``warmup_s`` (shared by every source, else ``None``), ``sources``
         (one description each), ``results`` (one row per source × predictor × lead:
-        ``predictor``, ``lead_samples``, ``lead_s``, ``rms_error_mm``, ``max_error_mm``,
-        ``ratio_to_hold``, ``rejected``, ``repaired``, ``missing``, ``loop_lead`` …) and the
-        rules (``warmup_rule``, ``loop_lead_rule``).
+        ``predictor``, ``family``, ``lead_samples``, ``lead_s``, ``rms_error_mm``,
+        ``max_error_mm``, ``ratio_to_hold``, ``rejected``, ``repaired``, ``missing``,
+        ``loop_lead``, ``fit_s``, ``update_us`` …), the protocol (``protocol``: ``online`` or
+        ``split``, ``split``) and the rules (``warmup_rule``, ``loop_lead_rule``).
     """
-    sources, results = [], []
+    sources, results, names = [], [], []
+    if progress is not None and not settings.predictors and not torch_available() and (
+            train is not None or settings.split is not None):
+        left = [n for n in FITTED_DEFAULTS if needs_torch(n)]
+        progress(f"{', '.join(left)} left out: they need PyTorch "
+                 '(pip install "rhmpc[learned]")')
     for item in tracks:
         group = item if isinstance(item, list) else [item]
         rows_of_group = []
         for track in group:
-            source, rows = score_track(track, settings, progress)
+            series = None if train is None else train(track.period)
+            source, rows = score_track(track, settings, progress, series, save)
             sources.append(source)
             rows_of_group += rows
         results += rows_of_group
         if isinstance(item, list) and len(group) > 1:
             results += mean_rows(f"{group[0].label.rsplit(':', 1)[0]}:mean", rows_of_group)
+    names = list(dict.fromkeys(r["predictor"] for r in results))
     rates = {round(s["rate_hz"], 9) for s in sources}
     warmups = {round(s["warmup_s"], 9) for s in sources}
     return {
         "rate_hz": sources[0]["rate_hz"] if len(rates) == 1 else None,
         "warmup_s": sources[0]["warmup_s"] if len(warmups) == 1 else None,
         "latency_s": settings.latency, "horizon_s": settings.horizon,
-        "leads": settings.leads, "predictors": list(settings.names),
-        "warmup_rule": "given" if settings.warmup is not None else
+        "leads": settings.leads, "predictors": names,
+        "protocol": "online" if settings.split is None else "split",
+        "split": None if settings.split is None else list(settings.split),
+        "fitted_on": ("training recordings" if train is not None else
+                      "the samples before TRAIN" if settings.split is not None else None),
+        "seed": settings.seed,
+        "warmup_rule": "split" if settings.split is not None else "given"
+        if settings.warmup is not None else
         f"max({WARMUP_SECONDS:g} s, {100 * WARMUP_FRACTION:g} % of the recording)",
         "loop_lead_rule": "ceil((period + latency + horizon) / period)",
         "sources": sources, "results": results,
@@ -393,7 +605,7 @@ def _table(rows: list[dict], names: list[str], key: str, extra: bool) -> list[st
     leads = sorted({r["lead_samples"] for r in rows})
     k_loop = next((r["lead_samples"] for r in rows if r["loop_lead"]), leads[-1])
     by = {(r["predictor"], r["lead_samples"]): r for r in rows}
-    head = f"{'predictor':<12}" + _lead_head(rows, leads)
+    head = f"{'predictor':<12}{'family':<12}" + _lead_head(rows, leads)
     if extra:
         head += f"{'÷hold 1':>9}{'÷hold *':>9}{'rejected':>10}{'repaired':>10}"
     lines = [head]
@@ -401,8 +613,8 @@ def _table(rows: list[dict], names: list[str], key: str, extra: bool) -> list[st
         if (name, leads[0]) not in by:
             continue
         cells = [by[name, k][key] for k in leads]
-        line = f"{name:<12}" + "".join(f"{'—':>10}" if v is None else f"{v:>10.3f}"
-                                       for v in cells)
+        line = f"{name:<12}{by[name, leads[0]]['family']:<12}" + "".join(
+            f"{'—':>10}" if v is None else f"{v:>10.3f}" for v in cells)
         if extra:
             ratios = [by[name, k]["ratio_to_hold"] for k in (leads[0], k_loop)]
             line += "".join(f"{'—':>9}" if v is None else f"{v:>9.2f}" for v in ratios)
@@ -414,11 +626,16 @@ def _table(rows: list[dict], names: list[str], key: str, extra: bool) -> list[st
 def _source_line(s: dict, doc: dict) -> str:
     period_ms = 1e3 * s["period_s"]
     gaps = f", {s['gap_samples']} missing between timestamps" if s["gap_samples"] else ""
-    rule = ("given" if doc["warmup_rule"] == "given" else "the longer of "
-            f"{WARMUP_SECONDS:g} s and {100 * WARMUP_FRACTION:g} % of the recording")
+    if doc.get("protocol") == "split":
+        scored = (f"forecasts issued at samples {s['scored_from']}–{s['scored_to'] - 1} scored, "
+                  f"the fitted predictors fitted on {doc['fitted_on']}")
+    else:
+        rule = ("given" if doc["warmup_rule"] == "given" else "the longer of "
+                f"{WARMUP_SECONDS:g} s and {100 * WARMUP_FRACTION:g} % of the recording")
+        scored = f"warm-up {s['warmup_s']:.1f} s excluded ({rule})"
     return (f"{s['label']}: {s['samples']} samples at {s['rate_hz']:.4g} Hz (Δ {period_ms:.3g} "
-            f"ms), {s['duration_s']:.1f} s, {s['missing']} missing{gaps}; warm-up "
-            f"{s['warmup_s']:.1f} s excluded ({rule}); the closed loop needs lead "
+            f"ms), {s['duration_s']:.1f} s, {s['missing']} missing{gaps}; {scored}; "
+            "the closed loop needs lead "
             f"{s['loop_lead_samples']} = {1e3 * s['loop_lead_s']:.0f} ms "
             f"(⌈(Δ + λ + N·Ts)/Δ⌉ = ⌈({period_ms:.3g} + {1e3 * doc['latency_s']:g} + "
             f"{1e3 * doc['horizon_s']:g})/{period_ms:.3g}⌉)")
@@ -435,8 +652,9 @@ def format_report(doc: dict) -> str:
             out.append(_source_line(described[label], doc))
         else:
             out.append(f"{label}: the mean over {rows[0]['points']} points")
+        when = "scored" if doc.get("protocol") == "split" else "after the warm-up"
         out.append("RMS forecast error [mm] at lead [samples/ms] (* the closed loop's lead); "
-                   "÷hold: RMS over hold's; events after the warm-up")
+                   f"÷hold: RMS over hold's; events {when}")
         out += _table(rows, names, "rms_error_mm", True)
         out.append("max forecast error [mm]")
         out += _table(rows, names, "max_error_mm", False)
@@ -455,13 +673,16 @@ def plot_leads(doc: dict, path) -> None:
     fig, axes = plt.subplots(len(labels), 1, figsize=(8, 3.6 * len(labels)), squeeze=False)
     for ax, label in zip(axes[:, 0], labels, strict=True):
         rows = [r for r in doc["results"] if r["source"] == label]
+        styles = {"baseline": ("--", 1.0), "adaptive": ("-", 1.0), "multi-point": ("-.", 1.5),
+                  "learned": (":", 1.8), "combination": ("-", 2.6)}
         for i, name in enumerate(doc["predictors"]):
-            pts = sorted((1e3 * r["lead_s"], r["rms_error_mm"]) for r in rows
-                         if r["predictor"] == name and r["rms_error_mm"] is not None)
+            mine = [r for r in rows if r["predictor"] == name and r["rms_error_mm"] is not None]
+            pts = sorted((1e3 * r["lead_s"], r["rms_error_mm"]) for r in mine)
             if pts:
                 x, y = zip(*pts, strict=True)
-                style = "--" if name in BASELINES else "-"
-                ax.plot(x, y, style, marker="o", ms=3, color=f"C{i % 10}", label=name)
+                style, width = styles.get(mine[0].get("family"), ("-", 1.0))
+                ax.plot(x, y, style, lw=width, marker="o", ms=3, color=f"C{i % 10}",
+                        label=f"{name} ({mine[0].get('family')})")
         loop = [1e3 * r["lead_s"] for r in rows if r["loop_lead"]]
         if loop:
             ax.axvline(loop[0], color="0.5", lw=0.8, ls=":", label="closed loop's lead")

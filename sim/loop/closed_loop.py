@@ -46,7 +46,7 @@ from sim.loop.results import (
     event_counts,
 )
 from sim.loop.settings import LoopSettings
-from sim.loop.streams import BLOCK, ArrayTruth, SampleSource, StreamCursor, as_samples
+from sim.loop.streams import BLOCK, ArrayTruth, PointsAt, SampleSource, StreamCursor, as_samples
 
 clock = time.perf_counter_ns
 #: Ticks between two calls of ``progress``.
@@ -102,15 +102,18 @@ class Refreshes:
     is new). With the ``"sensor"`` clock, each raw sample once, on the tick it arrives, with its
     own stamp; a gap in the stamps is first filled with missing samples (at most
     :attr:`MAX_FILL`), so that the predictor's clock keeps its period. Samples are centred by
-    ``center`` (the motion's placement, :mod:`sim.loop.closed_loop`).
+    ``center`` (the motion's placement, :mod:`sim.loop.closed_loop`). With ``points`` (the
+    other tracked points of a recording), each refresh also carries the other points measured
+    at its stamp, centred alike (None where none was measured then).
     """
 
     #: The most missing samples filled into one gap of the stamps.
     MAX_FILL = 50
 
     def __init__(self, stream, center: np.ndarray, settings: LoopSettings,
-                 clock: PredictorClock) -> None:
+                 clock: PredictorClock, points: PointsAt | None = None) -> None:
         self.center, self.Ts, self.clock = center, settings.Ts, clock
+        self.points = None if points is None else points.centred(center)
         self.sensor = clock.mode == "sensor"
         if self.sensor:
             self.queue = RawQueue(clock.raw, settings.Ts)
@@ -123,8 +126,14 @@ class Refreshes:
             self.period = settings.downsample
             self.next = 0
 
-    def due(self, tick: int) -> Iterator[tuple[np.ndarray | None, float]]:
-        """``(z, stamp)`` of every refresh on ``tick``, in order (call once per tick, in order)."""
+    def due(self, tick: int) -> Iterator[tuple[np.ndarray | None, float, np.ndarray | None]]:
+        """``(z, stamp, others)`` of every refresh on ``tick``, in order (call once per tick,
+        in order); ``others`` is None without ``points``."""
+        for z, stamp in self._due(tick):
+            others = None if self.points is None or z is None else self.points.at(stamp)
+            yield z, stamp, others
+
+    def _due(self, tick: int) -> Iterator[tuple[np.ndarray | None, float]]:
         if tick < self.next:
             return
         if not self.sensor:
@@ -185,7 +194,8 @@ def run_closed_loop(plant, controller, truth, stream, settings: LoopSettings,
                     progress: Callable[[int], None] | None = None,
                     trace_file: str | None = None,
                     yardstick: Callable[[np.ndarray, np.ndarray, np.ndarray], object] | None = None,
-                    chunk_ticks: int = 20_000, marks: Iterable[int] = ()) -> LoopResult:
+                    chunk_ticks: int = 20_000, marks: Iterable[int] = (),
+                    points: PointsAt | None = None) -> LoopResult:
     """Run the closed loop for ``settings.duration``, in chunks of ≈ 10 s of ticks.
 
     Parameters
@@ -225,13 +235,16 @@ def run_closed_loop(plant, controller, truth, stream, settings: LoopSettings,
         read (:func:`sim.loop.results.event_counts`): the result's ``segments`` then hold, for
         each stretch between two marks, its largest error, its joint envelope and the counts
         at its end (how an injected fault is measured, :mod:`sim.loop.faults`).
+    points
+        The other tracked points of a recording, given with each sample to the controller's
+        refresh (``others``: what a multi-point predictor reads).
     """
     n, N = settings.ticks, controller.N
     if not hasattr(truth, "window"):
         truth = ArrayTruth(truth, np.zeros(np.shape(truth)[1]))
     if truth.n_ticks < n + N + 1:
         raise ValueError(f"truth covers {truth.n_ticks} ticks, the run needs {n + N + 1}")
-    refreshes = Refreshes(stream, truth.center, settings, clock)
+    refreshes = Refreshes(stream, truth.center, settings, clock, points)
     marks = sorted({int(m) for m in marks if 0 < m < n})
     record = Recorder(robot, settings, N, truth, anchor, trace_file, clock, bool(marks))
     with quiet_gc():
@@ -267,9 +280,9 @@ def _run_ticks(plant, controller, refreshes: Refreshes, c0: int, c1: int, log: d
     for i in range(c0, c1):
         k = i - c0
         spent, refreshed = 0, False
-        for z, stamp in due(i):
+        for z, stamp, others in due(i):
             before = controller.outliers
-            refresh(i, z, stamp)
+            refresh(i, z, stamp, others)
             spent += controller.refresh_ns
             refreshed = True
             if z is not None:

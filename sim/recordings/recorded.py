@@ -37,7 +37,8 @@ class RecordedMotion:
     """A recorded trajectory, linearly interpolated between samples.
 
     position(t) = p_k + (t − t_k)/(t_{k+1} − t_k)·(p_{k+1} − p_k) for t_k ≤ t ≤ t_{k+1}.
-    It is NaN outside ``[t[0], t[-1]]`` and on any interval touching a missing sample.
+    It is NaN outside ``[t[0], t[-1] + Δ]`` (the last sample holds for its period Δ) and on any
+    interval touching a missing sample.
 
     Parameters
     ----------
@@ -64,8 +65,14 @@ class RecordedMotion:
 
     @property
     def duration(self) -> float:
-        """t[-1] − t[0] [s]."""
-        return float(self.t[-1] - self.t[0])
+        """n samples at the nominal rate f last n/f [s]: t[-1] − t[0] + Δ, the last sample
+        holding for its period Δ = 1/f, as a video frame does (750 frames at 25 Hz: 30 s)."""
+        return float(self.t[-1] - self.t[0]) + self.period
+
+    @property
+    def period(self) -> float:
+        """Δ = 1/f, the nominal sample period [s] (:attr:`sample_rate`; 0 for one sample)."""
+        return 1.0 / self.sample_rate if self.t.size > 1 else 0.0
 
     @property
     def sample_rate(self) -> float:
@@ -105,9 +112,12 @@ class RecordedMotion:
         # A time within SNAP of a sample is that sample (resampling at the file's own rate).
         at0, at1 = np.abs(ts - t0) <= SNAP, np.abs(ts - t1) <= SNAP
         out = np.where(at0[:, None], self.z[k], np.where(at1[:, None], self.z[k + 1], out))
+        last = (ts > self.t[-1] + SNAP) & (ts <= self.t[-1] + self.period + SNAP)
+        out[last] = self.z[-1]  # the last sample holds for its period
         bad = (ts < self.t[0] - SNAP) | (ts > self.t[-1] + SNAP)
         bad |= self._missing[k] & ~at1
         bad |= self._missing[k + 1] & ~at0
+        bad = np.where(last, self._missing[-1], bad)
         out[bad] = np.nan
         return out[0] if scalar else out
 

@@ -308,9 +308,10 @@ def save_recording(path: str | Path, t: np.ndarray, z: np.ndarray,
 
 def export_source(source: MotionSource, path: str | Path, duration: float, rate: float,
                   t0: float = 0.0, comment: str | None = None) -> Path:
-    """Sample ``source`` at ``rate`` [Hz] over ``[t0, t0 + duration]`` and save it to ``path``."""
+    """Sample ``source`` at ``rate`` [Hz] over ``[t0, t0 + duration)``, duration·rate samples
+    (which read back as a recording of ``duration``), and save it to ``path``."""
     if not duration > 0 or not rate > 0:
         raise ValueError("duration and rate must be positive")
-    n = round(duration * rate) + 1
+    n = max(1, round(duration * rate))
     t = t0 + np.arange(n) / rate
     return save_recording(path, t, np.asarray(source.position(t)).reshape(n, -1), comment)

@@ -45,3 +45,29 @@ def run(predictor, z, steps=1):
 def forecast_errors(forecasts, truth, k):
     """‖ẑ_{n+k|n} − p_{n+k}‖ for every n with a truth (array of length T − k)."""
     return np.linalg.norm(forecasts[:-k, k - 1] - truth[k:], axis=-1)
+
+
+def tracked_points(T: int, dt: float, points: int = 4, seed: int = 0, noise: float = 5e-6):
+    """(T, P, 3) [m]: P points of one beating surface (a shared 1.2 Hz motion, each point with
+    its own gain and offset, breathing at 0.25 Hz) plus white noise σ ``noise``; POI row 0."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(T) * dt
+    beat = HarmonicSource(f_hz=1.2).position(t) - HarmonicSource(f_hz=1.2).offset
+    breath = np.sin(2 * np.pi * 0.25 * t)[:, None] * np.array([1e-3, 0.5e-3, 2e-3])
+    out = np.empty((T, points, 3))
+    for p in range(points):
+        gain = rng.uniform(0.6, 1.4, 3)
+        out[:, p] = 0.05 + 0.01 * p + gain * beat + (1 + 0.2 * p) * breath
+    return out + noise * rng.standard_normal(out.shape)
+
+
+def feed(predictor, stream, steps: int, upto: int | None = None) -> np.ndarray:
+    """Feed a (T, P, d) stream (POI row 0, the others as ``others``) and return the forecasts
+    (T, steps, d) issued after each update (NaN after ``upto``)."""
+    T = stream.shape[0] if upto is None else upto
+    out = np.full((stream.shape[0], steps, stream.shape[2]), np.nan)
+    for n in range(T):
+        others = stream[n, 1:] if stream.shape[1] > 1 else None
+        predictor.update(stream[n, 0], others)
+        out[n] = predictor.predict(steps)
+    return out

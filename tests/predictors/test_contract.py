@@ -51,6 +51,7 @@ def test_predict_before_any_sample_raises(name):
 
 
 @pytest.mark.parametrize("name", list(PREDICTORS))
+@pytest.mark.slow
 def test_one_second_dropout_stays_finite_and_recovers_within_two_seconds(name):
     """20 s of data, 1 s without samples, then 4 s: the 4-step error 2–4 s after the gap is back."""
     dt = DT if name not in ("wflc", "ar", "fading-ar") else 1 / 28  # tuned at the 3DUS rate
@@ -170,3 +171,59 @@ def test_rms_by_lead_scores_hold_on_a_ramp_exactly():
     z = np.arange(200)[:, None] * v
     rms = rms_by_lead(make_predictor("hold", DT), z, 4, 50)
     np.testing.assert_allclose(rms, np.arange(1, 5) * np.linalg.norm(v), rtol=1e-12)
+
+
+# -- the predictors fitted before the run -------------------------------------------------
+FITTED = {"ridge": {}, "st-ridge": {}, "lstm": {"hidden": 8, "epochs": 5, "validation": 0.0},
+          "st-tcn": {"channels": 4, "dilations": (1, 2), "epochs": 5, "validation": 0.0}}
+DT_VIDEO = 0.04
+
+
+def _fitted(name):
+    if name in ("lstm", "st-tcn"):
+        pytest.importorskip("torch", reason="the neural predictors need PyTorch (rhmpc[learned])")
+    p = make_predictor(name, DT_VIDEO, **FITTED[name])
+    return p.fit(SRC.position(np.arange(500) * DT_VIDEO))
+
+
+@pytest.mark.parametrize("name", list(FITTED))
+@pytest.mark.slow
+def test_fitted_predictors_keep_the_contract(name):
+    p = _fitted(name)
+    with pytest.raises(RuntimeError):
+        p.predict(4)
+    z = SRC.position(np.arange(500, 600) * DT_VIDEO)
+    for zk in z[:80]:
+        p.update(zk)
+    assert p.predict(4).shape == (4, 3) and p.predict(9).shape == (9, 3)
+    before = p.counts["missing"]
+    for bad in (None, [np.nan, 0.0, 0.0], np.array([0.0, np.inf, 0.0]), np.full(3, 1e200)):
+        p.update(bad)
+    assert p.counts["missing"] == before + 4 and np.isfinite(p.predict(4)).all()
+    with pytest.raises(ValueError):
+        p.update(np.zeros(2))
+    model = p.model
+    p.reset()
+    assert p.n == 0 and not p.counts and p.model is model  # the fitted model stays
+    for zk in z:
+        p.update(zk)
+    assert p.ready and np.isfinite(p.predict(4)).all()
+
+
+@pytest.mark.parametrize("name", list(FITTED))
+@pytest.mark.slow
+def test_fitted_predictors_bridge_a_one_second_dropout(name):
+    p = _fitted(name)
+    t = np.arange(500, 1000) * DT_VIDEO
+    truth = SRC.position(t)
+    gap = (t >= t[250]) & (t < t[275])
+    err = np.full(t.size, np.nan)
+    for k in range(t.size):
+        p.update(None if gap[k] else truth[k])
+        f = p.predict(4)
+        assert np.isfinite(f).all()
+        if k + 4 < t.size:
+            err[k] = np.linalg.norm(f[-1] - truth[k + 4])
+    before = np.sqrt(np.nanmean(err[150:250] ** 2))
+    after = np.sqrt(np.nanmean(err[325:490] ** 2))
+    assert after <= 1.5 * before + 30e-6, (before, after)

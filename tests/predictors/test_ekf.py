@@ -32,6 +32,7 @@ def test_ekf_recovers_heart_rate_and_amplitudes(d):
     np.testing.assert_allclose(p.offsets, src.offset, atol=0.1e-3)
 
 
+@pytest.mark.slow
 def test_ekf_nis_within_chi2_bounds_on_its_own_model():
     dt, m, d = 1 / 28, 3, 1
     p = make_predictor(
@@ -93,6 +94,7 @@ def test_fourier_predictors_same_forecasts_in_metres_and_millimetres(name):
     np.testing.assert_allclose(f_mm, 1e3 * f_m, rtol=1e-6, atol=1e-6)
 
 
+@pytest.mark.slow
 def test_dual_ekf_tracks_breathing_plus_heartbeat():
     dt = 0.0075
     t = np.arange(int(40 / dt)) * dt

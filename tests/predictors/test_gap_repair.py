@@ -105,6 +105,7 @@ def _worst_after_gaps(name: str, z: np.ndarray, gap: int) -> tuple[float, float]
 
 
 @pytest.mark.parametrize("name", ["generalized", "one-step"])
+@pytest.mark.slow
 def test_rls_predictors_recover_from_a_two_sample_gap(name, monkeypatch):
     z = _stream()
     worst, baseline = _worst_after_gaps(name, z, gap=2)
@@ -118,6 +119,7 @@ def test_rls_predictors_recover_from_a_two_sample_gap(name, monkeypatch):
     assert unrepaired >= 4.0 * baseline
 
 
+@pytest.mark.slow
 def test_retract_replaces_the_newest_sample_by_its_forecast():
     z = _stream(12.0)
     for name in ("generalized", "one-step"):

@@ -39,6 +39,7 @@ def errors(request) -> tuple[str, dict[str, np.ndarray]]:
     return request.param, {name: _rms_by_lead(name, z) for name in names}
 
 
+@pytest.mark.slow
 def test_every_model_based_predictor_beats_hold_at_every_lead(errors) -> None:
     """Measured (60 s, seed 2), at 1 / 3 / 5 samples in vivo: ekf 0.76 / 0.81 / 0.75, dual-ekf
     0.68 / 0.72 / 0.64, wflc 0.68 / 0.76 / 0.70 × hold's; on the replicas at most 0.30."""
@@ -48,12 +49,14 @@ def test_every_model_based_predictor_beats_hold_at_every_lead(errors) -> None:
         assert np.all(ratio < 1.0), f"{scenario}: {name} / hold = {np.round(ratio, 2)}"
 
 
+@pytest.mark.slow
 def test_the_rls_predictors_beat_last_cycle(errors) -> None:
     scenario, rms = errors
     for name in ("one-step", "generalized"):
         assert np.all(rms[name] < rms["last-cycle"]), scenario
 
 
+@pytest.mark.slow
 def test_the_in_vivo_regime_is_as_hard_as_its_recording(errors) -> None:
     """one-step / hold at 3 samples: the recording 0.67 (check: ≥ 0.55); replicas ≤ 0.3."""
     scenario, rms = errors
@@ -66,6 +69,7 @@ def test_the_in_vivo_regime_is_as_hard_as_its_recording(errors) -> None:
 
 @pytest.mark.parametrize("name", sorted(RATE_BAND))
 @pytest.mark.parametrize("kind", ["invivo-video", "white", "chirp"])
+@pytest.mark.slow
 def test_heart_rate_estimate_stays_in_the_band(name: str, kind: str) -> None:
     """By construction: clamps and re-fits hold ω̂ inside the band, whatever the input."""
     rng = np.random.default_rng(7)

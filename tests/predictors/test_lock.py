@@ -76,6 +76,7 @@ _RR_SINE = {"rr": 60.0 / (100.0 + 8.0 * np.sin(np.arange(60) / 3.0))}
         ("fixed-a2-top", _RR_SINE, 5.0),
     ],
 )
+@pytest.mark.slow
 def test_ekf_keeps_heart_rate_lock_in_3d_with_breathing(scenario, overrides, tolerance, params):
     """Measured (seeds 4/5, in the order above, the default sonomicrometer with its white
     range error), ``adaptive`` / ``tuna2013-hrv``: p95 |ω̂ − ω| 3.1 / 5.5 / 3.8 / 3.2 / 3.2 bpm
@@ -90,6 +91,7 @@ def test_ekf_keeps_heart_rate_lock_in_3d_with_breathing(scenario, overrides, tol
 
 
 @pytest.mark.parametrize(("scenario", "seed"), [("fixed-a1-top", 7), ("varying-a1-top", 2)])
+@pytest.mark.slow
 def test_ekf_refits_after_losing_lock(scenario, seed):
     """The predictor-bench stream at seed 7 / 2, 30 s: ω̂ falls out of the 36–180 beats/min band
     of the FFT initialisation 3–4 s after the fit (to its 30 beats/min clamp) and the filter
@@ -104,6 +106,7 @@ def test_ekf_refits_after_losing_lock(scenario, seed):
 
 
 @pytest.mark.parametrize(("scenario", "seed"), [("varying-a3-side", 3), ("varying-a1-side", 2)])
+@pytest.mark.slow
 def test_ekf_refits_after_locking_on_half_the_heart_rate(scenario, seed, monkeypatch):
     """The predictor-bench stream at seed 3 / 2, 40 s: 4–5 s after the fit ω̂ settles near half
     the heart rate (41–52 beats/min, inside the FFT's band: no clamp) and its second harmonic
@@ -120,6 +123,7 @@ def test_ekf_refits_after_locking_on_half_the_heart_rate(scenario, seed, monkeyp
     assert _scores("ekf", *stream, 2 / 257, **kw)[0] > 20.0
 
 
+@pytest.mark.slow
 def test_ekf_refits_when_its_rate_leaves_the_band_around_the_fit():
     """``adaptive`` on the bench stream of fixed-a1-top at seed 7: the fit starts 13 bpm low
     (87 against 99 beats/min), and with R̂ at 3–20 mm ω̂ drifts down (to 47 beats/min within
@@ -132,6 +136,7 @@ def test_ekf_refits_when_its_rate_leaves_the_band_around_the_fit():
 
 
 @pytest.mark.parametrize("scenario", ["varying-a1-top", "varying-a3-top", "varying-a1-side"])
+@pytest.mark.slow
 def test_dual_ekf_keeps_heart_rate_lock_in_3d_with_breathing(scenario):
     """Richa's zero start lost lock on the first two (ω̂_c at its clamp); the third needs the
     innovation gate.  Measured (physical sonomicrometer, seeds 4/5): p95 |ω̂_c − ω| 3.9 / 3.4 /
@@ -154,6 +159,7 @@ def _mitdb_100():
     ["fixed-a1-top", "fixed-a2-top", "varying-a1-top", "varying-a3-top", "varying-a1-side",
      "varying-a3-side"],
 )
+@pytest.mark.slow
 def test_dual_ekf_keeps_heart_rate_lock_driven_by_mitdb_100(scenario):
     """Record 100's annotated beat times (from its first beat) drive the heart, 30 s.
 
@@ -168,6 +174,7 @@ def test_dual_ekf_keeps_heart_rate_lock_driven_by_mitdb_100(scenario):
 
 
 @pytest.mark.parametrize("scenario", ["fixed-a2-top", "varying-a1-top", "varying-a1-side"])
+@pytest.mark.slow
 def test_dual_ekf_refits_after_losing_lock_on_a_premature_beat(scenario):
     """Record 100 from t = 1200 s: atrial premature beats at 4.5, 10.9 and 28.9 s of the stream.
 
@@ -195,6 +202,7 @@ def _step_signal(base, delta, seconds=45.0, step_at=30.0, dt=1 / 28):
 
 @pytest.mark.parametrize("base", [60.0, 103.0])
 @pytest.mark.parametrize("delta", [-10.0, 10.0])
+@pytest.mark.slow
 def test_wflc_follows_a_10_bpm_step_without_clamping(base, delta):
     """28 Hz, 1-D in mm, σ = 1.3 mm (Yuen's protocol).
 
@@ -223,6 +231,7 @@ def test_wflc_follows_a_10_bpm_step_without_clamping(base, delta):
         assert abs(60 * q.heart_rate_hz - (base + delta)) > 10.0
 
 
+@pytest.mark.slow
 def test_wflc_tracks_a_chirp():
     """Heart rate sweeping 80 → 120 bpm over 30 s (1.33 bpm/s), 3-D, 128 Hz, σ = 0.1 mm.
 
@@ -249,6 +258,7 @@ def test_wflc_tracks_a_chirp():
 
 
 @pytest.mark.parametrize("f_hz", [0.9, 1.6, 2.4])
+@pytest.mark.slow
 def test_wflc_recovers_a_constant_frequency(f_hz):
     """A 3-harmonic 1-D signal at 128 Hz, σ = 0.1 mm: ω̂ within 0.5 bpm after 20 s."""
     dt = 1 / 128

@@ -167,23 +167,3 @@ def test_forecast_error_rms_per_lead_matches_a_direct_computation(name):
     got = p.forecast_error_rms
     assert got.shape == (K,)
     np.testing.assert_allclose(got, ref, rtol=1e-9)
-
-
-@pytest.mark.parametrize("name", ["generalized", "ekf"])
-def test_the_error_bookkeeping_waits_for_score_and_gives_the_same_errors(name):
-    """``score()`` run by the caller after every forecast (as the pipelined loop does) and
-    ``score()`` left to the next update give the same running errors, bit for bit; until it
-    runs, the newest sample and forecast are not booked."""
-    dt = 1 / 50
-    z = HarmonicSource(f_hz=1.2).position(np.arange(400) * dt)
-    lazy, eager = make_predictor(name, dt), make_predictor(name, dt)
-    for k in range(z.shape[0]):
-        lazy.update(z[k])
-        eager.update(z[k])
-        np.testing.assert_array_equal(lazy.predict(4), eager.predict(4))
-        booked = eager._errors.ms.copy()
-        assert eager._unscored is not None and eager._unrecorded is not None
-        eager.score()
-        assert eager._unscored is None and eager._unrecorded is None
-        assert k < 2 or not np.array_equal(booked, eager._errors.ms)  # it booked the sample
-    np.testing.assert_array_equal(lazy.forecast_error_rms, eager.forecast_error_rms)

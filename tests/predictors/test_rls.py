@@ -66,6 +66,7 @@ def _var2(T, rng):
     return A1, A2, z
 
 
+@pytest.mark.slow
 def test_one_step_recovers_var2():
     A1, A2, z = _var2(20000, np.random.default_rng(1))
     p = make_predictor("one-step", 0.01, order=2, forgetting_factor=1.0, init="zeros")
@@ -74,6 +75,7 @@ def test_one_step_recovers_var2():
     np.testing.assert_allclose(p.weights, np.hstack([A1, A2]), atol=0.02)
 
 
+@pytest.mark.slow
 def test_generalized_recovers_var2_horizon_blocks():
     A1, A2, z = _var2(20000, np.random.default_rng(2))
     p = make_predictor("generalized", 0.01, order=2, points=2, forgetting_factor=1.0, init="zeros")
@@ -122,6 +124,7 @@ def test_noiseless_harmonics_25ms_forecast_below_1um(name):
 
 
 @pytest.mark.parametrize("name", ["one-step", "generalized", "ar"])
+@pytest.mark.slow
 def test_same_forecasts_in_metres_and_millimetres(name):
     rng = np.random.default_rng(4)
     dt = 0.0075

@@ -30,4 +30,4 @@ def test_a_recording_starts_at_zero(tmp_path) -> None:
     heart = heart_source("unused", np.random.default_rng(0), data=str(path))
     assert heart.label == "file:rec.csv"
     np.testing.assert_allclose(heart.motion.position(0.0), z[0] * 1e-3)
-    np.testing.assert_allclose(heart.duration, 1.99)
+    np.testing.assert_allclose(heart.duration, 2.0)  # 200 samples at 100 Hz

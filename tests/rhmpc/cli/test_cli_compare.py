@@ -80,6 +80,7 @@ class Recorder(io.StringIO):
         return False
 
 
+@pytest.mark.slow
 def test_header_and_progress_come_before_the_first_run_ends(
         standin: dict, monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
     standin["delay"] = 0.8

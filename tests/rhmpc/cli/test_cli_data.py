@@ -13,6 +13,7 @@ from sim.heart.scenarios import available_scenarios
 from sim.recordings import load_recording
 
 
+@pytest.mark.slow
 def test_list_json(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["data", "list", "--json", "--duration", "40"]) == 0
     rows = json.loads(capsys.readouterr().out)
@@ -33,6 +34,7 @@ def test_list_json(capsys: pytest.CaptureFixture[str]) -> None:
             assert 0.1 < r["predictability"] < 0.5
 
 
+@pytest.mark.slow
 def test_list_table(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["data", "list", "--duration", "10"]) == 0  # --duration: measured
     out = capsys.readouterr().out
@@ -62,6 +64,7 @@ def test_list_reads_the_specifications_only(monkeypatch: pytest.MonkeyPatch,
     assert "heart_rate" in rows[0]["reported"]
 
 
+@pytest.mark.slow
 def test_show(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["data", "show", "varying-a3-top", "--duration", "60"]) == 0
     out = capsys.readouterr().out
@@ -88,9 +91,9 @@ def test_show_with_record(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
 def test_export_and_show_a_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "a2.csv"
     assert main(["data", "export", "fixed-a2-top", str(out), "--duration", "5"]) == 0
-    assert "wrote 1286 samples" in capsys.readouterr().out
+    assert "wrote 1285 samples" in capsys.readouterr().out
     rec = load_recording(out)
-    assert rec.dim == 3 and rec.t.size == 1286
+    assert rec.dim == 3 and rec.t.size == 1285
     assert main(["data", "show", str(out), "--json"]) == 0
     row = json.loads(capsys.readouterr().out)
     assert row["dim"] == 3 and row["sensor_rate_hz"] == pytest.approx(257.0, rel=1e-3)
@@ -108,10 +111,11 @@ def test_export_npz(tmp_path: Path) -> None:
     assert main(["data", "export", "varying-a3-side", str(out), "--duration", "3",
                  "--rate", "100"]) == 0
     with np.load(out) as data:
-        assert data["position"].shape == (301, 3)
+        assert data["position"].shape == (300, 3)
         assert str(data["units"]) == "m"
 
 
+@pytest.mark.slow
 def test_plot(tmp_path: Path) -> None:
     out = tmp_path / "f.png"
     assert main(["data", "plot", "fixed-a2-top", str(out), "--duration", "30"]) == 0
@@ -122,6 +126,7 @@ def test_plot(tmp_path: Path) -> None:
     assert one.is_file()
 
 
+@pytest.mark.slow
 def test_plot_draws_short_records_whole_and_long_ones_with_a_zoom(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """A record up to two windows long is one full-resolution line per axis; a longer one has
@@ -257,6 +262,7 @@ BAD_INPUTS = [
 
 @pytest.mark.parametrize(("argv", "first_line"), BAD_INPUTS, ids=[" ".join(a)[:40]
                                                                    for a, _ in BAD_INPUTS])
+@pytest.mark.slow
 def test_bad_input_is_one_line_and_exit_2(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                           capsys: pytest.CaptureFixture[str], argv: list[str],
                                           first_line: str) -> None:

@@ -84,6 +84,7 @@ def test_findings_say_what_reproduces_and_why_not() -> None:
     assert "paper ×1.23–2.88" in cross
 
 
+@pytest.mark.slow
 def test_compare_json_rows(capsys) -> None:
     code = main(["compare", "--predictors", "exact,one-step", "--scenarios", "fixed-a2-top",
                  "--duration", "0.6", "--settling", "0.2", "--jobs", "1", "--json",

@@ -29,12 +29,12 @@ def test_default_duration_is_the_recording(tmp_path: Path) -> None:
     scipy.io.savemat(path, {"X": X})
     config = config_from_args(_args("--data", str(path), "--var", "X", "--rate", "100",
                                     "--units", "mm"))
-    assert config.loop.duration == pytest.approx(19.99)
+    assert config.loop.duration == pytest.approx(20.0)  # 2000 samples at 100 Hz
     assert config.data_read == {"var": "X", "rate": 100.0, "units": "mm"}
     csv = tmp_path / "rec.csv"
-    t = np.arange(0, 20, 1 / 400)  # spans 19.9975 s
+    t = np.arange(0, 20, 1 / 400)  # 8000 samples at 400 Hz: 20 s
     csv.write_text("t,x,y,z\n" + "".join(f"{ti:.4f},1,2,3\n" for ti in t))
-    assert config_from_args(_args("--data", str(csv))).loop.duration == pytest.approx(19.9975)
+    assert config_from_args(_args("--data", str(csv))).loop.duration == pytest.approx(20.0)
 
 
 def test_too_long_request_names_both_lengths(tmp_path: Path,
@@ -44,10 +44,10 @@ def test_too_long_request_names_both_lengths(tmp_path: Path,
     x = 3.0 * np.sin(2 * np.pi * 1.2 * t)  # a heart-like 6 mm [mm]: no word on its amplitude
     rows = (f"{ti:.4f},{xi:.4f},2,3\n" for ti, xi in zip(t, x, strict=True))
     csv.write_text("t,x,y,z\n" + "".join(rows))
-    assert main(["simulate", "--data", str(csv), "--duration", "20"]) == 2
+    assert main(["simulate", "--data", str(csv), "--duration", "20.001"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1
-    assert "lasts 19.99" in err and "asks for 20.00" in err  # digits enough to differ
+    assert "lasts 20.000 s" in err and "asks for 20.001 s" in err  # digits enough to differ
 
 
 @pytest.mark.parametrize(("variables", "flags", "message"), [
@@ -98,6 +98,7 @@ def _recording(path: Path, rate: float, seconds: float, noise_mm: float = 0.1,
 
 @pytest.mark.parametrize(("rate", "mode"), [(25.0, "sensor"), (30.0, "sensor"),
                                             (257.0, "downsample"), (404.0, "downsample")])
+@pytest.mark.slow
 def test_a_recording_at_any_rate_runs_with_the_right_predictor_clock(
         tmp_path: Path, capsys: pytest.CaptureFixture[str], rate: float, mode: str) -> None:
     path = _recording(tmp_path / "rec.csv", rate, 4.0)
@@ -111,6 +112,7 @@ def test_a_recording_at_any_rate_runs_with_the_right_predictor_clock(
     assert np.isfinite(doc["rms_error_mm"]) and doc["fallbacks"] == 0
 
 
+@pytest.mark.slow
 def test_a_clean_recording_gets_no_rejections_and_the_summary_says_why(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """Regularly spaced samples with Gaussian noise: the gate, calibrated on this recording's

@@ -4,6 +4,8 @@ import json
 import subprocess
 import sys
 
+import pytest
+
 from rhmpc import __version__
 from rhmpc.cli import main
 
@@ -19,6 +21,7 @@ def test_version_and_help(capsys):
     assert "robots" in out
 
 
+@pytest.mark.slow
 def test_robots_table_and_json(capsys):
     assert main(["robots"]) == 0
     out = capsys.readouterr().out
@@ -31,6 +34,7 @@ def test_robots_table_and_json(capsys):
     assert phantom["jacobian_condition"] < 5
 
 
+@pytest.mark.slow
 def test_console_script_runs_in_a_subprocess():
     out = subprocess.run(
         [sys.executable, "-m", "rhmpc.cli", "robots"], capture_output=True, text=True, check=True

@@ -17,6 +17,7 @@ def run_cli(capsys, *argv):
     return code, out, err
 
 
+@pytest.mark.slow
 def test_simulate_json_document(capsys, tmp_path):
     out_file = tmp_path / "run.json"
     code, out, _ = run_cli(capsys, "simulate", "--predictor", "one-step", *FAST, "--json",
@@ -34,6 +35,7 @@ def test_simulate_json_document(capsys, tmp_path):
     assert doc["forecast_lead_s"] == pytest.approx(15 * 0.0005)
 
 
+@pytest.mark.slow
 def test_simulate_summary_and_plot(capsys, tmp_path):
     png = tmp_path / "fig.png"
     code, out, _ = run_cli(capsys, "simulate", "--predictor", "exact", *FAST, "--plot", str(png),
@@ -44,6 +46,7 @@ def test_simulate_summary_and_plot(capsys, tmp_path):
     assert png.stat().st_size > 10_000
 
 
+@pytest.mark.slow
 def test_simulate_reports_the_host_stalls_in_gain_ticks(capsys):
     code, out, _ = run_cli(capsys, "simulate", "--predictor", "exact", *FAST, "--json",
                            "--host-stalls", "0.05")
@@ -77,6 +80,7 @@ def test_bad_options_give_one_line_error_and_exit_2(capsys, argv, message):
     assert len(lines) == 1 and message in lines[0], err
 
 
+@pytest.mark.slow
 def test_config_file_round_trip_and_precedence(capsys, tmp_path):
     cfg = RunConfig(predictor="hold", seed=5).replace(**{"loop.duration": 1.0,
                                                         "loop.settling": 0.2,
@@ -109,6 +113,7 @@ def test_simulate_a_recording(capsys, tmp_path):
     assert code == 2 and "recording lasts" in err
 
 
+@pytest.mark.slow
 def test_compare_prints_the_table(capsys):
     code, out, _ = run_cli(capsys, "compare", "--predictors", "exact,hold", "--scenarios",
                            "fixed-a2-top", "--duration", "0.8", "--settling", "0.2", "--jobs", "2")

@@ -90,7 +90,7 @@ def test_default_warmup_is_stated(recordings: list[Path],
     (["predict", "--data", "REC", "--predictors", "exact"], "unknown predictor(s) exact"),
     (["predict", "--data", "nope.csv"], "nope.csv: no such file"),
     (["compare", "--data", "REC", "--scenarios", "fixed-a2-top"], "apply to scenarios"),
-    (["compare", "--data", "REC", "--duration", "9"], "lasts 4.96 s, --duration asks for 9.00"),
+    (["compare", "--data", "REC", "--duration", "9"], "lasts 5.00 s, --duration asks for 9.00"),
     (["compare", "--rows", "0,1,2"], "need --data FILE"),
 ])
 def test_refusals_are_one_line_exit_2(recordings: list[Path], capsys: pytest.CaptureFixture[str],
@@ -103,6 +103,7 @@ def test_refusals_are_one_line_exit_2(recordings: list[Path], capsys: pytest.Cap
     assert "Traceback" not in err
 
 
+@pytest.mark.slow
 def test_compare_data_one_row_per_predictor_and_column(recordings: list[Path],
                                                        capsys: pytest.CaptureFixture[str]) -> None:
     code = main(["compare", "--data", *map(str, recordings), "--predictors", "hold,one-step",
@@ -177,6 +178,7 @@ def surface(tmp_path_factory) -> Path:
     return path
 
 
+@pytest.mark.slow
 def test_predict_the_literatures_protocol(surface: Path, tmp_path: Path,
                                           capsys: pytest.CaptureFixture[str]) -> None:
     png = tmp_path / "leads.png"

@@ -92,6 +92,7 @@ def _check_accepted(box, H, q):
     assert np.all(box.mu * box.active >= -1e-9)
 
 
+@pytest.mark.slow
 def test_mpc_hessian_few_saturated_blocks_match_daqp_and_bvls(H_mpc):
     """The MPC's own H, minimiser targets with 1–6 of the 30 torques past their bound (the bench
     and the closed loop see 1–4 active bounds): with a cap of 30 solves every one is accepted

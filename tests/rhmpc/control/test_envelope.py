@@ -58,6 +58,7 @@ SOLVERS = pytest.mark.parametrize("solver", ["daqp", "osqp"])
 
 
 @SOLVERS
+@pytest.mark.slow
 def test_joint_position_limits_hold_with_the_reference_past_them(robot, arm, solver):
     lo, hi = arm.q0 - np.radians(2.0), arm.q0 + np.radians(2.0)
     target = np.tile(arm.y0 + np.array([0.0, 20e-3, 5e-3]), (N, 1))  # needs ≈ 6° of motion
@@ -73,6 +74,7 @@ def test_joint_position_limits_hold_with_the_reference_past_them(robot, arm, sol
 
 
 @SOLVERS
+@pytest.mark.slow
 def test_joint_velocity_limits_hold_through_reference_steps(robot, arm, solver):
     vmax = np.full(3, 0.3)
     step = np.array([10e-3, 10e-3, -10e-3])
@@ -96,6 +98,7 @@ def _swinging_reference(arm, ticks, amplitude=6e-3):
 
 
 @SOLVERS
+@pytest.mark.slow
 def test_cartesian_half_space_holds(robot, arm, solver):
     ticks = 2500
     ref = _swinging_reference(arm, ticks)
@@ -112,6 +115,7 @@ def test_cartesian_half_space_holds(robot, arm, solver):
 
 
 @SOLVERS
+@pytest.mark.slow
 def test_cartesian_box_holds(robot, arm, solver):
     ticks = 2500
     ref = _swinging_reference(arm, ticks)
@@ -189,6 +193,7 @@ def test_the_parallelogram_coupling_is_a_row_of_the_envelope(arm):
 
 
 @SOLVERS
+@pytest.mark.slow
 def test_a_coupled_joint_limit_holds_with_the_reference_past_it(robot, arm, solver):
     ((c, _, _),) = robot.coupling
     mid, band = float(c @ arm.q0), np.radians(1.0)
@@ -218,6 +223,7 @@ def test_bad_envelope_settings_raise(bad):
 
 
 @pytest.mark.parametrize("offset_correction", [True, False])
+@pytest.mark.slow
 def test_offset_free_tracking_on_the_nonlinear_plant(robot, arm, offset_correction):
     """Heart-like motion of 12 mm peak to peak around the home tip position, exact future: the
     plant's forward-kinematics error with the output offset is a fraction of the error without
@@ -242,6 +248,7 @@ def test_offset_free_tracking_on_the_nonlinear_plant(robot, arm, offset_correcti
 
 @pytest.mark.parametrize("columns", [[0, 1, 2, 3, 4, 5], [0, 1, 2, 3, 4, 5, 159, 160, 161],
                                      [3], [-3, -2, -1], [-1, 0]])
+@pytest.mark.slow
 def test_the_bound_columns_gather_as_a_slice_where_they_are_one_run(arm, columns):
     """``bound_index`` picks the same parameters as ``bound_columns``: a slice (a view) when
     they are one ascending run, else the indices themselves."""

@@ -99,6 +99,7 @@ def assert_same_counters(python, c):
 
 @needs_cc
 @pytest.mark.parametrize("variant", list(VARIANTS))
+@pytest.mark.slow
 def test_the_c_controller_is_the_python_one_tick_for_tick(variant):
     """4000 ticks of the bench's motion with 2-mm jumps (torque bounds, and with joint bounds the
     envelope, active after each jump)."""
@@ -111,6 +112,7 @@ def test_the_c_controller_is_the_python_one_tick_for_tick(variant):
 
 
 @needs_cc
+@pytest.mark.slow
 def test_faults_are_handled_alike():
     """Forced solver failures, missing and non-finite samples, an echo outlier of 5 mm, a 1e200
     sample, encoder readings that are not finite and encoders stuck for 0.1 s: the same
@@ -153,6 +155,7 @@ def test_faults_are_handled_alike():
 
 
 @needs_cc
+@pytest.mark.slow
 def test_an_unreachable_reference_backs_off_alike():
     """Jumps of 1 m (out of the arm's reach): level 2 reaches its cap, the tick takes the
     fallback, and levels 2 and 3 back off, tick for tick alike."""
@@ -166,6 +169,7 @@ def test_an_unreachable_reference_backs_off_alike():
 
 
 @needs_cc
+@pytest.mark.slow
 def test_a_slow_sensor_refreshes_on_each_sample_alike():
     """A 25-Hz video-like sensor: the sensor clock (the predictor at 40 ms, the forecast across
     the latency), samples 60 ms old on arrival."""
@@ -183,6 +187,7 @@ def test_a_slow_sensor_refreshes_on_each_sample_alike():
 
 
 @needs_cc
+@pytest.mark.slow
 def test_closed_loop_c_against_python_on_the_main_job(tmp_path):
     """`simulate --controller c` on the default job (4 s) and on a 25-Hz recording (a video
     track's 0.05-mm noise): the RMS within 1 % of the Python controller's (the same
@@ -205,6 +210,7 @@ def test_closed_loop_c_against_python_on_the_main_job(tmp_path):
 
 
 @needs_cc
+@pytest.mark.slow
 def test_two_controllers_on_one_library_do_not_share_the_solver():
     python, c = pair({})
     other = controller_in_c(python, "phantom")
@@ -219,6 +225,7 @@ def test_two_controllers_on_one_library_do_not_share_the_solver():
 
 
 @needs_cc
+@pytest.mark.slow
 def test_library_uses_no_heap_io_or_locks():
     """The shared library's undefined symbols: the monotonic clock, memset/memcpy/memmove and
     libm; no malloc, no printf, no lock."""

@@ -114,6 +114,7 @@ def _rel(a, b):
 
 
 @pytest.mark.parametrize("point_weights", [None, "ramp"])
+@pytest.mark.slow
 def test_unblocked_first_input_equals_backward_riccati(arm, fk, point_weights):
     rng = np.random.default_rng(1)
     pw = None if point_weights is None else tuple(np.linspace(1.0, 0.2, 50))
@@ -149,6 +150,7 @@ def test_blocked_first_input_equals_blocked_least_squares(arm, fk):
 
 
 @pytest.mark.parametrize("displacement_deg", [2.0, 10.0])
+@pytest.mark.slow
 def test_output_offset_is_the_forward_kinematics_residual(arm, fk, displacement_deg):
     """At rest at a posture q ≠ q0 with the reference on the tip (r_k = p(q)), the corrected
     controller's optimum is exactly u = 0 (zero cost); the uncorrected one moves the arm."""
@@ -322,6 +324,7 @@ def test_exact_reference_tracking_on_the_linear_model(arm):
 
 
 @pytest.mark.parametrize("joint_bounds", [False, True])
+@pytest.mark.slow
 def test_screening_is_exact_and_hands_binding_ticks_to_osqp(arm, joint_bounds):
     """Ticks settled by the screening cascade (level 1: unconstrained minimiser; level 2: the
     torque-box QP) return the exact QP solution (DAQP, to 1e-9 of τ_max) and satisfy every row;
@@ -368,6 +371,7 @@ def test_screening_is_exact_and_hands_binding_ticks_to_osqp(arm, joint_bounds):
     assert mpc.stats.fallback_total == 0 and every.stats.fallback_total == 0
 
 
+@pytest.mark.slow
 def test_level_2_checks_every_envelope_row_it_skips(arm):
     """Tight joint bounds and reference jumps: the torque-box QP's minimiser (an independent
     BVLS solve, scipy ``lsq_linear``) sometimes breaks an envelope row. Those ticks go to the

@@ -158,6 +158,7 @@ def test_a_capped_box_qp_takes_the_fallback_with_osqp_and_goes_to_daqp(arm):
 
 
 @pytest.mark.parametrize("bad", ["x_nan", "x_inf", "ref_nan", "ref_inf", "ref_neg_inf"])
+@pytest.mark.slow
 def test_nonfinite_inputs_trigger_the_fallback_without_exception(arm, mpc, bad):
     x = _run(mpc, arm, 20)
     ref = _moving_ref(arm, mpc.N, 20)
@@ -199,6 +200,7 @@ def _raise():
     ("nan_solution", "nonfinite_solution"),
     ("infeasible", "primal_infeasible"),
 ])
+@pytest.mark.slow
 def test_injected_solver_faults_apply_the_shifted_plan(arm, monkeypatch, solver, fault, reason):
     # OSQP on every tick with 100 iterations (not the real-time bound): only the faults fail
     mpc = RecedingHorizonMPC(arm, MPCSettings(solver=solver, screening=False, max_iter=100))
@@ -271,6 +273,7 @@ def _warm_start_run(arm, mode):
 
 
 @pytest.mark.parametrize("mode", ["shift", "shift_primal", "keep"])
+@pytest.mark.slow
 def test_osqp_warm_start_modes_agree_with_the_exact_solution(arm, mode):
     """Every warm-start mode gives u0 within 1 % of τ_max of DAQP; each saves iterations over
     the cold start "none" (measured means: shift 16.8, shift_primal 16.9, keep 22.5, none 27.8)."""
@@ -358,6 +361,7 @@ def test_settings_round_trip_through_a_dict():
 
 
 @pytest.mark.parametrize("robot", ["finger_edu", "ur5"])
+@pytest.mark.slow
 def test_other_robots_build_and_track(robot):
     arm = linearize(load_robot(robot))
     mpc = RecedingHorizonMPC(arm)

@@ -275,6 +275,7 @@ def _gated_run(z: np.ndarray, retract: bool, outlier: np.ndarray, k_out: int):
 
 
 @pytest.mark.parametrize("k_out", [1639, 1691, 1743])
+@pytest.mark.slow
 def test_gate_retracts_a_small_outlier_that_it_let_through(k_out):
     """A 0.12 mm outlier passes the 0.15 mm gate and the forecast made from it misses the next,
     good sample (the RLS weights amplify it). That sample agrees with the forecast made before the

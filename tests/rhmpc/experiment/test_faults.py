@@ -47,6 +47,7 @@ def check_run(result, doc, clean, spec):
     return report
 
 
+@pytest.mark.slow
 def test_the_truth_is_the_clean_streams():
     faulty = build_run(BASE.replace(**{"faults.events": ("freeze@1.5:0.3", "jump@2:1mm")}))
     n = BASE.loop.ticks
@@ -55,6 +56,7 @@ def test_the_truth_is_the_clean_streams():
         3000, 3001)[1][0, 0]
 
 
+@pytest.mark.slow
 def test_a_frozen_sensor_repeats_its_last_sample(clean):
     result, doc = run("freeze@1.5:0.3")
     report = check_run(result, doc, clean, "freeze@1.5:0.3")
@@ -67,6 +69,7 @@ def test_a_frozen_sensor_repeats_its_last_sample(clean):
     assert report["end_s"] == pytest.approx(1.8)
 
 
+@pytest.mark.slow
 def test_a_jump_is_rejected_then_followed_and_the_gate_says_so(clean):
     result, doc = run("jump@1.5:5mm")
     report = check_run(result, doc, clean, "jump@1.5:5mm")
@@ -79,6 +82,7 @@ def test_a_jump_is_rejected_then_followed_and_the_gate_says_so(clean):
     assert report["after"] is None and report["end_s"] == 3.0  # to the end of the run
 
 
+@pytest.mark.slow
 def test_a_burst_of_nan_is_counted_sample_by_sample(clean):
     result, doc = run("nan@1.5:0.5")
     report = check_run(result, doc, clean, "nan@1.5:0.5")
@@ -90,6 +94,7 @@ def test_a_burst_of_nan_is_counted_sample_by_sample(clean):
     assert report["after"]["counts"]["missing"] == 0
 
 
+@pytest.mark.slow
 def test_a_short_encoder_stick_is_held_tick_by_tick(clean):
     result, doc = run("stick@1.5:0.02")
     report = check_run(result, doc, clean, "stick@1.5:0.02")
@@ -101,6 +106,7 @@ def test_a_short_encoder_stick_is_held_tick_by_tick(clean):
     assert "encoder ticks held 40" in text and "joint envelope   held" in text
 
 
+@pytest.mark.slow
 def test_the_envelope_holds_through_a_stuck_encoder(clean):
     """0.2 s of stuck encoders: the observer's gate holds the readings out, the controller
     brakes after the fault timeout and tracks again once the readings move."""
@@ -111,6 +117,7 @@ def test_the_envelope_holds_through_a_stuck_encoder(clean):
     assert doc["encoder"]["held"] > 0 and doc["encoder"]["reacquired"] <= 1
 
 
+@pytest.mark.slow
 def test_a_slow_sensors_raw_samples_carry_the_fault():
     """3-D ultrasound at 28 Hz: the predictor reads each raw sample at its arrival, 68 ms
     late; every raw sample measured in the burst is missing for it."""

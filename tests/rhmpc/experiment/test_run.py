@@ -49,6 +49,7 @@ def test_result_document_has_the_documented_keys():
     assert doc["tick_per_simulated_s_g"] < doc["wall_per_simulated_s_g"]
 
 
+@pytest.mark.slow
 def test_same_seed_same_numbers_other_seed_other_numbers():
     keys = ("rms_error_mm", "max_error_mm", "rms_effort_mNm")
     a = run_experiment(small_config(seed=3))[1]
@@ -65,6 +66,7 @@ def test_truth_and_stream_start_together():
 
 
 @pytest.mark.parametrize("predictor", ["generalized", "exact"])
+@pytest.mark.slow
 def test_streamed_run_is_the_run_on_whole_arrays(tmp_path, predictor):
     """The streamed run (sensor stream made block by block, truth read per window, running
     statistics over many chunks) against the same run fed whole-run arrays
@@ -123,6 +125,7 @@ def test_streamed_run_is_the_run_on_whole_arrays(tmp_path, predictor):
     assert doc["tick_us"]["p999"] >= doc["tick_us"]["p99"] >= doc["tick_us"]["p50"] > 0
 
 
+@pytest.mark.slow
 def test_predictor_params_pick_each_predictors_named_set():
     """``predictor_params`` names a parameter set per predictor (a preset's choice for every
     predictor a comparison runs); ``predictor_settings.params`` still wins over it. The loop
@@ -168,6 +171,7 @@ def _patched_run_changes(monkeypatch, predictor: str) -> None:
 
 
 @pytest.mark.parametrize("predictor", ["generalized", "one-step"])
+@pytest.mark.slow
 def test_a_patched_forecast_changes_the_closed_loop_run(monkeypatch, predictor):
     _patched_run_changes(monkeypatch, predictor)
 

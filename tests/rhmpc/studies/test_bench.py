@@ -29,6 +29,7 @@ def test_heart_like_reference_amplitude_and_jumps():
     assert np.isclose(steps.max(), 2e-3)
 
 
+@pytest.mark.slow
 def test_run_bench_reports_the_issue_fields():
     r = run_bench(ticks=400, warmup=50, seed=1, jump_every=150)
     for key in ("tick_us", "osqp_tick_us", "solve_us", "gain_tick_us", "exact_tick_us",
@@ -58,6 +59,7 @@ def test_run_bench_reports_the_issue_fields():
     json.dumps(r)
 
 
+@pytest.mark.slow
 def test_cli_bench_json_and_table(capsys):
     assert main(["bench", "--ticks", "150", "--warmup", "10", "--json"]) == 0
     r = json.loads(capsys.readouterr().out)
@@ -74,6 +76,7 @@ def test_cli_bench_json_and_table(capsys):
 
 
 @pytest.mark.skipif(missing_toolchain() is not None, reason=missing_toolchain() or "")
+@pytest.mark.slow
 def test_run_bench_with_the_exported_controller():
     """`--controller c`: the whole exported controller in a loop of its own, every tick timed
     inside C (refresh ticks included) beside the gain tick of the same run."""

@@ -19,6 +19,7 @@ def test_the_report_draws_this_figure() -> None:
     assert report_plot_run is plot_run
 
 
+@pytest.mark.slow
 def test_a_run_with_forecasts_samples_and_limits(tmp_path, phantom) -> None:
     run = stand_in_run(phantom, seconds=3.0)
     out = tmp_path / "run.png"
@@ -29,6 +30,7 @@ def test_a_run_with_forecasts_samples_and_limits(tmp_path, phantom) -> None:
     assert np.unique(image.reshape(-1, image.shape[2]), axis=0).shape[0] > 100
 
 
+@pytest.mark.slow
 def test_a_long_decimated_run_without_the_new_fields(tmp_path, phantom) -> None:
     """A trace of every 20th tick plus a full-rate tail, no forecasts, samples or limits."""
     run = stand_in_run(phantom, seconds=60.0, stride=20, settling=10.0)
@@ -43,6 +45,7 @@ def test_a_long_decimated_run_without_the_new_fields(tmp_path, phantom) -> None:
     (0.03, 8.0, ["0.05", "0.1", "0.2", "0.5", "1", "2", "5"]),  # a few: 1, 2, 5
     (1e-3, 200.0, ["0.001", "0.01", "0.1", "1", "10", "100"]),  # many: the decades
 ])
+@pytest.mark.slow
 def test_log_axes_have_several_plain_labels(lo: float, hi: float, expected: list[str]) -> None:
     import matplotlib.pyplot as plt
 

@@ -15,6 +15,7 @@ def _rows(result):
     return {(r["parameter"], r["predictor"]): r for r in result["rows"]}
 
 
+@pytest.mark.slow
 def test_noise_study_reproduces_yuen_ordering():
     s = StudySettings(
         "noise",
@@ -44,6 +45,7 @@ def test_studies_are_reproducible_and_parallel_equals_serial():
     assert [r["rms_mm"] for r in a["rows"]] == [r["rms_mm"] for r in b["rows"]]
 
 
+@pytest.mark.slow
 def test_horizon_study_error_grows_with_lead_and_exact_is_zero():
     s = StudySettings(
         "horizon",
@@ -166,6 +168,7 @@ def test_28hz_rls_predictors_run_at_order_30():
     assert lc.settings.beat_times == tuple(beats) and ORDER_28HZ == 30
 
 
+@pytest.mark.slow
 def test_horizon_study_reports_heart_rate_error():
     s = StudySettings(
         "horizon", trials=1, seed=4, scenarios=("fixed-a2-top",), predictors=("ekf", "hold")

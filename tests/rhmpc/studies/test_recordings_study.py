@@ -112,3 +112,87 @@ def test_bad_settings_and_a_recording_too_short() -> None:
     assert parse_points(None) is None
     with pytest.raises(ValueError, match="--points"):
         parse_points("0")
+
+
+def points_track(T: int = 500, rate: float = 25.0, seed: int = 3) -> Track:
+    """Four tracked points of one surface; point 1 is the POI, the others its side
+    information."""
+    from tests.predictors.helpers import tracked_points
+
+    pts = tracked_points(T, 1.0 / rate, seed=seed, noise=20e-6)
+    t = np.arange(T) / rate
+    return Track("pts.mat:p1", t, pts[:, 0], "pts.mat", 1, pts[:, 1:])
+
+
+SPLIT_NAMES = ("hold", "one-step", "st-rls", "ridge", "st-ridge", "combination")
+
+
+def test_the_split_protocol_fits_before_train_and_scores_train_to_end() -> None:
+    track = points_track()
+    settings = OpenLoopSettings(predictors=SPLIT_NAMES, leads=4, split=(300, 400))
+    doc = run_open_loop([track], settings)
+    assert doc["protocol"] == "split" and doc["split"] == [300, 400]
+    by = {(r["predictor"], r["lead_samples"]): r for r in doc["results"]}
+    assert {r["family"] for r in doc["results"]} == {
+        "baseline", "adaptive", "multi-point", "learned", "combination"}
+    assert by["st-ridge", 1]["family"] == "learned" and by["st-rls", 1]["family"] == "multi-point"
+    assert all(by[n, k]["scored"] == 100 for n in SPLIT_NAMES for k in (1, 4))
+    assert by["st-ridge", 1]["fit_s"] is not None and by["one-step", 1]["fit_s"] is None
+    assert by["st-rls", 1]["update_us"] > 0
+    for k in (1, 2, 3, 4):
+        best = min(by[n, k]["rms_error_mm"] for n in SPLIT_NAMES if n != "combination")
+        assert by["combination", k]["rms_error_mm"] <= 1.05 * best
+        assert by["st-ridge", k]["rms_error_mm"] < by["hold", k]["rms_error_mm"]
+    source = doc["sources"][0]
+    assert (source["scored_from"], source["scored_to"], source["points"]) == (300, 400, 4)
+
+
+@pytest.mark.slow
+def test_the_split_protocol_never_reads_ahead() -> None:
+    """Changing every point from sample m on leaves every error of an origin n with
+    n + L < m as it was: neither the fits nor the forecasts read ahead."""
+    track = points_track()
+    m, L = 340, 4
+    rng = np.random.default_rng(0)
+    z, others = track.z.copy(), track.others.copy()
+    z[m:] += 1e-3 * rng.standard_normal(z[m:].shape)
+    others[m:] += 1e-3 * rng.standard_normal(others[m:].shape)
+    changed = Track(track.label, track.t, z, track.file, 1, others)
+    settings = OpenLoopSettings(predictors=SPLIT_NAMES, leads=L, split=(300, 400))
+    from rhmpc.studies.recordings import score_track
+
+    # errors per origin are not in the rows: score [300, m − L) alone, both ways
+    early = OpenLoopSettings(predictors=SPLIT_NAMES, leads=L, split=(300, m - L))
+    a = score_track(track, early)[1]
+    b = score_track(changed, early)[1]
+    assert [r["rms_error_mm"] for r in a] == [r["rms_error_mm"] for r in b]
+    c = score_track(changed, settings)[1]
+    assert [r["rms_error_mm"] for r in c] != [r["rms_error_mm"] for r in score_track(
+        track, settings)[1]]
+
+
+def test_training_recordings_fit_the_learned_predictors() -> None:
+    whole = points_track(800)  # one surface: the first half trains, the second is scored
+    series = [whole.points()[:400]]
+    track = Track("b.mat:p1", whole.t[400:], whole.z[400:], "b.mat", 1, whole.others[400:])
+    doc = run_open_loop([track], OpenLoopSettings(predictors=("hold", "st-ridge", "combination"),
+                                                  leads=2, warmup=4.0),
+                        train=lambda period: series)
+    assert doc["fitted_on"] == "training recordings" and doc["protocol"] == "online"
+    row = next(r for r in doc["results"] if r["predictor"] == "st-ridge")
+    assert row["scored"] == 400 - 100 - 1 and row["ratio_to_hold"] < 0.2
+
+
+def test_fitted_predictors_need_something_to_fit_on_and_splits_are_checked() -> None:
+    with pytest.raises(ValueError, match="fitted before the run"):
+        run_open_loop([points_track()], OpenLoopSettings(predictors=("st-ridge",), warmup=2.0))
+    with pytest.raises(ValueError, match="TRAIN < END"):
+        OpenLoopSettings(split=(300, 300))
+    with pytest.raises(ValueError, match="no warm-up"):
+        OpenLoopSettings(split=(300, 400), warmup=2.0)
+    with pytest.raises(ValueError, match="split starts"):
+        run_open_loop([points_track(200)], OpenLoopSettings(predictors=("hold",),
+                                                            split=(300, 400)))
+    names = default_predictors(fitted=True)
+    assert names[0] == "hold" and names[-1] == "combination" and "st-ridge" in names
+    assert "st-ridge" not in default_predictors()

@@ -91,6 +91,7 @@ def _slow_evaluate(task: int, extra: dict | None = None) -> dict:
     return {"key": str(task), "status": "ok"}
 
 
+@pytest.mark.slow
 def test_heartbeat_runs_while_evaluations_are_in_flight(tmp_path: Path) -> None:
     beats = []
     with ResultsWriter(tmp_path / "r.jsonl") as writer:

@@ -64,6 +64,7 @@ def test_unknown_override_is_rejected() -> None:
 
 
 @pytest.mark.parametrize("name", sorted(TUNA_TABLE))
+@pytest.mark.slow
 def test_replica_matches_tuna_table(replicas: dict[str, Scenario], name: str) -> None:
     pp_mm, rate, duration = TUNA_TABLE[name]
     sc = replicas[name]
@@ -76,6 +77,7 @@ def test_replica_matches_tuna_table(replicas: dict[str, Scenario], name: str) ->
 
 
 @pytest.mark.parametrize("variability", ["clean", "default"])
+@pytest.mark.slow
 def test_fixed_a2_top_rms(replicas: dict[str, Scenario], clean: dict[str, Scenario],
                           variability: str) -> None:
     """§III-B: RMS 3.55 mm, with and without the physiological variability."""
@@ -221,6 +223,7 @@ def test_content_above_26_hz_is_small() -> None:
     assert np.sqrt(np.mean(np.sum(mid ** 2, axis=1))) > 20e-6  # broad band, not a pure sine
 
 
+@pytest.mark.slow
 def test_seeds_reproduce_and_differ() -> None:
     t = np.linspace(0, 30, 3001)
     a = make_scenario("fixed-a2-top", np.random.default_rng(7)).source.position(t)

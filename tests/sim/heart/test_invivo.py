@@ -26,6 +26,7 @@ def statistics() -> list[dict]:
                               60.0) for s in (1, 2, 3, 4)]
 
 
+@pytest.mark.slow
 def test_amplitude_and_rates_are_the_recordings(statistics) -> None:
     for st in statistics:
         assert st["peak_to_peak_mm"] == pytest.approx(RECORDING["peak_to_peak_mm"], abs=0.01)
@@ -36,6 +37,7 @@ def test_amplitude_and_rates_are_the_recordings(statistics) -> None:
         assert 0.10 <= st["beat_interval_sd_s"] <= 0.18
 
 
+@pytest.mark.slow
 def test_mostly_not_periodic_as_the_recording(statistics) -> None:
     """Means over the seeds within the recording's ranges (periodic part 0.41–0.50 mm,
     residual 0.84–0.96 mm, 69 % of it in 0.5–3 Hz), each seed near them."""
@@ -48,6 +50,7 @@ def test_mostly_not_periodic_as_the_recording(statistics) -> None:
         assert 0.35 < st["periodic_mm"] < 0.55 and 0.75 < st["residual_mm"] < 1.1
 
 
+@pytest.mark.slow
 def test_hold_within_30_percent_of_the_recording(statistics) -> None:
     """Not tuned: follows from the statistics above (measured 0.40–0.43 / 0.98–1.05 /
     1.32–1.39 mm; lag 1 sits below the recording's 0.57 by what a tracker's frame-to-frame

@@ -51,6 +51,7 @@ BEFORE = {
 
 
 @pytest.mark.parametrize("name", sorted(BEFORE))
+@pytest.mark.slow
 def test_clean_gives_back_the_periodic_replica(name: str) -> None:
     """All mechanisms off = the replica as it was (to the 17 printed digits, ~1e-19 m)."""
     p = make_scenario(name, variability="clean").source.position(T)
@@ -71,6 +72,7 @@ _ALONE = {
 
 
 @pytest.mark.parametrize("part", sorted(_ALONE))
+@pytest.mark.slow
 def test_each_mechanism_switches_on_alone(part: str) -> None:
     """Each setting alone changes the motion; the statistics stay calibrated."""
     t = np.arange(0, 60, 0.01)

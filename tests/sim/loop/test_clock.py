@@ -54,7 +54,7 @@ def _due(settings: LoopSettings, raw, ticks: int | None = None) -> list[tuple[in
     """Every refresh the loop would make: (tick, z or None, stamp)."""
     refreshes = Refreshes(raw, np.zeros(3), settings, predictor_clock(settings, raw))
     return [(i, z, stamp) for i in range(settings.ticks if ticks is None else ticks)
-            for z, stamp in refreshes.due(i)]
+            for z, stamp, _ in refreshes.due(i)]
 
 
 def test_each_raw_sample_reaches_the_predictor_once_with_its_own_time_stamp():

@@ -108,12 +108,14 @@ def test_exact_reference_tracks_far_below_the_heart_amplitude(world):
     assert result.controller_stats["fallback_total"] <= 5  # at most a start-up transient
 
 
+@pytest.mark.slow
 def test_no_prediction_is_much_worse_than_exact(world):
     exact = run_with(world, lambda truth: ExactReference(truth, N)).metrics()
     hold = run_with(world, predicted("hold")).metrics()
     assert hold["rms_error_mm"] > 3 * exact["rms_error_mm"]
 
 
+@pytest.mark.slow
 def test_prediction_beats_holding_the_last_sample(world):
     hold = run_with(world, predicted("hold")).metrics()
     gen = run_with(world, predicted("generalized")).metrics()
@@ -134,6 +136,7 @@ def nan_and_spikes(source, duration=3.2):
 
 
 @pytest.mark.parametrize("name", ["generalized", "one-step", "ekf", "hold"])
+@pytest.mark.slow
 def test_nan_laden_spiky_stream_never_gives_nan_torque(world, name):
     result = run_with(world, predicted(name), stream_of=nan_and_spikes)
     robot, _ = world
@@ -157,6 +160,7 @@ def spiky(source, duration=3.2):
     return type(stream)(t=stream.t, z=z, arrival=stream.arrival)
 
 
+@pytest.mark.slow
 def test_outlier_gate_keeps_the_robot_from_chasing_echo_spikes(world):
     """Against the true motion: with the gate the spikes leave no trace; without it the robot
     jumps towards each 5 mm spike."""

@@ -199,6 +199,7 @@ def test_linear_plant_is_the_mpc_model(phantom, arm):
 
 
 @pytest.mark.parametrize("cables", [0.0, 80.0])
+@pytest.mark.slow
 def test_compiled_hardware_tick_is_the_pinocchio_one(phantom, arm, cables):
     """The compiled step (sim/plant/chain.c hw_integrate) against the Python steps on
     Pinocchio, rigid and with cables, the controller's model the Çavuşoğlu set: 400 ticks of

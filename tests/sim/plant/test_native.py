@@ -120,6 +120,7 @@ def test_native_tick_is_the_pinocchio_tick(phantom, chain):
     (3.0, {"predictor": "exact", "sensor": "ideal", "ground_truth": "true",
            "mismatch.mass_scale": 0.8, "mismatch.friction_scale": 0.5}),
 ])
+@pytest.mark.slow
 def test_a_closed_loop_run_on_the_native_tick_matches_pinocchio(chain, duration, changes):
     """A whole run with the compiled tick (encoders, observer, cancellation with its own
     model, plant) against the Python tick on Pinocchio: the metrics agree to 1e-6 relative

@@ -22,6 +22,7 @@ def one_tick(robot, settings, states):
     return np.array(out)
 
 
+@pytest.mark.slow
 def test_default_integrator_local_error_against_fine_rk4(phantom):
     rng = np.random.default_rng(5)
     states = [

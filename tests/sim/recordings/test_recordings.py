@@ -58,7 +58,10 @@ def test_dropouts_are_kept_as_missing(tmp_path: Path) -> None:
     assert np.all(np.isfinite(p[0]))
     assert np.isnan(p[1:4]).all()
     np.testing.assert_allclose(p[4:], [[4e-3] * 3, [4.5e-3] * 3])
-    assert np.isnan(rec.position(-1.0)).all() and np.isnan(rec.position(4.5)).all()
+    assert np.isnan(rec.position(-1.0)).all() and np.isnan(rec.position(5.5)).all()
+    # the last sample holds for its period: 5 samples at 1 Hz last 5 s
+    np.testing.assert_allclose(rec.position(4.5), [5e-3] * 3)
+    assert rec.duration == 5.0
 
 
 MALFORMED = {
@@ -136,7 +139,7 @@ def test_export_round_trip(tmp_path: Path, suffix: str) -> None:
     path = export_scenario(sc, tmp_path / f"a2{suffix}")
     rec = load_recording(path)
     assert rec.dim == 3
-    assert rec.t.size == int(4.0 * 257) + 1
+    assert rec.t.size == int(4.0 * 257)  # 4 s at 257 Hz, the last sample holding its period
     assert rec.sample_rate == pytest.approx(257.0, rel=1e-4)
     np.testing.assert_allclose(rec.z, sc.source.position(rec.t), atol=2e-9)
     t = np.linspace(0.1, 3.9, 500)  # linear interpolation of a 257 Hz record
@@ -147,7 +150,7 @@ def test_export_by_name_and_1d(tmp_path: Path) -> None:
     path = export_scenario("mitral-1d", tmp_path / "m.csv", duration=2.0, rate=100.0)
     assert path.read_text().splitlines()[1] == "t_s,x_mm"
     rec = load_recording(path)
-    assert rec.dim == 1 and rec.t.size == 201
+    assert rec.dim == 1 and rec.t.size == 200 and rec.duration == pytest.approx(2.0)
 
 
 def test_save_recording_writes_missing_as_empty(tmp_path: Path) -> None:

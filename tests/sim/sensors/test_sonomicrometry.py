@@ -57,6 +57,7 @@ def _above(e: np.ndarray, fs: float, cut: float = 26.0) -> float:
     return float(np.sqrt(np.mean(np.sum(np.fft.irfft(spec, n=len(e), axis=0) ** 2, axis=1))))
 
 
+@pytest.mark.slow
 def test_content_above_26_hz_and_absolute_error() -> None:
     """Tuna §III-B: recorded − true above 26 Hz 0.10–0.14 mm RMS (3-D, slips excluded) on every
     seed; §III-A: 0.25 mm absolute accuracy per distance, ≤ 0.30 mm for the 95th percentile of

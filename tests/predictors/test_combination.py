@@ -1,0 +1,104 @@
+"""The online combination: it follows its best member, per lead, and passes ``others`` on."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from predictors import make_predictor
+from predictors.base import Predictor
+from predictors.combination import Combination, CombinationSettings
+from tests.predictors.helpers import feed, tracked_points
+
+DT = 0.04
+
+
+class Noisy(Predictor):
+    """Forecasts the true future of ``truth`` plus white noise of σ ``sigma(n)`` [m]."""
+
+    def __init__(self, truth: np.ndarray, sigma, seed: int) -> None:
+        self.truth, self.sigma = truth, sigma
+        self.rng = np.random.default_rng(seed)
+        super().__init__(DT)
+
+    def _update(self, z):
+        self.ready = True
+
+    def _predict(self, steps):
+        n = self.n - 1  # the newest sample's index
+        future = self.truth[n + 1 : n + 1 + steps]
+        pad = np.repeat(self.truth[-1:], steps - future.shape[0], axis=0)
+        return np.vstack([future, pad]) + self.sigma(n) * self.rng.standard_normal((steps, 3))
+
+
+def _rms(f: np.ndarray, truth: np.ndarray, lo: int, hi: int, k: int = 1) -> float:
+    e = f[lo:hi, k - 1] - truth[lo + k : hi + k]
+    return float(np.sqrt(np.mean(np.sum(e**2, axis=1))))
+
+
+def test_it_tracks_the_best_member_of_a_switching_stream() -> None:
+    T, switch = 3000, 1500
+    truth = tracked_points(T + 8, DT)[:, 0]
+
+    def good_then_bad(n):
+        return 10e-6 if n < switch else 100e-6
+
+    def bad_then_good(n):
+        return 100e-6 if n < switch else 10e-6
+
+    members = [Noisy(truth, good_then_bad, 1), Noisy(truth, bad_then_good, 2)]
+    c = Combination(DT, CombinationSettings(members=("a", "b")), members)
+    f = feed(c, truth[:T, None], 2)
+    settle = int(2 * c.settings.memory / DT)  # two memories of the discounted errors
+    for lo, hi, best in ((settle, switch, 10e-6), (switch + settle, T - 2, 10e-6)):
+        for k in (1, 2):
+            assert _rms(f, truth, lo, hi, k) < 1.05 * best * np.sqrt(3)
+    w = c.weights
+    assert w.shape == (2, 4) and np.allclose(w.sum(axis=0), 1.0) and (w[1] > 0.99).all()
+
+
+def test_near_equal_members_share_the_weight_and_their_errors_cancel() -> None:
+    T = 1500
+    truth = tracked_points(T + 8, DT)[:, 0]
+    members = [Noisy(truth, lambda n: 50e-6, s) for s in (1, 2, 3)]
+    c = Combination(DT, CombinationSettings(members=("a", "b", "c")), members)
+    f = feed(c, truth[:T, None], 1)
+    assert _rms(f, truth, 500, T - 1) < 0.75 * 50e-6 * np.sqrt(3)  # ≈ 1/√3 of each
+
+
+def test_members_by_name_get_the_other_points_and_the_settings_are_checked() -> None:
+    stream = tracked_points(300, DT)
+    c = make_predictor("combination", DT, members=("one-step", "st-rls"))
+    f = feed(c, stream, 6)
+    assert np.isfinite(f).all()
+    assert c.members[1].points == 4 and c.members[1].counts["updates"] == 300
+    c.reset()
+    assert c.members[1].n == 0
+    with pytest.raises(ValueError, match="members"):
+        CombinationSettings(members=())
+    with pytest.raises(ValueError, match="members"):
+        CombinationSettings(members=("combination",))
+    with pytest.raises(ValueError, match="3 names"):
+        Combination(DT, CombinationSettings(members=("a", "b", "c")),
+                    [make_predictor("hold", DT)])
+    with pytest.raises(ValueError, match="exponent"):
+        CombinationSettings(exponent=-1.0)
+
+
+@pytest.mark.slow
+def test_scoring_starts_at_score_from_with_the_members_priors() -> None:
+    """Before ``score_from`` nothing is scored; there each member's prior error counts: a
+    fitted member's validation RMS, an online member's running RMS."""
+    stream = tracked_points(700, DT, seed=3)
+    fitted = make_predictor("st-ridge", DT).fit(stream[:400])
+    s = CombinationSettings(members=("one-step", "st-ridge"), score_from=400)
+    c = Combination(DT, s, [make_predictor("one-step", DT), fitted])
+    feed(c, stream, 4, upto=400)
+    assert (c._count == 0).all() and (c.weights == 0.5).all()
+    c._prime()  # what the next update does first
+    prior = s.prior_seconds / DT
+    np.testing.assert_allclose(c._count, prior)
+    online = c.members[0].forecast_error_rms
+    np.testing.assert_allclose(c._sq[0], online**2 * prior)
+    np.testing.assert_allclose(c._sq[1], (fitted.model["validation_rms"] / fitted.unit) ** 2
+                               * prior)
