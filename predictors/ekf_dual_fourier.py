@@ -39,7 +39,12 @@ band the initialisation's FFT searches (36–180 beats/min, 6–30 breaths/min),
 covariance are fitted again from that window (``lock_refit``).  Richa observe that an
 arrhythmia "is interpreted as a drastic phase change" (§II-C); measured on MIT-BIH record 100
 with atrial premature beats, the re-fit takes the 3-step RMS from 2.4–3.5 × hold's to
-0.49–0.59 ×; a locked filter is unchanged.
+0.49–0.59 ×; a locked filter is unchanged. A re-fit costs a window's FFT searches and fits (a
+few milliseconds), so a lock lost again soon after is not re-fitted at once: after k re-fits
+in a row the next waits min(2^(k−1) beats, the window) of samples (binary exponential
+back-off; the lost samples are counted ``refit_deferred``), and a lock held for a beat ends
+the run of re-fits. Motion the model cannot lock to then costs a re-fit per window, not one
+per sample.
 
 Motion that is not periodic (``adaptive``, the default parameter set), as the ``ekf``'s
 (:mod:`predictors.ekf_fourier`): R follows the long-run variance of the current state's residual
@@ -60,7 +65,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.stats import chi2
 
 from predictors.fourier_init import (
     FitWindow,
@@ -71,7 +75,12 @@ from predictors.fourier_init import (
 )
 from predictors.fourier_settings import DUAL_PARAMETER_SETS as PARAMETER_SETS
 from predictors.fourier_settings import DualEKFSettings
-from predictors.nonperiodic import FourierPredictor, NonPeriodic, long_run_variance
+from predictors.nonperiodic import (
+    FourierPredictor,
+    NonPeriodic,
+    chi2_quantile,
+    long_run_variance,
+)
 
 __all__ = ["PARAMETER_SETS", "DualEKFSettings", "DualFourierEKF"]
 
@@ -119,7 +128,8 @@ class DualFourierEKF(FourierPredictor):
         self._H = np.zeros((d, self.nx))
         self._Hblk = np.einsum("aaj->aj", self._H[:, : d * k].reshape(d, d, k))
         self.nis = math.nan
-        self._gate = math.inf if s.gate_probability is None else chi2.ppf(s.gate_probability, d)
+        p_gate = s.gate_probability
+        self._gate = math.inf if p_gate is None else chi2_quantile(p_gate, d)
         self._max_reject, self._rejected = max(1, round(s.gate_seconds / self.dt)), 0
         self._c_lo, self._c_hi = (_TWO_PI * f for f in s.cardiac_band_hz)
         self._r_lo, self._r_hi = (_TWO_PI * f for f in s.respiratory_band_hz)
@@ -127,6 +137,7 @@ class DualFourierEKF(FourierPredictor):
             n = max(round(s.init_seconds / self.dt), 2 * k)
             self._window = FitWindow(n, d)
         self._rest, self._hph, self._fit_omega = None, None, math.nan
+        self._refits = self._refit_wait = self._locked = 0  # the re-fit's back-off
         if s.adaptive_r or s.residual_order:
             self._rest = NonPeriodic(d, self.dt, self._r, s.adaptive_r, s.residual_order,
                                      s.residual_forgetting, self.unit, s.cardiac_band_hz[0],
@@ -246,12 +257,28 @@ class DualFourierEKF(FourierPredictor):
             self._window.push(z)
         self._time_update()
         accepted = self._correct(z)
-        if accepted:
-            if s.init_seconds is not None and self._lost() and self._fit():
-                self.counts["lock_refit"] += 1
+        if accepted and s.init_seconds is not None:
+            self._relock()
         elif self._rest is not None:
             self._rest.reject()
         self._follow(learn=accepted)
+
+    def _relock(self) -> None:
+        """Re-fit on a lost lock, with the back-off of the module docstring."""
+        beat = max(1, round(_TWO_PI / (max(self.x[self.iwc], self._c_lo) * self.dt)))
+        if not self._lost():
+            self._locked += 1
+            if self._locked >= beat:
+                self._refits = 0
+            return
+        self._locked = 0
+        if self._refit_wait > 0:
+            self._refit_wait -= 1
+            self.counts["refit_deferred"] += 1
+        elif self._fit():
+            self.counts["lock_refit"] += 1
+            self._refits += 1
+            self._refit_wait = min(2 ** (self._refits - 1) * beat, len(self._window.samples))
 
     def _rate(self) -> float:
         return float(self.x[self.iwc])

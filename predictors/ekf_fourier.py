@@ -97,7 +97,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.stats import chi2
 
 from predictors.fourier_init import (
     FitWindow,
@@ -110,7 +109,12 @@ from predictors.fourier_init import (
 )
 from predictors.fourier_settings import EKF_PARAMETER_SETS as PARAMETER_SETS
 from predictors.fourier_settings import Q_OMEGA_HRV, EKFSettings
-from predictors.nonperiodic import FourierPredictor, NonPeriodic, long_run_variance
+from predictors.nonperiodic import (
+    FourierPredictor,
+    NonPeriodic,
+    chi2_quantile,
+    long_run_variance,
+)
 
 __all__ = ["PARAMETER_SETS", "Q_OMEGA_HRV", "EKFSettings", "FourierEKF"]
 
@@ -158,7 +162,8 @@ class FourierEKF(FourierPredictor):
         self._q = q
         self._hb = np.arange(1.0, hb + 1.0)
         self._wb_lo, self._wb_hi = (_TWO_PI * f for f in s.breathing_band_hz)
-        self._gate = math.inf if s.gate_probability is None else chi2.ppf(s.gate_probability, d)
+        p_gate = s.gate_probability
+        self._gate = math.inf if p_gate is None else chi2_quantile(p_gate, d)
         self._max_reject, self._rejected = max(1, round(s.gate_seconds / self.dt)), 0
         self._r = (s.sigma_r / self.unit) ** 2
         self._rest, self._hph = None, None

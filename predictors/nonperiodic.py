@@ -43,6 +43,7 @@ from collections import Counter
 from collections.abc import Callable
 
 import numpy as np
+from scipy.special import gammaincinv
 
 from predictors.base import Predictor
 from predictors.residual import RecentSamples, ResidualAR
@@ -192,3 +193,9 @@ class FourierPredictor(Predictor):
             return self._model(np.arange(1.0, steps + 1.0))
         y = self._model(np.arange(0.0, steps + 1.0))  # ŷ_{n+k|n} + ê_{n+k|n}
         return y[1:] + self._rest.forecast(np.diff(y, axis=0))
+
+
+def chi2_quantile(p: float, d: int) -> float:
+    """The χ²_d quantile of probability ``p``: 2 P⁻¹(d/2, p), P the regularised lower incomplete
+    gamma function (``scipy.stats.chi2.ppf``'s formula, without importing ``scipy.stats``)."""
+    return float(2.0 * gammaincinv(d / 2.0, p))

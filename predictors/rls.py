@@ -39,6 +39,10 @@ from scipy.linalg.blas import dger, dsymv, dsyr
 __all__ = ["RecursiveLeastSquares"]
 
 
+#: The most memory an RLS's covariances P (batch × n × n) may take [bytes]: 512 MiB.
+RLS_MAX_BYTES = 2**29
+
+
 class RecursiveLeastSquares:
     """B independent RLS problems with n regressors and q outputs each.
 
@@ -67,6 +71,13 @@ class RecursiveLeastSquares:
         counts: Counter | None = None,
     ) -> None:
         self.B, self.n, self.q = int(batch), int(n), int(q)
+        size = 8 * self.B * self.n * self.n
+        if size > RLS_MAX_BYTES:  # P has n² entries per problem
+            largest = int((RLS_MAX_BYTES / (8 * self.B)) ** 0.5)
+            raise ValueError(f"a regressor of {self.n} values (the order times the values per "
+                             f"sample) needs {size / 2**30:.3g} GiB for the RLS's covariance; "
+                             f"at most {largest} values fit in {RLS_MAX_BYTES // 2**20} MiB: "
+                             "lower the order")
         self.lam = float(forgetting_factor)
         self.delta = float(delta)
         self.p_max = float(p_max_factor) / self.delta

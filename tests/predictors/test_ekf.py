@@ -117,3 +117,26 @@ def test_spd_inverse_matches_numpy_and_rejects_indefinite(d):
     bad = np.eye(d)
     bad[-1, -1] = -1.0
     assert spd_inverse(bad) is None
+
+
+def test_dual_ekf_refits_with_a_back_off_when_it_cannot_lock(monkeypatch):
+    """A lock lost on every sample: re-fits spaced by 1, 2, 4 … beats, up to the window, not one
+    per sample (each costs the window's FFT searches and fits)."""
+    from predictors import make_predictor
+    from predictors.ekf_dual_fourier import DualFourierEKF
+
+    dt = 1 / 100
+    t = np.arange(0.0, 40.0, dt)
+    z = np.c_[3e-3 * np.sin(2 * np.pi * 1.2 * t), 2e-3 * np.cos(2 * np.pi * 1.2 * t),
+              1e-3 * np.sin(2 * np.pi * 0.25 * t)]
+    p = make_predictor("dual-ekf", dt)
+    monkeypatch.setattr(DualFourierEKF, "_lost", lambda self: self._window.full)
+    for row in z:
+        p.update(row)
+    refits, deferred = p.counts["lock_refit"], p.counts["refit_deferred"]
+    window = len(p._window.samples)
+    after = len(t) - window  # samples with a full window
+    # at most one re-fit per window once the back-off has grown to it, plus its ramp-up
+    assert refits <= after / window + np.log2(window) + 2, refits
+    assert refits + deferred == after
+    assert np.all(np.isfinite(p.predict(5)))
