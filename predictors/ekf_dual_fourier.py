@@ -42,9 +42,9 @@ with atrial premature beats, the re-fit takes the 3-step RMS from 2.4–3.5 × h
 0.49–0.59 ×; a locked filter is unchanged. A re-fit costs a window's FFT searches and fits (a
 few milliseconds), so a lock lost again soon after is not re-fitted at once: after k re-fits
 in a row the next waits min(2^(k−1) beats, the window) of samples (binary exponential
-back-off; the lost samples are counted ``refit_deferred``), and a lock held for a beat ends
-the run of re-fits. Motion the model cannot lock to then costs a re-fit per window, not one
-per sample.
+back-off; the lost samples are counted ``refit_deferred``, the rates meanwhile clamped to the
+bands the fit searches), and a lock held for a beat ends the run of re-fits. Motion the model
+cannot lock to then costs a re-fit per window, not one per sample.
 
 Motion that is not periodic (``adaptive``, the default parameter set), as the ``ekf``'s
 (:mod:`predictors.ekf_fourier`): R follows the long-run variance of the current state's residual
@@ -272,9 +272,11 @@ class DualFourierEKF(FourierPredictor):
                 self._refits = 0
             return
         self._locked = 0
-        if self._refit_wait > 0:
+        if self._refit_wait > 0:  # meanwhile the rates stay within the bands the fit searches
             self._refit_wait -= 1
             self.counts["refit_deferred"] += 1
+            self.x[self.iwc] = min(max(self.x[self.iwc], self._c_lo), self._c_hi)
+            self.x[self.iwr] = min(max(self.x[self.iwr], self._r_lo), self._r_hi)
         elif self._fit():
             self.counts["lock_refit"] += 1
             self._refits += 1

@@ -252,8 +252,8 @@ def _run_data(args: argparse.Namespace) -> int:
         plot_leads,
         poi_tracks,
         run_open_loop,
-        training_series,
     )
+    from sim.recordings import training_series
 
     names = tuple(n.strip() for n in (args.predictors or "").split(",") if n.strip())
     if args.poi is not None and args.points is not None:

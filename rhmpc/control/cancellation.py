@@ -60,8 +60,9 @@ class NonlinearityCancellation:
         if self.mismatch.parameters is not None:
             robot = _same_joints(robot, load_robot(self.mismatch.parameters))
         self.motor_map = robot.motor_map
-        self._rows = self.motor_map.tolist()  # S by rows (ω = S q̇) and by columns (Sᵀ f)
-        self._columns = self.motor_map.T.tolist()
+        # S's non-zero entries (i, j, S_ij): ω_i = Σ_j S_ij q̇_j, and (Sᵀ f)_j = Σ_i S_ij f_i
+        self._entries = [(i, j, s) for (i, j), s in np.ndenumerate(self.motor_map.tolist())
+                         if s != 0.0]
         self.model = robot.model.copy()
         for i, inertia in enumerate(self.model.inertias):
             self.model.inertias[i] = pin.Inertia(
@@ -92,10 +93,14 @@ class NonlinearityCancellation:
             raise ValueError(f"v and tau_mpc must have shape {self._zero.shape}")
         bias = pin.rnea(self.model, self.data, q, v, self._zero).tolist()
         rates, inv_vs, tanh = v.tolist(), self._inv_stiction, math.tanh
-        w = [sum(s * x for s, x in zip(row, rates)) for row in self._rows]  # ω = S q̇
+        w = [0.0] * len(rates)
+        for i, j, s in self._entries:  # ω = S q̇
+            w[i] += s * rates[j]
         f = [d * x + c * tanh(x * inv_vs) for (d, c), x in zip(self._friction, w)]
-        return np.array([t + b + sum(s * fk for s, fk in zip(column, f))  # + Sᵀ f
-                         for t, b, column in zip(u.tolist(), bias, self._columns)])
+        tau = [t + b for t, b in zip(u.tolist(), bias)]
+        for i, j, s in self._entries:  # + Sᵀ f
+            tau[j] += s * f[i]
+        return np.array(tau)
 
 
 def _same_joints(plant: Robot, model: Robot) -> Robot:

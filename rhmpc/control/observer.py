@@ -138,7 +138,8 @@ class JointObserver:
         self._q_in = self._prior_q_one[2 * n : 3 * n]
         self.reading = self._q_in
         self._u_in = self._post_and_u[2 * n :]
-        self._nu = np.zeros(n)
+        self._nu, self._abs_nu = np.zeros(n), np.zeros(n)
+        self._gate_min = float(self.gate.min())
         self._first = np.zeros(n)  # the reading when it was first held
         self.reset()
 
@@ -181,7 +182,10 @@ class JointObserver:
         nu -= self.x_prior[: self.n]
         if self._grace:  # after a hold: fused whatever it says, while the filter settles
             self._grace -= 1
-        elif (self.held or not np.all(np.abs(nu) <= self.gate)) and self._hold(nu):
+        # every |ν_j| within the smallest gate is within its own (NaN is not): the exact test
+        # of _hold only when that fails
+        elif (self.held or not np.abs(nu, out=self._abs_nu).max() <= self._gate_min) \
+                and self._hold(nu):
             return self.x
         return np.dot(self._correct_matrix, self._prior_q_one, out=self.x)
 

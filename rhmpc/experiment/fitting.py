@@ -18,6 +18,8 @@ import numpy as np
 
 from rhmpc.errors import UsageError
 from sim.loop.closed_loop import Refreshes
+from sim.recordings import RecordingError
+from sim.recordings.points import training_series
 
 __all__ = ["fit_predictor", "settling_series"]
 
@@ -69,15 +71,13 @@ def settling_series(run) -> np.ndarray:
 
 def training_recordings(config, period: float) -> list[np.ndarray]:
     """The recordings of ``config.train`` as (T, P, d) [m] on their grid, POI first, each
-    centred on its POI's mean (:func:`rhmpc.studies.recordings.training_series`)."""
+    centred on its POI's mean (:func:`sim.recordings.training_series`)."""
     if not config.train:
         return []
-    from rhmpc.studies.recordings import training_series
-
     read = dict(config.data_read)
     poi = read.pop("point", None)
     try:
         series = training_series(config.train, poi, read, period)
-    except ValueError as exc:
+    except RecordingError as exc:
         raise UsageError(f"--train: {exc}") from None
     return [s - np.nanmean(s[:, 0], axis=0) for s in series]

@@ -56,7 +56,7 @@ import numpy as np
 from predictors import LEARNED, family, make_predictor, needs_torch, predictor_names
 from predictors.combination import Combination, CombinationSettings
 from sim.recordings import RecordedMotion, load_points
-from sim.recordings.points import pick_point
+from sim.recordings.points import on_grid, pick_point
 
 #: The baselines, first in every table: the newest sample held, and the previous cycle.
 BASELINES: tuple[str, ...] = ("hold", "last-cycle")
@@ -276,23 +276,6 @@ def poi_tracks(files: Sequence[str], poi: int, read: dict) -> list[Track]:
     return out
 
 
-def training_series(files: Sequence[str], poi: int | None, read: dict,
-                    period: float) -> list[np.ndarray]:
-    """The recordings to fit on (``--train``): each (T, P, d) [m] on its grid, POI (point
-    ``poi``, or the only one) first. Their sample period must be ``period`` [s] (1 %): a model
-    runs at the period it was fitted at."""
-    out = []
-    for track in poi_tracks(files, 1 if poi is None else poi, read):
-        if not math.isclose(track.period, period, rel_tol=0.01):
-            raise ValueError(f"{track.file}: sampled every {1e3 * track.period:.4g} ms, the "
-                             f"scored recording every {1e3 * period:.4g} ms: fit on "
-                             "recordings of the same rate")
-        wide = track.points().reshape(track.t.size, -1)
-        _, grid = on_grid(track.t, wide, track.period)
-        out.append(grid.reshape(grid.shape[0], -1, track.z.shape[1]))
-    return out
-
-
 def loop_lead(period: float, latency: float, horizon: float) -> int:
     """K_loop = ⌈(Δ + λ + N·Ts)/Δ⌉ [samples] (module docstring), robust to rounding."""
     return max(1, math.ceil((period + latency + horizon) / period - 1e-9))
@@ -303,20 +286,6 @@ def warmup_seconds(duration: float, warmup: float | None) -> float:
     if warmup is not None:
         return float(warmup)
     return max(WARMUP_SECONDS, WARMUP_FRACTION * duration)
-
-
-def on_grid(t: np.ndarray, z: np.ndarray, period: float) -> tuple[np.ndarray, np.ndarray]:
-    """Samples on the grid t₀ + jΔ: a gap in the timestamps becomes missing samples.
-
-    Returns the grid's times (m,) and positions (m, d) with NaN rows in the gaps. Timestamps
-    too irregular to round to distinct grid slots are kept as they are, one slot each.
-    """
-    slot = np.rint((t - t[0]) / period).astype(np.int64)
-    if slot.size > 1 and np.any(np.diff(slot) < 1):
-        return t, z
-    grid = np.full((int(slot[-1]) + 1, z.shape[1]), np.nan)
-    grid[slot] = z
-    return t[0] + period * np.arange(grid.shape[0]), grid
 
 
 def forecast_errors(predictor, z: np.ndarray, period: float, first: int, depth: int,
@@ -433,9 +402,9 @@ def score_track(track: Track, settings: OpenLoopSettings,
                 save: Path | None = None) -> tuple[dict, list[dict]]:
     """The source's description and the result rows of every predictor on ``track``.
 
-    ``train``: the recordings to fit the fitted predictors on (:func:`training_series`);
-    default, with a split, the track's samples before TRAIN. ``save``: a folder to write the
-    fitted models to (their ``save``).
+    ``train``: the recordings to fit the fitted predictors on
+    (:func:`sim.recordings.training_series`); default, with a split, the track's samples before
+    TRAIN. ``save``: a folder to write the fitted models to (their ``save``).
 
     Raises
     ------
@@ -542,8 +511,8 @@ def run_open_loop(tracks: Sequence[Track | list[Track]], settings: OpenLoopSetti
     gets its ``mean`` rows, labelled ``FILE:mean``.
 
     ``train(period)``: the recordings to fit the fitted predictors on, on the grid of
-    ``period`` [s] (e.g. :func:`training_series`); default, with a split, each track's
-    samples before TRAIN. ``save``: a folder to write the fitted models to.
+    ``period`` [s] (e.g. :func:`sim.recordings.training_series`); default, with a split, each
+    track's samples before TRAIN. ``save``: a folder to write the fitted models to.
 
     Returns
     -------

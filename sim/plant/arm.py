@@ -163,7 +163,7 @@ class ArmPlant:
     def encoders(self) -> np.ndarray:
         """The encoders' joint angles q̃ = Δ·round(q/Δ) [rad] (q without an encoder model)."""
         res = self.robot.encoder_resolution
-        return self.q if res is None else res * np.round(self.q / res)
+        return self.q if res is None else res * np.rint(self.q / res)
 
     def friction(self, v: np.ndarray) -> np.ndarray:
         """Joint friction torque Sᵀ (D ω + F_c tanh(ω / v_s)), ω = S q̇, opposing the motion

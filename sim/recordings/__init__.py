@@ -15,7 +15,7 @@
 from sim.recordings.files import load_recording
 from sim.recordings.matfile import load_mat, parse_indices
 from sim.recordings.plausible import Plausibility, RecordingWarning, check_recording
-from sim.recordings.points import load_points
+from sim.recordings.points import load_points, on_grid, training_series
 from sim.recordings.recorded import (
     LENGTH_UNITS,
     TIME_UNITS,
@@ -27,5 +27,5 @@ from sim.recordings.text import export_source, save_recording
 __all__ = [
     "LENGTH_UNITS", "TIME_UNITS", "Plausibility", "RecordedMotion", "RecordingError",
     "RecordingWarning", "check_recording", "export_source", "load_mat", "load_points",
-    "load_recording", "parse_indices", "save_recording",
+    "load_recording", "on_grid", "parse_indices", "save_recording", "training_series",
 ]

@@ -15,6 +15,7 @@ Points are numbered from 1, in the file's order. A one-point file is a file of o
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -95,3 +96,42 @@ def pick_point(path: str | Path, recordings: list[RecordedMotion], point: int) -
         raise RecordingError(f"{path}: no point {point!r}; the file holds "
                              f"{len(recordings)} (point = 1…{len(recordings)})")
     return recordings[int(point) - 1]
+
+
+def on_grid(t: np.ndarray, z: np.ndarray, period: float) -> tuple[np.ndarray, np.ndarray]:
+    """Samples on the grid t₀ + jΔ: a gap in the timestamps becomes missing samples.
+
+    Returns the grid's times (m,) and positions (m, d) with NaN rows in the gaps. Timestamps
+    too irregular to round to distinct grid slots are kept as they are, one slot each.
+    """
+    slot = np.rint((t - t[0]) / period).astype(np.int64)
+    if slot.size > 1 and np.any(np.diff(slot) < 1):
+        return t, z
+    grid = np.full((int(slot[-1]) + 1, z.shape[1]), np.nan)
+    grid[slot] = z
+    return t[0] + period * np.arange(grid.shape[0]), grid
+
+
+def training_series(files, poi: int | None, read: dict, period: float) -> list[np.ndarray]:
+    """The recordings to fit on (``--train``): each (T, P, d) [m] on its grid (:func:`on_grid`),
+    point ``poi`` (from 1; default the first) first, then the others in file order. Their
+    sample period must be ``period`` [s] (1 %): a model runs at the period it was fitted at.
+
+    Raises
+    ------
+    RecordingError
+        A file that cannot be read, lacks the point, or is sampled at another rate.
+    """
+    out = []
+    for f in files:
+        points = load_points(f, **read)
+        k = 1 if poi is None else poi
+        rec = pick_point(f, points, k)
+        if not math.isclose(rec.period, period, rel_tol=0.01):
+            raise RecordingError(f"{f}: sampled every {1e3 * rec.period:.4g} ms, the scored "
+                                 f"recording every {1e3 * period:.4g} ms: fit on recordings "
+                                 "of the same rate")
+        stack = np.stack([rec.z] + [p.z for i, p in enumerate(points, 1) if i != k], axis=1)
+        _, grid = on_grid(rec.t, stack.reshape(rec.t.size, -1), rec.period)
+        out.append(grid.reshape(grid.shape[0], len(points), -1))
+    return out

@@ -50,7 +50,8 @@ def stand_in_run(robot, seconds: float = 3.0, Ts: float = 0.5e-3, stride: int = 
     t_s = np.arange(0.0, seconds, 1 / 257)
     z = p0 + heart(t_s) + 5e-5 * rng.standard_normal((t_s.size, 3))
     z[5] = np.nan  # a missing sample
-    settings = SimpleNamespace(Ts=Ts, settling=settling, horizon=horizon, duration=seconds)
+    settings = SimpleNamespace(Ts=Ts, settling=settling, settling_s=settling, horizon=horizon,
+                               duration=seconds)
     return SimpleNamespace(
         settings=settings, trace=trace, stride=stride, time=trace["time"], ee=ee, poi=poi,
         reference0=trace["reference0"], tau_mpc=trace["tau_mpc"], tau=trace["tau"],
