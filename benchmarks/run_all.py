@@ -21,7 +21,7 @@ ROOT = HERE.parent
 #: The benchmarks that write docs/results/NAME.json, in the order they run.
 SCRIPTS = ("headline", "tuna_tables", "hardware_sensitivity", "causal_bound", "yuen_noise",
            "mpc_timing", "exported_tick", "predictor_table", "invivo_table", "design_choices",
-           "long_run", "faults")
+           "long_run", "faults", "learned_table")
 MARK = re.compile(r"(<!-- results:(\w+) -->\n).*?(<!-- /results:\2 -->)", re.S)
 
 
