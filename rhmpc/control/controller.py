@@ -49,7 +49,7 @@ class Controller:
     cancellation : rhmpc.control.cancellation.NonlinearityCancellation or None
         ĝ + Ĉq̇ + f̂ from the controller's model; None: nothing to cancel (a linear plant).
     torque_limit : ndarray (nu,)
-        |τ| the actuators apply [N·m].
+        abs(τ) the actuators apply [N·m].
     input_delay : int
         Ticks from a torque's computation to its action (0: it acts over the next tick).
     """

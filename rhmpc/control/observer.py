@@ -15,7 +15,7 @@ controller estimates ``x = [q − q0; q̇]`` with the model it already has (the 
 Innovation gate (encoders that stick, a reading that is not finite)
     The innovation ν_j = q̃_j − q0_j − x̂⁻_j of a healthy encoder has the steady-state variance
     S_jj, S = H P⁻ Hᵀ + R (P⁻ the filter's a-priori covariance, R = diag(Δ²/12)). A reading
-    with some |ν_j| > γ √S_jj, or not finite, is held out whole (the joints' encoders share
+    with some abs(ν_j) > γ √S_jj, or not finite, is held out whole (the joints' encoders share
     one interface): the prediction stands in for it, x̂ = x̂⁻ (the innovation test of fault
     detection: Mehra & Peschon, *Automatica* 7(5), 1971; Willsky, *Automatica* 12(6), 1976).
     A stuck encoder shows as a reading that stays while the model, driven by the torque that

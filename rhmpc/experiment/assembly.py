@@ -214,10 +214,12 @@ REACH_TOLERANCE = 1e-4
 
 def check_reach(robot: Robot, truth, anchor: np.ndarray, ticks: int) -> float:
     """The farthest the POI's path (``anchor`` + the centred truth over ``ticks``) lies from
-    the end-effector positions the joint limits allow [m] (:meth:`robots.Robot.
-    distance_to_reach` at :data:`REACH_POINTS` points); a path outside is warned about, with
-    the distance and the fix. The run goes on: the controller keeps the arm in its envelope and
-    takes its safe actions (a recorded jump can leave the workspace for a moment)."""
+    the end-effector positions the joint limits allow [m].
+
+    Measured by :meth:`robots.Robot.distance_to_reach` at :data:`REACH_POINTS` points; a path
+    outside is warned about, with the distance and the fix. The run goes on: the controller
+    keeps the arm in its envelope and takes its safe actions (a recorded jump can leave the
+    workspace for a moment)."""
     from rhmpc.control.reference import embed3
 
     worst, at, q = 0.0, 0.0, robot.q0

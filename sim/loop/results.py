@@ -105,7 +105,7 @@ class JointEnvelope:
 
     The position margin is the least of q − q_lower, q_upper − q and, for each coupled limit
     lo ≤ c·q ≤ hi (:attr:`robots.Robot.coupling`), c·q − lo and hi − c·q [rad]; the speed
-    margin is the least of v_max − |q_{i+1} − q_i| / Ts, the mean speed over each tick [rad/s].
+    margin is the least of v_max − abs(q_{i+1} − q_i) / Ts, the mean speed over each tick [rad/s].
     The envelope *held* when both stay ≥ 0 (the limits the MPC's envelope enforces by default,
     :mod:`rhmpc.control.envelope`).
     """

@@ -99,8 +99,8 @@ def frame_position(model: pin.Model, q, frame: int) -> ca.SX:
 
 
 def cancel_function(cancellation) -> ca.Function:
-    """``cancel(q, q̇, u) → τ_c`` of a :class:`~rhmpc.control.cancellation.
-    NonlinearityCancellation` (its model, friction and motor map)."""
+    """``cancel(q, q̇, u) → τ_c`` of a nonlinearity cancellation (its model, friction and motor
+    map: :class:`~rhmpc.control.cancellation.NonlinearityCancellation`)."""
     n = cancellation.model.nv
     q, v, u = ca.SX.sym("q", n), ca.SX.sym("v", n), ca.SX.sym("u", n)
     S = np.asarray(cancellation.motor_map, dtype=float)
