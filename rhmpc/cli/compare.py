@@ -176,7 +176,7 @@ def _scenario_columns(args: argparse.Namespace) -> list[tuple[str, dict]]:
 
 def _data_columns(args: argparse.Namespace) -> list[tuple[str, dict]]:
     """(column, settings) of each recording, or of each tracked point with --points."""
-    from rhmpc.studies.recordings import file_points, parse_points
+    from rhmpc.studies.tracks import file_points, parse_points
 
     if args.scenarios is not None or args.full or args.paper:
         raise UsageError("--scenarios, --full and --paper apply to scenarios, not --data")

@@ -17,7 +17,6 @@ would take; long work that fits says how long it will take before it starts.
 from __future__ import annotations
 
 import argparse
-import itertools
 import json
 import math
 import os
@@ -29,14 +28,13 @@ from pathlib import Path
 import numpy as np
 
 from rhmpc.cli import COMMANDS
+from rhmpc.cli.data_figure import heart_rate, motion_figure
+from rhmpc.cli.text import fmt, mm, size_bytes, time_span
 from rhmpc.errors import UsageError, one_line_warnings
 from sim.heart import DEFAULT_SCENARIO, SCENARIOS, SPECS, make_scenario
 from sim.heart.analysis import (
-    fill_gaps,
-    heart_rate_track,
     motion_stats,
     predictability,
-    psd,
 )
 from sim.heart.invivo import source_statistics, statistics_table
 from sim.heart.motion import MotionSource
@@ -68,10 +66,6 @@ ANNOUNCE_AFTER = 10.0
 FALLBACK_MEMORY = 8e9
 #: The rate a synthetic motion is drawn at, at least, so that slow sensors show its shape [Hz].
 PLOT_RATE = 250.0
-#: A record no longer than this many zoom windows is drawn whole, without a zoomed window [-].
-WHOLE_WINDOWS = 2.0
-#: Up to this many samples an axis is drawn as a line; beyond, as its min–max per pixel [-].
-LINE_POINTS = 20_000
 #: The width of the tables' text [characters].
 TABLE_WIDTH = 100
 
@@ -237,13 +231,13 @@ def _check_work(action: str, name: str, duration: float, rate: float) -> None:
     if memory > available:
         per_second = _work(action, 1.0, rate)[0]
         raise UsageError(
-            f"{_fmt(duration)} s of {name} at {_fmt(rate)} Hz is {duration * rate:.3g} "
-            f"samples: {action} would need about {_bytes(memory)} of memory and "
-            f"{_span(seconds)}; {_bytes(available)} is available, enough for about "
+            f"{fmt(duration)} s of {name} at {fmt(rate)} Hz is {duration * rate:.3g} "
+            f"samples: {action} would need about {size_bytes(memory)} of memory and "
+            f"{time_span(seconds)}; {size_bytes(available)} is available, enough for about "
             f"{available / per_second:.3g} s at this rate (lower --duration or --rate)")
     if seconds > ANNOUNCE_AFTER:
-        print(f"rhmpc data: {action} of {_fmt(duration)} s of {name} at {_fmt(rate)} Hz "
-              f"takes about {_span(seconds)}", file=sys.stderr)
+        print(f"rhmpc data: {action} of {fmt(duration)} s of {name} at {fmt(rate)} Hz "
+              f"takes about {time_span(seconds)}", file=sys.stderr)
 
 
 def _available_memory() -> float:
@@ -279,7 +273,7 @@ def _stats_row(target: _Target) -> dict:
         stats = motion_stats(target.source, target.duration, target.rate, target.start)
         value = predictability(target.source, target.duration, target.start)
     row = {"name": target.name, "dim": int(target.source.dim),
-           "sensor_rate_hz": float(_fmt(target.rate, 6)),
+           "sensor_rate_hz": float(fmt(target.rate, 6)),
            "duration_s": round(target.duration, 3)}
     row.update(stats.as_dict())
     if isinstance(target.source, RecordedMotion):  # the file's own samples, as the reader counts
@@ -383,7 +377,7 @@ def _measured_table(rows: list[dict]) -> list[str]:
     for r in rows:
         rms_t = "—" if r["target_rms_mm"] is None else f"{r['target_rms_mm']:.2f}"
         lines.append(f"{r['name']:<16} {r['dim']:>3} {r['sensor_rate_hz']:>6g} "
-                     f"{_fmt(r['duration_s']):>6} {r['peak_to_peak_mm']:>7.2f} "
+                     f"{fmt(r['duration_s']):>6} {r['peak_to_peak_mm']:>7.2f} "
                      f"{r['target_peak_to_peak_mm']:>9.2f} {r['rms_mm']:>6.2f} {rms_t:>9} "
                      f"{_bpm_text(r['heart_rate_bpm']):>12} {_pred_text(r):>8}")
     lines.append("All scenarios are synthetic, calibrated to the papers' reported statistics "
@@ -430,12 +424,12 @@ def _show_lines(row: dict) -> list[str]:
     lines = [
         f"{row['name']}: {row['description']}",
         f"  axes              {row['dim']}",
-        f"  sample rate       {_fmt(row['sensor_rate_hz'])} Hz",
-        f"  duration          {_fmt(row['duration_s'])} s",
-        f"  peak-to-peak      {_mm(row['peak_to_peak_mm'])} mm (largest per-axis range)",
-        f"  RMS               {_mm(row['rms_mm'])} mm (about the mean"
+        f"  sample rate       {fmt(row['sensor_rate_hz'])} Hz",
+        f"  duration          {fmt(row['duration_s'])} s",
+        f"  peak-to-peak      {mm(row['peak_to_peak_mm'])} mm (largest per-axis range)",
+        f"  RMS               {mm(row['rms_mm'])} mm (about the mean"
         + (", 3-D)" if row["dim"] > 1 else ")"),
-        "  RMS per axis      " + ", ".join(_mm(v) for v in row["rms_per_axis_mm"]) + " mm",
+        "  RMS per axis      " + ", ".join(mm(v) for v in row["rms_per_axis_mm"]) + " mm",
         f"  heart rate        {hr_text}",
         f"  spectral peaks    {peaks or 'none'}" + (" Hz" if peaks else ""),
     ]
@@ -493,8 +487,8 @@ def _plot(args: argparse.Namespace) -> int:
     p = np.asarray(target.source.position(t)).reshape(n, -1) * 1e3
     with np.errstate(over="ignore", invalid="ignore"):
         stats = motion_stats(target.source, target.duration, target.rate, target.start)
-    heart = _heart_rate(t, p, rate, phase)
-    fig = _figure(plt, target, t, p, rate, heart, stats, args)
+    heart = heart_rate(t, p, rate, phase)
+    fig = motion_figure(plt, target, t, p, rate, heart, stats, args)
     out = Path(args.file)
     try:
         fig.savefig(out, dpi=110)
@@ -504,177 +498,3 @@ def _plot(args: argparse.Namespace) -> int:
         plt.close(fig)
     print(f"wrote {out}")
     return 0
-
-
-@dataclass(frozen=True)
-class _Heart:
-    """The heart rate a figure shows: over time, and its summary for the title."""
-
-    t: np.ndarray
-    bpm: np.ndarray
-    summary: str
-    how: str
-
-
-def _heart_rate(t: np.ndarray, p: np.ndarray, rate: float, phase) -> _Heart:
-    """The heart rate over time: a synthetic motion's own (its phase), or a recording's
-    spectral estimate over 10-s stretches; the title's text is the range of what is drawn."""
-    if phase is not None and hasattr(phase, "rate"):
-        bpm = 60 * np.asarray(phase.rate(t), dtype=float)
-        how = "the motion's heart rate"
-    else:
-        t, hz = heart_rate_track(t, fill_gaps(t, p), rate)
-        bpm, how = 60 * hz, "spectral peak of each 10-s stretch"
-    bpm_ok = bpm[np.isfinite(bpm)]
-    if not bpm_ok.size:
-        return _Heart(t, bpm, "unknown (record shorter than 10 s)", how)
-    lo, hi = float(np.min(bpm_ok)), float(np.max(bpm_ok))
-    summary = f"{lo:.0f} bpm" if hi - lo < 0.5 else f"{lo:.0f}–{hi:.0f} bpm"
-    return _Heart(t, bpm, summary, how)
-
-
-def _figure(plt, target: _Target, t: np.ndarray, p: np.ndarray, rate: float, heart: _Heart,
-            stats, args: argparse.Namespace):
-    """Positions per axis (the whole record, and a zoomed window if it is long), the heart
-    rate with the statistics, and the PSD."""
-    dim = p.shape[1]
-    zoom = target.duration > WHOLE_WINDOWS * args.window
-    height = 2.3 * dim + 4.2
-    fig = plt.figure(figsize=(13, height))  # fixed margins: a layout engine costs seconds
-    grid = fig.add_gridspec(dim + 2, 2, width_ratios=(2.2, 1.0),
-                            height_ratios=(*([1.0] * dim), 0.6, 1.1), left=0.07, right=0.985,
-                            top=1 - 0.95 / height, bottom=0.55 / height, hspace=0.6,
-                            wspace=0.12)
-    _plot_positions(fig, grid, target, t, p, args, zoom)
-    _plot_heart_rate(fig.add_subplot(grid[dim, 0]), target, heart)
-    _plot_stats(fig.add_subplot(grid[dim, 1]), stats, dim)
-    _plot_psd(fig.add_subplot(grid[dim + 1, :]), *psd(fill_gaps(t, p), rate, resolution=0.02),
-              rate, stats)
-    fig.suptitle(f"{target.name}: p-p {stats.peak_to_peak * 1e3:.2f} mm, "
-                 f"RMS {stats.rms * 1e3:.2f} mm, heart rate {heart.summary}, "
-                 f"{_fmt(target.rate)} Hz, {_fmt(target.duration)} s\n"
-                 + "\n".join(textwrap.wrap(target.description, 170)), fontsize=10)
-    return fig
-
-
-def _plot_positions(fig, grid, target: _Target, t: np.ndarray, p: np.ndarray,
-                    args: argparse.Namespace, zoom: bool) -> None:
-    """Per axis: the whole record (full width when short), and a zoomed window when long."""
-    dim = p.shape[1]
-    labels = ("x", "y", "z") if dim == 3 else ("x",)
-    end = target.start + target.duration
-    w0 = min(max(args.start, target.start), max(end - args.window, target.start))
-    inside = (t >= w0) & (t <= w0 + args.window)
-    for d in range(dim):
-        ax = fig.add_subplot(grid[d, 0] if zoom else grid[d, :])
-        band = _draw_trace(ax, t, p[:, d], 1000 if zoom else 1400)
-        ax.set_ylabel(f"{labels[d]} [mm]")
-        ax.set_xlim(target.start, end)
-        if d == 0:
-            ax.set_title("position, the whole record" + (" (min–max per pixel)" if band else ""))
-        if d == dim - 1:
-            ax.set_xlabel("time [s]")
-        if not zoom:
-            continue
-        ax.axvspan(w0, w0 + args.window, color="tab:orange", alpha=0.15, lw=0)
-        axz = fig.add_subplot(grid[d, 1])
-        axz.plot(t[inside], p[inside, d], lw=0.9, color="tab:blue")
-        axz.set_xlim(w0, w0 + args.window)
-        if d == 0:
-            axz.set_title(f"{_fmt(args.window)} s from {_fmt(w0)} s")
-        if d == dim - 1:
-            axz.set_xlabel("time [s]")
-
-
-def _draw_trace(ax, t: np.ndarray, y: np.ndarray, pixels: int) -> bool:
-    """``y`` over ``t`` as a line, or as its min–max over each of ``pixels`` columns when it
-    has more than :data:`LINE_POINTS` samples (which a line would draw the same, slowly).
-    Returns whether it drew the min–max band."""
-    if t.size <= LINE_POINTS:
-        ax.plot(t, y, lw=0.6, color="tab:blue")
-        return False
-    edges = np.linspace(0, t.size, pixels + 1).astype(int)
-    lo = np.full(pixels, np.nan)
-    hi = np.full(pixels, np.nan)
-    for i, (a, b) in enumerate(itertools.pairwise(edges)):
-        seg = y[a:b][np.isfinite(y[a:b])]
-        if seg.size:
-            lo[i], hi[i] = seg.min(), seg.max()
-    mid = t[np.minimum((edges[:-1] + edges[1:]) // 2, t.size - 1)]
-    ax.fill_between(mid, lo, hi, color="tab:blue", lw=0.6, edgecolor="tab:blue", step="mid")
-    return True
-
-
-def _plot_heart_rate(ax, target: _Target, heart: _Heart) -> None:
-    """The heart rate over time, as the title states it."""
-    if not heart.t.size:
-        ax.axis("off")
-        ax.text(0.0, 0.5, f"heart rate {heart.summary}", transform=ax.transAxes)
-        return
-    ax.plot(heart.t, heart.bpm, color="tab:red", lw=1.0, marker="" if heart.t.size > 60
-            else ".")
-    ax.set_xlim(target.start, target.start + target.duration)
-    ax.set_ylabel("heart rate\n[beats/min]")
-    ax.set_xlabel("time [s]")
-    ax.set_title(f"heart rate: {heart.how}", fontsize=9)
-
-
-def _plot_stats(ax, stats, dim: int) -> None:
-    """The statistics as text."""
-    ax.axis("off")
-    ax.text(0.0, 1.0, "\n".join([
-        f"peak-to-peak  {stats.peak_to_peak * 1e3:.2f} mm (largest axis range)",
-        f"RMS           {stats.rms * 1e3:.2f} mm (about the mean"
-        + (", 3-D)" if dim > 1 else ")"),
-        "spectral peaks " + (", ".join(f"{v:.2f}" for v in stats.peaks[:6]) or "none")
-        + (" Hz" if len(stats.peaks) else ""),
-    ]), transform=ax.transAxes, va="top", family="monospace", fontsize=8)
-
-
-def _plot_psd(ax, f: np.ndarray, s: np.ndarray, rate: float, stats) -> None:
-    """The Welch PSD per axis, the spectral peaks marked."""
-    dim = s.shape[1]
-    labels = ("x", "y", "z") if dim == 3 else ("x",)
-    for d in range(dim):
-        ax.semilogy(f, s[:, d], lw=0.9, label=labels[d])
-    ax.set_xlim(0, min(30.0, rate / 2))
-    top = float(np.max(s)) if np.isfinite(np.max(s)) and np.max(s) > 0 else 1.0
-    ax.set_ylim(max(top * 1e-9, 1e-12), top * 5)
-    ax.set_xlabel("frequency [Hz]")
-    ax.set_ylabel("PSD [mm²/Hz]")
-    ax.set_title("power spectral density (Welch)")
-    ax.legend(loc="upper right", ncols=dim)
-    for fp in stats.peaks[:6]:
-        ax.axvline(fp, color="0.5", lw=0.5, ls=":")
-
-
-def _fmt(x: float, digits: int = 4) -> str:
-    """``x`` to ``digits`` significant digits, without exponent or trailing zeros
-    (9.98667 → 9.987, 472.0 → 472, 257.069 → 257.1)."""
-    if not math.isfinite(x) or x == 0 or abs(x) >= 1e6:
-        return f"{x:.{digits}g}"
-    decimals = max(0, digits - 1 - math.floor(math.log10(abs(x))))
-    text = f"{x:.{decimals}f}"
-    return text.rstrip("0").rstrip(".") if "." in text else text
-
-
-def _mm(value: float) -> str:
-    """A length [mm] to the micrometre; with an exponent beyond a kilometre."""
-    return f"{value:.3f}" if abs(value) < 1e6 else f"{value:.3g}"
-
-
-def _bytes(n: float) -> str:
-    """A memory size in B, kB, MB, GB, TB, PB or EB."""
-    for unit in ("B", "kB", "MB", "GB", "TB", "PB"):
-        if abs(n) < 1000:
-            return f"{n:.3g} {unit}"
-        n /= 1000
-    return f"{n:.3g} EB"
-
-
-def _span(seconds: float) -> str:
-    """A time span in s, min, h, days or years."""
-    for unit, size in (("years", 365.25 * 86400), ("days", 86400), ("h", 3600), ("min", 60)):
-        if seconds >= size:
-            return f"{seconds / size:.3g} {unit}"
-    return f"{seconds:.2g} s"

@@ -244,15 +244,9 @@ def _run_data(args: argparse.Namespace) -> int:
     """``--data``: every predictor on the recordings, open loop (rhmpc.studies.recordings)."""
     from functools import partial
 
-    from rhmpc.studies.recordings import (
-        OpenLoopSettings,
-        format_report,
-        load_tracks,
-        parse_points,
-        plot_leads,
-        poi_tracks,
-        run_open_loop,
-    )
+    from rhmpc.studies.recordings import OpenLoopSettings, run_open_loop
+    from rhmpc.studies.recordings_report import format_report, plot_leads
+    from rhmpc.studies.tracks import load_tracks, parse_points, poi_tracks
     from sim.recordings import training_series
 
     names = tuple(n.strip() for n in (args.predictors or "").split(",") if n.strip())

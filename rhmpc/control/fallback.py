@@ -15,6 +15,7 @@ The order (:meth:`rhmpc.control.mpc.RecedingHorizonMPC` applies it):
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -100,3 +101,107 @@ def brake_torque(M0: np.ndarray, velocity: np.ndarray, ticks: int, Ts: float,
                  u_max: np.ndarray) -> np.ndarray:
     """τ = clip(−M0 q̇ / (ticks · Ts), ±u_max) [N·m]: stop the joints in ``ticks`` ticks."""
     return np.clip(-(M0 @ velocity) / (ticks * Ts), -u_max, u_max)
+
+
+#: Failures whose iterate is carried over to the next tick's warm start.
+_CONTINUE = frozenset({"max_iter", "time_limit", "solved_inaccurate", "injected"})
+#: Failures that do not lengthen the back-off: no solve was tried, or the failure was injected.
+_NO_BACKOFF = frozenset({"nonfinite_input", "injected", "backoff", "encoder_fault"})
+#: Longest failure streak the back-off counts (2³⁰ ticks: beyond any ``backoff_max_ticks``).
+_STREAK_MAX = 30
+
+
+class FallbackChain:
+    """The ticks whose torque is not the QP's, as :class:`rhmpc.control.mpc.RecedingHorizonMPC`
+    takes them (it derives from this class, which works on its state): the chain above, the
+    failure counted, the back-off lengthened, the next warm start prepared."""
+
+    def _lq_or_brake(self) -> tuple[np.ndarray, str]:
+        """The clipped LQ input if its whole clipped plan keeps the envelope, else braking."""
+        v = np.dot(self._Z_ext, self._p_ext)
+        np.clip(v, -1.0, 1.0, out=v)
+        v[self._nz:] = 0.0
+        if not self.qp.param_bounds or envelope_holds(self.qp.A, v, self._l, self._u, self._nz):
+            return v[: self.nu] * self._scale0, "lq"
+        velocity = self._p_x[self.nx // 2:]
+        ticks = self.settings.block_lengths[0]
+        return brake_torque(self.arm.M0, velocity, ticks, self.arm.Ts, self.u_max), "brake"
+
+    def _unsolved(self, t0: int, reason: str) -> np.ndarray:
+        """A tick that ends without the solver (back-off, a capped level 2): the fallback."""
+        self._last_screened = False
+        stats = self.stats
+        stats.iterations = 0
+        stats.solve_time = 0.0
+        out = self._fallback(reason, inputs_finite=True)
+        stats.parts_ns[:] = [time.perf_counter_ns() - t0, 0, 0, 0]
+        return out
+
+    def brake(self, x: np.ndarray, reason: str = "encoder_fault") -> np.ndarray:
+        """A tick without the QP, for a fault of the state's source: the torque that stops the
+        joints within the first move block (:func:`rhmpc.control.fallback.brake_torque`, from
+        the velocity of ``x``; zero if it is not finite), counted as a failure ``reason``."""
+        t0 = time.perf_counter_ns()
+        stats = self.stats
+        stats.ticks += 1
+        stats.level = stats.box_iterations = stats.iterations = 0
+        stats.solve_time = 0.0
+        self._last_screened = False
+        velocity = np.asarray(x, dtype=float)[self.nx // 2:]
+        ticks = self.settings.block_lengths[0]
+        tau = brake_torque(self.arm.M0, velocity, ticks, self.arm.Ts, self.u_max)
+        out = self._fallen_back(reason, tau, "brake")
+        stats.parts_ns[:] = [time.perf_counter_ns() - t0, 0, 0, 0]
+        return out
+
+    def _rejected(self, reason: str) -> np.ndarray:
+        """A solve not used: the fallback's torque; an unfinished iterate starts the next solve."""
+        out = self._fallback(reason, inputs_finite=True)
+        if reason in _CONTINUE and self._ws != "none":
+            # An unfinished solve is a good start for the next, nearly identical QP: carry
+            # the ADMM iterate over instead of restarting from the old plan.
+            z, y = self.last_solution()
+            if not (np.isfinite(z).all() and np.isfinite(y).all()):
+                pass
+            elif self._ws != "keep":
+                self._ws_x = self._shift @ z
+                self._ws_y = self._shift_dual @ y
+            else:
+                self._ws_x = None  # "keep": OSQP's own iterate
+        return out
+
+    def _fallback(self, reason: str, *, inputs_finite: bool) -> np.ndarray:
+        """The fallback chain's torque (plan, clipped LQ or braking, zero), recorded."""
+        tau, source = None, "zero"
+        k = self._plan_age + 1  # the tick of the plan this one is
+        if self._plan is not None and k <= self.settings.plan_fallback_ticks:
+            b = self.qp.block_of_tick[min(k, self.N - 1)]
+            tau = self._plan[b * self.nu:(b + 1) * self.nu] * self._scale0
+            source = "plan"
+        if tau is None and inputs_finite:
+            tau, source = self._lq_or_brake()
+        return self._fallen_back(reason, tau, source)
+
+    def _fallen_back(self, reason: str, tau: np.ndarray | None, source: str) -> np.ndarray:
+        """The bookkeeping of a tick whose torque is not the QP's: the failure, the back-off,
+        the plan's age, τ (zero if not finite) clipped into u_{−1}, the next warm start."""
+        stats = self.stats
+        stats.status = reason
+        stats.failures[reason] = stats.failures.get(reason, 0) + 1
+        if reason not in _NO_BACKOFF:
+            self._streak = min(self._streak + 1, _STREAK_MAX)
+            self._rest = min(2**self._streak - 1, self.settings.backoff_max_ticks)
+        self._plan_age += 1
+        if tau is None or not np.all(np.isfinite(tau)):
+            tau = np.zeros(self.nu)
+            source = "zero"
+        tau = np.clip(tau, self._neg_umax, self.u_max)
+        stats.source = source
+        stats.fallbacks[source] += 1
+        self._p_u[:] = tau
+        # Next warm start: the plan shifted to the next tick (or cold if there is none).
+        self._ws_pending = False
+        if self._plan is not None and self._ws != "none":
+            self._ws_x = self._shift @ self._plan
+            self._ws_y = self._y_zero
+        return tau

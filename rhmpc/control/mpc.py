@@ -53,30 +53,23 @@ import numpy as np
 
 from rhmpc.control.active_set import ActiveSetSolver
 from rhmpc.control.box_qp import BoxQP, BoxQPSettings
-from rhmpc.control.fallback import MPCStats, brake_torque, envelope_holds
+from rhmpc.control.fallback import FallbackChain, MPCStats
 from rhmpc.control.offset import OutputOffset
 from rhmpc.control.osqp_solver import SOLVED, STATUS_REASON, OSQPSolver
 from rhmpc.control.qp import CondensedQP, build_condensed_qp, screening_rows
 from rhmpc.control.settings import MPCSettings
 from robots.linearize import LinearArm
 
-#: Failures whose iterate is carried over to the next tick's warm start.
-_CONTINUE = frozenset({"max_iter", "time_limit", "solved_inaccurate", "injected"})
-
 #: Failure reasons counted in :attr:`MPCStats.failures` besides OSQP's statuses.
 EXTRA_REASONS = ("nonfinite_input", "nonfinite_solution", "solver_error", "injected",
                  "box_max_iter", "backoff", "encoder_fault")
-#: Failures that do not lengthen the back-off: no solve was tried, or the failure was injected.
-_NO_BACKOFF = frozenset({"nonfinite_input", "injected", "backoff", "encoder_fault"})
-#: Longest failure streak the back-off counts (2³⁰ ticks: beyond any ``backoff_max_ticks``).
-_STREAK_MAX = 30
 #: A slack above this [its unit] counts the tick as relaxing the envelope (``stats.relaxed``).
 RELAXED_SLACK = 1e-2
 
 __all__ = ["EXTRA_REASONS", "MPCStats", "RecedingHorizonMPC"]
 
 
-class RecedingHorizonMPC:
+class RecedingHorizonMPC(FallbackChain):
     """Receding-horizon MPC for the linearised arm, tracking N end-effector reference points.
 
     Parameters
@@ -284,17 +277,6 @@ class RecedingHorizonMPC:
             raise ValueError(f"u_prev must be {self.nu} finite torques [N·m], got {value!r}")
         self._p_u[:] = np.clip(value, -self.u_max, self.u_max)
 
-    def _lq_or_brake(self) -> tuple[np.ndarray, str]:
-        """The clipped LQ input if its whole clipped plan keeps the envelope, else braking."""
-        v = np.dot(self._Z_ext, self._p_ext)
-        np.clip(v, -1.0, 1.0, out=v)
-        v[self._nz:] = 0.0
-        if not self.qp.param_bounds or envelope_holds(self.qp.A, v, self._l, self._u, self._nz):
-            return v[: self.nu] * self._scale0, "lq"
-        velocity = self._p_x[self.nx // 2:]
-        ticks = self.settings.block_lengths[0]
-        return brake_torque(self.arm.M0, velocity, ticks, self.arm.Ts, self.u_max), "brake"
-
     def unconstrained(
         self, x: np.ndarray, ref: np.ndarray, u_prev: np.ndarray | None = None
     ) -> np.ndarray:
@@ -343,33 +325,6 @@ class RecedingHorizonMPC:
             np.dot(self._F_ext, self._p_ext, out=self._q)
             stats.box_iterations = 0
         return self._solver_tick(t0)
-
-    def _unsolved(self, t0: int, reason: str) -> np.ndarray:
-        """A tick that ends without the solver (back-off, a capped level 2): the fallback."""
-        self._last_screened = False
-        stats = self.stats
-        stats.iterations = 0
-        stats.solve_time = 0.0
-        out = self._fallback(reason, inputs_finite=True)
-        stats.parts_ns[:] = [time.perf_counter_ns() - t0, 0, 0, 0]
-        return out
-
-    def brake(self, x: np.ndarray, reason: str = "encoder_fault") -> np.ndarray:
-        """A tick without the QP, for a fault of the state's source: the torque that stops the
-        joints within the first move block (:func:`rhmpc.control.fallback.brake_torque`, from
-        the velocity of ``x``; zero if it is not finite), counted as a failure ``reason``."""
-        t0 = time.perf_counter_ns()
-        stats = self.stats
-        stats.ticks += 1
-        stats.level = stats.box_iterations = stats.iterations = 0
-        stats.solve_time = 0.0
-        self._last_screened = False
-        velocity = np.asarray(x, dtype=float)[self.nx // 2:]
-        ticks = self.settings.block_lengths[0]
-        tau = brake_torque(self.arm.M0, velocity, ticks, self.arm.Ts, self.u_max)
-        out = self._fallen_back(reason, tau, "brake")
-        stats.parts_ns[:] = [time.perf_counter_ns() - t0, 0, 0, 0]
-        return out
 
     def _set_parameters(self, x: np.ndarray, ref: np.ndarray) -> bool:
         """Write p = [x; r; u_{−1}; d(x)] (d: the offset correction); False if not all finite."""
@@ -433,22 +388,6 @@ class RecedingHorizonMPC:
         elif self._ws_x is not None:
             self._warm_start(self._ws_x, self._ws_y)
             self._ws_x = self._ws_y = None
-
-    def _rejected(self, reason: str) -> np.ndarray:
-        """A solve not used: the fallback's torque; an unfinished iterate starts the next solve."""
-        out = self._fallback(reason, inputs_finite=True)
-        if reason in _CONTINUE and self._ws != "none":
-            # An unfinished solve is a good start for the next, nearly identical QP: carry
-            # the ADMM iterate over instead of restarting from the old plan.
-            z, y = self.last_solution()
-            if not (np.isfinite(z).all() and np.isfinite(y).all()):
-                pass
-            elif self._ws != "keep":
-                self._ws_x = self._shift @ z
-                self._ws_y = self._shift_dual @ y
-            else:
-                self._ws_x = None  # "keep": OSQP's own iterate
-        return out
 
     def _accepted(self, tau: np.ndarray, z: np.ndarray, y: np.ndarray) -> np.ndarray:
         """A solved QP: τ clipped to ±u_max, the plan kept, the next warm start prepared."""
@@ -528,41 +467,3 @@ class RecedingHorizonMPC:
         g = np.dot(self._A_env, box.z, out=self._g_env)
         nv = self._nv
         return bool((g - self._u[nv:]).max() <= 0.0 and (self._l[nv:] - g).max() <= 0.0)
-
-    # -- fallback ------------------------------------------------------------------------------
-    def _fallback(self, reason: str, *, inputs_finite: bool) -> np.ndarray:
-        """The fallback chain's torque (plan, clipped LQ or braking, zero), recorded."""
-        tau, source = None, "zero"
-        k = self._plan_age + 1  # the tick of the plan this one is
-        if self._plan is not None and k <= self.settings.plan_fallback_ticks:
-            b = self.qp.block_of_tick[min(k, self.N - 1)]
-            tau = self._plan[b * self.nu:(b + 1) * self.nu] * self._scale0
-            source = "plan"
-        if tau is None and inputs_finite:
-            tau, source = self._lq_or_brake()
-        return self._fallen_back(reason, tau, source)
-
-    def _fallen_back(self, reason: str, tau: np.ndarray | None, source: str) -> np.ndarray:
-        """The bookkeeping of a tick whose torque is not the QP's: the failure, the back-off,
-        the plan's age, τ (zero if not finite) clipped into u_{−1}, the next warm start."""
-        stats = self.stats
-        stats.status = reason
-        stats.failures[reason] = stats.failures.get(reason, 0) + 1
-        if reason not in _NO_BACKOFF:
-            self._streak = min(self._streak + 1, _STREAK_MAX)
-            self._rest = min(2**self._streak - 1, self.settings.backoff_max_ticks)
-        self._plan_age += 1
-        if tau is None or not np.all(np.isfinite(tau)):
-            tau = np.zeros(self.nu)
-            source = "zero"
-        tau = np.clip(tau, self._neg_umax, self.u_max)
-        stats.source = source
-        stats.fallbacks[source] += 1
-        self._p_u[:] = tau
-        # Next warm start: the plan shifted to the next tick (or cold if there is none).
-        self._ws_pending = False
-        if self._plan is not None and self._ws != "none":
-            self._ws_x = self._shift @ self._plan
-            self._ws_y = self._y_zero
-        return tau
-

@@ -19,10 +19,9 @@ j = 1 … N`` from a piecewise-quadratic (3-node Lagrange) interpolation of thes
 
     r(τ) = ½(u−1)(u−2)·z_m − u(u−2)·z_{m+1} + ½u(u−1)·z_{m+2}
 
-Beyond the last node the last window's quadratic extrapolates (with the paper's K = 4 and
-downsample 15 that is at most the last 2.5 ms of the last horizon before the next update).
-``K = prediction_points + ⌈latency/dt⌉`` so that a sensor's latency is predicted across (Yuen et
-al. 2009's delay compensation).
+Beyond the last node the last window's quadratic extrapolates (at most the last 2.5 ms of the
+last horizon with the paper's K = 4 and downsample 15). ``K = prediction_points +
+⌈latency/dt⌉``: a sensor's latency is predicted across (Yuen et al. 2009's delay compensation).
 
 Outlier gate (innovation gating, :mod:`rhmpc.control.gate`): while *locked*, a sample whose miss
 e = z − ẑ (ẑ the forecast made for it one period earlier) has ‖e‖ > max(floor, 4·e_rms) is

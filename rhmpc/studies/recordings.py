@@ -55,8 +55,8 @@ import numpy as np
 
 from predictors import LEARNED, family, make_predictor, needs_torch, predictor_names
 from predictors.combination import Combination, CombinationSettings
-from sim.recordings import RecordedMotion, load_points
-from sim.recordings.points import on_grid, pick_point
+from rhmpc.studies.tracks import Track, twelve_digits
+from sim.recordings.points import on_grid
 
 #: The baselines, first in every table: the newest sample held, and the previous cycle.
 BASELINES: tuple[str, ...] = ("hold", "last-cycle")
@@ -163,119 +163,6 @@ class OpenLoopSettings:
         return self.predictors
 
 
-@dataclass(frozen=True)
-class Track:
-    """One trajectory to score: a recording, or one tracked point of it.
-
-    Attributes
-    ----------
-    label : str
-        How tables and the JSON name it (``rec.csv``, ``rec.mat:p2``).
-    t : ndarray, shape (n,)
-        Sample times [s], increasing.
-    z : ndarray, shape (n, d)
-        Positions [m]; NaN = missing.
-    file : str
-        The file it came from.
-    point : int | None
-        Its point number in a file of several (from 1).
-    others : ndarray, shape (n, P − 1, d), or None
-        The other tracked points' positions at the same times [m] (NaN = missing), when ``z``
-        is the point of interest of a file of several.
-    """
-
-    label: str
-    t: np.ndarray
-    z: np.ndarray
-    file: str = ""
-    point: int | None = None
-    others: np.ndarray | None = None
-
-    @property
-    def period(self) -> float:
-        """Δ, the median sample interval [s] (to 12 significant digits: timestamps written in
-        decimal make 1/25 s 0.03999999999999915)."""
-        return _digits(float(np.median(np.diff(self.t))))
-
-    def points(self) -> np.ndarray:
-        """(n, P, d): the POI in row 0, then the other points."""
-        if self.others is None:
-            return self.z[:, None, :]
-        return np.concatenate([self.z[:, None, :], self.others], axis=1)
-
-
-def _digits(x: float) -> float:
-    """``x`` to 12 significant digits."""
-    return float(f"{x:.12g}")
-
-
-def parse_points(text: str | None) -> str | tuple[int, ...] | None:
-    """``--points``: ``None`` (one-point files), ``"all"``, or point numbers from 1 (``"1,3"``)."""
-    if text is None or text.strip().lower() == "all":
-        return None if text is None else "all"
-    try:
-        numbers = tuple(int(v) for v in text.split(",") if v.strip())
-    except ValueError:
-        numbers = ()
-    if not numbers or min(numbers) < 1:
-        raise ValueError(f"--points {text!r}: expected all or point numbers from 1 (e.g. 1,3)")
-    return numbers
-
-
-def _labels(files: Sequence[str]) -> list[str]:
-    """A label per file: its name, or the path as given where two names collide."""
-    names = [Path(f).name for f in files]
-    return [n if names.count(n) == 1 else str(f) for n, f in zip(names, files, strict=True)]
-
-
-def file_points(files: Sequence[str], points, read: dict) -> list[list[tuple[str, str, int | None,
-                                                                             RecordedMotion]]]:
-    """Per file, its (label, file, point, recording) to score: every point or the chosen ones
-    (``points`` from :func:`parse_points`); ``point`` is ``None`` in a one-point file.
-
-    Raises
-    ------
-    ValueError
-        A file that cannot be read, a point it lacks, or several points and no ``points``.
-    """
-    out = []
-    for label, f in zip(_labels(files), files, strict=True):
-        recordings = load_points(f, **read)
-        several = len(recordings) > 1
-        if several and points is None:
-            raise ValueError(f"{f}: holds {len(recordings)} tracked points; choose them with "
-                             "--points all (or --points 1,3, numbered from 1)")
-        chosen = range(1, len(recordings) + 1) if points in (None, "all") else points
-        out.append([(f"{label}:p{k}" if several else label, f, k if several else None,
-                     pick_point(f, recordings, k)) for k in chosen])
-    return out
-
-
-def load_tracks(files: Sequence[str], points, read: dict) -> list[Track | list[Track]]:
-    """The tracks of ``files`` for :func:`run_open_loop`: a file of several points gives the
-    list of its points (scored with their mean), a one-point file its track."""
-    out: list[Track | list[Track]] = []
-    for group in file_points(files, points, read):
-        tracks = [Track(label, rec.t, rec.z, f, k) for label, f, k, rec in group]
-        out.append(tracks if group[0][2] is not None else tracks[0])
-    return out
-
-
-def poi_tracks(files: Sequence[str], poi: int, read: dict) -> list[Track]:
-    """Per file, the track of its point ``poi`` (from 1) with the other points as ``others``
-    (file order); a one-point file has ``poi`` 1 and no others."""
-    out = []
-    for label, f in zip(_labels(files), files, strict=True):
-        recordings = load_points(f, **read)
-        rec = pick_point(f, recordings, poi)
-        rest = [r.z for k, r in enumerate(recordings, 1) if k != poi]
-        others = np.stack(rest, axis=1) if rest else None
-        several = len(recordings) > 1
-        out.append(Track(f"{label}:p{poi}" if several else label, rec.t, rec.z, f,
-                         poi if several else None, others))
-    return out
-
-
 def loop_lead(period: float, latency: float, horizon: float) -> int:
     """K_loop = ⌈(Δ + λ + N·Ts)/Δ⌉ [samples] (module docstring), robust to rounding."""
     return max(1, math.ceil((period + latency + horizon) / period - 1e-9))
@@ -343,7 +230,7 @@ def _rows(track: Track, name: str, errors: np.ndarray, counts: dict, leads: list
         e = 1e3 * e[np.isfinite(e)]
         out.append({
             "source": track.label, "predictor": name, "family": family(name),
-            "lead_samples": k, "lead_s": _digits(k * period),
+            "lead_samples": k, "lead_s": twelve_digits(k * period),
             "rms_error_mm": float(np.sqrt(np.mean(e**2))) if e.size else None,
             "max_error_mm": float(np.max(e)) if e.size else None,
             "scored": int(e.size), "loop_lead": k == k_loop,
@@ -443,10 +330,11 @@ def score_track(track: Track, settings: OpenLoopSettings,
     _ratios(rows)
     source = {
         "label": track.label, "file": track.file, "point": track.point,
-        "rate_hz": _digits(1.0 / period), "period_s": period,
+        "rate_hz": twelve_digits(1.0 / period), "period_s": period,
         "duration_s": float(track.t[-1] - track.t[0]),
         "samples": int(track.t.size), "missing": int(np.sum(~np.isfinite(z).all(axis=1))),
-        "warmup_s": warmup, "loop_lead_samples": k_loop, "loop_lead_s": _digits(k_loop * period),
+        "warmup_s": warmup, "loop_lead_samples": k_loop,
+        "loop_lead_s": twelve_digits(k_loop * period),
         "gap_samples": int(t.size - track.t.size),
         "regular": bool(np.allclose(np.diff(t), period, rtol=0.05)),
         "points": grid.shape[1], "scored_from": first, "scored_to": end,
@@ -560,104 +448,3 @@ def run_open_loop(tracks: Sequence[Track | list[Track]], settings: OpenLoopSetti
         "loop_lead_rule": "ceil((period + latency + horizon) / period)",
         "sources": sources, "results": results,
     }
-
-
-def _lead_head(rows: list[dict], leads: list[int]) -> str:
-    period = {r["lead_samples"]: r["lead_s"] for r in rows}
-    k_loop = next((r["lead_samples"] for r in rows if r["loop_lead"]), None)
-    return "".join(f"{f'{k}/{1e3 * period[k]:.0f}' + ('*' if k == k_loop else ''):>10}"
-                   for k in leads)
-
-
-def _table(rows: list[dict], names: list[str], key: str, extra: bool) -> list[str]:
-    """One line per predictor: ``key`` per lead (and the ratios and events if ``extra``)."""
-    leads = sorted({r["lead_samples"] for r in rows})
-    k_loop = next((r["lead_samples"] for r in rows if r["loop_lead"]), leads[-1])
-    by = {(r["predictor"], r["lead_samples"]): r for r in rows}
-    head = f"{'predictor':<12}{'family':<12}" + _lead_head(rows, leads)
-    if extra:
-        head += f"{'÷hold 1':>9}{'÷hold *':>9}{'rejected':>10}{'repaired':>10}"
-    lines = [head]
-    for name in names:
-        if (name, leads[0]) not in by:
-            continue
-        cells = [by[name, k][key] for k in leads]
-        line = f"{name:<12}{by[name, leads[0]]['family']:<12}" + "".join(
-            f"{'—':>10}" if v is None else f"{v:>10.3f}" for v in cells)
-        if extra:
-            ratios = [by[name, k]["ratio_to_hold"] for k in (leads[0], k_loop)]
-            line += "".join(f"{'—':>9}" if v is None else f"{v:>9.2f}" for v in ratios)
-            line += f"{by[name, k_loop]['rejected']:>10}{by[name, k_loop]['repaired']:>10}"
-        lines.append(line)
-    return lines
-
-
-def _source_line(s: dict, doc: dict) -> str:
-    period_ms = 1e3 * s["period_s"]
-    gaps = f", {s['gap_samples']} missing between timestamps" if s["gap_samples"] else ""
-    if doc.get("protocol") == "split":
-        scored = (f"forecasts issued at samples {s['scored_from']}–{s['scored_to'] - 1} scored, "
-                  f"the fitted predictors fitted on {doc['fitted_on']}")
-    else:
-        rule = ("given" if doc["warmup_rule"] == "given" else "the longer of "
-                f"{WARMUP_SECONDS:g} s and {100 * WARMUP_FRACTION:g} % of the recording")
-        scored = f"warm-up {s['warmup_s']:.1f} s excluded ({rule})"
-    return (f"{s['label']}: {s['samples']} samples at {s['rate_hz']:.4g} Hz (Δ {period_ms:.3g} "
-            f"ms), {s['duration_s']:.1f} s, {s['missing']} missing{gaps}; {scored}; "
-            "the closed loop needs lead "
-            f"{s['loop_lead_samples']} = {1e3 * s['loop_lead_s']:.0f} ms "
-            f"(⌈(Δ + λ + N·Ts)/Δ⌉ = ⌈({period_ms:.3g} + {1e3 * doc['latency_s']:g} + "
-            f"{1e3 * doc['horizon_s']:g})/{period_ms:.3g}⌉)")
-
-
-def format_report(doc: dict) -> str:
-    """The open-loop tables of :func:`run_open_loop`: per source, RMS and max error by lead."""
-    names = doc["predictors"]
-    described = {s["label"]: s for s in doc["sources"]}
-    out = []
-    for label in dict.fromkeys(r["source"] for r in doc["results"]):
-        rows = [r for r in doc["results"] if r["source"] == label]
-        if label in described:
-            out.append(_source_line(described[label], doc))
-        else:
-            out.append(f"{label}: the mean over {rows[0]['points']} points")
-        when = "scored" if doc.get("protocol") == "split" else "after the warm-up"
-        out.append("RMS forecast error [mm] at lead [samples/ms] (* the closed loop's lead); "
-                   f"÷hold: RMS over hold's; events {when}")
-        out += _table(rows, names, "rms_error_mm", True)
-        out.append("max forecast error [mm]")
-        out += _table(rows, names, "max_error_mm", False)
-        out.append("")
-    return "\n".join(out).rstrip()
-
-
-def plot_leads(doc: dict, path) -> None:
-    """RMS error against lead [ms], every predictor, one panel per source (PNG at ``path``)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    labels = list(dict.fromkeys(r["source"] for r in doc["results"]))
-    fig, axes = plt.subplots(len(labels), 1, figsize=(8, 3.6 * len(labels)), squeeze=False)
-    for ax, label in zip(axes[:, 0], labels, strict=True):
-        rows = [r for r in doc["results"] if r["source"] == label]
-        styles = {"baseline": ("--", 1.0), "adaptive": ("-", 1.0), "multi-point": ("-.", 1.5),
-                  "learned": (":", 1.8), "combination": ("-", 2.6)}
-        for i, name in enumerate(doc["predictors"]):
-            mine = [r for r in rows if r["predictor"] == name and r["rms_error_mm"] is not None]
-            pts = sorted((1e3 * r["lead_s"], r["rms_error_mm"]) for r in mine)
-            if pts:
-                x, y = zip(*pts, strict=True)
-                style, width = styles.get(mine[0].get("family"), ("-", 1.0))
-                ax.plot(x, y, style, lw=width, marker="o", ms=3, color=f"C{i % 10}",
-                        label=f"{name} ({mine[0].get('family')})")
-        loop = [1e3 * r["lead_s"] for r in rows if r["loop_lead"]]
-        if loop:
-            ax.axvline(loop[0], color="0.5", lw=0.8, ls=":", label="closed loop's lead")
-        ax.set(xlabel="lead [ms]", ylabel="RMS forecast error [mm]", title=label)
-        ax.set_yscale("log")
-        ax.legend(fontsize=7, ncol=2)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)

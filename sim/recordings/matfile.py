@@ -264,13 +264,14 @@ def _scalar(value: object) -> float | None:
 
 
 def _units(path: Path, file_units: object, units: str | None) -> tuple[str, str]:
-    """The length unit and where it came from: the file's ``units``, else ``units``."""
+    """The length unit and where it came from: the file's ``units``, else ``units``, else
+    millimetres, the format's default as for CSV (:mod:`sim.recordings.plausible` warns, naming
+    the likely unit, when the motion's span is implausible in it)."""
     if isinstance(file_units, str) and units is not None and file_units != units:
         raise RecordingError(f"{path}: units {file_units!r} in the file disagree with {units!r}")
+    if file_units is None and units is None:
+        return "mm", "default"
     unit = file_units if isinstance(file_units, str) else units
-    if unit is None:
-        raise RecordingError(f"{path}: the file does not state its length unit (a string "
-                             "variable 'units'); give it with --units mm, m, um or cm")
     if unit not in LENGTH_UNITS:
         raise RecordingError(f"{path}: unknown units {unit!r} "
                              f"(use one of {', '.join(sorted(LENGTH_UNITS))})")

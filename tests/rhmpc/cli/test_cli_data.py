@@ -134,14 +134,14 @@ def test_plot_draws_short_records_whole_and_long_ones_with_a_zoom(
     import rhmpc.cli.data
 
     seen: dict = {}
-    figure = rhmpc.cli.data._figure
+    figure = rhmpc.cli.data.motion_figure
 
     def spy(plt, target, t, p, rate, heart, stats, args):
         fig = figure(plt, target, t, p, rate, heart, stats, args)
         seen[target.name] = (fig, heart)
         return fig
 
-    monkeypatch.setattr(rhmpc.cli.data, "_figure", spy)
+    monkeypatch.setattr(rhmpc.cli.data, "motion_figure", spy)
     rec = _heart_csv(tmp_path / "rec.csv", seconds=30.0)
     for name, duration in (("fixed-a2-top", "15"), ("fixed-a2-top", "40"), (str(rec), "30")):
         assert main(["data", "plot", name, str(tmp_path / "f.png"), "--duration", duration]) == 0
@@ -242,7 +242,6 @@ BAD_INPUTS = [
     (["show", "complex.npz"], "complex.npz: 'position' holds complex numbers"),
     (["show", "array.npz"], "array.npz: holds a single .npy array, not an .npz archive"),
     (["show", "fortnight.mat"], "fortnight.mat: time_units 'fortnight' is not a time unit"),
-    (["show", "nounits.mat"], "nounits.mat: the file does not state its length unit"),
     (["show", "norate.mat"], "norate.mat: the file has no sample times: give the sample rate "
                              "with --rate HZ"),
     (["show", "timed.mat", "--rate", "25"], "timed.mat: --rate 25 Hz disagrees with the time "
@@ -316,6 +315,6 @@ def test_long_work_is_announced(monkeypatch: pytest.MonkeyPatch,
                                              (257.069, "257.1"), (0.040, "0.04"),
                                              (29.96, "29.96"), (1e12, "1e+12")])
 def test_numbers_are_printed_with_sensible_digits(value: float, text: str) -> None:
-    from rhmpc.cli.data import _fmt
+    from rhmpc.cli.text import fmt
 
-    assert _fmt(value) == text
+    assert fmt(value) == text

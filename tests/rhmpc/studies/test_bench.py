@@ -13,7 +13,8 @@ import pytest
 from rhmpc.cli import main
 from rhmpc.control.export import missing_toolchain
 from rhmpc.control.settings import MPCSettings
-from rhmpc.studies.bench import format_table, heart_like_reference, run_bench
+from rhmpc.studies.bench import heart_like_reference, run_bench
+from rhmpc.studies.bench_report import format_table
 
 
 def test_heart_like_reference_amplitude_and_jumps():
@@ -88,6 +89,11 @@ def test_run_bench_with_the_exported_controller():
     assert r["exported_levels"]["1"] > 0 and r["exported_levels"]["0"] == 0
     # every failed solve is counted and served by a fallback
     assert sum(r["exported_fallbacks"].values()) == sum(r["exported_failures"].values())
+    # the C generated from the Python controller computes its torques (double precision, the
+    # same operations up to the compilers' order of summation: far below 1e-6 τ_max)
+    assert r["c_vs_python_max_frac"] <= 1e-6
+    assert 0 < r["c_tick_us"]["p50"] <= r["c_tick_us"]["p99"]
     text = format_table(r)
     assert "exported controller" in text and "refresh ticks" in text
+    assert "against the Python controller" in text
     json.dumps(r)

@@ -8,15 +8,14 @@ import pytest
 from predictors import make_predictor
 from rhmpc.studies.recordings import (
     OpenLoopSettings,
-    Track,
     default_predictors,
     forecast_errors,
     loop_lead,
-    on_grid,
-    parse_points,
     run_open_loop,
     warmup_seconds,
 )
+from rhmpc.studies.tracks import Track, parse_points
+from sim.recordings import on_grid
 
 
 def motion(rate: float, seconds: float, seed: int = 1, noise: float = 1e-4) -> Track:

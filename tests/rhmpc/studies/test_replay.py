@@ -149,14 +149,14 @@ class DevTools:
         self._buffer, self._id = b"", 0
         page = next(t for t in self.call("Target.getTargets")["targetInfos"]
                     if t["type"] == "page")
-        self.session = self.call("Target.attachToTarget", targetId=page["targetId"],
-                                 flatten=True)["sessionId"]
+        self.target_session = self.call("Target.attachToTarget", targetId=page["targetId"],
+                                        flatten=True)["sessionId"]
 
-    def call(self, method: str, session: str | None = None, **params) -> dict:
+    def call(self, method: str, target_session: str | None = None, **params) -> dict:
         self._id += 1
         message = {"id": self._id, "method": method, "params": params}
-        if session:
-            message["sessionId"] = session
+        if target_session:
+            message["sessionId"] = target_session
         os.write(self._write, json.dumps(message).encode() + b"\0")
         while True:
             reply = self._next()
@@ -178,7 +178,7 @@ class DevTools:
         return json.loads(message)
 
     def evaluate(self, expression: str):
-        result = self.call("Runtime.evaluate", self.session, expression=expression,
+        result = self.call("Runtime.evaluate", self.target_session, expression=expression,
                            returnByValue=True, awaitPromise=True)
         if "exceptionDetails" in result:
             raise RuntimeError(f"{expression}: {result['exceptionDetails']}")
@@ -199,7 +199,7 @@ class DevTools:
         import matplotlib.image
 
         self.evaluate("new Promise(r => requestAnimationFrame(() => requestAnimationFrame(r)))")
-        data = self.call("Page.captureScreenshot", self.session, format="png")["data"]
+        data = self.call("Page.captureScreenshot", self.target_session, format="png")["data"]
         image = matplotlib.image.imread(io.BytesIO(base64.b64decode(data)), format="png")
         return image[90:-60, :, :3]
 

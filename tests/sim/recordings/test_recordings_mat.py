@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import scipy.io
 
-from sim.recordings import RecordingError, load_recording
+from sim.recordings import RecordingError, RecordingWarning, load_recording
 
 T = np.arange(0, 2, 0.01)
 XYZ = np.vstack([4 * np.sin(2 * np.pi * 1.3 * T), 2 * np.sin(2 * np.pi * 2.6 * T),
@@ -91,7 +91,6 @@ def test_v73(tmp_path: Path) -> None:
     (dict(X=XYZ, t=np.r_[T[:50], T[48:198]]), dict(var="X"), "does not increase"),
     (dict(X=XYZ, t=T[:10]), dict(var="X"), "has 10 samples"),
     (dict(X=XYZ), dict(var="X"), "no sample times: give the sample rate with --rate HZ"),
-    (dict(X=XYZ), dict(var="X", rate=100.0), "does not state its length unit.*--units mm"),
     (dict(X=XYZ + 1j, units="mm"), dict(var="X", rate=100.0), "'X' holds complex numbers"),
     (dict(X=XYZ, t=T, time_units="fortnight"), dict(var="X", units="mm"),
      "time_units 'fortnight' is not a time unit"),
@@ -134,3 +133,16 @@ def test_the_rate_from_the_file_and_an_agreeing_option(tmp_path: Path) -> None:
     assert load_recording(path, var="X", rate=100.2).sample_rate == pytest.approx(100.0)
     timed = _v5(tmp_path, "timed.mat", X=XYZ, t=T, units="mm")
     np.testing.assert_allclose(load_recording(timed, var="X", rate=100.0).t, T)
+
+
+def test_a_file_that_states_no_unit_is_read_in_millimetres(tmp_path) -> None:
+    """No ``units`` in the file nor given: millimetres, the format's default as for CSV, and
+    said so; motion implausible in millimetres warns with the likely unit."""
+    path = tmp_path / "rec.mat"
+    scipy.io.savemat(path, {"X": XYZ})
+    rec = load_recording(path, var="X", rate=100.0)
+    assert (rec.units, rec.units_origin) == ("mm", "default")
+    np.testing.assert_allclose(rec.z, 1e-3 * XYZ.T)
+    scipy.io.savemat(path, {"X": 1e3 * XYZ})  # micrometres read as millimetres
+    with pytest.warns(RecordingWarning, match="--units um"):
+        load_recording(path, var="X", rate=100.0)
