@@ -21,8 +21,8 @@ import time
 from collections.abc import Iterable
 from concurrent.futures import Executor, Future, ProcessPoolExecutor
 
-__all__ = ["WATCHDOG_PERIOD_S", "die_with_parent", "process_pool", "stop_executor",
-           "worker_init"]
+__all__ = ["TERMINATE_GRACE_S", "WATCHDOG_PERIOD_S", "die_with_parent", "process_pool",
+           "stop_executor", "worker_init"]
 
 #: Linux ``prctl`` option: the signal a process receives when its parent dies.
 _PR_SET_PDEATHSIG = 1
@@ -90,15 +90,28 @@ def process_pool(jobs: int, start_method: str = "spawn") -> ProcessPoolExecutor:
                                initializer=worker_init, initargs=(os.getpid(),))
 
 
+#: Seconds a terminated worker has to end before it is killed.
+TERMINATE_GRACE_S = 1.0
+
+
 def stop_executor(executor: Executor, futures: Iterable[Future]) -> None:
-    """Cancel what is queued and stop the workers without waiting for running evaluations."""
+    """Cancel what is queued and stop the workers without waiting for running evaluations.
+
+    Each worker gets SIGTERM, then SIGKILL if it has not ended within
+    :data:`TERMINATE_GRACE_S`, and is reaped: no worker outlives this call, so that the
+    executor's own clean-up at exit has no process to wait for.
+    """
     for fut in futures:
         fut.cancel()
-    terminate = getattr(executor, "terminate_workers", None)  # Python >= 3.14
-    if terminate is not None:
-        terminate()
-    elif isinstance(executor, ProcessPoolExecutor):
-        for process in list((getattr(executor, "_processes", None) or {}).values()):
+    if isinstance(executor, ProcessPoolExecutor):
+        processes = list((getattr(executor, "_processes", None) or {}).values())
+        for process in processes:
             if process.is_alive():
                 process.terminate()
-    executor.shutdown(wait=False)
+        deadline = time.monotonic() + TERMINATE_GRACE_S
+        for process in processes:
+            process.join(max(0.0, deadline - time.monotonic()))
+            if process.is_alive():
+                process.kill()
+                process.join()
+    executor.shutdown(wait=False, cancel_futures=True)

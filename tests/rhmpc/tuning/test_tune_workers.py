@@ -119,13 +119,13 @@ def test_workers_die_when_the_parent_is_killed(tmp_path: Path, start_method: str
 
 
 def test_ctrl_c_stops_the_workers_at_once(tmp_path: Path) -> None:
+    """Ctrl-C does not wait for the runs in flight (two minutes each here): the parent exits
+    with 130 and no worker is left (the bounds only catch a hang, on any machine's load)."""
     proc, children = _start(tmp_path, "fork")
     try:
-        start = time.monotonic()
         proc.send_signal(signal.SIGINT)
-        assert proc.wait(timeout=10) == 130
-        assert _until(lambda: not any(map(_alive, children)), 2.0)
-        assert time.monotonic() - start < 3.0
+        assert proc.wait(timeout=60) == 130
+        assert _until(lambda: not any(map(_alive, children)), 10.0)
     finally:
         proc.kill()
         _kill_all(children)
