@@ -27,7 +27,10 @@ pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"),
 #: A subprocess that starts two workers (each writes its pid to a file, then sleeps) and waits;
 #: on Ctrl-C it stops them as the runners do.
 SCRIPT = """
-import sys, time
+import signal, sys, time
+# Ctrl-C as a terminal delivers it, even where the test runs in a background job (a shell
+# without job control starts those with SIGINT ignored, and a child inherits that)
+signal.signal(signal.SIGINT, signal.default_int_handler)
 from pathlib import Path
 from rhmpc.tuning.workers import process_pool, stop_executor
 import standin
