@@ -44,7 +44,7 @@ def open_loop(seed: int, names: list[str], folder: Path) -> dict:
     """``rhmpc predict`` on the shipped recording with ``seed``: {name: row dicts by lead}."""
     out = folder / f"predict-{seed}.json"
     rhmpc(["predict", "--data", DATA, "--poi", str(POI), "--split", SPLIT, "--leads", str(LEADS),
-           "--predictors", ",".join(names), "--seed", str(seed), "--out", str(out), "--json"])
+           "--predictors", ",".join(names), "--seed", str(seed), "--out", str(out)])
     doc = json.loads(out.read_text())
     rows: dict[str, dict] = {}
     for r in doc["results"]:

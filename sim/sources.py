@@ -15,7 +15,7 @@ import numpy as np
 from sim.heart.motion import MotionSource
 from sim.heart.scenarios import SPECS, Scenario, make_scenario
 from sim.recordings.files import load_recording
-from sim.recordings.points import load_points, pick_point
+from sim.recordings.points import load_poi
 from sim.recordings.recorded import RecordedMotion
 from sim.recordings.text import export_source
 
@@ -89,10 +89,7 @@ def read_points(path: str, read: dict) -> tuple[RecordedMotion, np.ndarray | Non
     point = read.pop("point", None)
     if point is None:
         return load_recording(path, **read), None
-    points = load_points(path, **read)
-    recording = pick_point(path, points, point)
-    rest = [p.z for i, p in enumerate(points) if i != point - 1]
-    return recording, (np.stack(rest, axis=1) if rest else None)
+    return load_poi(path, point, **read)
 
 
 def export_scenario(scenario: Scenario | str, path: str | Path, duration: float | None = None,

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from sim.recordings import RecordedMotion, load_points
-from sim.recordings.points import pick_point
+from sim.recordings.points import load_poi, pick_point
 
 __all__ = ["Track", "file_points", "load_tracks", "parse_points", "poi_tracks", "twelve_digits"]
 
@@ -122,11 +122,8 @@ def poi_tracks(files: Sequence[str], poi: int, read: dict) -> list[Track]:
     (file order); a one-point file has ``poi`` 1 and no others."""
     out = []
     for label, f in zip(_labels(files), files, strict=True):
-        recordings = load_points(f, **read)
-        rec = pick_point(f, recordings, poi)
-        rest = [r.z for k, r in enumerate(recordings, 1) if k != poi]
-        others = np.stack(rest, axis=1) if rest else None
-        several = len(recordings) > 1
+        rec, others = load_poi(f, poi, **read)
+        several = others is not None
         out.append(Track(f"{label}:p{poi}" if several else label, rec.t, rec.z, f,
                          poi if several else None, others))
     return out

@@ -98,6 +98,16 @@ def pick_point(path: str | Path, recordings: list[RecordedMotion], point: int) -
     return recordings[int(point) - 1]
 
 
+def load_poi(path: str | Path, point: int, **read) -> tuple[RecordedMotion, np.ndarray | None]:
+    """Point ``point`` (from 1) of a recording, and the other points' positions on its samples,
+    (n, P − 1, d) [m] in file order, or None for a file of one point. ``read``: the options of
+    :func:`load_points`."""
+    points = load_points(path, **read)
+    rec = pick_point(path, points, point)
+    rest = [p.z for k, p in enumerate(points, 1) if k != point]
+    return rec, (np.stack(rest, axis=1) if rest else None)
+
+
 def on_grid(t: np.ndarray, z: np.ndarray, period: float) -> tuple[np.ndarray, np.ndarray]:
     """Samples on the grid t₀ + jΔ: a gap in the timestamps becomes missing samples.
 
@@ -124,14 +134,12 @@ def training_series(files, poi: int | None, read: dict, period: float) -> list[n
     """
     out = []
     for f in files:
-        points = load_points(f, **read)
-        k = 1 if poi is None else poi
-        rec = pick_point(f, points, k)
+        rec, others = load_poi(f, 1 if poi is None else poi, **read)
         if not math.isclose(rec.period, period, rel_tol=0.01):
             raise RecordingError(f"{f}: sampled every {1e3 * rec.period:.4g} ms, the scored "
                                  f"recording every {1e3 * period:.4g} ms: fit on recordings "
                                  "of the same rate")
-        stack = np.stack([rec.z] + [p.z for i, p in enumerate(points, 1) if i != k], axis=1)
+        stack = rec.z[:, None] if others is None else np.concatenate([rec.z[:, None], others], 1)
         _, grid = on_grid(rec.t, stack.reshape(rec.t.size, -1), rec.period)
-        out.append(grid.reshape(grid.shape[0], len(points), -1))
+        out.append(grid.reshape(grid.shape[0], stack.shape[1], -1))
     return out
