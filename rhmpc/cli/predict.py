@@ -11,7 +11,7 @@ from pathlib import Path
 
 from predictors import PREDICTORS
 from rhmpc.cli import COMMANDS
-from rhmpc.cli.simulate import add_recording_options, recording_options
+from rhmpc.cli.simulate import add_recording_options, parse_split, recording_options
 from rhmpc.errors import UsageError
 from rhmpc.studies.prediction import (
     BASE_BPM,
@@ -225,19 +225,6 @@ def run(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
     return 0
-
-
-def parse_split(text: str | None) -> tuple[int, int] | None:
-    """``--split TRAIN:END`` as (TRAIN, END) frames, or ``None``."""
-    if text is None:
-        return None
-    try:
-        train, end = (int(v) for v in text.split(":"))
-    except ValueError:
-        raise UsageError(f"--split {text!r}: expected TRAIN:END frames, e.g. 600:700") from None
-    if not 0 < train < end:
-        raise UsageError(f"--split {text!r}: expected 0 < TRAIN < END")
-    return train, end
 
 
 def _run_data(args: argparse.Namespace) -> int:

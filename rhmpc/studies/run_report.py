@@ -29,6 +29,22 @@ def _placement(loop: dict) -> str:
             + " (set loop.placement = \"absolute\" to keep its own coordinates)")
 
 
+def _budget_line(doc: dict) -> str:
+    """Each refresh (gate, predictor, interpolation) against the predictor's period, and a
+    combination's slowest member."""
+    r = doc["refresh_us"]
+    out = (f"each refresh p50 {r['p50']:.0f} µs, p99 {r['p99']:.0f} µs, max {r['max']:.0f} µs "
+           f"in a period of {r['period_us'] / 1e3:g} ms: {r['over_period']} of "
+           f"{r['refreshes']} longer")
+    members = doc.get("member_time_us") or {}
+    timed = {k: v for k, v in members.items() if v.get("mean_us") is not None}
+    if timed:
+        name = max(timed, key=lambda k: timed[k]["mean_us"])
+        out += (f"; slowest member {name} {timed[name]['mean_us']:.0f} µs mean, "
+                f"{timed[name]['max_us']:.0f} µs max")
+    return out
+
+
 def _score_words(doc: dict) -> str:
     """Where the tracking error was taken: at the measured samples, or at every tick."""
     if doc.get("score") == "measured":
@@ -98,6 +114,8 @@ def format_summary(doc: dict, settling_rule: str | None = None) -> str:
         lines.insert(-1, "                   " + _clock_line(doc.get("predictor_clock") or {}))
     if doc.get("outlier_gate"):
         lines.insert(-1, "  outlier gate     " + _gate_line(doc["outlier_gate"]))
+    if doc.get("refresh_us", {}).get("refreshes"):
+        lines.insert(-1, "  predictor time   " + _budget_line(doc))
     encoder = doc.get("encoder") or {}
     if encoder.get("held"):  # the observer's innovation gate (rhmpc.control.observer)
         lines.insert(-1, f"  encoders         {encoder['held']} readings held out past the "
