@@ -92,7 +92,8 @@ def test_header_and_progress_come_before_the_first_run_ends(
                  "hold,one-step", "--duration", "8", "--jobs", "2", "--out",
                  str(tmp_path / "runs.json")])
     assert code == 0
-    first_end = min(d["ended"] for d in json.loads((tmp_path / "runs.json").read_text()))
+    first_end = min(d["ended"]
+                    for d in json.loads((tmp_path / "runs.json").read_text())["runs"])
     assert err.first is not None and err.first - start < 0.5
     assert err.first < first_end - 0.4  # while the first runs are in flight
     assert out.first is not None and out.first < first_end
@@ -188,7 +189,7 @@ def test_paper_tables_fit_in_120_characters() -> None:
             for d in _docs(list(COLUMNS), preds, seeds=10)]
     text = paper_table(docs, preds, list(COLUMNS)).split("Published findings")[0]
     assert max(map(len, text.splitlines())) <= MAX_WIDTH
-    assert "the maximum over 10 runs (seeds 0–9)" in text
+    assert "the mean ± the half-width of its 95 % interval over 10 runs (seeds 0–9)" in text
 
 
 def test_interval_is_students_t() -> None:
@@ -223,9 +224,9 @@ def test_paper_with_seeds_states_the_runs_per_cell(
                  "--predictors", "exact", "--duration", "1", "--jobs", "2", "--seeds",
                  "3"]) == 0
     out = capsys.readouterr().out
-    assert "ours = the maximum over 3 runs (seeds 0–2)" in out
-    worst = BASE_MM["exact"] * 1.2 * 1.12  # seed 2 is the maximum
-    assert f"0.237 / {worst:.3f} / {worst / 0.237:.2f}" in out
+    assert "ours = the mean ± the half-width of its 95 % interval over 3 runs (seeds 0–2)" in out
+    mean, half = interval95([BASE_MM["exact"] * (1 + 0.1 * s) * 1.12 for s in range(3)])
+    assert f"0.237 / {mean:.3f} ± {half:.3f} / {mean / 0.237:.2f}" in out
 
 
 @pytest.fixture
@@ -249,7 +250,7 @@ def test_recordings_default_to_hold_and_ratios_to_hold(
     assert max(map(len, out.splitlines())) <= MAX_WIDTH
     assert main(["compare", "--data", str(recording), "--duration", "2", "--jobs", "1",
                  "--json", "--quiet"]) == 0
-    docs = json.loads(capsys.readouterr().out)
+    docs = json.loads(capsys.readouterr().out)["runs"]
     assert [d["predictor"] for d in docs] == list(compare.DATA_PREDICTORS)
 
 
