@@ -149,8 +149,8 @@ def paper_table(docs: Sequence[dict], predictors: Sequence[str],
     out += ["", "Published findings (ours; a column decides when the 95 % interval of its "
             "paired difference excludes 0):"]
     out += [f"  {f.line()}" for f in findings(docs, setting, cols)]
-    out += [f"  Also published: {CROSS.title} ({CROSS.source}): needs both presets' runs "
-            "(benchmarks/tuna_tables.py sets them side by side)."]
+    out += [f"  Also published: {CROSS.title} ({CROSS.source}): needs both presets' runs; "
+            "the documentation's page on Tuna et al. sets them side by side."]
     return "\n".join(out)
 
 
