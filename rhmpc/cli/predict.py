@@ -48,7 +48,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         "scored. With --poi N the predictors of point N that read the other tracked points "
         "get them; --split TRAIN:END runs the literature's protocol: the learned predictors "
         "are fitted on the frames before TRAIN (or on --train FILE...), every other one runs "
-        "from the first frame, and the forecasts issued in [TRAIN, END) are scored.",
+        "from the first frame, and the forecasts issued in [TRAIN, END) are scored. Before "
+        "the fits start it says what it fits, on which frames, why each network is fitted "
+        "twice (a validation round, then the final one) and about how long it will take, and "
+        "which fitted predictors the default set leaves out (the GRUs, the slowest to fit) "
+        "with the --predictors list that adds them.",
     )
     what = p.add_mutually_exclusive_group()
     what.add_argument("--study", choices=STUDIES, help="which synthetic study")

@@ -17,8 +17,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["MAX_WIDTH", "METRICS", "Cell", "cells", "comparison_csv", "comparison_table",
-           "grid", "interval95", "reference_row"]
+__all__ = ["MAX_WIDTH", "METRICS", "Cell", "cells", "cells_document", "comparison_csv",
+           "comparison_table", "grid", "interval95", "json_ready", "reference_row"]
 
 #: Widest line of a table; a wider table is transposed, then split into blocks.
 MAX_WIDTH = 120
@@ -119,6 +119,33 @@ def cells(docs: Sequence[dict], predictors: Sequence[str],
     return out
 
 
+def cells_document(docs: Sequence[dict], predictors: Sequence[str],
+                   columns: Sequence[str]) -> list[dict]:
+    """The cells as data: per predictor and column, ``runs``, ``failed`` and, per metric of
+    :data:`METRICS`, ``mean`` and ``ci95`` ([low, high] of the mean's 95 % interval; None
+    below two runs)."""
+    out = []
+    for (pred, col), c in cells(docs, predictors, columns).items():
+        out.append({"predictor": pred, "column": col, "runs": c.n, "failed": c.failed,
+                    **{m: {"mean": c.mean[m], "ci95": [c.mean[m] - c.half[m],
+                                                       c.mean[m] + c.half[m]]}
+                       for m in METRICS}})
+    return out
+
+
+def json_ready(obj):
+    """``obj`` with every non-finite float as None (strict JSON) and numpy scalars as Python's."""
+    if isinstance(obj, dict):
+        return {k: json_ready(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [json_ready(v) for v in obj]
+    if isinstance(obj, np.generic):
+        obj = obj.item()
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj
+
+
 def reference_row(predictors: Sequence[str], recordings: bool = False) -> str | None:
     """The row the ratios are to: ``exact`` (``hold`` on recordings), else the other one."""
     for pred in ("hold", "exact") if recordings else ("exact", "hold"):
@@ -143,7 +170,7 @@ def runs_line(table: dict[tuple[str, str], Cell], seeds: Sequence[int] = ()) -> 
 def comparison_table(docs: Sequence[dict], predictors: Sequence[str],
                      scenarios: Sequence[str], recordings: bool = False,
                      seeds: Sequence[int] = ()) -> str:
-    """Tuna Tables I/III replica: error [mm] and effort [mN·m] per predictor and column, and
+    """Tuna Tables I–III replica: error [mm] and effort [mN·m] per predictor and column, and
     the ratios to the reference row.
 
     Parameters
