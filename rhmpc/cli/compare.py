@@ -180,7 +180,7 @@ def setting_of_config(config: RunConfig) -> str:
 
 def _predictors(args: argparse.Namespace, base: RunConfig) -> list[str]:
     """--predictors, or the default rows: the published tables' with --paper."""
-    from predictors import PREDICTORS
+    from predictors import predictor_names
     from rhmpc.studies.paper import table_predictors
 
     if args.predictors:
@@ -192,9 +192,10 @@ def _predictors(args: argparse.Namespace, base: RunConfig) -> list[str]:
     else:
         names = list(TABLE_PREDICTORS)
     predictors = list(dict.fromkeys(p.strip() for p in names if p.strip()))
-    bad = [p for p in predictors if p not in PREDICTORS]
+    bad = [p for p in predictors if p not in predictor_names()]
     if bad:
-        raise UsageError(f"unknown predictor(s) {', '.join(bad)}; valid: {', '.join(PREDICTORS)}")
+        raise UsageError(f"unknown predictor(s) {', '.join(bad)}; valid: "
+                         f"{', '.join(predictor_names())}")
     return predictors
 
 
