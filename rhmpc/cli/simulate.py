@@ -149,13 +149,13 @@ def add_recording_options(p: argparse.ArgumentParser) -> None:
 
 
 
-def add_split_option(p: argparse.ArgumentParser) -> None:
+def add_split_option(p: argparse.ArgumentParser, more: str = "") -> None:
     """``--split TRAIN:END``: the literature's split of a recording, in closed loop."""
     p.add_argument("--split", metavar="TRAIN:END", help="with --data: the "
                    "literature's split in closed loop: the run starts at the first sample, a "
                    "predictor fitted before the run learns from the samples before TRAIN (as "
                    "the loop delivers them) and the score covers the instants of samples TRAIN "
-                   "to END - 1 (numbered from 0); replaces --settling and --duration")
+                   f"to END - 1 (numbered from 0); replaces --settling and --duration{more}")
 
 
 def parse_split(text: str | None) -> tuple[int, int] | None:
