@@ -15,7 +15,6 @@ standard library and NumPy only, so that each layer reads and writes its files t
 """
 
 from boundary.limits import BOUNDS, FILE_BYTES, Bound, check, largest
-from boundary.npz import NpzArchive
 from boundary.reader import (
     FileError,
     json_loads,
@@ -31,6 +30,7 @@ from boundary.writer import (
     atomic_write,
     check_output,
     make_folder,
+    save_figure,
     write_bytes,
     write_text,
 )
@@ -38,5 +38,14 @@ from boundary.writer import (
 __all__ = [
     "BOUNDS", "FILE_BYTES", "AtomicFile", "Bound", "FileError", "NpzArchive", "atomic_write",
     "check", "check_output", "json_loads", "largest", "make_folder", "open_input", "read_bytes",
-    "read_json", "read_text", "read_toml", "tracking_inputs", "write_bytes", "write_text",
+    "read_json", "read_text", "read_toml", "save_figure", "tracking_inputs", "write_bytes",
+    "write_text",
 ]
+
+
+def __getattr__(name: str):
+    if name == "NpzArchive":  # NumPy is imported only when an archive is read
+        from boundary.npz import NpzArchive
+
+        return NpzArchive
+    raise AttributeError(f"module 'boundary' has no attribute {name!r}")

@@ -29,8 +29,8 @@ from typing import IO
 
 from boundary.reader import FileError, inputs_read
 
-__all__ = ["AtomicFile", "atomic_write", "check_output", "make_folder", "write_bytes",
-           "write_text"]
+__all__ = ["AtomicFile", "atomic_write", "check_output", "make_folder", "save_figure",
+           "write_bytes", "write_text"]
 
 _UMASK = os.umask(0)
 os.umask(_UMASK)
@@ -39,7 +39,7 @@ os.umask(_UMASK)
 def _lstat(path: Path) -> os.stat_result | None:
     try:
         return os.lstat(path)
-    except FileNotFoundError:
+    except (FileNotFoundError, NotADirectoryError):
         return None
 
 
@@ -103,7 +103,7 @@ def check_output(path: str | Path, option: str | None = None, *, root: str | Pat
         raise FileError(f"{option} {exc}") from None
     folder = path.parent
     if not folder.is_dir():
-        raise FileError(f"{name}: no such folder {folder.resolve()}")
+        raise FileError(f"{name}: no such directory {folder.resolve()}")
     if not os.access(folder, os.W_OK | os.X_OK) or (path.exists()
                                                      and not os.access(path, os.W_OK)):
         raise FileError(f"{name}: cannot write there")
@@ -148,14 +148,16 @@ class AtomicFile:
             fd, temp = tempfile.mkstemp(prefix=f".{self.path.name}.", suffix=".part",
                                         dir=self.path.parent)
         except OSError as exc:
-            raise self._error(exc) from None
+            raise self.error(exc) from None
         self._temp = Path(temp)
         info = _lstat(self.path)
         os.fchmod(fd, stat.S_IMODE(info.st_mode) if info is not None else 0o666 & ~_UMASK)
         kwargs = {} if "b" in mode else {"encoding": "utf-8", "newline": newline}
         self.file: IO = os.fdopen(fd, mode, **kwargs)
 
-    def _error(self, exc: BaseException) -> FileError:
+    def error(self, exc: BaseException) -> FileError:
+        """The error of a failed write: it names the target and says whether a previous
+        file is kept."""
         reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
         kept = "; the previous file is kept" if self.path.exists() else ""
         return FileError(f"{self.path}: cannot write: {reason}{kept}")
@@ -169,7 +171,7 @@ class AtomicFile:
             check_output(self.path, root=self._root, inputs=self._inputs)
             os.replace(self._temp, self.path)
         except OSError as exc:
-            error = self._error(exc)
+            error = self.error(exc)
             self.discard()
             raise error from None
         except BaseException:
@@ -197,7 +199,7 @@ class AtomicFile:
         if kind is not None:
             self.discard()
             if isinstance(exc, OSError) and not isinstance(exc, FileError):
-                raise self._error(exc) from None
+                raise self.error(exc) from None
             return
         self.commit()
 
@@ -220,3 +222,12 @@ def write_bytes(path: str | Path, data: bytes, **kwargs) -> Path:
 def write_text(path: str | Path, text: str, **kwargs) -> Path:
     """Write ``text`` (UTF-8) to ``path`` atomically (:class:`AtomicFile`)."""
     return write_bytes(path, text.encode("utf-8"), **kwargs)
+
+
+def save_figure(figure, path: str | Path, **savefig) -> Path:
+    """Write a Matplotlib ``figure`` to ``path`` atomically, in the format its suffix names
+    (``figure.savefig(file, format=…, **savefig)``)."""
+    path = Path(path)
+    with AtomicFile(path) as f:
+        figure.savefig(f, format=path.suffix.lstrip(".").lower() or None, **savefig)
+    return path

@@ -9,7 +9,6 @@ import os
 import sys
 from concurrent.futures import FIRST_COMPLETED, Future, wait
 from dataclasses import dataclass
-from pathlib import Path
 
 from rhmpc.cli import COMMANDS
 from rhmpc.cli.simulate import (
@@ -235,12 +234,14 @@ def _with_duration(config: RunConfig, args: argparse.Namespace) -> RunConfig:
 
 
 def run(args: argparse.Namespace) -> int:
+    import boundary
+    from rhmpc.experiment.config import input_files
     from rhmpc.tuning.progress import note
-    from rhmpc.tuning.store import check_writable
 
     todo = jobs(args)
     if args.out:
-        check_writable(args.out, "--out")
+        boundary.check_output(args.out, "--out", inputs=[
+            *(f for job in todo for f in input_files(job.config)), *filter(None, [args.config])])
     runs = [job.config for job in todo]
     text = not (args.json or args.csv)
     if text:
@@ -249,7 +250,7 @@ def run(args: argparse.Namespace) -> int:
         note(_header(todo, args), args.quiet)
     docs, wall = execute(todo, min(args.jobs, len(todo)), args.quiet)
     if args.out:
-        Path(args.out).write_text(json.dumps(docs, indent=2) + "\n")
+        boundary.write_text(args.out, json.dumps(docs, indent=2) + "\n")
     _print_results(docs, todo, args)
     note(_footer(docs, runs, wall, min(args.jobs, len(todo))), args.quiet)
     failed = [d for d in docs if "error" in d]

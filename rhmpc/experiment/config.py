@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import dataclasses
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import boundary
+from boundary import FileError
 from rhmpc.control.cancellation import ModelMismatch
 from rhmpc.control.observer import ObserverSettings
 from rhmpc.control.reference import ReferenceSettings
@@ -234,15 +235,14 @@ def _check_keys(section: str, cls: type, values: dict[str, Any]) -> None:
                          f"valid keys of [{section}]: {', '.join(names)}")
 
 
-def read_toml(path: str | Path) -> dict[str, Any]:
-    """A TOML file as a ``dict``; unreadable or invalid files raise ``UsageError`` naming it."""
-    path = Path(path)
+def read_toml(path: str | Path, kind: str = "config") -> dict[str, Any]:
+    """A TOML file as a ``dict``, through the one reader (:func:`boundary.read_toml`: a
+    regular file, bounded in size and depth); a file that cannot be read or parsed raises
+    ``UsageError`` naming it."""
     try:
-        return tomllib.loads(path.read_text())
-    except OSError as exc:
-        raise UsageError(f"{path}: cannot read: {exc.strerror}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise UsageError(f"{path}: not valid TOML: {exc}") from None
+        return boundary.read_toml(path, kind)
+    except FileError as exc:
+        raise UsageError(str(exc)) from None
 
 
 def load_config(path: str | Path) -> RunConfig:
@@ -250,7 +250,15 @@ def load_config(path: str | Path) -> RunConfig:
     return RunConfig.from_dict(read_toml(path), where=str(path))
 
 
+def input_files(config: RunConfig) -> list[str]:
+    """The files a run of ``config`` reads: its recording, its training recordings and its
+    predictor's saved model (what no output of the run may replace)."""
+    files = [config.data, *config.train, config.predictor_settings.get("model")]
+    return [f for f in files if isinstance(f, str)]
+
+
 def save_config(config: RunConfig, path: str | Path) -> None:
+    """Write ``config`` as TOML to ``path`` (atomically: :func:`boundary.write_text`)."""
     import tomli_w
 
-    Path(path).write_text(tomli_w.dumps(config.to_dict()))
+    boundary.write_text(path, tomli_w.dumps(config.to_dict()))
