@@ -29,6 +29,7 @@ from boundary.writer import (
     AtomicFile,
     atomic_write,
     check_output,
+    file_stem,
     make_folder,
     save_figure,
     write_bytes,
@@ -37,9 +38,9 @@ from boundary.writer import (
 
 __all__ = [
     "BOUNDS", "FILE_BYTES", "AtomicFile", "Bound", "FileError", "NpzArchive", "atomic_write",
-    "check", "check_output", "json_loads", "largest", "make_folder", "open_input", "read_bytes",
-    "read_json", "read_text", "read_toml", "save_figure", "tracking_inputs", "write_bytes",
-    "write_text",
+    "check", "check_output", "file_stem", "json_loads", "largest", "make_folder", "open_input",
+    "read_bytes", "read_json", "read_text", "read_toml", "save_figure", "tracking_inputs",
+    "write_bytes", "write_text",
 ]
 
 

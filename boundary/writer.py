@@ -20,6 +20,7 @@ when it writes.
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import os
 import stat
 import tempfile
@@ -29,7 +30,7 @@ from typing import IO
 
 from boundary.reader import FileError, inputs_read
 
-__all__ = ["AtomicFile", "atomic_write", "check_output", "make_folder", "save_figure",
+__all__ = ["AtomicFile", "atomic_write", "check_output", "file_stem", "make_folder", "save_figure",
            "write_bytes", "write_text"]
 
 _UMASK = os.umask(0)
@@ -77,10 +78,11 @@ def _inside(path: Path, root: Path) -> None:
 
 
 def check_output(path: str | Path, option: str | None = None, *, root: str | Path | None = None,
-                 inputs: Iterable = ()) -> Path:
+                 inputs: Iterable = (), create: bool = False) -> Path:
     """Refuse ``path`` as an output (module docstring) with a :class:`FileError` that names
     it (after ``option``, the option that named it, if given); also when its folder is missing
-    or not writable. Returns the path."""
+    (unless ``create``: it will be made, :func:`make_folder`) or not writable. Returns the
+    path."""
     path = Path(path)
     name = f"{option} {path}" if option else str(path)
     try:
@@ -102,6 +104,8 @@ def check_output(path: str | Path, option: str | None = None, *, root: str | Pat
             raise
         raise FileError(f"{option} {exc}") from None
     folder = path.parent
+    if create and not folder.exists():
+        return path
     if not folder.is_dir():
         raise FileError(f"{name}: no such directory {folder.resolve()}")
     if not os.access(folder, os.W_OK | os.X_OK) or (path.exists()
@@ -116,7 +120,8 @@ def make_folder(path: str | Path, root: str | Path) -> Path:
     path = Path(path)
     _inside(path / "x", Path(root))
     info = _lstat(path)
-    if info is not None and stat.S_ISLNK(info.st_mode):
+    given = os.path.abspath(path) == os.path.abspath(root)  # the folder given may be a link
+    if info is not None and stat.S_ISLNK(info.st_mode) and not given:
         raise FileError(f"{path}: a symbolic link (to {os.readlink(path)}); rhmpc writes "
                         "nothing through a link")
     try:
@@ -222,6 +227,18 @@ def write_bytes(path: str | Path, data: bytes, **kwargs) -> Path:
 def write_text(path: str | Path, text: str, **kwargs) -> Path:
     """Write ``text`` (UTF-8) to ``path`` atomically (:class:`AtomicFile`)."""
     return write_bytes(path, text.encode("utf-8"), **kwargs)
+
+
+def file_stem(label: str) -> str:
+    """A file name made from ``label`` (a recording's label, say): its characters outside
+    letters, digits, ``-``, ``_`` and ``.`` replaced by ``-`` and, when any was, eight hex
+    digits of the label's SHA-256 appended, so that two labels never share a name (``x y.csv``
+    and ``x-y.csv`` give ``x-y.csv-…`` and ``x-y.csv``)."""
+    stem = "".join(c if c.isascii() and (c.isalnum() or c in "-_.") else "-" for c in label)
+    stem = stem.lstrip(".") or "-"
+    if stem != label:
+        stem += "-" + hashlib.sha256(label.encode("utf-8", "surrogatepass")).hexdigest()[:8]
+    return stem
 
 
 def save_figure(figure, path: str | Path, **savefig) -> Path:

@@ -9,6 +9,7 @@ import os
 import sys
 from pathlib import Path
 
+import boundary
 from predictors import PREDICTORS
 from rhmpc.cli import COMMANDS
 from rhmpc.cli.simulate import add_recording_options, recording_options
@@ -187,8 +188,17 @@ def _check_mode(args: argparse.Namespace) -> None:
         raise UsageError(f"{', '.join(bad)} apply to --data FILE, not --study")
 
 
+def _check_outputs(args: argparse.Namespace) -> None:
+    """--out and --plot can be written and are none of the inputs, before any work."""
+    inputs = [*(args.data or []), *(args.train or [])] if args.data is not None else []
+    for option in ("out", "plot"):
+        if getattr(args, option) is not None:
+            boundary.check_output(getattr(args, option), f"--{option}", inputs=inputs)
+
+
 def run(args: argparse.Namespace) -> int:
     _check_mode(args)
+    _check_outputs(args)
     if args.data is not None:
         return _run_data(args)
     s = _settings(args)
@@ -275,12 +285,10 @@ def _run_data(args: argparse.Namespace) -> int:
             train = partial(training_series, args.train, args.poi, read)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
-    if args.plot and not Path(args.plot).resolve().parent.is_dir():
-        raise UsageError(f"--plot {args.plot}: no such directory")
     if args.save_models is not None:
         if split is None and train is None:
             raise UsageError("--save-models needs --split TRAIN:END or --train FILE...")
-        args.save_models.mkdir(parents=True, exist_ok=True)
+        boundary.make_folder(args.save_models, root=args.save_models)
 
     def progress(what: str) -> None:
         if not args.json:
@@ -298,8 +306,7 @@ def _publish(args: argparse.Namespace, doc: dict, plot, text) -> None:
     """The document to ``--out``, its figure to ``--plot``, and to stdout as JSON (``--json``)
     or as ``text(doc)``."""
     if args.out:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps(doc, indent=2) + "\n")
+        boundary.write_text(args.out, json.dumps(doc, indent=2) + "\n")
     if args.plot:
         plot(doc, args.plot)
     print(json.dumps(doc, indent=2) if args.json else text(doc))

@@ -53,6 +53,7 @@ from pathlib import Path
 
 import numpy as np
 
+import boundary
 from predictors import LEARNED, family, make_predictor, needs_torch, predictor_names
 from predictors.combination import Combination, CombinationSettings
 from rhmpc.studies.tracks import Track, twelve_digits
@@ -278,8 +279,7 @@ def _fit(names, period: float, series: list[np.ndarray], leads: int, seed: int,
         p.fit(series, say)
         out[name] = (p, time.perf_counter() - tic)
         if save is not None:
-            stem = "".join(c if c.isalnum() or c in "-_." else "-" for c in label)
-            p.save(save / f"{stem}.{name}{p.SUFFIX}")
+            p.save(save / f"{boundary.file_stem(label)}.{name}{p.SUFFIX}")
     return out
 
 

@@ -40,6 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
+import boundary
 from sim.heart.motion import MotionSource
 from sim.recordings.recorded import (
     AXES,
@@ -288,7 +289,8 @@ def save_recording(path: str | Path, t: np.ndarray, z: np.ndarray,
     z = np.asarray(z, dtype=float).reshape(t.size, -1)
     suffix = path.suffix.lower()
     if suffix == ".npz":
-        np.savez_compressed(path, t=t, position=z, units=np.array("m"))
+        with boundary.atomic_write(path) as fh:
+            np.savez_compressed(fh, t=t, position=z, units=np.array("m"))
         return path
     if suffix not in {".csv", ".txt"}:
         raise RecordingError(f"{path}: unsupported file type {path.suffix!r} (use .csv or .npz)")
@@ -296,7 +298,7 @@ def save_recording(path: str | Path, t: np.ndarray, z: np.ndarray,
     if axes is None:
         raise RecordingError(f"{path}: can only write 1-D or 3-D positions, got {z.shape[1]}")
     mm = z * 1e3
-    with path.open("w", encoding="utf-8", newline="") as fh:
+    with boundary.atomic_write(path, "w", newline="") as fh:
         if comment:
             fh.write(f"# {comment}\n")
         fh.write(",".join(["t_s", *(f"{a}_mm" for a in axes)]) + "\n")
