@@ -26,6 +26,8 @@ __all__ = ["BOUNDS", "FILE_BYTES", "MEMORY_BUDGET", "TIME_BUDGET", "Bound", "che
 MEMORY_BUDGET = 2 * 2**30
 #: Computing one command may take on one core [s]: a day.
 TIME_BUDGET = 86400.0
+#: The budgets in a message.
+BUDGETS = "2 GiB of memory and a day of computing"
 
 MiB = 2**20
 #: The largest file of each kind that is read [B]. A run's settings (TOML) and a sweep's
@@ -88,46 +90,68 @@ class Bound:
     cap: float = math.inf
     source: str = ""
 
-    def largest(self, scale: float = 1.0, workers: int = 1) -> int:
-        """The largest count whose cost fits both budgets; ``scale`` multiplies the cost of a
-        unit (e.g. the parameter values each trial runs), ``workers`` divides the time."""
+    def largest(self, memory_scale: float = 1.0, time_scale: float = 1.0,
+                workers: int = 1) -> int:
+        """The largest count whose cost fits both budgets: a unit costs ``bytes_each`` ×
+        ``memory_scale`` of memory and ``seconds_each`` × ``time_scale`` of computing, spread
+        over ``workers`` cores."""
         fits = [self.cap]
-        if self.bytes_each > 0:
-            fits.append(MEMORY_BUDGET / (self.bytes_each * scale))
-        if self.seconds_each > 0:
-            fits.append(TIME_BUDGET * max(1, workers) / (self.seconds_each * scale))
+        if self.bytes_each > 0 and memory_scale > 0:
+            fits.append(MEMORY_BUDGET / (self.bytes_each * memory_scale))
+        if self.seconds_each > 0 and time_scale > 0:
+            fits.append(TIME_BUDGET * max(1, workers) / (self.seconds_each * time_scale))
         return max(0, math.floor(min(fits)))
 
-    def check(self, value: float, name: str, scale: float = 1.0, workers: int = 1) -> None:
+    def check(self, value: float, name: str, memory_scale: float = 1.0,
+              time_scale: float = 1.0, workers: int = 1) -> None:
         """Raise ``ValueError`` naming ``name``, the cost and the largest value that fits when
-        ``value`` does not."""
-        top = self.largest(scale, workers)
+        ``value`` does not (scales as for :meth:`largest`)."""
+        top = self.largest(memory_scale, time_scale, workers)
         if value <= top:
             return
         cost = []
-        if self.bytes_each > 0:
-            cost.append(f"about {size_bytes(value * self.bytes_each * scale)} of memory")
-        if self.seconds_each > 0:
-            cost.append(f"{time_span(value * self.seconds_each * scale / max(1, workers))} "
-                        "of computing")
+        if self.bytes_each > 0 and memory_scale > 0:
+            cost.append(f"about {size_bytes(value * self.bytes_each * memory_scale)} of memory")
+        if self.seconds_each > 0 and time_scale > 0:
+            cost.append(f"{time_span(value * self.seconds_each * time_scale / max(1, workers))}"
+                        " of computing")
         need = " and ".join(cost) or "more than is allowed"
-        raise ValueError(f"{name} {value:g}: {value:.3g} {self.what} would take {need}; at "
-                         f"most {top} fit in {size_bytes(MEMORY_BUDGET)} and "
-                         f"{time_span(TIME_BUDGET)}" + ("" if workers <= 1 else
-                                                         f" on {workers} workers"))
+        where = "" if workers <= 1 else f" on {workers} workers"
+        count = f"{int(value)}" if float(value).is_integer() else f"{value:g}"
+        raise ValueError(f"{name}: {count} {self.what} would take {need}; at most {top} fit "
+                         f"in {BUDGETS}{where}")
 
 
 #: The bounds of every count a user sets, by name.
-BOUNDS: dict[str, Bound] = {}
+BOUNDS: dict[str, Bound] = {
+    "window": Bound(
+        "samples in a delay window", bytes_each=8.0, seconds_each=0.0,
+        source="one float64 per sample and channel of the online history (memory_scale: the "
+               "channels, P·d; in a fit, three copies of every training regressor: 3·m·P·d)"),
+    "samples": Bound(
+        "samples of a recording", bytes_each=200.0, seconds_each=0.0,
+        source="PLACEHOLDER"),
+    "trials": Bound(
+        "Monte Carlo trials", bytes_each=4096.0, seconds_each=0.6,
+        source="rhmpc predict --study noise, 8 noise values × 7 predictors, 2 and 8 trials: "
+               "4.7 s per trial on one core, 0.6 s per trial and value (time_scale and "
+               "memory_scale: the values); a task's seeds, settings and results under 4 kB"),
+    "horizon": Bound(
+        "MPC horizon steps", bytes_each=24e3, seconds_each=7e-6,
+        source="rhmpc simulate --set mpc.horizon=N --set mpc.blocks=[N], 0.5 s: N = 1000 "
+               "and 4000 took 206 MB and 247 MB, 6.9 s and 29.6 s; N = 100 000 took 2.2 GB: "
+               "24 kB per step, 7 µs per step and tick (time_scale: the run's ticks)"),
+}
 
 
-def largest(name: str, scale: float = 1.0, workers: int = 1) -> int:
+def largest(name: str, memory_scale: float = 1.0, time_scale: float = 1.0,
+            workers: int = 1) -> int:
     """The largest value of count ``name`` that fits (:meth:`Bound.largest`)."""
-    return BOUNDS[name].largest(scale, workers)
+    return BOUNDS[name].largest(memory_scale, time_scale, workers)
 
 
-def check(name: str, value: float, label: str | None = None, scale: float = 1.0,
-          workers: int = 1) -> None:
+def check(name: str, value: float, label: str | None = None, memory_scale: float = 1.0,
+          time_scale: float = 1.0, workers: int = 1) -> None:
     """Refuse ``value`` of count ``name`` when it does not fit (:meth:`Bound.check`); the
     message names ``label`` (the option or setting, default ``name``)."""
-    BOUNDS[name].check(value, label or name, scale, workers)
+    BOUNDS[name].check(value, label or name, memory_scale, time_scale, workers)

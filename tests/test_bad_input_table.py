@@ -115,7 +115,7 @@ CASES = [
     ("data-missing-file", ["data", "show", "nope.csv"], {},
      2, r"rhmpc data: error: nope\.csv: no such file$"),
     ("data-directory", ["data", "show", "dir.csv"], {"dir.csv": None},
-     2, r"rhmpc data: error: dir\.csv: not a file$"),
+     2, r"rhmpc data: error: dir\.csv: a folder, not a regular file; give a file$"),
     ("data-garbage-mat", ["data", "show", "g.mat"], {"g.mat": b"MATLAB 5.0" + bytes(300)},
      2, r"rhmpc data: error: g\.mat: not a readable MATLAB file"),
     ("data-mat-times-in-us-unlabelled", ["data", "show", "us.mat"], {"us.mat": mat(1e6)},

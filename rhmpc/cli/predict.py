@@ -101,7 +101,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "these recordings (same rate and layout; --poi applies) instead of the "
                    "frames before TRAIN")
     g.add_argument("--save-models", type=Path, metavar="DIR", help="write the fitted models "
-                   "to this folder (LABEL.NAME.npz or .pt), to load later with the predictor "
+                   "to this folder (LABEL.NAME.npz), to load later with the predictor "
                    "setting model=FILE")
     g.add_argument("--leads", type=int, help=f"score leads 1..L samples (default {DEFAULT_LEADS})")
     g.add_argument("--warmup", type=float, metavar="S", help="seconds not scored at the start "

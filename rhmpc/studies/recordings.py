@@ -266,7 +266,7 @@ def _fit(names, period: float, series: list[np.ndarray], leads: int, seed: int,
          progress, save: Path | None = None, label: str = "") -> dict:
     """name → (fitted predictor, seconds): every predictor of ``LEARNED`` among ``names``,
     forecasting leads 1 … ``leads`` directly, fitted on ``series`` with the study's seed; each
-    saved in the folder ``save`` (``LABEL.NAME.npz``/``.pt``) if given."""
+    saved in the folder ``save`` (``LABEL.NAME.npz``) if given."""
     out = {}
     for name in names:
         if name not in LEARNED:
