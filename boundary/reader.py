@@ -80,7 +80,8 @@ def _os_error(path: Path, exc: OSError, verb: str = "read") -> FileError:
     return FileError(f"{path}: cannot {verb}: {exc.strerror or exc}")
 
 
-def open_input(path: str | Path, kind: str = "file", limit: int | None = None) -> IO[bytes]:
+def open_input(path: str | Path, kind: str = "file", limit: int | None = None, *,
+               track: bool = True) -> IO[bytes]:
     """``path`` opened for reading in binary, checked (module docstring).
 
     Parameters
@@ -92,6 +93,9 @@ def open_input(path: str | Path, kind: str = "file", limit: int | None = None) -
         ``"model"``, …): its largest size, and its name in the message.
     limit : int, optional
         The largest size [B], instead of the kind's.
+    track : bool
+        Whether the file is an input of the run (:func:`tracking_inputs`); False for rhmpc's
+        own files (its build cache), which it rewrites.
 
     Raises
     ------
@@ -112,7 +116,7 @@ def open_input(path: str | Path, kind: str = "file", limit: int | None = None) -
             raise FileError(f"{path}: {size_bytes(info.st_size)}, larger than a {kind} may be "
                             f"({size_bytes(limit)})")
         os.set_blocking(fd, True)
-        if _session is not None:
+        if _session is not None and track:
             _session[(info.st_dev, info.st_ino)] = str(path)
         return os.fdopen(fd, "rb")
     except BaseException:
@@ -120,10 +124,11 @@ def open_input(path: str | Path, kind: str = "file", limit: int | None = None) -
         raise
 
 
-def read_bytes(path: str | Path, kind: str = "file", limit: int | None = None) -> bytes:
+def read_bytes(path: str | Path, kind: str = "file", limit: int | None = None, *,
+               track: bool = True) -> bytes:
     """The whole of ``path`` (:func:`open_input`), at most its bound."""
     limit = FILE_BYTES[kind] if limit is None else limit
-    with open_input(path, kind, limit) as f:
+    with open_input(path, kind, limit, track=track) as f:
         try:
             data = f.read(limit + 1)
         except OSError as exc:
@@ -226,6 +231,6 @@ def json_loads(text: str | bytes, where: str) -> Any:
         raise FileError(f"{where}: not valid JSON ({exc})") from None
 
 
-def read_json(path: str | Path, kind: str = "file") -> Any:
+def read_json(path: str | Path, kind: str = "file", *, track: bool = True) -> Any:
     """A JSON file, bounded in size and depth (:func:`json_loads`)."""
-    return json_loads(read_bytes(path, kind), str(path))
+    return json_loads(read_bytes(path, kind, track=track), str(path))

@@ -80,7 +80,7 @@ def build_key(sources: list[Path], headers: list[Path]) -> str:
     lines of :data:`GENERATED_AT` removed."""
     key = hashlib.sha256(" ".join((*FLAGS, *_TUNED, _processor())).encode())
     for path in (*sources, *headers):
-        text = GENERATED_AT.sub(b"", boundary.read_bytes(path, "C source"))
+        text = GENERATED_AT.sub(b"", boundary.read_bytes(path, "C source", track=False))
         key.update(path.name.encode() + b"\0" + text)
     return key.hexdigest()[:16]
 
@@ -95,8 +95,8 @@ def _intact(target: Path) -> str | None:
     if not target.exists() and not _record(target).exists():
         return ""
     try:
-        record = boundary.read_json(_record(target), "file")
-        data = boundary.read_bytes(target, "library")
+        record = boundary.read_json(_record(target), "file", track=False)
+        data = boundary.read_bytes(target, "library", track=False)
     except FileError as exc:
         return str(exc)
     recorded = record.get("size") if isinstance(record, dict) else None
