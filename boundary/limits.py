@@ -129,13 +129,17 @@ BOUNDS: dict[str, Bound] = {
         source="one float64 per sample and channel of the online history (memory_scale: the "
                "channels, P·d; in a fit, three copies of every training regressor: 3·m·P·d)"),
     "samples": Bound(
-        "samples of a recording", bytes_each=200.0, seconds_each=0.0,
-        source="PLACEHOLDER"),
-    "trials": Bound(
-        "Monte Carlo trials", bytes_each=4096.0, seconds_each=0.6,
-        source="rhmpc predict --study noise, 8 noise values × 7 predictors, 2 and 8 trials: "
-               "4.7 s per trial on one core, 0.6 s per trial and value (time_scale and "
-               "memory_scale: the values); a task's seeds, settings and results under 4 kB"),
+        "samples of a recording", bytes_each=256.0, seconds_each=0.0,
+        source="a 1-kHz CSV of 10⁶ samples (39 MB): rhmpc data show peaked at 322 MB, "
+               "simulate at 297 MB, against 140 MB and 150 MB for 10⁵: 150–200 B per sample, "
+               "rounded up to 256 B"),
+    **{f"{study} trials": Bound(
+        "Monte Carlo trials", bytes_each=4096.0, seconds_each=seconds,
+        source=f"rhmpc predict --study {study} --trials 1 on one core: {seconds:g} s per trial, "
+               "value and predictor (time_scale: values × predictors; memory_scale: values); "
+               "a task's seed, settings and results under 4 kB")
+       for study, seconds in (("noise", 0.085), ("hr-step", 0.16), ("rr", 0.25),
+                              ("horizon", 2.4))},
     "horizon": Bound(
         "MPC horizon steps", bytes_each=24e3, seconds_each=7e-6,
         source="rhmpc simulate --set mpc.horizon=N --set mpc.blocks=[N], 0.5 s: N = 1000 "

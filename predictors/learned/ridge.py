@@ -110,6 +110,8 @@ class Ridge(FittedPredictor):
     def _fit(self, series: list[np.ndarray], progress) -> dict:
         s, d, L = self.settings, series[0].shape[2], self.settings.leads
         orders = sorted({max(2, round(w / self.dt)) for w in s.windows})
+        m, width = sum(a.shape[0] for a in series), series[0].shape[1] * d
+        boundary.check("window", orders[-1], "windows", memory_scale=3 * m * width)
         best: list[tuple] = [(np.inf, 0, 0.0)] * L  # per lead: (validation MSE, N, α)
         for N in orders:
             fit, val = [], []

@@ -205,6 +205,9 @@ def run(args: argparse.Namespace) -> int:
     jobs = (os.cpu_count() or 1) if args.jobs == 0 else args.jobs
     if jobs < 1:
         raise UsageError(f"--jobs must be >= 0, got {args.jobs}")
+    values = len(s.parameters())
+    boundary.check(f"{s.study} trials", s.trials, "--trials", memory_scale=values,
+                   time_scale=values * len(s.names), workers=jobs)
     bar = None
     if sys.stderr.isatty():
         from tqdm import tqdm

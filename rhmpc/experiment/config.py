@@ -147,6 +147,7 @@ class RunConfig:
                 f"ground_truth must be one of {', '.join(GROUND_TRUTHS)}, got {self.ground_truth!r}"
             )
         self.faults.check(self.loop.duration)
+        check_bounds(self)
 
     def to_dict(self) -> dict[str, Any]:
         """TOML-ready nested dict (``None`` values left out, and the ``faults`` table when it
@@ -224,6 +225,13 @@ class RunConfig:
             return dataclasses.replace(self, **top)
         except (TypeError, ValueError) as exc:
             raise UsageError(str(exc)) from None
+
+
+def check_bounds(config: RunConfig) -> None:
+    """Refuse the counts of a run that do not fit the bounds of :data:`boundary.BOUNDS`: the
+    MPC's horizon (its memory, and its computing over the run's ticks)."""
+    ticks = config.loop.duration / config.loop.Ts
+    boundary.check("horizon", config.mpc.horizon, "mpc.horizon", time_scale=ticks)
 
 
 def _check_keys(section: str, cls: type, values: dict[str, Any]) -> None:

@@ -27,6 +27,7 @@ and what is wrong.
 from __future__ import annotations
 
 import csv
+import io
 import re
 from pathlib import Path
 
@@ -46,8 +47,9 @@ __all__ = ["BLOCK_BYTES", "read_csv"]
 
 #: Bytes of the file parsed at a time.
 BLOCK_BYTES = 1 << 24
-#: An empty field (a dropout), to be read as NaN by NumPy's parser.
-_EMPTY = re.compile(r"(?<=,)[ \t]*(?=,|$)|^[ \t]*(?=,)", re.M)
+#: A comma before an empty field (a dropout), to be read as NaN by NumPy's parser (an empty
+#: first field, a missing time, is refused by the careful parser).
+_EMPTY = re.compile(r",(?=[ \t]*(?:,|$))", re.M)
 
 _HEADER_FIELD = re.compile(
     r"^\s*(?P<name>[A-Za-z]+\d*)\s*(?:(?:_|\[|\()\s*(?P<unit>[A-Za-zµ]+)\s*[\])]?)?\s*$")
@@ -194,13 +196,19 @@ class _Blocks:
 
 
 def _fast(lines: list[str], dim: int, prev: float) -> np.ndarray | None:
-    """The block's samples (n, dim + 1) by NumPy's parser, or None when it cannot read them
-    or they break a rule (the careful parser then says where)."""
-    text = _EMPTY.sub("nan", "\n".join(lines))
-    try:
-        rows = np.loadtxt(text.splitlines(), delimiter=",", comments="#", ndmin=2,
-                          dtype=float)
-    except (ValueError, IndexError):
+    """The block's samples (n, dim + 1) by NumPy's parser (empty fields, dropouts, read as
+    NaN), or None when it cannot read them or they break a rule (the careful parser then says
+    where)."""
+    text = "\n".join(lines)
+    rows = None
+    for attempt in (lambda: text, lambda: _EMPTY.sub(",nan", text)):  # dropouts, if need be
+        try:
+            rows = np.loadtxt(io.StringIO(attempt()), delimiter=",", comments="#", ndmin=2,
+                              dtype=float)
+            break
+        except (ValueError, IndexError):
+            continue
+    if rows is None:
         return None
     if rows.size == 0:
         return np.empty((0, dim + 1))
