@@ -206,8 +206,13 @@ class NeuralPredictor(FittedPredictor):
         if nets > len(saved.shapes):  # each network holds a tensor at least
             raise FileError(f"{saved.path}: the model's settings make {nets} networks; the "
                             f"file holds {len(saved.shapes)} arrays: a damaged or altered file")
-        with torch.device("meta"):
-            net = build(settings, C, self._head_width(settings, saved.dim))
+        try:
+            with torch.device("meta"):
+                net = build(settings, C, self._head_width(settings, saved.dim))
+        except (RuntimeError, ValueError, OverflowError) as exc:  # sizes past any tensor's
+            raise FileError(f"{saved.path}: the model's settings make a network no file "
+                            f"holds ({str(exc).splitlines()[0]}): a damaged or altered file"
+                            ) from None
         tensors = {k: tuple(v.shape) for k, v in net.state_dict().items()}
         for e in range(settings.ensemble):
             for j in range(nets // settings.ensemble):

@@ -147,11 +147,11 @@ def sweep(args: argparse.Namespace, spec_path: Path) -> int:
     existing = read_results(results_path)
     todo, n_ok, n_failed = pending(tasks, existing, retry_failed=bool(args.retry_failed))
     quiet = bool(args.quiet)
+    if skipped := existing.skipped(results_path):
+        print(f"rhmpc tune: warning: {skipped}", file=sys.stderr)
     note(f"rhmpc tune: sweep '{spec.name}': {len(points)} points × {len(spec.evaluations())} "
          f"evaluations = {len(tasks)}; done {n_ok}, failed {n_failed}, to run {len(todo)}; "
          f"results {results_path}", quiet)
-    if skipped := existing.skipped(results_path):
-        print(f"rhmpc tune: warning: {skipped}", file=sys.stderr)
     if args.dry_run:
         _print_points(spec, tasks, existing)
         return 0
