@@ -4,7 +4,8 @@
 fitted before the run (``fit`` or a ``model`` file, :mod:`predictors.learned`); the neural
 ones are imported only when one is built, and need PyTorch (``pip install "rhmpc[learned]"``).
 ``family(name)`` tells the kind of each: ``baseline``, ``adaptive``, ``multi-point``,
-``learned`` or ``combination``.
+``learned`` or ``combination``. ``load_model(path)`` builds the fitted predictor a file saved
+(:mod:`predictors.learned.modelfile`: the one loader, which checks a file before it reads it).
 """
 
 from __future__ import annotations
@@ -35,8 +36,8 @@ from predictors.rls_spatiotemporal import SpatioTemporalRLS
 from predictors.wflc import WFLC
 
 __all__ = ["BASELINES", "FITTED_DEFAULTS", "LEARNED", "PREDICTORS", "combination_members",
-           "default_predictors", "family", "make_predictor", "needs_torch", "predictor_names",
-           "settings_for", "torch_available"]
+           "default_predictors", "family", "load_model", "make_predictor", "needs_torch",
+           "predictor_names", "settings_for", "torch_available"]
 
 #: name → (class, default overrides of its settings dataclass)
 PREDICTORS: dict[str, tuple[type[Predictor], dict[str, Any]]] = {
@@ -203,3 +204,40 @@ def make_predictor(name: str, dt: float, **settings: Any) -> Predictor:
         return Combination(dt, s, [make_predictor(member, dt) for member in s.members])
     cls = PREDICTORS[name][0] if name in PREDICTORS else _learned_class(name)
     return cls(dt, s)
+
+
+def load_model(path, expected_kind: str | tuple[str, ...] | None = None,
+               dt: float | None = None) -> Predictor:
+    """The fitted predictor saved in ``path`` (``predict --save-models``, ``save``), ready to run.
+
+    Parameters
+    ----------
+    path : str or Path
+        A model file (:mod:`predictors.learned.modelfile`).
+    expected_kind : str or tuple of str, optional
+        The predictor name(s) of :data:`LEARNED` asked for (``"ridge"``, ``("lstm",
+        "st-lstm")``); a file of another kind is refused.
+    dt : float, optional
+        The period the predictor will run at [s]; a model fitted at another is refused.
+        Default: the file's.
+
+    Returns
+    -------
+    Predictor
+        A predictor of :data:`LEARNED` with the file's settings and model (``settings.model``
+        names the file); ``reset`` keeps the model.
+
+    Raises
+    ------
+    ValueError
+        (:class:`boundary.FileError`) In one line naming the file: not a regular file, empty,
+        not a model, another kind or period, a damaged or altered file, one larger than the
+        bounds (checked before any array is allocated).
+    ImportError
+        A network's file without PyTorch (``pip install "rhmpc[learned]"``).
+    """
+    from predictors.learned.modelfile import ModelFile
+
+    with ModelFile(path, expected_kind or tuple(LEARNED)) as saved:
+        kind, saved_dt = saved.kind, saved.dt
+    return make_predictor(kind, dt=saved_dt if dt is None else dt, model=str(path))

@@ -15,7 +15,6 @@ import argparse
 import json
 import sys
 from dataclasses import dataclass
-from pathlib import Path
 
 from rhmpc.cli import COMMANDS
 from rhmpc.cli.simulate import (
@@ -287,12 +286,14 @@ def _base_config(args: argparse.Namespace) -> RunConfig:
 
 
 def run(args: argparse.Namespace) -> int:
+    import boundary
+    from rhmpc.experiment.config import input_files
     from rhmpc.tuning.progress import note
-    from rhmpc.tuning.store import check_writable
 
     todo = jobs(args)
     if args.out:
-        check_writable(args.out, "--out")
+        boundary.check_output(args.out, "--out", inputs=[
+            *(f for job in todo for f in input_files(job.config)), *filter(None, [args.config])])
     text = not (args.json or args.csv)
     if text:
         print(_header(todo, args), flush=True)
@@ -308,7 +309,7 @@ def run(args: argparse.Namespace) -> int:
 
         results["loop_gap"] = gap_rows(docs, beside)
     if args.out:
-        Path(args.out).write_text(json.dumps(results, indent=2) + "\n")
+        boundary.write_text(args.out, json.dumps(results, indent=2) + "\n")
     _print_results(results, docs, todo, args)
     note(_footer(docs, [job.config for job in done], outcome.elapsed_s, where), args.quiet)
     if outcome.interrupted:

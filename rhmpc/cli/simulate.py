@@ -286,10 +286,11 @@ OUTPUTS = {"out": (".json", ".mat"), "plot": (".png", ".pdf", ".svg"), "view": (
            "trace": (".npz",)}
 
 
-def check_outputs(args: argparse.Namespace) -> None:
+def check_outputs(args: argparse.Namespace, inputs=()) -> None:
     """Every output file can be written, checked before the run starts (a missing or
-    read-only directory, or a suffix the option does not write, is a one-line error)."""
-    import os
+    read-only directory, a suffix the option does not write, a link, or one of ``inputs``, the
+    run's files, is a one-line error: :func:`boundary.check_output`)."""
+    import boundary
 
     for option, suffixes in OUTPUTS.items():
         path = getattr(args, option, None)
@@ -299,11 +300,7 @@ def check_outputs(args: argparse.Namespace) -> None:
         if path.suffix.lower() not in suffixes:
             raise UsageError(f"--{option} {path}: the file must end in "
                              f"{' or '.join(suffixes)}")
-        folder = path.resolve().parent
-        if not folder.is_dir():
-            raise UsageError(f"--{option} {path}: no such directory {folder}")
-        if not os.access(folder, os.W_OK) or (path.exists() and not os.access(path, os.W_OK)):
-            raise UsageError(f"--{option} {path}: cannot write there")
+        boundary.check_output(path, f"--{option}", inputs=inputs)
 
 
 def check_score(doc: dict) -> None:
@@ -326,7 +323,9 @@ def write_outputs(args: argparse.Namespace, result, doc: dict) -> None:
 
         write_mat(args.out, result, doc)
     elif args.out:
-        Path(args.out).write_text(json.dumps(doc, indent=2) + "\n")
+        import boundary
+
+        boundary.write_text(args.out, json.dumps(doc, indent=2) + "\n")
     if args.plot or getattr(args, "view", None):
         from robots import load_robot
 
@@ -352,7 +351,9 @@ def run(args: argparse.Namespace) -> int:
 
         if reason := missing_toolchain():
             raise UsageError(reason)
-    check_outputs(args)
+    from rhmpc.experiment.config import input_files
+
+    check_outputs(args, [*input_files(config), *filter(None, [args.config])])
     trace = getattr(args, "trace", None)
     stalls = getattr(args, "host_stalls", 0.0)
     check_host_stalls(stalls)

@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import dataclasses
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import boundary
+from boundary import FileError
 from rhmpc.control.cancellation import ModelMismatch
 from rhmpc.control.observer import ObserverSettings
 from rhmpc.control.reference import ReferenceSettings
@@ -160,6 +161,7 @@ class RunConfig:
                 f"ground_truth must be one of {', '.join(GROUND_TRUTHS)}, got {self.ground_truth!r}"
             )
         self.faults.check(self.loop.duration)
+        check_bounds(self)
 
     def to_dict(self) -> dict[str, Any]:
         """TOML-ready nested dict (``None`` values left out, and the ``faults`` table when it
@@ -264,6 +266,13 @@ def with_split(config: RunConfig) -> RunConfig:
     return config.replace(**{"loop.settling": float(t[train]), "loop.duration": duration})
 
 
+def check_bounds(config: RunConfig) -> None:
+    """Refuse the counts of a run that do not fit the bounds of :data:`boundary.BOUNDS`: the
+    MPC's horizon (its memory, and its computing over the run's ticks)."""
+    ticks = config.loop.duration / config.loop.Ts
+    boundary.check("horizon", config.mpc.horizon, "mpc.horizon", time_scale=ticks)
+
+
 def _check_keys(section: str, cls: type, values: dict[str, Any]) -> None:
     """Raise ``UsageError`` listing the valid keys of ``[section]`` if ``values`` has others."""
     names = [f.name for f in dataclasses.fields(cls)]
@@ -273,15 +282,14 @@ def _check_keys(section: str, cls: type, values: dict[str, Any]) -> None:
                          f"valid keys of [{section}]: {', '.join(names)}")
 
 
-def read_toml(path: str | Path) -> dict[str, Any]:
-    """A TOML file as a ``dict``; unreadable or invalid files raise ``UsageError`` naming it."""
-    path = Path(path)
+def read_toml(path: str | Path, kind: str = "config") -> dict[str, Any]:
+    """A TOML file as a ``dict``, through the one reader (:func:`boundary.read_toml`: a
+    regular file, bounded in size and depth); a file that cannot be read or parsed raises
+    ``UsageError`` naming it."""
     try:
-        return tomllib.loads(path.read_text())
-    except OSError as exc:
-        raise UsageError(f"{path}: cannot read: {exc.strerror}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise UsageError(f"{path}: not valid TOML: {exc}") from None
+        return boundary.read_toml(path, kind)
+    except FileError as exc:
+        raise UsageError(str(exc)) from None
 
 
 def load_config(path: str | Path) -> RunConfig:
@@ -289,7 +297,15 @@ def load_config(path: str | Path) -> RunConfig:
     return RunConfig.from_dict(read_toml(path), where=str(path))
 
 
+def input_files(config: RunConfig) -> list[str]:
+    """The files a run of ``config`` reads: its recording, its training recordings and its
+    predictor's saved model (what no output of the run may replace)."""
+    files = [config.data, *config.train, config.predictor_settings.get("model")]
+    return [f for f in files if isinstance(f, str)]
+
+
 def save_config(config: RunConfig, path: str | Path) -> None:
+    """Write ``config`` as TOML to ``path`` (atomically: :func:`boundary.write_text`)."""
     import tomli_w
 
-    Path(path).write_text(tomli_w.dumps(config.to_dict()))
+    boundary.write_text(path, tomli_w.dumps(config.to_dict()))
