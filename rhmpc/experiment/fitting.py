@@ -38,6 +38,11 @@ def fit_predictor(run, progress=None) -> None:
     settling = settling_series(run)
     series = [settling, *training_recordings(run.config, predictor.dt)]
     series = [s for s in series if np.isfinite(s[:, 0]).any()]
+    if not series and hasattr(predictor, "score_after"):  # a combination: its online members
+        if progress is not None:
+            progress(f"{run.config.predictor}: nothing before the run to fit its fitted "
+                     "members on; it runs the others")
+        return
     if not series:
         raise UsageError(f"{run.config.predictor} learns before the run and has nothing to "
                          "learn from: give it a settling window (loop.settling) or --train "
