@@ -67,6 +67,10 @@ class CombinationSettings(PredictorSettings):
         The samples before this one (counted from 0) are not scored: where members fitted
         before the run were fitted on them, their misses there are no forecast errors. The
         priors are taken at it.
+    models : tuple of str
+        Saved models (``rhmpc predict --save-models``) of members fitted before the run, each
+        loaded into the member of its kind (``predictors.registry.load_model``); those without
+        one are fitted by :meth:`Combination.fit`.
     """
 
     members: tuple[str, ...] = ()
@@ -75,6 +79,7 @@ class CombinationSettings(PredictorSettings):
     exponent: float = 2.0
     prior_seconds: float = 2.0
     score_from: int = 0
+    models: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -89,6 +94,10 @@ class CombinationSettings(PredictorSettings):
             raise ValueError(f"exponent must be >= 0, got {self.exponent!r}")
         if not self.prior_seconds >= 0.0:
             raise ValueError(f"prior_seconds must be >= 0, got {self.prior_seconds!r}")
+        if isinstance(self.models, list):  # as TOML reads it
+            object.__setattr__(self, "models", tuple(self.models))
+        if not all(isinstance(f, str) for f in self.models):
+            raise ValueError(f"models must be file names, got {self.models!r}")
         if int(self.score_from) != self.score_from or self.score_from < 0:
             raise ValueError(f"score_from must be an integer >= 0, got {self.score_from!r}")
 
@@ -135,9 +144,10 @@ class Combination(Predictor):
         self.settings = replace(self.settings, score_from=int(samples))
 
     def fit(self, series, progress=None) -> Combination:
-        """Fit the members that are fitted before the run (``fit``) to ``series``."""
+        """Fit the members that are fitted before the run (``fit``) and not yet fitted (nor
+        loaded from a file) to ``series``."""
         for name, m in zip(self.settings.members, self.members, strict=True):
-            if hasattr(m, "fit"):
+            if hasattr(m, "fit") and not m.fitted:
                 m.fit(series, None if progress is None else
                       (lambda text, name=name: progress(f"{name}: {text}")))
         self.reset()

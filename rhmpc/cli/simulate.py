@@ -14,6 +14,7 @@ from rhmpc.cli.presets import add_preset_option, apply_preset
 from rhmpc.errors import UsageError
 from rhmpc.experiment import RunConfig, check_sensor, load_config, run_experiment
 from rhmpc.experiment.config import with_split
+from rhmpc.experiment.fitting import with_models
 from sim.loop.settings import DEFAULT_SETTLING, LoopSettings
 from sim.recordings.matfile import parse_indices
 
@@ -74,6 +75,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "of a --data file of several tracked points; a predictor that reads the "
                    "other points (st-rls, st-ridge, st-lstm, ...) gets their samples")
     add_split_option(p)
+    add_model_option(p)
     p.add_argument("--train", nargs="+", metavar="FILE", help="recordings a predictor fitted "
                    "before the run (ridge, lstm, ...) learns from, beside the run's own "
                    "settling window (same rate and layout; --poi applies)")
@@ -156,6 +158,14 @@ def add_split_option(p: argparse.ArgumentParser, more: str = "") -> None:
                    "predictor fitted before the run learns from the samples before TRAIN (as "
                    "the loop delivers them) and the score covers the instants of samples TRAIN "
                    f"to END - 1 (numbered from 0); replaces --settling and --duration{more}")
+
+
+def add_model_option(p: argparse.ArgumentParser) -> None:
+    """``--model FILE...``: saved models instead of fitting before the run."""
+    p.add_argument("--model", nargs="+", metavar="FILE", help="models saved by rhmpc predict "
+                   "--save-models, loaded instead of fitted before the run: a fitted "
+                   "predictor (ridge, st-ridge, lstm, ...) takes the file of its kind, the "
+                   "combination each file into its member of that kind (the others it fits)")
 
 
 def parse_split(text: str | None) -> tuple[int, int] | None:
@@ -241,6 +251,8 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
     if getattr(args, "fault", None):
         changes["faults.events"] = fault_events(config, changes, args.fault)
     config = with_split(config.replace(**changes))
+    if getattr(args, "model", None):
+        config = with_models(config, args.model)
     check_sensor(config)
     check_scoring(config)
     return config

@@ -299,8 +299,10 @@ def load_config(path: str | Path) -> RunConfig:
 
 def input_files(config: RunConfig) -> list[str]:
     """The files a run of ``config`` reads: its recording, its training recordings and its
-    predictor's saved model (what no output of the run may replace)."""
-    files = [config.data, *config.train, config.predictor_settings.get("model")]
+    predictor's saved models (what no output of the run may replace)."""
+    models = config.predictor_settings.get("models") or ()
+    files = [config.data, *config.train, config.predictor_settings.get("model"),
+             *(models if isinstance(models, list | tuple) else ())]
     return [f for f in files if isinstance(f, str)]
 
 
