@@ -105,7 +105,6 @@ def document(config: RunConfig, run: Run, result: LoopResult, wall: float,
         "encoder": jsonable(run.controller.encoder_counts),
         "wall_s": wall,
         "real_time_factor": config.loop.duration / wall,
-        "plant_dynamics": result.plant_dynamics,
         "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,  # Linux: KiB
         "settings": config.to_dict(),
         "versions": versions(),

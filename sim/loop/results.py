@@ -57,7 +57,6 @@ class LoopResult:
     controller_stats: dict = field(default_factory=dict)
     saturated_ticks: int = 0
     predictor_counts: dict = field(default_factory=dict)
-    plant_dynamics: str = "pinocchio"  # who integrated the plant (and why not native)
     #: what the score leaves out: the samples taken as outliers, the ticks whose truth touches
     #: them, and the recorded samples that are no measurements (their truth is missing)
     excluded: dict = field(default_factory=dict)
@@ -149,12 +148,6 @@ class Recorder:
         self.robot, self.settings, self.N = robot, settings, horizon
         self.truth, self.anchor = truth, np.asarray(anchor, dtype=float)
         self.model, self.data, self.fid = robot.model, robot.create_data(), robot.ee_frame_id
-        from sim.plant.native import load_chain
-
-        # end-effector positions of a whole chunk in one compiled call (else Pinocchio per tick)
-        self.chain = load_chain(robot.model)
-        frame = robot.model.frames[self.fid]
-        self.ee_joint, self.ee_point = frame.parentJoint, np.array(frame.placement.translation)
         self.tracking = RunningTracking()
         self.ticks = TickHistogram()
         self.yardstick = TickHistogram()
@@ -192,9 +185,7 @@ class Recorder:
                 "outliers": self.outliers, "last_stamp": self.last_stamp}
 
     def _ee(self, q_log: np.ndarray) -> np.ndarray:
-        """End-effector positions (m, 3) of the joint angles (m, nq)."""
-        if self.chain is not None:
-            return self.chain.points(q_log, self.ee_joint, self.ee_point)
+        """End-effector positions (m, 3) of the joint angles (m, nq) (Pinocchio)."""
         model, data, fid = self.model, self.data, self.fid
         ee = np.empty((q_log.shape[0], 3))
         for k, q in enumerate(q_log):
@@ -296,7 +287,7 @@ class Recorder:
             self.file.close()
             self.file = None
 
-    def result(self, controller, dynamics: str = "pinocchio") -> LoopResult:
+    def result(self, controller) -> LoopResult:
         with np.errstate(invalid="ignore", divide="ignore"):
             horizon_error = np.sqrt(self.horizon2 / self.n_horizons)  # NaN where no refresh
         ticks = np.array([t for t, _ in self.kept_horizons], dtype=np.int64)
@@ -312,7 +303,7 @@ class Recorder:
             tick_parts_us={name: h.stats_us() for name, h in self.parts.items()},
             control_tick_us=self.parts["step"].stats_us(), horizon_error=horizon_error,
             controller_stats=controller_stats(controller), saturated_ticks=self.saturated_ticks,
-            predictor_counts=dict(controller.predictor_counts), plant_dynamics=dynamics,
+            predictor_counts=dict(controller.predictor_counts),
             horizons=(ticks, points), samples=(stamps, samples),
             excluded={"outliers": len(self.outliers), "ticks": self.excluded_ticks,
                       "unmeasured": len(getattr(self.truth, "unmeasured", ()))},
