@@ -12,10 +12,10 @@ from rhmpc.control.mpc import RecedingHorizonMPC
 from rhmpc.control.settings import MPCSettings
 from rhmpc.studies.bench import heart_like_reference
 from robots import linearize, load_robot
+from tests.rhmpc.control.exact import EveryTick, exact_mpc
 
 #: OSQP run to (near) machine accuracy, for comparisons at 1e-6.
-TIGHT = {"max_iter": 100_000, "solver": "osqp",
-         "osqp": {"eps_abs": 1e-10, "eps_rel": 0.0, "check_termination": 1}}
+TIGHT = {"max_iter": 100_000, "osqp_eps_abs": 1e-10}
 
 
 @pytest.fixture(scope="module")
@@ -229,9 +229,10 @@ def _saturating_problem(arm, mpc, jump):
 
 @pytest.mark.parametrize("settings_kind", ["default", "tight", "daqp"])
 def test_active_torque_bounds_agree_with_daqp(arm, settings_kind):
-    settings = {"default": MPCSettings(), "tight": MPCSettings(**TIGHT),
-                "daqp": MPCSettings(solver="daqp")}[settings_kind]
-    mpc = RecedingHorizonMPC(arm, settings)
+    if settings_kind == "daqp":
+        mpc = exact_mpc(arm)
+    else:
+        mpc = RecedingHorizonMPC(arm, MPCSettings(**(TIGHT if settings_kind == "tight" else {})))
     x, ref = _saturating_problem(arm, mpc, np.array([3e-3, -2e-3, 2e-3]))
     q, lo, up = mpc.qp_vectors(x, ref)
     tau = mpc.step(x, ref)
@@ -335,7 +336,7 @@ def test_screening_is_exact_and_hands_binding_ticks_to_osqp(arm, joint_bounds):
         extra = {"joint_lower": tuple(arm.q0 - np.radians(5.0)),
                  "joint_upper": tuple(arm.q0 + np.radians(5.0)), "max_iter": 100}
     mpc = RecedingHorizonMPC(arm, MPCSettings(**extra))
-    every = RecedingHorizonMPC(arm, MPCSettings(screening=False, **extra))
+    every = EveryTick(arm, MPCSettings(**extra))
     ticks = 1500
     traj = heart_like_reference(ticks + mpc.N + 1, arm.Ts, np.random.default_rng(2), arm.y0,
                                 jump=4e-3, jump_every=500)
@@ -381,9 +382,9 @@ def test_level_2_checks_every_envelope_row_it_skips(arm):
     from scipy.optimize import lsq_linear
 
     q0 = arm.q0
-    mpc = RecedingHorizonMPC(arm, MPCSettings(
+    mpc = exact_mpc(arm, MPCSettings(
         joint_lower=tuple(q0 - np.array([0.015, 0.01, 0.03])),
-        joint_upper=tuple(q0 + np.array([0.015, 0.01, 0.03])), solver="daqp"))
+        joint_upper=tuple(q0 + np.array([0.015, 0.01, 0.03]))))
     qp, nz = mpc.qp, mpc.qp.nz
     Lc = np.linalg.cholesky(qp.P[:nz, :nz])
     ticks = 3000
