@@ -7,11 +7,10 @@ are needed, kept in a cache directory (``$RHMPC_CACHE``) and loaded with :mod:`c
 library's name holds a hash of the sources, the flags and the processor, so a changed source or
 another processor (a cache directory shared between machines) gets its own build.
 
-Flags: ``-O3 -march=native`` — the processor's vector instructions, measured 5 % faster on the
-plant's 6 × 6 spatial algebra — with ``-ffp-contract=off``: no fused multiply-add, so that each
-product is rounded as the source writes it and the results are the same to the bit with or
-without ``-march=native`` (a compiler that does not take it builds without it). No fast-math: the
-order of every sum is the source's.
+Flags: ``-O3 -march=native`` (the processor's vector instructions) with ``-ffp-contract=off``: no
+fused multiply-add, so that each product is rounded as the source writes it and the results are
+the same to the bit with or without ``-march=native`` (a compiler that does not take it builds
+without it). No fast-math: the order of every sum is the source's.
 """
 
 from __future__ import annotations

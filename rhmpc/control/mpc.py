@@ -154,8 +154,8 @@ class RecedingHorizonMPC(FallbackChain):
         self._g_env = np.empty(qp.A.shape[0] - qp.nv)
         self._level = 0
         # Multipliers of a screened solution: 0 on every row but the slack bounds s ≥ 0, whose
-        # multiplier is −ρ₁ (stationarity in s at s = 0). Starting ADMM from them matters: from
-        # 0 it needs thousands of iterations to build up ρ₁ (measured: > 4000 vs 25–75).
+        # multiplier is −ρ₁ (stationarity in s at s = 0): ADMM's start, so that it need not
+        # build ρ₁ up over its iterations.
         self._y_zero = np.zeros(qp.A.shape[0])
         self._y_zero[qp.nz:qp.nv] = -self.settings.envelope_penalty
         self._neg_umax = -qp.u_max

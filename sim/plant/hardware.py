@@ -61,7 +61,7 @@ class HardwareSettings:
         Tuna et al. give only the 0.5-ms xPC Target period (§VIII); one tick is what a loop
         that samples the encoders at the start of a tick and writes the DAC at its end has.
     current_time_constant : float
-        τ_e of the current-mode amplifier [s]: L/R = 0.238 mH / 2.18 Ω = 0.109 ms, the Maxon
+        τ_e of the current-mode amplifier [s]: L/R = ``0.238`` mH / 2.18 Ω = 0.109 ms, the Maxon
         RE 25 118743's winding (mahilab/Phantom README.md). The amplifier's own bandwidth is
         not published; a current loop closed around the winding is faster than L/R, so this is
         the slow bound. 0: the current follows the command at once.
@@ -94,7 +94,7 @@ class HardwareSettings:
         ζ of each cable [-]: 0.05. Assumption (light damping of steel cable drives).
     substeps : int
         Integration steps per tick; 0: 4 rigid (h = 125 µs against J v_s/F_s ≈ 120 µs for the
-        elbow's ≈ 1e-3 kg·m²), 20 with cables (h = 25 µs: the rotor, 1.3e-4 kg·m², alone on
+        elbow's ≈ 1e-3 kg·m²), 20 with cables (h = 25 µs: the rotor, ``1.3e-4`` kg·m², alone on
         its friction).
     error_from : str
         Which joint angles the loop scores the tip from: ``"true"`` (the arm's) or
