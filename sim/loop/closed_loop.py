@@ -46,7 +46,8 @@ from sim.loop.results import (
     event_counts,
 )
 from sim.loop.settings import LoopSettings
-from sim.loop.streams import BLOCK, ArrayTruth, PointsAt, SampleSource, StreamCursor, as_samples
+from sim.loop.streams import ArrayTruth, PointsAt, StreamCursor
+from sim.sensors.stream import BLOCK, SampleSource, as_samples
 
 clock = time.perf_counter_ns
 #: Ticks between two calls of ``progress``.

@@ -3,8 +3,7 @@
 The faults of :mod:`sim.sensors.faults` act on what the controller reads, never on the truth,
 each on the stream its kind declares (``target``) and by its own ``corrupt``:
 
-- the sensor's samples, block by block (:class:`FaultySamples`: the samples delivered to the
-  control rate and the raw ones a slow sensor's clock reads, both by their measurement time);
+- the sensor's samples, block by block (:class:`sim.sensors.faults.FaultySamples`);
 - the plant's ``encoders()``, tick by tick (:class:`FaultyEncoders`: the arm moves on).
 
 :func:`fault_marks` gives the ticks where the loop reads its counters
@@ -20,8 +19,7 @@ import numpy as np
 
 from sim.loop.clock import arrival_tick
 
-__all__ = ["REPORTED", "FaultyEncoders", "FaultySamples", "fault_marks", "fault_report",
-           "split_faults"]
+__all__ = ["REPORTED", "FaultyEncoders", "fault_marks", "fault_report", "split_faults"]
 
 #: The counts a fault's record states (the differences over its windows), and how the run's
 #: summary names them.
@@ -37,48 +35,6 @@ def split_faults(faults) -> tuple[tuple, tuple]:
     """(the faults on the sensor's samples, those on the encoders) of ``faults``."""
     return (tuple(f for f in faults if f.target == "samples"),
             tuple(f for f in faults if f.target == "encoders"))
-
-
-class FaultySamples:
-    """A sample source (:mod:`sim.loop.streams`) with sensor faults applied to each block.
-
-    Sample ``k`` is ``z_k`` after every fault in turn (``fault.corrupt``), the sample each one
-    holds (the last measured before its window) read once, at construction, with the faults
-    before it applied. Stamps and arrivals are the source's. A source with raw samples
-    (``recorded``, read by a slow sensor's clock) gets them with the same faults.
-    """
-
-    def __init__(self, samples, faults) -> None:
-        self.samples, self.faults = samples, tuple(faults)
-        self.held: list[np.ndarray | None] = []
-        for k, fault in enumerate(self.faults):
-            self.held.append(self._before(fault.start_s, k))
-        if hasattr(samples, "recorded"):
-            self.recorded = FaultySamples(samples.recorded, self.faults)
-
-    def _before(self, start_s: float, upto: int) -> np.ndarray | None:
-        """The last sample measured before ``start_s``, the first ``upto`` faults applied."""
-        j = self.samples.index_at(start_s)
-        if j >= 0 and float(self.samples.block(j, j + 1)[0][0]) >= start_s:
-            j -= 1
-        if j < 0:
-            return None
-        t, z, _ = self.samples.block(j, j + 1)
-        for fault, held in zip(self.faults[:upto], self.held, strict=False):
-            z = fault.corrupt(t, z, held)
-        return np.array(z[0], dtype=float)
-
-    def __len__(self) -> int:
-        return len(self.samples)
-
-    def index_at(self, t: float) -> int:
-        return self.samples.index_at(t)
-
-    def block(self, a: int, b: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        t, z, arrival = self.samples.block(a, b)
-        for fault, held in zip(self.faults, self.held, strict=True):
-            z = fault.corrupt(t, z, held)
-        return t, z, arrival
 
 
 class FaultyEncoders:

@@ -34,8 +34,8 @@ import numpy as np
 
 from sim.sensors.stream import SampleStream
 
-__all__ = ["FAULT_KINDS", "GRAMMAR", "EncoderStick", "FaultSettings", "NaNBurst", "SensorFreeze",
-           "StreamJump", "parse_fault"]
+__all__ = ["FAULT_KINDS", "GRAMMAR", "EncoderStick", "FaultSettings", "FaultySamples", "NaNBurst",
+           "SensorFreeze", "StreamJump", "parse_fault"]
 
 #: Length units a jump's offset may carry [m per unit].
 LENGTH_UNITS: dict[str, float] = {"mm": 1e-3, "um": 1e-6, "m": 1.0}
@@ -321,6 +321,50 @@ def parse_fault(spec: str) -> _Windowed:
         return cls(start, **values)
     except ValueError as exc:
         raise ValueError(f"fault {spec!r}: {str(exc).partition(': ')[2]}") from None
+
+
+class FaultySamples:
+    """A sample source (:class:`sim.sensors.stream.SampleSource`) with faults on its samples
+    applied to each block, by their measurement time (the samples delivered to the control rate,
+    and the raw ones a slow sensor's clock reads).
+
+    Sample ``k`` is ``z_k`` after every fault in turn (``fault.corrupt``), the sample each one
+    holds (the last measured before its window) read once, at construction, with the faults
+    before it applied. Stamps and arrivals are the source's. A source with raw samples
+    (``recorded``, read by a slow sensor's clock) gets them with the same faults.
+    """
+
+    def __init__(self, samples, faults) -> None:
+        self.samples, self.faults = samples, tuple(faults)
+        self.held: list[np.ndarray | None] = []
+        for k, fault in enumerate(self.faults):
+            self.held.append(self._before(fault.start_s, k))
+        if hasattr(samples, "recorded"):
+            self.recorded = FaultySamples(samples.recorded, self.faults)
+
+    def _before(self, start_s: float, upto: int) -> np.ndarray | None:
+        """The last sample measured before ``start_s``, the first ``upto`` faults applied."""
+        j = self.samples.index_at(start_s)
+        if j >= 0 and float(self.samples.block(j, j + 1)[0][0]) >= start_s:
+            j -= 1
+        if j < 0:
+            return None
+        t, z, _ = self.samples.block(j, j + 1)
+        for fault, held in zip(self.faults[:upto], self.held, strict=False):
+            z = fault.corrupt(t, z, held)
+        return np.array(z[0], dtype=float)
+
+    def __len__(self) -> int:
+        return len(self.samples)
+
+    def index_at(self, t: float) -> int:
+        return self.samples.index_at(t)
+
+    def block(self, a: int, b: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        t, z, arrival = self.samples.block(a, b)
+        for fault, held in zip(self.faults, self.held, strict=True):
+            z = fault.corrupt(t, z, held)
+        return t, z, arrival
 
 
 @dataclass(frozen=True)
