@@ -1,17 +1,14 @@
-"""The MPC's settings: a frozen dataclass with the units of every field, and its ``dict`` form.
+"""The MPC's settings: a frozen dataclass with the units of every field.
 
 Settings are validated when they are constructed (what can be checked without a robot) and again
 when a controller is built (what depends on the robot, e.g. the torque limits left after the
-cancellation margin). :func:`to_dict` / :func:`from_dict` convert a settings object to and from
-a plain ``dict`` of TOML-representable values (tuples become lists, ``None`` fields left out).
+cancellation margin).
 """
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass
-from typing import Any, TypeVar
 
 #: Default move-blocking of the MPC inputs [ticks]: short blocks first, longer ones towards the end
 #: of the 50-tick horizon; 10 blocks (30 QP variables for 3 joints), sum 50.
@@ -257,47 +254,3 @@ class MPCSettings:
     def block_lengths(self) -> tuple[int, ...]:
         """Move-block lengths [ticks]; all ones when blocking is off."""
         return self.blocks if self.blocks is not None else (1,) * self.horizon
-
-
-S = TypeVar("S")
-
-
-def to_dict(settings: Any) -> dict[str, Any]:
-    """Settings dataclass → TOML-friendly ``dict`` (tuples → lists, ``None`` fields dropped)."""
-    out: dict[str, Any] = {}
-    for f in dataclasses.fields(settings):
-        value = getattr(settings, f.name)
-        if value is not None:
-            out[f.name] = list(value) if isinstance(value, tuple) else value
-    return out
-
-
-def from_dict(cls: type[S], data: dict[str, Any]) -> S:
-    """``dict`` (e.g. a parsed TOML table) → settings dataclass ``cls``.
-
-    Raises
-    ------
-    ValueError
-        On unknown keys or values the dataclass rejects.
-    """
-    if not isinstance(data, dict):
-        raise ValueError(f"{cls.__name__} must be a table, got {data!r}")
-    names = [f.name for f in dataclasses.fields(cls)]
-    unknown = sorted(set(data) - set(names))
-    if unknown:
-        raise ValueError(f"unknown {cls.__name__} setting(s): {', '.join(unknown)}; "
-                         f"valid: {', '.join(names)}")
-    kwargs = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items()}
-    return cls(**kwargs)
-
-
-def replace_settings(settings: S, changes: dict[str, Any]) -> S:
-    """``dataclasses.replace`` with lists as tuples; a ValueError names the valid keys of an
-    unknown one."""
-    names = [f.name for f in dataclasses.fields(settings)]
-    for key in changes:
-        if key not in names:
-            raise ValueError(f"unknown {type(settings).__name__} setting {key!r}; valid: "
-                             f"{', '.join(names)}")
-    return dataclasses.replace(settings, **{
-        k: tuple(v) if isinstance(v, list) else v for k, v in changes.items()})

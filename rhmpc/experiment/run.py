@@ -110,7 +110,7 @@ def document(config: RunConfig, run: Run, result: LoopResult, wall: float,
         "versions": versions(),
     }
     predictor = getattr(run.reference, "predictor", None)
-    if predictor is not None:  # its running RMS miss per lead (rhmpc.control.confidence)
+    if predictor is not None:  # its running RMS miss per lead (benchmarks/horizon_weights.py)
         errors = np.asarray(predictor.forecast_error_rms, dtype=float)
         doc["forecast_error_rms_mm"] = [None if not np.isfinite(v) else 1e3 * float(v)
                                         for v in errors]

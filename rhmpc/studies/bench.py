@@ -41,8 +41,9 @@ import numpy as np
 
 from rhmpc.control.mpc import RecedingHorizonMPC
 from rhmpc.control.offset import OutputOffset
-from rhmpc.control.settings import MPCSettings, to_dict
+from rhmpc.control.settings import MPCSettings
 from rhmpc.control.yardstick import GainTick, numpy_gain_step
+from rhmpc.experiment.tables import to_dict
 from robots import linearize, load_robot
 from robots.linearize import LinearArm
 from sim.loop.metrics import warm_ns

@@ -10,7 +10,8 @@ import osqp
 import pytest
 
 from rhmpc.control.mpc import RecedingHorizonMPC
-from rhmpc.control.settings import MPCSettings, from_dict, to_dict
+from rhmpc.control.settings import MPCSettings
+from rhmpc.experiment.tables import from_dict, to_dict
 from robots import linearize, load_robot
 from tests.rhmpc.control.exact import EveryTick, exact_mpc
 
