@@ -48,7 +48,6 @@ from .dynamics import cancel_function, generate, offset_function
 
 #: Prefix of OSQP's generated globals (``rhmpc_osqp_solver``) and workspace files.
 OSQP_PREFIX = "rhmpc_osqp_"
-_WARM_STARTS = {"shift": 0, "shift_primal": 1, "keep": 2, "none": 3}
 #: The template files, copied with their placeholders filled.
 TEMPLATES = ("rhmpc.h", "rhmpc.c", "rhmpc_mpc.c", "rhmpc_reference.c", "rhmpc_data.h",
              "CMakeLists.txt", "example/main.c")
@@ -313,9 +312,7 @@ def _mpc_subs(mpc: RecedingHorizonMPC) -> dict[str, object]:
         "BRAKE": int(_brakes(mpc)), "BRAKE_TICKS": s.block_lengths[0],
         "PLAN_FALLBACK_TICKS": s.plan_fallback_ticks, "MAX_ITER": s.max_iter,
         "BACKOFF_MAX_TICKS": s.backoff_max_ticks,
-        "WARM_START": _WARM_STARTS["shift_primal"], "WARM_START_NAME": "shift_primal",
-        "SCREENING": 1, "PARAM_BOUNDS": int(qp.param_bounds),
-        "BOX_SCREENING": 1, "BOX_MAX_ITER": mpc.box.settings.max_iter,
+        "PARAM_BOUNDS": int(qp.param_bounds), "BOX_MAX_ITER": mpc.box.settings.max_iter,
         "BOX_PDAS_ITER": mpc.box.settings.pdas_iter,
         "BOX_PRIMAL_TOL": repr(float(mpc.box.settings.primal_tol)),
         "BOX_DUAL_TOL": repr(float(mpc.box.settings.dual_tol)),
