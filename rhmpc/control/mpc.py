@@ -120,7 +120,6 @@ class RecedingHorizonMPC(FallbackChain):
         self._p_d = self._p_ext[nx + N * ny + self.nu:-1]
         self._offset = (OutputOffset(arm, out=self._p_d, state=self._p_x)
                         if self.settings.offset_correction else None)
-        self._probe = OutputOffset(arm) if self._offset is not None else None  # for offset()
         self._x_shape, self._ref_shape = (nx,), (N, ny)
         self._F_ext = np.ascontiguousarray(np.column_stack([qp.F, qp.f0]))
         self._q = np.empty(qp.nv)
@@ -132,7 +131,6 @@ class RecedingHorizonMPC(FallbackChain):
         self._nz, self._nv = qp.nz, qp.nv
         self._shift, self._shift_dual = qp.shift, qp.shift_dual
         self._scale0 = qp.u_max.copy()
-        self._gain, self._gain0 = qp.gain, qp.gain0
         self._Z_ext = np.ascontiguousarray(qp.minimiser)
         # Level 1 in two mat-vecs (:meth:`_level1`): w = [ẑ*; 0; p_B; 1] with ẑ* = K_z p_ext
         # (K_z = −W F_z), and every row of l ≤ A [ẑ*; 0] ≤ u as a row of H w ≤ 0.
@@ -196,29 +194,6 @@ class RecedingHorizonMPC(FallbackChain):
             raise ValueError(f"count must be >= 0, got {count}")
         self._forced.extend([reason] * int(count))
 
-    def offset(self, x: np.ndarray) -> np.ndarray:
-        """Output offset d = p(q0 + x_q) − (C x + y0) [m] the controller uses at ``x`` (0 when
-        ``offset_correction`` is off)."""
-        if self._offset is None:
-            return np.zeros(self.ny)
-        return self._probe(np.asarray(x, dtype=float), out=np.empty(self.ny))
-
-    def params(
-        self, x: np.ndarray, ref: np.ndarray, u_prev: np.ndarray | None = None
-    ) -> np.ndarray:
-        """QP parameter vector p = [x; r_1..r_N; u_{−1}; d] (u_{−1} defaults to the last output,
-        d is :meth:`offset` at ``x``)."""
-        up = self._p_u if u_prev is None else u_prev
-        x = np.asarray(x, float)
-        return self.qp.params(x, np.asarray(ref, float), np.asarray(up, float), self.offset(x))
-
-    def qp_vectors(
-        self, x: np.ndarray, ref: np.ndarray, u_prev: np.ndarray | None = None
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(q, l, u) of the QP the controller would solve for ``x``, ``ref`` (P, A: ``self.qp``)."""
-        p = self.params(x, ref, u_prev)
-        return (self.qp.q(p), *self.qp.bounds(p))
-
     def last_solution(self) -> tuple[np.ndarray, np.ndarray]:
         """Primal ẑ and dual y of the last tick's QP, as copies.
 
@@ -248,12 +223,6 @@ class RecedingHorizonMPC(FallbackChain):
         if value.shape != (self.nu,) or not np.all(np.isfinite(value)):
             raise ValueError(f"u_prev must be {self.nu} finite torques [N·m], got {value!r}")
         self._p_u[:] = np.clip(value, -self.u_max, self.u_max)
-
-    def unconstrained(
-        self, x: np.ndarray, ref: np.ndarray, u_prev: np.ndarray | None = None
-    ) -> np.ndarray:
-        """First input of the unconstrained minimiser, not clipped [N·m] (the LQ fallback)."""
-        return self._gain @ self.params(x, ref, u_prev) + self._gain0
 
     def step(self, x: np.ndarray, ref: np.ndarray) -> np.ndarray:
         """One control tick: MPC torque τ_mpc (nu,) [N·m] for state ``x`` and reference ``ref``.

@@ -90,18 +90,8 @@ typedef struct {
     double m, h[3], I[9];
 } rbi_t;
 
-/* The coordinate axis that body i turns about with an identity placement rotation, or -1. */
-static int plane_axis(const chain_t *m, int i) {
-    static const double I3[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
-    const double *a = m->axis[i];
-    if (memcmp(m->Rp[i], I3, sizeof I3) != 0) return -1;
-    for (int k = 0; k < 3; k++)
-        if (a[k] == 1.0 && a[(k + 1) % 3] == 0.0 && a[(k + 2) % 3] == 0.0) return k;
-    return -1;
-}
-
 /* E = (R_p Rot(a, q))^T with Rot(a, q) = I + s K + (1 - c) K^2 (Rodrigues), K = a x. */
-static void general_rotation(const chain_t *m, int i, double q, double E[9]) {
+static void rotation(const chain_t *m, int i, double q, double E[9]) {
     const double *a = m->axis[i], *P = m->Rp[i];
     double s = sin(q), c = 1.0 - cos(q), J[9];
     double K[9] = {0, -a[2], a[1], a[2], 0, -a[0], -a[1], a[0], 0};
@@ -115,23 +105,11 @@ static void general_rotation(const chain_t *m, int i, double q, double E[9]) {
             E[3 * l + k] = P[3 * k] * J[l] + P[3 * k + 1] * J[3 + l] + P[3 * k + 2] * J[6 + l];
 }
 
-/* The bodies' poses at the body angles qb: E = Rot(e_k, -q) directly for a joint about
- * coordinate axis k of an unrotated placement (RX, RY, RZ), else the general rotation. */
+/* The bodies' poses at the body angles qb. */
 static void poses(const chain_t *m, const double *qb, pose_t *X) {
     for (int i = 0; i < m->nb; i++) {
-        pose_t *P = &X[i];
-        int k = plane_axis(m, i), u = (k + 1) % 3, w = (k + 2) % 3;
-        memcpy(P->p, m->pp[i], sizeof P->p);
-        if (k < 0) {
-            general_rotation(m, i, qb[i], P->E);
-            continue;
-        }
-        double c = cos(qb[i]), s = sin(qb[i]);
-        memset(P->E, 0, sizeof P->E);
-        P->E[4 * k] = 1.0;
-        P->E[4 * u] = P->E[4 * w] = c;
-        P->E[3 * u + w] = s;
-        P->E[3 * w + u] = -s;
+        memcpy(X[i].p, m->pp[i], sizeof X[i].p);
+        rotation(m, i, qb[i], X[i].E);
     }
 }
 

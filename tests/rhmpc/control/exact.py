@@ -1,4 +1,5 @@
-"""The tests' exact level 3: the controller's QP solved by DAQP in OSQP's place.
+"""The tests' references of the controller: its QP's vectors and unconstrained input rebuilt from
+the QP's data, and an exact level 3 (the QP solved by DAQP in OSQP's place).
 
 DAQP (dual active set; Arnström, Bemporad & Axehill, IEEE TAC 67(8), 2022) solves the QP
 exactly, hot-started from its last working set, in a few changes of its active set where ADMM
@@ -17,6 +18,7 @@ import numpy as np
 import osqp
 
 from rhmpc.control.mpc import RecedingHorizonMPC
+from rhmpc.control.offset import OutputOffset
 from rhmpc.control.settings import MPCSettings
 
 _SOLVED = int(osqp.SolverStatus.OSQP_SOLVED)
@@ -83,3 +85,23 @@ class EveryTick(RecedingHorizonMPC):
 
     def _box_solved(self) -> bool:
         return False
+
+
+def params(mpc: RecedingHorizonMPC, x, ref, u_prev=None) -> np.ndarray:
+    """p = [x; r_1..r_N; u_{−1}; d(x)] of the QP the controller solves (u_{−1} defaults to its
+    last output; d the output offset, 0 without ``offset_correction``)."""
+    x = np.asarray(x, dtype=float)
+    d = OutputOffset(mpc.arm)(x) if mpc.settings.offset_correction else None
+    return mpc.qp.params(x, np.asarray(ref, dtype=float),
+                         mpc.u_prev if u_prev is None else np.asarray(u_prev, dtype=float), d)
+
+
+def qp_vectors(mpc: RecedingHorizonMPC, x, ref, u_prev=None):
+    """(q, l, u) of the QP the controller would solve for ``x``, ``ref`` (P, A: ``mpc.qp``)."""
+    p = params(mpc, x, ref, u_prev)
+    return (mpc.qp.q(p), *mpc.qp.bounds(p))
+
+
+def unconstrained(mpc: RecedingHorizonMPC, x, ref, u_prev=None) -> np.ndarray:
+    """The first input of the unconstrained minimiser, not clipped [N·m] (the LQ fallback)."""
+    return mpc.qp.gain @ params(mpc, x, ref, u_prev) + mpc.qp.gain0

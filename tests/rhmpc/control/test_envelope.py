@@ -21,7 +21,7 @@ from rhmpc.control.mpc import RecedingHorizonMPC
 from rhmpc.control.settings import MPCSettings
 from robots import load_robot
 from sim.plant import ArmPlant
-from tests.rhmpc.control.exact import exact_mpc
+from tests.rhmpc.control.exact import exact_mpc, qp_vectors, unconstrained
 
 N = 50
 
@@ -156,7 +156,7 @@ def test_lq_fallback_that_would_break_a_limit_is_replaced_by_braking(arm):
     ref_mid = np.tile(arm.y0 + np.array([0.0, 0.5e-3, 0.0]), (N, 1))
     tau = mpc.step(x_mid, ref_mid)
     assert mpc.stats.source == "lq"
-    lq = np.clip(mpc.unconstrained(x_mid, ref_mid, np.zeros(3)), -mpc.u_max, mpc.u_max)
+    lq = np.clip(unconstrained(mpc, x_mid, ref_mid, np.zeros(3)), -mpc.u_max, mpc.u_max)
     np.testing.assert_allclose(tau, lq, rtol=0, atol=1e-9)  # rounding: measured 5e-14 N·m
 
 
@@ -173,7 +173,7 @@ def test_envelope_rows_come_from_the_urdf_and_are_certified_between_block_ends(a
     mpc = RecedingHorizonMPC(arm, s)
     qp = mpc.qp
     x = np.zeros(6)
-    _, _, up = mpc.qp_vectors(x, np.tile(arm.y0, (N, 1)))
+    _, _, up = qp_vectors(mpc, x, np.tile(arm.y0, (N, 1)))
     nv, me = qp.nv, env.m
     rows_b0 = slice(nv, nv + me)
     # rows are normalised; the slack coefficient of an upper row is −(its scale factor)

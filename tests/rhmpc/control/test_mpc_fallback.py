@@ -13,7 +13,7 @@ from rhmpc.control.mpc import RecedingHorizonMPC
 from rhmpc.control.settings import MPCSettings
 from rhmpc.experiment.tables import from_dict, to_dict
 from robots import linearize, load_robot
-from tests.rhmpc.control.exact import EveryTick, exact_mpc
+from tests.rhmpc.control.exact import EveryTick, exact_mpc, qp_vectors, unconstrained
 
 TIME_LIMIT = int(osqp.SolverStatus.OSQP_TIME_LIMIT_REACHED)
 
@@ -75,7 +75,7 @@ def test_injected_failures_take_the_shifted_plan_then_lq(arm, mpc):
             np.testing.assert_allclose(tau, np.clip(planned[k], -mpc.u_max, mpc.u_max))
         else:
             assert mpc.stats.source == "lq"
-            lq = np.clip(mpc.unconstrained(x, ref, u_prev), -mpc.u_max, mpc.u_max)
+            lq = np.clip(unconstrained(mpc, x, ref, u_prev), -mpc.u_max, mpc.u_max)
             np.testing.assert_allclose(tau, lq)
         x = arm.A @ x + arm.B @ tau
     assert mpc.stats.failures == {"injected": n_plan + 2}
@@ -93,7 +93,7 @@ def test_failure_without_a_plan_uses_the_clipped_lq_input(arm, mpc):
     tau = mpc.step(x, ref)
     assert mpc.stats.source == "lq"
     np.testing.assert_allclose(
-        tau, np.clip(mpc.unconstrained(x, ref, np.zeros(3)), -mpc.u_max, mpc.u_max)
+        tau, np.clip(unconstrained(mpc, x, ref, np.zeros(3)), -mpc.u_max, mpc.u_max)
     )
 
 
@@ -271,7 +271,7 @@ def test_osqp_on_every_tick_agrees_with_the_exact_solution_and_its_warm_start_pa
         qp, x, iters, errs = mpc.qp, np.zeros(6), [], []
         for k in range(120):
             ref = _moving_ref(arm, mpc.N, k, amp=5e-3)
-            q, lo, up = mpc.qp_vectors(x, ref)
+            q, lo, up = qp_vectors(mpc, x, ref)
             if cold:
                 mpc._ws_x, mpc._ws_y, mpc._ws_pending = np.zeros(qp.nv), mpc._y_zero, False
             tau = mpc.step(x, ref)
