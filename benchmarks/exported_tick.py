@@ -182,10 +182,11 @@ def main() -> None:
     tables["simulation|The Python simulation's speed on the main job (not a real-time figure)"] \
         = simulation_table(sim)
     simulation_note = (
-        "The simulation's row is the Python reference implementation running a study (the "
-        "generalized predictor on fixed-a2-top, PHANToM, sonomicrometer): its step is the "
-        "controller's (observer, MPC, cancellation), its refresh the reference's (gate, "
-        "predictor, interpolation).")
+        "The simulation's rows are the Python reference implementation running a study (the "
+        "generalized predictor on fixed-a2-top, PHANToM, sonomicrometer) on each plant: its "
+        "step is the controller's (observer, MPC, cancellation), its refresh the reference's "
+        "(gate, predictor, interpolation); the plant's tick (encoders and step, the dynamics "
+        "kernel and what composes it) is timed beside g in the benchmark's own process.")
     if runs:
         predictor = next(iter(runs.values()))["exported_predictor"]
         notes = ("The exported controller runs in a closed loop of its own on the linear "
