@@ -48,7 +48,7 @@ def phantom_friction() -> np.ndarray:
     """Coulomb friction of each drive on its output coordinate, K_t·I₀·η [N·m].
 
     The datasheet's no-load current I₀ is the current that overcomes the motor's own brush and
-    bearing friction: K_t I₀ = 0.615 mN·m at the motor, (8.19, 6.89, 6.89) mN·m through the
+    bearing friction: K_t I₀ = 0.615 mN·m at the motor, ``(8.19, 6.89, 6.89)`` mN·m through the
     transmissions. No viscous term is sourced: the whole no-load loss is taken as Coulomb.
     """
     return PHANTOM_TORQUE_CONSTANT * PHANTOM_NO_LOAD_CURRENT * PHANTOM_GEAR_RATIO

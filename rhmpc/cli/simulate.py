@@ -82,7 +82,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, help="seed of every random draw (default 0)")
     p.add_argument("--controller", choices=("python", "c"), default="python",
                    help="'c': the compiled controller of `rhmpc export` in the loop (built once, "
-                   "cached; needs cmake and a C compiler)")
+                   "cached; needs a C compiler)")
     add_run_options(p)
     p.add_argument("--out", metavar="FILE", help="write the result document: FILE.json, or "
                    "FILE.mat for MATLAB (the summary and the trace: time, error, ee, poi, "
@@ -97,15 +97,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--trace", metavar="FILE.npz", help="write every tick to an NPZ file as the "
                    "run goes (chunked; read it with sim.loop.trace.read_trace)")
     add_host_stalls_option(p, "the run")
+    from sim.sensors.faults import GRAMMAR
+
     p.add_argument("--fault", action="append", default=[], metavar="KIND@START[:ARG…]",
-                   help="inject a fault into the run (repeatable; the truth is untouched): "
-                   "freeze@START:DURATION (the sensor repeats its last sample), "
-                   "jump@START:OFFSET[:DURATION] (the stream steps by OFFSET, a length with its "
-                   "unit along x, 5mm, or x,y,z, 5,0,-2mm; to the end of the run by default), "
-                   "nan@START[:DURATION] (missing samples, default 0.5), "
-                   "stick@START:DURATION[:JOINTS] (encoder readings hold; 0-based joints, e.g. "
-                   "0,2; default all). Times in s, e.g. --fault freeze@14:0.3 --fault "
-                   "jump@20:5mm. The summary states each fault's errors and counts")
+                   help=f"inject a fault into the run (repeatable; the truth is untouched): "
+                   f"{GRAMMAR}; e.g. --fault freeze@14:0.3 --fault jump@20:5mm. The summary "
+                   "states each fault's errors and counts")
     p.set_defaults(func=run)
 
 

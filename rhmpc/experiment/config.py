@@ -12,8 +12,9 @@ from boundary import FileError
 from rhmpc.control.cancellation import ModelMismatch
 from rhmpc.control.observer import ObserverSettings
 from rhmpc.control.reference import ReferenceSettings
-from rhmpc.control.settings import MPCSettings, from_dict, replace_settings, to_dict
+from rhmpc.control.settings import MPCSettings
 from rhmpc.errors import UsageError
+from rhmpc.experiment.tables import from_dict, replace_settings, to_dict
 from sim.loop import LoopSettings
 from sim.plant import HardwareSettings, PlantSettings
 from sim.sensors.faults import FaultSettings
