@@ -6,7 +6,7 @@ checked against two facts of heart motion, whatever the rate:
 
 - its strongest periodic component, the highest peak of the motion's spectrum that repeats at
   least :data:`MIN_CYCLES` times in the recording, lies between breathing and the fastest
-  heartbeat, :data:`MOTION_BAND` (0.1–4.17 Hz: 6 breaths/min to 250 beats/min, the heart-rate
+  heartbeat, :data:`MOTION_BAND` (6 breaths/min to 250 beats/min, the heart-rate
   range of ``rhmpc data --bpm``);
 - its sample rate is one an instrument of heart motion delivers, at most :data:`MAX_RATE`
   (sonomicrometry 257 Hz in Tuna et al. 2013, trackers and cameras up to 1 kHz).
