@@ -134,8 +134,12 @@ class ResultsWriter:
     def open(self) -> None:
         if self.path.parent and not self.path.parent.exists():
             self.path.parent.mkdir(parents=True, exist_ok=True)
+        if self.path.is_symlink():  # never written through a link (boundary.writer)
+            raise UsageError(f"{self.path}: a symbolic link (to {os.readlink(self.path)}); rhmpc "
+                             "writes nothing through a link: give the file itself")
         try:
-            fd = os.open(self.path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+            fd = os.open(self.path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NOFOLLOW,
+                         0o644)
         except OSError as exc:
             raise UsageError(f"{self.path}: cannot open for appending: {exc.strerror}") from None
         try:
