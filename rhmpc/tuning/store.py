@@ -96,18 +96,20 @@ def read_results(path: str | Path) -> ResultsFile:
     if not os.path.lexists(path):
         return out
     try:
-        raw = boundary.read_bytes(path, "results file")
+        with boundary.open_input(path, "results file") as f:
+            for number, line in enumerate(f, 1):
+                if not line.strip():
+                    continue
+                record = _parse(line, f"{path}, line {number}")
+                if record is None:
+                    out.bad_lines += 1
+                    out.first_bad = out.first_bad or number
+                else:
+                    out.records.append(record)
     except FileError as exc:
         raise UsageError(str(exc)) from None
-    for number, line in enumerate(raw.split(b"\n"), 1):
-        if not line.strip():
-            continue
-        record = _parse(line, f"{path}, line {number}")
-        if record is None:
-            out.bad_lines += 1
-            out.first_bad = out.first_bad or number
-        else:
-            out.records.append(record)
+    except OSError as exc:
+        raise UsageError(f"{path}: cannot read: {exc.strerror or exc}") from None
     return out
 
 
