@@ -12,7 +12,7 @@ from pathlib import Path
 import boundary
 from predictors import PREDICTORS
 from rhmpc.cli import COMMANDS
-from rhmpc.cli.simulate import add_recording_options, recording_options
+from rhmpc.cli.simulate import add_recording_options, parse_split, recording_options
 from rhmpc.errors import UsageError
 from rhmpc.studies.prediction import (
     BASE_BPM,
@@ -49,7 +49,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         "scored. With --poi N the predictors of point N that read the other tracked points "
         "get them; --split TRAIN:END runs the literature's protocol: the learned predictors "
         "are fitted on the frames before TRAIN (or on --train FILE...), every other one runs "
-        "from the first frame, and the forecasts issued in [TRAIN, END) are scored.",
+        "from the first frame, and the forecasts issued in [TRAIN, END) are scored. Before "
+        "the fits start it says what it fits, on which frames, why each network is fitted "
+        "twice (a validation round, then the final one) and about how long it will take, and "
+        "which fitted predictors the default set leaves out (the GRUs, the slowest to fit) "
+        "with the --predictors list that adds them.",
     )
     what = p.add_mutually_exclusive_group()
     what.add_argument("--study", choices=STUDIES, help="which synthetic study")
@@ -238,19 +242,6 @@ def run(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
     return 0
-
-
-def parse_split(text: str | None) -> tuple[int, int] | None:
-    """``--split TRAIN:END`` as (TRAIN, END) frames, or ``None``."""
-    if text is None:
-        return None
-    try:
-        train, end = (int(v) for v in text.split(":"))
-    except ValueError:
-        raise UsageError(f"--split {text!r}: expected TRAIN:END frames, e.g. 600:700") from None
-    if not 0 < train < end:
-        raise UsageError(f"--split {text!r}: expected 0 < TRAIN < END")
-    return train, end
 
 
 def _run_data(args: argparse.Namespace) -> int:

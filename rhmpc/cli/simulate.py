@@ -13,6 +13,7 @@ from rhmpc.cli import COMMANDS
 from rhmpc.cli.presets import add_preset_option, apply_preset
 from rhmpc.errors import UsageError
 from rhmpc.experiment import RunConfig, check_sensor, load_config, run_experiment
+from rhmpc.experiment.config import with_split
 from sim.loop.settings import DEFAULT_SETTLING, LoopSettings
 from sim.recordings.matfile import parse_indices
 
@@ -72,6 +73,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--poi", type=int, metavar="N", help="the point of interest (numbered from 1) "
                    "of a --data file of several tracked points; a predictor that reads the "
                    "other points (st-rls, st-ridge, st-lstm, ...) gets their samples")
+    add_split_option(p)
     p.add_argument("--train", nargs="+", metavar="FILE", help="recordings a predictor fitted "
                    "before the run (ridge, lstm, ...) learns from, beside the run's own "
                    "settling window (same rate and layout; --poi applies)")
@@ -147,6 +149,28 @@ def add_recording_options(p: argparse.ArgumentParser) -> None:
 
 
 
+def add_split_option(p: argparse.ArgumentParser, more: str = "") -> None:
+    """``--split TRAIN:END``: the literature's split of a recording, in closed loop."""
+    p.add_argument("--split", metavar="TRAIN:END", help="with --data: the "
+                   "literature's split in closed loop: the run starts at the first sample, a "
+                   "predictor fitted before the run learns from the samples before TRAIN (as "
+                   "the loop delivers them) and the score covers the instants of samples TRAIN "
+                   f"to END - 1 (numbered from 0); replaces --settling and --duration{more}")
+
+
+def parse_split(text: str | None) -> tuple[int, int] | None:
+    """``--split TRAIN:END`` as (TRAIN, END) sample indices, or ``None``."""
+    if text is None:
+        return None
+    try:
+        train, end = (int(v) for v in text.split(":"))
+    except ValueError:
+        raise UsageError(f"--split {text!r}: expected TRAIN:END frames, e.g. 600:700") from None
+    if not 0 < train < end:
+        raise UsageError(f"--split {text!r}: expected 0 < TRAIN < END")
+    return train, end
+
+
 def recording_options(args: argparse.Namespace) -> dict:
     """The ``load_recording`` keywords given on the command line."""
     keys = {"var": "var", "rows": "rows", "cols": "cols", "data_rate": "rate", "units": "units"}
@@ -187,13 +211,19 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
         poi = args.poi if getattr(args, "poi", None) is not None else poi
         if poi is not None:
             changes["data_read"]["point"] = poi
-        if args.duration is None and not args.config:  # default: the whole recording
+        if args.duration is None and not args.config and not getattr(args, "split", None):
             from sim.recordings import load_recording
 
             changes["loop.duration"] = load_recording(data, **changes["data_read"]).duration
     elif any(getattr(args, k, None) is not None
-             for k in ("var", "rows", "cols", "data_rate", "units", "poi")):
-        raise UsageError("--var, --rows, --cols, --rate, --units and --poi need --data FILE")
+             for k in ("var", "rows", "cols", "data_rate", "units", "poi", "split")):
+        raise UsageError("--var, --rows, --cols, --rate, --units, --poi and --split need "
+                         "--data FILE")
+    if getattr(args, "split", None):
+        if args.duration is not None or args.settling is not None:
+            raise UsageError("--split TRAIN:END sets the settling and the duration: give "
+                             "neither --settling nor --duration with it")
+        changes["split"] = parse_split(args.split)
     if getattr(args, "train", None):
         missing = [f for f in args.train if not Path(f).is_file()]
         if missing:
@@ -210,7 +240,7 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
         changes[key.strip()] = parse_value(value.strip())
     if getattr(args, "fault", None):
         changes["faults.events"] = fault_events(config, changes, args.fault)
-    config = config.replace(**changes)
+    config = with_split(config.replace(**changes))
     check_sensor(config)
     check_scoring(config)
     return config
@@ -231,6 +261,9 @@ def fault_events(config: RunConfig, changes: dict, specs: list[str]) -> tuple[st
 
 def settling_rule(args: argparse.Namespace) -> str:
     """Where the run's settling time came from, for the summary."""
+    if getattr(args, "split", None):
+        train, end = parse_split(args.split)
+        return f"the samples before {train} of --split {train}:{end}"
     if getattr(args, "settling", None) is not None:
         return "set by --settling"
     if getattr(args, "config", None):

@@ -125,7 +125,7 @@ def _speed(records: list[dict]) -> str:
 
 def sweep(args: argparse.Namespace, spec_path: Path) -> int:
     from rhmpc.tuning.progress import format_duration, note
-    from rhmpc.tuning.runner import pending, process_pool, run_sweep
+    from rhmpc.tuning.runner import pending, run_sweep
     from rhmpc.tuning.spec import load_spec, with_sampler_seed
     from rhmpc.tuning.store import ResultsWriter, read_results
 
@@ -157,8 +157,7 @@ def sweep(args: argparse.Namespace, spec_path: Path) -> int:
         return 0
     outcome = None
     if todo:
-        outcome = _execute(args, spec, todo, results_path, run_sweep, process_pool,
-                           ResultsWriter)
+        outcome = _execute(args, spec, todo, results_path, run_sweep, ResultsWriter)
         note(f"rhmpc tune: {outcome.written} evaluation(s) in "
              f"{format_duration(outcome.elapsed_s)} = {outcome.evaluations_per_minute:.1f} "
              f"evaluations per minute{_speed(outcome.records)}", quiet)
@@ -179,34 +178,13 @@ def sweep(args: argparse.Namespace, spec_path: Path) -> int:
     return code
 
 
-def _execute(args, spec, todo, results_path, run_sweep, process_pool, ResultsWriter):
+def _execute(args, spec, todo, results_path, run_sweep, ResultsWriter):
     from rhmpc.tuning.objective import check_objective_metrics
     from rhmpc.tuning.progress import Heartbeat, note, progress_bar
+    from rhmpc.tuning.runner import executors
 
-    client = None
-    if args.scheduler:
-        try:
-            from distributed import Client
-        except ImportError:
-            raise UsageError("--scheduler needs dask.distributed: pip install 'rhmpc[dask]'"
-                             ) from None
-        try:
-            client = Client(args.scheduler, timeout="20s")
-        except OSError as exc:
-            raise UsageError(f"--scheduler {args.scheduler}: cannot connect: {exc}") from None
-        window = args.jobs or max(1, sum(client.nthreads().values()))
-
-        def factory():
-            return client.get_executor(pure=False)
-
-        where = f"Dask cluster {args.scheduler} ({window} in flight)"
-    else:
-        window = min(args.jobs or os.cpu_count() or 1, len(todo))
-
-        def factory():
-            return process_pool(window)
-
-        where = f"{window} local process(es)"
+    backend = executors(args.jobs, args.scheduler, len(todo))
+    window, where = backend.window, backend.where
     quiet = bool(args.quiet)
     note(f"rhmpc tune: running {len(todo)} evaluation(s) on {where}", quiet)
     bar = progress_bar(len(todo), "eval", f"tune {spec.name}", quiet)
@@ -228,12 +206,11 @@ def _execute(args, spec, todo, results_path, run_sweep, process_pool, ResultsWri
 
     try:
         with ResultsWriter(results_path) as writer:
-            outcome = run_sweep(todo, writer, factory, window, extra=_extra(spec),
+            outcome = run_sweep(todo, writer, backend.factory, window, extra=_extra(spec),
                                 on_result=on_result, heartbeat=Heartbeat(bar))
     finally:
         bar.close()
-        if client is not None:
-            client.close()
+        backend.close()
     return outcome
 
 

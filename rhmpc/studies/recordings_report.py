@@ -43,7 +43,7 @@ def _source_line(s: dict, doc: dict) -> str:
     period_ms = 1e3 * s["period_s"]
     gaps = f", {s['gap_samples']} missing between timestamps" if s["gap_samples"] else ""
     if doc.get("protocol") == "split":
-        scored = (f"forecasts issued at samples {s['scored_from']}–{s['scored_to'] - 1} scored, "
+        scored = (f"forecasts issued at frames {s['scored_from']}–{s['scored_to'] - 1} scored, "
                   f"the fitted predictors fitted on {doc['fitted_on']}")
     else:
         rule = ("given" if doc["warmup_rule"] == "given" else "the longer of "
