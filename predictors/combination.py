@@ -32,12 +32,14 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from predictors.base import Predictor, PredictorSettings
+from predictors.learned.fitted import FitWarning
 
 __all__ = ["Combination", "CombinationSettings", "MemberTime"]
 
@@ -145,11 +147,16 @@ class Combination(Predictor):
 
     def fit(self, series, progress=None) -> Combination:
         """Fit the members that are fitted before the run (``fit``) and not yet fitted (nor
-        loaded from a file) to ``series``."""
+        loaded from a file) to ``series``. A member that cannot be fitted on them (too few
+        samples for its model) takes no part, with a :class:`FitWarning` naming it."""
         for name, m in zip(self.settings.members, self.members, strict=True):
             if hasattr(m, "fit") and not m.fitted:
-                m.fit(series, None if progress is None else
-                      (lambda text, name=name: progress(f"{name}: {text}")))
+                try:
+                    m.fit(series, None if progress is None else
+                          (lambda text, name=name: progress(f"{name}: {text}")))
+                except ValueError as exc:
+                    warnings.warn(f"the combination runs without {name}: {exc}", FitWarning,
+                                  stacklevel=2)
         self.reset()
         return self
 
