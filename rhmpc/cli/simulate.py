@@ -60,7 +60,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "simulate", help=COMMANDS["simulate"],
         description="Closed loop at 2 kHz: heart motion -> sensor -> predictor (every "
-        "downsample ticks) -> quadratic interpolation to 50 reference points -> MPC (OSQP) -> "
+        "downsample ticks) -> cubic interpolation to 50 reference points -> MPC (OSQP) -> "
         "nonlinearity cancellation -> Pinocchio plant. Prints RMS/max tracking error, RMS "
         "control effort, prediction error and per-tick controller timing.")
     p.add_argument("--predictor", help="predictor name (default generalized; 'exact' = the true "
@@ -114,7 +114,7 @@ def add_host_stalls_option(p: argparse.ArgumentParser, after: str) -> None:
     """``--host-stalls SECONDS``: the host's stalls, timed after ``after``."""
     p.add_argument("--host-stalls", type=float, default=0.0, metavar="SECONDS",
                    help=f"after {after}, time a busy loop for SECONDS and report the host's "
-                   "stalls beside the tick's maximum (sim.loop.metrics.host_stalls; default 0: "
+                   "stalls beside the tick's maximum (rhmpc.studies.host.host_stalls; default 0: "
                    "off)")
 
 
@@ -127,8 +127,8 @@ def check_host_stalls(seconds: float) -> None:
 
 def host_stalls_document(seconds: float, gain_us: float | None) -> dict:
     """The host's stalls in a busy loop of ``seconds``, in µs and in gain ticks of ``gain_us``
-    (:func:`sim.loop.metrics.stall_summary`)."""
-    from sim.loop.metrics import host_stalls, stall_summary
+    (:func:`rhmpc.studies.host.stall_summary`)."""
+    from rhmpc.studies.host import host_stalls, stall_summary
 
     return stall_summary(host_stalls(seconds), seconds, gain_us)
 

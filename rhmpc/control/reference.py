@@ -13,14 +13,19 @@ period ``dt``::
     nodes  t_a + k·dt,  k = 0 … K      values  z(t_a), ẑ(t_a + dt), …, ẑ(t_a + K·dt)
 
 Each control tick ``t`` until the next refresh takes its N points ``r_j = r(t + j·Ts),
-j = 1 … N`` from a piecewise-quadratic (3-node Lagrange) interpolation of these nodes: with
-``s = (τ − t_a)/dt`` and the window of nodes ``m, m+1, m+2`` (``m = min(⌊s⌋, K − 2)``),
-``u = s − m``::
+j = 1 … N`` from a piecewise-cubic (4-node Lagrange) interpolation of these nodes: with
+``s = (τ − t_a)/dt``, the window of nodes ``m … m+3`` around the interval of s
+(``m = clip(⌊s⌋ − 1, 0, K − 3)``) and ``u = s − m``::
 
-    r(τ) = ½(u−1)(u−2)·z_m − u(u−2)·z_{m+1} + ½u(u−1)·z_{m+2}
+    r(τ) = −(u−1)(u−2)(u−3)/6·z_m + u(u−2)(u−3)/2·z_{m+1}
+           − u(u−1)(u−3)/2·z_{m+2} + u(u−1)(u−2)/6·z_{m+3}
 
-Beyond the last node the last window's quadratic extrapolates (at most the last 2.5 ms of the
-last horizon with the paper's K = 4 and downsample 15). ``K = prediction_points +
+The nodes are passed through exactly, so that at each sample instant the reference is the
+forecast of that sample; the cubic follows the motion's curvature between two samples of a slow
+sensor closer than Tuna et al.'s quadratic, which the robot tracks with a smaller miss at the
+samples (the decision record *The reference's interpolation*). Beyond the last node the last
+window's cubic extrapolates (at most the last 2.5 ms of the last horizon with the paper's K = 4
+and downsample 15). ``K = prediction_points +
 ⌈latency/dt⌉``: a sensor's latency is predicted across (Yuen et al. 2009's delay compensation).
 
 Outlier gate (innovation gating, :mod:`rhmpc.control.gate`): while *locked*, a sample whose miss
@@ -58,7 +63,7 @@ from predictors.base import is_measured
 from rhmpc.control.gate import OutlierGate
 
 __all__ = ["ExactReference", "PredictedReference", "ReferenceSettings", "embed3",
-           "interpolation_matrix", "quadratic_weights", "windows"]
+           "interpolation_matrix", "lagrange_weights", "windows"]
 
 
 @dataclass(frozen=True)
@@ -69,7 +74,8 @@ class ReferenceSettings:
     ----------
     prediction_points : int
         Points the predictor forecasts per refresh, before latency compensation (4: Tuna et
-        al. 2013 §VIII-B, M = 4 at 7.5 ms covers the 25-ms horizon).
+        al. 2013 §VIII-B, M = 4 at 7.5 ms covers the 25-ms horizon); at least 4, the cubic's
+        window.
     outlier_gate : float or str
         A sensor sample farther from its one-step forecast than max(floor, 4 × the running RMS
         forecast miss) is treated as missing (echo outliers: the heart cannot jump millimetres
@@ -104,7 +110,7 @@ class ReferenceSettings:
     guard_margin: float = 2e-3
 
     def __post_init__(self) -> None:
-        for name, least in (("prediction_points", 2), ("outlier_max_rejections", 0)):
+        for name, least in (("prediction_points", WINDOW), ("outlier_max_rejections", 0)):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < least:
                 raise ValueError(f"{name} must be an integer >= {least}, got {value!r}")
@@ -136,45 +142,36 @@ def embed3(p: np.ndarray) -> np.ndarray:
     return out
 
 
-#: The three Lagrange weights on nodes m, m+1, m+2 as polynomials in u = s − m, in the basis
-#: (u², u, 1): ½(u−1)(u−2), −u(u−2), ½u(u−1).
-_LAGRANGE = np.array([[0.5, -1.5, 1.0], [-1.0, 2.0, 0.0], [0.5, -0.5, 0.0]])
+#: Nodes of the interpolation's window (cubic: 4).
+WINDOW = 4
+#: The four Lagrange weights on nodes m … m+3 as polynomials in u = s − m, in the basis
+#: (u³, u², u, 1): −(u−1)(u−2)(u−3)/6, u(u−2)(u−3)/2, −u(u−1)(u−3)/2, u(u−1)(u−2)/6.
+_LAGRANGE = np.array([[-1 / 6, 1.0, -11 / 6, 1.0], [0.5, -2.5, 3.0, 0.0],
+                      [-0.5, 2.0, -1.5, 0.0], [1 / 6, -0.5, 1 / 3, 0.0]])
 
 
-def _window_weights(s: np.ndarray, n_nodes: int) -> tuple[np.ndarray, np.ndarray]:
-    """``m`` (n,) and the weights as rows, shape (3, n)."""
-    if n_nodes < 3:
-        raise ValueError(f"quadratic interpolation needs at least 3 nodes, got {n_nodes}")
-    m = np.floor(s)
-    np.minimum(m, float(n_nodes - 3), out=m)
-    np.maximum(m, 0.0, out=m)
-    basis = np.ones((3, s.shape[0]))
-    u = np.subtract(s, m, out=basis[1])
-    np.multiply(u, u, out=basis[0])
-    return m.astype(np.intp), _LAGRANGE @ basis
+def lagrange_weights(s: np.ndarray, n_nodes: int) -> tuple[np.ndarray, np.ndarray]:
+    """Window start ``m`` and the four Lagrange weights for node coordinates ``s`` (in periods).
 
-
-def quadratic_weights(s: np.ndarray, n_nodes: int) -> tuple[np.ndarray, np.ndarray]:
-    """Window start ``m`` and the three Lagrange weights for node coordinates ``s`` (in periods).
-
-    Returns ``m`` (n,) and ``w`` (n, 3) with r(s) = Σ_j w[:, j] · node[m + j].
+    Returns ``m`` (n,) and ``w`` (n, 4) with r(s) = Σ_j w[:, j] · node[m + j], the window
+    m = clip(⌊s⌋ − 1, 0, n_nodes − 4) (module docstring).
     """
-    m, w = _window_weights(s, n_nodes)
-    return m, w.T
+    if n_nodes < WINDOW:
+        raise ValueError(f"cubic interpolation needs at least {WINDOW} nodes, got {n_nodes}")
+    m = np.clip(np.floor(s) - 1.0, 0.0, float(n_nodes - WINDOW))
+    u = s - m
+    basis = np.stack([u**3, u**2, u, np.ones_like(u)])
+    return m.astype(np.intp), (_LAGRANGE @ basis).T
 
 
 def interpolation_matrix(s: np.ndarray, n_nodes: int) -> np.ndarray:
-    """W (n, n_nodes) with W @ nodes = the piecewise-quadratic interpolation at ``s``."""
-    m, w = _window_weights(s, n_nodes)
-    n = s.shape[0]
-    W = np.zeros(n * n_nodes)
-    m += np.arange(0, n * n_nodes, n_nodes)  # flat index of each row's first node
-    W[m] = w[0]
-    m += 1
-    W[m] = w[1]
-    m += 1
-    W[m] = w[2]
-    return W.reshape(n, n_nodes)
+    """W (n, n_nodes) with W @ nodes = the piecewise-cubic interpolation at ``s``."""
+    m, w = lagrange_weights(s, n_nodes)
+    W = np.zeros((s.shape[0], n_nodes))
+    rows = np.arange(s.shape[0])
+    for j in range(WINDOW):
+        W[rows, m + j] = w[:, j]
+    return W
 
 
 def windows(points: np.ndarray, first: int, count: int, N: int) -> np.ndarray:

@@ -220,7 +220,7 @@ def _gate_line(gate: dict) -> str:
 
 
 def stall_line(stalls: dict) -> str:
-    """What the host took from a busy loop (:func:`sim.loop.metrics.host_stalls`), in a line."""
+    """What the host took from a busy loop (:func:`rhmpc.studies.host.host_stalls`), in a line."""
     over = stalls.get("over_g")
     longest = f"{stalls['longest_us']:.0f} µs" + (
         f" = {stalls['longest_g']:.0f} g" if "longest_g" in stalls else "")

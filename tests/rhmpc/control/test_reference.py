@@ -1,4 +1,4 @@
-"""Quadratic interpolation of the predictor's points into the N control-rate references."""
+"""Cubic interpolation of the predictor's points into the N control-rate references."""
 
 import numpy as np
 import pytest
@@ -7,7 +7,7 @@ from rhmpc.control.reference import (
     ExactReference,
     PredictedReference,
     ReferenceSettings,
-    quadratic_weights,
+    lagrange_weights,
 )
 
 TS, DS, N = 0.5e-3, 15, 50
@@ -42,14 +42,19 @@ class Scripted:
         return np.column_stack([self.f(t), t])
 
 
-def test_weights_reproduce_quadratics_exactly():
+def test_weights_reproduce_cubics_exactly_and_pass_through_the_nodes():
     s = np.linspace(-0.5, 6.5, 57)
-    m, w = quadratic_weights(s, 6)
-    nodes = 3.0 - 2.0 * np.arange(6) + 0.7 * np.arange(6) ** 2
-    got = w[:, 0] * nodes[m] + w[:, 1] * nodes[m + 1] + w[:, 2] * nodes[m + 2]
-    np.testing.assert_allclose(got, 3.0 - 2.0 * s + 0.7 * s**2, atol=1e-12)
+    m, w = lagrange_weights(s, 6)
+    cubic = lambda x: 3.0 - 2.0 * x + 0.7 * x**2 - 0.2 * x**3  # noqa: E731
+    nodes = cubic(np.arange(6.0))
+    got = sum(w[:, j] * nodes[m + j] for j in range(4))
+    np.testing.assert_allclose(got, cubic(s), atol=1e-11)
+    k = np.arange(6.0)
+    m, w = lagrange_weights(k, 6)
+    np.testing.assert_allclose(sum(w[:, j] * nodes[m + j] for j in range(4)), nodes, atol=1e-12)
+    assert m.tolist() == [0, 0, 1, 2, 2, 2]  # the window around the interval, clipped
     with pytest.raises(ValueError):
-        quadratic_weights(s, 2)
+        lagrange_weights(s, 3)
 
 
 def build(f, latency_ticks=0, points=4):

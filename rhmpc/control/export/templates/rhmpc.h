@@ -14,7 +14,7 @@
  *
  * rhmpc_refresh: the outlier gate, the @PREDICTOR@ predictor (update and
  * forecast of RHMPC_PREDICTION_POINTS points at its period RHMPC_DT, plus the latency of the
- * sample), the piecewise-quadratic interpolation to the control ticks, the reference guard.
+ * sample), the piecewise-cubic interpolation to the control ticks, the reference guard.
  * rhmpc_step: the observer (x_hat = [q - q0; qdot] from the encoders), the output offset by
  * forward kinematics, the MPC (screening cascade, OSQP, fallbacks, envelope), the cancellation
  * of gravity, Coriolis and friction with the controller's model, the torque clip.

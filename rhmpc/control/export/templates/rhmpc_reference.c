@@ -565,21 +565,23 @@ static void diverged(rhmpc_t *ctl) {
   for (int i = 0; i < RHMPC_SPAN; i++) memcpy(s->dense + i * D, held, sizeof held);
 }
 
-/* PredictedReference._interpolate: the span points after `tick`, piecewise-quadratic Lagrange
- * on the nodes (s = lead + age/dt, window m = clamp(floor(s), 0, nodes - 3), u = s - m),
+/* PredictedReference._interpolate: the span points after `tick`, piecewise-cubic Lagrange on
+ * the nodes (s = lead + age/dt, window m = clamp(floor(s) - 1, 0, nodes - 4), u = s - m),
  * guarded and placed */
 static void interpolate(rhmpc_t *ctl, long long tick, int n_nodes, double t0) {
   rhmpc_reference_t *s = &ctl->ref;
   const double now = (double)tick * RHMPC_TS, shift = (now - t0) / RHMPC_DT;
-  const double top = (double)(n_nodes - 3);
+  const double top = (double)(n_nodes - 4);
   for (int i = 0; i < RHMPC_SPAN; i++) {
-    double si = (i + 1) * (RHMPC_TS / RHMPC_DT) + shift, m = floor(si);
+    double si = (i + 1) * (RHMPC_TS / RHMPC_DT) + shift, m = floor(si) - 1.0;
     m = m > top ? top : m;
     m = m >= 0.0 ? m : 0.0;
-    double u = si - m, u2 = u * u;
-    double w0 = 0.5 * u2 - 1.5 * u + 1.0, w1 = -u2 + 2.0 * u, w2 = 0.5 * u2 - 0.5 * u;
+    double u = si - m, u1 = u - 1.0, u2 = u - 2.0, u3 = u - 3.0;
+    double w[4] = {-u1 * u2 * u3 / 6.0, u * u2 * u3 / 2.0, -u * u1 * u3 / 2.0,
+                   u * u1 * u2 / 6.0};
     const double *r = s->nodes + (int)m * D;
-    for (int c = 0; c < D; c++) s->dense[i * D + c] = w0 * r[c] + w1 * r[D + c] + w2 * r[2 * D + c];
+    for (int c = 0; c < D; c++)
+      s->dense[i * D + c] = w[0] * r[c] + w[1] * r[D + c] + w[2] * r[2 * D + c] + w[3] * r[3 * D + c];
   }
   ctl->pub.first = tick + 1;
   if (RHMPC_GUARD_SPEED > 0.0 && s->have_held) {
