@@ -383,6 +383,7 @@ def _generate_into(controller, robot: str, out: Path) -> tuple[list[str], list[s
     for leftover in ("emosqp.c", "Makefile"):  # OSQP's example program (printf, main)
         (out / "osqp" / leftover).unlink(missing_ok=True)
     notes = _notes(controller)
+    robot = getattr(getattr(mpc.arm, "robot", None), "name", robot)  # a name, not a file's path
     subs = {"ROBOT": robot, "ROBOT_ID": "".join(c if c.isalnum() else "_" for c in robot),
             "VERSION": _version("rhmpc"), "OSQP_VERSION": _version("osqp"),
             "REACQUIRE_TICKS": controller.observer.settings.reacquire_ticks,
