@@ -74,6 +74,8 @@ class Run:
         The injected faults (:mod:`sim.sensors.faults`), already in ``stream`` and ``plant``.
     points : PointsAt or None
         The other tracked points of a recording, which the loop gives with each sample.
+    measured : tuple or None
+        A recording's own samples (t [s] from 0, z (n, d) [m]): where the run is scored.
     """
 
     config: RunConfig
@@ -89,6 +91,7 @@ class Run:
     clock: PredictorClock
     faults: tuple = ()
     points: PointsAt | None = None
+    measured: tuple[np.ndarray, np.ndarray] | None = None
 
     @property
     def reference(self):
@@ -293,7 +296,9 @@ def build_run(config: RunConfig, implementation: str = "python", progress=None) 
             raise UsageError(f"[faults] {exc}") from None
     points = None if heart.others is None else PointsAt(heart.origin.t - heart.origin.t[0],
                                                         heart.others)
+    measured = None if config.data is None else (heart.origin.t - heart.origin.t[0],
+                                                  heart.origin.z)
     run = Run(config, robot, arm, plant, controller, truth, anchor, stream, heart.label,
-              loop.duration, clock, config.faults.faults, points)
+              loop.duration, clock, config.faults.faults, points, measured)
     fit_predictor(run, progress)
     return run

@@ -54,7 +54,7 @@ def run_experiment(config: RunConfig, progress: bool = False, trace: str | None 
             run.plant, run.controller, run.truth, run.stream, config.loop, run.clock,
             anchor=run.anchor, robot=run.robot, progress=callback, trace_file=trace,
             yardstick=None if gain_tick is None else _gain_tick(run.controller, gain_tick),
-            marks=marks, points=run.points,
+            marks=marks, points=run.points, measured=run.measured,
         )
     finally:
         if bar is not None:

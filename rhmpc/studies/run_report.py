@@ -29,6 +29,27 @@ def _placement(loop: dict) -> str:
             + " (set loop.placement = \"absolute\" to keep its own coordinates)")
 
 
+def _score_words(doc: dict) -> str:
+    """Where the tracking error was taken: at the measured samples, or at every tick."""
+    if doc.get("score") == "measured":
+        return f"at the {doc.get('scored_samples', 0)} measured instants"
+    return "at every tick"
+
+
+def _measured_lines(doc: dict) -> str:
+    """A recording's second score (every tick against the samples' interpolant) and what the
+    score at the measured instants leaves out."""
+    ex = doc.get("excluded") or {}
+    out = (f"                   every tick against the line between samples (where nobody "
+           f"measured): RMS {doc['rms_error_interpolated_mm']:.3f} mm, max "
+           f"{doc['max_error_interpolated_mm']:.3f} mm")
+    left = [f"{ex[k]} {what}" for k, what in (
+        ("outlier_samples", "samples taken as outliers"),
+        ("unmeasured_samples", "samples that are no measurements"),
+        ("after_last_sample_ticks", "ticks after the last sample")) if ex.get(k)]
+    return out + ("\n                   left out: " + ", ".join(left) if left else "")
+
+
 def format_summary(doc: dict, settling_rule: str | None = None) -> str:
     """A closed-loop run's document as a few aligned lines (mm, mN·m, µs).
 
@@ -50,7 +71,7 @@ def format_summary(doc: dict, settling_rule: str | None = None) -> str:
         f"{doc['ground_truth']} motion)",
         f"  placement        {_placement(s)}",
         f"  tracking error   RMS {doc['rms_error_mm']:.3f} mm   max {doc['max_error_mm']:.3f} mm"
-        f"   (RMS per axis x, y, z: {axes} mm)",
+        f"   (RMS per axis x, y, z: {axes} mm) {_score_words(doc)}",
         f"  control effort   RMS {doc['rms_effort_mNm']:.1f} mN·m (MPC torque; with the "
         f"cancellation {doc['rms_total_torque_mNm']:.1f} mN·m); saturated ticks "
         f"{doc['saturated_ticks']}",
@@ -83,7 +104,9 @@ def format_summary(doc: dict, settling_rule: str | None = None) -> str:
                      f"observer's gate, {encoder.get('reacquired', 0)} taken again once they "
                      "moved")
     excluded = doc.get("excluded") or {}
-    if excluded.get("ticks") or excluded.get("unmeasured"):
+    if doc.get("score") == "measured":
+        lines.insert(3, _measured_lines(doc))
+    elif excluded.get("ticks") or excluded.get("unmeasured"):
         lines.insert(3, f"                   the score leaves out {excluded.get('ticks', 0)} ticks "
                      f"whose truth touches the {excluded.get('outliers', 0)} samples taken as "
                      f"outliers, and the {excluded.get('unmeasured', 0)} recorded samples that "

@@ -18,7 +18,8 @@ import numpy as np
 
 
 class DecimatedTrace:
-    """Every ``stride``-th tick of the run plus every tick of the last ``tail`` ticks.
+    """Every ``stride``-th tick of the run plus every tick of the last ``tail`` ticks (and the
+    ticks a chunk flags: those next to a recording's sample, where the run is scored).
 
     ``stride = ⌈n_ticks / points⌉``, so the trace holds at most ``points + tail`` ticks whatever
     the run length (for ``--plot``: the whole run, and a full-rate window at its end).
@@ -30,8 +31,11 @@ class DecimatedTrace:
         self._kept: list[dict] = []
         self._recent: list[dict] = []
 
-    def add(self, chunk: dict[str, np.ndarray]) -> None:
+    def add(self, chunk: dict[str, np.ndarray], also: np.ndarray | None = None) -> None:
+        """Keep the chunk's every ``stride``-th tick, and the ticks flagged in ``also``."""
         keep = chunk["tick"] % self.stride == 0
+        if also is not None:
+            keep |= also
         self._kept.append({k: v[keep] for k, v in chunk.items()})
         self._recent.append(chunk)
         while sum(c["tick"].size for c in self._recent[1:]) >= self.tail:
