@@ -232,9 +232,18 @@ class PredictedReference:
         """A sample's arrival on ``tick``: ``z`` measured at ``stamp`` [s] (None or NaN: none
         new), and ``others`` the other tracked points' samples of that instant (a multi-point
         predictor reads them). Gate, update, forecast, interpolation, guard, placement."""
+        made = self.nodes(tick, z, stamp, others)
+        if made is not None and tick >= self._external_until:  # else a forecast from outside
+            self._interpolate(tick, *made, self._held, self._held_stamp, restart=True)
+
+    def nodes(self, tick: int, z: np.ndarray | None, stamp: float,
+              others: np.ndarray | None = None) -> tuple[np.ndarray, float] | None:
+        """A refresh's gate, update and forecast: the nodes it interpolates, (K, d) [m] at
+        ``t0 + k·dt``, and ``t0`` [s] — what a predictor in another process sends
+        (:meth:`forecast`) — or None while nothing has been measured."""
         z = self._gated(z)
         if z is None and self._anchor is None:
-            return  # nothing measured yet (nor lost): keep holding
+            return None  # nothing measured yet (nor lost): keep holding
         if self._multi_point:
             self.predictor.update(z, others)
         else:
@@ -247,14 +256,11 @@ class PredictedReference:
         points = self.predictor.predict(self.prediction_points
                                         + math.ceil(latency / self.dt - 1e-9))
         self._keep_forecasts(points, measured=z is not None)
-        if z is not None:
-            nodes, t0 = np.concatenate((np.reshape(z, (1, -1)), points)), self._anchor
-            self.age_sum += latency
-            self.age_count += 1
-        else:
-            nodes, t0 = points, self._anchor + self.dt
-        if tick >= self._external_until:  # else a forecast from outside serves these ticks
-            self._interpolate(tick, nodes, t0, self._held, self._held_stamp, restart=True)
+        if z is None:
+            return points, self._anchor + self.dt
+        self.age_sum += latency
+        self.age_count += 1
+        return np.concatenate((np.reshape(z, (1, -1)), points)), self._anchor
 
     def forecast(self, tick: int, stamp: float, points: np.ndarray) -> bool:
         """A forecast made outside (a predictor in another process) arriving on ``tick``:
