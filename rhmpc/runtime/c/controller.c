@@ -8,8 +8,8 @@
  *
  * Each tick i wakes at epoch + i Ts (clock_nanosleep, TIMER_ABSTIME), takes what has arrived
  * (measured_cp: rhmpc_refresh, the internal predictor; forecast_cp: rhmpc_forecast; measured_js:
- * the encoders), steps the controller and sends servo_jf to the robot. An encoder reading that is
- * not this tick's is stale: the step gets NaN, the observer's fault path (it predicts, and brakes
+ * the encoders, whose reading of tick i it awaits until Ts/5 into the tick), steps the controller
+ * and sends servo_jf to the robot. An encoder reading that is not this tick's is stale: the step gets NaN, the observer's fault path (it predicts, and brakes
  * after its timeout). A lost measured_cp is a missing sample (the predictor runs open-loop); a
  * late one (reordered) is dropped. --no-internal: samples are not given to the internal
  * predictor, so a lost forecast holds the last points.
@@ -29,6 +29,7 @@
 #include <errno.h>
 #include <math.h>
 #include <netinet/in.h>
+#include <poll.h>
 #include <sched.h>
 #include <signal.h>
 #include <stdio.h>
@@ -43,6 +44,7 @@
 #define MAX_VALUES 4096
 #define MAX_FILL 50 /* the most missing samples one gap of sequence numbers fills */
 #define TS_NS ((long long)llround(RHMPC_TS * 1e9))
+#define ENCODER_WAIT_NS (TS_NS / 5) /* how long into a tick its encoder reading may arrive */
 
 enum { SERVED_NONE, SERVED_INTERNAL, SERVED_EXTERNAL, SERVED_HOLD, N_SERVED };
 static const char *const served_names[N_SERVED] = {"none", "internal", "external", "hold"};
@@ -181,6 +183,13 @@ static void run_loop(run_t *r, int fd, long long *wake, long long *work, long lo
     r->done = tick + 1;
     if (r->probe) continue;
     take_arrivals(r, fd, tick, &q_tick, &source, &origin);
+    while (q_tick != tick) { /* the reading of this tick may still be on its way */
+      long long left = next + ENCODER_WAIT_NS - mono_ns();
+      struct pollfd p = {fd, POLLIN, 0};
+      struct timespec wait = {0, left > 0 ? left : 0};
+      if (left <= 0 || ppoll(&p, 1, &wait, NULL) <= 0) break;
+      take_arrivals(r, fd, tick, &q_tick, &source, &origin);
+    }
     if (q_tick != tick) { /* stale or missing: the observer's fault path */
       for (int j = 0; j < RHMPC_NU; j++) q[j] = NAN;
       r->stale_encoders++;
