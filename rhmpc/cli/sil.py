@@ -82,7 +82,7 @@ def table(r: dict) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from rhmpc.runtime.session import SilSettings, run_sil
+    from rhmpc.runtime.deployment import SilSettings, run_sil
 
     config = config_from_args(args)
     if config.predictor == "exact":

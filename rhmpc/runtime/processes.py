@@ -1,6 +1,6 @@
 """The processes beside the controller: the sensor, the predictor and the robot.
 
-Each runs in its own process, started by :mod:`.session` with the run it belongs to (built once
+Each runs in its own process, started by :mod:`.deployment` with the run it belongs to (built once
 by :func:`rhmpc.experiment.assembly.build_run`, so that each holds the very objects of the
 in-process simulation), and talks to the others only over UDP in the wire format of
 :mod:`.wire`. Time is the run's clock: tick i starts at ``epoch + i·Ts``.
@@ -64,7 +64,7 @@ class Role:
 
 
 class _Stop:
-    """SIGTERM asks the process to stop; Ctrl-C is the session's to handle."""
+    """SIGTERM asks the process to stop; Ctrl-C is the deployment's to handle."""
 
     def __init__(self) -> None:
         self.asked = False
@@ -76,7 +76,7 @@ class _Stop:
 
 
 def _start(role: Role, parent: int) -> tuple[_Stop, str]:
-    """The process's set-up: it dies with the session; SCHED_FIFO where asked and permitted."""
+    """The process's set-up: it dies with the deployment; SCHED_FIFO where asked and permitted."""
     die_with_parent(parent)
     stop = _Stop()
     if role.priority <= 0:

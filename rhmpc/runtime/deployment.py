@@ -10,7 +10,7 @@ in-process simulation of the same settings for comparison, builds the controller
   own holding the run.
 
 They end by themselves after the run's ticks. Ctrl-C or SIGTERM stops every one of them
-(SIGTERM, then SIGKILL after :data:`GRACE_S`), and each ends with the session anyway (its
+(SIGTERM, then SIGKILL after :data:`GRACE_S`), and each ends with the run anyway (its
 parent-death signal). The tool's positions the robot logged are scored where the POI was
 measured, as the in-process run is (:class:`sim.loop.metrics.MeasuredScore`).
 """
@@ -136,7 +136,7 @@ class _Processes:
 
 
 class _Stopped(KeyboardInterrupt):
-    """SIGTERM during a session: stopped like Ctrl-C."""
+    """SIGTERM during a run: stopped like Ctrl-C."""
 
 
 def _on_sigterm(*_) -> None:
