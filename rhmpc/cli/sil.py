@@ -66,7 +66,8 @@ def table(r: dict) -> str:
         _row("ticks, deadline misses", f"{r['ticks']}, {r['deadline_misses']}"),
         _row("controller wake-up latency", _p(r["wakeup_latency_us"], "us")),
         _row("host wake-up latency", _p(r["host_wakeup_latency_us"], "us")
-             + f" ({r['host_wakeup_latency_us']['tool']})"),
+             + f" ({r['host_wakeup_latency_us']['tool']}; a period late: "
+             f"{100 * r['host_wakeup_latency_us']['late_periods']:.3g} %)"),
         _row("controller step", _p(r["controller_step_us"], "us")),
         _row("sensor to torque", _p(r["sensor_to_torque_ms"], "ms")),
         _row("packets lost, late", f"{lost}, {late} (stale encoder readings "

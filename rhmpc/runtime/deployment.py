@@ -7,7 +7,7 @@ in-process simulation of the same settings for comparison, builds the controller
 - the **controller** (the exported C at 2 kHz: real time where permitted) and beside it the
   **host probe** (:mod:`.host`),
 - the **robot**, the **predictor** and the **sensor** (:mod:`.processes`), each a process of its
-  own holding the run.
+  own holding the run, on the other processors.
 
 They end by themselves after the run's ticks. Ctrl-C or SIGTERM stops every one of them
 (SIGTERM, then SIGKILL after :data:`GRACE_S`), and each ends with the run anyway (its
@@ -17,6 +17,7 @@ measured, as the in-process run is (:class:`sim.loop.metrics.MeasuredScore`).
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import multiprocessing
 import os
@@ -158,7 +159,7 @@ def run_sil(config: RunConfig, settings: SilSettings = SilSettings(), progress=N
         folder = Path(tmp)
         ports = processes.Ports(*_free_ports(3))
         epoch = time.clock_gettime_ns(time.CLOCK_MONOTONIC) + int(STARTUP_S * 1e9)
-        role = processes.Role(epoch, loop.ticks, loop.Ts, ports, folder)
+        role = processes.Role(epoch, loop.ticks, loop.Ts, ports, folder, 0, cpu)
         probe, tool = host.probe_command(
             built.program, epoch_ns=epoch, ticks=loop.ticks, Ts=loop.Ts, cpu=cpu,
             priority=settings.priority, out=folder / "host", phase_ns=round(loop.Ts * 5e8))
@@ -191,15 +192,14 @@ def run_sil(config: RunConfig, settings: SilSettings = SilSettings(), progress=N
         arrays = {name: np.fromfile(folder / f"controller.{name}", dtype=np.int64)
                   for name in ("wake", "work", "step", "s2t")}
         q = np.load(folder / "robot_q.npy")
-        host_latency = host.read_probe(folder / "host", tool)
+        host_latency = host.read_probe(folder / "host", tool, loop.Ts)
     score = _score(run, q, documents["predictor"]["outliers"])
     return report(config, built, settings.internal, documents, arrays, host_latency, score,
                   in_process, (load_before, os.getloadavg()))
 
 
 def _with(role: processes.Role, priority: int) -> processes.Role:
-    return processes.Role(role.epoch_ns, role.ticks, role.Ts, role.ports, role.folder,
-                          max(priority, 1))
+    return dataclasses.replace(role, priority=max(priority, 1))
 
 
 def _score(run, q: np.ndarray, outliers: list[float]) -> dict:

@@ -12,6 +12,7 @@ behind each other.
 
 from __future__ import annotations
 
+import json
 import re
 import shutil
 from pathlib import Path
@@ -19,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["HISTOGRAM_US", "histogram_percentiles", "percentiles", "probe_command",
-           "read_probe"]
+           "read_histogram", "read_probe"]
 
 #: cyclictest's histogram: 1-µs bins up to this latency [µs] (beyond: its overflow count).
 HISTOGRAM_US = 10_000
@@ -52,10 +53,10 @@ def percentiles(values_us: np.ndarray) -> dict:
             "max": round(float(values_us.max()), 1)}
 
 
-def histogram_percentiles(text: str) -> dict:
-    """p50, p99 and max [µs] of a cyclictest histogram file (``--histfile``): lines ``µs
-    count`` (one column per thread: summed), then ``# Max Latencies:`` and ``# Histogram
-    Overflows:`` (the wake-ups beyond the last bin, counted at its edge)."""
+def read_histogram(text: str) -> tuple[np.ndarray, np.ndarray, float]:
+    """(latencies [µs], counts, max [µs]) of a cyclictest histogram file (``--histfile``):
+    lines ``µs count`` (one column per thread: summed), then ``# Max Latencies:`` and
+    ``# Histogram Overflows:`` (the wake-ups beyond the last bin, counted at its edge)."""
     bins, counts = [], []
     for line in text.splitlines():
         if line.startswith("#") or not line.strip():
@@ -65,23 +66,36 @@ def histogram_percentiles(text: str) -> dict:
         counts.append(sum(int(f) for f in fields[1:]))
     overflow = re.search(r"# Histogram Overflows:\s*([\d\s]+)", text)
     biggest = re.search(r"# Max Latencies:\s*([\d\s]+)", text)
-    counts_arr = np.array(counts, dtype=float)
     over = sum(int(v) for v in overflow.group(1).split()) if overflow else 0
-    values, weights = np.array([*bins, HISTOGRAM_US], float), np.r_[counts_arr, over]
+    values, weights = np.array([*bins, HISTOGRAM_US], float), np.array([*counts, over], float)
+    top = max(int(v) for v in biggest.group(1).split()) if biggest else \
+        (values[weights > 0][-1] if weights.any() else np.nan)
+    return values, weights, float(top)
+
+
+def histogram_percentiles(values: np.ndarray, weights: np.ndarray, top: float) -> dict:
+    """p50, p99 and max [µs] of a histogram (bins ``values``, counts ``weights``)."""
     if weights.sum() == 0:
         return {"p50": None, "p99": None, "max": None}
     cumulative = np.cumsum(weights) / weights.sum()
     p50, p99 = (float(values[np.searchsorted(cumulative, q)]) for q in (0.5, 0.99))
-    top = max(int(v) for v in biggest.group(1).split()) if biggest else values[weights > 0][-1]
-    return {"p50": p50, "p99": p99, "max": float(top)}
+    return {"p50": p50, "p99": p99, "max": top}
 
 
-def read_probe(out: Path, tool: str) -> dict:
-    """The probe's p50, p99 and max wake-up latency [µs] and its name."""
+def read_probe(out: Path, tool: str, Ts: float) -> dict:
+    """The probe's p50, p99 and max wake-up latency [µs], the fraction of its periods that
+    woke a period or more late (``late_periods``: what deadline misses it would have had) and
+    its name."""
     if tool == "cyclictest":
         hist = Path(f"{out}.hist")
-        found = histogram_percentiles(hist.read_text()) if hist.is_file() else percentiles([])
+        values, weights, top = read_histogram(hist.read_text() if hist.is_file() else "")
+        found = histogram_percentiles(values, weights, top)
+        late = weights[values >= Ts * 1e6].sum() / max(weights.sum(), 1.0)
     else:
         wake = Path(f"{out}.wake")
-        found = percentiles(np.fromfile(wake, dtype=np.int64) * 1e-3 if wake.is_file() else [])
-    return {**found, "tool": tool}
+        us = np.fromfile(wake, dtype=np.int64) * 1e-3 if wake.is_file() else np.zeros(0)
+        found = percentiles(us)
+        doc = Path(f"{out}.json")
+        behind = json.loads(doc.read_text())["ticks_behind"] if doc.is_file() else 0
+        late = (np.sum(us >= Ts * 1e6) + behind) / max(us.size + behind, 1)
+    return {**found, "late_periods": round(float(late), 6), "tool": tool}

@@ -61,6 +61,7 @@ class Role:
     ports: Ports
     folder: Path
     priority: int = 0  # SCHED_FIFO priority where permitted; 0: the default scheduler
+    controller_cpu: int | None = None  # the controller's processor, which this one leaves
 
 
 class _Stop:
@@ -79,6 +80,9 @@ def _start(role: Role, parent: int) -> tuple[_Stop, str]:
     """The process's set-up: it dies with the deployment; SCHED_FIFO where asked and permitted."""
     die_with_parent(parent)
     stop = _Stop()
+    others = os.sched_getaffinity(0) - {role.controller_cpu}
+    if role.controller_cpu is not None and others:
+        os.sched_setaffinity(0, others)  # the controller's processor is the controller's
     if role.priority <= 0:
         return stop, "SCHED_OTHER"
     try:

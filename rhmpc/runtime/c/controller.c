@@ -16,7 +16,8 @@
  * --probe: no controller, the same thread and clock only: the host's own wake-up latency.
  *
  * Real time where the host permits, and said where it does not (PREFIX.json "realtime"):
- * mlockall, SCHED_FIFO at --priority (default 80), pinned to --cpu. Nothing in the loop
+ * mlockall, SCHED_FIFO at --priority (default 80), pinned to --cpu, /dev/cpu_dma_latency held
+ * at 0 (as cyclictest does: no deep C-state). Nothing in the loop
  * allocates; results go to PREFIX.json and raw int64 arrays PREFIX.wake/.work/.step/.s2t [ns]
  * after the loop. SIGINT or SIGTERM ends the loop at the next tick; the process ends with its
  * parent (PR_SET_PDEATHSIG).
@@ -27,6 +28,7 @@
 
 #include <arpa/inet.h>
 #include <errno.h>
+#include <fcntl.h>
 #include <math.h>
 #include <netinet/in.h>
 #include <poll.h>
@@ -94,6 +96,12 @@ static void go_realtime(run_t *r) {
     else snprintf(text, sizeof text, "not pinned (CPU %d: %s)", r->cpu, strerror(errno));
     note(r, text);
   }
+  int dma = open("/dev/cpu_dma_latency", O_RDWR); /* no deep C-state while it stays open */
+  const int32_t zero = 0;
+  if (dma >= 0 && write(dma, &zero, sizeof zero) == (ssize_t)sizeof zero)
+    note(r, "/dev/cpu_dma_latency held at 0");
+  else if (dma >= 0)
+    close(dma);
   volatile unsigned char stack[256 * 1024]; /* fault the stack in before the loop */
   memset((void *)stack, 0, sizeof stack);
 }

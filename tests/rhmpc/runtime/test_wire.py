@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from rhmpc.runtime.host import histogram_percentiles, percentiles
+from rhmpc.runtime.host import histogram_percentiles, percentiles, read_histogram
 from rhmpc.runtime.wire import (
     HEADER,
     Arrivals,
@@ -87,6 +87,9 @@ def test_cyclictest_histograms_and_latencies_give_percentiles():
             "# Min Latencies: 00020\n# Avg Latencies: 00031\n# Max Latencies: 12977\n"
             "# Histogram Overflows: 00001\n# Histogram Overflow at cycle number:\n"
             "# Thread 0: 00042\n")
-    assert histogram_percentiles(text) == {"p50": 20.0, "p99": 100.0, "max": 12977.0}
+    values, weights, top = read_histogram(text)
+    assert histogram_percentiles(values, weights, top) == {"p50": 20.0, "p99": 100.0,
+                                                           "max": 12977.0}
+    assert weights[values >= 100].sum() == 20  # the bin of 100 µs and the overflow
     assert percentiles(np.arange(1, 101)) == {"p50": 50.5, "p99": 99.0, "max": 100.0}
     assert percentiles([])["p99"] is None
