@@ -30,6 +30,8 @@ from pathlib import Path
 
 import numpy as np
 
+from rhmpc.control.reference import embed3
+from rhmpc.runtime.host import percentiles
 from rhmpc.runtime.wire import Link, run_clock
 from rhmpc.tuning.workers import die_with_parent
 from sim.loop.closed_loop import Refreshes, _note_outliers
@@ -113,22 +115,14 @@ def sensor(run, role: Role, parent: int) -> None:
         tick = int(refreshes.next)
         _sleep_until(role, tick)
         for z, stamp, others in refreshes.due(tick):
-            rows = [np.full(3, np.nan) if z is None else _embed(z)]
+            rows = [np.full((1, 3), np.nan) if z is None else embed3(z)]
             if others is not None:
-                rows += [_embed(o) for o in np.atleast_2d(others)]
+                rows.append(embed3(others))
             link.send([role.ports.predictor, role.ports.controller], "measured_cp", stamp,
                       np.vstack(rows), origin=run_clock(role.epoch_ns))
             sent += 1
     link.close()
     _write(role, "sensor", {"sent": sent, "scheduling": scheduling})
-
-
-def _embed(z) -> np.ndarray:
-    """A sample of d ≤ 3 coordinates as 3 (a 1-D motion along x)."""
-    out = np.zeros(3)
-    z = np.asarray(z, dtype=float).reshape(-1)
-    out[: z.size] = z
-    return out
 
 
 def predictor(run, role: Role, parent: int) -> None:
@@ -157,28 +151,20 @@ def predictor(run, role: Role, parent: int) -> None:
             _note_outliers(before, (reference.predictor.counts["outliers_rejected"],
                                     reference.predictor.counts["retracted"]), message.stamp, log)
         if nodes is not None:
-            link.send(role.ports.controller, "forecast_cp", nodes[1],
-                      np.column_stack([nodes[0], np.zeros((len(nodes[0]), 3 - dim))]),
+            link.send(role.ports.controller, "forecast_cp", nodes[1], embed3(nodes[0]),
                       origin=message.origin, period=reference.dt)
             made += 1
         busy.append(time.perf_counter_ns() - start)
     link.close()
     _write(role, "predictor", {"forecasts": made, "outliers": log["outliers"],
                                "scheduling": scheduling, "arrivals": link.arrivals.counts(),
-                               "forecast_ms": _percentiles(np.array(busy) * 1e-6)})
+                               "forecast_ms": percentiles(np.array(busy) * 1e-6)})
 
 
 def _dimension(reference) -> int:
     """The coordinates the predictor reads (1 or 3)."""
     dim = getattr(getattr(reference.predictor, "settings", None), "dim", None)
     return 3 if dim is None else int(dim)
-
-
-def _percentiles(values: np.ndarray) -> dict:
-    if values.size == 0:
-        return {"p50": None, "p99": None, "max": None}
-    p50, p99 = np.percentile(values, [50, 99])
-    return {"p50": float(p50), "p99": float(p99), "max": float(values.max())}
 
 
 def robot(run, role: Role, parent: int) -> None:
