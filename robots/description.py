@@ -192,8 +192,9 @@ def _reduced(doc: dict, full: pin.Model, urdf: Path) -> pin.Model:
             raise RobotFileError(f"locked: joint {name!r} is also actuated (joints)")
         idx = full.joints[jid].idx_q
         lo, hi = full.lowerPositionLimit[idx], full.upperPositionLimit[idx]
-        if isinstance(value, bool) or not isinstance(value, int | float) \
-                or not lo - 1e-9 <= value <= hi + 1e-9:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise RobotFileError(f"locked: {name} = {value!r} must be an angle [rad]")
+        if not lo - 1e-9 <= value <= hi + 1e-9:
             raise RobotFileError(f"locked: {name} = {value!r} is outside its limits "
                                  f"[{lo:.4g}, {hi:.4g}] rad")
         q_ref[idx] = float(value)

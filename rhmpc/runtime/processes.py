@@ -14,8 +14,9 @@ in-process simulation), and talks to the others only over UDP in the wire format
   ``forecast_cp`` for each sample. A lost sample (a gap in the sequence numbers) is a missing
   one; a late one is dropped.
 - **robot** (:func:`robot`): the run's plant stepping in real time: each tick it applies the
-  ``servo_jf`` of that tick (the last one if it has not come within 0.7 Ts: counted), steps one
-  tick and sends its encoders as ``measured_js`` for the next.
+  ``servo_jf`` of that tick (the last one if it has not come within 0.7 Ts: counted; after
+  :data:`WATCHDOG_TICKS` without one, its drivers' safe state), steps one tick and sends its
+  encoders as ``measured_js`` for the next.
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import pinocchio as pin
 
 from rhmpc.control.reference import embed3
 from rhmpc.runtime.host import percentiles
@@ -36,10 +38,17 @@ from rhmpc.runtime.wire import Link, run_clock
 from rhmpc.tuning.workers import die_with_parent
 from sim.loop.closed_loop import Refreshes, _note_outliers
 
-__all__ = ["ROBOT_WAIT", "Ports", "Role", "predictor", "robot", "sensor"]
+__all__ = ["BRAKE_S", "ROBOT_WAIT", "WATCHDOG_TICKS", "Ports", "Role", "predictor", "robot",
+           "sensor"]
 
-#: How long into a tick the robot waits for that tick's torque [ticks].
-ROBOT_WAIT = 0.7
+#: How long into a tick the robot waits for that tick's torque [ticks], and at least how long
+#: after sending its reading (a robot that fell behind still gives the controller time to answer).
+ROBOT_WAIT, ROBOT_ANSWER = 0.7, 0.2
+#: Ticks without a torque after which the drivers leave the last one for their safe state (10 ms:
+#: the last torque, 0.2 N·m on the PHANToM's 4 g·m², moves its tool by under a millimetre).
+WATCHDOG_TICKS = 20
+#: The safe state's braking time constant [s]: the joint speeds decay e-fold in it.
+BRAKE_S = 0.02
 #: The most missing samples a gap in the sequence numbers fills (as the loop's fills).
 MAX_FILL = Refreshes.MAX_FILL
 
@@ -167,37 +176,63 @@ def _dimension(reference) -> int:
     return 3 if dim is None else int(dim)
 
 
+class _Drivers:
+    """What a robot's drivers do with the torques: apply each tick's, hold the last one through
+    a short silence, and past :data:`WATCHDOG_TICKS` without one enter their safe state, gravity
+    compensation with viscous braking from the encoders, τ = ĝ(q) − M(q) q̇ / BRAKE_S (clipped
+    to the torque limits), until torques come again."""
+
+    def __init__(self, robot, Ts: float) -> None:
+        self.robot, self.Ts, self.data = robot, Ts, robot.create_data()
+        self.tau, self.silent, self.missed, self.safe = np.zeros(robot.nv), 0, 0, 0
+        self.last: np.ndarray | None = None
+
+    def torque(self, command: np.ndarray | None, reading: np.ndarray) -> np.ndarray:
+        speed = np.zeros_like(reading) if self.last is None else (reading - self.last) / self.Ts
+        self.last = reading
+        if command is not None:
+            self.tau, self.silent = np.asarray(command, dtype=float), 0
+            return self.tau
+        self.missed += 1
+        self.silent += 1
+        if self.silent <= WATCHDOG_TICKS:
+            return self.tau  # the last torque holds
+        self.safe += 1
+        gravity = pin.computeGeneralizedGravity(self.robot.model, self.data, reading)
+        brake = gravity - self.robot.mass_matrix(reading) @ speed / BRAKE_S
+        limit = self.robot.torque_limit
+        return np.clip(brake, -limit, limit)
+
+
 def robot(run, role: Role, parent: int) -> None:
-    """The run's plant in the robot's place: one tick per tick of the run's clock."""
+    """The run's plant in the robot's place: one tick per tick of the run's clock, behind its
+    drivers (:class:`_Drivers`)."""
     stop, scheduling = _start(role, parent)
     plant, Ts = run.plant, role.Ts
     link = Link(role.ports.robot, role.epoch_ns)
     q = np.full((role.ticks, plant.q.size), np.nan)
-    tau = np.zeros(run.robot.nv)
-    missed = late = 0
-    link.send(role.ports.controller, "measured_js", 0.0, plant.encoders())
+    drivers, late, reading = _Drivers(run.robot, Ts), 0, plant.encoders()
+    link.send(role.ports.controller, "measured_js", 0.0, reading)
     for i in range(role.ticks):
         if stop.asked:
             break
-        command = None
-        while command is None:
-            left = (i + ROBOT_WAIT) * Ts - run_clock(role.epoch_ns)
+        command, sent = None, run_clock(role.epoch_ns)
+        while command is None:  # until 0.7 Ts into the tick, and 0.2 Ts after the reading
+            left = max((i + ROBOT_WAIT) * Ts, sent + ROBOT_ANSWER * Ts) - run_clock(role.epoch_ns)
             message = link.receive(timeout=max(left, 0.0))
             if message is None:
                 break
             tick = round(message.stamp / Ts)
             if message.kind == "servo_jf" and tick == i:
-                command = message
+                command = message.values[0]
             elif message.kind == "servo_jf" and tick < i:
                 late += 1  # a torque for a tick already stepped: stale
-        if command is None:
-            missed += 1  # the last torque holds
-        else:
-            tau = command.values[0]
-        plant.step(tau)
+        plant.step(drivers.torque(command, reading))
         q[i] = plant.q
-        link.send(role.ports.controller, "measured_js", (i + 1) * Ts, plant.encoders())
+        reading = plant.encoders()
+        link.send(role.ports.controller, "measured_js", (i + 1) * Ts, reading)
     link.close()
     np.save(role.folder / "robot_q.npy", q)
-    _write(role, "robot", {"torques_missed": missed, "torques_late": late,
-                           "scheduling": scheduling, "arrivals": link.arrivals.counts()})
+    _write(role, "robot", {"torques_missed": drivers.missed, "torques_late": late,
+                           "safe_state_ticks": drivers.safe, "scheduling": scheduling,
+                           "arrivals": link.arrivals.counts()})

@@ -8,7 +8,7 @@
  *
  * Each tick i wakes at epoch + i Ts (clock_nanosleep, TIMER_ABSTIME), takes what has arrived
  * (measured_cp: rhmpc_refresh, the internal predictor; forecast_cp: rhmpc_forecast; measured_js:
- * the encoders, whose reading of tick i it awaits until Ts/5 into the tick), steps the controller
+ * the encoders, whose reading of tick i it awaits until Ts/5 after it began), steps the controller
  * and sends servo_jf to the robot. An encoder reading that is not this tick's is stale: the step gets NaN, the observer's fault path (it predicts, and brakes
  * after its timeout). A lost measured_cp is a missing sample (the predictor runs open-loop); a
  * late one (reordered) is dropped. --no-internal: samples are not given to the internal
@@ -46,7 +46,7 @@
 #define MAX_VALUES 4096
 #define MAX_FILL 50 /* the most missing samples one gap of sequence numbers fills */
 #define TS_NS ((long long)llround(RHMPC_TS * 1e9))
-#define ENCODER_WAIT_NS (TS_NS / 5) /* how long into a tick its encoder reading may arrive */
+#define ENCODER_WAIT_NS (TS_NS / 5) /* how long after a tick began its reading may arrive */
 
 enum { SERVED_NONE, SERVED_INTERNAL, SERVED_EXTERNAL, SERVED_HOLD, N_SERVED };
 static const char *const served_names[N_SERVED] = {"none", "internal", "external", "hold"};
@@ -192,7 +192,7 @@ static void run_loop(run_t *r, int fd, long long *wake, long long *work, long lo
     if (r->probe) continue;
     take_arrivals(r, fd, tick, &q_tick, &source, &origin);
     while (q_tick != tick) { /* the reading of this tick may still be on its way */
-      long long left = next + ENCODER_WAIT_NS - mono_ns();
+      long long left = now + ENCODER_WAIT_NS - mono_ns(); /* from the tick's start */
       struct pollfd p = {fd, POLLIN, 0};
       struct timespec wait = {0, left > 0 ? left : 0};
       if (left <= 0 || ppoll(&p, 1, &wait, NULL) <= 0) break;
