@@ -71,7 +71,8 @@ def table(r: dict) -> str:
         _row("controller step", _p(r["controller_step_us"], "us")),
         _row("sensor to torque", _p(r["sensor_to_torque_ms"], "ms")),
         _row("packets lost, late", f"{lost}, {late} (stale encoder readings "
-             f"{r['stale_encoders']}, torques missed {r['torques_missed']})"),
+             f"{r['stale_encoders']}, torques missed {r['torques_missed']}, robot braked "
+             f"{r['robot_safe_state_ticks']} ticks)"),
         _row("a lost forecast falls back to", r["forecast_fallback"]),
         _row("RMS error at measured instants", f"{r['rms_error_mm']:.4f} mm (in-process "
              f"{r['in_process_rms_error_mm']:.4f} mm)"),

@@ -259,6 +259,7 @@ def report(config: RunConfig, built, internal: bool, documents: dict, arrays: di
         "packets": _packets(documents), "bad_datagrams": controller["bad"],
         "stale_encoders": controller["stale_encoders"],
         "torques_missed": robot["torques_missed"], "torques_late": robot["torques_late"],
+        "robot_safe_state_ticks": robot["safe_state_ticks"],
         "forecasts_rejected": controller["forecasts_rejected"],
         "forecast_fallback": fallback,
         "points_served_ticks": controller["served"],
