@@ -4,7 +4,7 @@ The package's parts (see the README's design section for what each may import):
 
 - :mod:`rhmpc.control` — the controller: QP, per-tick MPC, reference builder, settings;
 - :mod:`rhmpc.experiment` — one run's configuration (TOML) and its assembly;
-- :mod:`rhmpc.studies` — bench, prediction studies, the Table I/III comparison;
+- :mod:`rhmpc.studies` — bench, prediction studies, the Tables I–III comparison;
 - :mod:`rhmpc.tuning` — resumable parameter sweeps;
 - :mod:`rhmpc.cli` — the ``rhmpc`` console script.
 

@@ -26,8 +26,8 @@ from rhmpc.errors import UsageError, one_line_warnings
 #: their one-line help.
 COMMANDS: dict[str, str] = {
     "simulate": "run the closed loop once and print its tracking summary",
-    "compare": "predictors x scenarios (or recordings) in parallel: the Tuna Tables I/III "
-    "replica",
+    "compare": "predictors x scenarios (or recordings) in parallel; --paper sets them beside "
+    "Tuna et al.'s Tables I–III",
     "robots": "list the registered robots",
     "data": "list, show, export and plot heart-motion scenarios",
     "bench": "time the MPC tick against a gain tick and an exact active-set solve",
@@ -67,8 +67,10 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 0
+    from boundary import tracking_inputs
+
     try:
-        with one_line_warnings(f"rhmpc {args.command}"):
+        with one_line_warnings(f"rhmpc {args.command}"), tracking_inputs():
             return int(args.func(args) or 0)
     except BrokenPipeError:
         # The reader went away (``rhmpc ... | head``): not an error of ours. Point stdout at

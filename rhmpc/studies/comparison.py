@@ -17,8 +17,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["MAX_WIDTH", "METRICS", "Cell", "cells", "comparison_csv", "comparison_table",
-           "grid", "interval95", "reference_row"]
+__all__ = ["MAX_WIDTH", "METRICS", "Cell", "cells", "cells_document", "comparison_csv",
+           "comparison_table", "grid", "interval95", "json_ready", "reference_row"]
 
 #: Widest line of a table; a wider table is transposed, then split into blocks.
 MAX_WIDTH = 120
@@ -119,6 +119,33 @@ def cells(docs: Sequence[dict], predictors: Sequence[str],
     return out
 
 
+def cells_document(docs: Sequence[dict], predictors: Sequence[str],
+                   columns: Sequence[str]) -> list[dict]:
+    """The cells as data: per predictor and column, ``runs``, ``failed`` and, per metric of
+    :data:`METRICS`, ``mean`` and ``ci95`` ([low, high] of the mean's 95 % interval; None
+    below two runs)."""
+    out = []
+    for (pred, col), c in cells(docs, predictors, columns).items():
+        out.append({"predictor": pred, "column": col, "runs": c.n, "failed": c.failed,
+                    **{m: {"mean": c.mean[m], "ci95": [c.mean[m] - c.half[m],
+                                                       c.mean[m] + c.half[m]]}
+                       for m in METRICS}})
+    return out
+
+
+def json_ready(obj):
+    """``obj`` with every non-finite float as None (strict JSON) and numpy scalars as Python's."""
+    if isinstance(obj, dict):
+        return {k: json_ready(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [json_ready(v) for v in obj]
+    if isinstance(obj, np.generic):
+        obj = obj.item()
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj
+
+
 def reference_row(predictors: Sequence[str], recordings: bool = False) -> str | None:
     """The row the ratios are to: ``exact`` (``hold`` on recordings), else the other one."""
     for pred in ("hold", "exact") if recordings else ("exact", "hold"):
@@ -143,7 +170,7 @@ def runs_line(table: dict[tuple[str, str], Cell], seeds: Sequence[int] = ()) -> 
 def comparison_table(docs: Sequence[dict], predictors: Sequence[str],
                      scenarios: Sequence[str], recordings: bool = False,
                      seeds: Sequence[int] = ()) -> str:
-    """Tuna Tables I/III replica: error [mm] and effort [mN·m] per predictor and column, and
+    """Tuna Tables I–III replica: error [mm] and effort [mN·m] per predictor and column, and
     the ratios to the reference row.
 
     Parameters
@@ -166,14 +193,16 @@ def comparison_table(docs: Sequence[dict], predictors: Sequence[str],
     table = cells(docs, predictors, scenarios)
     runs = max((c.n + c.failed for c in table.values()), default=0)
     out = [runs_line(table, seeds)]
+    where = _where(docs)
     if runs <= 1:
-        out += ["", *grid("RMS position error [mm] (maximum error [mm])", predictors, scenarios,
-                          lambda p, s: _rms_max(table[p, s]))]
+        out += ["", *grid(f"RMS position error [mm] (maximum error [mm]){where}", predictors,
+                          scenarios, lambda p, s: _rms_max(table[p, s]))]
         metrics: tuple[str, ...] = ("rms_effort_mNm",)
     else:
         metrics = METRICS
     for metric in metrics:
-        out += ["", *grid(_TITLES[metric], predictors, scenarios,
+        title = _TITLES[metric] + (where if metric != "rms_effort_mNm" else "")
+        out += ["", *grid(title, predictors, scenarios,
                           lambda p, s, m=metric: table[p, s].text(m, _digits(m), runs))]
     reference = reference_row(predictors, recordings)
     if reference is not None and len(predictors) > 1:
@@ -183,6 +212,14 @@ def comparison_table(docs: Sequence[dict], predictors: Sequence[str],
         out += ["", *grid(f"ratio to {reference}: RMS error / RMS effort{why}", rows, scenarios,
                           lambda p, s: _ratio(table[p, s], table[reference, s]))]
     return "\n".join(out)
+
+
+def _where(docs: Sequence[dict]) -> str:
+    """Where the errors were taken: at a recording's measured instants, or at every tick."""
+    scores = {d.get("score") for d in docs if "error" not in d}
+    if scores == {"measured"}:
+        return ", at the measured instants"
+    return ", at every tick" if scores == {"continuous"} else ""
 
 
 def _digits(metric: str) -> int:

@@ -60,6 +60,8 @@ def write_mat(path: str | Path, result, doc: dict) -> Path:
     """
     from scipy.io import savemat
 
+    import boundary
+
     variables = {"summary": matlab_value(doc), "summary_json": json.dumps(doc, indent=1)}
     variables.update(trace_variables(result))
     variables["units"] = {k: v for k, v in UNITS.items() if k in variables}
@@ -68,7 +70,8 @@ def write_mat(path: str | Path, result, doc: dict) -> Path:
         "tick of the run's last seconds); positions in the robot's workspace frame; "
         "summary holds the run's metrics in mm and mN*m as their names say")
     path = Path(path)
-    savemat(path, variables, do_compression=True, oned_as="column", long_field_names=True)
+    with boundary.atomic_write(path) as f:
+        savemat(f, variables, do_compression=True, oned_as="column", long_field_names=True)
     return path
 
 

@@ -55,16 +55,11 @@ import numpy as np
 
 from predictors import LEARNED, family, make_predictor, needs_torch, predictor_names
 from predictors.combination import Combination, CombinationSettings
+from predictors.registry import default_predictors, torch_available
+from rhmpc.studies.fitting import describe, fit_all, plan_fits
 from rhmpc.studies.tracks import Track, twelve_digits
 from sim.recordings.points import on_grid
 
-#: The baselines, first in every table: the newest sample held, and the previous cycle.
-BASELINES: tuple[str, ...] = ("hold", "last-cycle")
-#: The fitted predictors scored by default when there is something to fit them on: the ridge
-#: regressions, and the literature's networks where PyTorch is installed.
-FITTED_DEFAULTS: tuple[str, ...] = ("ridge", "st-ridge", "lstm", "st-lstm", "tcn", "st-tcn")
-#: The order of the families in the tables.
-FAMILIES: tuple[str, ...] = ("baseline", "adaptive", "multi-point", "learned", "combination")
 #: Leads 1 … DEFAULT_LEADS are scored [samples].
 DEFAULT_LEADS = 5
 #: Warm-up: the longer of this many seconds [s] …
@@ -74,24 +69,6 @@ WARMUP_FRACTION = 0.25
 #: Counter names of the predictors summed into ``rejected`` and ``repaired``.
 REJECTED = ("innovation_rejected", "outliers_rejected")
 REPAIRED = ("forecast_clamped", "forecast_nonfinite", "retracted")
-
-
-def torch_available() -> bool:
-    """Whether PyTorch, the ``learned`` extra of the neural predictors, is installed."""
-    import importlib.util
-
-    return importlib.util.find_spec("torch") is not None
-
-
-def default_predictors(fitted: bool = False) -> tuple[str, ...]:
-    """The baselines, then every other online predictor (the oracle ``exact`` left out), the
-    fitted ones of :data:`FITTED_DEFAULTS` if ``fitted`` (the neural ones where PyTorch is
-    installed), by family, and the combination last."""
-    names = [n for n in predictor_names() if n != "exact" and n not in LEARNED]
-    if fitted:
-        names += [n for n in FITTED_DEFAULTS if not needs_torch(n) or torch_available()]
-    names = [*BASELINES, *(n for n in names if n not in BASELINES)]
-    return tuple(sorted(names, key=lambda n: FAMILIES.index(family(n))))
 
 
 @dataclass(frozen=True)
@@ -261,28 +238,6 @@ def _origins(track: Track, t: np.ndarray, settings: OpenLoopSettings, last_lead:
     return first, t.size, warmup
 
 
-def _fit(names, period: float, series: list[np.ndarray], leads: int, seed: int,
-         progress, save: Path | None = None, label: str = "") -> dict:
-    """name → (fitted predictor, seconds): every predictor of ``LEARNED`` among ``names``,
-    forecasting leads 1 … ``leads`` directly, fitted on ``series`` with the study's seed; each
-    saved in the folder ``save`` (``LABEL.NAME.npz``/``.pt``) if given."""
-    out = {}
-    for name in names:
-        if name not in LEARNED:
-            continue
-        extra = {"seed": seed} if "seed" in LEARNED[name].settings.__dataclass_fields__ else {}
-        p = make_predictor(name, dt=period, leads=leads, **extra)
-        say = None if progress is None else (
-            lambda text, name=name: progress(f"fit {name}: {text}"))
-        tic = time.perf_counter()
-        p.fit(series, say)
-        out[name] = (p, time.perf_counter() - tic)
-        if save is not None:
-            stem = "".join(c if c.isalnum() or c in "-_." else "-" for c in label)
-            p.save(save / f"{stem}.{name}{p.SUFFIX}")
-    return out
-
-
 def score_track(track: Track, settings: OpenLoopSettings,
                 progress: Callable[[str], None] | None = None,
                 train: list[np.ndarray] | None = None,
@@ -307,11 +262,14 @@ def score_track(track: Track, settings: OpenLoopSettings,
     k_loop = loop_lead(period, settings.latency, settings.horizon)
     leads = sorted({*range(1, settings.leads + 1), k_loop})
     first, end, warmup = _origins(track, t, settings, leads[-1])
+    where = "the training recordings"
     if train is None and settings.split is not None:
         train = [grid[:first]]
+        where = (f"frames 0–{first - 1} of {track.label} (the frames before TRAIN = {first}; "
+                 f"the forecasts issued at frames {first}–{end - 1} are scored)")
     names = settings.names(fitted=train is not None)
-    fitted = _fit(names, period, train, leads[-1], settings.seed, progress, save,
-                  track.label) if train else {}
+    fitted = _fit(names, settings, period, train, leads[-1], progress, save, track.label,
+                  where) if train else {}
     rows: list[dict] = []
     for name in names:
         if progress is not None:
@@ -342,6 +300,29 @@ def score_track(track: Track, settings: OpenLoopSettings,
     for row in rows:
         row["rate_hz"] = source["rate_hz"]
     return source, rows
+
+
+def left_out(names: Sequence[str]) -> list[str]:
+    """The fitted predictors that could run here (PyTorch installed for a network) but are not
+    among ``names``: those the default set leaves out."""
+    return [n for n in LEARNED if n not in names and (not needs_torch(n) or torch_available())]
+
+
+def _fit(names, settings: OpenLoopSettings, period: float, series: list[np.ndarray],
+         leads: int, progress, save: Path | None, label: str, where: str) -> dict:
+    """name → (fitted predictor, seconds) of the fitted predictors among ``names``, after the
+    plan is said (:func:`rhmpc.studies.fitting.describe`): what, on which frames, why in two
+    rounds, how long, and which fitted predictors the default set leaves out."""
+    plans = plan_fits(names, period, series, leads, settings.seed)
+    if not plans:
+        return {}
+    if progress is not None:
+        spare = [] if settings.predictors else left_out(names)
+        omitted = plan_fits(spare, period, series, leads, settings.seed)
+        frames = series[0].shape[0] if len(series) == 1 else None
+        for line in describe(plans, where, frames, omitted, names):
+            progress(line)
+    return fit_all(plans, period, series, leads, settings.seed, progress, save, label)
 
 
 def _combination(names, fitted: dict, period: float, leads: int, score_from: int
@@ -415,7 +396,7 @@ def run_open_loop(tracks: Sequence[Track | list[Track]], settings: OpenLoopSetti
     sources, results, names = [], [], []
     if progress is not None and not settings.predictors and not torch_available() and (
             train is not None or settings.split is not None):
-        left = [n for n in FITTED_DEFAULTS if needs_torch(n)]
+        left = [n for n in LEARNED if needs_torch(n)]
         progress(f"{', '.join(left)} left out: they need PyTorch "
                  '(pip install "rhmpc[learned]")')
     for item in tracks:
@@ -439,8 +420,9 @@ def run_open_loop(tracks: Sequence[Track | list[Track]], settings: OpenLoopSetti
         "leads": settings.leads, "predictors": names,
         "protocol": "online" if settings.split is None else "split",
         "split": None if settings.split is None else list(settings.split),
-        "fitted_on": ("training recordings" if train is not None else
-                      "the samples before TRAIN" if settings.split is not None else None),
+        "fitted_on": ("the training recordings" if train is not None else
+                      f"frames 0–{settings.split[0] - 1}, the frames before "
+                      f"{settings.split[0]}" if settings.split is not None else None),
         "seed": settings.seed,
         "warmup_rule": "split" if settings.split is not None else "given"
         if settings.warmup is not None else

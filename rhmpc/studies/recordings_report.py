@@ -3,6 +3,7 @@ tables of ``rhmpc predict --data`` and the figure of ``--plot``."""
 
 from __future__ import annotations
 
+import boundary
 from rhmpc.studies.recordings import WARMUP_FRACTION, WARMUP_SECONDS
 
 __all__ = ["format_report", "plot_leads"]
@@ -42,7 +43,7 @@ def _source_line(s: dict, doc: dict) -> str:
     period_ms = 1e3 * s["period_s"]
     gaps = f", {s['gap_samples']} missing between timestamps" if s["gap_samples"] else ""
     if doc.get("protocol") == "split":
-        scored = (f"forecasts issued at samples {s['scored_from']}–{s['scored_to'] - 1} scored, "
+        scored = (f"forecasts issued at frames {s['scored_from']}–{s['scored_to'] - 1} scored, "
                   f"the fitted predictors fitted on {doc['fitted_on']}")
     else:
         rule = ("given" if doc["warmup_rule"] == "given" else "the longer of "
@@ -105,5 +106,5 @@ def plot_leads(doc: dict, path) -> None:
         ax.set_yscale("log")
         ax.legend(fontsize=7, ncol=2)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    boundary.save_figure(fig, path, dpi=110)
     plt.close(fig)

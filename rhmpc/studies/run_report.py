@@ -29,6 +29,22 @@ def _placement(loop: dict) -> str:
             + " (set loop.placement = \"absolute\" to keep its own coordinates)")
 
 
+def _budget_line(doc: dict) -> str:
+    """Each refresh (gate, predictor, interpolation) against the predictor's period, and a
+    combination's slowest member."""
+    r = doc["refresh_us"]
+    out = (f"each refresh p50 {r['p50']:.0f} µs, p99 {r['p99']:.0f} µs, max {r['max']:.0f} µs "
+           f"in a period of {r['period_us'] / 1e3:g} ms: {r['over_period']} of "
+           f"{r['refreshes']} longer")
+    members = doc.get("member_time_us") or {}
+    timed = {k: v for k, v in members.items() if v.get("mean_us") is not None}
+    if timed:
+        name = max(timed, key=lambda k: timed[k]["mean_us"])
+        out += (f"; slowest member {name} {timed[name]['mean_us']:.0f} µs mean, "
+                f"{timed[name]['max_us']:.0f} µs max")
+    return out
+
+
 def _score_words(doc: dict) -> str:
     """Where the tracking error was taken: at the measured samples, or at every tick."""
     if doc.get("score") == "measured":
@@ -49,6 +65,27 @@ def _measured_lines(doc: dict) -> str:
         ("after_last_sample_ticks", "ticks after the last sample")) if ex.get(k)]
     return out + ("\n                   left out: " + ", ".join(left) if left else "")
 
+#: The controller that ran (the document's ``implementation``), as the summary names it.
+CONTROLLERS = {"python": "Python reference", "c": "deployable C (rhmpc export)"}
+
+
+def _tick_line(doc: dict, Ts: float) -> str:
+    """The controller's tick: the deployable C's against the real-time budget, or the Python
+    reference's as the speed of a study (the deployable's is what ``rhmpc bench --controller
+    c`` and ``simulate --controller c`` report)."""
+    tick = doc["tick_us"]
+    times = (f"p50 {tick['p50']:.1f} µs   p99 {tick['p99']:.1f} µs   "
+             + (f"p99.9 {tick['p999']:.1f} µs   " if "p999" in tick else "")
+             + f"max {tick['max']:.1f} µs")
+    if doc.get("implementation") == "c":
+        line = (f"  controller tick  {times}   (the deployable C: budget {1e6 * Ts:.0f} µs, "
+                "refreshes included)")
+    else:
+        line = (f"  study speed      Python reference tick {times}   (not the deployable's: "
+                "rhmpc bench --controller c and simulate --controller c time the C against "
+                f"the {1e6 * Ts:.0f}-µs budget)")
+    return line + (_in_gain_ticks(doc) if "gain_tick_us" in doc else "")
+
 
 def format_summary(doc: dict, settling_rule: str | None = None) -> str:
     """A closed-loop run's document as a few aligned lines (mm, mN·m, µs).
@@ -57,7 +94,7 @@ def format_summary(doc: dict, settling_rule: str | None = None) -> str:
     """
     s = doc["settings"]["loop"]
     rule = f", {settling_rule}" if settling_rule else ""
-    tick, pred, ctrl = doc["tick_us"], doc["prediction_rms_mm"], doc["controller"]
+    pred, ctrl = doc["prediction_rms_mm"], doc["controller"]
     fb = ctrl.get("fallbacks", {})
     fails = ctrl.get("failures", {})
     axes = ", ".join(f"{v:.3f}" for v in doc["rms_error_axis_mm"])
@@ -66,7 +103,9 @@ def format_summary(doc: dict, settling_rule: str | None = None) -> str:
     sources = ", ".join(f"{k} {v}" for k, v in fb.items())
     lines = [
         f"rhmpc simulate: {doc['predictor']} on {doc['scenario']}, robot {doc['robot']}, "
-        f"sensor {doc['sensor']}, seed {doc['seed']}, {_seconds(s['duration'])} s "
+        f"sensor {doc['sensor']}, controller "
+        f"{CONTROLLERS.get(doc.get('implementation', 'python'), doc.get('implementation'))}, "
+        f"seed {doc['seed']}, {_seconds(s['duration'])} s "
         f"(metrics after {_seconds(settling)} s{rule}; error against the "
         f"{doc['ground_truth']} motion)",
         f"  placement        {_placement(s)}",
@@ -77,10 +116,7 @@ def format_summary(doc: dict, settling_rule: str | None = None) -> str:
         f"{doc['saturated_ticks']}",
         f"  prediction       horizon RMS error {pred['lead_1']:.3f} mm at {1e3 * Ts:g} ms, "
         f"{pred['lead_N']:.3f} mm at {1e3 * N * Ts:g} ms",
-        f"  controller tick  p50 {tick['p50']:.1f} µs   p99 {tick['p99']:.1f} µs   "
-        + (f"p99.9 {tick['p999']:.1f} µs   " if "p999" in tick else "")
-        + f"max {tick['max']:.1f} µs   (budget {1e6 * Ts:.0f} µs, refreshes included)"
-        + (_in_gain_ticks(doc) if "gain_tick_us" in doc else ""),
+        _tick_line(doc, Ts),
         f"  QP               {ctrl.get('ticks', 0)} ticks, fallbacks {doc['fallbacks']}"
         + (f" ({sources})" if sources else "")
         + (", failures " + ", ".join(f"{k} {v}" for k, v in fails.items()) if fails else ""),
@@ -98,6 +134,8 @@ def format_summary(doc: dict, settling_rule: str | None = None) -> str:
         lines.insert(-1, "                   " + _clock_line(doc.get("predictor_clock") or {}))
     if doc.get("outlier_gate"):
         lines.insert(-1, "  outlier gate     " + _gate_line(doc["outlier_gate"]))
+    if doc.get("refresh_us", {}).get("refreshes"):
+        lines.insert(-1, "  predictor time   " + _budget_line(doc))
     encoder = doc.get("encoder") or {}
     if encoder.get("held"):  # the observer's innovation gate (rhmpc.control.observer)
         lines.insert(-1, f"  encoders         {encoder['held']} readings held out past the "

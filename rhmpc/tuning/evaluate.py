@@ -22,8 +22,8 @@ from rhmpc.control.settings import to_dict as settings_to_dict
 from rhmpc.experiment import SECTIONS, RunConfig
 from rhmpc.experiment.run import jsonable
 
-__all__ = ["Task", "apply_point", "current_value", "evaluate_task", "evaluation_key",
-           "record_for"]
+__all__ = ["RUN_LOCK", "Task", "apply_point", "current_value", "evaluate_task",
+           "evaluation_key", "record_for"]
 
 #: Record format version written into every results line.
 RECORD_FORMAT = 1
@@ -152,7 +152,7 @@ def record_for(task: Task, status: str, **fields: Any) -> dict:
 
 #: One closed-loop run at a time per process: the run stack is not thread-safe (two runs in
 #: threads of one process corrupt the heap), and a Dask worker may have several threads.
-_RUN_LOCK = threading.Lock()
+RUN_LOCK = threading.Lock()
 
 
 def evaluate_task(task: Task, extra: dict | None = None) -> dict:
@@ -161,12 +161,12 @@ def evaluate_task(task: Task, extra: dict | None = None) -> dict:
     Exceptions of the run are caught and recorded (status ``"failed"`` with the error and the
     traceback's last lines); ``KeyboardInterrupt`` and other non-``Exception`` errors propagate.
     ``extra`` entries (e.g. the sweep's name and objective) are added to the record. Runs in
-    one process are serialised (:data:`_RUN_LOCK`); give Dask workers one thread each
+    one process are serialised (:data:`RUN_LOCK`); give Dask workers one thread each
     (``dask worker --nthreads 1 --nworkers N``) to use N cores.
     """
     from rhmpc.experiment import run_experiment
 
-    with _RUN_LOCK:
+    with RUN_LOCK:
         started = time.time()
         wall = time.perf_counter()
         timing = {"started": started, "host": platform.node(), "pid": os.getpid()}

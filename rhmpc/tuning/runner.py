@@ -5,7 +5,8 @@ results file as soon as it arrives (so an interruption loses no finished result)
 a dead worker: a broken process pool is rebuilt and the evaluations it was running are tried
 again, up to ``max_attempts`` times each before being recorded as failed. A local
 ``ProcessPoolExecutor`` (:func:`process_pool`) and dask.distributed's ``Client.get_executor()``
-go through the same code.
+go through the same code (:func:`executors` picks one from the command line's ``--jobs`` and
+``--scheduler``); ``rhmpc tune`` and ``rhmpc compare`` both run through it.
 
 The workers of :func:`~rhmpc.tuning.workers.process_pool` die with the process that started them,
 so that a sweep killed with SIGKILL leaves no worker behind; the results file is intact and the
@@ -14,6 +15,7 @@ same command resumes it.
 
 from __future__ import annotations
 
+import os
 import time
 from collections import deque
 from collections.abc import Callable, Iterable
@@ -27,11 +29,13 @@ from concurrent.futures import (
 )
 from dataclasses import dataclass, field
 
+from rhmpc.errors import UsageError
 from rhmpc.tuning.evaluate import Task, evaluate_task, record_for
 from rhmpc.tuning.store import ResultsFile, ResultsWriter
 from rhmpc.tuning.workers import process_pool, stop_executor
 
-__all__ = ["HEARTBEAT_S", "SweepOutcome", "pending", "process_pool", "run_sweep"]
+__all__ = ["HEARTBEAT_S", "Executors", "SweepOutcome", "executors", "pending", "process_pool",
+           "run_sweep"]
 
 
 @dataclass
@@ -52,6 +56,8 @@ class SweepOutcome:
         Wall time of the sweep, from the first submission to the last result [s].
     records : list[dict]
         The records written, in completion order.
+    by_key : dict[str, dict]
+        The same records by their task's key.
     """
 
     submitted: int = 0
@@ -61,6 +67,7 @@ class SweepOutcome:
     pool_restarts: int = 0
     elapsed_s: float = 0.0
     records: list[dict] = field(default_factory=list)
+    by_key: dict[str, dict] = field(default_factory=dict)
 
     @property
     def written(self) -> int:
@@ -100,7 +107,7 @@ HEARTBEAT_S = 0.5
 
 def run_sweep(
     tasks: Iterable[Task],
-    writer: ResultsWriter,
+    writer: ResultsWriter | None,
     executor_factory: Callable[[], Executor],
     window: int,
     *,
@@ -109,15 +116,18 @@ def run_sweep(
     on_result: Callable[[dict], None] | None = None,
     heartbeat: Callable[[], None] | None = None,
     max_attempts: int = 2,
+    failed: Callable[[Task, str], dict] | None = None,
 ) -> SweepOutcome:
     """Run ``tasks`` through executors from ``executor_factory``, appending each result.
 
     Parameters
     ----------
     tasks : iterable of Task
-        Evaluations to run (already filtered by :func:`pending`).
-    writer : ResultsWriter
-        Open results file; every finished record is appended before ``on_result`` sees it.
+        Evaluations to run (already filtered by :func:`pending`); any objects with a unique
+        ``key`` that ``evaluate`` and ``failed`` take.
+    writer : ResultsWriter or None
+        Open results file; every finished record is appended before ``on_result`` sees it
+        (None: the records are only kept in the outcome).
     executor_factory : callable
         Returns a fresh ``Executor``; called again when one breaks (a worker process died).
     window : int
@@ -135,14 +145,21 @@ def run_sweep(
         (e.g. to redraw a progress bar).
     max_attempts : int
         A task whose worker died this many times is recorded as failed.
+    failed : callable, optional
+        ``failed(task, error) -> record`` of a task that the executor could not run (default:
+        a results line with status ``"failed"``). A record with ``status`` other than
+        ``"ok"``, or without ``status`` and with ``error``, counts as failed.
 
     Returns
     -------
     SweepOutcome
         Counts; ``interrupted`` is set instead of propagating ``KeyboardInterrupt``.
     """
+    if failed is None:
+        def failed(task: Task, error: str) -> dict:
+            return record_for(task, "failed", **(extra or {}), error=error)
     sweep = _Sweep(deque(tasks), writer, executor_factory, max(1, int(window)), evaluate,
-                   extra, on_result, max_attempts)
+                   extra, on_result, max_attempts, failed)
     start = time.perf_counter()
     executor = executor_factory()
     try:
@@ -171,25 +188,28 @@ class _Sweep:
     def __init__(self, queue: deque, writer: ResultsWriter,
                  executor_factory: Callable[[], Executor], window: int,
                  evaluate: Callable[..., dict], extra: dict | None,
-                 on_result: Callable[[dict], None] | None, max_attempts: int) -> None:
+                 on_result: Callable[[dict], None] | None, max_attempts: int,
+                 failed: Callable[[Task, str], dict]) -> None:
         self.queue, self.writer, self.executor_factory = queue, writer, executor_factory
         self.window, self.evaluate, self.extra = window, evaluate, extra
-        self.on_result, self.max_attempts = on_result, max_attempts
+        self.on_result, self.max_attempts, self.failed = on_result, max_attempts, failed
         self.outcome = SweepOutcome(submitted=len(queue))
         self.inflight: dict[Future, Task] = {}
         self.attempts: dict[str, int] = {}
 
-    def record(self, record: dict) -> None:
+    def record(self, record: dict, task: Task) -> None:
         """Append a finished record to the file and the outcome's counts."""
-        self.writer.append(record)
+        if self.writer is not None:
+            self.writer.append(record)
         self.outcome.records.append(record)
-        if record.get("status") == "ok":
+        self.outcome.by_key[task.key] = record
+        if record.get("status", "failed" if "error" in record else "ok") == "ok":
             self.outcome.ok += 1
         else:
             self.outcome.failed += 1
 
-    def finish(self, record: dict) -> None:
-        self.record(record)
+    def finish(self, record: dict, task: Task) -> None:
+        self.record(record, task)
         if self.on_result is not None:
             self.on_result(record)
 
@@ -216,15 +236,13 @@ class _Sweep:
             if n < self.max_attempts:
                 self.queue.appendleft(task)
             else:
-                self.finish(record_for(task, "failed", **(self.extra or {}),
-                                       error=f"worker died {n} times while running this "
-                                       f"evaluation ({type(exc).__name__}: {exc})"))
+                self.finish(self.failed(task, f"worker died {n} times while running this "
+                                        f"evaluation ({type(exc).__name__}: {exc})"), task)
             return True
         except Exception as exc:  # the executor could not run it (e.g. dask KilledWorker)
-            self.finish(record_for(task, "failed", **(self.extra or {}),
-                                   error=f"{type(exc).__name__}: {exc}"))
+            self.finish(self.failed(task, f"{type(exc).__name__}: {exc}"), task)
             return False
-        self.finish(record)
+        self.finish(record, task)
         return False
 
     def restart(self, executor: Executor) -> Executor:
@@ -240,10 +258,66 @@ class _Sweep:
         """Ctrl-C: keep whatever finished meanwhile, then stop the rest."""
         self.outcome.interrupted = True
         for fut in [f for f in self.inflight if f.done() and not f.cancelled()]:
-            self.inflight.pop(fut)
+            task = self.inflight.pop(fut)
             try:
                 record = fut.result()
             except BaseException:  # unfinished or broken: left for the resume
                 continue
-            self.record(record)
+            self.record(record, task)
         stop_executor(executor, self.inflight)
+
+
+@dataclass
+class Executors:
+    """Where the evaluations run: a factory of executors, how many run at once, and in words.
+
+    Attributes
+    ----------
+    factory : callable
+        Returns a fresh executor (:func:`run_sweep`'s ``executor_factory``).
+    window : int
+        Evaluations in flight at once.
+    where : str
+        ``"2 local process(es)"`` or ``"Dask cluster ADDRESS (8 in flight)"``.
+    client : object or None
+        The ``distributed.Client``, closed by :meth:`close`.
+    """
+
+    factory: Callable[[], Executor]
+    window: int
+    where: str
+    client: object | None = None
+
+    def close(self) -> None:
+        if self.client is not None:
+            self.client.close()
+
+
+def executors(jobs: int | None, scheduler: str | None, tasks: int,
+              start_method: str = "spawn") -> Executors:
+    """Local worker processes (``jobs``, default the cores, at most ``tasks``) or, with
+    ``scheduler``, a dask.distributed cluster (``jobs`` in flight, default its threads).
+
+    Raises
+    ------
+    UsageError
+        ``jobs`` below 1, dask.distributed missing, or the scheduler unreachable.
+    """
+    if jobs is not None and jobs < 1:
+        raise UsageError("--jobs must be >= 1")
+    if not scheduler:
+        window = max(1, min(jobs or os.cpu_count() or 1, tasks))
+        return Executors(lambda: process_pool(window, start_method=start_method), window,
+                         f"{window} local process(es)")
+    try:
+        from distributed import Client
+    except ImportError:
+        raise UsageError("--scheduler needs dask.distributed: pip install 'rhmpc[dask]'"
+                         ) from None
+    try:
+        client = Client(scheduler, timeout="20s")
+    except OSError as exc:
+        raise UsageError(f"--scheduler {scheduler}: cannot connect: {exc}") from None
+    window = jobs or max(1, sum(client.nthreads().values()))
+    return Executors(lambda: client.get_executor(pure=False), window,
+                     f"Dask cluster {scheduler} ({window} in flight)", client)

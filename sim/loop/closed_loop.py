@@ -284,6 +284,7 @@ def _run_ticks(plant, controller, refreshes: Refreshes, c0: int, c1: int, log: d
     q_log, ref0, u_log, tau_log, cmd_log = (log[k] for k in ("q", "ref0", "u", "tau", "cmd"))
     step_ns, refresh_ns, horizons, samples = (log[k] for k in ("step_ns", "refresh_ns",
                                                                "horizons", "samples"))
+    each = log["refresh_each_ns"]
     u_prev = log["u_prev"]
     for i in range(c0, c1):
         k = i - c0
@@ -292,6 +293,7 @@ def _run_ticks(plant, controller, refreshes: Refreshes, c0: int, c1: int, log: d
             before = controller.outliers
             refresh(i, z, stamp, others)
             spent += controller.refresh_ns
+            each.append(controller.refresh_ns)
             refreshed = True
             if z is not None:
                 _note_outliers(before, controller.outliers, stamp, log)

@@ -64,6 +64,9 @@ class LoopResult:
     #: the same of the tick without the refreshes (the step alone) [µs]: what it would cost
     #: with the predictor in a task of its own
     control_tick_us: dict
+    #: each refresh's time [µs] (p50 … max, ``over_period``: refreshes longer than the
+    #: predictor's period, which a predictor in a task of its own could not keep up with)
+    refresh_us: dict
     horizon_error: np.ndarray  # (N,) RMS error of the reference vs the truth per lead tick [m]
     controller_stats: dict = field(default_factory=dict)
     saturated_ticks: int = 0
@@ -114,6 +117,7 @@ class LoopResult:
         out["tick_us"] = dict(self.tick_us)
         out["tick_parts_us"] = {k: dict(v) for k, v in self.tick_parts_us.items()}
         out["control_tick_us"] = dict(self.control_tick_us)
+        out["refresh_us"] = dict(self.refresh_us)
         out["prediction_rms_mm"] = {
             "lead_1": float(1e3 * self.horizon_error[0]),
             "lead_N": float(1e3 * self.horizon_error[-1]),
@@ -187,6 +191,8 @@ class Recorder:
         self.ticks = TickHistogram()
         self.yardstick = TickHistogram()
         self.parts = {name: TickHistogram() for name in TICK_PARTS}
+        #: each refresh (gate, predictor, interpolation) against the predictor's period
+        self.refreshes, self.period_ns = TickHistogram(span_ns=100_000_000), 1e9 * clock.dt
         self.trace = DecimatedTrace(settings.ticks)
         self.file = None if trace_file is None else TraceFile(trace_file)
         self.lead = np.arange(1, horizon + 1)
@@ -224,7 +230,8 @@ class Recorder:
         return {"q": np.empty((m, nq)), "ref0": np.empty((m, 3)), "u": np.empty((m, nv)),
                 "tau": np.empty((m, nv)), "cmd": np.empty((m, nv)),
                 "step_ns": np.zeros(m, dtype=np.int64), "refresh_ns": np.zeros(m, dtype=np.int64),
-                "horizons": [], "samples": [], "yardstick_ns": [], "u_prev": self.u_prev,
+                "horizons": [], "samples": [], "yardstick_ns": [], "refresh_each_ns": [],
+                "u_prev": self.u_prev,
                 "outliers": self.outliers, "last_stamp": self.last_stamp}
 
     def _ee(self, q_log: np.ndarray) -> np.ndarray:
@@ -259,6 +266,7 @@ class Recorder:
         self.parts["step"].add(log["step_ns"][s:])
         self.parts["refresh"].add(log["refresh_ns"][s:])
         self.yardstick.add(np.array(log["yardstick_ns"], dtype=np.int64))
+        self.refreshes.add(np.array(log["refresh_each_ns"], dtype=np.int64))
         self._horizon_errors(c0, log["horizons"], placed)
         self._segment(c0, c1, ee - poi, log["q"])
         self._keep_refreshes(log["horizons"], log["samples"])
@@ -365,6 +373,15 @@ class Recorder:
                         after_last_sample_ticks=self.after_last_ticks)
         return tracking, interpolated, excluded
 
+    def _refresh_budget(self) -> dict:
+        """Each refresh's p50 … max [µs], the predictor's period [µs] and how many refreshes
+        took longer (every refresh of the run, settling included)."""
+        h = self.refreshes
+        edge = int(min(self.period_ns // h.resolution, h.counts.size))
+        over = int(h.counts[edge:].sum()) + sum(ns > self.period_ns for ns in h.overflow)
+        return {**h.stats_us(), "refreshes": h.n, "period_us": self.period_ns / 1e3,
+                "over_period": over}
+
     def result(self, controller, dynamics: str = "pinocchio") -> LoopResult:
         tracking, interpolated, excluded = self._scores()
         with np.errstate(invalid="ignore", divide="ignore"):
@@ -383,6 +400,7 @@ class Recorder:
             yardstick_us=self.yardstick.stats_us(),
             tick_parts_us={name: h.stats_us() for name, h in self.parts.items()},
             control_tick_us=self.parts["step"].stats_us(), horizon_error=horizon_error,
+            refresh_us=self._refresh_budget(),
             controller_stats=controller_stats(controller), saturated_ticks=self.saturated_ticks,
             predictor_counts=dict(controller.predictor_counts), plant_dynamics=dynamics,
             horizons=(ticks, points), samples=(stamps, samples),

@@ -13,6 +13,7 @@ import io
 import json
 import math
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -92,7 +93,8 @@ def test_header_and_progress_come_before_the_first_run_ends(
                  "hold,one-step", "--duration", "8", "--jobs", "2", "--out",
                  str(tmp_path / "runs.json")])
     assert code == 0
-    first_end = min(d["ended"] for d in json.loads((tmp_path / "runs.json").read_text()))
+    first_end = min(d["ended"]
+                    for d in json.loads((tmp_path / "runs.json").read_text())["runs"])
     assert err.first is not None and err.first - start < 0.5
     assert err.first < first_end - 0.4  # while the first runs are in flight
     assert out.first is not None and out.first < first_end
@@ -188,7 +190,7 @@ def test_paper_tables_fit_in_120_characters() -> None:
             for d in _docs(list(COLUMNS), preds, seeds=10)]
     text = paper_table(docs, preds, list(COLUMNS)).split("Published findings")[0]
     assert max(map(len, text.splitlines())) <= MAX_WIDTH
-    assert "the maximum over 10 runs (seeds 0–9)" in text
+    assert "the mean ± the half-width of its 95 % interval over 10 runs (seeds 0–9)" in text
 
 
 def test_interval_is_students_t() -> None:
@@ -223,9 +225,9 @@ def test_paper_with_seeds_states_the_runs_per_cell(
                  "--predictors", "exact", "--duration", "1", "--jobs", "2", "--seeds",
                  "3"]) == 0
     out = capsys.readouterr().out
-    assert "ours = the maximum over 3 runs (seeds 0–2)" in out
-    worst = BASE_MM["exact"] * 1.2 * 1.12  # seed 2 is the maximum
-    assert f"0.237 / {worst:.3f} / {worst / 0.237:.2f}" in out
+    assert "ours = the mean ± the half-width of its 95 % interval over 3 runs (seeds 0–2)" in out
+    mean, half = interval95([BASE_MM["exact"] * (1 + 0.1 * s) * 1.12 for s in range(3)])
+    assert f"0.237 / {mean:.3f} ± {half:.3f} / {mean / 0.237:.2f}" in out
 
 
 @pytest.fixture
@@ -249,7 +251,7 @@ def test_recordings_default_to_hold_and_ratios_to_hold(
     assert max(map(len, out.splitlines())) <= MAX_WIDTH
     assert main(["compare", "--data", str(recording), "--duration", "2", "--jobs", "1",
                  "--json", "--quiet"]) == 0
-    docs = json.loads(capsys.readouterr().out)
+    docs = json.loads(capsys.readouterr().out)["runs"]
     assert [d["predictor"] for d in docs] == list(compare.DATA_PREDICTORS)
 
 
@@ -279,4 +281,72 @@ def test_an_unwritable_out_is_refused_before_any_run(
     code = main(["compare", "--scenarios", "fixed-a2-top", "--predictors", "hold",
                  "--duration", "1", "--out", str(tmp_path / "missing" / "runs.json")])
     err = capsys.readouterr().err.strip()
-    assert code == 2 and len(err.splitlines()) == 1 and "--out" in err and "no folder" in err
+    assert code == 2 and len(err.splitlines()) == 1 and "--out" in err
+    assert "no such directory" in err
+
+
+#: A compare of 8 runs whose ``hold`` runs end at once (each leaves a mark) and whose ``exact``
+#: runs last two minutes; Ctrl-C as a terminal delivers it.
+CTRL_C_SCRIPT = """
+import signal, sys, time
+signal.signal(signal.SIGINT, signal.default_int_handler)
+from pathlib import Path
+from rhmpc.cli import compare, main
+
+def stand_in(job):
+    if job.config.predictor == "exact":
+        time.sleep(120)
+    Path(sys.argv[1], f"done{job.key}").write_text("")
+    return compare._labelled({"predictor": job.config.predictor, "seed": job.config.seed,
+                              "rms_error_mm": 0.4 + job.config.seed, "max_error_mm": 1.0,
+                              "rms_effort_mNm": 10.0}, job)
+
+compare.run_job = stand_in
+sys.exit(main(["compare", "--scenarios", "fixed-a2-top", "--predictors", "hold,exact",
+               "--seeds", "4", "--duration", "1", "--jobs", "2"]))
+"""
+
+
+def test_ctrl_c_prints_the_runs_done_so_far(tmp_path: Path) -> None:
+    """Ctrl-C with 4 of 8 runs done: the tables of those 4, a line that says so, exit 130, at
+    once (the bound only catches a wait for the two-minute runs)."""
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    proc = subprocess.Popen([sys.executable, "-c", CTRL_C_SCRIPT, str(tmp_path)], cwd=REPO,
+                            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    try:
+        deadline = time.monotonic() + 60
+        while len(list(tmp_path.glob("done*"))) < 4 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert len(list(tmp_path.glob("done*"))) == 4, "the four quick runs did not end"
+        time.sleep(1.5)  # the runner has collected them (it looks every half second)
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130, err[-1000:]
+    assert "interrupted with 4 of 8 runs done" in err and "Traceback" not in err
+    assert "Each cell: mean ± half-width of the 95 % interval (Student t) over 4 runs" in out
+    assert _row(out, "hold").split()[1:4] == ["1.900", "±", "2.054"]  # seeds 0–3 of hold
+    assert _row(out, "exact").split()[1] == "-"  # not run
+
+
+@pytest.mark.slow
+def test_compare_on_a_dask_cluster(capsys: pytest.CaptureFixture[str]) -> None:
+    """``--scheduler``: the runs go to the cluster's worker (two threads: one run at a time per
+    process), and the table is the local one's."""
+    distributed = pytest.importorskip("distributed")
+    argv = ["compare", "--predictors", "hold,exact", "--scenarios", "fixed-a2-top",
+            "--duration", "0.6", "--settling", "0.2", "--seeds", "2", "--json"]
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=True,
+                                  host="127.0.0.1", dashboard_address=None,
+                                  silence_logs=40) as cluster:
+        assert main([*argv, "--scheduler", cluster.scheduler_address]) == 0
+    captured = capsys.readouterr()
+    remote = json.loads(captured.out)
+    assert "on Dask cluster tcp://127.0.0.1" in captured.err
+    assert main([*argv, "--jobs", "1"]) == 0
+    local = json.loads(capsys.readouterr().out)
+    assert [(r["predictor"], r["seed"], r["rms_error_mm"]) for r in remote["runs"]] == [
+        (r["predictor"], r["seed"], r["rms_error_mm"]) for r in local["runs"]]
+    assert remote["cells"] == local["cells"]

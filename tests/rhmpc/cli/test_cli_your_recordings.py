@@ -108,7 +108,7 @@ def test_compare_data_one_row_per_predictor_and_column(recordings: list[Path],
                                                        capsys: pytest.CaptureFixture[str]) -> None:
     code = main(["compare", "--data", *map(str, recordings), "--predictors", "hold,one-step",
                  "--duration", "0.6", "--settling", "0.2", "--jobs", "1", "--json"])
-    rows = json.loads(capsys.readouterr().out)
+    rows = json.loads(capsys.readouterr().out)["runs"]
     assert code == 0 and len(rows) == 2 * len(RATES)
     assert {(r["scenario"], r["predictor"]) for r in rows} == {
         (f"rec{rate:g}.csv", p) for rate in RATES for p in ("hold", "one-step")}
@@ -148,7 +148,7 @@ def test_several_points_predict_and_compare(tmp_path: Path,
     assert main(["compare", "--data", str(path), "--rate", "25", "--points", "2,4",
                  "--predictors", "hold", "--duration", "0.6", "--settling", "0.2",
                  "--jobs", "1", "--json"]) == 0
-    rows = json.loads(capsys.readouterr().out)
+    rows = json.loads(capsys.readouterr().out)["runs"]
     assert [(r["scenario"], r["point"]) for r in rows] == [("points.mat:p2", 2),
                                                           ("points.mat:p4", 4)]
     assert rows[0]["settings"]["data_read"] == {"rate": 25.0, "point": 2}

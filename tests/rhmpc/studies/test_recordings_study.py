@@ -177,7 +177,7 @@ def test_training_recordings_fit_the_learned_predictors() -> None:
     doc = run_open_loop([track], OpenLoopSettings(predictors=("hold", "st-ridge", "combination"),
                                                   leads=2, warmup=4.0),
                         train=lambda period: series)
-    assert doc["fitted_on"] == "training recordings" and doc["protocol"] == "online"
+    assert doc["fitted_on"] == "the training recordings" and doc["protocol"] == "online"
     row = next(r for r in doc["results"] if r["predictor"] == "st-ridge")
     assert row["scored"] == 400 - 100 - 1 and row["ratio_to_hold"] < 0.2
 
@@ -195,3 +195,66 @@ def test_fitted_predictors_need_something_to_fit_on_and_splits_are_checked() -> 
     names = default_predictors(fitted=True)
     assert names[0] == "hold" and names[-1] == "combination" and "st-ridge" in names
     assert "st-ridge" not in default_predictors()
+
+
+def test_the_split_says_what_it_fits_on_which_frames_and_how_long_before_fitting() -> None:
+    said: list[str] = []
+    run_open_loop([points_track()], OpenLoopSettings(predictors=SPLIT_NAMES, leads=2,
+                                                    split=(300, 400)), said.append)
+    first = said.index(next(s for s in said if s.startswith("fitting ")))
+    assert said[first] == ("fitting ridge, st-ridge on frames 0–299 of "
+                           f"{points_track().label} (the frames before TRAIN = 300; the "
+                           "forecasts issued at frames 300–399 are scored)")
+    assert said[first + 1].startswith("about 0 s of fitting") and \
+        "ridge under a second; st-ridge under a second" in said[first + 1]
+    assert all("TRAIN" not in s for s in said[first + 2:])  # the placeholder is not said
+    assert not any(s.startswith("left out") for s in said)  # predictors were given
+
+
+def test_the_plan_names_the_rounds_their_frames_and_what_the_defaults_leave_out() -> None:
+    from rhmpc.studies.fitting import FitPlan, describe
+
+    plans = [FitPlan("ridge", 0, 0.2, None), FitPlan("lstm", 4, 0.2, 95.0),
+             FitPlan("tcn", 4, 0.2, 20.0)]
+    lines = describe(plans, "frames 0–599 of rec.mat", 600,
+                     [FitPlan("gru", 4, 0.2, 400.0), FitPlan("st-gru", 4, 0.2, 410.0)],
+                     ["hold", "lstm", "combination"])
+    assert lines[0] == "fitting ridge, lstm, tcn on frames 0–599 of rec.mat"
+    assert "a validation round on the first 80 % of those frames (0–479), its forecasts on the " \
+           "rest (480–599)" in lines[1] and "then the final round on all of them" in lines[1]
+    assert lines[2].startswith("about 1.9 min of fitting") and \
+        "lstm 1.6 min (4 networks × 2 rounds); tcn 20 s" in lines[2]
+    assert lines[3] == ("left out of the default set: gru, st-gru (about 6.7 min and 6.8 min of "
+                        "fitting here); add them with --predictors "
+                        "hold,lstm,combination,gru,st-gru")
+
+
+def test_each_network_line_names_its_round() -> None:
+    from rhmpc.studies.fitting import FitPlan, _rounds
+
+    said: list[str] = []
+    say = _rounds(FitPlan("tcn", 2, 0.2, 1.0), said.append)
+    for text in ("network 1/2", "network 2/2", "network 1/2", "network 2/2"):
+        say(text)
+    assert said == ["fit tcn: validation round, network 1/2",
+                    "fit tcn: validation round, network 2/2",
+                    "fit tcn: final round, network 1/2", "fit tcn: final round, network 2/2"]
+
+
+def test_the_defaults_leave_out_the_grus_and_say_so() -> None:
+    from rhmpc.studies.recordings import left_out, torch_available
+
+    names = default_predictors(fitted=True)
+    assert left_out(names) == (["gru", "st-gru"] if torch_available() else [])
+    assert left_out([*names, "gru", "st-gru"]) == []
+
+
+@pytest.mark.slow
+def test_a_network_fit_is_estimated_from_a_probe_of_a_few_epochs() -> None:
+    pytest.importorskip("torch")
+    from rhmpc.studies.fitting import plan_fits
+
+    track = points_track()
+    (plan,) = plan_fits(["tcn"], track.period, [track.points()[:300]], 2, 0)
+    assert plan.networks == 2 and plan.rounds == 2  # per-lead heads: one network per lead
+    assert plan.estimate_s is not None and plan.estimate_s > 0

@@ -1,0 +1,191 @@
+"""Fitting the learned predictors before an open-loop study: what is fitted, on which frames,
+why in two rounds, and how long it will take, said before the fits start.
+
+A network predictor (:class:`predictors.learned.settings.NetworkSettings`) trains
+``ensemble`` networks per head (one head per lead with ``heads = "per-lead"``, one for every
+lead with ``"joint"``), for ``epochs`` epochs, in two rounds when ``validation`` = v > 0: a
+*validation round* on the first 1 − v of each training series, whose forecasts on the last v
+give the out-of-sample error that an online combination starts from, then the *final round*
+on every frame. Its fitting time is estimated before it starts from one network trained on the
+same frames for 1 and for :data:`PROBE_EPOCHS` epochs, after a first fit that imports the
+network's library (the difference leaves out what does not grow with the epochs):
+
+.. math::
+
+    t_{\\text{epoch}} = \\frac{t_{K} - t_1}{K - 1}, \\qquad
+    \\hat T = t_{\\text{epoch}} \\cdot E \\cdot M \\cdot \\bigl((1 - v)\\,[v > 0] + 1\\bigr),
+
+with K = :data:`PROBE_EPOCHS`, E the epochs and M the networks per round. The ridge
+regressions fit in well under a second and are not probed.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+import boundary
+from predictors import LEARNED, make_predictor, settings_for
+
+__all__ = ["PROBE_EPOCHS", "FitPlan", "describe", "fit_all", "plan_fits"]
+
+#: K, the epochs of the longer probe network.
+PROBE_EPOCHS = 5
+
+
+@dataclass(frozen=True)
+class FitPlan:
+    """How one fitted predictor will be fitted.
+
+    Attributes
+    ----------
+    name : str
+        The predictor.
+    networks : int
+        Networks per round (0: not a network predictor).
+    validation : float
+        v, the fraction held out in the validation round (0: one round).
+    estimate_s : float or None
+        The estimated fitting time [s] (None: not probed, well under a second).
+    """
+
+    name: str
+    networks: int
+    validation: float
+    estimate_s: float | None
+
+    @property
+    def rounds(self) -> int:
+        return 2 if self.networks and self.validation > 0 else 1
+
+
+def _networks(name: str, leads: int) -> tuple[int, float, int]:
+    """(networks per round, validation fraction, epochs) of a network predictor; (0, v, 0)
+    for another fitted one."""
+    s = settings_for(name, leads=leads)
+    if not hasattr(s, "epochs"):
+        return 0, float(getattr(s, "validation", 0.0)), 0
+    heads = leads if s.heads == "per-lead" else 1
+    return s.ensemble * heads, float(s.validation), int(s.epochs)
+
+
+def plan_fits(names: Sequence[str], period: float, series: list[np.ndarray], leads: int,
+              seed: int) -> list[FitPlan]:
+    """The plan of every fitted predictor of ``names``, each network predictor's time estimated
+    from one timed epoch of one network on ``series`` (the module's equation)."""
+    out = []
+    for name in names:
+        if name not in LEARNED:
+            continue
+        networks, validation, epochs = _networks(name, leads)
+        estimate = None
+        if networks:
+            _probe(name, period, series, seed, 1)  # the first fit of a process imports
+            t1, tk = (_probe(name, period, series, seed, k) for k in (1, PROBE_EPOCHS))
+            epoch = max(tk - t1, 0.0) / (PROBE_EPOCHS - 1)
+            estimate = epoch * epochs * networks * ((1.0 - validation) * (validation > 0) + 1)
+        out.append(FitPlan(name, networks, validation, estimate))
+    return out
+
+
+def _probe(name: str, period: float, series: list[np.ndarray], seed: int, epochs: int) -> float:
+    """Seconds to fit one network of ``name`` on ``series`` for ``epochs`` epochs."""
+    probe = make_predictor(name, dt=period, leads=1, epochs=epochs, validation=0.0, ensemble=1,
+                           heads="per-lead", seed=seed)
+    tic = time.perf_counter()
+    probe.fit(series)
+    return time.perf_counter() - tic
+
+
+def fit_all(plans: Sequence[FitPlan], period: float, series: list[np.ndarray], leads: int,
+            seed: int, progress: Callable[[str], None] | None = None,
+            save: Path | None = None, label: str = "") -> dict:
+    """name → (fitted predictor, seconds): each planned predictor forecasting leads 1 …
+    ``leads`` directly, fitted on ``series`` with the study's ``seed``; its progress told
+    round by round; each saved in the folder ``save`` (``LABEL.NAME.npz``/``.pt``) if given."""
+    out = {}
+    for plan in plans:
+        extra = {"seed": seed} if "seed" in LEARNED[plan.name].settings.__dataclass_fields__ \
+            else {}
+        p = make_predictor(plan.name, dt=period, leads=leads, **extra)
+        tic = time.perf_counter()
+        p.fit(series, None if progress is None else _rounds(plan, progress))
+        out[plan.name] = (p, time.perf_counter() - tic)
+        if save is not None:
+            p.save(save / f"{boundary.file_stem(label)}.{plan.name}{p.SUFFIX}")
+    return out
+
+
+def _rounds(plan: FitPlan, progress: Callable[[str], None]) -> Callable[[str], None]:
+    """``progress`` with each network's line named by its round (validation, then final)."""
+    round_ = 0
+
+    def say(text: str) -> None:
+        nonlocal round_
+        if text.startswith("network 1/"):
+            round_ += 1
+        if plan.rounds == 2 and text.startswith("network "):
+            which = "validation round" if round_ == 1 else "final round"
+            text = f"{which}, {text}"
+        progress(f"fit {plan.name}: {text}")
+
+    return say
+
+
+def _duration(seconds: float) -> str:
+    """``8 s``, ``57 s``, ``4.2 min``: an estimate, rounded."""
+    return f"{seconds:.0f} s" if seconds < 90 else f"{seconds / 60:.1f} min"
+
+
+def _seconds(plan: FitPlan) -> str:
+    return "under a second" if plan.estimate_s is None else _duration(plan.estimate_s)
+
+
+def describe(plans: Sequence[FitPlan], where: str, frames: int | None,
+             omitted: Sequence[FitPlan] = (), every: Sequence[str] = ()) -> list[str]:
+    """What is fitted, on which frames, why in two rounds, and how long: the lines said
+    before the fits start.
+
+    Parameters
+    ----------
+    plans : sequence of FitPlan
+        The fits to run.
+    where : str
+        The frames they are fitted on, in words (``"frames 0–599 of rec.mat"``).
+    frames : int or None
+        Frames of one training series (None: several recordings), for the rounds' frames.
+    omitted : sequence of FitPlan
+        Fitted predictors left out of the default set, with their estimates.
+    every : sequence of str
+        The default set, for the option that adds the omitted ones.
+    """
+    out = [f"fitting {', '.join(p.name for p in plans)} on {where}"]
+    twice = [p for p in plans if p.rounds == 2]
+    if twice:
+        v = twice[0].validation
+        part = f"the first {100 * (1 - v):g} % of those frames"
+        if frames is not None:
+            cut = round((1.0 - v) * frames)
+            part += f" (0–{cut - 1}), its forecasts on the rest ({cut}–{frames - 1})"
+        else:
+            part += ", its forecasts on the rest"
+        out.append(f"each network is fitted twice: a validation round on {part} give the "
+                   "out-of-sample error the combination starts from; then the final round on "
+                   "all of them")
+    timed = [p for p in plans if p.estimate_s is not None]
+    total = sum(p.estimate_s for p in timed)
+    out.append(f"about {_duration(total)} of fitting (each network predictor timed "
+               "from a few epochs of one network): " + "; ".join(
+                   f"{p.name} {_seconds(p)}" + (f" ({p.networks} networks × {p.rounds} "
+                                                 "rounds)" if p.networks else "")
+                   for p in plans))
+    if omitted:
+        names = ", ".join(p.name for p in omitted)
+        out.append(f"left out of the default set: {names} (about "
+                   f"{' and '.join(_seconds(p) for p in omitted)} of fitting here); add them "
+                   f"with --predictors {','.join([*every, *(p.name for p in omitted)])}")
+    return out
