@@ -48,12 +48,12 @@ from __future__ import annotations
 import math
 import os
 import re
-import tomllib
 from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 
+from boundary import FileError, read_text, read_toml
 from robots.model import Robot
 
 #: Keys of a robot file and of its [drives] table.
@@ -64,8 +64,8 @@ DRIVE_KEYS = ("gear_ratio", "peak_torque", "torque_constant", "no_load_current",
               "rotor_inertia", "encoder_counts", "rotor_joints")
 #: The POI's reach about the tool's home position by default [m] (Yuen et al. 2009, §2).
 WORKSPACE = 0.01
-#: The largest robot file and URDF read [bytes].
-MAX_TOML_BYTES, MAX_URDF_BYTES = 2**20, 2**26
+#: The largest URDF read [bytes] (the robot file is a settings file: ``boundary``'s bound).
+MAX_URDF_BYTES = 2**26
 #: A home posture whose Jacobian's singular values differ by more than this is singular.
 MAX_CONDITION = 1e3
 #: Revolute joints the controller can drive (one angle each).
@@ -77,16 +77,12 @@ class RobotFileError(ValueError):
     """A robot file that cannot describe a robot; the message names the file and the key."""
 
 
-def _read(path: Path, key: str, limit: int) -> bytes:
-    """The bytes of a regular file of at most ``limit`` bytes."""
+def _read_urdf(path: Path) -> str:
+    """The URDF's text through the one guarded reader (a regular file of bounded size)."""
     try:
-        if not path.is_file():
-            raise RobotFileError(f"{key}: {path} is not a file")
-        if path.stat().st_size > limit:
-            raise RobotFileError(f"{key}: {path} is larger than {limit // 2**20} MiB")
-        return path.read_bytes()
-    except OSError as exc:
-        raise RobotFileError(f"{key}: cannot read {path}: {exc.strerror}") from None
+        return read_text(path, "file", MAX_URDF_BYTES)
+    except FileError as exc:
+        raise RobotFileError(f"urdf: {exc}") from None
 
 
 def _package(url: str) -> Path:
@@ -128,12 +124,10 @@ def _number(table: dict, key: str, where: str = "") -> float:
 
 
 def read_file(path: str | Path) -> dict:
-    """The robot file's table; unknown keys and a TOML error raise :class:`RobotFileError`."""
-    path = Path(path)
-    try:
-        doc = tomllib.loads(_read(path, "robot file", MAX_TOML_BYTES).decode())
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise RobotFileError(f"not valid TOML: {exc}") from None
+    """The robot file's table (:func:`boundary.read_toml`: a file that cannot be read, or is
+    not TOML, is a ``FileError`` naming it); unknown or missing keys raise
+    :class:`RobotFileError`."""
+    doc = read_toml(path)  # FileError, naming the file
     unknown = sorted(set(doc) - set(KEYS))
     if unknown:
         raise RobotFileError(f"{unknown[0]}: unknown key; valid keys: {', '.join(KEYS)}")
@@ -155,9 +149,9 @@ def _urdf_path(doc: dict, base: Path) -> Path:
 
 def _full_model(path: Path) -> pin.Model:
     """The URDF's model (mimic joints follow their joints), read without its meshes."""
-    _read(path, "urdf", MAX_URDF_BYTES)  # a regular file of a bounded size
+    text = _read_urdf(path)
     try:
-        return pin.buildModelFromUrdf(str(path), mimic=True)
+        return pin.buildModelFromXML(text, mimic=True)
     except (RuntimeError, ValueError) as exc:
         first = str(exc).strip().splitlines()[:1] or ["unknown error"]
         raise RobotFileError(f"urdf: {path} is not a URDF Pinocchio reads ({first[0]})") from None

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from importlib.resources import files
 from pathlib import Path
 
+import boundary
 from rhmpc.compiled import cache_dir
 from rhmpc.control.export import PREDICTORS, export_controller
 from rhmpc.errors import UsageError
@@ -77,8 +78,8 @@ def build_controller(config: RunConfig, sensor_rate: float) -> BuiltController:
             shutil.copytree(Path(tmp) / "export", staging / "export")
             (staging / "program").mkdir()
             for source in SOURCES:
-                text = program_dir.joinpath(source).read_bytes()
-                (staging / "program" / source).write_bytes(text)
+                boundary.write_bytes(staging / "program" / source,
+                                     program_dir.joinpath(source).read_bytes())
             _cmake("-S", str(staging / "program"), "-B", str(staging / "build"),
                    f"-DRHMPC_EXPORT={staging / 'export'}", "-DCMAKE_BUILD_TYPE=Release")
             _cmake("--build", str(staging / "build"), "--target", "rhmpc_sil_controller")

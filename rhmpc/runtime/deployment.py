@@ -18,7 +18,7 @@ measured, as the in-process run is (:class:`sim.loop.metrics.MeasuredScore`).
 from __future__ import annotations
 
 import dataclasses
-import json
+import io
 import multiprocessing
 import os
 import signal
@@ -31,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+import boundary
 from rhmpc.control.reference import embed3
 from rhmpc.experiment import RunConfig, run_experiment
 from rhmpc.experiment.assembly import build_run
@@ -187,11 +188,11 @@ def run_sil(config: RunConfig, settings: SilSettings = SilSettings(), progress=N
         if not finished or failed:
             raise RuntimeError("the deployment did not finish: " + ("; ".join(failed) or
                                                                     "a process hung"))
-        documents = {name: json.loads((folder / f"{name}.json").read_text())
+        documents = {name: boundary.read_json(folder / f"{name}.json", track=False)
                      for name in ("controller", "robot", "predictor", "sensor")}
-        arrays = {name: np.fromfile(folder / f"controller.{name}", dtype=np.int64)
+        arrays = {name: host.read_int64(folder / f"controller.{name}")
                   for name in ("wake", "work", "step", "s2t")}
-        q = np.load(folder / "robot_q.npy")
+        q = np.load(io.BytesIO(boundary.read_bytes(folder / "robot_q.npy", track=False)))
         host_latency = host.read_probe(folder / "host", tool, loop.Ts)
     score = _score(run, q, documents["predictor"]["outliers"])
     return report(config, built, settings.internal, documents, arrays, host_latency, score,

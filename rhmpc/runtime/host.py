@@ -12,15 +12,16 @@ behind each other.
 
 from __future__ import annotations
 
-import json
 import re
 import shutil
 from pathlib import Path
 
 import numpy as np
 
+import boundary
+
 __all__ = ["HISTOGRAM_US", "histogram_percentiles", "percentiles", "probe_command",
-           "read_histogram", "read_probe"]
+           "read_histogram", "read_int64", "read_probe"]
 
 #: cyclictest's histogram: 1-µs bins up to this latency [µs] (beyond: its overflow count).
 HISTOGRAM_US = 10_000
@@ -82,20 +83,27 @@ def histogram_percentiles(values: np.ndarray, weights: np.ndarray, top: float) -
     return {"p50": p50, "p99": p99, "max": top}
 
 
+def read_int64(path: Path) -> np.ndarray:
+    """A raw array of int64 the controller's program wrote (empty if it wrote none)."""
+    if not path.is_file():
+        return np.zeros(0, dtype=np.int64)
+    return np.frombuffer(boundary.read_bytes(path, track=False), dtype=np.int64)
+
+
 def read_probe(out: Path, tool: str, Ts: float) -> dict:
     """The probe's p50, p99 and max wake-up latency [µs], the fraction of its periods that
     woke a period or more late (``late_periods``: what deadline misses it would have had) and
     its name."""
     if tool == "cyclictest":
         hist = Path(f"{out}.hist")
-        values, weights, top = read_histogram(hist.read_text() if hist.is_file() else "")
+        text = boundary.read_bytes(hist, track=False).decode() if hist.is_file() else ""
+        values, weights, top = read_histogram(text)
         found = histogram_percentiles(values, weights, top)
         late = weights[values >= Ts * 1e6].sum() / max(weights.sum(), 1.0)
     else:
-        wake = Path(f"{out}.wake")
-        us = np.fromfile(wake, dtype=np.int64) * 1e-3 if wake.is_file() else np.zeros(0)
+        us = read_int64(Path(f"{out}.wake")) * 1e-3
         found = percentiles(us)
         doc = Path(f"{out}.json")
-        behind = json.loads(doc.read_text())["ticks_behind"] if doc.is_file() else 0
+        behind = boundary.read_json(doc, track=False)["ticks_behind"] if doc.is_file() else 0
         late = (np.sum(us >= Ts * 1e6) + behind) / max(us.size + behind, 1)
     return {**found, "late_periods": round(float(late), 6), "tool": tool}

@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
+import boundary
 from rhmpc.control.reference import embed3
 from rhmpc.runtime.host import percentiles
 from rhmpc.runtime.wire import Link, run_clock
@@ -110,7 +111,7 @@ def _sleep_until(role: Role, tick: float) -> None:
 
 
 def _write(role: Role, name: str, document: dict) -> None:
-    (role.folder / f"{name}.json").write_text(json.dumps(document))
+    boundary.write_text(role.folder / f"{name}.json", json.dumps(document))
 
 
 def sensor(run, role: Role, parent: int) -> None:
@@ -232,7 +233,8 @@ def robot(run, role: Role, parent: int) -> None:
         reading = plant.encoders()
         link.send(role.ports.controller, "measured_js", (i + 1) * Ts, reading)
     link.close()
-    np.save(role.folder / "robot_q.npy", q)
+    with boundary.atomic_write(role.folder / "robot_q.npy") as out:
+        np.save(out, q)
     _write(role, "robot", {"torques_missed": drivers.missed, "torques_late": late,
                            "safe_state_ticks": drivers.safe, "scheduling": scheduling,
                            "arrivals": link.arrivals.counts()})
