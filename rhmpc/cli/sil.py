@@ -84,7 +84,7 @@ def table(r: dict) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from rhmpc.runtime.deployment import SilSettings, run_sil
+    from rhmpc.runtime.deployment import DeploymentError, SilSettings, run_sil
 
     config = config_from_args(args)
     if config.predictor == "exact":
@@ -94,7 +94,11 @@ def run(args: argparse.Namespace) -> int:
                                internal=not args.no_internal)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
-    report = run_sil(config, settings, progress=lambda text: print(f"rhmpc sil: {text}",
-                                                                    file=sys.stderr))
+    try:
+        report = run_sil(config, settings, progress=lambda text: print(f"rhmpc sil: {text}",
+                                                                        file=sys.stderr))
+    except DeploymentError as exc:  # not the input's fault: exit 1, on one line
+        print(f"rhmpc sil: error: {' '.join(str(exc).split())}", file=sys.stderr)
+        return 1
     print(json.dumps(report, indent=2) if args.json else table(report))
     return 0

@@ -39,7 +39,7 @@ from rhmpc.runtime import host, processes
 from rhmpc.runtime.build import build_controller
 from sim.loop.metrics import MeasuredScore
 
-__all__ = ["GRACE_S", "SilSettings", "run_sil"]
+__all__ = ["GRACE_S", "DeploymentError", "SilSettings", "run_sil"]
 
 #: Seconds from a stop request to SIGKILL.
 GRACE_S = 2.0
@@ -137,6 +137,10 @@ class _Processes:
         return out
 
 
+class DeploymentError(RuntimeError):
+    """A process of the deployment failed or hung (the message says which, on one line)."""
+
+
 class _Stopped(KeyboardInterrupt):
     """SIGTERM during a run: stopped like Ctrl-C."""
 
@@ -186,8 +190,8 @@ def run_sil(config: RunConfig, settings: SilSettings = SilSettings(), progress=N
             signal.signal(signal.SIGTERM, previous)
         failed = group.failures()
         if not finished or failed:
-            raise RuntimeError("the deployment did not finish: " + ("; ".join(failed) or
-                                                                    "a process hung"))
+            raise DeploymentError("the deployment did not finish: " + ("; ".join(failed) or
+                                                                      "a process hung"))
         documents = {name: boundary.read_json(folder / f"{name}.json", track=False)
                      for name in ("controller", "robot", "predictor", "sensor")}
         arrays = {name: host.read_int64(folder / f"controller.{name}")

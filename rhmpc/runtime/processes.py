@@ -25,6 +25,7 @@ import json
 import math
 import os
 import signal
+import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -138,6 +139,9 @@ def sensor(run, role: Role, parent: int) -> None:
 def predictor(run, role: Role, parent: int) -> None:
     """The run's predictor behind its reference: a forecast for each sample that arrives."""
     stop, scheduling = _start(role, parent)
+    torch = sys.modules.get("torch")  # a learned predictor's: its thread pool is not fork-safe
+    if torch is not None:
+        torch.set_num_threads(1)  # one thread runs its parallel regions inline
     reference = run.controller.reference
     link = Link(role.ports.predictor, role.epoch_ns)
     log = {"outliers": [], "last_stamp": None}
