@@ -26,3 +26,14 @@ def test_a_silent_controller_leaves_the_arm_braked_not_pushed():
     np.testing.assert_allclose(tau, expected, rtol=1e-12)
     assert drivers.missed == WATCHDOG_TICKS + 1 and drivers.safe == 1
     np.testing.assert_array_equal(drivers.torque(command, moved), command)  # torques again
+
+
+def test_bad_settings_of_sil_are_one_line(capsys):
+    from rhmpc.cli import main
+
+    for argv, words in ((["--priority", "0"], "priority must be 1"),
+                        (["--cpu", "100000"], "cpu 100000 is not one"),
+                        (["--predictor", "exact"], "needs a predictor")):
+        assert main(["sil", "--duration", "2", *argv]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and words in err[0], err
