@@ -32,13 +32,14 @@ BUDGETS = "2 GiB of memory and a day of computing"
 MiB = 2**20
 #: The largest file of each kind that is read [B]. A run's settings (TOML) and a sweep's
 #: specification are hand-written, a few kB; a results file holds a line of about 2 kB per
-#: evaluation (500 000 evaluations in 1 GiB); a recording of 10 h at 1 kHz as CSV is about
-#: 1.3 GB; a model holds at most ``MEMORY_BUDGET / 2`` of weights (its copy while it loads).
+#: evaluation, about 10 kB once read (128 000 evaluations in 256 MiB); a recording of 10 h at
+#: 1 kHz as CSV is about 1.3 GB (its samples are bounded by ``BOUNDS["samples"]``); a model holds
+#: at most half the memory budget of weights (its copy while it loads).
 FILE_BYTES: dict[str, int] = {
     "file": 1024 * MiB,
     "config": 4 * MiB,
     "tune spec": 4 * MiB,
-    "results file": 1024 * MiB,
+    "results file": 256 * MiB,
     "recording": 2048 * MiB,
     "model": 1024 * MiB,
     "model header": 4 * MiB,

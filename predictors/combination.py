@@ -32,12 +32,14 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from predictors.base import Predictor, PredictorSettings
+from predictors.learned.fitted import FitWarning
 
 __all__ = ["Combination", "CombinationSettings", "MemberTime"]
 
@@ -67,6 +69,10 @@ class CombinationSettings(PredictorSettings):
         The samples before this one (counted from 0) are not scored: where members fitted
         before the run were fitted on them, their misses there are no forecast errors. The
         priors are taken at it.
+    models : tuple of str
+        Saved models (``rhmpc predict --save-models``) of members fitted before the run, each
+        loaded into the member of its kind (``predictors.registry.load_model``); those without
+        one are fitted by :meth:`Combination.fit`.
     """
 
     members: tuple[str, ...] = ()
@@ -75,6 +81,7 @@ class CombinationSettings(PredictorSettings):
     exponent: float = 2.0
     prior_seconds: float = 2.0
     score_from: int = 0
+    models: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -89,6 +96,10 @@ class CombinationSettings(PredictorSettings):
             raise ValueError(f"exponent must be >= 0, got {self.exponent!r}")
         if not self.prior_seconds >= 0.0:
             raise ValueError(f"prior_seconds must be >= 0, got {self.prior_seconds!r}")
+        if isinstance(self.models, list):  # as TOML reads it
+            object.__setattr__(self, "models", tuple(self.models))
+        if not all(isinstance(f, str) for f in self.models):
+            raise ValueError(f"models must be file names, got {self.models!r}")
         if int(self.score_from) != self.score_from or self.score_from < 0:
             raise ValueError(f"score_from must be an integer >= 0, got {self.score_from!r}")
 
@@ -135,11 +146,17 @@ class Combination(Predictor):
         self.settings = replace(self.settings, score_from=int(samples))
 
     def fit(self, series, progress=None) -> Combination:
-        """Fit the members that are fitted before the run (``fit``) to ``series``."""
+        """Fit the members that are fitted before the run (``fit``) and not yet fitted (nor
+        loaded from a file) to ``series``. A member that cannot be fitted on them (too few
+        samples for its model) takes no part, with a :class:`FitWarning` naming it."""
         for name, m in zip(self.settings.members, self.members, strict=True):
-            if hasattr(m, "fit"):
-                m.fit(series, None if progress is None else
-                      (lambda text, name=name: progress(f"{name}: {text}")))
+            if hasattr(m, "fit") and not m.fitted:
+                try:
+                    m.fit(series, None if progress is None else
+                          (lambda text, name=name: progress(f"{name}: {text}")))
+                except ValueError as exc:
+                    warnings.warn(f"the combination runs without {name}: {exc}", FitWarning,
+                                  stacklevel=2)
         self.reset()
         return self
 

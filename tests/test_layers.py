@@ -1,4 +1,4 @@
-"""The import layering of the README's design map: an import may only point down.
+"""The import layering of the package map (docs/design/index.md): an import may only point down.
 
 Layers, from the bottom (peers of one layer do not import each other):
 
@@ -145,7 +145,8 @@ def test_no_import_points_up_a_layer() -> None:
 def test_every_module_has_a_layer() -> None:
     unplaced = [module_name(p, REPO) for top in PACKAGES for p in (REPO / top).rglob("*.py")
                 if layer_of(module_name(p, REPO)) is None and module_name(p, REPO) != "rhmpc"]
-    assert unplaced == [], "add these modules' package to LAYERS and to the README's map"
+    assert unplaced == [], ("add these modules' package to LAYERS and to the map in "
+                            "docs/design/index.md")
 
 
 @pytest.mark.parametrize(("where", "source", "expected"), [

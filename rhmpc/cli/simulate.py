@@ -14,6 +14,7 @@ from rhmpc.cli.presets import add_preset_option, apply_preset
 from rhmpc.errors import UsageError
 from rhmpc.experiment import RunConfig, check_sensor, load_config, run_experiment
 from rhmpc.experiment.config import with_split
+from rhmpc.experiment.fitting import with_models
 from sim.loop.settings import DEFAULT_SETTLING, LoopSettings
 from sim.recordings.matfile import parse_indices
 
@@ -74,13 +75,14 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "of a --data file of several tracked points; a predictor that reads the "
                    "other points (st-rls, st-ridge, st-lstm, ...) gets their samples")
     add_split_option(p)
+    add_model_option(p)
     p.add_argument("--train", nargs="+", metavar="FILE", help="recordings a predictor fitted "
                    "before the run (ridge, lstm, ...) learns from, beside the run's own "
                    "settling window (same rate and layout; --poi applies)")
     p.add_argument("--seed", type=int, help="seed of every random draw (default 0)")
     p.add_argument("--controller", choices=("python", "c"), default="python",
                    help="'c': the compiled controller of `rhmpc export` in the loop (built once, "
-                   "cached; needs cmake and a C compiler)")
+                   "cached; needs a C compiler)")
     add_run_options(p)
     p.add_argument("--out", metavar="FILE", help="write the result document: FILE.json, or "
                    "FILE.mat for MATLAB (the summary and the trace: time, error, ee, poi, "
@@ -95,15 +97,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--trace", metavar="FILE.npz", help="write every tick to an NPZ file as the "
                    "run goes (chunked; read it with sim.loop.trace.read_trace)")
     add_host_stalls_option(p, "the run")
+    from sim.sensors.faults import GRAMMAR
+
     p.add_argument("--fault", action="append", default=[], metavar="KIND@START[:ARG…]",
-                   help="inject a fault into the run (repeatable; the truth is untouched): "
-                   "freeze@START:DURATION (the sensor repeats its last sample), "
-                   "jump@START:OFFSET[:DURATION] (the stream steps by OFFSET, a length with its "
-                   "unit along x, 5mm, or x,y,z, 5,0,-2mm; to the end of the run by default), "
-                   "nan@START[:DURATION] (missing samples, default 0.5), "
-                   "stick@START:DURATION[:JOINTS] (encoder readings hold; 0-based joints, e.g. "
-                   "0,2; default all). Times in s, e.g. --fault freeze@14:0.3 --fault "
-                   "jump@20:5mm. The summary states each fault's errors and counts")
+                   help=f"inject a fault into the run (repeatable; the truth is untouched): "
+                   f"{GRAMMAR}; e.g. --fault freeze@14:0.3 --fault jump@20:5mm. The summary "
+                   "states each fault's errors and counts")
     p.set_defaults(func=run)
 
 
@@ -156,6 +155,14 @@ def add_split_option(p: argparse.ArgumentParser, more: str = "") -> None:
                    "predictor fitted before the run learns from the samples before TRAIN (as "
                    "the loop delivers them) and the score covers the instants of samples TRAIN "
                    f"to END - 1 (numbered from 0); replaces --settling and --duration{more}")
+
+
+def add_model_option(p: argparse.ArgumentParser) -> None:
+    """``--model FILE...``: saved models instead of fitting before the run."""
+    p.add_argument("--model", nargs="+", metavar="FILE", help="models saved by rhmpc predict "
+                   "--save-models, loaded instead of fitted before the run: a fitted "
+                   "predictor (ridge, st-ridge, lstm, ...) takes the file of its kind, the "
+                   "combination each file into its member of that kind (the others it fits)")
 
 
 def parse_split(text: str | None) -> tuple[int, int] | None:
@@ -241,6 +248,8 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
     if getattr(args, "fault", None):
         changes["faults.events"] = fault_events(config, changes, args.fault)
     config = with_split(config.replace(**changes))
+    if getattr(args, "model", None):
+        config = with_models(config, args.model)
     check_sensor(config)
     check_scoring(config)
     return config

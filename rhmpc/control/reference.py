@@ -95,7 +95,7 @@ class ReferenceSettings:
         After this many consecutive rejected samples the gate opens (a real jump, or a forecast
         gone wrong) until 20 samples in a row fall inside it again [samples]. Default 3: a
         sonomicrometer's cycle slip lasts up to 8 ms and the causal playback adds one raw period
-        (3.9 ms at 257 Hz), so it reaches ⌈11.9 / 7.5⌉ + 1 = 3 samples of the predictor.
+        (3.9 ms at 257 Hz), so it reaches ``⌈11.9 / 7.5⌉ + 1 = 3`` samples of the predictor.
     guard_speed : float
         Reference guard: forecasts farther from the last accepted sample than ``guard_margin +
         guard_speed · lead`` mean a diverged predictor; the reference then holds that sample and

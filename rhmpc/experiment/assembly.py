@@ -23,17 +23,14 @@ from rhmpc.experiment.config import RunConfig, with_split
 from rhmpc.experiment.fitting import fit_predictor
 from robots import LinearArm, Robot, linearize, load_robot
 from sim.loop.clock import PredictorClock, clock_for_rate, predictor_clock
-from sim.loop.faults import FaultyEncoders, FaultySamples, split_faults
+from sim.loop.faults import FaultyEncoders, split_faults
 from sim.loop.metrics import HeartRateScore
-from sim.loop.streams import (
-    PointsAt,
-    SampleSource,
-    SourceTruth,
-    UpsampledSamples,
-    sensor_samples,
-)
+from sim.loop.streams import PointsAt, SourceTruth
 from sim.plant import make_plant
 from sim.sensors import DEFAULT_PLAYBACK, SampleStream, Sensor, playback, sensor_from_name
+from sim.sensors.faults import FaultySamples
+from sim.sensors.playback import UpsampledSamples, sensor_samples
+from sim.sensors.stream import SampleSource
 from sim.sources import HeartSource, heart_source
 
 if TYPE_CHECKING:
@@ -103,7 +100,7 @@ def build_stream(config: RunConfig, heart: HeartSource, duration: float,
                  rng: np.random.Generator) -> SampleSource:
     """The sensor samples the controller sees (SI units), over ``duration`` seconds.
 
-    A sample source read in blocks (:func:`sim.loop.streams.sensor_samples`): the samples and
+    A sample source read in blocks (:func:`sim.sensors.playback.sensor_samples`): the samples and
     random draws of ``sensor.measure`` over the whole run, without holding the 2-kHz stream.
     """
     control_rate = 1.0 / config.loop.Ts

@@ -12,8 +12,9 @@ from boundary import FileError
 from rhmpc.control.cancellation import ModelMismatch
 from rhmpc.control.observer import ObserverSettings
 from rhmpc.control.reference import ReferenceSettings
-from rhmpc.control.settings import MPCSettings, from_dict, replace_settings, to_dict
+from rhmpc.control.settings import MPCSettings
 from rhmpc.errors import UsageError
+from rhmpc.experiment.tables import from_dict, replace_settings, to_dict
 from sim.loop import LoopSettings
 from sim.plant import HardwareSettings, PlantSettings
 from sim.sensors.faults import FaultSettings
@@ -299,8 +300,10 @@ def load_config(path: str | Path) -> RunConfig:
 
 def input_files(config: RunConfig) -> list[str]:
     """The files a run of ``config`` reads: its recording, its training recordings and its
-    predictor's saved model (what no output of the run may replace)."""
-    files = [config.data, *config.train, config.predictor_settings.get("model")]
+    predictor's saved models (what no output of the run may replace)."""
+    models = config.predictor_settings.get("models") or ()
+    files = [config.data, *config.train, config.predictor_settings.get("model"),
+             *(models if isinstance(models, list | tuple) else ())]
     return [f for f in files if isinstance(f, str)]
 
 

@@ -106,13 +106,12 @@ def document(config: RunConfig, run: Run, result: LoopResult, wall: float,
         "encoder": jsonable(run.controller.encoder_counts),
         "wall_s": wall,
         "real_time_factor": config.loop.duration / wall,
-        "plant_dynamics": result.plant_dynamics,
         "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,  # Linux: KiB
         "settings": config.to_dict(),
         "versions": versions(),
     }
     predictor = getattr(run.reference, "predictor", None)
-    if predictor is not None:  # its running RMS miss per lead (rhmpc.control.confidence)
+    if predictor is not None:  # its running RMS miss per lead (benchmarks/horizon_weights.py)
         errors = np.asarray(predictor.forecast_error_rms, dtype=float)
         doc["forecast_error_rms_mm"] = [None if not np.isfinite(v) else 1e3 * float(v)
                                         for v in errors]

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 from rhmpc.studies.figures import plot_run as plot_run
+from sim.loop.faults import REPORTED as FAULT_COUNTS
 
 
 def _seconds(x: float) -> str:
@@ -164,14 +165,6 @@ def format_summary(doc: dict, settling_rule: str | None = None) -> str:
                      + f" (true mean {hr['mean_true_bpm']:.1f} bpm)")
     return "\n".join(lines)
 
-
-#: How a fault record's counts read in the summary (:func:`sim.loop.faults.fault_report`).
-FAULT_COUNTS = {"missing": "samples missing", "outliers_rejected": "rejected",
-                "gate_unlocked": "gate unlocked", "retracted": "retracted",
-                "reference_guard": "reference guard", "encoder_held_ticks": "encoder ticks held",
-                "qp_failures": "QP failures", "fallback_plan": "plan", "fallback_lq": "lq",
-                "fallback_brake": "brake", "fallback_zero": "zero",
-                "saturated_ticks": "saturated ticks"}
 
 
 def fault_lines(doc: dict) -> list[str]:

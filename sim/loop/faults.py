@@ -1,12 +1,10 @@
 """Faults injected into a closed loop, and what each one did to the run.
 
-The faults of :mod:`sim.sensors.faults` act on what the controller reads, never on the truth:
+The faults of :mod:`sim.sensors.faults` act on what the controller reads, never on the truth,
+each on the stream its kind declares (``target``) and by its own ``corrupt``:
 
-- the sensor's faults on its stream, block by block (:class:`FaultySamples`: the samples
-  delivered to the control rate and the raw ones a slow sensor's clock reads, both by their
-  measurement time);
-- an encoder fault on the plant's ``encoders()`` (:class:`FaultyEncoders`: the arm moves on,
-  its readings hold).
+- the sensor's samples, block by block (:class:`sim.sensors.faults.FaultySamples`);
+- the plant's ``encoders()``, tick by tick (:class:`FaultyEncoders`: the arm moves on).
 
 :func:`fault_marks` gives the ticks where the loop reads its counters
 (``run_closed_loop(marks=…)``), and :func:`fault_report` turns the result's segments into one
@@ -20,79 +18,42 @@ import math
 import numpy as np
 
 from sim.loop.clock import arrival_tick
-from sim.sensors.faults import EncoderStick
 
-__all__ = ["FaultyEncoders", "FaultySamples", "fault_marks", "fault_report", "split_faults"]
+__all__ = ["REPORTED", "FaultyEncoders", "fault_marks", "fault_report", "split_faults"]
 
-#: The counts a fault's record states (the differences over its windows).
-REPORTED = ("missing", "outliers_rejected", "gate_unlocked", "retracted", "reference_guard",
-            "encoder_held_ticks", "qp_failures", "fallback_plan", "fallback_lq",
-            "fallback_brake", "fallback_zero", "saturated_ticks")
+#: The counts a fault's record states (the differences over its windows), and how the run's
+#: summary names them.
+REPORTED = {"missing": "samples missing", "outliers_rejected": "rejected",
+            "gate_unlocked": "gate unlocked", "retracted": "retracted",
+            "reference_guard": "reference guard", "encoder_held_ticks": "encoder ticks held",
+            "qp_failures": "QP failures", "fallback_plan": "plan", "fallback_lq": "lq",
+            "fallback_brake": "brake", "fallback_zero": "zero",
+            "saturated_ticks": "saturated ticks"}
 
 
 def split_faults(faults) -> tuple[tuple, tuple]:
-    """(the sensor's faults, the encoders' faults) of ``faults``."""
-    encoders = tuple(f for f in faults if isinstance(f, EncoderStick))
-    return tuple(f for f in faults if not isinstance(f, EncoderStick)), encoders
-
-
-class FaultySamples:
-    """A sample source (:mod:`sim.loop.streams`) with sensor faults applied to each block.
-
-    Sample ``k`` is ``z_k`` after every fault in turn (``fault.corrupt``), the sample each one
-    holds (the last measured before its window) read once, at construction, with the faults
-    before it applied. Stamps and arrivals are the source's. A source with raw samples
-    (``recorded``, read by a slow sensor's clock) gets them with the same faults.
-    """
-
-    def __init__(self, samples, faults) -> None:
-        self.samples, self.faults = samples, tuple(faults)
-        self.held: list[np.ndarray | None] = []
-        for k, fault in enumerate(self.faults):
-            self.held.append(self._before(fault.start_s, k))
-        if hasattr(samples, "recorded"):
-            self.recorded = FaultySamples(samples.recorded, self.faults)
-
-    def _before(self, start_s: float, upto: int) -> np.ndarray | None:
-        """The last sample measured before ``start_s``, the first ``upto`` faults applied."""
-        j = self.samples.index_at(start_s)
-        if j >= 0 and float(self.samples.block(j, j + 1)[0][0]) >= start_s:
-            j -= 1
-        if j < 0:
-            return None
-        t, z, _ = self.samples.block(j, j + 1)
-        for fault, held in zip(self.faults[:upto], self.held, strict=False):
-            z = fault.corrupt(t, z, held)
-        return np.array(z[0], dtype=float)
-
-    def __len__(self) -> int:
-        return len(self.samples)
-
-    def index_at(self, t: float) -> int:
-        return self.samples.index_at(t)
-
-    def block(self, a: int, b: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        t, z, arrival = self.samples.block(a, b)
-        for fault, held in zip(self.faults, self.held, strict=True):
-            z = fault.corrupt(t, z, held)
-        return t, z, arrival
+    """(the faults on the sensor's samples, those on the encoders) of ``faults``."""
+    return (tuple(f for f in faults if f.target == "samples"),
+            tuple(f for f in faults if f.target == "encoders"))
 
 
 class FaultyEncoders:
-    """A plant whose encoders stick (:class:`~sim.sensors.faults.EncoderStick`).
+    """A plant whose encoder readings a fault corrupts (:class:`~sim.sensors.faults.EncoderStick`).
 
     On tick ``i`` (time ``i·Ts``, counted by ``step``) inside a fault's window, ``encoders()``
-    returns the reading of the tick before the window on the stuck joints; ``held_ticks``
-    counts the ticks with a held reading. Everything else is the plant's (``q``, ``step`` …):
-    the arm moves on.
+    returns the reading as the fault's ``corrupt`` leaves it, the reading of the tick before the
+    window the held one; ``held_ticks`` counts the ticks with a corrupted reading. Everything
+    else is the plant's (``q``, ``step`` …): the arm moves on.
     """
 
     def __init__(self, plant, faults, Ts: float) -> None:
-        self.plant, self.faults = plant, tuple(faults)
+        self.plant, self.faults, self.Ts = plant, tuple(faults), Ts
         nq = np.size(plant.encoders())
+        for f in self.faults:
+            f.columns(nq)  # ValueError for a joint the arm does not have
         self.windows = [(arrival_tick(f.start_s, Ts),
-                         math.inf if math.isinf(f.end_s) else arrival_tick(f.end_s, Ts),
-                         f.columns(nq)) for f in self.faults]
+                         math.inf if math.isinf(f.end_s) else arrival_tick(f.end_s, Ts))
+                        for f in self.faults]
         self._held: list[np.ndarray | None] = [None] * len(self.faults)
         self._last: np.ndarray | None = None
         self.tick = 0
@@ -101,12 +62,13 @@ class FaultyEncoders:
     def encoders(self) -> np.ndarray:
         reading = self.plant.encoders()
         i, out = self.tick, reading
-        for k, (a, b, joints) in enumerate(self.windows):
+        for k, (fault, (a, b)) in enumerate(zip(self.faults, self.windows, strict=True)):
             if a <= i < b:
                 if self._held[k] is None:
                     self._held[k] = np.array(reading if self._last is None else self._last)
-                out = np.array(out, dtype=float) if out is reading else out
-                out[joints] = self._held[k][joints]
+                rows = out[None]
+                corrupted = fault.corrupt(np.array([i * self.Ts]), rows, self._held[k])
+                out = out if corrupted is rows else corrupted[0]
         if out is not reading:
             self.held_ticks += 1
         self._last = out

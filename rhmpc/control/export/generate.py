@@ -49,7 +49,6 @@ from .layout import template_subs
 
 #: Prefix of OSQP's generated globals (``rhmpc_osqp_solver``) and workspace files.
 OSQP_PREFIX = "rhmpc_osqp_"
-_WARM_STARTS = {"shift": 0, "shift_primal": 1, "keep": 2, "none": 3}
 #: The template files, copied with their placeholders filled.
 TEMPLATES = ("rhmpc.h", "rhmpc.c", "rhmpc_mpc.c", "rhmpc_reference.c", "rhmpc_data.h",
              "CMakeLists.txt", "example/main.c")
@@ -104,7 +103,7 @@ def _brakes(mpc: RecedingHorizonMPC) -> bool:
 
 def _check(mpc: RecedingHorizonMPC) -> None:
     """Raise ExportError for what the generated code does not reproduce."""
-    qp, s = mpc.qp, mpc.settings
+    qp = mpc.qp
     if _n_extra(mpc) < 0:
         raise ExportError(f"the QP has {qp.npar} parameters, fewer than x, ref and u_prev")
     if _n_extra(mpc) not in (0, qp.ny):
@@ -113,16 +112,6 @@ def _check(mpc: RecedingHorizonMPC) -> None:
     unknown = set(MPCStats().fallbacks) - {"plan", "lq", "brake", "zero"}
     if unknown:
         raise ExportError(f"fallback source(s) {sorted(unknown)} are not exported yet")
-    if s.solver != "osqp":
-        raise ExportError(f"the exported controller's level 3 is OSQP's generated code, not "
-                          f"{s.solver}; set mpc.solver = \"osqp\"")
-    if s.osqp.adaptive_rho:
-        raise ExportError("adaptive_rho needs OSQP's KKT refactorisation, which the vectors-mode "
-                          "embedded code does not have; set mpc.osqp.adaptive_rho = false")
-    if s.osqp.polish:
-        raise ExportError("OSQP's embedded code does not polish; set mpc.osqp.polish = false")
-    if s.warm_start not in _WARM_STARTS:
-        raise ExportError(f"warm start {s.warm_start!r} is not exported")
     m, nv = qp.A.shape
     arrays = {"P": qp.P, "F": qp.F, "f0": qp.f0, "A": qp.A, "G": qp.G,
               "minimiser": qp.minimiser, "gain": qp.gain, "gain0": qp.gain0}
@@ -321,9 +310,7 @@ def _mpc_subs(mpc: RecedingHorizonMPC) -> dict[str, object]:
         "BRAKE": int(_brakes(mpc)), "BRAKE_TICKS": s.block_lengths[0],
         "PLAN_FALLBACK_TICKS": s.plan_fallback_ticks, "MAX_ITER": s.max_iter,
         "BACKOFF_MAX_TICKS": s.backoff_max_ticks,
-        "WARM_START": _WARM_STARTS[s.warm_start], "WARM_START_NAME": s.warm_start,
-        "SCREENING": int(s.screening), "PARAM_BOUNDS": int(qp.param_bounds),
-        "BOX_SCREENING": int(s.box_screening), "BOX_MAX_ITER": mpc.box.settings.max_iter,
+        "PARAM_BOUNDS": int(qp.param_bounds), "BOX_MAX_ITER": mpc.box.settings.max_iter,
         "BOX_PDAS_ITER": mpc.box.settings.pdas_iter,
         "BOX_PRIMAL_TOL": repr(float(mpc.box.settings.primal_tol)),
         "BOX_DUAL_TOL": repr(float(mpc.box.settings.dual_tol)),
@@ -333,14 +320,8 @@ def _mpc_subs(mpc: RecedingHorizonMPC) -> dict[str, object]:
 
 def _notes(controller) -> list[str]:
     """What the C does not reproduce of the Python controller."""
-    s = controller.mpc.settings
-    notes = [f"a refresh forecasts across at most {LATENCY_CAP:g} s of a sample's latency "
-             "(counts[forecast_capped] beyond)"]
-    if s.osqp.time_limit > 0:  # OSQP's embedded sources have no timer
-        notes.append(f"time_limit = {s.osqp.time_limit:g} s is not enforced in C (OSQP's "
-                     f"embedded code has no timer); a solve is bounded by max_iter = "
-                     f"{s.max_iter}")
-    return notes
+    return [f"a refresh forecasts across at most {LATENCY_CAP:g} s of a sample's latency "
+            "(counts[forecast_capped] beyond)"]
 
 
 def _data_source(controller, robot: str, key: str) -> str:

@@ -80,7 +80,7 @@ def test_streamed_run_is_the_run_on_whole_arrays(tmp_path, predictor):
     from sim.sensors import sensor_from_name
 
     config = small_config(predictor=predictor, seed=5, **{
-        "loop.duration": 4.0, "loop.settling": 1.0, "plant.dynamics": "pinocchio"})
+        "loop.duration": 4.0, "loop.settling": 1.0})
     loop, run, N = config.loop, build_run(config), config.mpc.horizon
     streamed = run_closed_loop(  # chunks of 600 ticks: 14 chunk boundaries
         run.plant, run.controller, run.truth, run.stream, loop, run.clock, anchor=run.anchor,

@@ -75,3 +75,27 @@ def test_the_split_on_the_command_line(capsys):
     assert "expected TRAIN:END" in capsys.readouterr().err
     assert main(["simulate", "--split", "1:2"]) == 2
     assert "need --data" in capsys.readouterr().err
+
+
+def test_fit_once_run_many(tmp_path):
+    """Models saved by predict --save-models load in the closed loop: the run fits nothing
+    (its model is the file's, whatever the settling window holds)."""
+    from predictors.registry import load_model
+    from rhmpc.experiment.fitting import with_models
+
+    assert main(["predict", "--data", "hamlyn-phantom", "--poi", "4", "--split", "100:150",
+                 "--predictors", "ridge", "--save-models", str(tmp_path / "m")]) == 0
+    (model,) = sorted((tmp_path / "m").iterdir())
+    saved = load_model(model, "ridge", dt=0.04)
+    loaded = build_run(with_models(_config("ridge", split=(300, 350)), [model]))
+    predictor = loaded.reference.predictor
+    assert predictor.settings.model == str(model) and predictor.fitted
+    for a, b in zip(saved.model["W"], predictor.model["W"], strict=True):
+        np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-12)
+    combination = build_run(with_models(
+        _config("combination", split=(100, 150),
+                predictor_settings={"members": ["one-step", "ridge"]}), [model]))
+    assert combination.reference.predictor.members[1].settings.model == str(model)
+    with pytest.raises(UsageError, match="one-step is not fitted before the run"):
+        with_models(_config("one-step"), [model])
+    assert with_models(_config("one-step"), [model], strict=False).predictor_settings == {}

@@ -5,17 +5,12 @@ import pytest
 
 from sim.loop.closed_loop import poi_truth
 from sim.loop.metrics import RunningTracking, TickHistogram, tracking_metrics
-from sim.loop.streams import (
-    ArraySamples,
-    SampledSamples,
-    SourceTruth,
-    StreamCursor,
-    UpsampledSamples,
-    measure,
-)
+from sim.loop.streams import SourceTruth, StreamCursor
 from sim.loop.trace import DecimatedTrace, TraceFile, read_trace
 from sim.recordings import RecordedMotion
-from sim.sensors import Dropouts, SonomicrometrySettings, Upsample, ideal, sonomicrometry
+from sim.sensors import Dropouts, Sensor, SonomicrometrySettings, Upsample, ideal, sonomicrometry
+from sim.sensors.playback import UpsampledSamples
+from sim.sensors.stream import ArraySamples, SampledSamples
 from tests.sim.loop.stand_ins import HarmonicHeart
 
 TS = 0.5e-3
@@ -157,11 +152,12 @@ def test_decimated_trace_is_bounded_and_keeps_a_full_rate_tail():
     assert trace.stride == 1000 and tick[1] - tick[0] == 1000
 
 
-def test_chunked_measure_is_the_sensor_measure():
+def test_a_sensor_samples_its_source_in_chunks(monkeypatch):
     cfg = SonomicrometrySettings(dropouts=Dropouts(rate=0.5), latency=0.004)
     sensor = sonomicrometry(cfg)
     whole = sensor.measure(HarmonicHeart(), 30.0, np.random.default_rng(8))
-    chunked = measure(sensor, HarmonicHeart(), 30.0, np.random.default_rng(8), chunk=1000)
+    monkeypatch.setattr(Sensor, "CHUNK", 1000)
+    chunked = sensor.measure(HarmonicHeart(), 30.0, np.random.default_rng(8))
     np.testing.assert_array_equal(chunked.t, whole.t)
     np.testing.assert_array_equal(chunked.arrival, whole.arrival)
     np.testing.assert_array_equal(np.isnan(chunked.z), np.isnan(whole.z))

@@ -5,13 +5,6 @@
 #include "rhmpc.h"
 
 /* the MPC (rhmpc.control.mpc, rhmpc.control.settings.MPCSettings) */
-#define RHMPC_WS_SHIFT 0
-#define RHMPC_WS_SHIFT_PRIMAL 1
-#define RHMPC_WS_KEEP 2
-#define RHMPC_WS_NONE 3
-#define RHMPC_WARM_START @WARM_START@ /* settings.warm_start = "@WARM_START_NAME@" */
-#define RHMPC_SCREENING @SCREENING@
-#define RHMPC_BOX_SCREENING @BOX_SCREENING@ /* level 2 of the cascade (settings.box_screening) */
 #define RHMPC_BOX_MAX_ITER @BOX_MAX_ITER@ /* Cholesky solves of level 2 per tick, in all */
 #define RHMPC_BOX_PDAS_ITER @BOX_PDAS_ITER@ /* of which the primal-dual active set's */
 #define RHMPC_BOX_PRIMAL_TOL @BOX_PRIMAL_TOL@
