@@ -11,7 +11,8 @@ Layers, from the bottom (peers of one layer do not import each other):
    ``sim.plant``; ``sim.recordings`` and ``sim.sensors`` (they read ``sim.heart``'s motion
    sources); ``sim.sources`` (a scenario or a recording); ``sim.loop``
 3. ``rhmpc.experiment``
-4. ``rhmpc.studies``, ``rhmpc.tuning``
+4. ``rhmpc.studies``, ``rhmpc.tuning``; above them ``rhmpc.runtime`` (the deployment's
+   processes, which reuse the tuning's processes that die with their parent)
 5. ``rhmpc.cli``
 
 Every ``import`` statement counts, including those inside functions (deferred imports are
@@ -49,6 +50,7 @@ LAYERS: tuple[tuple[str, float, str], ...] = (
     ("rhmpc.experiment", 3, "rhmpc.experiment"),
     ("rhmpc.studies", 4, "rhmpc.studies"),
     ("rhmpc.tuning", 4, "rhmpc.tuning"),
+    ("rhmpc.runtime", 4.5, "rhmpc.runtime"),
     ("rhmpc.cli", 5, "rhmpc.cli"),
 )
 PACKAGES = ("boundary", "robots", "predictors", "sim", "rhmpc")

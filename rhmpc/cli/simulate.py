@@ -34,7 +34,7 @@ def add_run_options(
 ) -> None:
     """Options shared by ``simulate`` and ``compare`` (``duration``/``settling``: for the help)."""
     p.add_argument("--config", metavar="FILE.toml", help="every setting of the run (TOML)")
-    p.add_argument("--robot", help="robot name (rhmpc robots); default phantom")
+    p.add_argument("--robot", help="a robot (rhmpc robots) or robot file X.toml; default phantom")
     p.add_argument("--sensor", help="sonomicrometry (default; the instrument from its "
                    "physics), white (additive white noise), ultrasound, video (stereo video "
                    "tracking, 25 Hz), ideal; 'recorded' uses a "

@@ -42,9 +42,10 @@ import numpy as np
 
 import boundary
 from rhmpc.control.mpc import MPCStats, RecedingHorizonMPC
-from rhmpc.control.reference import PredictedReference
+from rhmpc.control.reference import LATENCY_CAP, PredictedReference
 
 from .dynamics import cancel_function, generate, offset_function
+from .layout import template_subs
 
 #: Prefix of OSQP's generated globals (``rhmpc_osqp_solver``) and workspace files.
 OSQP_PREFIX = "rhmpc_osqp_"
@@ -53,9 +54,6 @@ TEMPLATES = ("rhmpc.h", "rhmpc.c", "rhmpc_mpc.c", "rhmpc_reference.c", "rhmpc_da
              "CMakeLists.txt", "example/main.c")
 #: The predictors the exported controller runs (the registry's names and their classes').
 PREDICTORS = {"one-step": "OneStepRLS", "generalized": "GeneralizedRLS"}
-#: The latest sample a refresh forecasts across [s]: K is capped at prediction_points +
-#: ⌈LATENCY_CAP / dt⌉ (``counts[forecast_capped]``).
-LATENCY_CAP = 0.25
 
 
 class ExportError(ValueError):
@@ -291,13 +289,13 @@ def _reference_subs(reference) -> dict[str, object]:
 
 
 def _controller_arrays(controller) -> dict[str, np.ndarray]:
-    """The observer's matrices, the torque limits, q0 and y0."""
+    """The observer's matrices, the torque limits, q0, y0 and the output map C (y = C x + y0)."""
     arm, n = controller.mpc.arm, controller.nu
     predict = np.hstack([controller.observer.predict_matrix, np.zeros((2 * n, 1))])
     return {"correct": np.asarray(controller.observer.correct_matrix), "predict": predict,
             "tau_max": controller.torque_limit, "q0": np.asarray(arm.q0, dtype=float),
             "gate": np.asarray(controller.observer.gate, dtype=float),
-            "y0": np.asarray(arm.y0, dtype=float)}
+            "y0": np.asarray(arm.y0, dtype=float), "output": np.asarray(arm.C, dtype=float)}
 
 
 def _mpc_subs(mpc: RecedingHorizonMPC) -> dict[str, object]:
@@ -364,6 +362,7 @@ def _generate_into(controller, robot: str, out: Path) -> tuple[list[str], list[s
     for leftover in ("emosqp.c", "Makefile"):  # OSQP's example program (printf, main)
         (out / "osqp" / leftover).unlink(missing_ok=True)
     notes = _notes(controller)
+    robot = getattr(getattr(mpc.arm, "robot", None), "name", robot)  # a name, not a file's path
     subs = {"ROBOT": robot, "ROBOT_ID": "".join(c if c.isalnum() else "_" for c in robot),
             "VERSION": _version("rhmpc"), "OSQP_VERSION": _version("osqp"),
             "REACQUIRE_TICKS": controller.observer.settings.reacquire_ticks,
@@ -371,7 +370,8 @@ def _generate_into(controller, robot: str, out: Path) -> tuple[list[str], list[s
             "INPUT_DELAY": controller.input_delay, "CANCEL": int(controller.cancellation
                                                                  is not None),
             **_mpc_subs(mpc), **_reference_subs(controller.reference),
-            **sizes, "NOTES": "".join(f"\n * - {n}." for n in notes)}
+            **sizes, **template_subs(), "LATENCY_CAP": repr(LATENCY_CAP),
+            "NOTES": "".join(f"\n * - {n}." for n in notes)}
     key = hashlib.sha256(repr(sorted(subs.items())).encode())
     data = _data_source(controller, robot, "@HASH@")
     key.update(data.encode())

@@ -167,6 +167,49 @@ def test_an_unreachable_reference_backs_off_alike():
 
 @needs_cc
 @pytest.mark.slow
+def test_forecasts_from_outside_are_taken_alike():
+    """A predictor outside the controller sends forecasts (here the motion's own future, K = 5
+    points 7.5 ms apart) on most samples while the controller's RLS keeps refreshing: the same
+    torques and counters tick for tick, through a stretch without forecasts (its own RLS serves
+    again), points not finite, too many points, a stamp older than the last, one older than
+    the cap, and a forecast far off (the guard holds its first point)."""
+    python, c = pair({})
+    Ts, ticks, every = python.mpc.arm.Ts, 3000, 15
+    samples = bench_samples(Ts, ticks)
+    traj = heart_like_reference(ticks + 200, Ts, np.random.default_rng(0), np.zeros(3),
+                                jump=2e-3, jump_every=1000)
+    taken = {"python": [], "c": []}
+
+    def send(k):
+        if k % every != 2 or 400 <= k < 700:
+            return None
+        first = k - 2 - (2 * every if k == 1202 else 0) - (600 if k == 1802 else 0)
+        points = traj[first + every * np.arange(5)].copy()
+        if k == 902:
+            points[3, 1] = np.nan
+        if k == 1502:
+            points[1:] += 0.05
+        if k == 2102:
+            points = traj[first + np.arange(40)]
+        return first * Ts, points
+
+    def faults(k, python, c):
+        sent = send(k)
+        if sent is not None:
+            taken["python"].append(python.forecast(k, *sent))
+            taken["c"].append(c.forecast(k, *sent))
+
+    err, differ = lockstep(python, c, ticks, samples, faults)
+    assert differ == [] and err.max() <= TOL
+    assert taken["python"] == taken["c"] and taken["python"].count(False) == 4
+    assert_same_counters(python, c)
+    counts = python.predictor_counts
+    assert (counts["external_rejected"], counts["external_stale"]) == (2, 2)
+    assert counts["reference_guard"] >= 1 and counts["external"] == len(taken["c"]) - 4
+
+
+@needs_cc
+@pytest.mark.slow
 def test_a_slow_sensor_refreshes_on_each_sample_alike():
     """A 25-Hz video-like sensor: the sensor clock (the predictor at 40 ms, the forecast across
     the latency), samples 60 ms old on arrival."""
@@ -287,3 +330,7 @@ def test_cmake_builds_the_libraries_and_the_example_runs(tmp_path, capsys):
     run = subprocess.run([str(build / "rhmpc_example"), "0.5"], capture_output=True, text=True,
                          check=True, timeout=60)
     assert "refreshes" in run.stdout and "status solved" in run.stdout, run.stdout
+    for bad in ("inf", "nan", "-1", "1e9", "2s"):  # a duration it refuses, on one line
+        run = subprocess.run([str(build / "rhmpc_example"), bad], capture_output=True,
+                             text=True, timeout=60)
+        assert run.returncode == 2 and run.stdout == "" and len(run.stderr.splitlines()) == 1

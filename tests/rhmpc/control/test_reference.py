@@ -1,5 +1,7 @@
 """Cubic interpolation of the predictor's points into the N control-rate references."""
 
+from collections import Counter
+
 import numpy as np
 import pytest
 
@@ -25,7 +27,7 @@ class Scripted:
     """A 'predictor' that knows the signal f(t): its forecasts are exact at its own grid."""
 
     def __init__(self, f, dt=DS * TS):
-        self.f, self.dt = f, dt
+        self.f, self.dt, self.counts = f, dt, Counter()
         self.reset()
 
     def reset(self):
@@ -331,3 +333,30 @@ def test_a_fixed_gate_floor_is_used_as_given():
     assert not gate.accept(np.array([2e-3, 0, 0]), np.zeros(3), {"outliers_rejected": 0})
     with pytest.raises(ValueError, match="> 0"):
         OutlierGate(-1.0)
+
+
+def test_a_forecast_from_outside_serves_until_refreshes_take_over_again():
+    """A quadratic's nodes sent from outside are reproduced at every tick; the refreshes
+    within ``refresh_ticks`` after it leave the points alone, later ones interpolate again;
+    points not finite, or older than the last, are counted and not taken."""
+    f = lambda t: 1e-3 + 0.2 * t - 3.0 * t**2  # noqa: E731
+    g = lambda t: -f(t)  # noqa: E731
+    ref, _, tick = build(f)
+    dt = ref.dt
+    stamp = (tick - 2) * TS
+    nodes = np.column_stack([g(stamp + dt * np.arange(6)), np.zeros(6)])
+    assert ref.forecast(tick, stamp, nodes)
+    t = (tick + np.arange(1, N + 1)) * TS
+    np.testing.assert_allclose(ref.horizon(tick)[:, 0], g(t), atol=1e-15)
+    soon = tick + DS - 1  # within refresh_ticks (DS) of the forecast
+    ref.refresh(soon, np.array([f(soon * TS), soon * TS]), soon * TS)
+    np.testing.assert_allclose(ref.horizon(soon)[:, 0], g(t + (DS - 1) * TS), atol=1e-15)
+    assert not ref.forecast(soon, stamp - TS, nodes)  # older than the last one taken
+    bad = nodes.copy()
+    bad[2, 0] = np.nan
+    assert not ref.forecast(soon, stamp, bad)
+    later = tick + 2 * DS
+    ref.refresh(later, np.array([f(later * TS), later * TS]), later * TS)
+    np.testing.assert_allclose(ref.horizon(later)[:, 0], f(t + 2 * DS * TS), atol=1e-15)
+    counts = ref.predictor.counts
+    assert (counts["external"], counts["external_stale"], counts["external_rejected"]) == (1, 1, 1)

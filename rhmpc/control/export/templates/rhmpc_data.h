@@ -78,6 +78,8 @@ extern const double rhmpc_y_plan[RHMPC_M];
 extern const double rhmpc_correct[RHMPC_NX * (RHMPC_NX + RHMPC_NU + 1)];
 extern const double rhmpc_predict[RHMPC_NX * (RHMPC_NX + RHMPC_NU + 1)];
 extern const double rhmpc_gate[RHMPC_NU]; /* the observer's innovation gate per joint [rad] */
+/* The MPC's output map C (NY x NX): the tool's position y = C x + y0 in its linear model [m]. */
+extern const double rhmpc_output[RHMPC_NY * RHMPC_NX];
 
 /* The functions the controller's files share */
 void rhmpc_mpc_reset(rhmpc_t *ctl);
@@ -86,4 +88,6 @@ int rhmpc_mpc_tick(rhmpc_t *ctl, const double x[RHMPC_NX], const double *ref, co
 int rhmpc_mpc_brake(rhmpc_t *ctl, const double x[RHMPC_NX], int status, double tau[RHMPC_NU]);
 void rhmpc_reference_reset(rhmpc_t *ctl);
 int rhmpc_reference_refresh(rhmpc_t *ctl, long long tick, double stamp, const double *z);
+int rhmpc_reference_forecast(rhmpc_t *ctl, long long tick, double stamp, const double *points,
+                             int count);
 #endif
