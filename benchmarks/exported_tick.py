@@ -98,8 +98,8 @@ def plant_tick(label: str, ticks: int = 4000) -> dict:
 
     import numpy as np
 
-    from rhmpc.control.yardstick import GainTick
     from rhmpc.experiment import RunConfig, build_run
+    from rhmpc.studies.yardstick import GainTick
 
     config = RunConfig(predictor="generalized", seed=2)
     if label != "ideal":

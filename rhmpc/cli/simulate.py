@@ -367,7 +367,7 @@ def run(args: argparse.Namespace) -> int:
     stalls = getattr(args, "host_stalls", 0.0)
     check_host_stalls(stalls)
     try:
-        from rhmpc.control.yardstick import GainTick  # timed in the same run
+        from rhmpc.studies.yardstick import GainTick  # timed in the same run
 
         result, doc = run_experiment(config, progress=not args.json, trace=trace,
                                      gain_tick=GainTick, implementation=args.controller)

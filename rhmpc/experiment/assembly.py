@@ -21,12 +21,13 @@ from rhmpc.control.reference import ExactReference, PredictedReference
 from rhmpc.errors import UsageError
 from rhmpc.experiment.config import RunConfig, with_split
 from rhmpc.experiment.fitting import fit_predictor
+from rhmpc.experiment.monitor import HeartRateScore
 from robots import LinearArm, Robot, linearize, load_robot
 from sim.loop.clock import PredictorClock, clock_for_rate, predictor_clock
 from sim.loop.faults import FaultyEncoders, split_faults
-from sim.loop.metrics import HeartRateScore
-from sim.loop.streams import PointsAt, SourceTruth
+from sim.loop.streams import SourceTruth
 from sim.plant import make_plant
+from sim.recordings.points import PointsAt
 from sim.sensors import DEFAULT_PLAYBACK, SampleStream, Sensor, playback, sensor_from_name
 from sim.sensors.faults import FaultySamples
 from sim.sensors.playback import UpsampledSamples, sensor_samples

@@ -14,8 +14,8 @@ import numpy as np
 
 from rhmpc.experiment.assembly import Run, build_run
 from rhmpc.experiment.config import RunConfig
+from rhmpc.experiment.faults import fault_marks, fault_report
 from sim.loop import LoopResult, run_closed_loop
-from sim.loop.faults import fault_marks, fault_report
 from sim.sensors import DEFAULT_PLAYBACK
 
 
@@ -42,7 +42,8 @@ def run_experiment(config: RunConfig, progress: bool = False, trace: str | None 
     timed in the run on every 64th tick so that the document has ``gain_tick_us`` and the
     tick's ratios to its p50 (``tick_ratio_to_gain``). ``implementation``: ``"python"`` or
     ``"c"`` (:func:`~rhmpc.experiment.assembly.build_run`). With faults (``config.faults``),
-    the document's ``faults`` holds one record per fault (:func:`sim.loop.faults.fault_report`).
+    the document's ``faults`` holds one record per fault
+    (:func:`rhmpc.experiment.faults.fault_report`).
     """
     run = build_run(config, implementation, _say if progress else None)
     config = run.config  # its span set by its split, if any

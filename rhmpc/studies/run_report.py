@@ -3,8 +3,8 @@
 
 from __future__ import annotations
 
+from rhmpc.experiment.faults import REPORTED as FAULT_COUNTS
 from rhmpc.studies.figures import plot_run as plot_run
-from sim.loop.faults import REPORTED as FAULT_COUNTS
 
 
 def _seconds(x: float) -> str:

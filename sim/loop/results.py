@@ -54,7 +54,7 @@ class LoopResult:
     settings: object  # sim.loop.LoopSettings
     trace: dict  # field -> array over the traced ticks
     stride: int  # ticks between traced samples before the full-rate tail
-    #: tracking_metrics after settling: at every tick against the truth, or with
+    #: the tracking metrics after settling: at every tick against the truth, or with
     #: ``measured`` at the recorded samples' instants (:class:`~sim.loop.metrics.MeasuredScore`;
     #: the all-tick score against the samples' interpolant then in ``interpolated``)
     tracking: dict

@@ -4,8 +4,9 @@ the report of what each fault did (the closed loop itself: tests/rhmpc/experimen
 import numpy as np
 import pytest
 
+from rhmpc.experiment.faults import fault_marks, fault_report
 from sim.loop.closed_loop import chunks
-from sim.loop.faults import FaultyEncoders, fault_marks, fault_report, split_faults
+from sim.loop.faults import FaultyEncoders, split_faults
 from sim.sensors import SampleStream, Upsample
 from sim.sensors.faults import EncoderStick, FaultySamples, NaNBurst, SensorFreeze, StreamJump
 from sim.sensors.playback import UpsampledSamples

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from sim.loop.closed_loop import poi_truth
-from sim.loop.metrics import RunningTracking, TickHistogram, tracking_metrics
+from sim.loop.metrics import RunningTracking, TickHistogram, rms
 from sim.loop.streams import SourceTruth, StreamCursor
 from sim.loop.trace import DecimatedTrace, TraceFile, read_trace
 from sim.recordings import RecordedMotion
@@ -14,6 +14,23 @@ from sim.sensors.stream import ArraySamples, SampledSamples
 from tests.sim.loop.stand_ins import HarmonicHeart
 
 TS = 0.5e-3
+
+
+
+def tracking_metrics(error: np.ndarray, tau_mpc: np.ndarray, tau_total: np.ndarray) -> dict:
+    """3-D position error RMS / max [mm] and RMS control effort [mN·m] over the given ticks.
+
+    ``error`` is (n, 3) end-effector minus POI in metres; efforts are (n, nv) in N·m. The effort
+    is the RMS over time of the Euclidean norm of the joint torque vector.
+    """
+    norm = np.linalg.norm(error, axis=1)
+    return {
+        "rms_error_mm": float(1e3 * rms(norm)),
+        "max_error_mm": float(1e3 * np.nanmax(norm)) if norm.size else float("nan"),
+        "rms_error_axis_mm": (1e3 * rms(error, axis=0)).tolist(),
+        "rms_effort_mNm": float(1e3 * rms(np.linalg.norm(tau_mpc, axis=1))),
+        "rms_total_torque_mNm": float(1e3 * rms(np.linalg.norm(tau_total, axis=1))),
+    }
 
 
 def raw_stream(latency=0.0):
