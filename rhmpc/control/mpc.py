@@ -145,8 +145,9 @@ class RecedingHorizonMPC(FallbackChain):
         self._q[qp.nz:] = qp.f0[qp.nz:]
         self._q_z = self._q[: qp.nz]
         self._F_z = np.ascontiguousarray(self._F_ext[: qp.nz])
-        self.box = BoxQP(qp.P[: qp.nz, : qp.nz],
-                         BoxQPSettings(max_iter=self.settings.box_max_iter))
+        cap = self.settings.box_max_iter
+        self.box = BoxQP(qp.P[: qp.nz, : qp.nz], BoxQPSettings(
+            max_iter=BoxQPSettings.pdas_iter + qp.nz if cap is None else cap))
         self._K_z = np.ascontiguousarray(self.box._negW @ self._F_z)
         self._A_env = np.ascontiguousarray(qp.A[qp.nv:, : qp.nz])
         self._g_env = np.empty(qp.A.shape[0] - qp.nv)

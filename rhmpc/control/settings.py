@@ -122,9 +122,11 @@ class MPCSettings:
     osqp_eps_abs : float
         OSQP's absolute termination tolerance on the primal and dual residuals, on the QP
         scaled by u_max (inputs of magnitude ≤ 1) [-]; the relative one is 0.
-    box_max_iter : int
+    box_max_iter : int or None
         Cap on level 2's active-set solves (Cholesky factorisations of at most nz × nz) per
-        tick [-]; past it the tick takes the fallback (:mod:`rhmpc.control.box_qp`).
+        tick [-]; past it the tick takes the fallback (:mod:`rhmpc.control.box_qp`). None
+        (default): its PDAS solves plus nz, those of a dual phase in which every torque bound
+        enters once and none leaves (Goldfarb & Idnani 1983).
     backoff_max_ticks : int
         Longest rest of levels 2 and 3 after consecutive failed ticks [ticks]: after k of
         them the next ``min(2ᵏ − 1, backoff_max_ticks)`` ticks take the fallback unless level
@@ -160,7 +162,7 @@ class MPCSettings:
     max_iter: int = 10
     osqp_rho: float = 3.0
     osqp_eps_abs: float = 1e-3
-    box_max_iter: int = 24
+    box_max_iter: int | None = None
     backoff_max_ticks: int = 255
     plan_fallback_ticks: int = 10
 
@@ -245,7 +247,8 @@ class MPCSettings:
         _finite("osqp_rho", self.osqp_rho, positive=True)
         _finite("osqp_eps_abs", self.osqp_eps_abs, positive=True)
         _integer("plan_fallback_ticks", self.plan_fallback_ticks, 0)
-        _integer("box_max_iter", self.box_max_iter, 1)
+        if self.box_max_iter is not None:
+            _integer("box_max_iter", self.box_max_iter, 1)
         _integer("backoff_max_ticks", self.backoff_max_ticks, 0)
         if self.backoff_max_ticks > 2**30:
             raise ValueError(f"backoff_max_ticks must be <= 2**30, got {self.backoff_max_ticks}")
