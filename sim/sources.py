@@ -15,7 +15,7 @@ import numpy as np
 from sim.heart.motion import MotionSource
 from sim.heart.scenarios import SPECS, Scenario, make_scenario
 from sim.recordings.files import load_recording
-from sim.recordings.points import load_poi
+from sim.recordings.points import PointsAt, load_poi
 from sim.recordings.recorded import RecordedMotion
 from sim.recordings.text import export_source
 
@@ -56,6 +56,20 @@ class HeartSource:
     duration: float
     origin: Scenario | RecordedMotion
     others: np.ndarray | None = None
+
+    @property
+    def measured(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """A recording's own samples, (t [s] from 0, z (n, d) [m]); None for a scenario."""
+        if not isinstance(self.origin, RecordedMotion):
+            return None
+        return self.origin.t - self.origin.t[0], self.origin.z
+
+    @property
+    def points(self) -> PointsAt | None:
+        """The other tracked points of a recording on its samples' times from 0, or None."""
+        if self.others is None:
+            return None
+        return PointsAt(self.origin.t - self.origin.t[0], self.others)
 
 
 def heart_source(scenario: str, rng: np.random.Generator, *, data: str | None = None,

@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from rhmpc.cli import build_parser
-from rhmpc.cli.presets import PRESETS
+from rhmpc.experiment.presets import PRESETS
 from rhmpc.experiment import RunConfig
 from rhmpc.studies.paper import paper_table
 
