@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from sim.heart.motion import MotionSource
-from sim.heart.scenarios import SPECS, Scenario, make_scenario
+from sim.heart.scenarios import Scenario, make_scenario
 from sim.recordings.files import load_recording
 from sim.recordings.points import PointsAt, load_poi
 from sim.recordings.recorded import RecordedMotion
@@ -75,12 +75,14 @@ class HeartSource:
 def heart_source(scenario: str, rng: np.random.Generator, *, data: str | None = None,
                  data_read: dict | None = None, rr: str | None = None,
                  needed: float = 0.0) -> HeartSource:
-    """The motion of a recording (``data``, read with ``data_read``) or of a named scenario.
+    """The motion of a recording (``data``, read with ``data_read``) or of a named scenario
+    (:func:`sim.heart.make_scenario`, the one builder of a scenario).
 
-    A scenario's random processes (HRV, drift, breathing) are drawn over its nominal length or
-    ``needed`` seconds, whichever is longer; past that they would be extrapolated polynomials.
-    Only a longer run asks for more, so the draws of shorter runs stay the same. ``rr``: a
-    PhysioNet record whose beat annotations drive the heart phase.
+    A scenario is made ``needed`` seconds long: its random processes (HRV, drift, breathing)
+    are drawn over its nominal length or ``needed`` seconds, whichever is longer (past that
+    they would be extrapolated polynomials), so that only a run longer than the nominal
+    length changes the draws. ``rr``: a PhysioNet record whose beat annotations drive the
+    heart phase.
     """
     if data is not None:
         recording, others = read_points(data, data_read or {})
@@ -88,8 +90,7 @@ def heart_source(scenario: str, rng: np.random.Generator, *, data: str | None = 
         return HeartSource(motion, f"file:{Path(data).name}", recording.duration, recording,
                            others)
     overrides: dict = {"record": rr} if rr else {}
-    spec = SPECS.get(scenario)  # an unknown name: make_scenario says so
-    if spec is not None and needed > spec.duration:
+    if needed > 0:
         overrides["duration"] = needed
     made = make_scenario(scenario, rng=rng, **overrides)
     label = made.name + (f"+rr:{Path(rr).name}" if rr else "")

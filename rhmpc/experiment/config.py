@@ -15,7 +15,7 @@ from rhmpc.control.observer import ObserverSettings
 from rhmpc.control.reference import ReferenceSettings
 from rhmpc.control.settings import MPCSettings
 from rhmpc.errors import UsageError
-from rhmpc.experiment.presets import apply_preset
+from rhmpc.experiment.presets import preset_settings
 from rhmpc.experiment.tables import from_dict, replace_settings, to_dict
 from sim.loop import LoopSettings
 from sim.plant import HardwareSettings, PlantSettings
@@ -274,10 +274,10 @@ def run_config(file: str | Path | None = None, preset: str | None = None,
     ``data_read``) makes the sensor ``recorded`` unless ``sensor`` is given and, without a
     ``file``, ``loop.duration`` or ``split``, the run as long as the recording; ``split`` sets
     the settling and the duration (:func:`with_split`), ``models`` the saved models the
-    predictor loads (:func:`rhmpc.experiment.fitting.with_models`). The run must be scored on
+    predictor loads (:func:`rhmpc.experiment.fitting.model_settings`). The run must be scored on
     at least :data:`MIN_SCORED` seconds. A bad source is a one-line ``UsageError``.
     """
-    from rhmpc.experiment.fitting import with_models
+    from rhmpc.experiment.fitting import model_settings
 
     options = dict(options or {})
     if options.get("split") is not None and {"loop.duration", "loop.settling"} & set(options):
@@ -287,8 +287,8 @@ def run_config(file: str | Path | None = None, preset: str | None = None,
     if missing:
         raise UsageError(f"--train: no such file {', '.join(missing)}")
     recording = _recording(options, whole=file is None) if options.get("data") else None
-    config = apply_preset(load_config(file) if file else RunConfig(), preset)
-    changes = {**options, **parse_sets(sets)}
+    config = load_config(file) if file else RunConfig()
+    changes = {**preset_settings(preset), **options, **parse_sets(sets)}
     if faults:
         changes["faults.events"] = (*changes.get("faults.events", config.faults.events),
                                     *_checked_faults(faults))
@@ -297,7 +297,8 @@ def run_config(file: str | Path | None = None, preset: str | None = None,
                                                                       options["data_read"]):
         recording = None  # --set read another recording
     config = with_split(config, recording)
-    config = with_models(config, models)
+    if models:
+        config = config.replace(**model_settings(config, models))
     check_scoring(config)
     return config
 

@@ -49,9 +49,8 @@ PRESETS: dict[str, dict[str, Any]] = {
 }
 
 
-def apply_preset(config, name: str | None):
-    """``config`` (a :class:`~rhmpc.experiment.config.RunConfig`) with the preset's settings
-    (``name`` None: unchanged).
+def preset_settings(name: str | None) -> dict[str, Any]:
+    """The dotted settings of preset ``name`` (``None``: none).
 
     Raises
     ------
@@ -59,7 +58,13 @@ def apply_preset(config, name: str | None):
         Unknown preset (the message lists the valid ones).
     """
     if name is None:
-        return config
+        return {}
     if name not in PRESETS:
         raise UsageError(f"unknown preset {name!r}; valid: {', '.join(PRESETS)}")
-    return config.replace(**PRESETS[name])
+    return dict(PRESETS[name])
+
+
+def apply_preset(config, name: str | None):
+    """``config`` (a :class:`~rhmpc.experiment.config.RunConfig`) with the settings of preset
+    ``name`` (:func:`preset_settings`)."""
+    return config.replace(**preset_settings(name)) if name is not None else config

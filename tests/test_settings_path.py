@@ -1,11 +1,14 @@
 """The path of a run's settings, measured: the repository files a command's calls cross on
 their way from the command line to the closed loop.
 
-``python -m tests.settings_path [rhmpc arguments]`` runs the command (by default ``rhmpc
+``python -m tests.test_settings_path [rhmpc arguments]`` runs the command (by default ``rhmpc
 simulate`` on the default scenario and on a recording) under :func:`sys.setprofile` up to the
 call of :func:`sim.loop.run_closed_loop` (the loop itself is not run), ignores library files
 and the module bodies an import runs, and prints
 
+- ``files_crossed``, ``returns_crossed``: the repository files entered by any call, and the
+  places where a call enters a file already entered from another place (the components'
+  own insides included: the MPC's build, the robot's model);
 - ``files``: the repository files the settings enter, from the command line
   (``rhmpc.cli.main``) and from ``run_experiment`` on: a call carries the settings when an
   argument is the command's options (their namespace, or a ``dict`` of settings by name), the
@@ -24,7 +27,9 @@ and the module bodies an import runs, and prints
 - ``scenarios_entered``, ``heart_returns``: while the heart is built, the entries (whatever
   they carry) into ``sim/heart/scenarios.py``, and the returns among the ``sim/heart`` files;
 - ``name_hops``, ``name_files``: the calls that take the predictor's name as an argument, from
-  ``run_experiment`` to the predictor's constructor (that call included), and their files.
+  ``run_experiment`` to the predictor's constructor (that call included), and their files;
+- ``recording_reads``: the times a recording is read (``load_recording``, ``load_poi``,
+  ``load_points`` called from outside ``sim/recordings``).
 """
 
 from __future__ import annotations
@@ -35,6 +40,8 @@ import re
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
+
+import pytest
 
 from tests.test_layers import layer_of, module_name
 
@@ -103,6 +110,7 @@ class Crossing:
     experiment: int = 0  #: the index of ``run_experiment``'s entry
     heart: tuple[int, int] = (0, 0)  #: the entries made while the heart was built
     hops: list[Entry] = field(default_factory=list)  #: the predictor's name's calls
+    reads: int = 0  #: the times the recording is read
 
     @property
     def entries(self) -> list[Entry]:
@@ -124,7 +132,10 @@ class Crossing:
         heart = [e for e in self.everything[slice(*self.heart)]
                  if e.callee.startswith("sim/heart/")]
         entries = self.entries
+        crossed = {e.callee for e in self.everything}
         return {
+            "files_crossed": len(crossed),
+            "returns_crossed": len(self.everything) - len(crossed),
             "files": len(self.files()),
             "files_from_experiment": len(self.files(self.experiment)),
             "entries": len(entries),
@@ -135,6 +146,7 @@ class Crossing:
             "heart_returns": len(heart) - len({e.callee for e in heart}),
             "name_hops": len(self.hops),
             "name_files": len({e.callee for e in self.hops}),
+            "recording_reads": self.reads,
         }
 
 
@@ -204,6 +216,9 @@ def trace(argv: list[str], heart_builder: str = "build_heart") -> Crossing:
             if built or any(isinstance(v, str) and v == name for v in args):
                 out.hops.append(Entry(caller[0], line, callee, code.co_name))
             state["built"] = built
+        if code.co_name in ("load_recording", "load_points", "load_poi") and callee.startswith(
+                "sim/recordings/") and not str(caller[0]).startswith("sim/recordings/"):
+            out.reads += 1
         if code is loop_code:
             raise _Reached
 
@@ -238,10 +253,11 @@ def report(argv: list[str], **kwargs) -> str:
     return "\n".join(lines)
 
 
-#: The runs measured by default: the main job and a recording.
+#: The runs measured by default: the main job, a recording, a recording's split with a preset.
 RUNS = (
     ["simulate", "--duration", "1", "--settling", "0.5"],
     ["simulate", "--data", "hamlyn-phantom", "--duration", "2", "--settling", "1"],
+    ["simulate", "--data", "hamlyn-phantom", "--split", "600:650", "--preset", "tuna2013"],
 )
 
 if __name__ == "__main__":
@@ -252,3 +268,96 @@ if __name__ == "__main__":
     for argv in [args] if args else RUNS:
         print(report(list(argv), heart_builder=builder))
 
+
+
+DOC = REPO / "docs" / "design" / "index.md"
+#: The chain's files in the order the settings first enter them, each with the file that
+#: hands them the settings: the command builds the RunConfig, then runs it (the loop's file
+#: may be entered first by a predictor's fitting, which reads the settling window as the loop
+#: delivers it).
+CHAIN = {"rhmpc/experiment/config.py": "rhmpc/cli/simulate.py",
+         "rhmpc/experiment/run.py": "rhmpc/cli/simulate.py",
+         "rhmpc/experiment/assembly.py": "rhmpc/experiment/run.py",
+         "sim/loop/closed_loop.py": "rhmpc/experiment/run.py"}
+#: The files whose hand-offs the design page's table lists.
+HANDING = ("rhmpc/cli/simulate.py", *list(CHAIN)[:-1], "sim/sources.py")
+#: The one call that climbs a layer: the gain tick the command hands down to be timed.
+YARDSTICK = ("rhmpc/experiment/run.py", "rhmpc/studies/yardstick.py")
+
+
+def drawn_handoffs(text: str) -> set[tuple[str, str]]:
+    """(from, to) of each row of the design page's table of the settings' hand-offs."""
+    section = text.split("## The path of a run's settings", 1)[1].split("\n## ", 1)[0]
+    rows = re.findall(r"^\| `([^`]+)` \| `([^`]+)` \|", section, re.M)
+    return set(rows)
+
+
+def _drawn(edge: tuple[str, str], drawn: set[tuple[str, str]]) -> bool:
+    """Whether ``edge`` is a row of ``drawn`` (a drawn folder standing for its files)."""
+    return any(edge[0] == a and (edge[1] == b or (b.endswith("/") and edge[1].startswith(b)))
+               for a, b in drawn)
+
+
+@pytest.fixture(scope="module")
+def crossings(tmp_path_factory) -> list[Crossing]:
+    """The runs of :data:`RUNS`, then the split's run with a saved ridge model (``--model``)."""
+    from rhmpc.cli import main
+
+    folder = tmp_path_factory.mktemp("models")
+    assert main(["predict", "--data", "hamlyn-phantom", "--split", "100:150", "--predictors",
+                 "ridge", "--save-models", str(folder)]) == 0
+    (model,) = sorted(folder.iterdir())
+    return [trace(list(argv)) for argv in (*RUNS, [*RUNS[-1], "--predictor", "ridge",
+                                                   "--model", str(model)])]
+
+
+@pytest.mark.slow
+def test_the_settings_go_down_the_drawn_chain(crossings: list[Crossing]) -> None:
+    """Every hand-off from a file of the chain is a row of the design page's table, and
+    every row is taken by one of the runs; the chain's files are first entered in order, from
+    the file that hands them the settings; nothing calls back into a file further up the
+    stack, and the only call up a layer is the gain tick."""
+    drawn = drawn_handoffs(DOC.read_text(encoding="utf-8"))
+    taken = set()
+    for crossing in crossings:
+        handed = {(e.caller, e.callee) for e in crossing.entries if e.caller in HANDING}
+        assert [edge for edge in handed if not _drawn(edge, drawn)] == []
+        taken |= {(e.caller, e.callee) for e in crossing.everything}
+        first = {}
+        for e in crossing.everything:
+            first.setdefault(e.callee, e.caller)
+        assert [f for f in first if f in CHAIN] == list(CHAIN)
+        assert {f: first[f] for f in list(CHAIN)[:-1]} == dict(list(CHAIN.items())[:-1])
+        assert [e for e in crossing.everything if e.back and e.caller in HANDING] == []
+        assert {(e.caller, e.callee) for e in crossing.upward()} == {YARDSTICK}
+    assert [row for row in drawn if not any(_drawn(edge, {row}) for edge in taken)] == []
+
+
+@pytest.mark.slow
+def test_a_heart_is_built_in_one_place_and_a_name_resolved_once(
+        crossings: list[Crossing]) -> None:
+    """The heart is entered once, by the scenario's builder, from the run's heart source; the
+    predictor's name reaches its class through the registry's one lookup (``resolve``), and
+    a recording is read at most twice (its span, its samples)."""
+    scenario, *recordings, _ = crossings
+    heart = [e for e in scenario.everything[slice(*scenario.heart)]
+             if e.callee.startswith("sim/heart/") and not e.caller.startswith("sim/heart/")]
+    assert [(e.caller, e.callee, e.function) for e in heart] == [
+        ("sim/sources.py", "sim/heart/scenarios.py", "make_scenario")]
+    for crossing in crossings[:-1]:
+        names = [(e.callee, e.function) for e in crossing.hops
+                 if e.callee.startswith("predictors/")]
+        assert names[:2] == [("predictors/registry.py", "resolve"),
+                             ("predictors/registry.py", "_entry")]
+        assert sum(f == "resolve" for _, f in names) == 1
+        assert {e.callee for e in crossing.hops} <= {"predictors/registry.py",
+                                                     "predictors/base.py",
+                                                     "rhmpc/experiment/config.py"}
+    assert [c.reads for c in recordings] == [1, 2]
+
+
+def test_the_table_is_read() -> None:
+    """The design page's table parses into hand-offs from every file of the chain."""
+    drawn = drawn_handoffs(DOC.read_text(encoding="utf-8"))
+    assert {a for a, _ in drawn} == set(HANDING)
+    assert all((REPO / b).exists() for _, b in drawn)
