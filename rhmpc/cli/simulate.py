@@ -226,11 +226,12 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
              for k in ("var", "rows", "cols", "data_rate", "units", "poi", "split")):
         raise UsageError("--var, --rows, --cols, --rate, --units, --poi and --split need "
                          "--data FILE")
+    split = None
     if getattr(args, "split", None):
         if args.duration is not None or args.settling is not None:
             raise UsageError("--split TRAIN:END sets the settling and the duration: give "
                              "neither --settling nor --duration with it")
-        changes["split"] = parse_split(args.split)
+        split = parse_split(args.split)
     if getattr(args, "train", None):
         missing = [f for f in args.train if not Path(f).is_file()]
         if missing:
@@ -247,7 +248,7 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
         changes[key.strip()] = parse_value(value.strip())
     if getattr(args, "fault", None):
         changes["faults.events"] = fault_events(config, changes, args.fault)
-    config = with_split(config.replace(**changes))
+    config = with_split(config.replace(**changes), split)
     if getattr(args, "model", None):
         config = with_models(config, args.model)
     check_sensor(config)
@@ -376,6 +377,8 @@ def run(args: argparse.Namespace) -> int:
             raise UsageError(str(exc)) from None
         raise
     check_score(doc)
+    if getattr(args, "split", None):
+        doc["split"] = list(parse_split(args.split))
     if stalls > 0:
         g = (doc.get("gain_tick_us") or {}).get("p50")
         doc["host_stalls"] = host_stalls_document(stalls, g)

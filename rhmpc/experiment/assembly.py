@@ -19,7 +19,7 @@ from rhmpc.control.mpc import RecedingHorizonMPC
 from rhmpc.control.observer import JointObserver
 from rhmpc.control.reference import ExactReference, PredictedReference
 from rhmpc.errors import UsageError
-from rhmpc.experiment.config import RunConfig, with_split
+from rhmpc.experiment.config import RunConfig
 from rhmpc.experiment.fitting import fit_predictor
 from rhmpc.experiment.monitor import HeartRateScore
 from robots import LinearArm, Robot, linearize, load_robot
@@ -250,12 +250,10 @@ def build_run(config: RunConfig, implementation: str = "python", progress=None) 
     """Build robot, plant, controller, heart motion and sensor stream for ``config``.
 
     ``implementation="c"``: the controller is the C one of ``rhmpc export`` (built once and
-    cached, :func:`rhmpc.control.export.controller_in_c`) instead of the Python one. A split
-    of the recording sets the run's span (:func:`~rhmpc.experiment.config.with_split`). A
+    cached, :func:`rhmpc.control.export.controller_in_c`) instead of the Python one. A
     predictor that learns before the run is fitted (:mod:`rhmpc.experiment.fitting`);
     ``progress(text)`` hears how that goes.
     """
-    config = with_split(config)
     loop, N = config.loop, config.mpc.horizon
     heart_rng, sensor_rng = np.random.default_rng(config.seed).spawn(2)
     robot = load_robot(config.robot)
