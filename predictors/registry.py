@@ -142,10 +142,11 @@ def needs_torch(name: str) -> bool:
 
 
 class _Entry(NamedTuple):
-    """What a registered name stands for: its settings class, named parameter sets, default
-    overrides and default parameter set, and its class (``None``: one of :data:`LEARNED`,
-    imported when built)."""
+    """What a registered name stands for: the name, its settings class, named parameter sets,
+    default overrides and default parameter set, and its class (``None``: one of
+    :data:`LEARNED`, imported when built)."""
 
+    name: str
     settings: type
     presets: dict | None
     overrides: dict
@@ -159,19 +160,19 @@ def _entry(name: str) -> _Entry:
     valid ones."""
     if name in PREDICTORS:
         cls, overrides = PREDICTORS[name]
-        return _Entry(cls.Settings, getattr(cls, "PRESETS", None), overrides,
+        return _Entry(name, cls.Settings, getattr(cls, "PRESETS", None), overrides,
                       DEFAULT_PARAMS.get(name), cls)
     if name in LEARNED:
         learned = LEARNED[name]
-        return _Entry(learned.settings, learned.presets, {}, DEFAULT_PARAMS.get(name), None,
-                      learned)
+        return _Entry(name, learned.settings, learned.presets, {}, DEFAULT_PARAMS.get(name),
+                      None, learned)
     raise ValueError(f"unknown predictor {name!r}; valid: {', '.join(predictor_names())}")
 
 
-def _settings(entry: _Entry, name: str, settings: dict[str, Any]):
-    """The frozen settings of ``entry`` (called ``name`` in messages) with ``settings``: its
-    parameter set (``params``, or its default one), its overrides, then ``settings``."""
-    settings = dict(settings)
+def _settings(entry: _Entry, settings: dict[str, Any]):
+    """The frozen settings of ``entry`` with ``settings``: its parameter set (``params``, or its
+    default one), its overrides, then ``settings``."""
+    name, settings = entry.name, dict(settings)
     params = settings.pop("params", entry.params)
     base = None
     if params is not None:
@@ -194,11 +195,12 @@ def _settings(entry: _Entry, name: str, settings: dict[str, Any]):
 
 def settings_for(name: str, **settings: Any):
     """The frozen settings dataclass ``make_predictor(name, …)`` would use."""
-    return _settings(_entry(name), name, settings)
+    return _settings(_entry(name), settings)
 
 
-def _learned_class(learned: Learned, name: str) -> type[Predictor]:
+def _learned_class(entry: _Entry) -> type[Predictor]:
     """The class of a predictor fitted before the run, imported now."""
+    learned, name = entry.learned, entry.name
     try:
         module = importlib.import_module(learned.module)
     except ModuleNotFoundError as exc:
@@ -221,8 +223,8 @@ def resolve(name: str, **settings: Any) -> tuple[type[Predictor], Any]:
         A neural predictor without PyTorch (the message names the extra to install).
     """
     entry = _entry(name)
-    made = _settings(entry, name, settings)
-    return entry.cls or _learned_class(entry.learned, name), made
+    made = _settings(entry, settings)  # a bad setting is said before a missing extra
+    return entry.cls or _learned_class(entry), made
 
 
 def build(cls: type[Predictor], settings: Any, dt: float) -> Predictor:
@@ -238,8 +240,13 @@ def build(cls: type[Predictor], settings: Any, dt: float) -> Predictor:
         {"model": files[member]} if member in files else {})) for member in settings.members])
 
 
-def make_predictor(name: str, dt: float, **settings: Any) -> Predictor:
+def make_predictor(name: str, dt: float, *, data_unit: float | None = None,
+                   **settings: Any) -> Predictor:
     """Build the predictor ``name`` running at period ``dt`` [s] with ``settings``.
+
+    ``data_unit``: metres per unit of the samples it will be fed, when the caller knows it (the
+    closed loop feeds metres: 1.0); a predictor that would infer its unit from its first
+    samples (``unit=None``) takes it instead, unless ``settings`` give one.
 
     Unknown names and settings raise ``ValueError`` listing the valid ones.  A predictor with
     parameter sets takes ``params=`` one of its class's ``PRESETS`` (``ekf``: ``"adaptive"``,
@@ -253,6 +260,8 @@ def make_predictor(name: str, dt: float, **settings: Any) -> Predictor:
     ``ImportError`` naming the extra to install.
     """
     cls, made = resolve(name, **settings)
+    if data_unit is not None and "unit" not in settings and getattr(made, "unit", 1.0) is None:
+        made = dataclasses.replace(made, unit=data_unit)
     return build(cls, made, dt)
 
 

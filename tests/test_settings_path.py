@@ -347,7 +347,8 @@ def test_a_heart_is_built_in_one_place_and_a_name_resolved_once(
     for crossing in crossings[:-1]:
         names = [(e.callee, e.function) for e in crossing.hops
                  if e.callee.startswith("predictors/")]
-        assert names[:2] == [("predictors/registry.py", "resolve"),
+        assert names[:3] == [("predictors/registry.py", "make_predictor"),
+                             ("predictors/registry.py", "resolve"),
                              ("predictors/registry.py", "_entry")]
         assert sum(f == "resolve" for _, f in names) == 1
         assert {e.callee for e in crossing.hops} <= {"predictors/registry.py",

@@ -30,6 +30,7 @@ from rhmpc.cli.simulate import (
 )
 from rhmpc.errors import UsageError
 from rhmpc.experiment import RunConfig, run_experiment
+from rhmpc.experiment.config import with_split
 from rhmpc.experiment.fitting import with_models
 from rhmpc.studies.tuna2013 import COLUMNS
 from sim.recordings.shipped import resolve_all
@@ -267,7 +268,8 @@ def _data_columns(args: argparse.Namespace) -> list[tuple[str, dict]]:
             changes = {"data": path, "data_read": {**read, **({"point": point} if point else {})},
                        **sensor}
             if split:
-                changes["split"] = split
+                span = with_split(RunConfig(data=path, data_read=changes["data_read"]), split).loop
+                changes.update({"loop.settling": span.settling, "loop.duration": span.duration})
             elif args.duration is None and not args.config:  # default: the whole recording
                 changes["loop.duration"] = recording.duration
             elif args.duration is not None and args.duration > recording.duration:
@@ -384,18 +386,18 @@ def open_loops(todo: list[Job], args: argparse.Namespace,
     from rhmpc.studies.loop_gap import open_loop_beside
     from rhmpc.tuning.progress import note
 
-    out, share = {}, not (args.model or args.scheduler)
+    out, share, split = {}, not (args.model or args.scheduler), parse_split(args.split)
     for i, column in enumerate(dict.fromkeys(job.column for job in todo)):
         config = next(job.config for job in todo if job.column == column)
         names = list(dict.fromkeys(job.config.predictor for job in todo if job.column == column))
-        note(f"rhmpc compare: the open loop on {column}, split {config.split[0]}:"
-             f"{config.split[1]}", args.quiet)
+        note(f"rhmpc compare: the open loop on {column}, split {split[0]}:{split[1]}",
+             args.quiet)
         save = folder / str(i) if share else None
         if save is not None:
             save.mkdir()
         try:
             out[column] = open_loop_beside(
-                config.data, config.data_read, config.split, names,
+                config.data, config.data_read, split, names,
                 config.reference.prediction_points, config.seed,
                 None if args.quiet else (lambda text: note(f"  {text}", False)), save)
         except ValueError as exc:

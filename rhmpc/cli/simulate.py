@@ -200,12 +200,11 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
              for k in ("var", "rows", "cols", "data_rate", "units", "poi", "split")):
         raise UsageError("--var, --rows, --cols, --rate, --units, --poi and --split need "
                          "--data FILE")
-    if getattr(args, "split", None):
-        options["split"] = parse_split(args.split)
     if options.get("train"):
         options["train"] = tuple(options["train"])
     return run_config(args.config, getattr(args, "preset", None), options, args.set,
-                      getattr(args, "fault", None) or (), getattr(args, "model", None) or ())
+                      getattr(args, "fault", None) or (), getattr(args, "model", None) or (),
+                      parse_split(getattr(args, "split", None)))
 
 
 def settling_rule(args: argparse.Namespace) -> str:
@@ -306,6 +305,8 @@ def run(args: argparse.Namespace) -> int:
             raise UsageError(str(exc)) from None
         raise
     check_score(doc)
+    if getattr(args, "split", None):
+        doc["split"] = list(parse_split(args.split))
     if stalls > 0:
         g = (doc.get("gain_tick_us") or {}).get("p50")
         doc["host_stalls"] = host_stalls_document(stalls, g)

@@ -10,21 +10,20 @@ thing (``robots``, ``sim``, ``predictors``, :mod:`rhmpc.control`) and none calls
 
 from __future__ import annotations
 
-import dataclasses
 import warnings
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from predictors.registry import build, resolve
+from predictors.registry import make_predictor
 from rhmpc.control.cancellation import NonlinearityCancellation
 from rhmpc.control.controller import Controller
 from rhmpc.control.mpc import RecedingHorizonMPC
 from rhmpc.control.observer import JointObserver
 from rhmpc.control.reference import ExactReference, PredictedReference
 from rhmpc.errors import UsageError
-from rhmpc.experiment.config import RunConfig, with_split
+from rhmpc.experiment.config import RunConfig
 from rhmpc.experiment.fitting import fit_predictor
 from rhmpc.experiment.monitor import HeartRateScore
 from robots import LinearArm, Robot, linearize, load_robot
@@ -53,7 +52,6 @@ class Run:
     Attributes
     ----------
     config : RunConfig
-        The settings, with the span of a recording's split (:func:`with_split`).
     robot : Robot
         The plant's robot model.
     arm : LinearArm
@@ -105,14 +103,13 @@ def build_run(config: RunConfig, implementation: str = "python", progress=None) 
     """Build robot, heart motion, sensor stream, reference, controller and plant for ``config``.
 
     ``implementation="c"``: the controller is the C one of ``rhmpc export`` (built once and
-    cached, :func:`rhmpc.control.export.controller_in_c`) instead of the Python one. A split
-    of the recording sets the run's span (:func:`~rhmpc.experiment.config.with_split`). A
+    cached, :func:`rhmpc.control.export.controller_in_c`) instead of the Python one. A
     predictor that learns before the run is fitted (:mod:`rhmpc.experiment.fitting`);
     ``progress(text)`` hears how that goes.
     """
     heart_rng, sensor_rng = np.random.default_rng(config.seed).spawn(2)
     robot, arm = build_robot(config)
-    heart, config = build_heart(config, heart_rng)
+    heart = build_heart(config, heart_rng)
     stream, truth = build_stream(config, heart, sensor_rng)
     loop = config.loop
     clock = predictor_clock(loop, stream)
@@ -136,27 +133,22 @@ def build_robot(config: RunConfig) -> tuple[Robot, LinearArm]:
     return robot, linearize(robot, Ts=config.loop.Ts)
 
 
-def build_heart(config: RunConfig, rng: np.random.Generator) -> tuple[HeartSource, RunConfig]:
+def build_heart(config: RunConfig, rng: np.random.Generator) -> HeartSource:
     """The run's heart motion, a named scenario or a recording (:func:`sim.sources.heart_source`,
-    a scenario's random processes drawn from ``rng`` over the run and its last horizon), and
-    ``config`` with the span of its split of the recording (:func:`with_split`). A recording
-    shorter than the run is a one-line ``UsageError``."""
+    a scenario's random processes drawn from ``rng`` over the run and its last horizon). A
+    recording shorter than the run is a one-line ``UsageError``."""
     loop = config.loop
     heart = heart_source(config.scenario, rng, data=config.data, data_read=config.data_read,
                          rr=config.rr, needed=loop.duration + config.mpc.horizon * loop.Ts + 1.0)
-    if config.data is None:
-        return heart, with_split(config)
-    config = with_split(config, heart.origin)
-    duration = config.loop.duration
-    if duration > heart.duration:
+    if config.data is not None and loop.duration > heart.duration:
         available = heart.duration
         digits = next((d for d in range(2, 10)
-                       if f"{available:.{d}f}" != f"{duration:.{d}f}"), 9)
+                       if f"{available:.{d}f}" != f"{loop.duration:.{d}f}"), 9)
         raise UsageError(
             f"{config.data}: the recording lasts {available:.{digits}f} s, the run asks for "
-            f"{duration:.{digits}f} s (set --duration)"
+            f"{loop.duration:.{digits}f} s (set --duration)"
         )
-    return heart, config
+    return heart
 
 
 def build_stream(config: RunConfig, heart: HeartSource,
@@ -223,17 +215,14 @@ def build_reference(config: RunConfig, truth: SourceTruth, heart: HeartSource,
                     clock: PredictorClock) -> ExactReference | PredictedReference:
     """The exact future (``predictor = "exact"``) or the predictor's forecast on ``clock``.
 
-    The predictor's name is resolved once (:func:`predictors.registry.resolve`) into its class
-    and settings (:meth:`RunConfig.predictor_keywords`); one that infers its data's unit is
-    told metres, what the loop feeds it."""
+    The predictor is built by name (:func:`predictors.registry.make_predictor`, which resolves
+    the name once into its class and settings) with :meth:`RunConfig.predictor_keywords`, fed
+    metres."""
     N = config.mpc.horizon
     if config.predictor == "exact":
         return ExactReference(truth, N)
-    keywords = config.predictor_keywords()
-    cls, settings = resolve(config.predictor, **keywords)
-    if "unit" not in keywords and getattr(settings, "unit", 1.0) is None:
-        settings = dataclasses.replace(settings, unit=1.0)  # the loop feeds metres
-    predictor = build(cls, settings, clock.dt)
+    predictor = make_predictor(config.predictor, clock.dt, data_unit=1.0,
+                               **config.predictor_keywords())
     reference = PredictedReference(predictor, config.loop.Ts, N, clock.refresh_ticks,
                                    config.reference)
     phase = getattr(getattr(heart, "motion", None), "phase", None)

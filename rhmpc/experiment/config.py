@@ -44,11 +44,9 @@ TOP_LEVEL: dict[str, object] = {
     "robot": str, "scenario": str, "data": (str, None), "data_read": dict, "rr": (str, None),
     "sensor": str, "sensor_settings": dict, "predictor": str, "predictor_settings": dict,
     "predictor_params": dict, "ground_truth": str, "seed": int, "train": tuple,
-    "split": (tuple, None),
 }
 KIND_NAMES = {str: "a name (a string)", (str, None): "a string or absent", dict: "a table",
-              int: "an integer", tuple: "a list of file names",
-              (tuple, None): "[TRAIN, END] (two sample indices) or absent"}
+              int: "an integer", tuple: "a list of file names"}
 
 
 def _is(value: Any, kind: object) -> bool:
@@ -81,11 +79,6 @@ class RunConfig:
     train : tuple of str
         Recordings a predictor fitted before the run learns from (read as ``data``, the POI
         first), besides the run's own samples of its settling window.
-    split : tuple of int, optional
-        (TRAIN, END), the literature's split of a recording [sample indices from 0]: the run
-        starts at the first sample, its settling window ends at sample TRAIN (what a
-        predictor fitted before the run learns from) and the score covers the instants in
-        [TRAIN, END) (:func:`with_split` sets ``loop.settling`` and ``loop.duration``).
     rr : str | None
         PhysioNet record whose beat annotations drive the heart phase: a shipped name
         (``mitdb-100``, ``1003``) or a path without extension.
@@ -127,7 +120,6 @@ class RunConfig:
     data: str | None = None
     data_read: dict = field(default_factory=dict)
     train: tuple[str, ...] = ()
-    split: tuple[int, int] | None = None
     rr: str | None = None
     sensor: str = "sonomicrometry"
     sensor_settings: dict = field(default_factory=dict)
@@ -146,20 +138,14 @@ class RunConfig:
     faults: FaultSettings = field(default_factory=FaultSettings)
 
     def __post_init__(self) -> None:
-        for name in ("train", "split"):
-            if isinstance(getattr(self, name), list):  # as TOML reads it
-                object.__setattr__(self, name, tuple(getattr(self, name)))
+        if isinstance(self.train, list):  # as TOML reads it
+            object.__setattr__(self, "train", tuple(self.train))
         for name, kind in TOP_LEVEL.items():
             value = getattr(self, name)
             if not _is(value, kind):
                 raise ValueError(f"{name} must be {KIND_NAMES[kind]}, got {value!r}")
         if not all(isinstance(f, str) for f in self.train):
             raise ValueError(f"train must be a list of file names, got {self.train!r}")
-        if self.split is not None and not (
-                len(self.split) == 2 and all(_is(v, int) for v in self.split)
-                and 0 < self.split[0] < self.split[1]):
-            raise ValueError(f"split must be [TRAIN, END], sample indices with 0 < TRAIN < END, "
-                             f"got {list(self.split)!r}")
         if not 0 <= self.seed < 2**63:
             raise ValueError(f"seed must be an integer in 0 … 2⁶³ − 1, got {self.seed!r}")
         if self.ground_truth not in GROUND_TRUTHS:
@@ -190,7 +176,7 @@ class RunConfig:
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
             if (f.name == "faults" and value == FaultSettings()) or (
-                    f.name in ("train", "split") and not value):
+                    f.name == "train" and not value):
                 continue
             if f.name in SECTIONS:
                 out[f.name] = to_dict(value)
@@ -263,30 +249,32 @@ class RunConfig:
 
 def run_config(file: str | Path | None = None, preset: str | None = None,
                options: dict[str, Any] | None = None, sets: Sequence[str] = (),
-               faults: Sequence[str] = (), models: Sequence[str] = ()) -> RunConfig:
+               faults: Sequence[str] = (), models: Sequence[str] = (),
+               split: tuple[int, int] | None = None) -> RunConfig:
     """A run's settings from the command line, the one place its sources merge: the defaults,
     the TOML ``file`` (``--config``), the ``preset`` (:mod:`rhmpc.experiment.presets`), the
     command's ``options`` (top-level or dotted keys, ``{"predictor": "ekf", "loop.duration":
     5.0}``), then ``sets`` (``SECTION.KEY=VALUE``, the value in TOML's syntax: ``--set``), each
-    over the ones before; ``faults`` (``--fault KIND@START…``) join the run's own.
+    over the ones before; ``faults`` (``--fault KIND@START…``) join the run's own, and
+    ``split`` (TRAIN, END: ``--split``) sets the settling and the duration (:func:`with_split`).
 
     A recording among the options (``data``: a file, or a shipped recording's name, read with
     ``data_read``) makes the sensor ``recorded`` unless ``sensor`` is given and, without a
-    ``file``, ``loop.duration`` or ``split``, the run as long as the recording; ``split`` sets
-    the settling and the duration (:func:`with_split`), ``models`` the saved models the
-    predictor loads (:func:`rhmpc.experiment.fitting.model_settings`). The run must be scored on
-    at least :data:`MIN_SCORED` seconds. A bad source is a one-line ``UsageError``.
+    ``file``, ``loop.duration`` or ``split``, the run as long as the recording; ``models`` are
+    the saved models the predictor loads (:func:`rhmpc.experiment.fitting.model_settings`).
+    The run must be scored on at least :data:`MIN_SCORED` seconds. A bad source is a one-line
+    ``UsageError``.
     """
     from rhmpc.experiment.fitting import model_settings
 
     options = dict(options or {})
-    if options.get("split") is not None and {"loop.duration", "loop.settling"} & set(options):
+    if split is not None and {"loop.duration", "loop.settling"} & set(options):
         raise UsageError("--split TRAIN:END sets the settling and the duration: give neither "
                          "--settling nor --duration with it")
     missing = [f for f in options.get("train", ()) if not Path(f).is_file()]
     if missing:
         raise UsageError(f"--train: no such file {', '.join(missing)}")
-    recording = _recording(options, whole=file is None) if options.get("data") else None
+    recording = _recording(options, file is None, split) if options.get("data") else None
     config = load_config(file) if file else RunConfig()
     changes = {**preset_settings(preset), **options, **parse_sets(sets)}
     if faults:
@@ -296,14 +284,14 @@ def run_config(file: str | Path | None = None, preset: str | None = None,
     if recording is not None and (config.data, config.data_read) != (options["data"],
                                                                       options["data_read"]):
         recording = None  # --set read another recording
-    config = with_split(config, recording)
+    config = with_split(config, split, recording)
     if models:
         config = config.replace(**model_settings(config, models))
     check_scoring(config)
     return config
 
 
-def _recording(options: dict[str, Any], whole: bool):
+def _recording(options: dict[str, Any], whole: bool, split: tuple[int, int] | None):
     """Resolve the recording of ``options`` in place (its file, how it is read, the sensor
     that reads it as it is, and with ``whole`` and no duration or split, the run's length) and
     return it, read once (``None`` when nothing needs it read)."""
@@ -319,10 +307,10 @@ def _recording(options: dict[str, Any], whole: bool):
     options.setdefault("sensor", "recorded")
     options["data"], options["data_read"] = data, {**read, **({} if poi is None else
                                                               {"point": poi})}
-    if options.get("split") is None and not (whole and "loop.duration" not in options):
+    if split is None and not (whole and "loop.duration" not in options):
         return None
     recording = _read(data, options["data_read"])
-    if options.get("split") is None:
+    if split is None:
         options["loop.duration"] = recording.duration
     return recording
 
@@ -380,18 +368,21 @@ def check_scoring(config: RunConfig) -> None:
             f"at least {MIN_SCORED:g} s is needed (raise --duration or lower --settling)")
 
 
-def with_split(config: RunConfig, recording=None) -> RunConfig:
-    """``config`` with its settling window and duration from its ``split`` (TRAIN, END) of the
-    recording ``data``: settling t_TRAIN − t_0, duration t_END − t_0 (the recording's n/f when
-    END = n), so that the scored instants are t_TRAIN ≤ t_k < t_END. ``recording``: ``data``
-    already read (:class:`sim.recordings.RecordedMotion`), else it is read here. Unchanged
-    without a split; a split without a recording, or beyond it, is a one-line ``UsageError``."""
-    if config.split is None:
+def with_split(config: RunConfig, split: tuple[int, int] | None,
+               recording=None) -> RunConfig:
+    """``config`` with its settling window and duration set by the literature's split (TRAIN,
+    END) of its recording ``data`` [sample indices from 0]: the run starts at the first sample,
+    its settling window (what a predictor fitted before the run learns from) ends at sample
+    TRAIN, t_TRAIN − t_0, and it lasts t_END − t_0 (the recording's n/f when END = n), so that
+    the scored instants are t_TRAIN ≤ t_k < t_END. ``recording``: ``data`` already read
+    (:class:`sim.recordings.RecordedMotion`), else it is read here. Unchanged without a split;
+    a split without a recording, or beyond it, is a one-line ``UsageError``."""
+    if split is None:
         return config
     if config.data is None:
         raise UsageError("--split TRAIN:END splits a recording: it needs --data FILE")
     recording = _read(config.data, config.data_read) if recording is None else recording
-    train, end = config.split
+    train, end = split
     n = recording.t.size
     if end > n:
         raise UsageError(f"--split {train}:{end}: {config.data} holds {n} samples (END <= {n})")

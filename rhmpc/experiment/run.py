@@ -46,7 +46,6 @@ def run_experiment(config: RunConfig, progress: bool = False, trace: str | None 
     (:func:`rhmpc.experiment.faults.fault_report`).
     """
     run = build_run(config, implementation, _say if progress else None)
-    config = run.config  # its span set by its split, if any
     loop = config.loop
     marks = fault_marks(run.faults, config.faults.after_s, loop.Ts, loop.duration)
     bar, callback = _progress_bar(config, run.label) if progress else (None, None)
