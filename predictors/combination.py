@@ -29,14 +29,15 @@ is taken to be as bad as the worst that has one.
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from predictors.base import Predictor, PredictorSettings
 
-__all__ = ["Combination", "CombinationSettings"]
+__all__ = ["Combination", "CombinationSettings", "MemberTime"]
 
 
 @dataclass(frozen=True)
@@ -46,8 +47,9 @@ class CombinationSettings(PredictorSettings):
     Attributes
     ----------
     members : tuple of str
-        Predictor names (``predictors.make_predictor``); the default: the adaptive linear
-        predictors, POI-only and multi-point, which need no fitting.
+        Predictor names (``predictors.make_predictor``); empty (the default): every default
+        predictor that is not a baseline, the fitted ones included
+        (``predictors.registry.combination_members``), as in the open-loop study.
     leads : int
         L, leads scored and weighted on their own [samples]; longer ones take lead L's
         weights. 4 (160 ms at 25 frames/s).
@@ -65,7 +67,7 @@ class CombinationSettings(PredictorSettings):
         priors are taken at it.
     """
 
-    members: tuple[str, ...] = ("one-step", "generalized", "st-rls")
+    members: tuple[str, ...] = ()
     leads: int = 4
     memory: float = 10.0
     exponent: float = 2.0
@@ -74,8 +76,8 @@ class CombinationSettings(PredictorSettings):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        if not self.members or "combination" in self.members:
-            raise ValueError(f"members must name one predictor or more (not a combination), "
+        if "combination" in self.members:
+            raise ValueError(f"members must name predictors other than a combination, "
                              f"got {self.members!r}")
         if isinstance(self.leads, bool) or int(self.leads) != self.leads or self.leads < 1:
             raise ValueError(f"leads must be a positive integer, got {self.leads!r}")
@@ -116,7 +118,19 @@ class Combination(Predictor):
             raise ValueError(f"{len(members)} members given for the {len(s.members)} names "
                              f"{', '.join(s.members)}")
         self.members = list(members)
+        #: each member's update-and-forecast time against the sample period
+        self.member_time = MemberTime(s.members, dt)
         super().__init__(dt, s)
+
+    @property
+    def fitted(self) -> bool:
+        """Whether every member fitted before the run has been (True without such members)."""
+        return all(getattr(m, "fitted", True) for m in self.members if hasattr(m, "fit"))
+
+    def score_after(self, samples: int) -> None:
+        """Score no miss of the first ``samples`` updates (``score_from``): the samples its
+        fitted members learnt from, replayed, where their misses are no forecast errors."""
+        self.settings = replace(self.settings, score_from=int(samples))
 
     def fit(self, series, progress=None) -> Combination:
         """Fit the members that are fitted before the run (``fit``) to ``series``."""
@@ -149,32 +163,38 @@ class Combination(Predictor):
         self._gamma = max(0.0, 1.0 - self.dt / self.settings.memory)
         self._primed = False
 
-    def _pass(self, z: np.ndarray | None) -> None:
-        others = self.others
-        for m in self.members:
+    def _step(self, z: np.ndarray | None) -> np.ndarray:
+        """Every member's update with ``z`` (None: missing) and its forecast of leads 1 … L,
+        (K, L, d), each member's pair timed (:attr:`member_time`)."""
+        others, L = self.others, self.settings.leads
+        fc = np.full((len(self.members), L, self.d), np.nan)
+        for i, m in enumerate(self.members):
+            tic = time.perf_counter_ns()
             m.update(z, others)
+            try:
+                fc[i] = m.predict(L)
+            except RuntimeError:  # a member without a valid sample yet
+                pass
+            self.member_time.add(i, time.perf_counter_ns() - tic)
+        return fc
 
     def _update(self, z: np.ndarray) -> None:
-        self._pass(z)
+        fc = self._step(z)
         if self.n > self.settings.score_from:  # sample n − 1, counted from 0
             self._prime()
             self._score(z)
-        self._record()
+        self._record(fc)
 
     def _missing(self) -> None:
-        self._pass(None)
-        self._record()
+        self._record(self._step(None))
 
-    def _record(self) -> None:
-        """Every member's forecast of leads 1 … L from this update."""
+    def _record(self, fc: np.ndarray) -> None:
+        """Keep every member's forecast of leads 1 … L from this update (after the scoring,
+        which reads the slot it replaces)."""
         slot = self.n % self.settings.leads
         self._issued[slot] = self.n
-        for i, m in enumerate(self.members):
-            try:
-                self._fc[slot, i] = m.predict(self.settings.leads)
-            except RuntimeError:  # a member without a valid sample yet
-                self._fc[slot, i] = np.nan
-        self.ready = bool(np.isfinite(self._fc[slot]).all())
+        self._fc[slot] = fc
+        self.ready = bool(np.isfinite(fc).all())
 
     def _score(self, z: np.ndarray) -> None:
         """The misses of the forecasts that reach sample n, into the discounted sums."""
@@ -229,6 +249,38 @@ class Combination(Predictor):
         w = self._weights()
         w = w[:, np.minimum(np.arange(steps), L - 1)]
         return np.einsum("ik,ikj->kj", w, f)
+
+
+class MemberTime:
+    """Each member's time for one update and its forecast, against the sample period Δ: the
+    budget a member must fit in on one core, as the combination runs them one after another.
+
+    Parameters
+    ----------
+    names : sequence of str
+        The members' names.
+    period : float
+        Δ, the sample period [s].
+    """
+
+    def __init__(self, names: Sequence[str], period: float) -> None:
+        self.names, self.period_ns = tuple(names), 1e9 * period
+        K = len(self.names)
+        self.total, self.max = np.zeros(K), np.zeros(K)
+        self.over, self.n = np.zeros(K, dtype=np.int64), np.zeros(K, dtype=np.int64)
+
+    def add(self, i: int, ns: int) -> None:
+        """Member ``i`` took ``ns`` [ns] for one update and its forecast."""
+        self.total[i] += ns
+        self.max[i] = max(self.max[i], ns)
+        self.over[i] += ns > self.period_ns
+        self.n[i] += 1
+
+    def summary(self) -> dict:
+        """Per member: ``mean_us``, ``max_us`` and ``over_period`` (updates longer than Δ)."""
+        return {name: {"mean_us": float(self.total[i] / self.n[i] / 1e3) if self.n[i] else None,
+                       "max_us": float(self.max[i] / 1e3), "over_period": int(self.over[i])}
+                for i, name in enumerate(self.names)}
 
 
 def _prior_rms(member: Predictor, leads: int) -> np.ndarray:

@@ -4,13 +4,15 @@
 fitted before the run (``fit`` or a ``model`` file, :mod:`predictors.learned`); the neural
 ones are imported only when one is built, and need PyTorch (``pip install "rhmpc[learned]"``).
 ``family(name)`` tells the kind of each: ``baseline``, ``adaptive``, ``multi-point``,
-``learned`` or ``combination``.
+``learned`` or ``combination``. ``load_model(path)`` builds the fitted predictor a file saved
+(:mod:`predictors.learned.modelfile`: the one loader, which checks a file before it reads it).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import importlib
+import importlib.util
 from typing import Any, NamedTuple
 
 from predictors.ar import AutoregressivePredictor
@@ -33,8 +35,9 @@ from predictors.rls_one_step import OneStepRLS
 from predictors.rls_spatiotemporal import SpatioTemporalRLS
 from predictors.wflc import WFLC
 
-__all__ = ["LEARNED", "PREDICTORS", "family", "make_predictor", "needs_torch", "predictor_names",
-           "settings_for"]
+__all__ = ["BASELINES", "FITTED_DEFAULTS", "LEARNED", "PREDICTORS", "combination_members",
+           "default_predictors", "family", "load_model", "make_predictor", "needs_torch",
+           "predictor_names", "settings_for", "torch_available"]
 
 #: name → (class, default overrides of its settings dataclass)
 PREDICTORS: dict[str, tuple[type[Predictor], dict[str, Any]]] = {
@@ -82,6 +85,39 @@ DEFAULT_PARAMS = {"ekf": "adaptive", "dual-ekf": "adaptive", "wflc": "adaptive",
 
 _FAMILIES = {"hold": "baseline", "last-cycle": "baseline", "exact": "baseline",
              "st-rls": "multi-point", "combination": "combination"}
+
+
+#: The baselines, first in every table: the newest sample held, and the previous cycle.
+BASELINES: tuple[str, ...] = ("hold", "last-cycle")
+#: The fitted predictors taken by default when there is something to fit them on: the ridge
+#: regressions, and the literature's networks where PyTorch is installed.
+FITTED_DEFAULTS: tuple[str, ...] = ("ridge", "st-ridge", "lstm", "st-lstm", "tcn", "st-tcn")
+#: The order of the families in the tables.
+FAMILIES: tuple[str, ...] = ("baseline", "adaptive", "multi-point", "learned", "combination")
+
+
+def torch_available() -> bool:
+    """Whether PyTorch, the ``learned`` extra of the neural predictors, is installed."""
+    return importlib.util.find_spec("torch") is not None
+
+
+def default_predictors(fitted: bool = False) -> tuple[str, ...]:
+    """The baselines, then every other online predictor (the oracle ``exact`` left out), the
+    fitted ones of :data:`FITTED_DEFAULTS` if ``fitted`` (the neural ones where PyTorch is
+    installed), by family, and the combination last."""
+    names = [n for n in PREDICTORS if n != "exact"]
+    if fitted:
+        names += [n for n in FITTED_DEFAULTS if not needs_torch(n) or torch_available()]
+    names = [*BASELINES, *(n for n in names if n not in BASELINES)]
+    return tuple(sorted(names, key=lambda n: FAMILIES.index(family(n))))
+
+
+def combination_members(fitted: bool = True) -> tuple[str, ...]:
+    """The combination's default members: the default predictors (:func:`default_predictors`)
+    that are neither baselines nor the combination, the open-loop study's and the closed
+    loop's alike."""
+    return tuple(n for n in default_predictors(fitted)
+                 if family(n) not in ("baseline", "combination"))
 
 
 def predictor_names() -> tuple[str, ...]:
@@ -157,11 +193,51 @@ def make_predictor(name: str, dt: float, **settings: Any) -> Predictor:
     ``last-cycle``: ``"anchored"``, ``"yuen2008"``; ``lstm``, ``st-lstm``: ``"zhang2022"``, the
     default, ``"xu2026"``; ``gru``, ``st-gru``: ``"li2022"``; ``tcn``, ``st-tcn``:
     ``"xu2026"``); other settings override it.  ``combination`` builds its ``members`` by
-    name.  A predictor of ``LEARNED`` must be fitted (``fit``) or given a ``model`` file before
-    it runs; a neural one without PyTorch raises ``ImportError`` naming the extra to install.
+    name (by default :func:`combination_members`).  A predictor of ``LEARNED`` must be fitted
+    (``fit``) or given a ``model`` file before it runs; a neural one without PyTorch raises
+    ``ImportError`` naming the extra to install.
     """
     s = settings_for(name, **settings)
     if name == "combination":
+        if not s.members:
+            s = dataclasses.replace(s, members=combination_members())
         return Combination(dt, s, [make_predictor(member, dt) for member in s.members])
     cls = PREDICTORS[name][0] if name in PREDICTORS else _learned_class(name)
     return cls(dt, s)
+
+
+def load_model(path, expected_kind: str | tuple[str, ...] | None = None,
+               dt: float | None = None) -> Predictor:
+    """The fitted predictor saved in ``path`` (``predict --save-models``, ``save``), ready to run.
+
+    Parameters
+    ----------
+    path : str or Path
+        A model file (:mod:`predictors.learned.modelfile`).
+    expected_kind : str or tuple of str, optional
+        The predictor name(s) of :data:`LEARNED` asked for (``"ridge"``, ``("lstm",
+        "st-lstm")``); a file of another kind is refused.
+    dt : float, optional
+        The period the predictor will run at [s]; a model fitted at another is refused.
+        Default: the file's.
+
+    Returns
+    -------
+    Predictor
+        A predictor of :data:`LEARNED` with the file's settings and model (``settings.model``
+        names the file); ``reset`` keeps the model.
+
+    Raises
+    ------
+    ValueError
+        (:class:`boundary.FileError`) In one line naming the file: not a regular file, empty,
+        not a model, another kind or period, a damaged or altered file, one larger than the
+        bounds (checked before any array is allocated).
+    ImportError
+        A network's file without PyTorch (``pip install "rhmpc[learned]"``).
+    """
+    from predictors.learned.modelfile import ModelFile
+
+    with ModelFile(path, expected_kind or tuple(LEARNED)) as saved:
+        kind, saved_dt = saved.kind, saved.dt
+    return make_predictor(kind, dt=saved_dt if dt is None else dt, model=str(path))

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import re
 from collections.abc import Callable
 from pathlib import Path
@@ -55,6 +56,18 @@ def mat(time_scale: float, **extra: str) -> Callable[[Path], None]:
     """A MAT file: ``X`` 3 × n [mm], ``t`` = ``time_scale`` × seconds, ``units`` and ``extra``."""
     def write(path: Path) -> None:
         scipy.io.savemat(path, {"X": HEART_MM.T, "t": T * time_scale, "units": "mm", **extra})
+
+    return write
+
+
+def fifo(path: Path) -> None:
+    os.mkfifo(path)
+
+
+def link(target: str) -> Callable[[Path], None]:
+    """A symbolic link to ``target`` (relative to the link's folder)."""
+    def write(path: Path) -> None:
+        path.symlink_to(target)
 
     return write
 
@@ -115,7 +128,7 @@ CASES = [
     ("data-missing-file", ["data", "show", "nope.csv"], {},
      2, r"rhmpc data: error: nope\.csv: no such file$"),
     ("data-directory", ["data", "show", "dir.csv"], {"dir.csv": None},
-     2, r"rhmpc data: error: dir\.csv: not a file$"),
+     2, r"rhmpc data: error: dir\.csv: a folder, not a regular file; give a file$"),
     ("data-garbage-mat", ["data", "show", "g.mat"], {"g.mat": b"MATLAB 5.0" + bytes(300)},
      2, r"rhmpc data: error: g\.mat: not a readable MATLAB file"),
     ("data-mat-times-in-us-unlabelled", ["data", "show", "us.mat"], {"us.mat": mat(1e6)},
@@ -197,7 +210,7 @@ CASES = [
      2, r"rhmpc simulate: error: run\.toml: not valid TOML: Expected '\]' at the end of a table "
         r"declaration \(at line 1, column 5\)$"),
     ("sim-missing-config", [*SIM, "--config", "nope.toml"], {},
-     2, r"rhmpc simulate: error: nope\.toml: cannot read: No such file or directory$"),
+     2, r"rhmpc simulate: error: nope\.toml: no such file$"),
     # rhmpc simulate --data
     ("sim-data-complex", [*DATA_SIM, "c.npz"], {"c.npz": complex_npz},
      2, r"rhmpc simulate: error: c\.npz: 'position' holds complex numbers; positions and times "
@@ -269,7 +282,7 @@ CASES = [
      2, r"rhmpc tune: error: s\.toml: parameters \(mpc\.effort_weight = 0\.0001\): unknown "
         r"predictor 'nosuch'" + VALID_PREDICTORS),
     ("tune-missing-spec", ["tune", "nope.toml"], {},
-     2, r"rhmpc tune: error: nope\.toml: cannot read: No such file or directory$"),
+     2, r"rhmpc tune: error: nope\.toml: no such file$"),
     ("tune-broken-spec", ["tune", "s.toml"], {"s.toml": "name = \n"},
      2, r"rhmpc tune: error: s\.toml: not valid TOML: Invalid value \(at line 1, column 8\)$"),
     ("tune-report-missing", ["tune", "report", "nope.jsonl"], {},
@@ -294,7 +307,7 @@ CASES = [
     ("config-unknown-setting", ["config", "show", "--set", "mpc.nosuch=1"], {},
      2, r"rhmpc config: error: unknown setting\(s\) mpc\.nosuch; valid keys of \[mpc\]: horizon,"),
     ("config-missing-file", ["config", "show", "--config", "nope.toml"], {},
-     2, r"rhmpc config: error: nope\.toml: cannot read: No such file or directory$"),
+     2, r"rhmpc config: error: nope\.toml: no such file$"),
     ("config-wrong-type", ["config", "show", "--config", "r.toml"],
      {"r.toml": '[mpc]\nhorizon = "ten"\n'},
      2, r"rhmpc config: error: r\.toml: \[mpc\] horizon must be an integer >= 1, got 'ten'$"),
@@ -302,6 +315,50 @@ CASES = [
      {"r.toml": "[mpc]\nhorizn = 10\n"},
      2, r"rhmpc config: error: r\.toml: \[mpc\] unknown MPCSettings setting\(s\): horizn; "
         r"valid: horizon,"),
+    # files in through one reader, out through one writer; bounds from one table
+    ("config-fifo", ["config", "show", "--config", "fifo.toml"], {"fifo.toml": fifo},
+     2, r"rhmpc config: error: fifo\.toml: a named pipe \(FIFO\), not a regular file"),
+    ("config-dev-zero", ["config", "show", "--config", "/dev/zero"], {},
+     2, r"rhmpc config: error: /dev/zero: a character device, not a regular file; give a file$"),
+    ("tune-dev-zero", ["tune", "/dev/zero"], {},
+     2, r"rhmpc tune: error: /dev/zero: a character device, not a regular file; give a file$"),
+    ("sim-toml-5000-deep", [*SIM, "--config", "deep.toml"],
+     {"deep.toml": "a = " + "[" * 5000 + "]" * 5000 + "\n"},
+     2, r"rhmpc simulate: error: deep\.toml: nested 5000 levels deep; at most 64 are read$"),
+    ("tune-report-bad-line", ["tune", "report", "r.jsonl"],
+     {"r.jsonl": '{"key": "zzz", "status": "ok"}\n'},
+     2, r"rhmpc tune: error: r\.jsonl: no results yet \(skipped 1 line\(s\) that are not "
+        r"results records \(the first: line 1\)"),
+    ("tune-dry-run-bad-line", ["tune", "s.toml", "--dry-run", "--results", "r.jsonl"],
+     {"s.toml": spec(), "r.jsonl": '{"key": "zzz", "status": "ok"}\n'},
+     0, r"rhmpc tune: warning: r\.jsonl: skipped 1 line\(s\) that are not results records"),
+    ("sim-model-empty", [*SIM, "--predictor", "ridge", "--set",
+                         'predictor_settings.model="empty.npz"'], {"empty.npz": b""},
+     2, r"rhmpc simulate: error: empty\.npz: an empty file \(0 bytes\), not a saved model$"),
+    ("sim-model-missing", [*SIM, "--predictor", "ridge", "--set",
+                           'predictor_settings.model="none.npz"'], {},
+     2, r"rhmpc simulate: error: none\.npz: no such file$"),
+    ("sim-out-is-input", [*DATA_SIM, "rec.mat", "--out", "./rec.mat"], {"rec.mat": mat(1.0)},
+     2, r"rhmpc simulate: error: --out rec\.mat: is an input of this run \(rec\.mat\)"),
+    ("sim-trace-through-link", [*SIM, "--trace", "t.npz"], {"t.npz": link("victim.npz")},
+     2, r"rhmpc simulate: error: --trace t\.npz: a symbolic link \(to victim\.npz\)"),
+    ("export-through-link", ["export", "out", "--force"],
+     {"out": None, "victim.h": "keep\n", "out/rhmpc.h": link("../victim.h")},
+     2, r"rhmpc export: error: out/rhmpc\.h: a symbolic link \(to \.\./victim\.h\)"),
+    ("data-csv-ms-1khz", ["data", "show", "ms.csv"],
+     {"ms.csv": csv(t=np.arange(T.size) * 1.0, z=np.interp(np.arange(T.size) / 1000.0, T,
+                                                           HEART_MM[:, 0])[:, None]
+                    * [1, 1, 1])},
+     2, r"rhmpc data: error: ms\.csv: the times look like|rhmpc data: error: ms\.csv: one "),
+    ("data-frame-numbers", ["data", "show", "frames.csv"],
+     {"frames.csv": csv(t=np.arange(T.size) * 1.0)},
+     2, r"rhmpc data: error: frames\.csv: the times look like frame numbers \(steps of 1\)"),
+    ("predict-trials-huge", ["predict", "--study", "noise", "--trials", "1000000000"], {},
+     2, r"rhmpc predict: error: --trials: 1000000000 Monte Carlo trials would take about .* "
+        r"at most \d+ fit in 2 GiB of memory and a day of computing$"),
+    ("sim-horizon-huge", [*SIM, "--set", "mpc.horizon=100000", "--set", "mpc.blocks=[100000]"],
+     {}, 2, r"rhmpc simulate: error: mpc\.horizon: 100000 MPC horizon steps would take about "
+            r".*; at most \d+ fit in 2 GiB of memory and a day of computing$"),
 ]
 
 
@@ -322,7 +379,18 @@ def _file_kept(root: Path, out: str) -> None:
 
 
 #: Checks beyond the exit code and stderr: on the working directory and stdout.
+def _input_kept(root: Path, out: str) -> None:
+    scipy.io.loadmat(root / "rec.mat")  # still the recording
+
+
+def _victim_kept(root: Path, out: str) -> None:
+    assert (root / "victim.h").read_text() == "keep\n"
+    assert sorted(p.name for p in (root / "out").iterdir()) == ["rhmpc.h"]
+
+
 CHECKS: dict[str, Callable[[Path, str], None]] = {
+    "sim-out-is-input": _input_kept,
+    "export-through-link": _victim_kept,
     "sim-data-spike": _spike_is_excluded,
     "export-over-users-file": _users_file_kept,
     "data-export-over-file": _file_kept,

@@ -2,6 +2,8 @@
 
 Layers, from the bottom (peers of one layer do not import each other):
 
+-1. ``boundary``, the one guarded reader, the one atomic writer and the table of bounds, which
+    every package may import (it imports the standard library and NumPy only)
 0. ``robots``, ``predictors``
 1. ``rhmpc.control``, the controller a robot runs (with ``rhmpc.errors`` and ``rhmpc.compiled``,
    the one build helper of every compiled piece, which every part above may use)
@@ -14,8 +16,8 @@ Layers, from the bottom (peers of one layer do not import each other):
 
 Every ``import`` statement counts, including those inside functions (deferred imports are
 still dependencies), and no module may reach itself through imports (no cycle).
-``predictors`` also depends on nothing outside numpy, scipy and the standard library, so that
-a predictor can be lifted into another project; only the learned predictors
+``predictors`` also depends on nothing outside numpy, scipy, the standard library and
+``boundary``, so that a predictor can be lifted into another project; only the learned predictors
 (``predictors.learned``) import their optional deep-learning extra, and only when asked for.
 """
 
@@ -31,6 +33,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 #: (package prefix, layer, peer group); the longest matching prefix decides.
 LAYERS: tuple[tuple[str, float, str], ...] = (
+    ("boundary", -1, "boundary"),
     ("robots", 0, "robots"),
     ("predictors", 0, "predictors"),
     ("rhmpc.errors", 0.9, "rhmpc.errors"),
@@ -48,9 +51,11 @@ LAYERS: tuple[tuple[str, float, str], ...] = (
     ("rhmpc.tuning", 4, "rhmpc.tuning"),
     ("rhmpc.cli", 5, "rhmpc.cli"),
 )
-PACKAGES = ("robots", "predictors", "sim", "rhmpc")
+PACKAGES = ("boundary", "robots", "predictors", "sim", "rhmpc")
 #: What ``predictors`` may import besides itself and the standard library.
-PREDICTOR_DEPENDENCIES = ("numpy", "scipy")
+PREDICTOR_DEPENDENCIES = ("numpy", "scipy", "boundary")
+#: What ``boundary`` may import besides itself and the standard library.
+BOUNDARY_DEPENDENCIES = ("numpy",)
 #: The optional extra the learned predictors (``predictors.learned``) may import besides.
 LEARNED_DEPENDENCIES = ("torch",)
 
@@ -100,6 +105,12 @@ def violations(root: Path) -> list[str]:
                 continue  # the facade: lazy re-exports only, resolved on first use
             own = layer_of(module)
             for line, target in imports_of(path, module):
+                if top == "boundary":
+                    first = target.split(".")[0]
+                    if first not in ("boundary", *BOUNDARY_DEPENDENCIES) and \
+                            first not in sys.stdlib_module_names:
+                        found.append(f"{path.relative_to(root)}:{line}: boundary imports "
+                                     f"{target} (the standard library and numpy only)")
                 if top == "predictors":
                     first = target.split(".")[0]
                     extra = LEARNED_DEPENDENCIES if module.startswith("predictors.learned") \
@@ -107,7 +118,7 @@ def violations(root: Path) -> list[str]:
                     if first not in ("predictors", *PREDICTOR_DEPENDENCIES, *extra) and \
                             first not in sys.stdlib_module_names:
                         found.append(f"{path.relative_to(root)}:{line}: predictors imports "
-                                     f"{target} (numpy and scipy only)")
+                                     f"{target} (numpy, scipy and boundary only)")
                 if target.split(".")[0] == "rhmpc" and layer_of(target) is None \
                         and target not in ("rhmpc", "rhmpc.__version__"):
                     found.append(f"{path.relative_to(root)}:{line}: {module} imports {target} "
@@ -142,8 +153,9 @@ def test_every_module_has_a_layer() -> None:
     ("rhmpc/studies/bad.py", "from rhmpc.tuning import spec\n", "layer 4"),
     ("rhmpc/tuning/bad.py", "from ..cli import main\n", "layer 5"),
     ("robots/bad.py", "import predictors\n", "layer 0"),
-    ("predictors/bad.py", "import pinocchio\n", "numpy and scipy only"),
-    ("predictors/bad.py", "import torch\n", "numpy and scipy only"),
+    ("predictors/bad.py", "import pinocchio\n", "numpy, scipy and boundary only"),
+    ("predictors/bad.py", "import torch\n", "numpy, scipy and boundary only"),
+    ("boundary/bad.py", "import scipy\n", "the standard library and numpy only"),
     ("rhmpc/control/bad.py", "from rhmpc import run_experiment\n", "facade"),
 ])
 def test_the_check_catches_an_upward_import(tmp_path: Path, where: str, source: str,

@@ -20,45 +20,57 @@ its newest sample: a model's input never holds a NaN.
 from __future__ import annotations
 
 import dataclasses
-import json
+import warnings
 from abc import abstractmethod
 
 import numpy as np
 
+from boundary import FileError
 from predictors.base import Predictor
+from predictors.learned.modelfile import ModelFile, write_model
 from predictors.learned.series import as_series
 
-__all__ = ["FittedPredictor", "settings_from_json", "settings_to_json"]
+__all__ = ["MIN_FIT_SECONDS", "FitWarning", "FittedPredictor", "settings_from_dict"]
+
+#: The least measured time [s] a network is fitted on without a :class:`FitWarning`: five
+#: beats at 60 beats/min, the least that shows the beat-to-beat variation a model must learn.
+MIN_FIT_SECONDS = 5.0
 
 
-def settings_to_json(settings) -> str:
-    """The settings dataclass as JSON (tuples become lists)."""
-    return json.dumps(dataclasses.asdict(settings), sort_keys=True)
+class FitWarning(UserWarning):
+    """A predictor was fitted, but on too little data for its forecasts to be trusted."""
 
 
-def settings_from_json(cls, text: str):
-    """The settings dataclass ``cls`` from :func:`settings_to_json`'s text (unknown keys are an
-    error: the file was written by another version or another predictor)."""
-    values = json.loads(text)
+def settings_from_dict(cls, values: dict, where: str):
+    """The settings dataclass ``cls`` from a model file's ``settings`` (lists become tuples);
+    unknown keys and invalid values are a :class:`boundary.FileError` naming ``where``."""
     fields = {f.name for f in dataclasses.fields(cls)}
     unknown = sorted(set(values) - fields)
     if unknown:
-        raise ValueError(f"the model file's settings {', '.join(unknown)} are not {cls.__name__}'s")
+        raise FileError(f"{where}: the model's settings {', '.join(unknown)} are not "
+                        f"{cls.__name__}'s")
     values = {k: tuple(v) if isinstance(v, list) else v for k, v in values.items()}
-    return cls(**values)
+    try:
+        return cls(**values)
+    except (TypeError, ValueError) as exc:
+        raise FileError(f"{where}: the model's settings: {exc}") from None
 
 
 class FittedPredictor(Predictor):
     """A predictor fitted before the run (module docstring).
 
     Subclasses implement ``_fit(series, progress)`` (returns the model, a dict), ``_forecast()``
-    ((L, d) forecasts [m] of leads 1 … L from ``self._rows``), ``save(path)``/``_read(path)``,
-    and optionally ``_advance(row)`` (a recurrent state's step) and ``_span()`` (rows kept).
+    ((L, d) forecasts [m] of leads 1 … L from ``self._rows``), and the model's file:
+    ``_arrays()`` (what :meth:`save` writes), ``model_shapes(settings, saved)`` (the arrays a
+    file of these settings holds) and ``_restore(settings, arrays, saved)`` (the model from
+    them); optionally ``_advance(row)`` (a recurrent state's step) and ``_span()`` (rows kept).
     Their settings have ``leads``, ``unit`` and ``model``.
     """
 
+    #: the predictor's name (``predictors.registry.LEARNED``), the ``kind`` of its files
+    KIND = ""
     #: the file name suffix of :meth:`save`
-    SUFFIX = ""
+    SUFFIX = ".npz"
 
     def __init__(self, dt: float, settings=None) -> None:
         self.model: dict | None = None
@@ -78,31 +90,70 @@ class FittedPredictor(Predictor):
         other points uses row 0 only). ``progress(text)``, if given, hears how it goes.
         Returns the predictor, its online history reset."""
         data = as_series(series, None if self.multi_point else 1)
+        self._warn_if_short(data)
         self.model = self._fit(data, progress)
         self.model.update(points=data[0].shape[1], dim=data[0].shape[2], dt=self.dt)
         self.reset()
         return self
 
+    def _warn_if_short(self, series: list[np.ndarray]) -> None:
+        """A :class:`FitWarning` when the series hold less than :data:`MIN_FIT_SECONDS` of
+        samples whose point of interest was measured."""
+        measured = sum(int(np.isfinite(a[:, 0]).all(axis=1).sum()) for a in series)
+        if measured * self.dt < MIN_FIT_SECONDS:
+            warnings.warn(f"{self.KIND or type(self).__name__} is fitted on {measured} "
+                          f"samples ({measured * self.dt:.3g} s), less than "
+                          f"{MIN_FIT_SECONDS:g} s: its forecasts rest on fewer than five "
+                          "beats; give it more data (a longer --split TRAIN, --train "
+                          "recordings, a longer settling)", FitWarning, stacklevel=3)
+
     def load(self, path) -> FittedPredictor:
-        """Load a model written by :meth:`save` (its settings replace this predictor's, except
-        ``unit`` and ``model``). Raises ``ValueError`` for a file of another predictor or
-        sampling period."""
-        settings, model = self._read(path)
-        if not np.isclose(model["dt"], self.dt, rtol=1e-6, atol=0.0):
-            raise ValueError(f"{path}: fitted at dt = {model['dt']:g} s; this predictor runs at "
-                             f"{self.dt:g} s")
+        """Load a model written by :meth:`save`, checked before any array is read
+        (:class:`~predictors.learned.modelfile.ModelFile`); its settings replace this
+        predictor's, except ``unit`` and ``model``.
+
+        Raises
+        ------
+        ValueError
+            (:class:`boundary.FileError`) Naming the file: not a model of this predictor, of
+            another sampling period, damaged, altered or too large.
+        """
+        with ModelFile(path, self.KIND) as saved:
+            settings = settings_from_dict(self.Settings, saved.settings, str(path))
+            if not np.isclose(saved.dt, self.dt, rtol=1e-6, atol=0.0):
+                raise FileError(f"{path}: fitted at dt = {saved.dt:g} s; this predictor runs "
+                                f"at {self.dt:g} s")
+            saved.expect(*self.model_shapes(settings, saved))
+            model = self._restore(settings, saved.arrays(), saved)
+        model.update(points=saved.points, dim=saved.dim, dt=saved.dt)
         self.settings = dataclasses.replace(settings, unit=self.settings.unit, model=str(path))
         self.model = model
         self.reset()
         return self
 
-    @abstractmethod
     def save(self, path) -> None:
-        """Write the fitted model and its settings to ``path``."""
+        """Write the fitted model and its settings to ``path`` (the one model format,
+        :mod:`predictors.learned.modelfile`; atomically, never through a link)."""
+        if self.model is None:
+            raise RuntimeError(f"{type(self).__name__} is not fitted: nothing to save")
+        m = self.model
+        write_model(path, self.KIND, m["dt"], m["points"], m["dim"], self.settings,
+                    self._arrays())
 
     @abstractmethod
-    def _read(self, path) -> tuple[object, dict]:
-        """(settings, model) from a file written by :meth:`save`."""
+    def _arrays(self) -> dict[str, np.ndarray]:
+        """The fitted model's arrays, by name (what :meth:`save` writes)."""
+
+    @abstractmethod
+    def model_shapes(self, settings, saved: ModelFile
+                     ) -> tuple[dict[str, tuple[int, ...]], tuple[str, ...]]:
+        """(name → shape of every array a file of ``settings`` holds, names of the optional
+        ones), from the file's header ``saved`` (points, dim; small arrays may be read),
+        computed without allocating the model."""
+
+    @abstractmethod
+    def _restore(self, settings, arrays: dict[str, np.ndarray], saved: ModelFile) -> dict:
+        """The model (a dict) from a checked file's ``arrays``."""
 
     @abstractmethod
     def _fit(self, series: list[np.ndarray], progress) -> dict: ...

@@ -35,8 +35,15 @@ class Recurrent(nn.Module):
                        dropout=dropout if layers > 1 else 0.0)
         self.head = nn.Linear(hidden, q)
 
+    def run(self, x: torch.Tensor, state=None) -> tuple[torch.Tensor, object]:
+        """Outputs (B, T, q) over inputs ``x`` (B, T, C) from ``state`` (zeros if None), and
+        the state after the last input: the one definition of the network, run over whole
+        sequences in training and one sample at a time online."""
+        y, state = self.rnn(x, state)
+        return self.head(y), state
+
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return self.head(self.rnn(x)[0])
+        return self.run(x)[0]
 
 
 class _Block(nn.Module):
@@ -50,10 +57,19 @@ class _Block(nn.Module):
         self.drop = nn.Dropout(dropout)
         self.skip = nn.Conv1d(cin, cout, 1) if cin != cout else nn.Identity()
 
-    def forward(self, x: torch.Tensor) -> torch.Tensor:  # (B, C, T)
-        y = self.drop(torch.relu(self.conv1(nn.functional.pad(x, (self.pad, 0)))))
-        y = self.drop(torch.relu(self.conv2(nn.functional.pad(y, (self.pad, 0)))))
-        return torch.relu(y + self.skip(x))
+    def forward(self, x: torch.Tensor, past=None) -> tuple[torch.Tensor, tuple]:
+        """Outputs (B, C', T) over inputs ``x`` (B, C, T), each convolution's left context
+        taken from ``past`` (the last ``pad`` columns of its inputs before ``x``; zeros when
+        None, the training's padding); and the ``past`` of the next call."""
+        if past is None:
+            past = (x.new_zeros(x.shape[0], x.shape[1], self.pad),
+                    x.new_zeros(x.shape[0], self.conv1.out_channels, self.pad))
+        a = torch.cat([past[0], x], dim=2)
+        h = self.drop(torch.relu(self.conv1(a)))
+        b = torch.cat([past[1], h], dim=2)
+        y = self.drop(torch.relu(self.conv2(b)))
+        keep = slice(x.shape[2], None)  # the last pad columns of a and b
+        return torch.relu(y + self.skip(x)), (a[:, :, keep], b[:, :, keep])
 
 
 class TCN(nn.Module):
@@ -63,12 +79,23 @@ class TCN(nn.Module):
                  dropout: float) -> None:
         super().__init__()
         sizes = [inputs] + [channels] * len(dilations)
-        self.blocks = nn.Sequential(*(_Block(sizes[i], sizes[i + 1], kernel, dil, dropout)
-                                      for i, dil in enumerate(dilations)))
+        self.blocks = nn.ModuleList(_Block(sizes[i], sizes[i + 1], kernel, dil, dropout)
+                                    for i, dil in enumerate(dilations))
         self.head = nn.Conv1d(channels, q, 1)
 
+    def run(self, x: torch.Tensor, state=None) -> tuple[torch.Tensor, list]:
+        """Outputs (B, T, q) over inputs ``x`` (B, T, C) after the inputs ``state`` holds
+        (each convolution's left context; None: the start of a sequence), and the state after
+        the last input (Paine et al. 2016, "Fast WaveNet generation", arXiv:1611.09482: one
+        new input costs one column per convolution)."""
+        h, after = x.transpose(1, 2), []
+        for block, past in zip(self.blocks, state or [None] * len(self.blocks), strict=True):
+            h, past = block(h, past)
+            after.append(past)
+        return self.head(h).transpose(1, 2), after
+
     def forward(self, x: torch.Tensor) -> torch.Tensor:  # (B, T, C) -> (B, T, q)
-        return self.head(self.blocks(x.transpose(1, 2))).transpose(1, 2)
+        return self.run(x)[0]
 
 
 def build(s, inputs: int, q: int) -> nn.Module:

@@ -12,19 +12,22 @@ series; a missing input takes the channel's previous value. For each lead k (or 
 (:func:`predictors.learned.networks.train`), the target at instant t the z-scored POI at
 t + k. Seeds: ``numpy.random.SeedSequence(seed)`` spawns one per network.
 
-Online.  The networks run one step per sample with NumPy, from a zero state as in training:
-recurrent ones through their cells (the LSTM of Hochreiter & Schmidhuber 1997 with a forget
-gate, the GRU of Cho et al. 2014, in PyTorch's gate layout), a TCN through its convolutions'
-queues of past inputs (zeros before the first sample: the training's padding). The forecast
-is the mean of the ensemble, ẑ_{n+k} = μ + σ ⊙ mean_e f_{k,e}.
+Online.  The networks run one step per sample through their own modules, from the state at
+the start of a sequence as in training (:meth:`~predictors.learned.networks.Recurrent.run`: a
+recurrent network's state; :meth:`~predictors.learned.networks.TCN.run`: a TCN's last inputs
+of each convolution, zeros before the first sample as the training's padding), one definition
+for both. The forecast is the mean of the ensemble, ẑ_{n+k} = μ + σ ⊙ mean_e f_{k,e}.
 """
 
 from __future__ import annotations
 
+import contextlib
+
 import numpy as np
 import torch
 
-from predictors.learned.fitted import FittedPredictor, settings_from_json, settings_to_json
+from boundary import FileError
+from predictors.learned.fitted import FittedPredictor
 from predictors.learned.networks import build, train
 from predictors.learned.series import channel_stats, fill_forward
 from predictors.learned.settings import (
@@ -38,103 +41,24 @@ __all__ = ["GRUPredictor", "LSTMPredictor", "MultiPointGRU", "MultiPointLSTM",
            "MultiPointTCN", "NeuralPredictor", "TCNPredictor"]
 
 
-def _sigmoid(x: np.ndarray) -> np.ndarray:
-    return 0.5 * (1.0 + np.tanh(0.5 * x))  # no overflow warning for large |x|
-
-
-class _Cells:
-    """One recurrent network's weights as NumPy arrays, and its step."""
-
-    def __init__(self, kind: str, net) -> None:
-        sd = {k: v.detach().double().numpy() for k, v in net.state_dict().items()}
-        self.kind, self.layers = kind, net.rnn.num_layers
-        self.w_ih = [sd[f"rnn.weight_ih_l{i}"] for i in range(self.layers)]
-        self.w_hh = [sd[f"rnn.weight_hh_l{i}"] for i in range(self.layers)]
-        self.b_ih = [sd[f"rnn.bias_ih_l{i}"] for i in range(self.layers)]
-        self.b_hh = [sd[f"rnn.bias_hh_l{i}"] for i in range(self.layers)]
-        self.head_w, self.head_b = sd["head.weight"], sd["head.bias"]
-        self.hidden = self.w_hh[0].shape[1]
-
-    def zero(self) -> tuple[np.ndarray, np.ndarray]:
-        return np.zeros((self.layers, self.hidden)), np.zeros((self.layers, self.hidden))
-
-    def step(self, x: np.ndarray, h: np.ndarray, c: np.ndarray) -> np.ndarray:
-        """Advance the state (h, c) in place with input x; return the head's output.
-
-        LSTM: [i; f; g; o] = W_ih x + b_ih + W_hh h + b_hh, c ← σ(f)c + σ(i)tanh(g),
-        h ← σ(o)tanh(c). GRU: r, u = σ(·) of their rows, m = tanh(W_in x + b_in + r(W_hn h +
-        b_hn)), h ← (1 − u)m + u h.
-        """
-        H = self.hidden
-        for i in range(self.layers):
-            gi = self.w_ih[i] @ x + self.b_ih[i]
-            gh = self.w_hh[i] @ h[i] + self.b_hh[i]
-            if self.kind == "lstm":
-                g = gi + gh
-                c[i] = _sigmoid(g[H : 2 * H]) * c[i] + _sigmoid(g[:H]) * np.tanh(g[2 * H : 3 * H])
-                h[i] = _sigmoid(g[3 * H :]) * np.tanh(c[i])
-            else:
-                r = _sigmoid(gi[:H] + gh[:H])
-                u = _sigmoid(gi[H : 2 * H] + gh[H : 2 * H])
-                m = np.tanh(gi[2 * H :] + r * gh[2 * H :])
-                h[i] = (1.0 - u) * m + u * h[i]
-            x = h[i]
-        return self.head_w @ x + self.head_b
-
-
-class _Causal:
-    """One TCN's weights as NumPy arrays, run one sample at a time (Paine et al. 2016, "Fast
-    WaveNet generation", arXiv:1611.09482): each convolution keeps the inputs it still needs,
-    zeros before the first sample, as the training's left padding."""
-
-    def __init__(self, net) -> None:
-        sd = {k: v.detach().double().numpy() for k, v in net.state_dict().items()}
-        self.blocks = []
-        for i, block in enumerate(net.blocks):
-            pre = f"blocks.{i}."
-            skip = (sd[pre + "skip.weight"][:, :, 0], sd[pre + "skip.bias"]) \
-                if pre + "skip.weight" in sd else None
-            self.blocks.append((sd[pre + "conv1.weight"], sd[pre + "conv1.bias"],
-                                sd[pre + "conv2.weight"], sd[pre + "conv2.bias"], skip,
-                                block.conv1.dilation[0]))
-        self.head_w, self.head_b = sd["head.weight"][:, :, 0], sd["head.bias"]
-
-    def zero(self) -> tuple[list[np.ndarray], list[int]]:
-        """Per convolution, a ring of its last (k − 1)·dilation + 1 inputs; the write index."""
-        rings = []
-        for w1, _, w2, _, _, dil in self.blocks:
-            span = (w1.shape[2] - 1) * dil + 1
-            rings += [np.zeros((span, w1.shape[1])), np.zeros((span, w2.shape[1]))]
-        return rings, [0]
-
-    def step(self, x: np.ndarray, rings: list[np.ndarray], clock: list[int]) -> np.ndarray:
-        """Feed input x; return the head's output. A convolution of kernel k and dilation δ:
-        y_t = b + Σ_j W_j x_{t − (k − 1 − j)δ}; a block: relu(relu-conv(relu-conv(x)) + skip)."""
-        t = clock[0]
-        clock[0] = t + 1
-        for i, (w1, b1, w2, b2, skip, dil) in enumerate(self.blocks):
-            h = np.maximum(_conv(rings[2 * i], x, w1, b1, dil, t), 0.0)
-            y = np.maximum(_conv(rings[2 * i + 1], h, w2, b2, dil, t), 0.0)
-            x = np.maximum(y + (x if skip is None else skip[0] @ x + skip[1]), 0.0)
-        return self.head_w @ x + self.head_b
-
-
-def _conv(ring: np.ndarray, x: np.ndarray, w: np.ndarray, b: np.ndarray, dil: int,
-          t: int) -> np.ndarray:
-    """Write x at time t into ``ring`` and return the causal convolution's output at t."""
-    span, k = ring.shape[0], w.shape[2]
-    ring[t % span] = x
-    out = b.copy()
-    for j in range(k):
-        out += w[:, :, j] @ ring[(t - (k - 1 - j) * dil) % span]
-    return out
+@contextlib.contextmanager
+def _batch_of_one():
+    """PyTorch's own CPU kernels inside, not oneDNN's (``torch.backends.mkldnn.enabled``): for
+    one sample of one sequence, oneDNN's recurrent kernel, made for batches, took 4 to 7 times
+    as long (an LSTM of 2 × 600 units: 2.0 ms against 14.7 ms a step, measured on one core)."""
+    before = torch.backends.mkldnn.enabled
+    torch.backends.mkldnn.enabled = False
+    try:
+        yield
+    finally:
+        torch.backends.mkldnn.enabled = before
 
 
 class NeuralPredictor(FittedPredictor):
     """A neural forecaster of the POI from its own past (module docstring)."""
 
     Settings = NetworkSettings
-    SUFFIX = ".pt"
+    KIND = "lstm"
     PRESETS = LSTM_PRESETS
 
     # -- fitting ------------------------------------------------------------------
@@ -231,20 +155,20 @@ class NeuralPredictor(FittedPredictor):
         m = self.model
         self._stats = (m["mean"], m["std"])
         self._dim = m["dim"]
-        if self.settings.architecture == "tcn":
-            self._runs = [[_Causal(net) for net in row] for row in m["nets"]]
-        else:
-            self._runs = [[_Cells(self.settings.architecture, net) for net in row]
-                          for row in m["nets"]]
-        self._state = [[run.zero() for run in row] for row in self._runs]
+        self._state = [[None] * len(row) for row in m["nets"]]  # from the start of a sequence
         self._out: np.ndarray | None = None
 
     def _advance(self, row: np.ndarray) -> None:
         mean, std = self._stats
-        x = (row - mean) / std
-        outs = [np.concatenate([run.step(x, *state) for run, state in
-                                zip(runs, states, strict=True)])
-                for runs, states in zip(self._runs, self._state, strict=True)]
+        x = torch.as_tensor((row - mean) / std, dtype=torch.float32)[None, None]
+        outs = []
+        with torch.inference_mode(), _batch_of_one():
+            for nets, states in zip(self.model["nets"], self._state, strict=True):
+                ys = []
+                for j, net in enumerate(nets):
+                    y, states[j] = net.run(x, states[j])
+                    ys.append(y[0, -1])
+                outs.append(torch.cat(ys).double().numpy())
         self._out = np.mean(outs, axis=0)
 
     def _forecast(self) -> np.ndarray:
@@ -255,74 +179,102 @@ class NeuralPredictor(FittedPredictor):
         f[order] = self._out.reshape(-1, d)
         return mean[:d] + std[:d] * f
 
-    # -- files ----------------------------------------------------------------------
-    def save(self, path) -> None:
-        """Write the model to ``path`` (``torch.save`` of tensors, the networks' state dicts and
-        the settings as JSON; :meth:`load` reads it with ``weights_only=True``)."""
-        if self.model is None:
-            raise RuntimeError(f"{type(self).__name__} is not fitted: nothing to save")
+    # -- the model's file ------------------------------------------------------------
+    def _arrays(self) -> dict[str, np.ndarray]:
         m = self.model
-        val = m["validation_rms"]
-        torch.save({
-            "kind": type(self).__name__, "settings": settings_to_json(self.settings),
-            "mean": torch.as_tensor(m["mean"]), "std": torch.as_tensor(m["std"]),
-            "validation_rms": None if val is None else torch.as_tensor(val),
-            "nets": [[net.state_dict() for net in row] for row in m["nets"]],
-            "points": m["points"], "dim": m["dim"], "dt": m["dt"],
-        }, path)
+        out = {"mean": m["mean"], "std": m["std"]}
+        if m["validation_rms"] is not None:
+            out["validation_rms"] = m["validation_rms"]
+        for e, row in enumerate(m["nets"]):
+            for j, net in enumerate(row):
+                out.update({f"net.{e}.{j}.{k}": v.detach().cpu().numpy()
+                            for k, v in net.state_dict().items()})
+        return out
 
-    def _read(self, path):
-        f = torch.load(path, map_location="cpu", weights_only=True)
-        if f.get("kind") != type(self).__name__:
-            raise ValueError(f"{path}: a {f.get('kind')} model, not a {type(self).__name__}")
-        s = settings_from_json(self.Settings, f["settings"])
-        d, P = int(f["dim"]), int(f["points"])
-        q = d * (s.leads if s.heads == "joint" else 1)
+    @staticmethod
+    def _head_width(settings, dim: int) -> int:
+        """Outputs of each network: every lead's coordinates (joint), or one lead's."""
+        return dim * (settings.leads if settings.heads == "joint" else 1)
+
+    def model_shapes(self, settings, saved):
+        """The networks' tensors as the settings build them (on PyTorch's ``meta`` device:
+        shapes only, nothing allocated), per ensemble member e and head j ``net.e.j.NAME``;
+        the channels' ``mean`` and ``std``; ``validation_rms`` (L,) when it was estimated."""
+        C = (saved.points if self.multi_point else 1) * saved.dim
+        nets = settings.ensemble * (1 if settings.heads == "joint" else settings.leads)
+        shapes = {"mean": (C,), "std": (C,)}
+        if nets > len(saved.shapes):  # each network holds a tensor at least
+            raise FileError(f"{saved.path}: the model's settings make {nets} networks; the "
+                            f"file holds {len(saved.shapes)} arrays: a damaged or altered file")
+        try:
+            with torch.device("meta"):
+                net = build(settings, C, self._head_width(settings, saved.dim))
+        except (RuntimeError, ValueError, OverflowError) as exc:  # sizes past any tensor's
+            raise FileError(f"{saved.path}: the model's settings make a network no file "
+                            f"holds ({str(exc).splitlines()[0]}): a damaged or altered file"
+                            ) from None
+        tensors = {k: tuple(v.shape) for k, v in net.state_dict().items()}
+        for e in range(settings.ensemble):
+            for j in range(nets // settings.ensemble):
+                shapes.update({f"net.{e}.{j}.{k}": v for k, v in tensors.items()})
+        if "validation_rms" in saved.shapes:
+            shapes["validation_rms"] = (settings.leads,)
+        return shapes, ()
+
+    def _restore(self, settings, arrays, saved) -> dict:
+        C = (saved.points if self.multi_point else 1) * saved.dim
+        q = self._head_width(settings, saved.dim)
+        heads = 1 if settings.heads == "joint" else settings.leads
         nets = []
-        for row in f["nets"]:
+        for e in range(settings.ensemble):
             nets.append([])
-            for state in row:
-                net = build(s, P * d, q)
-                net.load_state_dict(state)
+            for j in range(heads):
+                net = build(settings, C, q)
+                prefix = f"net.{e}.{j}."
+                net.load_state_dict({k[len(prefix):]: torch.from_numpy(v)
+                                     for k, v in arrays.items() if k.startswith(prefix)})
                 nets[-1].append(net.eval())
-        val = f["validation_rms"]
-        model = {"mean": f["mean"].numpy(), "std": f["std"].numpy(), "nets": nets,
-                 "validation_rms": None if val is None else val.numpy(),
-                 "points": P, "dim": d, "dt": float(f["dt"])}
-        return s, model
+        return {"mean": arrays["mean"], "std": arrays["std"], "nets": nets,
+                "validation_rms": arrays.get("validation_rms")}
 
 
 class LSTMPredictor(NeuralPredictor):
     """LSTM forecaster of the POI from its own past (presets ``zhang2022``, ``xu2026``)."""
 
+    KIND = "lstm"
     PRESETS = LSTM_PRESETS
 
 
 class GRUPredictor(NeuralPredictor):
     """GRU forecaster of the POI from its own past (preset ``li2022``)."""
 
+    KIND = "gru"
     PRESETS = GRU_PRESETS
 
 
 class TCNPredictor(NeuralPredictor):
     """TCN forecaster of the POI from its own past (preset ``xu2026``)."""
 
+    KIND = "tcn"
     PRESETS = TCN_PRESETS
 
 
 class MultiPointLSTM(LSTMPredictor):
     """LSTM forecaster of the POI from every tracked point's past (ST-LSTM)."""
 
+    KIND = "st-lstm"
     multi_point = True
 
 
 class MultiPointGRU(GRUPredictor):
     """GRU forecaster of the POI from every tracked point's past (ST-GRU)."""
 
+    KIND = "st-gru"
     multi_point = True
 
 
 class MultiPointTCN(TCNPredictor):
     """TCN forecaster of the POI from every tracked point's past."""
 
+    KIND = "st-tcn"
     multi_point = True

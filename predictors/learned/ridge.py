@@ -26,8 +26,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+import boundary
+from boundary import FileError
 from predictors.base import PredictorSettings
-from predictors.learned.fitted import FittedPredictor, settings_from_json, settings_to_json
+from predictors.learned.fitted import FittedPredictor
 from predictors.learned.series import relative_windows
 
 __all__ = ["MultiPointRidge", "Ridge", "RidgeSettings"]
@@ -103,11 +105,13 @@ class Ridge(FittedPredictor):
     """Ridge regression on the POI's delay embedding (module docstring)."""
 
     Settings = RidgeSettings
-    SUFFIX = ".npz"
+    KIND = "ridge"
 
     def _fit(self, series: list[np.ndarray], progress) -> dict:
         s, d, L = self.settings, series[0].shape[2], self.settings.leads
         orders = sorted({max(2, round(w / self.dt)) for w in s.windows})
+        m, width = sum(a.shape[0] for a in series), series[0].shape[1] * d
+        boundary.check("window", orders[-1], "windows", memory_scale=3 * m * width)
         best: list[tuple] = [(np.inf, 0, 0.0)] * L  # per lead: (validation MSE, N, α)
         for N in orders:
             fit, val = [], []
@@ -152,31 +156,36 @@ class Ridge(FittedPredictor):
         return rows[0, :d] + np.stack([W @ rel[: N - 1].reshape(-1) for N, W in
                                        zip(self.model["orders"], self.model["W"], strict=True)])
 
-    def save(self, path) -> None:
-        """Write the model to ``path`` (NumPy ``.npz``: arrays and the settings as JSON)."""
-        if self.model is None:
-            raise RuntimeError(f"{type(self).__name__} is not fitted: nothing to save")
+    # -- the model's file ------------------------------------------------------------
+    def _arrays(self) -> dict[str, np.ndarray]:
         m = self.model
-        weights = {f"W{k}": W for k, W in enumerate(m["W"])}
-        with open(path, "wb") as f:  # the path as given (np.savez would append .npz)
-            np.savez(f, kind=type(self).__name__, settings=settings_to_json(self.settings),
-                     validation_rms=m["validation_rms"], orders=m["orders"],
-                     alphas=m["alphas"], points=m["points"], dim=m["dim"], dt=m["dt"],
-                     **weights)
+        return {"orders": np.asarray(m["orders"], dtype=np.int64), "alphas": m["alphas"],
+                "validation_rms": m["validation_rms"],
+                **{f"W{k}": W for k, W in enumerate(m["W"])}}
 
-    def _read(self, path):
-        with np.load(path, allow_pickle=False) as f:
-            if str(f["kind"]) != type(self).__name__:
-                raise ValueError(f"{path}: a {f['kind']} model, not a {type(self).__name__}")
-            settings = settings_from_json(self.Settings, str(f["settings"]))
-            orders = f["orders"]
-            model = {"W": [f[f"W{k}"] for k in range(orders.size)], "orders": orders,
-                     "validation_rms": f["validation_rms"], "alphas": f["alphas"],
-                     "points": int(f["points"]), "dim": int(f["dim"]), "dt": float(f["dt"])}
-        return settings, model
+    def model_shapes(self, settings, saved):
+        """W_k is (d, (N_k − 1)·P·d) for the window N_k of lead k (``orders``, read first and
+        bounded: 2 ≤ N_k and the online history of N_k rows fits, :data:`boundary.BOUNDS`)."""
+        L, d = settings.leads, saved.dim
+        width = (saved.points if self.multi_point else 1) * d
+        saved.expect({"orders": (L,)}, tuple(n for n in saved.shapes if n != "orders"))
+        orders = saved.read("orders")
+        if orders.dtype.kind != "i" or np.any(orders < 2) or np.any(
+                orders > boundary.largest("window", width)):
+            raise FileError(f"{saved.path}: the model's windows {orders.tolist()} are not "
+                            f"between 2 and {boundary.largest('window', width)} samples")
+        shapes = {"orders": (L,), "alphas": (L,), "validation_rms": (L,)}
+        shapes.update({f"W{k}": (d, (int(N) - 1) * width) for k, N in enumerate(orders)})
+        return shapes, ()
+
+    def _restore(self, settings, arrays, saved) -> dict:
+        orders = arrays["orders"]
+        return {"W": [arrays[f"W{k}"] for k in range(orders.size)], "orders": orders,
+                "alphas": arrays["alphas"], "validation_rms": arrays["validation_rms"]}
 
 
 class MultiPointRidge(Ridge):
     """Ridge regression on the delay embedding of every tracked point (module docstring)."""
 
+    KIND = "st-ridge"
     multi_point = True

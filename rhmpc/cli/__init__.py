@@ -65,8 +65,10 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 0
+    from boundary import tracking_inputs
+
     try:
-        with one_line_warnings(f"rhmpc {args.command}"):
+        with one_line_warnings(f"rhmpc {args.command}"), tracking_inputs():
             return int(args.func(args) or 0)
     except BrokenPipeError:
         # The reader went away (``rhmpc ... | head``): not an error of ours. Point stdout at

@@ -15,13 +15,14 @@ import argparse
 import json
 import sys
 from dataclasses import dataclass
-from pathlib import Path
 
 from rhmpc.cli import COMMANDS
 from rhmpc.cli.simulate import (
     add_recording_options,
     add_run_options,
+    add_split_option,
     config_from_args,
+    parse_split,
     recording_options,
 )
 from rhmpc.errors import UsageError
@@ -107,6 +108,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="use each scenario's full duration (235-472 s) instead of --duration")
     add_run_options(p)
     add_recording_options(p)
+    add_split_option(p, "; each predictor's closed loop is set beside its open-loop forecast "
+                     "of the same samples, one sample ahead")
     out = p.add_mutually_exclusive_group()
     out.add_argument("--json", action="store_true", help="print the results as JSON: runs (one "
                      "document per column, predictor and seed, each with scenario (the column: "
@@ -180,7 +183,7 @@ def setting_of_config(config: RunConfig) -> str:
 
 def _predictors(args: argparse.Namespace, base: RunConfig) -> list[str]:
     """--predictors, or the default rows: the published tables' with --paper."""
-    from predictors import PREDICTORS
+    from predictors import predictor_names
     from rhmpc.studies.paper import table_predictors
 
     if args.predictors:
@@ -192,9 +195,10 @@ def _predictors(args: argparse.Namespace, base: RunConfig) -> list[str]:
     else:
         names = list(TABLE_PREDICTORS)
     predictors = list(dict.fromkeys(p.strip() for p in names if p.strip()))
-    bad = [p for p in predictors if p not in PREDICTORS]
+    bad = [p for p in predictors if p not in predictor_names()]
     if bad:
-        raise UsageError(f"unknown predictor(s) {', '.join(bad)}; valid: {', '.join(PREDICTORS)}")
+        raise UsageError(f"unknown predictor(s) {', '.join(bad)}; valid: "
+                         f"{', '.join(predictor_names())}")
     return predictors
 
 
@@ -218,10 +222,10 @@ def _scenario_columns(args: argparse.Namespace) -> list[tuple[str, dict]]:
     """(column, settings) of each scenario."""
     from sim.heart import SCENARIOS, SPECS
 
-    if args.points is not None or args.poi is not None or any(
+    if args.points is not None or args.poi is not None or args.split is not None or any(
             getattr(args, k, None) is not None for k in READ_OPTIONS):
-        raise UsageError("--points, --poi, --var, --rows, --cols, --rate and --units need "
-                         "--data FILE")
+        raise UsageError("--points, --poi, --split, --var, --rows, --cols, --rate and --units "
+                         "need --data FILE")
     names = args.scenarios or ",".join(TABLE_SCENARIOS)
     scenarios = list(dict.fromkeys(s.strip() for s in names.split(",") if s.strip()))
     unknown = [s for s in scenarios if s not in SCENARIOS]
@@ -247,12 +251,18 @@ def _data_columns(args: argparse.Namespace) -> list[tuple[str, dict]]:
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     sensor = {} if args.sensor else {"sensor": "recorded"}
+    split = parse_split(args.split)
+    if split and (args.duration is not None or args.settling is not None):
+        raise UsageError("--split TRAIN:END sets the settling and the duration: give neither "
+                         "--settling nor --duration with it")
     out = []
     for group in files:
         for column, path, point, recording in group:
             changes = {"data": path, "data_read": {**read, **({"point": point} if point else {})},
                        **sensor}
-            if args.duration is None and not args.config:  # default: the whole recording
+            if split:
+                changes["split"] = split
+            elif args.duration is None and not args.config:  # default: the whole recording
                 changes["loop.duration"] = recording.duration
             elif args.duration is not None and args.duration > recording.duration:
                 raise UsageError(f"{path}: the recording lasts {recording.duration:.2f} s, "
@@ -265,7 +275,7 @@ def _base_config(args: argparse.Namespace) -> RunConfig:
     """The settings every run shares, as ``simulate`` makes them: defaults < --config <
     --preset < options < --set (the column, the predictor and the seed come per run)."""
     saved = {k: getattr(args, k, None) for k in ("predictor", "scenario", "data", "seed",
-                                                 *READ_OPTIONS)}
+                                                 "split", "poi", *READ_OPTIONS)}
     for key in saved:
         setattr(args, key, None)
     try:
@@ -276,23 +286,30 @@ def _base_config(args: argparse.Namespace) -> RunConfig:
 
 
 def run(args: argparse.Namespace) -> int:
+    import boundary
+    from rhmpc.experiment.config import input_files
     from rhmpc.tuning.progress import note
-    from rhmpc.tuning.store import check_writable
 
     todo = jobs(args)
     if args.out:
-        check_writable(args.out, "--out")
+        boundary.check_output(args.out, "--out", inputs=[
+            *(f for job in todo for f in input_files(job.config)), *filter(None, [args.config])])
     text = not (args.json or args.csv)
     if text:
         print(_header(todo, args), flush=True)
     else:
         note(_header(todo, args), args.quiet)
+    beside = open_loops(todo, args) if args.split else {}
     outcome, where = execute(todo, args)
     done = [job for job in todo if job.key in outcome.by_key]
     docs = [outcome.by_key[job.key] for job in done]
     results = _document(docs, done, args, outcome.interrupted)
+    if args.split:
+        from rhmpc.studies.loop_gap import gap_rows
+
+        results["loop_gap"] = gap_rows(docs, beside)
     if args.out:
-        Path(args.out).write_text(json.dumps(results, indent=2) + "\n")
+        boundary.write_text(args.out, json.dumps(results, indent=2) + "\n")
     _print_results(results, docs, todo, args)
     note(_footer(docs, [job.config for job in done], outcome.elapsed_s, where), args.quiet)
     if outcome.interrupted:
@@ -344,6 +361,33 @@ def _print_results(results: dict, docs: list[dict], todo: list[Job],
 
         print()
         print(paper_table(docs, predictors, columns, setting=_setting(todo)), flush=True)
+    if results.get("loop_gap"):
+        from rhmpc.studies.loop_gap import gap_table
+
+        print("\n".join(gap_table(results["loop_gap"])), flush=True)
+
+
+def open_loops(todo: list[Job], args: argparse.Namespace) -> dict[str, dict]:
+    """Per recording column of a split: every predictor's open-loop forecast of the scored
+    samples one sample ahead (:func:`rhmpc.studies.loop_gap.open_loop_beside`), made here
+    before the closed loops run."""
+    from rhmpc.studies.loop_gap import open_loop_beside
+    from rhmpc.tuning.progress import note
+
+    out = {}
+    for column in dict.fromkeys(job.column for job in todo):
+        config = next(job.config for job in todo if job.column == column)
+        names = list(dict.fromkeys(job.config.predictor for job in todo if job.column == column))
+        note(f"rhmpc compare: the open loop on {column}, split {config.split[0]}:"
+             f"{config.split[1]}", args.quiet)
+        try:
+            out[column] = open_loop_beside(
+                config.data, config.data_read, config.split, names,
+                config.reference.prediction_points, config.seed,
+                None if args.quiet else (lambda text: note(f"  {text}", False)))
+        except ValueError as exc:
+            raise UsageError(f"{column}: {exc}") from None
+    return out
 
 
 def _setting(todo: list[Job]) -> str:

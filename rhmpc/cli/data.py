@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+import boundary
 from rhmpc.cli import COMMANDS
 from rhmpc.cli.data_figure import heart_rate, motion_figure
 from rhmpc.cli.text import fmt, mm, size_bytes, time_span
@@ -451,8 +452,7 @@ def _export(args: argparse.Namespace) -> int:
         raise UsageError(f"{out}: output must end in .csv or .npz")
     if out.exists() and not args.force:
         raise UsageError(f"{out} exists; pass --force to overwrite")
-    if not out.resolve().parent.is_dir():
-        raise UsageError(f"{out}: no such directory {out.parent}")
+    boundary.check_output(out, inputs=[args.name])
     target = _target(args.name, args)
     rate = target.rate if args.rate is None else args.rate
     comment = f"rhmpc {target.name}: {target.description}"
@@ -491,7 +491,9 @@ def _plot(args: argparse.Namespace) -> int:
     fig = motion_figure(plt, target, t, p, rate, heart, stats, args)
     out = Path(args.file)
     try:
-        fig.savefig(out, dpi=110)
+        boundary.save_figure(fig, out, dpi=110)
+    except boundary.FileError:
+        raise
     except (OSError, ValueError) as exc:
         raise UsageError(f"{out}: cannot write the figure ({exc})") from None
     finally:

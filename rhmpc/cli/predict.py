@@ -9,9 +9,10 @@ import os
 import sys
 from pathlib import Path
 
+import boundary
 from predictors import PREDICTORS
 from rhmpc.cli import COMMANDS
-from rhmpc.cli.simulate import add_recording_options, recording_options
+from rhmpc.cli.simulate import add_recording_options, parse_split, recording_options
 from rhmpc.errors import UsageError
 from rhmpc.studies.prediction import (
     BASE_BPM,
@@ -104,7 +105,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "these recordings (same rate and layout; --poi applies) instead of the "
                    "frames before TRAIN")
     g.add_argument("--save-models", type=Path, metavar="DIR", help="write the fitted models "
-                   "to this folder (LABEL.NAME.npz or .pt), to load later with the predictor "
+                   "to this folder (LABEL.NAME.npz), to load later with the predictor "
                    "setting model=FILE")
     g.add_argument("--leads", type=int, help=f"score leads 1..L samples (default {DEFAULT_LEADS})")
     g.add_argument("--warmup", type=float, metavar="S", help="seconds not scored at the start "
@@ -191,14 +192,26 @@ def _check_mode(args: argparse.Namespace) -> None:
         raise UsageError(f"{', '.join(bad)} apply to --data FILE, not --study")
 
 
+def _check_outputs(args: argparse.Namespace) -> None:
+    """--out and --plot can be written and are none of the inputs, before any work."""
+    inputs = [*(args.data or []), *(args.train or [])] if args.data is not None else []
+    for option in ("out", "plot"):
+        if getattr(args, option) is not None:
+            boundary.check_output(getattr(args, option), f"--{option}", inputs=inputs)
+
+
 def run(args: argparse.Namespace) -> int:
     _check_mode(args)
+    _check_outputs(args)
     if args.data is not None:
         return _run_data(args)
     s = _settings(args)
     jobs = (os.cpu_count() or 1) if args.jobs == 0 else args.jobs
     if jobs < 1:
         raise UsageError(f"--jobs must be >= 0, got {args.jobs}")
+    values = len(s.parameters())
+    boundary.check(f"{s.study} trials", s.trials, "--trials", memory_scale=values,
+                   time_scale=values * len(s.names), workers=jobs)
     bar = None
     if sys.stderr.isatty():
         from tqdm import tqdm
@@ -229,19 +242,6 @@ def run(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
     return 0
-
-
-def parse_split(text: str | None) -> tuple[int, int] | None:
-    """``--split TRAIN:END`` as (TRAIN, END) frames, or ``None``."""
-    if text is None:
-        return None
-    try:
-        train, end = (int(v) for v in text.split(":"))
-    except ValueError:
-        raise UsageError(f"--split {text!r}: expected TRAIN:END frames, e.g. 600:700") from None
-    if not 0 < train < end:
-        raise UsageError(f"--split {text!r}: expected 0 < TRAIN < END")
-    return train, end
 
 
 def _run_data(args: argparse.Namespace) -> int:
@@ -279,12 +279,10 @@ def _run_data(args: argparse.Namespace) -> int:
             train = partial(training_series, args.train, args.poi, read)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
-    if args.plot and not Path(args.plot).resolve().parent.is_dir():
-        raise UsageError(f"--plot {args.plot}: no such directory")
     if args.save_models is not None:
         if split is None and train is None:
             raise UsageError("--save-models needs --split TRAIN:END or --train FILE...")
-        args.save_models.mkdir(parents=True, exist_ok=True)
+        boundary.make_folder(args.save_models, root=args.save_models)
 
     def progress(what: str) -> None:
         if not args.json:
@@ -302,8 +300,7 @@ def _publish(args: argparse.Namespace, doc: dict, plot, text) -> None:
     """The document to ``--out``, its figure to ``--plot``, and to stdout as JSON (``--json``)
     or as ``text(doc)``."""
     if args.out:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps(doc, indent=2) + "\n")
+        boundary.write_text(args.out, json.dumps(doc, indent=2) + "\n")
     if args.plot:
         plot(doc, args.plot)
     print(json.dumps(doc, indent=2) if args.json else text(doc))

@@ -13,6 +13,7 @@ from rhmpc.cli import COMMANDS
 from rhmpc.cli.presets import add_preset_option, apply_preset
 from rhmpc.errors import UsageError
 from rhmpc.experiment import RunConfig, check_sensor, load_config, run_experiment
+from rhmpc.experiment.config import with_split
 from sim.loop.settings import DEFAULT_SETTLING, LoopSettings
 from sim.recordings.matfile import parse_indices
 
@@ -72,6 +73,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--poi", type=int, metavar="N", help="the point of interest (numbered from 1) "
                    "of a --data file of several tracked points; a predictor that reads the "
                    "other points (st-rls, st-ridge, st-lstm, ...) gets their samples")
+    add_split_option(p)
     p.add_argument("--train", nargs="+", metavar="FILE", help="recordings a predictor fitted "
                    "before the run (ridge, lstm, ...) learns from, beside the run's own "
                    "settling window (same rate and layout; --poi applies)")
@@ -152,6 +154,28 @@ def add_recording_options(p: argparse.ArgumentParser) -> None:
 
 
 
+def add_split_option(p: argparse.ArgumentParser, more: str = "") -> None:
+    """``--split TRAIN:END``: the literature's split of a recording, in closed loop."""
+    p.add_argument("--split", metavar="TRAIN:END", help="with --data: the "
+                   "literature's split in closed loop: the run starts at the first sample, a "
+                   "predictor fitted before the run learns from the samples before TRAIN (as "
+                   "the loop delivers them) and the score covers the instants of samples TRAIN "
+                   f"to END - 1 (numbered from 0); replaces --settling and --duration{more}")
+
+
+def parse_split(text: str | None) -> tuple[int, int] | None:
+    """``--split TRAIN:END`` as (TRAIN, END) sample indices, or ``None``."""
+    if text is None:
+        return None
+    try:
+        train, end = (int(v) for v in text.split(":"))
+    except ValueError:
+        raise UsageError(f"--split {text!r}: expected TRAIN:END frames, e.g. 600:700") from None
+    if not 0 < train < end:
+        raise UsageError(f"--split {text!r}: expected 0 < TRAIN < END")
+    return train, end
+
+
 def recording_options(args: argparse.Namespace) -> dict:
     """The ``load_recording`` keywords given on the command line."""
     keys = {"var": "var", "rows": "rows", "cols": "cols", "data_rate": "rate", "units": "units"}
@@ -192,13 +216,19 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
         poi = args.poi if getattr(args, "poi", None) is not None else poi
         if poi is not None:
             changes["data_read"]["point"] = poi
-        if args.duration is None and not args.config:  # default: the whole recording
+        if args.duration is None and not args.config and not getattr(args, "split", None):
             from sim.recordings import load_recording
 
             changes["loop.duration"] = load_recording(data, **changes["data_read"]).duration
     elif any(getattr(args, k, None) is not None
-             for k in ("var", "rows", "cols", "data_rate", "units", "poi")):
-        raise UsageError("--var, --rows, --cols, --rate, --units and --poi need --data FILE")
+             for k in ("var", "rows", "cols", "data_rate", "units", "poi", "split")):
+        raise UsageError("--var, --rows, --cols, --rate, --units, --poi and --split need "
+                         "--data FILE")
+    if getattr(args, "split", None):
+        if args.duration is not None or args.settling is not None:
+            raise UsageError("--split TRAIN:END sets the settling and the duration: give "
+                             "neither --settling nor --duration with it")
+        changes["split"] = parse_split(args.split)
     if getattr(args, "train", None):
         missing = [f for f in args.train if not Path(f).is_file()]
         if missing:
@@ -215,7 +245,7 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
         changes[key.strip()] = parse_value(value.strip())
     if getattr(args, "fault", None):
         changes["faults.events"] = fault_events(config, changes, args.fault)
-    config = config.replace(**changes)
+    config = with_split(config.replace(**changes))
     check_sensor(config)
     check_scoring(config)
     return config
@@ -236,6 +266,9 @@ def fault_events(config: RunConfig, changes: dict, specs: list[str]) -> tuple[st
 
 def settling_rule(args: argparse.Namespace) -> str:
     """Where the run's settling time came from, for the summary."""
+    if getattr(args, "split", None):
+        train, end = parse_split(args.split)
+        return f"the samples before {train} of --split {train}:{end}"
     if getattr(args, "settling", None) is not None:
         return "set by --settling"
     if getattr(args, "config", None):
@@ -258,10 +291,11 @@ OUTPUTS = {"out": (".json", ".mat"), "plot": (".png", ".pdf", ".svg"), "view": (
            "trace": (".npz",)}
 
 
-def check_outputs(args: argparse.Namespace) -> None:
+def check_outputs(args: argparse.Namespace, inputs=()) -> None:
     """Every output file can be written, checked before the run starts (a missing or
-    read-only directory, or a suffix the option does not write, is a one-line error)."""
-    import os
+    read-only directory, a suffix the option does not write, a link, or one of ``inputs``, the
+    run's files, is a one-line error: :func:`boundary.check_output`)."""
+    import boundary
 
     for option, suffixes in OUTPUTS.items():
         path = getattr(args, option, None)
@@ -271,11 +305,7 @@ def check_outputs(args: argparse.Namespace) -> None:
         if path.suffix.lower() not in suffixes:
             raise UsageError(f"--{option} {path}: the file must end in "
                              f"{' or '.join(suffixes)}")
-        folder = path.resolve().parent
-        if not folder.is_dir():
-            raise UsageError(f"--{option} {path}: no such directory {folder}")
-        if not os.access(folder, os.W_OK) or (path.exists() and not os.access(path, os.W_OK)):
-            raise UsageError(f"--{option} {path}: cannot write there")
+        boundary.check_output(path, f"--{option}", inputs=inputs)
 
 
 def check_score(doc: dict) -> None:
@@ -298,7 +328,9 @@ def write_outputs(args: argparse.Namespace, result, doc: dict) -> None:
 
         write_mat(args.out, result, doc)
     elif args.out:
-        Path(args.out).write_text(json.dumps(doc, indent=2) + "\n")
+        import boundary
+
+        boundary.write_text(args.out, json.dumps(doc, indent=2) + "\n")
     if args.plot or getattr(args, "view", None):
         from robots import load_robot
 
@@ -329,7 +361,9 @@ def run(args: argparse.Namespace) -> int:
 
         if reason := missing_toolchain():
             raise UsageError(reason)
-    check_outputs(args)
+    from rhmpc.experiment.config import input_files
+
+    check_outputs(args, [*input_files(config), *filter(None, [args.config])])
     trace = getattr(args, "trace", None)
     stalls = getattr(args, "host_stalls", 0.0)
     check_host_stalls(stalls)

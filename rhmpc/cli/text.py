@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import math
 
+from boundary.limits import size_bytes, time_span
+
 __all__ = ["fmt", "mm", "size_bytes", "time_span"]
 
 
@@ -21,19 +23,3 @@ def mm(value: float) -> str:
     """A length [mm] to the micrometre; with an exponent beyond a kilometre."""
     return f"{value:.3f}" if abs(value) < 1e6 else f"{value:.3g}"
 
-
-def size_bytes(n: float) -> str:
-    """A memory size in B, kB, MB, GB, TB, PB or EB."""
-    for unit in ("B", "kB", "MB", "GB", "TB", "PB"):
-        if abs(n) < 1000:
-            return f"{n:.3g} {unit}"
-        n /= 1000
-    return f"{n:.3g} EB"
-
-
-def time_span(seconds: float) -> str:
-    """A time span in s, min, h, days or years."""
-    for unit, size in (("years", 365.25 * 86400), ("days", 86400), ("h", 3600), ("min", 60)):
-        if seconds >= size:
-            return f"{seconds / size:.3g} {unit}"
-    return f"{seconds:.2g} s"

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from pathlib import Path
 
@@ -99,13 +100,14 @@ def _extra(spec) -> dict:
             "evaluations_per_point": len(spec.evaluations())}
 
 
-def _check_outputs(args: argparse.Namespace) -> None:
-    """--plot and --best-toml must be writable before a sweep starts."""
-    from rhmpc.tuning.store import check_writable
+def _check_outputs(args: argparse.Namespace, inputs: tuple = ()) -> None:
+    """--plot and --best-toml must be writable, and none of ``inputs`` (the spec, the results
+    file), before a sweep starts."""
+    import boundary
 
     for option, path in (("--plot", args.plot), ("--best-toml", args.best_toml)):
         if path:
-            check_writable(path, option)
+            boundary.check_output(path, option, inputs=inputs)
 
 
 def _speed(records: list[dict]) -> str:
@@ -136,19 +138,20 @@ def sweep(args: argparse.Namespace, spec_path: Path) -> int:
         spec = dataclasses.replace(spec, base=apply_preset(spec.base, args.preset))
     if args.seed is not None:
         spec = with_sampler_seed(spec, args.seed, where=str(spec_path))
-    _check_outputs(args)
+    if args.jobs is not None and args.jobs < 1:
+        raise UsageError("--jobs must be >= 1")
     results_path = Path(args.results or f"{spec_path.stem}.results.jsonl")
+    _check_outputs(args, (spec_path, results_path))
     tasks = spec.tasks()
     points = list(dict.fromkeys(t.point for t in tasks))
     existing = read_results(results_path)
     todo, n_ok, n_failed = pending(tasks, existing, retry_failed=bool(args.retry_failed))
     quiet = bool(args.quiet)
+    if skipped := existing.skipped(results_path):
+        print(f"rhmpc tune: warning: {skipped}", file=sys.stderr)
     note(f"rhmpc tune: sweep '{spec.name}': {len(points)} points × {len(spec.evaluations())} "
          f"evaluations = {len(tasks)}; done {n_ok}, failed {n_failed}, to run {len(todo)}; "
          f"results {results_path}", quiet)
-    if existing.bad_lines:
-        print(f"rhmpc tune: {results_path}: skipped {existing.bad_lines} unreadable line(s) "
-              "(e.g. one cut short by a crash)", file=sys.stderr)
     if args.dry_run:
         _print_points(spec, tasks, existing)
         return 0
@@ -232,12 +235,16 @@ def report(args: argparse.Namespace, results_path: Path) -> int:
     from rhmpc.tuning.report import objective_of
     from rhmpc.tuning.store import read_results
 
-    if not results_path.is_file():
+    if not os.path.lexists(results_path):
         raise UsageError(f"{results_path}: no such file")
+    _check_outputs(args, (results_path, *([args.spec] if args.spec else [])))
     data = read_results(results_path)
-    if data.bad_lines:
-        print(f"rhmpc tune report: {results_path}: skipped {data.bad_lines} unreadable "
-              "line(s)", file=sys.stderr)
+    if not data.records:
+        raise UsageError(f"{results_path}: no results yet"
+                         + (f" ({data.skipped(results_path).split(': ', 1)[1]})"
+                            if data.bad_lines else ""))
+    if skipped := data.skipped(results_path):
+        print(f"rhmpc tune: warning: {skipped}", file=sys.stderr)
     points, log_keys = None, None
     if args.spec:
         from rhmpc.tuning.spec import load_spec
@@ -251,8 +258,6 @@ def report(args: argparse.Namespace, results_path: Path) -> int:
         objective = objective_of(data.records)
         names = list(dict.fromkeys(r.get("sweep") for r in data.records if r.get("sweep")))
         title = f"sweep '{', '.join(names)}'" if names else str(results_path)
-    if not data.records:
-        raise UsageError(f"{results_path}: no results yet")
     return report_records(args, data.records, objective, points, str(results_path), title,
                           log_keys)
 
@@ -280,7 +285,9 @@ def report_records(args, records, objective, points, results: str, title: str,
         if top is None:
             raise UsageError("--best-toml: no point has finished all its evaluations "
                              "successfully")
-        Path(args.best_toml).write_text(best_toml(top, objective, results))
+        import boundary
+
+        boundary.write_text(args.best_toml, best_toml(top, objective, results))
     if args.plot:
         plot_objective(summaries, objective, args.plot, title=f"rhmpc tune: {title}",
                        log_keys=log_keys)

@@ -19,7 +19,7 @@ from rhmpc.control.mpc import RecedingHorizonMPC
 from rhmpc.control.observer import JointObserver
 from rhmpc.control.reference import ExactReference, PredictedReference
 from rhmpc.errors import UsageError
-from rhmpc.experiment.config import RunConfig
+from rhmpc.experiment.config import RunConfig, with_split
 from rhmpc.experiment.fitting import fit_predictor
 from robots import LinearArm, Robot, linearize, load_robot
 from sim.loop.clock import PredictorClock, clock_for_rate, predictor_clock
@@ -74,6 +74,8 @@ class Run:
         The injected faults (:mod:`sim.sensors.faults`), already in ``stream`` and ``plant``.
     points : PointsAt or None
         The other tracked points of a recording, which the loop gives with each sample.
+    measured : tuple or None
+        A recording's own samples (t [s] from 0, z (n, d) [m]): where the run is scored.
     """
 
     config: RunConfig
@@ -89,6 +91,7 @@ class Run:
     clock: PredictorClock
     faults: tuple = ()
     points: PointsAt | None = None
+    measured: tuple[np.ndarray, np.ndarray] | None = None
 
     @property
     def reference(self):
@@ -249,10 +252,12 @@ def build_run(config: RunConfig, implementation: str = "python", progress=None) 
     """Build robot, plant, controller, heart motion and sensor stream for ``config``.
 
     ``implementation="c"``: the controller is the C one of ``rhmpc export`` (built once and
-    cached, :func:`rhmpc.control.export.controller_in_c`) instead of the Python one. A
+    cached, :func:`rhmpc.control.export.controller_in_c`) instead of the Python one. A split
+    of the recording sets the run's span (:func:`~rhmpc.experiment.config.with_split`). A
     predictor that learns before the run is fitted (:mod:`rhmpc.experiment.fitting`);
     ``progress(text)`` hears how that goes.
     """
+    config = with_split(config)
     loop, N = config.loop, config.mpc.horizon
     heart_rng, sensor_rng = np.random.default_rng(config.seed).spawn(2)
     robot = load_robot(config.robot)
@@ -293,7 +298,9 @@ def build_run(config: RunConfig, implementation: str = "python", progress=None) 
             raise UsageError(f"[faults] {exc}") from None
     points = None if heart.others is None else PointsAt(heart.origin.t - heart.origin.t[0],
                                                         heart.others)
+    measured = None if config.data is None else (heart.origin.t - heart.origin.t[0],
+                                                  heart.origin.z)
     run = Run(config, robot, arm, plant, controller, truth, anchor, stream, heart.label,
-              loop.duration, clock, config.faults.faults, points)
+              loop.duration, clock, config.faults.faults, points, measured)
     fit_predictor(run, progress)
     return run

@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import dataclasses
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import boundary
+from boundary import FileError
 from rhmpc.control.cancellation import ModelMismatch
 from rhmpc.control.observer import ObserverSettings
 from rhmpc.control.reference import ReferenceSettings
@@ -37,9 +38,11 @@ TOP_LEVEL: dict[str, object] = {
     "robot": str, "scenario": str, "data": (str, None), "data_read": dict, "rr": (str, None),
     "sensor": str, "sensor_settings": dict, "predictor": str, "predictor_settings": dict,
     "predictor_params": dict, "ground_truth": str, "seed": int, "train": tuple,
+    "split": (tuple, None),
 }
 KIND_NAMES = {str: "a name (a string)", (str, None): "a string or absent", dict: "a table",
-              int: "an integer", tuple: "a list of file names"}
+              int: "an integer", tuple: "a list of file names",
+              (tuple, None): "[TRAIN, END] (two sample indices) or absent"}
 
 
 def _is(value: Any, kind: object) -> bool:
@@ -72,6 +75,11 @@ class RunConfig:
     train : tuple of str
         Recordings a predictor fitted before the run learns from (read as ``data``, the POI
         first), besides the run's own samples of its settling window.
+    split : tuple of int, optional
+        (TRAIN, END), the literature's split of a recording [sample indices from 0]: the run
+        starts at the first sample, its settling window ends at sample TRAIN (what a
+        predictor fitted before the run learns from) and the score covers the instants in
+        [TRAIN, END) (:func:`with_split` sets ``loop.settling`` and ``loop.duration``).
     rr : str | None
         PhysioNet record whose beat annotations drive the heart phase: a shipped name
         (``mitdb-100``, ``1003``) or a path without extension.
@@ -113,6 +121,7 @@ class RunConfig:
     data: str | None = None
     data_read: dict = field(default_factory=dict)
     train: tuple[str, ...] = ()
+    split: tuple[int, int] | None = None
     rr: str | None = None
     sensor: str = "sonomicrometry"
     sensor_settings: dict = field(default_factory=dict)
@@ -131,14 +140,20 @@ class RunConfig:
     faults: FaultSettings = field(default_factory=FaultSettings)
 
     def __post_init__(self) -> None:
-        if isinstance(self.train, list):  # as TOML reads it
-            object.__setattr__(self, "train", tuple(self.train))
+        for name in ("train", "split"):
+            if isinstance(getattr(self, name), list):  # as TOML reads it
+                object.__setattr__(self, name, tuple(getattr(self, name)))
         for name, kind in TOP_LEVEL.items():
             value = getattr(self, name)
             if not _is(value, kind):
                 raise ValueError(f"{name} must be {KIND_NAMES[kind]}, got {value!r}")
         if not all(isinstance(f, str) for f in self.train):
             raise ValueError(f"train must be a list of file names, got {self.train!r}")
+        if self.split is not None and not (
+                len(self.split) == 2 and all(_is(v, int) for v in self.split)
+                and 0 < self.split[0] < self.split[1]):
+            raise ValueError(f"split must be [TRAIN, END], sample indices with 0 < TRAIN < END, "
+                             f"got {list(self.split)!r}")
         if not 0 <= self.seed < 2**63:
             raise ValueError(f"seed must be an integer in 0 … 2⁶³ − 1, got {self.seed!r}")
         if self.ground_truth not in GROUND_TRUTHS:
@@ -146,6 +161,7 @@ class RunConfig:
                 f"ground_truth must be one of {', '.join(GROUND_TRUTHS)}, got {self.ground_truth!r}"
             )
         self.faults.check(self.loop.duration)
+        check_bounds(self)
 
     def to_dict(self) -> dict[str, Any]:
         """TOML-ready nested dict (``None`` values left out, and the ``faults`` table when it
@@ -153,8 +169,8 @@ class RunConfig:
         out: dict[str, Any] = {}
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
-            if (f.name == "faults" and value == FaultSettings()) or (f.name == "train"
-                                                                       and not value):
+            if (f.name == "faults" and value == FaultSettings()) or (
+                    f.name in ("train", "split") and not value):
                 continue
             if f.name in SECTIONS:
                 out[f.name] = to_dict(value)
@@ -225,6 +241,38 @@ class RunConfig:
             raise UsageError(str(exc)) from None
 
 
+def with_split(config: RunConfig) -> RunConfig:
+    """``config`` with its settling window and duration from its ``split`` (TRAIN, END) of the
+    recording ``data``: settling t_TRAIN − t_0, duration t_END − t_0 (the recording's n/f when
+    END = n), so that the scored instants are t_TRAIN ≤ t_k < t_END. Unchanged without a
+    split; a split without a recording, or beyond it, is a one-line ``UsageError``."""
+    if config.split is None:
+        return config
+    if config.data is None:
+        raise UsageError("--split TRAIN:END splits a recording: it needs --data FILE")
+    from sim.recordings import RecordingError
+    from sim.sources import read_points
+
+    try:
+        recording, _ = read_points(config.data, config.data_read)
+    except RecordingError as exc:
+        raise UsageError(str(exc)) from None
+    train, end = config.split
+    n = recording.t.size
+    if end > n:
+        raise UsageError(f"--split {train}:{end}: {config.data} holds {n} samples (END <= {n})")
+    t = recording.t - recording.t[0]
+    duration = recording.duration if end == n else float(t[end])
+    return config.replace(**{"loop.settling": float(t[train]), "loop.duration": duration})
+
+
+def check_bounds(config: RunConfig) -> None:
+    """Refuse the counts of a run that do not fit the bounds of :data:`boundary.BOUNDS`: the
+    MPC's horizon (its memory, and its computing over the run's ticks)."""
+    ticks = config.loop.duration / config.loop.Ts
+    boundary.check("horizon", config.mpc.horizon, "mpc.horizon", time_scale=ticks)
+
+
 def _check_keys(section: str, cls: type, values: dict[str, Any]) -> None:
     """Raise ``UsageError`` listing the valid keys of ``[section]`` if ``values`` has others."""
     names = [f.name for f in dataclasses.fields(cls)]
@@ -234,15 +282,14 @@ def _check_keys(section: str, cls: type, values: dict[str, Any]) -> None:
                          f"valid keys of [{section}]: {', '.join(names)}")
 
 
-def read_toml(path: str | Path) -> dict[str, Any]:
-    """A TOML file as a ``dict``; unreadable or invalid files raise ``UsageError`` naming it."""
-    path = Path(path)
+def read_toml(path: str | Path, kind: str = "config") -> dict[str, Any]:
+    """A TOML file as a ``dict``, through the one reader (:func:`boundary.read_toml`: a
+    regular file, bounded in size and depth); a file that cannot be read or parsed raises
+    ``UsageError`` naming it."""
     try:
-        return tomllib.loads(path.read_text())
-    except OSError as exc:
-        raise UsageError(f"{path}: cannot read: {exc.strerror}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise UsageError(f"{path}: not valid TOML: {exc}") from None
+        return boundary.read_toml(path, kind)
+    except FileError as exc:
+        raise UsageError(str(exc)) from None
 
 
 def load_config(path: str | Path) -> RunConfig:
@@ -250,7 +297,15 @@ def load_config(path: str | Path) -> RunConfig:
     return RunConfig.from_dict(read_toml(path), where=str(path))
 
 
+def input_files(config: RunConfig) -> list[str]:
+    """The files a run of ``config`` reads: its recording, its training recordings and its
+    predictor's saved model (what no output of the run may replace)."""
+    files = [config.data, *config.train, config.predictor_settings.get("model")]
+    return [f for f in files if isinstance(f, str)]
+
+
 def save_config(config: RunConfig, path: str | Path) -> None:
+    """Write ``config`` as TOML to ``path`` (atomically: :func:`boundary.write_text`)."""
     import tomli_w
 
-    Path(path).write_text(tomli_w.dumps(config.to_dict()))
+    boundary.write_text(path, tomli_w.dumps(config.to_dict()))

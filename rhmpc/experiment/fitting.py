@@ -35,7 +35,8 @@ def fit_predictor(run, progress=None) -> None:
     predictor = getattr(run.reference, "predictor", None)
     if predictor is None or not needs_fit(predictor):
         return
-    series = [settling_series(run), *training_recordings(run.config, predictor.dt)]
+    settling = settling_series(run)
+    series = [settling, *training_recordings(run.config, predictor.dt)]
     series = [s for s in series if np.isfinite(s[:, 0]).any()]
     if not series:
         raise UsageError(f"{run.config.predictor} learns before the run and has nothing to "
@@ -49,6 +50,8 @@ def fit_predictor(run, progress=None) -> None:
         predictor.fit(series, progress)
     except ValueError as exc:
         raise UsageError(f"fitting {run.config.predictor}: {exc}") from None
+    if hasattr(predictor, "score_after"):  # a combination: its members learnt the settling
+        predictor.score_after(settling.shape[0])
 
 
 def settling_series(run) -> np.ndarray:

@@ -45,6 +45,7 @@ def run_experiment(config: RunConfig, progress: bool = False, trace: str | None 
     the document's ``faults`` holds one record per fault (:func:`sim.loop.faults.fault_report`).
     """
     run = build_run(config, implementation, _say if progress else None)
+    config = run.config  # its span set by its split, if any
     loop = config.loop
     marks = fault_marks(run.faults, config.faults.after_s, loop.Ts, loop.duration)
     bar, callback = _progress_bar(config, run.label) if progress else (None, None)
@@ -54,7 +55,7 @@ def run_experiment(config: RunConfig, progress: bool = False, trace: str | None 
             run.plant, run.controller, run.truth, run.stream, config.loop, run.clock,
             anchor=run.anchor, robot=run.robot, progress=callback, trace_file=trace,
             yardstick=None if gain_tick is None else _gain_tick(run.controller, gain_tick),
-            marks=marks, points=run.points,
+            marks=marks, points=run.points, measured=run.measured,
         )
     finally:
         if bar is not None:
@@ -117,6 +118,8 @@ def document(config: RunConfig, run: Run, result: LoopResult, wall: float,
                                         for v in errors]
         doc["forecast_lead_s"] = run.clock.dt
         doc["predictor_unit_m"] = getattr(predictor, "unit", None)  # metres per data unit
+        if hasattr(predictor, "member_time"):  # a combination: each member against the period
+            doc["member_time_us"] = predictor.member_time.summary()
     doc["predictor_clock"] = _clock_document(config, run)
     if config.predictor != "exact":
         counts, floor = result.predictor_counts, run.controller.gate_floor

@@ -193,14 +193,16 @@ def comparison_table(docs: Sequence[dict], predictors: Sequence[str],
     table = cells(docs, predictors, scenarios)
     runs = max((c.n + c.failed for c in table.values()), default=0)
     out = [runs_line(table, seeds)]
+    where = _where(docs)
     if runs <= 1:
-        out += ["", *grid("RMS position error [mm] (maximum error [mm])", predictors, scenarios,
-                          lambda p, s: _rms_max(table[p, s]))]
+        out += ["", *grid(f"RMS position error [mm] (maximum error [mm]){where}", predictors,
+                          scenarios, lambda p, s: _rms_max(table[p, s]))]
         metrics: tuple[str, ...] = ("rms_effort_mNm",)
     else:
         metrics = METRICS
     for metric in metrics:
-        out += ["", *grid(_TITLES[metric], predictors, scenarios,
+        title = _TITLES[metric] + (where if metric != "rms_effort_mNm" else "")
+        out += ["", *grid(title, predictors, scenarios,
                           lambda p, s, m=metric: table[p, s].text(m, _digits(m), runs))]
     reference = reference_row(predictors, recordings)
     if reference is not None and len(predictors) > 1:
@@ -210,6 +212,14 @@ def comparison_table(docs: Sequence[dict], predictors: Sequence[str],
         out += ["", *grid(f"ratio to {reference}: RMS error / RMS effort{why}", rows, scenarios,
                           lambda p, s: _ratio(table[p, s], table[reference, s]))]
     return "\n".join(out)
+
+
+def _where(docs: Sequence[dict]) -> str:
+    """Where the errors were taken: at a recording's measured instants, or at every tick."""
+    scores = {d.get("score") for d in docs if "error" not in d}
+    if scores == {"measured"}:
+        return ", at the measured instants"
+    return ", at every tick" if scores == {"continuous"} else ""
 
 
 def _digits(metric: str) -> int:

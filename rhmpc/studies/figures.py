@@ -18,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
+import boundary
+
 #: Colours shared with the 3-D replay (:mod:`rhmpc.studies.replay`).
 COLOURS = {"poi": "#d62728", "tool": "#1f77b4", "forecast": "#2ca02c", "samples": "#ff7f0e",
            "settling": "0.88", "zoom": "#fff2cc"}
@@ -89,7 +91,7 @@ def plot_run(result, path: str | Path, title: str = "", zoom: tuple[float, float
         ax.set_xlim(*span)
     if title:
         fig.suptitle(title)
-    fig.savefig(path, dpi=120)
+    boundary.save_figure(fig, path, dpi=120)
     plt.close(fig)
 
 

@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+import boundary
 from predictors import LEARNED, make_predictor, settings_for
 
 __all__ = ["PROBE_EPOCHS", "FitPlan", "describe", "fit_all", "plan_fits"]
@@ -115,8 +116,7 @@ def fit_all(plans: Sequence[FitPlan], period: float, series: list[np.ndarray], l
         p.fit(series, None if progress is None else _rounds(plan, progress))
         out[plan.name] = (p, time.perf_counter() - tic)
         if save is not None:
-            stem = "".join(c if c.isalnum() or c in "-_." else "-" for c in label)
-            p.save(save / f"{stem}.{plan.name}{p.SUFFIX}")
+            p.save(save / f"{boundary.file_stem(label)}.{plan.name}{p.SUFFIX}")
     return out
 
 

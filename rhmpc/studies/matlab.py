@@ -10,7 +10,12 @@ MATLAB or Octave reads as variables:
   ``reference0`` and ``error`` = ee − poi [m] (n × 3), ``error_norm`` [m], ``tau_mpc``,
   ``tau_command``, ``tau`` [N·m], ``q`` [rad], ``tick_ns`` [ns], and ``trace_stride``;
 - where the run has them, the forecasts (``horizon_tick``, ``horizon_time`` [s], ``horizon``
-  R × N × 3 [m]) and the measured samples (``sample_time`` [s], ``sample`` S × 3 [m]);
+  R × N × 3 [m]) and the measured samples (``sample_time`` [s], ``sample`` S × 3 [m]). On a
+  recording these are its own samples, where the run is scored: ``sample`` is NaN where the
+  score leaves a sample out (no measurement, or taken as an outlier by the controller),
+  ``sample_recorded`` holds them as recorded and ``sample_scored`` says which are in the
+  score; the trace keeps the ticks at their instants, so that the score is ``ee`` at
+  ``sample_time`` against ``sample`` over the scored span;
 - ``units``: each variable's unit, and ``description``.
 """
 
@@ -28,7 +33,8 @@ UNITS = {
     "ee": "m", "poi": "m", "reference0": "m", "error": "m", "error_norm": "m", "q": "rad",
     "tau_mpc": "N*m", "tau_command": "N*m", "tau": "N*m", "tick_ns": "ns",
     "horizon_tick": "control tick", "horizon_time": "s", "horizon": "m",
-    "sample_time": "s", "sample": "m", "trace_stride": "ticks",
+    "sample_time": "s", "sample": "m", "sample_recorded": "m", "sample_scored": "logical",
+    "trace_stride": "ticks",
 }
 #: MATLAB's limit on a variable or field name.
 NAME_MAX = 63
@@ -54,6 +60,8 @@ def write_mat(path: str | Path, result, doc: dict) -> Path:
     """
     from scipy.io import savemat
 
+    import boundary
+
     variables = {"summary": matlab_value(doc), "summary_json": json.dumps(doc, indent=1)}
     variables.update(trace_variables(result))
     variables["units"] = {k: v for k, v in UNITS.items() if k in variables}
@@ -62,7 +70,8 @@ def write_mat(path: str | Path, result, doc: dict) -> Path:
         "tick of the run's last seconds); positions in the robot's workspace frame; "
         "summary holds the run's metrics in mm and mN*m as their names say")
     path = Path(path)
-    savemat(path, variables, do_compression=True, oned_as="column", long_field_names=True)
+    with boundary.atomic_write(path) as f:
+        savemat(f, variables, do_compression=True, oned_as="column", long_field_names=True)
     return path
 
 
@@ -83,11 +92,24 @@ def trace_variables(result) -> dict[str, np.ndarray]:
         ticks = np.asarray(horizons[0], float)
         out.update(horizon_tick=ticks, horizon_time=ticks * result.settings.Ts,
                    horizon=np.asarray(horizons[1], float))
+    measured = getattr(result, "measured", ())
     samples = getattr(result, "samples", None)
-    if samples is not None and len(samples[0]):
+    if len(measured):
+        t, p, scored = measured
+        left_out = ~np.isfinite(p).all(axis=1) | (~scored & _in_span(t, result))
+        out.update(sample_time=np.asarray(t, float),
+                   sample=np.where(left_out[:, None], np.nan, p),
+                   sample_recorded=np.asarray(p, float), sample_scored=np.asarray(scored))
+    elif samples is not None and len(samples[0]):
         out.update(sample_time=np.asarray(samples[0], float),
                    sample=np.asarray(samples[1], float))
     return out
+
+
+def _in_span(t: np.ndarray, result) -> np.ndarray:
+    """Whether each instant ``t`` [s] lies in the run's scored span [settling, duration)."""
+    s = result.settings
+    return (t >= s.settling_ticks * s.Ts - 1e-9) & (t < s.ticks * s.Ts - 1e-9)
 
 
 def matlab_value(value):

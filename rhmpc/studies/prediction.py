@@ -44,6 +44,7 @@ from pathlib import Path
 
 import numpy as np
 
+import boundary
 from predictors import make_predictor
 
 __all__ = [
@@ -414,7 +415,7 @@ def plot_study(result: dict, path: str | Path) -> Path:
         ax.legend(fontsize=8)
     fig.tight_layout()
     path = Path(path)
-    fig.savefig(path, dpi=120)
+    boundary.save_figure(fig, path, dpi=120)
     plt.close(fig)
     return path
 

@@ -55,17 +55,11 @@ import numpy as np
 
 from predictors import LEARNED, family, make_predictor, needs_torch, predictor_names
 from predictors.combination import Combination, CombinationSettings
+from predictors.registry import default_predictors, torch_available
 from rhmpc.studies.fitting import describe, fit_all, plan_fits
 from rhmpc.studies.tracks import Track, twelve_digits
 from sim.recordings.points import on_grid
 
-#: The baselines, first in every table: the newest sample held, and the previous cycle.
-BASELINES: tuple[str, ...] = ("hold", "last-cycle")
-#: The fitted predictors scored by default when there is something to fit them on: the ridge
-#: regressions, and the literature's networks where PyTorch is installed.
-FITTED_DEFAULTS: tuple[str, ...] = ("ridge", "st-ridge", "lstm", "st-lstm", "tcn", "st-tcn")
-#: The order of the families in the tables.
-FAMILIES: tuple[str, ...] = ("baseline", "adaptive", "multi-point", "learned", "combination")
 #: Leads 1 … DEFAULT_LEADS are scored [samples].
 DEFAULT_LEADS = 5
 #: Warm-up: the longer of this many seconds [s] …
@@ -75,24 +69,6 @@ WARMUP_FRACTION = 0.25
 #: Counter names of the predictors summed into ``rejected`` and ``repaired``.
 REJECTED = ("innovation_rejected", "outliers_rejected")
 REPAIRED = ("forecast_clamped", "forecast_nonfinite", "retracted")
-
-
-def torch_available() -> bool:
-    """Whether PyTorch, the ``learned`` extra of the neural predictors, is installed."""
-    import importlib.util
-
-    return importlib.util.find_spec("torch") is not None
-
-
-def default_predictors(fitted: bool = False) -> tuple[str, ...]:
-    """The baselines, then every other online predictor (the oracle ``exact`` left out), the
-    fitted ones of :data:`FITTED_DEFAULTS` if ``fitted`` (the neural ones where PyTorch is
-    installed), by family, and the combination last."""
-    names = [n for n in predictor_names() if n != "exact" and n not in LEARNED]
-    if fitted:
-        names += [n for n in FITTED_DEFAULTS if not needs_torch(n) or torch_available()]
-    names = [*BASELINES, *(n for n in names if n not in BASELINES)]
-    return tuple(sorted(names, key=lambda n: FAMILIES.index(family(n))))
 
 
 @dataclass(frozen=True)

@@ -3,6 +3,7 @@ tables of ``rhmpc predict --data`` and the figure of ``--plot``."""
 
 from __future__ import annotations
 
+import boundary
 from rhmpc.studies.recordings import WARMUP_FRACTION, WARMUP_SECONDS
 
 __all__ = ["format_report", "plot_leads"]
@@ -105,5 +106,5 @@ def plot_leads(doc: dict, path) -> None:
         ax.set_yscale("log")
         ax.legend(fontsize=7, ncol=2)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    boundary.save_figure(fig, path, dpi=110)
     plt.close(fig)

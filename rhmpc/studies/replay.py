@@ -37,6 +37,8 @@ import numpy as np
 import pinocchio as pin
 import umsgpack
 
+import boundary
+
 with warnings.catch_warnings():  # meshcat's package imports its server's deprecated zmq loop
     warnings.simplefilter("ignore", DeprecationWarning)
     import meshcat
@@ -124,8 +126,7 @@ def write_replay(path: str | Path, result, robot, *, fps: float = 60.0, max_fram
     data["title"] = title or "rhmpc replay"
     commands = scene_commands(robot, data.pop("_scene"))
     page = _page(commands, data)
-    path = Path(path)
-    path.write_text(page, encoding="utf-8")
+    path = boundary.write_text(path, page)
     return ReplayInfo(path, t_frames.size, float(t_frames[0]), float(t_frames[-1]), float(fps),
                       path.stat().st_size)
 

@@ -29,6 +29,42 @@ def _placement(loop: dict) -> str:
             + " (set loop.placement = \"absolute\" to keep its own coordinates)")
 
 
+def _budget_line(doc: dict) -> str:
+    """Each refresh (gate, predictor, interpolation) against the predictor's period, and a
+    combination's slowest member."""
+    r = doc["refresh_us"]
+    out = (f"each refresh p50 {r['p50']:.0f} µs, p99 {r['p99']:.0f} µs, max {r['max']:.0f} µs "
+           f"in a period of {r['period_us'] / 1e3:g} ms: {r['over_period']} of "
+           f"{r['refreshes']} longer")
+    members = doc.get("member_time_us") or {}
+    timed = {k: v for k, v in members.items() if v.get("mean_us") is not None}
+    if timed:
+        name = max(timed, key=lambda k: timed[k]["mean_us"])
+        out += (f"; slowest member {name} {timed[name]['mean_us']:.0f} µs mean, "
+                f"{timed[name]['max_us']:.0f} µs max")
+    return out
+
+
+def _score_words(doc: dict) -> str:
+    """Where the tracking error was taken: at the measured samples, or at every tick."""
+    if doc.get("score") == "measured":
+        return f"at the {doc.get('scored_samples', 0)} measured instants"
+    return "at every tick"
+
+
+def _measured_lines(doc: dict) -> str:
+    """A recording's second score (every tick against the samples' interpolant) and what the
+    score at the measured instants leaves out."""
+    ex = doc.get("excluded") or {}
+    out = (f"                   every tick against the line between samples (where nobody "
+           f"measured): RMS {doc['rms_error_interpolated_mm']:.3f} mm, max "
+           f"{doc['max_error_interpolated_mm']:.3f} mm")
+    left = [f"{ex[k]} {what}" for k, what in (
+        ("outlier_samples", "samples taken as outliers"),
+        ("unmeasured_samples", "samples that are no measurements"),
+        ("after_last_sample_ticks", "ticks after the last sample")) if ex.get(k)]
+    return out + ("\n                   left out: " + ", ".join(left) if left else "")
+
 #: The controller that ran (the document's ``implementation``), as the summary names it.
 CONTROLLERS = {"python": "Python reference", "c": "deployable C (rhmpc export)"}
 
@@ -74,7 +110,7 @@ def format_summary(doc: dict, settling_rule: str | None = None) -> str:
         f"{doc['ground_truth']} motion)",
         f"  placement        {_placement(s)}",
         f"  tracking error   RMS {doc['rms_error_mm']:.3f} mm   max {doc['max_error_mm']:.3f} mm"
-        f"   (RMS per axis x, y, z: {axes} mm)",
+        f"   (RMS per axis x, y, z: {axes} mm) {_score_words(doc)}",
         f"  control effort   RMS {doc['rms_effort_mNm']:.1f} mN·m (MPC torque; with the "
         f"cancellation {doc['rms_total_torque_mNm']:.1f} mN·m); saturated ticks "
         f"{doc['saturated_ticks']}",
@@ -98,13 +134,17 @@ def format_summary(doc: dict, settling_rule: str | None = None) -> str:
         lines.insert(-1, "                   " + _clock_line(doc.get("predictor_clock") or {}))
     if doc.get("outlier_gate"):
         lines.insert(-1, "  outlier gate     " + _gate_line(doc["outlier_gate"]))
+    if doc.get("refresh_us", {}).get("refreshes"):
+        lines.insert(-1, "  predictor time   " + _budget_line(doc))
     encoder = doc.get("encoder") or {}
     if encoder.get("held"):  # the observer's innovation gate (rhmpc.control.observer)
         lines.insert(-1, f"  encoders         {encoder['held']} readings held out past the "
                      f"observer's gate, {encoder.get('reacquired', 0)} taken again once they "
                      "moved")
     excluded = doc.get("excluded") or {}
-    if excluded.get("ticks") or excluded.get("unmeasured"):
+    if doc.get("score") == "measured":
+        lines.insert(3, _measured_lines(doc))
+    elif excluded.get("ticks") or excluded.get("unmeasured"):
         lines.insert(3, f"                   the score leaves out {excluded.get('ticks', 0)} ticks "
                      f"whose truth touches the {excluded.get('outliers', 0)} samples taken as "
                      f"outliers, and the {excluded.get('unmeasured', 0)} recorded samples that "

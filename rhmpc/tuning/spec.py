@@ -220,7 +220,8 @@ class TuneSpec:
 def load_spec(path: str | Path) -> TuneSpec:
     """Read and validate a sweep specification; errors name the file and the key."""
     path = Path(path)
-    return parse_spec(read_toml(path), where=str(path), root=path.parent, default_name=path.stem)
+    return parse_spec(read_toml(path, "tune spec"), where=str(path), root=path.parent,
+                      default_name=path.stem)
 
 
 def parse_spec(data: dict, where: str = "spec", root: Path | None = None,

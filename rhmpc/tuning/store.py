@@ -2,8 +2,11 @@
 
 One line per finished evaluation (see :func:`rhmpc.tuning.record_for`). Each line is written with
 a single ``write`` on a file opened ``O_APPEND``, then flushed to disk (``fsync``), so a crash
-leaves at most a truncated last line; readers skip lines that are not complete JSON objects. One
-writer at a time is enforced with an advisory ``flock``.
+leaves at most a truncated last line. The file is read through the one reader
+(:func:`boundary.read_bytes`: a regular file of at most 1 GiB), and a line is a record only if it
+is a JSON object with the fields a record has (:func:`is_record`); the others (a line cut short
+by a crash, a line edited by hand) are skipped and counted. One writer at a time is enforced
+with an advisory ``flock``.
 """
 
 from __future__ import annotations
@@ -14,7 +17,17 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import boundary
+from boundary import FileError
 from rhmpc.errors import UsageError
+
+#: The statuses of a record.
+STATUSES = ("ok", "failed")
+#: Each field every record has, and its type.
+RECORD_FIELDS: dict[str, type | tuple[type, ...]] = {
+    "key": str, "point": str, "status": str, "parameters": dict, "settings": dict}
+#: The longest line that is read as a record [characters]: a record is about 2 kB.
+MAX_LINE = 1 << 20
 
 
 @dataclass
@@ -26,11 +39,21 @@ class ResultsFile:
     records : list[dict]
         Every complete record, in file order.
     bad_lines : int
-        Lines that are not a JSON object with a ``key`` (e.g. a truncated last line).
+        Lines that are not records (:func:`is_record`), e.g. a truncated last line.
+    first_bad : int or None
+        The number of the first of them (from 1).
     """
 
     records: list[dict] = field(default_factory=list)
     bad_lines: int = 0
+    first_bad: int | None = None
+
+    def skipped(self, path: str | Path) -> str | None:
+        """What was skipped, for a warning naming ``path``; None if nothing was."""
+        if not self.bad_lines:
+            return None
+        return (f"{path}: skipped {self.bad_lines} line(s) that are not results records "
+                f"(the first: line {self.first_bad}), e.g. a line cut short by a crash")
 
     def latest(self) -> dict[str, dict]:
         """The last record of each evaluation key (an ``ok`` one wins over failures)."""
@@ -42,54 +65,50 @@ class ResultsFile:
         return out
 
 
+def is_record(record: object) -> bool:
+    """Whether ``record`` is a results line: a dict with every field of
+    :data:`RECORD_FIELDS` of its type, a status of :data:`STATUSES`, the ``metrics`` (a dict)
+    of an ``ok`` one and, if present, an ``objective`` that is a dict."""
+    if not isinstance(record, dict):
+        return False
+    if not all(isinstance(record.get(k), kind) for k, kind in RECORD_FIELDS.items()):
+        return False
+    if record["status"] not in STATUSES or not isinstance(record.get("objective", {}), dict):
+        return False
+    return record["status"] != "ok" or isinstance(record.get("metrics"), dict)
+
+
+def _parse(line: bytes, where: str) -> dict | None:
+    if len(line) > MAX_LINE:
+        return None
+    try:
+        record = boundary.json_loads(line, where)
+    except FileError:
+        return None
+    return record if is_record(record) else None
+
+
 def read_results(path: str | Path) -> ResultsFile:
-    """Read a results file; a missing file is empty, malformed lines are counted and skipped."""
+    """Read a results file; a missing file is empty, lines that are not records are counted
+    and skipped."""
     path = Path(path)
     out = ResultsFile()
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
+    if not os.path.lexists(path):
         return out
-    except OSError as exc:
-        raise UsageError(f"{path}: cannot read: {exc.strerror}") from None
-    for line in raw.split(b"\n"):
+    try:
+        raw = boundary.read_bytes(path, "results file")
+    except FileError as exc:
+        raise UsageError(str(exc)) from None
+    for number, line in enumerate(raw.split(b"\n"), 1):
         if not line.strip():
             continue
-        try:
-            record = json.loads(line)
-        except (json.JSONDecodeError, UnicodeDecodeError):
+        record = _parse(line, f"{path}, line {number}")
+        if record is None:
             out.bad_lines += 1
-            continue
-        if not isinstance(record, dict) or "key" not in record:
-            out.bad_lines += 1
-            continue
-        out.records.append(record)
+            out.first_bad = out.first_bad or number
+        else:
+            out.records.append(record)
     return out
-
-
-def check_writable(path: str | Path, option: str) -> None:
-    """Refuse an output file that cannot be written, before any run starts.
-
-    Parameters
-    ----------
-    path : str or Path
-        The file to be written later.
-    option : str
-        The option that named it (``--out``), for the message.
-
-    Raises
-    ------
-    UsageError
-        Its folder is missing or not writable, or the path is a folder.
-    """
-    path = Path(path)
-    folder = path.parent if str(path.parent) else Path(".")
-    if path.is_dir():
-        raise UsageError(f"{option} {path}: is a folder; give a file name")
-    if not folder.is_dir():
-        raise UsageError(f"{option} {path}: no folder {folder}")
-    if not os.access(folder, os.W_OK) or (path.exists() and not os.access(path, os.W_OK)):
-        raise UsageError(f"{option} {path}: not writable")
 
 
 class ResultsWriter:

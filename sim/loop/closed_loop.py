@@ -22,7 +22,9 @@ and a fixed-size decimated trace, and every tick can go to an NPZ file as the ru
 
 The POI trajectory is placed in the workspace (``LoopSettings.placement``): by default centred
 on its mean over the run, at the end-effector's home position plus ``poi_offset``. A 1-D motion
-moves along the x axis. The error is ``p_ee(q_{i+1}) − p_poi((i+1)·Ts)``.
+moves along the x axis. The error is ``p_ee(q_{i+1}) − p_poi((i+1)·Ts)``: at every tick for a
+synthetic motion, whose truth is continuous; at the instants of its samples for a recording,
+where the POI was measured only then (``measured``).
 """
 
 from __future__ import annotations
@@ -195,7 +197,8 @@ def run_closed_loop(plant, controller, truth, stream, settings: LoopSettings,
                     trace_file: str | None = None,
                     yardstick: Callable[[np.ndarray, np.ndarray, np.ndarray], object] | None = None,
                     chunk_ticks: int = 20_000, marks: Iterable[int] = (),
-                    points: PointsAt | None = None) -> LoopResult:
+                    points: PointsAt | None = None,
+                    measured: tuple[np.ndarray, np.ndarray] | None = None) -> LoopResult:
     """Run the closed loop for ``settings.duration``, in chunks of ≈ 10 s of ticks.
 
     Parameters
@@ -238,6 +241,10 @@ def run_closed_loop(plant, controller, truth, stream, settings: LoopSettings,
     points
         The other tracked points of a recording, given with each sample to the controller's
         refresh (``others``: what a multi-point predictor reads).
+    measured
+        A recording's own samples ``(t [s], z (n, d) [m])`` in the run's time, uncentred: the
+        run is then scored at their instants (:class:`sim.loop.metrics.MeasuredScore`), and
+        the all-tick score against their interpolant is kept beside it.
     """
     n, N = settings.ticks, controller.N
     if not hasattr(truth, "window"):
@@ -246,7 +253,8 @@ def run_closed_loop(plant, controller, truth, stream, settings: LoopSettings,
         raise ValueError(f"truth covers {truth.n_ticks} ticks, the run needs {n + N + 1}")
     refreshes = Refreshes(stream, truth.center, settings, clock, points)
     marks = sorted({int(m) for m in marks if 0 < m < n})
-    record = Recorder(robot, settings, N, truth, anchor, trace_file, clock, bool(marks))
+    record = Recorder(robot, settings, N, truth, anchor, trace_file, clock, bool(marks),
+                      measured)
     with quiet_gc():
         try:
             for c0, c1 in chunks(n, chunk_ticks, marks):
@@ -276,6 +284,7 @@ def _run_ticks(plant, controller, refreshes: Refreshes, c0: int, c1: int, log: d
     q_log, ref0, u_log, tau_log, cmd_log = (log[k] for k in ("q", "ref0", "u", "tau", "cmd"))
     step_ns, refresh_ns, horizons, samples = (log[k] for k in ("step_ns", "refresh_ns",
                                                                "horizons", "samples"))
+    each = log["refresh_each_ns"]
     u_prev = log["u_prev"]
     for i in range(c0, c1):
         k = i - c0
@@ -284,6 +293,7 @@ def _run_ticks(plant, controller, refreshes: Refreshes, c0: int, c1: int, log: d
             before = controller.outliers
             refresh(i, z, stamp, others)
             spent += controller.refresh_ns
+            each.append(controller.refresh_ns)
             refreshed = True
             if z is not None:
                 _note_outliers(before, controller.outliers, stamp, log)

@@ -16,7 +16,7 @@ import pinocchio as pin
 
 from rhmpc.control.reference import embed3
 from robots import Robot
-from sim.loop.metrics import RunningTracking, TickHistogram, rms
+from sim.loop.metrics import MeasuredScore, RunningTracking, TickHistogram, rms
 from sim.loop.trace import DecimatedTrace, TraceFile
 
 #: The parts of a tick, timed separately: the controller's step (observer, MPC, cancellation)
@@ -27,6 +27,13 @@ TICK_PARTS = ("step", "refresh")
 YARDSTICK_EVERY, YARDSTICK_PHASE = 64, 7
 #: The most refreshes (and their samples) a result keeps for figures.
 KEPT_REFRESHES = 4000
+#: Samples measured this long before a chunk's start are scored at its end [s]: by then the
+#: controller has judged them (its gate, and a retraction one sample period later).
+JUDGED_AFTER_S = 1.0
+#: What a run's ``rms_error_mm`` compares, by its truth: a recording's samples at their own
+#: instants, or a synthetic motion known at every tick.
+SCORES = {"measured": "the tool against each recorded sample, at the sample's instant",
+          "continuous": "the tool against the true motion, at every tick"}
 
 
 @dataclass
@@ -40,19 +47,26 @@ class LoopResult:
     each refresh made (ticks (R,), points (R, N, 3) [m]) and ``samples`` the sensor samples
     that refreshed them, placed in the workspace (t (S,) [s], z (S, 3) [m], NaN for a missing
     one), each of at most :data:`KEPT_REFRESHES` evenly spread refreshes. The metrics cover
-    every tick after settling.
+    the run after settling: every tick of a continuous truth, or a recording's samples at their
+    own instants (:attr:`score`).
     """
 
     settings: object  # sim.loop.LoopSettings
     trace: dict  # field -> array over the traced ticks
     stride: int  # ticks between traced samples before the full-rate tail
-    tracking: dict  # tracking_metrics of every tick after settling
+    #: tracking_metrics after settling: at every tick against the truth, or with
+    #: ``measured`` at the recorded samples' instants (:class:`~sim.loop.metrics.MeasuredScore`;
+    #: the all-tick score against the samples' interpolant then in ``interpolated``)
+    tracking: dict
     tick_us: dict  # p50 / p99 / p999 / max / mean of the whole control tick [µs]
     yardstick_us: dict  # the same of the yardstick (gain tick) timed in the run [µs]
     tick_parts_us: dict  # the same per part of the tick (TICK_PARTS) [µs]
     #: the same of the tick without the refreshes (the step alone) [µs]: what it would cost
     #: with the predictor in a task of its own
     control_tick_us: dict
+    #: each refresh's time [µs] (p50 … max, ``over_period``: refreshes longer than the
+    #: predictor's period, which a predictor in a task of its own could not keep up with)
+    refresh_us: dict
     horizon_error: np.ndarray  # (N,) RMS error of the reference vs the truth per lead tick [m]
     controller_stats: dict = field(default_factory=dict)
     saturated_ticks: int = 0
@@ -70,6 +84,12 @@ class LoopResult:
     #: (:meth:`Recorder.count`): ``ticks`` (i0, i1), ``max_error_m`` (every tick, settling
     #: included; NaN without truth), ``envelope`` and the event ``counts`` at its end
     segments: tuple = ()
+    #: with a recording: the all-tick score against its linear interpolant, keys suffixed
+    #: ``_interpolated`` (``rms_error_interpolated_mm`` …); empty for a continuous truth
+    interpolated: dict = field(default_factory=dict)
+    #: with a recording: its samples (t (n,) [s], p (n, 3) [m] placed in the workspace, and
+    #: whether each is in the score), the truth of :attr:`score` ``"measured"``
+    measured: tuple = ()
 
     time = property(lambda self: self.trace["time"])  # [s], the instant of the state (i+1)·Ts
     ee = property(lambda self: self.trace["ee"])  # (n, 3) end-effector position [m]
@@ -84,11 +104,20 @@ class LoopResult:
     def error(self) -> np.ndarray:
         return self.ee - self.poi
 
+    @property
+    def score(self) -> str:
+        """``"measured"`` (a recording's samples) or ``"continuous"`` (:data:`SCORES`)."""
+        return "measured" if self.interpolated else "continuous"
+
     def metrics(self) -> dict:
         out = dict(self.tracking)
+        out["score"] = self.score
+        out["score_description"] = SCORES[self.score]
+        out.update(self.interpolated)
         out["tick_us"] = dict(self.tick_us)
         out["tick_parts_us"] = {k: dict(v) for k, v in self.tick_parts_us.items()}
         out["control_tick_us"] = dict(self.control_tick_us)
+        out["refresh_us"] = dict(self.refresh_us)
         out["prediction_rms_mm"] = {
             "lead_1": float(1e3 * self.horizon_error[0]),
             "lead_N": float(1e3 * self.horizon_error[-1]),
@@ -145,7 +174,7 @@ class Recorder:
     """Turns each chunk's per-tick records into running statistics, the trace and the trace file."""
 
     def __init__(self, robot: Robot, settings, horizon: int, truth, anchor, trace_file,
-                 clock, segmented: bool = False) -> None:
+                 clock, segmented: bool = False, measured: tuple | None = None) -> None:
         self.robot, self.settings, self.N = robot, settings, horizon
         self.truth, self.anchor = truth, np.asarray(anchor, dtype=float)
         self.model, self.data, self.fid = robot.model, robot.create_data(), robot.ee_frame_id
@@ -156,9 +185,14 @@ class Recorder:
         frame = robot.model.frames[self.fid]
         self.ee_joint, self.ee_point = frame.parentJoint, np.array(frame.placement.translation)
         self.tracking = RunningTracking()
+        #: a recording's samples (t [s], z (n, d) [m], uncentred): scored at their instants
+        self.measured = None if measured is None else self._measured_score(*measured)
+        self.after_last_ticks = 0  # ticks after a recording's last sample: not scored
         self.ticks = TickHistogram()
         self.yardstick = TickHistogram()
         self.parts = {name: TickHistogram() for name in TICK_PARTS}
+        #: each refresh (gate, predictor, interpolation) against the predictor's period
+        self.refreshes, self.period_ns = TickHistogram(span_ns=100_000_000), 1e9 * clock.dt
         self.trace = DecimatedTrace(settings.ticks)
         self.file = None if trace_file is None else TraceFile(trace_file)
         self.lead = np.arange(1, horizon + 1)
@@ -179,6 +213,14 @@ class Recorder:
         #: per chunk, with ``segmented``: its ticks, max error and envelope (then its counts)
         self.segments: list[dict] | None = [] if segmented else None
 
+    def _measured_score(self, t: np.ndarray, z: np.ndarray) -> MeasuredScore:
+        """The score at the samples ``z`` (n, d) [m] measured at ``t`` [s], placed as the truth
+        is (its centre off, at the anchor), from the settling's end to the run's."""
+        z = np.asarray(z, dtype=float).reshape(np.size(t), -1)
+        placed = self.anchor + embed3(z - self.truth.center)
+        s = self.settings
+        return MeasuredScore(t, placed, s.settling_ticks * s.Ts, s.ticks * s.Ts, s.Ts)
+
     def start_chunk(self, c0: int, c1: int) -> dict:
         """The records of ticks c0 … c1 − 1, preallocated (the loop writes rows): q (m, nq), the
         first reference point (m, 3), τ_mpc, the applied and the commanded τ (m, nv), the step's
@@ -188,7 +230,8 @@ class Recorder:
         return {"q": np.empty((m, nq)), "ref0": np.empty((m, 3)), "u": np.empty((m, nv)),
                 "tau": np.empty((m, nv)), "cmd": np.empty((m, nv)),
                 "step_ns": np.zeros(m, dtype=np.int64), "refresh_ns": np.zeros(m, dtype=np.int64),
-                "horizons": [], "samples": [], "yardstick_ns": [], "u_prev": self.u_prev,
+                "horizons": [], "samples": [], "yardstick_ns": [], "refresh_each_ns": [],
+                "u_prev": self.u_prev,
                 "outliers": self.outliers, "last_stamp": self.last_stamp}
 
     def _ee(self, q_log: np.ndarray) -> np.ndarray:
@@ -214,11 +257,16 @@ class Recorder:
         self.saturated_ticks += int((np.abs(log["cmd"]) > limit).any(axis=1).sum())
         s = max(self.settings.settling_ticks - c0, 0)
         tick_ns = log["step_ns"] + log["refresh_ns"]
+        if self.measured is not None:
+            self.measured.add(c0, ee)
+            self.measured.fold(self.outliers, c0 * self.settings.Ts - JUDGED_AFTER_S)
+            scored = self._before_last_sample(c0, scored, s)
         self.tracking.add(ee[s:] - scored[s:], log["u"][s:], log["tau"][s:])
         self.ticks.add(tick_ns[s:])
         self.parts["step"].add(log["step_ns"][s:])
         self.parts["refresh"].add(log["refresh_ns"][s:])
         self.yardstick.add(np.array(log["yardstick_ns"], dtype=np.int64))
+        self.refreshes.add(np.array(log["refresh_each_ns"], dtype=np.int64))
         self._horizon_errors(c0, log["horizons"], placed)
         self._segment(c0, c1, ee - poi, log["q"])
         self._keep_refreshes(log["horizons"], log["samples"])
@@ -226,7 +274,7 @@ class Recorder:
         chunk = {"tick": ticks, "time": (ticks + 1) * self.settings.Ts, "ee": ee, "poi": poi,
                  "reference0": log["ref0"], "tau_mpc": log["u"], "tau_command": log["cmd"],
                  "tau": log["tau"], "tick_ns": tick_ns, "q": log["q"]}
-        self.trace.add(chunk)
+        self.trace.add(chunk, None if self.measured is None else self.measured.rows(c0, m))
         if self.file is not None:
             self.file.add(chunk)
 
@@ -260,6 +308,18 @@ class Recorder:
         self.excluded_ticks += int((near & settled).sum())
         poi = poi.copy()
         poi[near] = np.nan
+        return poi
+
+    def _before_last_sample(self, c0: int, poi: np.ndarray, s: int) -> np.ndarray:
+        """``poi`` with NaN on the ticks after the recording's last sample (counted after
+        settling): nobody measured the heart there."""
+        times = (c0 + 1 + np.arange(poi.shape[0])) * self.settings.Ts
+        after = times > self.measured.last + 1e-9
+        if not after.any():
+            return poi
+        self.after_last_ticks += int(after[s:].sum())
+        poi = poi.copy()
+        poi[after] = np.nan
         return poi
 
     def _keep_refreshes(self, horizons: list, samples: list) -> None:
@@ -296,7 +356,34 @@ class Recorder:
             self.file.close()
             self.file = None
 
+    def _scores(self) -> tuple[dict, dict, dict]:
+        """(tracking, interpolated, excluded): with a recording, the score at its samples'
+        instants and the all-tick one renamed; else the all-tick score alone."""
+        tracking = self.tracking.result()
+        excluded = {"outliers": len(self.outliers), "ticks": self.excluded_ticks,
+                    "unmeasured": len(getattr(self.truth, "unmeasured", ()))}
+        if self.measured is None:
+            return tracking, {}, excluded
+        self.measured.fold(self.outliers)
+        interpolated = {k.replace("_mm", "_interpolated_mm"): tracking.pop(k)
+                        for k in ("rms_error_mm", "max_error_mm", "rms_error_axis_mm")}
+        tracking.update(self.measured.result())
+        excluded.update(outlier_samples=self.measured.outliers,
+                        unmeasured_samples=self.measured.unmeasured,
+                        after_last_sample_ticks=self.after_last_ticks)
+        return tracking, interpolated, excluded
+
+    def _refresh_budget(self) -> dict:
+        """Each refresh's p50 … max [µs], the predictor's period [µs] and how many refreshes
+        took longer (every refresh of the run, settling included)."""
+        h = self.refreshes
+        edge = int(min(self.period_ns // h.resolution, h.counts.size))
+        over = int(h.counts[edge:].sum()) + sum(ns > self.period_ns for ns in h.overflow)
+        return {**h.stats_us(), "refreshes": h.n, "period_us": self.period_ns / 1e3,
+                "over_period": over}
+
     def result(self, controller, dynamics: str = "pinocchio") -> LoopResult:
+        tracking, interpolated, excluded = self._scores()
         with np.errstate(invalid="ignore", divide="ignore"):
             horizon_error = np.sqrt(self.horizon2 / self.n_horizons)  # NaN where no refresh
         ticks = np.array([t for t, _ in self.kept_horizons], dtype=np.int64)
@@ -307,15 +394,17 @@ class Recorder:
                    else np.zeros((0, 3)))
         return LoopResult(
             settings=self.settings, trace=self.trace.arrays(), stride=self.trace.stride,
-            tracking=self.tracking.result(), tick_us=self.ticks.stats_us(),
+            tracking=tracking, interpolated=interpolated,
+            measured=() if self.measured is None else self.measured.samples(),
+            tick_us=self.ticks.stats_us(),
             yardstick_us=self.yardstick.stats_us(),
             tick_parts_us={name: h.stats_us() for name, h in self.parts.items()},
             control_tick_us=self.parts["step"].stats_us(), horizon_error=horizon_error,
+            refresh_us=self._refresh_budget(),
             controller_stats=controller_stats(controller), saturated_ticks=self.saturated_ticks,
             predictor_counts=dict(controller.predictor_counts), plant_dynamics=dynamics,
             horizons=(ticks, points), samples=(stamps, samples),
-            excluded={"outliers": len(self.outliers), "ticks": self.excluded_ticks,
-                      "unmeasured": len(getattr(self.truth, "unmeasured", ()))},
+            excluded=excluded,
             envelope=self.envelope.result(), segments=tuple(self.segments or ()),
         )
 

@@ -3,8 +3,10 @@
 ==============  =================================================================
 ``recorded``    :class:`RecordedMotion` (a recording as a motion source),
                 :class:`RecordingError`, the unit tables
-``text``        CSV and NPZ: reading, :func:`save_recording`, :func:`export_source`
-``matfile``     MATLAB ``.mat`` v5 and v7.3 (HDF5)
+``csvfile``     CSV, read in blocks
+``text``        NPZ, and writing: :func:`save_recording`, :func:`export_source`
+``matfile``     MATLAB ``.mat`` v5 and v7.3 (HDF5), only the variables a recording needs
+``timebase``    the time unit by evidence: times in milliseconds or frame numbers refused
 ``points``      :func:`load_points`: files of several tracked points, point by point
 ``files``       :func:`load_recording`: any of them, by suffix
 ``plausible``   :class:`RecordingWarning` on a recording unlikely to be heart motion as read

@@ -6,11 +6,13 @@ from pathlib import Path
 
 import numpy as np
 
+from sim.recordings.csvfile import read_csv
 from sim.recordings.matfile import load_mat
 from sim.recordings.plausible import check_recording
 from sim.recordings.points import load_points, pick_point
 from sim.recordings.recorded import RecordedMotion, RecordingError, check_file, check_rate
-from sim.recordings.text import read_csv, read_npz
+from sim.recordings.text import read_npz
+from sim.recordings.timebase import check_time_unit
 
 
 def load_recording(path: str | Path, units: str | None = None, var: str | None = None,
@@ -42,7 +44,9 @@ def load_recording(path: str | Path, units: str | None = None, var: str | None =
     Raises
     ------
     RecordingError
-        Naming the file, the line and the problem.
+        Naming the file, the line and the problem; also when its times, read in seconds
+        because the file states no unit, look like milliseconds or frame numbers
+        (:mod:`sim.recordings.timebase`).
 
     Warns
     -----
@@ -70,5 +74,6 @@ def load_recording(path: str | Path, units: str | None = None, var: str | None =
     if not np.any(np.all(np.isfinite(rec.z), axis=1)):
         raise RecordingError(f"{path}: no complete sample (all positions missing)")
     check_rate(rec)
+    check_time_unit(rec)
     check_recording(rec)
     return rec

@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+import boundary
 from sim.recordings.recorded import LENGTH_UNITS, TIME_UNITS, RecordedMotion, RecordingError
 
 #: Names recognised as the time vector, in order of preference.
@@ -48,56 +49,99 @@ def parse_indices(text: str) -> list[int]:
             f"expected comma-separated indices, got {text!r}") from None
 
 
-def _read_variables(path: Path) -> dict[str, object]:
-    """Every variable of a .mat file: numeric arrays (MATLAB's shape) and strings."""
+#: MATLAB classes of numeric arrays (a recording's matrix, its times, its rate).
+NUMERIC = ("double", "single", "int8", "uint8", "int16", "uint16", "int32", "uint32", "int64",
+           "uint64", "logical")
+
+
+def _catalog(path: Path, f) -> tuple[str, dict[str, tuple[tuple[int, ...], str]]]:
+    """The file's format (``"v5"`` or ``"hdf5"``, v7.3) and name → (MATLAB shape, class) of
+    every variable, from the file's headers: no variable's data is read."""
+    import h5py
     import scipy.io
 
     try:
-        raw = scipy.io.loadmat(path, squeeze_me=False, chars_as_strings=True)
+        return "v5", {name: (tuple(shape), cls) for name, shape, cls in scipy.io.whosmat(f)}
     except NotImplementedError:  # v7.3: HDF5
-        return _read_hdf5(path)
-    except (ValueError, TypeError, OSError, IndexError, scipy.io.matlab.MatReadError) as exc:
-        if _is_hdf5(path):  # an HDF5 file without MATLAB's header block
-            return _read_hdf5(path)
-        raise RecordingError(f"{path}: not a readable MATLAB file ({exc})") from None
+        pass
+    except (ValueError, TypeError, OSError, IndexError, EOFError,
+            scipy.io.matlab.MatReadError) as exc:
+        f.seek(0)
+        if not _is_hdf5(f):  # an HDF5 file without MATLAB's header block is read as v7.3
+            raise RecordingError(f"{path}: not a readable MATLAB file ({exc})") from None
+    f.seek(0)
+    out = {}
+    try:
+        with h5py.File(f, "r") as h5:
+            for key, item in h5.items():
+                if isinstance(item, h5py.Dataset) and not key.startswith("#"):
+                    cls = item.attrs.get("MATLAB_class", b"double")
+                    cls = cls.decode() if isinstance(cls, bytes) else str(cls)
+                    out[key] = (tuple(item.shape[::-1]), cls)  # HDF5 holds MATLAB's transpose
+    except OSError as exc:
+        raise RecordingError(f"{path}: not a readable MATLAB v7.3 file ({exc})") from None
+    return "hdf5", out
+
+
+#: HDF5's signature, at the start of its superblock: offset 0, 512, 1024, 2048, … (after a
+#: user block, such as MATLAB's 512-byte header of a v7.3 file).
+HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+
+
+def _is_hdf5(f) -> bool:
+    """Whether the open file ``f`` holds an HDF5 superblock where HDF5 looks for one."""
+    offset = 0
+    while True:
+        f.seek(offset)
+        head = f.read(len(HDF5_SIGNATURE))
+        if head == HDF5_SIGNATURE:
+            return True
+        if len(head) < len(HDF5_SIGNATURE):
+            return False
+        offset = max(512, 2 * offset)
+
+
+def _load(path: Path, f, kind: str, names: list[str]) -> dict[str, object]:
+    """The variables ``names`` of the file (no other is read): numeric arrays (MATLAB's
+    shape; complex ones kept, refused if read as positions) and strings."""
+    import scipy.io
+
+    f.seek(0)
+    if kind == "v5":
+        try:
+            raw = scipy.io.loadmat(f, squeeze_me=False, chars_as_strings=True,
+                                   variable_names=names)
+        except (ValueError, TypeError, OSError, IndexError, EOFError,
+                scipy.io.matlab.MatReadError) as exc:
+            raise RecordingError(f"{path}: not a readable MATLAB file ({exc})") from None
+    else:
+        raw = _load_hdf5(path, f, names)
     out: dict[str, object] = {}
     for key, value in raw.items():
-        if key.startswith("__"):
+        if key.startswith("__") or not isinstance(value, np.ndarray):
             continue
-        if isinstance(value, np.ndarray) and value.dtype.kind in "US":
+        if value.dtype.kind in "US":
             out[key] = "".join(np.asarray(value).ravel().tolist()).strip()
-        elif isinstance(value, np.ndarray) and value.dtype.kind in "fiub":
+        elif value.dtype.kind in "fiub":
             out[key] = np.asarray(value, dtype=float)
-        elif isinstance(value, np.ndarray) and value.dtype.kind == "c":
-            out[key] = np.asarray(value, dtype=complex)  # refused if it is the one read
+        elif value.dtype.kind == "c":
+            out[key] = np.asarray(value, dtype=complex)
     return out
 
 
-def _is_hdf5(path: Path) -> bool:
+def _load_hdf5(path: Path, f, names: list[str]) -> dict[str, np.ndarray]:
     import h5py
 
+    out = {}
     try:
-        return bool(h5py.is_hdf5(path))
-    except OSError:
-        return False
-
-
-def _read_hdf5(path: Path) -> dict[str, object]:
-    try:
-        import h5py
-    except ImportError:  # pragma: no cover - h5py is a dependency
-        raise RecordingError(f"{path}: MATLAB v7.3 files need h5py") from None
-    out: dict[str, object] = {}
-    try:
-        with h5py.File(path, "r") as f:
-            for key, item in f.items():
-                if not isinstance(item, h5py.Dataset) or key.startswith("#"):
-                    continue
-                data = item[()]
+        with h5py.File(f, "r") as h5:
+            for key in names:
+                item = h5[key]
+                data = np.asarray(item[()])
                 if item.attrs.get("MATLAB_class", b"") in (b"char", "char"):
-                    out[key] = "".join(chr(c) for c in np.asarray(data).ravel()).strip()
-                elif np.asarray(data).dtype.kind in "fiub":
-                    out[key] = np.asarray(data, dtype=float).T  # HDF5 holds MATLAB's transpose
+                    out[key] = np.array("".join(chr(c) for c in data.ravel()))
+                elif data.dtype.kind in "fiub":
+                    out[key] = data.T  # HDF5 holds MATLAB's transpose
     except OSError as exc:
         raise RecordingError(f"{path}: not a readable MATLAB v7.3 file ({exc})") from None
     return out
@@ -165,40 +209,52 @@ def load_mat(path: str | Path, var: str | None = None, rows=None, cols=None,
         Times in seconds from 0 (or the file's time vector), positions in metres.
     """
     path = Path(path)
-    variables = _read_variables(path)
+    with boundary.open_input(path, "recording") as f:
+        kind, catalog = _catalog(path, f)
+        numeric = {k: shape for k, (shape, cls) in catalog.items() if cls in NUMERIC}
+        time_key = next((k for k in TIME_NAMES if k in numeric), None)
+        var = _variable(path, numeric, var, time_key)
+        boundary.check("samples", max(numeric[var]), f"{path}: {var!r}")
+        wanted = [var, *(k for k in (time_key, *RATE_NAMES) if k in numeric),
+                  *(k for k in ("units", "time_units") if catalog.get(k, ((), ""))[1] == "char")]
+        variables = _load(path, f, kind, list(dict.fromkeys(wanted)))
     arrays = {k: v for k, v in variables.items() if isinstance(v, np.ndarray)}
-    time_key = next((k for k in TIME_NAMES if k in arrays), None)
-    var = _variable(path, arrays, var, time_key)
+    if var not in arrays:
+        raise RecordingError(f"{path}: variable {var!r} could not be read as numbers")
+    if arrays[var].dtype.kind == "c":
+        raise RecordingError(f"{path}: variable {var!r} holds complex numbers; positions must "
+                             "be real (take the real part or the magnitude before saving)")
     z = _select(path, arrays[var], var, rows, cols, points)
     n = z.shape[0]
     if n < MIN_SAMPLES:
         raise RecordingError(f"{path}: variable {var!r} has {n} sample(s); at least "
                              f"{MIN_SAMPLES} are needed")
-    t = _times(path, variables, None if time_key == var else time_key, n, rate)
+    time_key = None if time_key == var else time_key
+    t = _times(path, variables, time_key, n, rate)
     if np.any(np.isinf(z)):
         raise RecordingError(f"{path}: {var!r} has infinite values (use NaN for missing)")
     if not np.any(np.all(np.isfinite(z), axis=1)):
         raise RecordingError(f"{path}: {var!r} has no complete sample (all NaN)")
     unit, origin = _units(path, variables.get("units"), units)
-    return RecordedMotion(t, z * LENGTH_UNITS[unit], str(path), unit, origin)
+    stated = variables.get("time_units") if time_key is not None else "s"  # "s": from a rate
+    return RecordedMotion(t, z * LENGTH_UNITS[unit], str(path), unit, origin,
+                          stated if isinstance(stated, str) else None)
 
 
-def _variable(path: Path, arrays: dict[str, np.ndarray], var: str | None,
+def _variable(path: Path, numeric: dict[str, tuple[int, ...]], var: str | None,
               time_key: str | None) -> str:
-    """The variable holding the positions: ``var``, or the file's only matrix besides the
-    time vector; a complex one is refused."""
+    """The variable holding the positions: ``var``, or the file's only numeric matrix besides
+    the time vector (``numeric``: name → shape)."""
     if var is None:
-        candidates = [k for k, v in arrays.items() if k != time_key and v.size > 3]
+        candidates = [k for k, shape in numeric.items() if k != time_key
+                      and int(np.prod(shape)) > 3]
         if len(candidates) != 1:
             raise RecordingError(f"{path}: name the variable with --var (found "
-                                 f"{', '.join(sorted(arrays)) or 'no numeric variables'})")
+                                 f"{', '.join(sorted(numeric)) or 'no numeric variables'})")
         var = candidates[0]
-    if var not in arrays:
+    if var not in numeric:
         raise RecordingError(f"{path}: no numeric variable {var!r} (found "
-                             f"{', '.join(sorted(arrays)) or 'none'})")
-    if arrays[var].dtype.kind == "c":
-        raise RecordingError(f"{path}: variable {var!r} holds complex numbers; positions must "
-                             "be real (take the real part or the magnitude before saving)")
+                             f"{', '.join(sorted(numeric)) or 'none'})")
     return var
 
 

@@ -20,10 +20,12 @@ from pathlib import Path
 
 import numpy as np
 
+from sim.recordings.csvfile import read_csv
 from sim.recordings.matfile import load_mat
 from sim.recordings.plausible import check_recording
 from sim.recordings.recorded import RecordedMotion, RecordingError, check_file, check_rate
-from sim.recordings.text import read_csv, read_npz
+from sim.recordings.text import read_npz
+from sim.recordings.timebase import check_time_unit
 
 
 def _wide(path: Path, units, var, rows, cols, rate) -> RecordedMotion:
@@ -74,6 +76,7 @@ def load_points(path: str | Path, units: str | None = None, var: str | None = No
     path = Path(path)
     wide = _wide(path, units, var, rows, cols, rate)
     check_rate(wide)
+    check_time_unit(wide)
     if wide.dim <= 3:
         recordings = [wide]
     else:

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+import boundary
 from sim.heart.motion import as_time_array
 
 #: Length units accepted in headers and flags, in metres.
@@ -52,15 +53,21 @@ class RecordedMotion:
         The length unit the file was read in (a key of :data:`LENGTH_UNITS`), if known.
     units_origin : str, optional
         Where that unit came from, one of :data:`UNIT_ORIGINS`.
+    time_unit : str, optional
+        The time unit the file stated (a key of :data:`TIME_UNITS`; ``"s"`` for times made
+        from a stated sample rate), or None: read in seconds without the file saying so
+        (:mod:`sim.recordings.timebase` checks that reading).
     """
 
     def __init__(self, t: np.ndarray, z: np.ndarray, name: str = "recording",
-                 units: str | None = None, units_origin: str | None = None) -> None:
+                 units: str | None = None, units_origin: str | None = None,
+                 time_unit: str | None = None) -> None:
         self.t = np.asarray(t, dtype=float)
         self.z = np.asarray(z, dtype=float).reshape(self.t.size, -1)
         self.dim = self.z.shape[1]
         self.name = name
         self.units, self.units_origin = units, units_origin
+        self.time_unit = time_unit
         self._missing = ~np.all(np.isfinite(self.z), axis=1)
 
     @property
@@ -95,7 +102,7 @@ class RecordedMotion:
                      ) -> RecordedMotion:
         """Other samples with this recording's name and units (``name`` replaces the name)."""
         return RecordedMotion(t, z, self.name if name is None else name, self.units,
-                              self.units_origin)
+                              self.units_origin, self.time_unit)
 
     def starting_at(self, t0: float = 0.0) -> RecordedMotion:
         """The same recording with its time axis shifted so that it starts at ``t0`` [s]."""
@@ -123,11 +130,12 @@ class RecordedMotion:
 
 
 def check_file(path: Path) -> None:
-    """Raise :class:`RecordingError` unless ``path`` is an existing file."""
-    if not path.exists():
-        raise RecordingError(f"{path}: no such file")
-    if not path.is_file():
-        raise RecordingError(f"{path}: not a file")
+    """Raise :class:`RecordingError` unless ``path`` is a regular file the one reader opens
+    (:func:`boundary.open_input`: not a folder, a FIFO or a device; within its size bound)."""
+    try:
+        boundary.open_input(path, "recording").close()
+    except boundary.FileError as exc:
+        raise RecordingError(str(exc)) from None
 
 
 def check_rate(rec: RecordedMotion) -> None:

@@ -74,8 +74,10 @@ def test_members_by_name_get_the_other_points_and_the_settings_are_checked() -> 
     assert c.members[1].points == 4 and c.members[1].counts["updates"] == 300
     c.reset()
     assert c.members[1].n == 0
-    with pytest.raises(ValueError, match="members"):
-        CombinationSettings(members=())
+    timed = c.member_time.summary()  # each member's update and forecast, against the period
+    assert list(timed) == ["one-step", "st-rls"]
+    assert all(v["over_period"] <= 300 and v["max_us"] >= 0 for v in timed.values())
+    assert c.member_time.n.tolist() == [300, 300]
     with pytest.raises(ValueError, match="members"):
         CombinationSettings(members=("combination",))
     with pytest.raises(ValueError, match="3 names"):
@@ -102,3 +104,16 @@ def test_scoring_starts_at_score_from_with_the_members_priors() -> None:
     np.testing.assert_allclose(c._sq[0], online**2 * prior)
     np.testing.assert_allclose(c._sq[1], (fitted.model["validation_rms"] / fitted.unit) ** 2
                                * prior)
+
+
+def test_the_default_members_are_the_open_loop_study_s() -> None:
+    """Without members, the combination takes every default predictor that is not a baseline,
+    the fitted ones included: the same as the open-loop study's combination."""
+    from predictors.registry import combination_members, default_predictors, family
+
+    names = combination_members()
+    assert names == tuple(n for n in default_predictors(fitted=True)
+                          if family(n) not in ("baseline", "combination"))
+    assert {"one-step", "st-rls", "ridge", "st-ridge"} <= set(names)
+    assert "hold" not in names and "combination" not in names
+    assert CombinationSettings().members == ()

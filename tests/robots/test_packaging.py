@@ -25,8 +25,9 @@ def test_urdf_found_after_non_editable_install(tmp_path):
     physionet = {f"sim/heart/physionet/{f}" for f in (
         "README.md", "mitdb-100/100.hea", "mitdb-100/100.atr", "1003/1003.hea", "1003/1003.atr")}
     assert physionet <= names
-    # every module of the four import packages ships, subpackages included
-    sources = {p.relative_to(REPO).as_posix() for top in ("rhmpc", "robots", "predictors", "sim")
+    # every module of the five import packages ships, subpackages included
+    sources = {p.relative_to(REPO).as_posix() for top in ("rhmpc", "robots", "predictors", "sim",
+                                                          "boundary")
                for p in (REPO / top).rglob("*.py")}
     assert sources - names == set()
     subprocess.run(

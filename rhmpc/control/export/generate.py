@@ -32,7 +32,6 @@ from __future__ import annotations
 import hashlib
 import math
 import re
-import shutil
 import tempfile
 from dataclasses import dataclass
 from importlib.metadata import PackageNotFoundError, version
@@ -41,6 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
+import boundary
 from rhmpc.control.mpc import MPCStats, RecedingHorizonMPC
 from rhmpc.control.reference import PredictedReference
 
@@ -432,7 +432,9 @@ def export_controller(controller, outdir: str | Path, *, robot: str,
                           "directory")
     with tempfile.TemporaryDirectory() as tmp:
         written, notes, key = _generate_into(controller, robot, Path(tmp))
+        for name in written:  # every target checked before any is written
+            boundary.check_output(outdir / name, root=outdir, create=True)
         for name in written:
-            (outdir / name).parent.mkdir(parents=True, exist_ok=True)
-            shutil.copyfile(Path(tmp) / name, outdir / name)
+            boundary.make_folder((outdir / name).parent, root=outdir)
+            boundary.write_bytes(outdir / name, (Path(tmp) / name).read_bytes(), root=outdir)
     return ExportInfo(outdir=outdir, key=key, files=tuple(written), notes=tuple(notes))

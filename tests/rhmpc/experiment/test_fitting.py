@@ -77,7 +77,7 @@ def test_a_multi_point_predictor_reads_the_other_points_in_closed_loop(capsys):
 
 def test_train_files_and_poi_need_data(capsys):
     assert main(["simulate", "--poi", "2", "--duration", "1"]) == 2
-    assert "--poi need --data" in capsys.readouterr().err
+    assert "--poi and --split need --data" in capsys.readouterr().err
     assert main(["simulate", "--data", "hamlyn-phantom", "--train", "nosuch.csv",
                  "--duration", "1"]) == 2
     assert "--train: no such file nosuch.csv" in capsys.readouterr().err

@@ -101,7 +101,7 @@ def test_file_level_errors(tmp_path: Path) -> None:
         load_recording(_write(tmp_path, GOOD, "rec.xlsx"))
     with pytest.raises(RecordingError, match="not a readable MATLAB file"):
         load_recording(_write(tmp_path, GOOD, "rec.mat"))
-    with pytest.raises(RecordingError, match="not a file"):
+    with pytest.raises(RecordingError, match="a folder, not a regular file"):
         load_recording(tmp_path)
     binary = tmp_path / "bin.csv"
     binary.write_bytes(b"\xff\xfe\x00\x81garbage")

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import scipy.io
 
-from sim.recordings import RecordingError, RecordingWarning, load_recording
+from sim.recordings import RecordingError, RecordingWarning, load_mat, load_recording
 
 T = np.arange(0, 2, 0.01)
 XYZ = np.vstack([4 * np.sin(2 * np.pi * 1.3 * T), 2 * np.sin(2 * np.pi * 2.6 * T),
@@ -146,3 +146,33 @@ def test_a_file_that_states_no_unit_is_read_in_millimetres(tmp_path) -> None:
     scipy.io.savemat(path, {"X": 1e3 * XYZ})  # micrometres read as millimetres
     with pytest.warns(RecordingWarning, match="--units um"):
         load_recording(path, var="X", rate=100.0)
+
+
+def test_only_the_variables_a_recording_needs_are_read(tmp_path: Path) -> None:
+    """A huge variable beside the recording is never loaded, in v5 and v7.3 (h5py: a dataset
+    declared 10¹² values and never written)."""
+    import h5py
+
+    path = _v73(tmp_path, X=np.ones((3, 50)), fs=np.array([[25.0]]), units="mm")
+    with h5py.File(path, "a") as f:
+        f.create_dataset("other", shape=(10**6, 10**6), dtype="f8", chunks=(100, 100))
+        f["other"].attrs["MATLAB_class"] = np.bytes_("double")
+    rec = load_mat(path, var="X")
+    assert rec.t.size == 50 and rec.sample_rate == pytest.approx(25.0)
+
+
+def test_a_variable_of_more_samples_than_fit_is_refused_before_it_is_read(tmp_path: Path,
+                                                                          monkeypatch) -> None:
+    import boundary
+    from boundary.limits import Bound
+
+    monkeypatch.setitem(boundary.BOUNDS, "samples", Bound("samples of a recording", 1e9, 0.0))
+    path = tmp_path / "r.mat"
+    scipy.io.savemat(path, {"X": np.ones((3, 100)), "fs": 25.0, "units": "mm"})
+    with pytest.raises(ValueError, match=r"r\.mat: 'X': 100 samples of a recording would take "
+                                         r"about 100 GB of memory; at most 2 fit"):
+        load_mat(path)
+    csv_path = tmp_path / "r.csv"
+    csv_path.write_text("t,x\n" + "".join(f"{k / 25},1\n" for k in range(10)))
+    with pytest.raises(ValueError, match=r"r\.csv: 11 samples of a recording would take"):
+        load_recording(csv_path)

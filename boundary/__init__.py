@@ -1,0 +1,52 @@
+"""The boundary of rhmpc: files in through one guarded reader, out through one atomic writer,
+and the bounds of every count a user sets.
+
+==============  =================================================================
+``reader``      :func:`open_input` and the readers on it (bytes, text, TOML, JSON):
+                regular files only, sizes and depths bounded, errors naming the file
+``npz``         :class:`NpzArchive`: ``.npz`` members checked before they are read
+``writer``      :class:`AtomicFile`, :func:`check_output`: a temporary file renamed over
+                the target; never through a link, outside its folder or onto an input
+``limits``      :data:`BOUNDS` and :data:`FILE_BYTES`: the one table of bounds
+==============  =================================================================
+
+It sits below every other package (``predictors`` and ``robots`` included) and depends on the
+standard library and NumPy only, so that each layer reads and writes its files the same way.
+"""
+
+from boundary.limits import BOUNDS, FILE_BYTES, Bound, check, largest
+from boundary.reader import (
+    FileError,
+    json_loads,
+    open_input,
+    read_bytes,
+    read_json,
+    read_text,
+    read_toml,
+    tracking_inputs,
+)
+from boundary.writer import (
+    AtomicFile,
+    atomic_write,
+    check_output,
+    file_stem,
+    make_folder,
+    save_figure,
+    write_bytes,
+    write_text,
+)
+
+__all__ = [
+    "BOUNDS", "FILE_BYTES", "AtomicFile", "Bound", "FileError", "NpzArchive", "atomic_write",
+    "check", "check_output", "file_stem", "json_loads", "largest", "make_folder", "open_input",
+    "read_bytes", "read_json", "read_text", "read_toml", "save_figure", "tracking_inputs",
+    "write_bytes", "write_text",
+]
+
+
+def __getattr__(name: str):
+    if name == "NpzArchive":  # NumPy is imported only when an archive is read
+        from boundary.npz import NpzArchive
+
+        return NpzArchive
+    raise AttributeError(f"module 'boundary' has no attribute {name!r}")
