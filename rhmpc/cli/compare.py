@@ -38,7 +38,7 @@ DATA_PREDICTORS = ("hold", "exact", "one-step", "generalized", "ekf")
 #: Seeds per cell of ``--paper`` (``--seeds`` overrides). Tuna et al. ran each cell ten times
 #: (§VIII-B); five seeds are half of that, so that two disjoint sets of five make the paper's
 #: ten and each can be judged alone, and both presets' runs fit in 10 minutes on two cores
-#: (``benchmarks/paper_runs.py``). Why five decide the findings: docs/validation/tuna.md.
+#: (``benchmarks/tuna_tables.py``). Why five decide the findings: docs/validation/tuna.md.
 PAPER_SEEDS = 5
 #: Options that read a recording (``--data``); their ``argparse`` destinations.
 READ_OPTIONS = ("var", "rows", "cols", "data_rate", "units")
