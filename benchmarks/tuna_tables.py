@@ -6,13 +6,13 @@ linear model as the plant) and ``rhmpc compare --preset tuna2013-hardware --pape
 II–III, their hardware: the hardware-like PHANToM, the error from the encoders' forward
 kinematics), at their default seeds, duration and settling. Then:
 
-- the same two commands on the disjoint seeds after them (``--seed 5 --seeds 5``): each
-  finding's verdict from both sets of seeds, side by side;
-- the verdicts on the first n seeds of each set (n = 2 … the default): how many seeds decide
-  them, and the seed-to-seed spread of the cells;
+- the same two commands on two disjoint sets of five seeds, half of Tuna's ten runs each
+  (``--seed 0 --seeds 5`` and ``--seed 5 --seeds 5``): each finding's verdict from both sets,
+  side by side, and the verdicts on the first n seeds of each (n = 2 … 5): how many seeds decide
+  them; the seed-to-seed spread of the cells;
 - hardware effort above simulation effort, paired by seed across the two presets;
 - the two RLS predictors at equal order (both at N = 16, both at N = 10; Tuna ran one-step at
-  16 and generalized at 10, §VIII-B) on the README's seeds;
+  16 and generalized at 10, §VIII-B) on the first set's seeds;
 - the time of the README's two commands on this machine: wall time, the CPU time of every
   process, that CPU time in gain ticks g, and the wall time it projects on two idle cores.
 
@@ -52,6 +52,8 @@ TITLES = {"I": "Table I (simulation)", "II": "Table II (hardware experiments)",
 SHORT = {"fixed-a1-top": "fixed a1", "fixed-a2-top": "fixed a2", "varying-a1-top": "var. a1",
          "varying-a3-top": "var. a3", "varying-a1-side": "var. a1 side",
          "varying-a3-side": "var. a3 side"}
+#: Seeds of each of the two disjoint sets the verdicts are compared on: half of Tuna's ten runs.
+SET_SEEDS = 5
 #: The equal-order comparison: the two RLS predictors, both at each of these orders N.
 RLS = ("one-step", "generalized")
 ORDERS = (16, 10)
@@ -67,7 +69,9 @@ def compare(args: list[str], reuse: Path | None) -> tuple[dict, dict]:
     process's: the command's and its workers')."""
     cache = None
     if reuse is not None:
-        cache = reuse / (("_".join(a.lstrip("-").replace("=", "-") for a in args)) + ".json")
+        # the README's command runs the default seeds: they belong to its key
+        words = [*args, f"default-seeds-{PAPER_SEEDS}"]
+        cache = reuse / ("_".join(a.lstrip("-").replace("=", "-") for a in words) + ".json")
         if cache.is_file():
             saved = json.loads(cache.read_text())
             return saved["doc"], saved["timing"]
@@ -304,39 +308,42 @@ def equal_order_table(runs: dict, paper_runs: dict, data: dict) -> str:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true",
-                    help="12-s runs on 2 + 2 seeds instead of the README's defaults")
+                    help="12-s runs, 2 seeds, sets of 2 instead of the README's defaults")
     ap.add_argument("--reuse", type=Path, metavar="DIR",
                     help="keep each command's JSON in DIR and read it back when present")
     a = ap.parse_args()
-    seeds = 2 if a.quick else PAPER_SEEDS
-    extra = ["--duration", "12", "--seeds", str(seeds)] if a.quick else []
-    runs, timings, later = {}, {}, {}
-    commands = []
+    size = 2 if a.quick else SET_SEEDS
+    extra = ["--duration", "12", "--seeds", "2"] if a.quick else []
+    runs, timings, commands = {}, {}, []
+    sets: dict[str, dict[str, list[dict]]] = {f"{k}–{k + size - 1}": {} for k in (0, size)}
     for setting, preset in PRESETS.items():
         command = readme_command(preset) + extra
         doc, timings[setting] = compare(command, a.reuse)
         runs[setting] = doc["runs"]
         commands.append(shlex.join(command))
-        doc, _ = compare([*command, "--seed", str(seeds), "--seeds", str(seeds)], a.reuse)
-        later[setting] = doc["runs"]
-    names = {f"{0}–{seeds - 1}": runs, f"{seeds}–{2 * seeds - 1}": later}
-    data: dict = {"commands": commands, "seeds": seeds}
+        for first, name in zip((0, size), sets, strict=True):
+            doc, _ = compare([*command[:5], *extra[:2], "--seed", str(first), "--seeds",
+                              str(size)], a.reuse)
+            sets[name][setting] = doc["runs"]
+    first_set = next(iter(sets.values()))
+    data: dict = {"commands": commands, "seeds": sorted({d["seed"] for d in runs["hardware"]}),
+                  "sets": list(sets)}
     cells: list = []
     tables = paper_tables(runs, cells)
-    tables["verdicts|Each finding on the README's seeds and on the next ones (columns "
-           "holding / failing / undecided)"] = verdict_table(names, data)
-    tables["seeds|The verdicts on the first n seeds of each set"] = seeds_needed(names, seeds,
+    tables["verdicts|Each finding on two disjoint sets of five seeds (columns holding / failing "
+           "/ undecided)"] = verdict_table(sets, data)
+    tables["seeds|The verdicts on the first n seeds of each set"] = seeds_needed(sets, size,
                                                                                   data)
-    tables["spread|Seed-to-seed spread of a cell (standard deviation ÷ mean), README's seeds"] = \
-        spread_table(runs, data)
+    tables["spread|Seed-to-seed spread of a cell (standard deviation ÷ mean), the first set"] = \
+        spread_table(first_set, data)
     g_us = R.yardstick()["gain_tick_us"]
     tables["timing|The README's two commands on this machine"] = timing_table(
         timings, runs, g_us, data)
     equal_data: dict = {}
-    equal = equal_order_runs(runs, seeds, extra[:2], a.reuse)
+    equal = equal_order_runs(first_set, size, extra[:2], a.reuse)
     tables["equal-order|Generalized against one-step at equal order N: mean RMS position "
-           "error [mm], both presets, the README's seeds and duration"] = equal_order_table(
-        equal, runs, equal_data)
+           "error [mm], both presets, the first set's seeds"] = equal_order_table(
+        equal, first_set, equal_data)
     lines = [f"{setting}: {f.line()}" for setting in PRESETS
              for f in findings(runs[setting], setting)]
     lines.append("both: " + cross_finding(runs["simulation"], runs["hardware"]).line())
@@ -346,8 +353,8 @@ def main() -> None:
             "), the physical sonomicrometer with its white range error, causal delivery, "
             "the error scored against the recorded stream as in the paper. Table I beside "
             "the simulation preset, Tables II–III beside the hardware preset; a simulation is "
-            "never set against a hardware table. The findings, as `rhmpc compare --paper` "
-            "prints them (the cross-preset one from both commands' runs):\n\n```text\n"
+            "never set against a hardware table. The findings, as the README's commands "
+            "print them (the cross-preset one from both commands' runs):\n\n```text\n"
             + "\n".join(lines) + "\n```")
 
 

@@ -46,6 +46,7 @@ def run(args: argparse.Namespace) -> int:
     from rhmpc.control.export import ExportError, export_controller
     from rhmpc.experiment import RunConfig, load_config
     from rhmpc.experiment.assembly import deployable
+    from rhmpc.runtime.build import TRANSPORT, write_transport
 
     config = load_config(args.config) if args.config else RunConfig()
     changes = {k: v for k, v in (("robot", args.robot), ("predictor", args.predictor)) if v}
@@ -55,6 +56,7 @@ def run(args: argparse.Namespace) -> int:
     name = controller.mpc.arm.robot.name
     try:
         info = export_controller(controller, outdir, robot=name, force=args.force)
+        transport = write_transport(outdir)
     except (ExportError, OSError) as exc:
         raise UsageError(str(exc)) from None
     q, ref = controller.mpc.qp, controller.reference
@@ -63,10 +65,12 @@ def run(args: argparse.Namespace) -> int:
     print(f"rhmpc export: {name}, {config.predictor} predictor every {1e3 * ref.dt:g} ms, "
           f"N = {q.N}, {q.P.shape[0]} QP variables (RHMPC_NV: {q.nz} block inputs, "
           f"{q.P.shape[0] - q.nz} envelope slacks), {q.A.shape[0]} constraints, "
-          f"{len(info.files)} files in {outdir} (key {info.key})")
+          f"{len(info.files) + len(transport)} files in {outdir} (key {info.key})")
     for note in info.notes:
         print(f"note:  {note}")
     print(f"build: cmake -S {src} -B {build} && cmake --build {build}")
     print(f"run:   {build}/rhmpc_example 2    (a fixed-rate loop with a fake sensor)")
     print(f"API:   {outdir / 'rhmpc.h'} (units and array layouts)")
+    print(f"udp:   {outdir / TRANSPORT} (the controller's real-time program over the wire format "
+          "and a robot-side client: cmake -S it; rhmpc sil runs it)")
     return 0

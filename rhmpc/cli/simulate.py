@@ -87,7 +87,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", action="store_true", help="print the result document on stdout")
     p.add_argument("--plot", metavar="FILE.png", help="figures: per axis the POI, the tool and "
                    "the 25-ms forecasts against the measured samples; the error; the torques "
-                   "against their limits")
+                   "against their limits (PNG, or vector PDF/SVG)")
+    p.add_argument("--figure", choices=("dashboard", "paper"), default="dashboard",
+                   help="what --plot draws: dashboard (default: every axis, the error and the "
+                   "torques over the run, a zoom and a detail) or paper (one column wide: the "
+                   "tracking error over the run, and the POI against the tool with the "
+                   "forecasts; its numbers are the summary's)")
     p.add_argument("--view", metavar="FILE.html", help="a 3-D replay of the run: one "
                    "self-contained page that opens offline (the arm, the POI's and the tool's "
                    "paths, the forecasts; play, pause, time slider)")
@@ -268,13 +273,18 @@ def write_outputs(args: argparse.Namespace, result, doc: dict) -> None:
         from robots import load_robot
 
         robot = load_robot(doc["robot"])
-    if args.plot:
+    if args.plot and getattr(args, "figure", "dashboard") == "paper":
+        from rhmpc.studies.paper_figure import plot_paper
+
+        plot_paper(result, doc, args.plot)
+    elif args.plot:
         from rhmpc.studies.figures import plot_run
 
         plot_run(result, args.plot, title=f"{doc['predictor']} on {doc['scenario']} "
                  f"({doc['robot']}): RMS error {doc['rms_error_mm']:.3f} mm",
                  torque_limit=robot.torque_limit,
-                 joint_names=[robot.model.names[j] for j in range(1, robot.nv + 1)])
+                 joint_names=[robot.model.names[j] for j in range(1, robot.nv + 1)],
+                 score=doc)
     if getattr(args, "view", None):
         from rhmpc.studies.replay import write_replay
 

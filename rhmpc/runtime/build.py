@@ -1,4 +1,5 @@
-"""The controller process: the exported controller and ``c/controller.c``, built with CMake.
+"""The controller process: the exported controller and its transport (``export/``), built with
+CMake.
 
 The controller a run deploys is :func:`rhmpc.experiment.assembly.deployable` of its settings,
 exported by :func:`rhmpc.control.export.export_controller`. Its own predictor, which serves
@@ -26,10 +27,14 @@ from rhmpc.errors import UsageError
 from rhmpc.experiment import RunConfig
 from rhmpc.experiment.assembly import deployable
 
-__all__ = ["SOURCES", "BuiltController", "build_controller", "internal_predictor"]
+__all__ = ["SOURCES", "TRANSPORT", "BuiltController", "build_controller", "internal_predictor",
+           "write_transport"]
 
-#: The program's files (package data of :mod:`rhmpc.runtime`, folder ``c``).
-SOURCES = ("controller.c", "rhmpc_wire.h", "CMakeLists.txt")
+#: The transport's files (package data of :mod:`rhmpc.runtime`, folder ``export``), which
+#: ``rhmpc export`` writes beside the controller (``DIR/udp``, :func:`write_transport`).
+SOURCES = ("controller.c", "robot_client.c", "rhmpc_wire.h", "CMakeLists.txt")
+#: The folder of an export the transport goes to.
+TRANSPORT = "udp"
 #: The longest a configure or a build may take [s].
 BUILD_TIMEOUT = 600
 
@@ -65,29 +70,40 @@ def build_controller(config: RunConfig, sensor_rate: float) -> BuiltController:
     internal = internal_predictor(config)
     controller = deployable(config.replace(predictor=internal), sensor_rate)
     name = controller.mpc.arm.robot.name
-    program_dir = files(__package__).joinpath("c")
     with tempfile.TemporaryDirectory(prefix="rhmpc-sil-") as tmp:
         info = export_controller(controller, Path(tmp) / "export", robot=name)
         key = hashlib.sha256(info.key.encode())
         for source in SOURCES:
-            key.update(program_dir.joinpath(source).read_bytes())
+            key.update(_source(source))
         target = cache_dir() / "sil" / key.hexdigest()[:16]
         program = target / "build" / "rhmpc_sil_controller"
         if not program.is_file():
             staging = Path(tempfile.mkdtemp(prefix="build-", dir=_folder(target.parent)))
             shutil.copytree(Path(tmp) / "export", staging / "export")
-            (staging / "program").mkdir()
-            for source in SOURCES:
-                boundary.write_bytes(staging / "program" / source,
-                                     program_dir.joinpath(source).read_bytes())
-            _cmake("-S", str(staging / "program"), "-B", str(staging / "build"),
-                   f"-DRHMPC_EXPORT={staging / 'export'}", "-DCMAKE_BUILD_TYPE=Release")
+            write_transport(staging / "export")
+            _cmake("-S", str(staging / "export" / TRANSPORT), "-B", str(staging / "build"),
+                   "-DCMAKE_BUILD_TYPE=Release")
             _cmake("--build", str(staging / "build"), "--target", "rhmpc_sil_controller")
             try:
                 os.replace(staging, target)  # whole, or not at all (another run built it first)
             except OSError:
                 shutil.rmtree(staging, ignore_errors=True)
     return BuiltController(program, controller, internal)
+
+
+def _source(name: str) -> bytes:
+    """One of the transport's files, as the package holds it."""
+    return files(__package__).joinpath("export", name).read_bytes()
+
+
+def write_transport(outdir: Path) -> list[str]:
+    """Write the transport into the export folder ``outdir`` (``udp/``: the controller's
+    real-time program over the wire format, a robot-side client, their CMake project), each
+    file atomically and inside ``outdir`` (:mod:`boundary`). Returns the files' names."""
+    boundary.make_folder(outdir / TRANSPORT, root=outdir)
+    for source in SOURCES:
+        boundary.write_bytes(outdir / TRANSPORT / source, _source(source), root=outdir)
+    return [f"{TRANSPORT}/{source}" for source in SOURCES]
 
 
 def _folder(path: Path) -> Path:

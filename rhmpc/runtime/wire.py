@@ -1,7 +1,7 @@
 """The wire format between the processes of a deployment, version 1, and a Python client.
 
 Each message is one UDP datagram: a 48-byte header, then ``rows × width`` values, all
-little-endian (``rhmpc/runtime/c/rhmpc_wire.h`` is the same format in C)::
+little-endian (``rhmpc/runtime/export/rhmpc_wire.h`` is the same format in C)::
 
     offset  type     field
     0       4 bytes  magic   b"RHMP"

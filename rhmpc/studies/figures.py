@@ -34,7 +34,7 @@ MAX_FORECASTS = 200
 def plot_run(result, path: str | Path, title: str = "", zoom: tuple[float, float] | None = None,
              torque_limit: Sequence[float] | None = None,
              joint_names: Sequence[str] | None = None,
-             detail: tuple[float, float] | None = None) -> None:
+             detail: tuple[float, float] | None = None, score: dict | None = None) -> None:
     """Draw a closed-loop run's figure and save it (the format follows ``path``'s suffix).
 
     Three columns: the whole run, a zoom on a few beats, and a detail of a fraction of a second
@@ -63,6 +63,9 @@ def plot_run(result, path: str | Path, title: str = "", zoom: tuple[float, float
     detail : tuple of float, optional
         The detail's span [s]; default: :data:`DETAIL_S` seconds of the zoom around the POI's
         fastest motion.
+    score : dict, optional
+        The run's document: the RMS error drawn and written is its ``rms_error_mm`` (the
+        summary's, scored as the run was); without it, the RMS of ‖tool − POI‖ after settling.
     """
     import matplotlib
 
@@ -77,7 +80,7 @@ def plot_run(result, path: str | Path, title: str = "", zoom: tuple[float, float
     centre = np.nanmean(np.asarray(result.poi, float), axis=0)
     for k in range(3):
         _position_row(axes[k], result, k, centre, spans)
-    _error_row(axes[3], result, spans)
+    _error_row(axes[3], result, spans, None if score is None else score["rms_error_mm"])
     _torque_row(axes[4], result, spans, torque_limit, joint_names)
     _mark_spans(axes[:, 0], result.settings.settling_s, zoom, t[0])
     _mark_spans(axes[:, 1], None, spans[2], t[0])
@@ -166,26 +169,50 @@ def _samples(ax, result, k: int, centre: np.ndarray, span: tuple[float, float],
             mew=0, color=COLOURS["samples"], label="measured samples", zorder=2)
 
 
-def _error_row(row, result, spans) -> None:
-    """‖e‖ over the run on a log axis with its RMS after settling; ‖e‖ in the zoom and detail."""
+def measured_errors(result) -> tuple[np.ndarray, np.ndarray] | None:
+    """On a recording, the instants of the samples in the score and ‖tool − sample‖ there
+    [s], [mm] (the trace keeps the ticks at those instants); None for a continuous truth."""
+    measured = getattr(result, "measured", ())
+    if not len(measured):
+        return None
+    t_k, p, scored = measured
+    t, ee = np.asarray(result.time, float), np.asarray(result.ee, float)
+    t_k, p = np.asarray(t_k, float)[scored], np.asarray(p, float)[scored]
+    tool = np.column_stack([np.interp(t_k, t, ee[:, a]) for a in range(ee.shape[1])])
+    return t_k, 1e3 * np.linalg.norm(tool - p, axis=1)
+
+
+def _error_row(row, result, spans, rms: float | None = None) -> None:
+    """‖e‖ over the run on a log axis with the RMS after settling (``rms`` [mm], the run's
+    score, or else that of ‖e‖); ‖e‖ in the zoom and detail. On a recording the score's own
+    errors, at the measured instants, are drawn over it."""
     t = np.asarray(result.time, float)
     err = 1e3 * np.linalg.norm(np.asarray(result.ee, float) - np.asarray(result.poi, float),
                                axis=1)
     scored = t >= result.settings.settling_s
-    rms = float(np.sqrt(np.mean(np.square(err[scored])))) if scored.any() else np.nan
+    if rms is None:
+        rms = float(np.sqrt(np.mean(np.square(err[scored])))) if scored.any() else np.nan
+    at = measured_errors(result)
     ax = row[0]
-    ax.plot(t, np.where(err > 0, err, np.nan), color="0.55", lw=0.5, label="‖tool − POI‖")
+    ax.plot(t, np.where(err > 0, err, np.nan), color="0.55", lw=0.5,
+            label="‖tool − POI‖" if at is None else "‖tool − line between samples‖")
     centres, rms_per, _, width = binned(t, err)
     ax.plot(centres, rms_per, color="k", lw=1.3, drawstyle="steps-mid",
             label=f"RMS per {width:.3g} s")
+    if at is not None:
+        ax.plot(*at, ls="none", marker="o", ms=2.5, color=COLOURS["samples"],
+                label="‖tool − sample‖ at the measured instants")
     if np.isfinite(rms):
-        ax.axhline(rms, color=COLOURS["poi"], lw=1.0, ls=":",
-                   label=f"RMS after settling, {rms:.3g} mm")
+        where = "at the measured instants" if at is not None else "after settling"
+        ax.axhline(rms, color=COLOURS["poi"], lw=1.0, ls=":", label=f"RMS {where}, {rms:.3f} mm")
     _log_scale(ax, err)
     ax.set_ylabel("tracking error [mm]")
     for ax, span in zip(row[1:], spans[1:], strict=True):
         w = _window(t, span)
         ax.plot(t[w], err[w], color="0.2", lw=0.9)
+        if at is not None:
+            m = _window(at[0], span)
+            ax.plot(at[0][m], at[1][m], ls="none", marker="o", ms=3, color=COLOURS["samples"])
         ax.set_ylim(bottom=0)
         ax.set_ylabel("tracking error [mm]")
 

@@ -21,8 +21,10 @@ published cells. The finding is
   :math:`< k_p`),
 - ``"undecided"`` otherwise.
 
-Each finding carries its measured cause: the ratio of the relation's two sides and the rows'
-25-ms forecast errors (the run documents' ``prediction_rms_mm.lead_N``).
+Each finding carries its measured cause: the ratio of the relation's two sides, the rows'
+25-ms forecast errors (the run documents' ``prediction_rms_mm.lead_N``), and the runs of its
+rows in which the controller fell back from its QP solution (``fallbacks``), which can move a
+cell by themselves.
 """
 
 from __future__ import annotations
@@ -227,6 +229,21 @@ def _forecast(docs: Sequence[dict], rows: Sequence[str], cols: Sequence[str]) ->
     return "25-ms forecast error " + ", ".join(parts) if parts else ""
 
 
+def _fallbacks(docs: Sequence[dict], rows: Sequence[str], cols: Sequence[str]) -> str:
+    """``runs that fell back: exact on varying-a3-side seed 8 (54464 ticks: brake)``."""
+    runs = [d for d in docs if d.get("predictor") in rows and d.get("scenario") in cols
+            and d.get("fallbacks")]
+    if not runs:
+        return ""
+    parts = []
+    for d in runs:
+        kinds = ", ".join(k for k, v in (d.get("controller", {}).get("fallbacks") or {}).items()
+                          if v)
+        parts.append(f"{d['predictor']} on {d['scenario']} seed {d['seed']} "
+                     f"({d['fallbacks']} ticks{': ' + kinds if kinds else ''})")
+    return "runs whose controller fell back from the QP: " + "; ".join(parts)
+
+
 def _ratio(relation: Relation, paired: list[dict[int, dict[str, float]]]) -> str:
     """``generalized ÷ one-step RMS error 1.02–1.05`` over the columns' means."""
     top, bottom = relation.sides
@@ -257,7 +274,8 @@ def findings(docs: Sequence[dict], setting: str,
         published = "; ".join(f"Table {t}: {k}/{len(cols)} columns"
                               for t, k in zip(mine, counts, strict=True))
         cause = "; ".join(x for x in (_ratio(relation, paired),
-                                      _forecast(docs, relation.rows, cols)) if x)
+                                      _forecast(docs, relation.rows, cols),
+                                      _fallbacks(docs, relation.rows, cols)) if x)
         out.append(Finding(relation, published, min(counts), columns, cause))
     return out
 
@@ -279,5 +297,7 @@ def cross_finding(simulation: Sequence[dict], hardware: Sequence[dict],
                             **judge([CROSS.margin(v) for v in pairs.values()])})
     published = sum(TUNA2013[("II", CROSS.metric)][r][c] > TUNA2013[("I", CROSS.metric)][r][c]
                     for r in CROSS.rows for c in cols)
+    cause = "; ".join(x for x in (_ratio(CROSS, paired), _fallbacks(
+        [*simulation, *hardware], CROSS.rows, cols)) if x)
     return Finding(CROSS, f"Tables II(b) ÷ I(b): {published}/{len(columns)} cells", published,
-                   columns, _ratio(CROSS, paired))
+                   columns, cause)

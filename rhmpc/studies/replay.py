@@ -6,7 +6,20 @@ measured samples and the forecast horizon of each refresh, and animates them at 
 rate of simulated time. The page inlines meshcat's three.js viewer (the ``meshcat`` package's
 ``main.min.js``), the scene as meshcat commands and the animation as base64 arrays, so it loads
 nothing from the network. Its controls: play and pause (also the space bar), a time slider, the
-playback speed, and two views (the whole arm, a close-up of the POI).
+playback speed, three views and a help panel (``?``).
+
+Views
+    ``follow`` (the first): the camera rides with the POI at :data:`FOLLOW_SPAN` times the
+    median 25-ms travel of the forecasts, so that a forecast spans about a third of the view
+    and its shape reads, with the last second of the paths; ``path``: the POI's whole path;
+    ``arm``: the whole arm. The follow and path views look at the POI from the side of its
+    path's plane away from the forearm (the bar that carries the tool), so that the arm is
+    behind what they show; the markers keep their size on the screen.
+The address
+    ``page.html#t=2.5`` starts at 2.5 s of the run (default: within the second after the
+    settling span, where the forecasts have converged, the frame whose forecast travels
+    farthest), ``&paused`` starts paused, ``&path`` or ``&arm`` starts in that view; e.g.
+    ``run.html#t=12&paused&arm``.
 
 Units: positions in metres (the workspace frame of the run), time in seconds.
 """
@@ -42,6 +55,11 @@ PATH_POINTS_PER_FRAME = 4
 TRAIL_S = 1.0
 #: At most this many points of each forecast horizon are drawn (evenly spaced, both ends kept).
 HORIZON_POINTS = 25
+#: The follow view's camera distance, in median forecast travels (a view about three times as
+#: tall as that travel: the fov of meshcat's camera is 75°).
+FOLLOW_SPAN = 2.0
+#: The follow view's camera distance is kept within these bounds [m].
+FOLLOW_RANGE = (2e-3, 3e-2)
 
 
 @dataclass(frozen=True)
@@ -152,6 +170,7 @@ def _animation(result, robot, t_frames: np.ndarray, fps: float) -> dict:
                  np.vstack([poi_path, tool_path, samples]), placements),
              "marker": float(np.clip(0.03 * _span(poi_path), 3e-4, 1.5e-3))}  # radius [m]
     centre = np.nan_to_num(np.nanmean(poi_path, axis=0), nan=0.0)
+    settling = float(getattr(result.settings, "settling_s", t_frames[0]))
     return {
         "frames": int(t_frames.size), "fps": float(fps), "t0": float(t_frames[0]),
         "path_per_frame": PATH_POINTS_PER_FRAME, "trail": round(TRAIL_S * fps),
@@ -161,8 +180,13 @@ def _animation(result, robot, t_frames: np.ndarray, fps: float) -> dict:
         "horizon_n": int(horizons.shape[1]) if horizons.size else 0,
         "sample_counts": _b64(sample_counts, np.int32), "has_samples": bool(samples.size),
         "centre": centre.tolist(), "arm_centre": (0.5 * (placements[0, :3] + centre)).tolist(),
-        "poi_span": _span(poi_path), "near_dir": _face_on(poi_path).tolist(),
+        "poi_span": _span(poi_path),
+        "near_dir": view_direction(poi_path, tool_path[0], _forearm_root(robot,
+                                                                          placements)).tolist(),
         "arm_span": _span(np.vstack([placements[:, :3], centre[None]])), "_scene": scene,
+        "start": start_time(t_frames, index, horizons, settling),
+        "follow": follow_distance(horizons), "marker": scene["marker"],
+        "tool_joint": robot.model.names[robot.model.frames[robot.ee_frame_id].parentJoint],
     }
 
 
@@ -235,15 +259,58 @@ def _extent(points: np.ndarray, placements: np.ndarray) -> tuple[np.ndarray, np.
     return allp.min(axis=0), allp.max(axis=0)
 
 
-def _face_on(path: np.ndarray) -> np.ndarray:
-    """A viewing direction onto the plane the path spans most (its least-variance axis, turned
-    to the viewer's side, −y, and lifted a little)."""
+def _forearm_root(robot, placements: np.ndarray) -> np.ndarray:
+    """Where the bar that carries the tool starts: its joint's position at the first frame [m]."""
+    joint = robot.model.frames[robot.ee_frame_id].parentJoint
+    return placements[joint - 1, :3]
+
+
+def view_direction(path: np.ndarray, tool: np.ndarray, root: np.ndarray) -> np.ndarray:
+    """A unit direction from the POI to the camera: onto the plane the path spans most (its
+    least-variance axis), on the side away from the forearm (from ``tool`` to its ``root``),
+    tilted a further half-unit away from it, so that the arm is behind the POI.
+
+    Parameters
+    ----------
+    path : numpy.ndarray
+        (n, 3) the POI's path [m].
+    tool : numpy.ndarray
+        (3,) the tool's position [m].
+    root : numpy.ndarray
+        (3,) where the bar that carries the tool starts [m].
+    """
+    arm = np.asarray(root, float) - np.asarray(tool, float)
+    arm = arm / np.linalg.norm(arm) if np.linalg.norm(arm) > 0 else np.array([0.0, 0.0, 1.0])
     finite = path[np.isfinite(path).all(axis=1)]
-    if finite.shape[0] < 3:
-        return np.array([0.5, -1.4, 0.25])
-    normal = np.linalg.svd(finite - finite.mean(axis=0), full_matrices=False)[2][-1]
-    normal = normal if normal[1] <= 0 else -normal
-    return normal + np.array([0.0, 0.0, 0.3])
+    normal = (np.linalg.svd(finite - finite.mean(axis=0), full_matrices=False)[2][-1]
+              if finite.shape[0] >= 3 else np.array([0.0, -1.0, 0.0]))
+    normal = -normal if normal @ arm > 0 else normal
+    d = normal - 0.5 * arm
+    return d / np.linalg.norm(d)
+
+
+def start_time(t_frames: np.ndarray, index: np.ndarray, horizons: np.ndarray,
+               settling: float) -> float:
+    """The first frame's time [s]: within the second after ``settling`` (clipped to the
+    frames), the frame whose drawn forecast travels farthest (first to last point); the
+    settling's end without forecasts."""
+    lo = float(np.clip(settling, t_frames[0], t_frames[-1]))
+    window = np.flatnonzero((t_frames >= lo - 1e-9) & (t_frames <= lo + 1.0) & (index >= 0))
+    if window.size == 0 or horizons.size == 0:
+        return lo
+    travel = np.linalg.norm(horizons[index[window], -1] - horizons[index[window], 0], axis=1)
+    return float(t_frames[window[int(np.nanargmax(travel))]])
+
+
+def follow_distance(horizons: np.ndarray) -> float:
+    """The follow view's camera distance [m]: :data:`FOLLOW_SPAN` median travels of the drawn
+    forecasts (first to last point), within :data:`FOLLOW_RANGE`."""
+    if horizons.size == 0:
+        return FOLLOW_RANGE[1]
+    travel = np.linalg.norm(horizons[:, -1] - horizons[:, 0], axis=1)
+    travel = travel[np.isfinite(travel)]
+    median = float(np.median(travel)) if travel.size else FOLLOW_RANGE[1]
+    return float(np.clip(FOLLOW_SPAN * median, *FOLLOW_RANGE))
 
 
 # -- the scene: meshcat commands -------------------------------------------------------------

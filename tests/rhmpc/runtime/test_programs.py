@@ -17,7 +17,7 @@ import pytest
 from rhmpc.compiled import compiler
 from rhmpc.runtime.wire import Link, run_clock
 
-C = Path(str(files("rhmpc.runtime").joinpath("c")))
+C = Path(str(files("rhmpc.runtime").joinpath("export")))
 needs_cc = pytest.mark.skipif(compiler() is None, reason="no C compiler")
 TS = 0.5e-3
 

@@ -65,3 +65,63 @@ def test_log_axes_have_several_plain_labels(lo: float, hi: float, expected: list
 ])
 def test_plain_numbers(value: float, text: str) -> None:
     assert _plain(value) == text
+
+
+def _svg_texts(path) -> list[str]:
+    """The text elements of an SVG written with its text kept as text."""
+    import xml.etree.ElementTree as ET
+
+    root = ET.parse(path).getroot()
+    return ["".join(e.itertext()) for e in root.iter() if e.tag.endswith("text")]
+
+
+@pytest.fixture(scope="module")
+def short_run():
+    from rhmpc.experiment import RunConfig, run_experiment
+
+    config = RunConfig(predictor="one-step").replace(**{"loop.duration": 3.0,
+                                                        "loop.settling": 1.0})
+    return run_experiment(config)
+
+
+@pytest.mark.slow
+def test_the_paper_figure_is_one_column_vector_and_its_numbers_are_the_summarys(
+        tmp_path, short_run) -> None:
+    from rhmpc.studies.paper_figure import WIDTH_IN, plot_paper
+    from rhmpc.studies.run_report import format_summary
+
+    result, doc = short_run
+    pdf, svg = tmp_path / "f.pdf", tmp_path / "f.svg"
+    plot_paper(result, doc, pdf)
+    plot_paper(result, doc, svg)
+    raw = pdf.read_bytes()
+    assert raw.startswith(b"%PDF") and b"/Subtype /Image" not in raw  # vector, no raster
+    width = float(raw.split(b"/MediaBox [")[1].split(b"]")[0].split()[2])
+    assert width == pytest.approx(72 * WIDTH_IN)  # one column [pt]
+    texts = _svg_texts(svg)
+    assert sum(t.startswith(("(a)", "(b)")) for t in texts) == 2  # two panels
+    summary = format_summary(doc)
+    rms, peak = f"{doc['rms_error_mm']:.3f}", f"{doc['max_error_mm']:.3f}"
+    assert f"RMS {rms} mm   max {peak} mm" in summary
+    assert f"RMS {rms} mm (max {peak} mm)" in texts
+    assert "forecasts (25 ms)" in texts
+
+
+@pytest.mark.slow
+def test_the_dashboards_title_and_legend_give_the_same_rms(tmp_path, short_run) -> None:
+    result, doc = short_run
+    svg = tmp_path / "run.svg"
+    with matplotlib.rc_context({"svg.fonttype": "none"}):
+        plot_run(result, svg, title=f"RMS error {doc['rms_error_mm']:.3f} mm", score=doc)
+    texts = _svg_texts(svg)
+    assert f"RMS error {doc['rms_error_mm']:.3f} mm" in texts
+    assert f"RMS after settling, {doc['rms_error_mm']:.3f} mm" in texts
+
+
+@pytest.mark.slow
+def test_simulate_figure_paper_writes_a_pdf(tmp_path, capsys) -> None:
+    from rhmpc.cli import main
+
+    pdf = tmp_path / "f.pdf"
+    assert main(["simulate", "--duration", "2", "--plot", str(pdf), "--figure", "paper"]) == 0
+    assert pdf.read_bytes().startswith(b"%PDF") and "figure" in capsys.readouterr().out

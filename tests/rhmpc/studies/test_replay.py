@@ -216,8 +216,8 @@ class DevTools:
 
 
 @pytest.fixture
-def browser(page: Path, tmp_path: Path):
-    devtools = DevTools(page.as_uri(), tmp_path)
+def browser(page: Path, tmp_path: Path, request):
+    devtools = DevTools(page.as_uri() + getattr(request, "param", ""), tmp_path)
     try:
         devtools.wait_for("window.replay !== undefined && replay.state.shown > 0")
         yield devtools
@@ -256,3 +256,53 @@ def test_the_page_plays_by_itself(browser: DevTools) -> None:
     assert after[1] > before[1] and after[0] != before[0]  # new frames, the clock moved
     assert (np.abs(first - second).max(axis=2) > 0.1).mean() > 0.0005
     assert "Uncaught" not in browser.log.read_text()
+
+
+def _colour(image: np.ndarray, name: str) -> np.ndarray:
+    """Pixels of the POI's red, the tool's blue or the forecast's green (shaded as drawn)."""
+    r, g, b = image[..., 0], image[..., 1], image[..., 2]
+    return {"poi": (r > 0.6) & (g < 0.4) & (b < 0.4),
+            "tool": (b > 0.45) & (r < 0.3) & (b > g + 0.1),
+            "forecast": (g > 0.45) & (r < 0.4) & (b < 0.45) & (g > r + 0.15)}[name]
+
+
+@pytest.mark.slow
+@needs_chromium
+@pytest.mark.parametrize("browser", ["#paused"], indirect=True)
+def test_the_first_view_shows_the_poi_the_tool_and_the_forecasts_shape(
+        browser: DevTools) -> None:
+    """Opened as it is (paused to hold the frame): the follow view, after the settling, with
+    the POI, the tool and the forecast each in its own colour, unhidden by the arm, apart, and
+    the forecast a sixth of the view tall or wide at least."""
+    state = browser.evaluate("[replay.state.view, replay.state.time, replay.state.playing]")
+    assert state[0] == "follow" and state[1] >= 1.0 and state[2] is False  # settling: 1 s
+    image = browser.screenshot()
+    spots = {k: np.argwhere(_colour(image, k)) for k in ("poi", "tool", "forecast")}
+    assert all(len(v) > 15 for v in spots.values()), {k: len(v) for k, v in spots.items()}
+    poi, tool = spots["poi"].mean(axis=0), spots["tool"].mean(axis=0)
+    assert np.linalg.norm(poi - tool) > 6  # apart [px]
+    extent = np.ptp(spots["forecast"], axis=0)
+    assert max(extent[0] / image.shape[0], extent[1] / image.shape[1]) > 1 / 6
+
+
+@pytest.mark.slow
+@needs_chromium
+def test_the_page_says_its_options_in_its_help(browser: DevTools) -> None:
+    assert browser.evaluate("document.getElementById('help').hidden") is True
+    browser.evaluate("document.getElementById('help-button').click()")
+    text = browser.evaluate("document.getElementById('help').innerText")
+    assert browser.evaluate("document.getElementById('help').hidden") is False
+    for option in ("#t=2.5", "&paused", "&path", "&arm", "follow", "space bar"):
+        assert option in text, option
+
+
+def test_the_views_look_from_the_side_away_from_the_arm() -> None:
+    """A path in the x-z plane, the forearm going up from the tool: the camera is on the path's
+    normal side away from the forearm, tilted below."""
+    from rhmpc.studies.replay import view_direction
+
+    t = np.linspace(0, 1, 50)
+    path = np.c_[np.cos(6 * t), 0.001 * t, np.sin(6 * t)] * 1e-3
+    d = view_direction(path, np.zeros(3), np.array([0.0, 0.1, 0.2]))
+    assert d @ np.array([0.0, 0.1, 0.2]) < 0 and np.linalg.norm(d) == pytest.approx(1.0)
+    assert abs(d[1]) > abs(d[0])  # mostly along the path's normal (y)
