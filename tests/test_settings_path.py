@@ -1,10 +1,10 @@
-"""The path of a run's settings, measured: the repository files a command's calls cross on
-their way from the command line to the closed loop.
+"""The path of a run's settings, measured and held to the design page's drawing: the
+repository files a command's calls cross on their way from the command line to the loop.
 
-``python -m tests.test_settings_path [rhmpc arguments]`` runs the command (by default ``rhmpc
-simulate`` on the default scenario and on a recording) under :func:`sys.setprofile` up to the
-call of :func:`sim.loop.run_closed_loop` (the loop itself is not run), ignores library files
-and the module bodies an import runs, and prints
+``python -m tests.test_settings_path [rhmpc arguments]`` runs the command (by default the
+three ``rhmpc simulate`` runs of :data:`RUNS`) under :func:`sys.setprofile` up to the call of
+:func:`sim.loop.run_closed_loop` (the loop itself is not run), ignores library files and the
+module bodies an import runs, and prints
 
 - ``files_crossed``, ``returns_crossed``: the repository files entered by any call, and the
   places where a call enters a file already entered from another place (the components'
@@ -12,10 +12,10 @@ and the module bodies an import runs, and prints
 - ``files``: the repository files the settings enter, from the command line
   (``rhmpc.cli.main``) and from ``run_experiment`` on: a call carries the settings when an
   argument is the command's options (their namespace, or a ``dict`` of settings by name), the
-  :class:`~rhmpc.experiment.RunConfig`, one of its
-  settings objects (a class named ``…Settings``, ``…Config``, ``…Spec`` or ``…Mismatch``;
-  not the call of its own property or ``__post_init__``, which reads it where it is
-  declared), or the run's predictor, scenario, robot, sensor or recording by name;
+  :class:`~rhmpc.experiment.RunConfig`, one of its settings objects (a class named
+  ``…Settings``, ``…Config``, ``…Spec`` or ``…Mismatch``; not the call of its own property or
+  ``__post_init__``, which reads it where it is declared), or the run's predictor, scenario,
+  robot, sensor or recording by name;
 - ``entries``: the places in the code (file and line) whose call carries the settings into
   another file, as the run takes them (a call in a loop counts once);
 - ``returns``: the entries into a file already entered from another place
@@ -30,6 +30,13 @@ and the module bodies an import runs, and prints
   ``run_experiment`` to the predictor's constructor (that call included), and their files;
 - ``recording_reads``: the times a recording is read (``load_recording``, ``load_poi``,
   ``load_points`` called from outside ``sim/recordings``).
+
+``--heart-builder NAME`` first names the function whose call builds the heart (default
+``build_heart``; ``heart_source`` for a version of the code without it).
+
+The tests below trace the same runs (and one with a saved model) and fail when a hand-off of
+the settings leaves the table of ``docs/design/index.md``, when a file calls back up, or when
+the heart or the predictor's name take another road.
 """
 
 from __future__ import annotations
@@ -260,16 +267,6 @@ RUNS = (
     ["simulate", "--data", "hamlyn-phantom", "--split", "600:650", "--preset", "tuna2013"],
 )
 
-if __name__ == "__main__":
-    builder = "build_heart"
-    args = sys.argv[1:]
-    if args[:1] == ["--heart-builder"]:
-        builder, args = args[1], args[2:]
-    for argv in [args] if args else RUNS:
-        print(report(list(argv), heart_builder=builder))
-
-
-
 DOC = REPO / "docs" / "design" / "index.md"
 #: The chain's files in the order the settings first enter them, each with the file that
 #: hands them the settings: the command builds the RunConfig, then runs it (the loop's file
@@ -362,3 +359,12 @@ def test_the_table_is_read() -> None:
     drawn = drawn_handoffs(DOC.read_text(encoding="utf-8"))
     assert {a for a, _ in drawn} == set(HANDING)
     assert all((REPO / b).exists() for _, b in drawn)
+
+
+if __name__ == "__main__":
+    builder = "build_heart"
+    args = sys.argv[1:]
+    if args[:1] == ["--heart-builder"]:
+        builder, args = args[1], args[2:]
+    for argv in [args] if args else RUNS:
+        print(report(list(argv), heart_builder=builder))
