@@ -1,5 +1,8 @@
 """Predictors by name: ``make_predictor(name, dt, **settings)``.
 
+A name is resolved in one place, :func:`resolve`: into the predictor's class and its frozen
+settings (its named parameter set, the registry's overrides, then the caller's settings);
+:func:`build` makes the predictor of them, and ``make_predictor`` is the two in one.
 ``PREDICTORS`` holds the online predictors (ready to run once built), ``LEARNED`` the ones
 fitted before the run (``fit`` or a ``model`` file, :mod:`predictors.learned`); the neural
 ones are imported only when one is built, and need PyTorch (``pip install "rhmpc[learned]"``).
@@ -35,9 +38,10 @@ from predictors.rls_one_step import OneStepRLS
 from predictors.rls_spatiotemporal import SpatioTemporalRLS
 from predictors.wflc import WFLC
 
-__all__ = ["BASELINES", "FITTED_DEFAULTS", "LEARNED", "PREDICTORS", "combination_members",
-           "default_predictors", "family", "load_model", "make_predictor", "model_kind",
-           "needs_torch", "predictor_names", "settings_for", "torch_available"]
+__all__ = ["BASELINES", "FITTED_DEFAULTS", "LEARNED", "PREDICTORS", "build",
+           "combination_members", "default_predictors", "family", "load_model", "make_predictor",
+           "model_kind", "needs_torch", "predictor_names", "resolve", "settings_for",
+           "torch_available"]
 
 #: name → (class, default overrides of its settings dataclass)
 PREDICTORS: dict[str, tuple[type[Predictor], dict[str, Any]]] = {
@@ -137,54 +141,112 @@ def needs_torch(name: str) -> bool:
     return name in LEARNED and LEARNED[name].module == _NEURAL
 
 
-def _settings_class(name: str) -> tuple[type, dict | None, dict]:
+class _Entry(NamedTuple):
+    """What a registered name stands for: the name, its settings class, named parameter sets,
+    default overrides and default parameter set, and its class (``None``: one of
+    :data:`LEARNED`, imported when built)."""
+
+    name: str
+    settings: type
+    presets: dict | None
+    overrides: dict
+    params: str | None
+    cls: type[Predictor] | None
+    learned: Learned | None = None
+
+
+def _entry(name: str) -> _Entry:
+    """The registry's one lookup of a name; an unknown one is a ``ValueError`` listing the
+    valid ones."""
     if name in PREDICTORS:
         cls, overrides = PREDICTORS[name]
-        return cls.Settings, getattr(cls, "PRESETS", None), overrides
+        return _Entry(name, cls.Settings, getattr(cls, "PRESETS", None), overrides,
+                      DEFAULT_PARAMS.get(name), cls)
     if name in LEARNED:
-        entry = LEARNED[name]
-        return entry.settings, entry.presets, {}
+        learned = LEARNED[name]
+        return _Entry(name, learned.settings, learned.presets, {}, DEFAULT_PARAMS.get(name),
+                      None, learned)
     raise ValueError(f"unknown predictor {name!r}; valid: {', '.join(predictor_names())}")
+
+
+def _settings(entry: _Entry, settings: dict[str, Any]):
+    """The frozen settings of ``entry`` with ``settings``: its parameter set (``params``, or its
+    default one), its overrides, then ``settings``."""
+    name, settings = entry.name, dict(settings)
+    params = settings.pop("params", entry.params)
+    base = None
+    if params is not None:
+        if not entry.presets:
+            raise ValueError(f"{name!r} takes no parameter set (`params`)")
+        if params not in entry.presets:
+            raise ValueError(f"unknown {name} params {params!r}; valid: "
+                             f"{', '.join(entry.presets)}")
+        base = entry.presets[params]
+    valid = [f.name for f in dataclasses.fields(entry.settings)]
+    unknown = sorted(set(settings) - set(valid))
+    if unknown:
+        valid += ["params"] if entry.presets else []
+        raise ValueError(
+            f"unknown setting(s) {', '.join(unknown)} for {name!r}; valid: {', '.join(valid)}"
+        )
+    merged = {**entry.overrides, **settings}
+    return entry.settings(**merged) if base is None else dataclasses.replace(base, **merged)
 
 
 def settings_for(name: str, **settings: Any):
     """The frozen settings dataclass ``make_predictor(name, …)`` would use."""
-    settings_cls, presets, overrides = _settings_class(name)
-    params = settings.pop("params", DEFAULT_PARAMS.get(name))
-    if params is not None:
-        if not presets:
-            raise ValueError(f"{name!r} takes no parameter set (`params`)")
-        if params not in presets:
-            raise ValueError(f"unknown {name} params {params!r}; valid: {', '.join(presets)}")
-        base = presets[params]
-    else:
-        base = None
-    valid = [f.name for f in dataclasses.fields(settings_cls)]
-    unknown = sorted(set(settings) - set(valid))
-    if unknown:
-        valid += ["params"] if presets else []
-        raise ValueError(
-            f"unknown setting(s) {', '.join(unknown)} for {name!r}; valid: {', '.join(valid)}"
-        )
-    merged = {**overrides, **settings}
-    return settings_cls(**merged) if base is None else dataclasses.replace(base, **merged)
+    return _settings(_entry(name), settings)
 
 
-def _learned_class(name: str) -> type[Predictor]:
+def _learned_class(entry: _Entry) -> type[Predictor]:
     """The class of a predictor fitted before the run, imported now."""
-    entry = LEARNED[name]
+    learned, name = entry.learned, entry.name
     try:
-        module = importlib.import_module(entry.module)
+        module = importlib.import_module(learned.module)
     except ModuleNotFoundError as exc:
         if exc.name != "torch" and not str(exc.name).startswith("torch."):
             raise
         raise ImportError(f"predictor {name!r} needs PyTorch: pip install \"rhmpc[learned]\""
                           ) from None
-    return getattr(module, entry.cls)
+    return getattr(module, learned.cls)
 
 
-def make_predictor(name: str, dt: float, **settings: Any) -> Predictor:
+def resolve(name: str, **settings: Any) -> tuple[type[Predictor], Any]:
+    """The class of predictor ``name`` and its frozen settings with ``settings`` (see
+    :func:`make_predictor`): the one place a name is resolved.
+
+    Raises
+    ------
+    ValueError
+        An unknown name, parameter set or setting (the message lists the valid ones).
+    ImportError
+        A neural predictor without PyTorch (the message names the extra to install).
+    """
+    entry = _entry(name)
+    made = _settings(entry, settings)  # a bad setting is said before a missing extra
+    return entry.cls or _learned_class(entry), made
+
+
+def build(cls: type[Predictor], settings: Any, dt: float) -> Predictor:
+    """A predictor of class ``cls`` running at period ``dt`` [s] with the frozen ``settings``
+    of :func:`resolve`; a combination builds its ``members`` by name (by default
+    :func:`combination_members`), each given the file of its kind among ``models``."""
+    if cls is not Combination:
+        return cls(dt, settings)
+    if not settings.members:
+        settings = dataclasses.replace(settings, members=combination_members())
+    files = _models_by_kind(settings.models, settings.members)
+    return Combination(dt, settings, [make_predictor(member, dt, **(
+        {"model": files[member]} if member in files else {})) for member in settings.members])
+
+
+def make_predictor(name: str, dt: float, *, data_unit: float | None = None,
+                   **settings: Any) -> Predictor:
     """Build the predictor ``name`` running at period ``dt`` [s] with ``settings``.
+
+    ``data_unit``: metres per unit of the samples it will be fed, when the caller knows it (the
+    closed loop feeds metres: 1.0); a predictor that would infer its unit from its first
+    samples (``unit=None``) takes it instead, unless ``settings`` give one.
 
     Unknown names and settings raise ``ValueError`` listing the valid ones.  A predictor with
     parameter sets takes ``params=`` one of its class's ``PRESETS`` (``ekf``: ``"adaptive"``,
@@ -197,15 +259,10 @@ def make_predictor(name: str, dt: float, **settings: Any) -> Predictor:
     (``fit``) or given a ``model`` file before it runs; a neural one without PyTorch raises
     ``ImportError`` naming the extra to install.
     """
-    s = settings_for(name, **settings)
-    if name == "combination":
-        if not s.members:
-            s = dataclasses.replace(s, members=combination_members())
-        files = _models_by_kind(s.models, s.members)
-        return Combination(dt, s, [make_predictor(member, dt, **(
-            {"model": files[member]} if member in files else {})) for member in s.members])
-    cls = PREDICTORS[name][0] if name in PREDICTORS else _learned_class(name)
-    return cls(dt, s)
+    cls, made = resolve(name, **settings)
+    if data_unit is not None and "unit" not in settings and getattr(made, "unit", 1.0) is None:
+        made = dataclasses.replace(made, unit=data_unit)
+    return build(cls, made, dt)
 
 
 def model_kind(path) -> str:

@@ -13,9 +13,9 @@ from pathlib import Path
 import numpy as np
 
 from sim.heart.motion import MotionSource
-from sim.heart.scenarios import SPECS, Scenario, make_scenario
+from sim.heart.scenarios import Scenario, make_scenario
 from sim.recordings.files import load_recording
-from sim.recordings.points import load_poi
+from sim.recordings.points import PointsAt, load_poi
 from sim.recordings.recorded import RecordedMotion
 from sim.recordings.text import export_source
 
@@ -57,16 +57,32 @@ class HeartSource:
     origin: Scenario | RecordedMotion
     others: np.ndarray | None = None
 
+    @property
+    def measured(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """A recording's own samples, (t [s] from 0, z (n, d) [m]); None for a scenario."""
+        if not isinstance(self.origin, RecordedMotion):
+            return None
+        return self.origin.t - self.origin.t[0], self.origin.z
+
+    @property
+    def points(self) -> PointsAt | None:
+        """The other tracked points of a recording on its samples' times from 0, or None."""
+        if self.others is None:
+            return None
+        return PointsAt(self.origin.t - self.origin.t[0], self.others)
+
 
 def heart_source(scenario: str, rng: np.random.Generator, *, data: str | None = None,
                  data_read: dict | None = None, rr: str | None = None,
                  needed: float = 0.0) -> HeartSource:
-    """The motion of a recording (``data``, read with ``data_read``) or of a named scenario.
+    """The motion of a recording (``data``, read with ``data_read``) or of a named scenario
+    (:func:`sim.heart.make_scenario`, the one builder of a scenario).
 
-    A scenario's random processes (HRV, drift, breathing) are drawn over its nominal length or
-    ``needed`` seconds, whichever is longer; past that they would be extrapolated polynomials.
-    Only a longer run asks for more, so the draws of shorter runs stay the same. ``rr``: a
-    PhysioNet record whose beat annotations drive the heart phase.
+    A scenario is made ``needed`` seconds long: its random processes (HRV, drift, breathing)
+    are drawn over its nominal length or ``needed`` seconds, whichever is longer (past that
+    they would be extrapolated polynomials), so that only a run longer than the nominal
+    length changes the draws. ``rr``: a PhysioNet record whose beat annotations drive the
+    heart phase.
     """
     if data is not None:
         recording, others = read_points(data, data_read or {})
@@ -74,8 +90,7 @@ def heart_source(scenario: str, rng: np.random.Generator, *, data: str | None = 
         return HeartSource(motion, f"file:{Path(data).name}", recording.duration, recording,
                            others)
     overrides: dict = {"record": rr} if rr else {}
-    spec = SPECS.get(scenario)  # an unknown name: make_scenario says so
-    if spec is not None and needed > spec.duration:
+    if needed > 0:
         overrides["duration"] = needed
     made = make_scenario(scenario, rng=rng, **overrides)
     label = made.name + (f"+rr:{Path(rr).name}" if rr else "")

@@ -15,8 +15,8 @@ from pathlib import Path
 import pytest
 
 from rhmpc.cli import build_parser
-from rhmpc.cli.presets import PRESETS
 from rhmpc.experiment import RunConfig
+from rhmpc.experiment.presets import PRESETS
 from rhmpc.studies.paper import paper_table
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -17,11 +17,11 @@ import textwrap
 from typing import Any
 
 from rhmpc.cli import COMMANDS
-from rhmpc.cli.presets import PRESETS, add_preset_option, apply_preset
-from rhmpc.cli.simulate import parse_value
+from rhmpc.cli.presets import add_preset_option
 from rhmpc.errors import UsageError
 from rhmpc.experiment import RunConfig
-from rhmpc.experiment.config import FREE_TABLES, SECTIONS, read_toml
+from rhmpc.experiment.config import FREE_TABLES, SECTIONS, parse_sets, read_toml
+from rhmpc.experiment.presets import PRESETS, apply_preset
 
 #: Top-level keys of a run file that hold tables of free keys: the recording's read options and
 #: the configuration's free tables.
@@ -138,12 +138,7 @@ def effective(args: argparse.Namespace) -> tuple[RunConfig, RunConfig, dict[str,
     if args.preset:
         config = apply_preset(config, args.preset)
         sources.update({k: f"preset {args.preset}" for k in PRESETS[args.preset]})
-    changes: dict[str, Any] = {}
-    for item in args.set:
-        key, sep, value = item.partition("=")
-        if not sep or not key.strip():
-            raise UsageError(f"--set {item!r}: expected SECTION.KEY=VALUE")
-        changes[key.strip()] = parse_value(value.strip())
+    changes = parse_sets(args.set)
     config = config.replace(**changes)
     sources.update({k: "--set" for k in changes})
     return config, defaults, sources

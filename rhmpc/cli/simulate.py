@@ -10,11 +10,10 @@ from pathlib import Path
 import numpy as np
 
 from rhmpc.cli import COMMANDS
-from rhmpc.cli.presets import add_preset_option, apply_preset
+from rhmpc.cli.presets import add_preset_option
 from rhmpc.errors import UsageError
-from rhmpc.experiment import RunConfig, check_sensor, load_config, run_experiment
-from rhmpc.experiment.config import with_split
-from rhmpc.experiment.fitting import with_models
+from rhmpc.experiment import RunConfig, run_experiment
+from rhmpc.experiment.config import run_config
 from sim.loop.settings import DEFAULT_SETTLING, LoopSettings
 from sim.recordings.matfile import parse_indices
 
@@ -23,8 +22,6 @@ DEFAULT_DURATION = LoopSettings.duration
 #: The settling rule when neither --settling nor a config file sets it.
 SETTLING_RULE = (f"settling by default {DEFAULT_SETTLING:g} s, or a third of a run shorter than "
                  f"{3 * DEFAULT_SETTLING:g} s")
-#: The shortest stretch after settling that a run is scored on [s]: ten 25-ms horizons.
-MIN_SCORED = 0.25
 
 
 def add_run_options(
@@ -189,89 +186,30 @@ def recording_options(args: argparse.Namespace) -> dict:
     return {v: getattr(args, k) for k, v in keys.items() if getattr(args, k, None) is not None}
 
 
-def parse_value(text: str):
-    """A --set value: TOML scalar/array syntax (numbers, true/false, "strings", [lists])."""
-    import tomllib
-
-    try:
-        return tomllib.loads(f"v = {text}")["v"]
-    except tomllib.TOMLDecodeError:
-        return text  # a bare word is a string
+#: Options that set one setting each: option → the setting.
+OPTIONS = {"predictor": "predictor", "scenario": "scenario", "data": "data", "seed": "seed",
+           "robot": "robot", "sensor": "sensor", "rr": "rr", "ground_truth": "ground_truth",
+           "train": "train", "duration": "loop.duration", "settling": "loop.settling"}
 
 
 def config_from_args(args: argparse.Namespace) -> RunConfig:
-    """The run's settings: defaults < --config file < --preset < explicit options < --set."""
-    config = load_config(args.config) if args.config else RunConfig()
-    config = apply_preset(config, getattr(args, "preset", None))
-    changes: dict = {}
-    for name in ("predictor", "scenario", "data", "seed", "robot", "sensor", "rr"):
-        value = getattr(args, name, None)
-        if value is not None:
-            changes[name] = value
-    if getattr(args, "ground_truth", None):
-        changes["ground_truth"] = args.ground_truth
+    """The run's settings (:func:`rhmpc.experiment.config.run_config`): defaults < --config
+    file < --preset < explicit options < --set."""
+    options = {key: getattr(args, name) for name, key in OPTIONS.items()
+               if getattr(args, name, None) is not None}
     if getattr(args, "data", None):
-        from sim.recordings.shipped import SHIPPED, resolve
-
-        data, read, poi = resolve(args.data, recording_options(args))
-        if not Path(data).is_file():
-            raise UsageError(f"{args.data}: no such file (nor a shipped recording: "
-                             f"{', '.join(SHIPPED)})")
-        if args.sensor is None:
-            changes["sensor"] = "recorded"
-        changes["data"], changes["data_read"] = data, read
-        poi = args.poi if getattr(args, "poi", None) is not None else poi
-        if poi is not None:
-            changes["data_read"]["point"] = poi
-        if args.duration is None and not args.config and not getattr(args, "split", None):
-            from sim.recordings import load_recording
-
-            changes["loop.duration"] = load_recording(data, **changes["data_read"]).duration
+        options["data_read"] = recording_options(args)
+        if getattr(args, "poi", None) is not None:
+            options["data_read"]["point"] = args.poi
     elif any(getattr(args, k, None) is not None
              for k in ("var", "rows", "cols", "data_rate", "units", "poi", "split")):
         raise UsageError("--var, --rows, --cols, --rate, --units, --poi and --split need "
                          "--data FILE")
-    split = None
-    if getattr(args, "split", None):
-        if args.duration is not None or args.settling is not None:
-            raise UsageError("--split TRAIN:END sets the settling and the duration: give "
-                             "neither --settling nor --duration with it")
-        split = parse_split(args.split)
-    if getattr(args, "train", None):
-        missing = [f for f in args.train if not Path(f).is_file()]
-        if missing:
-            raise UsageError(f"--train: no such file {', '.join(missing)}")
-        changes["train"] = tuple(args.train)
-    if args.duration is not None:
-        changes["loop.duration"] = args.duration
-    if args.settling is not None:
-        changes["loop.settling"] = args.settling
-    for item in args.set:
-        key, sep, value = item.partition("=")
-        if not sep or not key:
-            raise UsageError(f"--set {item!r}: expected SECTION.KEY=VALUE")
-        changes[key.strip()] = parse_value(value.strip())
-    if getattr(args, "fault", None):
-        changes["faults.events"] = fault_events(config, changes, args.fault)
-    config = with_split(config.replace(**changes), split)
-    if getattr(args, "model", None):
-        config = with_models(config, args.model)
-    check_sensor(config)
-    check_scoring(config)
-    return config
-
-
-def fault_events(config: RunConfig, changes: dict, specs: list[str]) -> tuple[str, ...]:
-    """The run's faults and those of ``--fault``, each checked (a malformed one is a one-line
-    error naming it)."""
-    from sim.sensors.faults import parse_fault
-
-    for spec in specs:
-        try:
-            parse_fault(spec)
-        except ValueError as exc:
-            raise UsageError(f"--{exc}") from None
-    return (*changes.get("faults.events", config.faults.events), *specs)
+    if options.get("train"):
+        options["train"] = tuple(options["train"])
+    return run_config(args.config, getattr(args, "preset", None), options, args.set,
+                      getattr(args, "fault", None) or (), getattr(args, "model", None) or (),
+                      parse_split(getattr(args, "split", None)))
 
 
 def settling_rule(args: argparse.Namespace) -> str:
@@ -284,16 +222,6 @@ def settling_rule(args: argparse.Namespace) -> str:
     if getattr(args, "config", None):
         return f"from {args.config}"
     return SETTLING_RULE
-
-
-def check_scoring(config: RunConfig) -> None:
-    """A run must be scored on at least :data:`MIN_SCORED` seconds after settling."""
-    loop = config.loop
-    scored = loop.duration - loop.settling_s
-    if scored < MIN_SCORED:
-        raise UsageError(
-            f"the run is scored on {scored:.3g} s after {loop.settling_s:.3g} s of settling; "
-            f"at least {MIN_SCORED:g} s is needed (raise --duration or lower --settling)")
 
 
 #: What each output option writes, by its file's suffix.

@@ -133,7 +133,7 @@ def sweep(args: argparse.Namespace, spec_path: Path) -> int:
     if args.preset is not None:
         import dataclasses
 
-        from rhmpc.cli.presets import apply_preset
+        from rhmpc.experiment.presets import apply_preset
 
         spec = dataclasses.replace(spec, base=apply_preset(spec.base, args.preset))
     if args.seed is not None:

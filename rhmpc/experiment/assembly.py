@@ -1,7 +1,11 @@
-"""The assembly of a run's world: robot, controller, heart motion, sensor stream, reference.
+"""The assembly of a run's world from its settings, one function per thing it builds.
 
-This is where the packages meet: ``robots`` (model, linearisation), ``sim`` (heart motion,
-sensor, plant, loop), ``predictors`` and the controller of :mod:`rhmpc.control`.
+:func:`build_run` takes a :class:`~rhmpc.experiment.config.RunConfig` and builds, in order,
+the robot and its linear model (:func:`build_robot`), the heart motion (:func:`build_heart`),
+the sensor's samples and the truth (:func:`build_stream`), the predictor and the reference
+(:func:`build_reference`), the controller (:func:`build_controller`) and the plant
+(:func:`build_plant`); each hands its part of the settings down to the package that holds the
+thing (``robots``, ``sim``, ``predictors``, :mod:`rhmpc.control`) and none calls back up.
 """
 
 from __future__ import annotations
@@ -12,7 +16,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from predictors import make_predictor, settings_for
+from predictors.registry import make_predictor
 from rhmpc.control.cancellation import NonlinearityCancellation
 from rhmpc.control.controller import Controller
 from rhmpc.control.mpc import RecedingHorizonMPC
@@ -53,7 +57,7 @@ class Run:
     arm : LinearArm
         The controller's linear model about the home posture.
     plant
-        The plant (:func:`sim.plant.make_plant`).
+        The plant (:func:`build_plant`).
     controller : Controller or CController
         The Python controller, or the exported C one (``implementation="c"``).
     truth : SourceTruth
@@ -74,6 +78,8 @@ class Run:
         The other tracked points of a recording, which the loop gives with each sample.
     measured : tuple or None
         A recording's own samples (t [s] from 0, z (n, d) [m]): where the run is scored.
+    reference : ExactReference or PredictedReference or None
+        The controller's reference (the Python controller's; None for the C one).
     """
 
     config: RunConfig
@@ -90,29 +96,92 @@ class Run:
     faults: tuple = ()
     points: PointsAt | None = None
     measured: tuple[np.ndarray, np.ndarray] | None = None
-
-    @property
-    def reference(self):
-        """The controller's reference (the Python controller's; None for the C one)."""
-        return getattr(self.controller, "reference", None)
+    reference: ExactReference | PredictedReference | None = None
 
 
-def build_stream(config: RunConfig, heart: HeartSource, duration: float,
-                 rng: np.random.Generator) -> SampleSource:
-    """The sensor samples the controller sees (SI units), over ``duration`` seconds.
+def build_run(config: RunConfig, implementation: str = "python", progress=None) -> Run:
+    """Build robot, heart motion, sensor stream, reference, controller and plant for ``config``.
 
-    A sample source read in blocks (:func:`sim.sensors.playback.sensor_samples`): the samples and
-    random draws of ``sensor.measure`` over the whole run, without holding the 2-kHz stream.
+    ``implementation="c"``: the controller is the C one of ``rhmpc export`` (built once and
+    cached, :func:`rhmpc.control.export.controller_in_c`) instead of the Python one. A
+    predictor that learns before the run is fitted (:mod:`rhmpc.experiment.fitting`);
+    ``progress(text)`` hears how that goes.
     """
-    control_rate = 1.0 / config.loop.Ts
+    heart_rng, sensor_rng = np.random.default_rng(config.seed).spawn(2)
+    robot, arm = build_robot(config)
+    heart = build_heart(config, heart_rng)
+    stream, truth = build_stream(config, heart, sensor_rng)
+    loop = config.loop
+    clock = predictor_clock(loop, stream)
+    anchor = motion_anchor(config, arm)
+    check_reach(robot, truth, anchor, loop.ticks)
+    reference = build_reference(config, truth, heart, clock)
+    reference.place(anchor)
+    controller = build_controller(config, robot, arm, reference, implementation)
+    plant = build_plant(config, robot, arm)
+    run = Run(config, robot, arm, plant, controller, truth, anchor, stream, heart.label,
+              loop.duration, clock, config.faults.faults, heart.points, heart.measured,
+              getattr(controller, "reference", None))
+    fit_predictor(run, progress)
+    return run
+
+
+def build_robot(config: RunConfig) -> tuple[Robot, LinearArm]:
+    """The robot ``config.robot`` and its linear model about its home posture at the loop's
+    period (:func:`robots.linearize`)."""
+    robot = load_robot(config.robot)
+    return robot, linearize(robot, Ts=config.loop.Ts)
+
+
+def build_heart(config: RunConfig, rng: np.random.Generator) -> HeartSource:
+    """The run's heart motion, a named scenario or a recording (:func:`sim.sources.heart_source`,
+    a scenario's random processes drawn from ``rng`` over the run and its last horizon). A
+    recording shorter than the run is a one-line ``UsageError``."""
+    loop = config.loop
+    heart = heart_source(config.scenario, rng, data=config.data, data_read=config.data_read,
+                         rr=config.rr, needed=loop.duration + config.mpc.horizon * loop.Ts + 1.0)
+    if config.data is not None and loop.duration > heart.duration:
+        available = heart.duration
+        digits = next((d for d in range(2, 10)
+                       if f"{available:.{d}f}" != f"{loop.duration:.{d}f}"), 9)
+        raise UsageError(
+            f"{config.data}: the recording lasts {available:.{digits}f} s, the run asks for "
+            f"{loop.duration:.{digits}f} s (set --duration)"
+        )
+    return heart
+
+
+def build_stream(config: RunConfig, heart: HeartSource,
+                 rng: np.random.Generator) -> tuple[SampleSource, SourceTruth]:
+    """The sensor samples the controller sees (SI units) over the run and its last horizon,
+    with the injected sensor faults, and the truth they are scored against.
+
+    The samples are a source read in blocks (:func:`sim.sensors.playback.sensor_samples`: the
+    samples and random draws of ``sensor.measure`` over the whole run, without holding the
+    2-kHz stream), or a recording's own samples (``sensor = "recorded"``). The truth, read per
+    window (:class:`sim.loop.streams.SourceTruth`), is the clean samples as recorded (before
+    their delivery to the loop), linearly interpolated at the ticks, as the paper's
+    prerecorded data (``ground_truth = "recorded"``), or the true motion (``"true"``).
+    """
+    loop, N = config.loop, config.mpc.horizon
+    duration = loop.duration + (N + 1) * loop.Ts
+    control_rate = 1.0 / loop.Ts
     settings = dict(config.sensor_settings)
     if config.sensor == "recorded":
-        return _recorded_stream(config, heart.origin, settings, control_rate)
-    if config.sensor in ("sonomicrometry", "white"):
-        settings.setdefault("rate", getattr(heart.origin, "sensor_rate", None) or 257.0)
-        settings.setdefault("upsample", control_rate)  # delivered to the 2-kHz loop
-    sensor = make_sensor(config.sensor, heart.motion.dim, settings)
-    return sensor_samples(sensor, heart.motion, duration, rng)
+        stream = _recorded_stream(config, heart.origin, settings, control_rate)
+    else:
+        if config.sensor in ("sonomicrometry", "white"):
+            settings.setdefault("rate", getattr(heart.origin, "sensor_rate", None) or 257.0)
+            settings.setdefault("upsample", control_rate)  # delivered to the 2-kHz loop
+        sensor = make_sensor(config.sensor, heart.motion.dim, settings)
+        stream = sensor_samples(sensor, heart.motion, duration, rng)
+    recorded = getattr(stream, "recorded", stream)
+    truth = SourceTruth(recorded if config.ground_truth == "recorded" else heart.motion,
+                        loop.ticks + N + 1, loop.Ts, centred=loop.placement == "centred")
+    sensor_faults, _ = split_faults(config.faults.faults)
+    if sensor_faults:  # what the controller reads; the truth above is the clean stream's
+        stream = FaultySamples(stream, sensor_faults)
+    return stream, truth
 
 
 def _recorded_stream(config: RunConfig, recording, settings: dict,
@@ -142,25 +211,18 @@ def make_sensor(name: str, dim: int, settings: dict) -> Sensor:
         raise UsageError(f"sensor {name!r}: {exc}") from None
 
 
-def check_sensor(config: RunConfig) -> None:
-    """Build the run's sensor once (no sampling) so that bad settings fail before any run."""
-    if config.sensor != "recorded":
-        make_sensor(config.sensor, 3, dict(config.sensor_settings))
-
-
 def build_reference(config: RunConfig, truth: SourceTruth, heart: HeartSource,
                     clock: PredictorClock) -> ExactReference | PredictedReference:
-    """The exact future (``predictor = "exact"``) or the predictor's forecast on ``clock``."""
+    """The exact future (``predictor = "exact"``) or the predictor's forecast on ``clock``.
+
+    The predictor is built by name (:func:`predictors.registry.make_predictor`, which resolves
+    the name once into its class and settings) with :meth:`RunConfig.predictor_keywords`, fed
+    metres."""
     N = config.mpc.horizon
     if config.predictor == "exact":
         return ExactReference(truth, N)
-    settings = dict(config.predictor_settings)
-    if config.predictor in config.predictor_params and "params" not in settings:
-        settings["params"] = config.predictor_params[config.predictor]
-    if "unit" not in settings and getattr(settings_for(config.predictor, **settings), "unit",
-                                          1.0) is None:
-        settings["unit"] = 1.0  # the loop feeds metres: no unit inference
-    predictor = make_predictor(config.predictor, dt=clock.dt, **settings)
+    predictor = make_predictor(config.predictor, clock.dt, data_unit=1.0,
+                               **config.predictor_keywords())
     reference = PredictedReference(predictor, config.loop.Ts, N, clock.refresh_ticks,
                                    config.reference)
     phase = getattr(getattr(heart, "motion", None), "phase", None)
@@ -190,6 +252,20 @@ def build_controller(config: RunConfig, robot: Robot, arm: LinearArm, reference,
     return controller
 
 
+def build_plant(config: RunConfig, robot: Robot, arm: LinearArm):
+    """The plant of ``config.plant`` (:func:`sim.plant.make_plant`) at the home posture, its
+    encoders with the injected encoder faults."""
+    loop = config.loop
+    plant = make_plant(robot, arm, loop.Ts, config.plant, config.hardware)
+    _, encoder_faults = split_faults(config.faults.faults)
+    if not encoder_faults:
+        return plant
+    try:
+        return FaultyEncoders(plant, encoder_faults, loop.Ts)
+    except ValueError as exc:
+        raise UsageError(f"[faults] {exc}") from None
+
+
 def deployable(config: RunConfig, sensor_rate: float) -> Controller:
     """The Python controller of ``config`` for a sensor of ``sensor_rate`` [Hz] (what ``rhmpc
     export`` generates from): the reference refreshes on each sample of a sensor slower than
@@ -197,8 +273,7 @@ def deployable(config: RunConfig, sensor_rate: float) -> Controller:
     position plus ``loop.poi_offset``."""
     if not (np.isfinite(sensor_rate) and sensor_rate > 0):
         raise UsageError(f"the sensor's rate must be > 0 Hz, got {sensor_rate!r}")
-    robot = load_robot(config.robot)
-    arm = linearize(robot, Ts=config.loop.Ts)
+    robot, arm = build_robot(config)
     clock = clock_for_rate(config.loop, sensor_rate)
     if config.predictor == "exact":
         raise UsageError("the controller to deploy needs a predictor ('exact' reads the future)")
@@ -244,59 +319,3 @@ def motion_anchor(config: RunConfig, arm: LinearArm) -> np.ndarray:
     """Where the centred motion's origin sits in the workspace [m] (``loop.placement``)."""
     offset = np.asarray(config.loop.poi_offset, dtype=float)
     return arm.y0 + offset if config.loop.placement == "centred" else offset
-
-
-def build_run(config: RunConfig, implementation: str = "python", progress=None) -> Run:
-    """Build robot, plant, controller, heart motion and sensor stream for ``config``.
-
-    ``implementation="c"``: the controller is the C one of ``rhmpc export`` (built once and
-    cached, :func:`rhmpc.control.export.controller_in_c`) instead of the Python one. A
-    predictor that learns before the run is fitted (:mod:`rhmpc.experiment.fitting`);
-    ``progress(text)`` hears how that goes.
-    """
-    loop, N = config.loop, config.mpc.horizon
-    heart_rng, sensor_rng = np.random.default_rng(config.seed).spawn(2)
-    robot = load_robot(config.robot)
-    arm = linearize(robot, Ts=loop.Ts)
-    heart = heart_source(config.scenario, heart_rng, data=config.data,
-                         data_read=config.data_read, rr=config.rr,
-                         needed=loop.duration + N * loop.Ts + 1.0)
-    if config.data is not None and loop.duration > heart.duration:
-        available = heart.duration
-        digits = next((d for d in range(2, 10)
-                       if f"{available:.{d}f}" != f"{loop.duration:.{d}f}"), 9)
-        raise UsageError(
-            f"{config.data}: the recording lasts {available:.{digits}f} s, the run asks for "
-            f"{loop.duration:.{digits}f} s (set --duration)"
-        )
-    stream = build_stream(config, heart, loop.duration + (N + 1) * loop.Ts, sensor_rng)
-    # the truth, read per window: "recorded" — the sensor's samples as recorded (before their
-    # delivery to the loop), linearly interpolated at the ticks, as the paper's prerecorded
-    # data — or the true motion
-    recorded = getattr(stream, "recorded", stream)
-    truth = SourceTruth(recorded if config.ground_truth == "recorded" else heart.motion,
-                        loop.ticks + N + 1, loop.Ts,
-                        centred=loop.placement == "centred")
-    sensor_faults, encoder_faults = split_faults(config.faults.faults)
-    if sensor_faults:  # what the controller reads; the truth above is the clean stream's
-        stream = FaultySamples(stream, sensor_faults)
-    clock = predictor_clock(loop, stream)
-    anchor = motion_anchor(config, arm)
-    check_reach(robot, truth, anchor, loop.ticks)
-    reference = build_reference(config, truth, heart, clock)
-    reference.place(anchor)
-    controller = build_controller(config, robot, arm, reference, implementation)
-    plant = make_plant(robot, arm, loop.Ts, config.plant, config.hardware)
-    if encoder_faults:
-        try:
-            plant = FaultyEncoders(plant, encoder_faults, loop.Ts)
-        except ValueError as exc:
-            raise UsageError(f"[faults] {exc}") from None
-    points = None if heart.others is None else PointsAt(heart.origin.t - heart.origin.t[0],
-                                                        heart.others)
-    measured = None if config.data is None else (heart.origin.t - heart.origin.t[0],
-                                                  heart.origin.z)
-    run = Run(config, robot, arm, plant, controller, truth, anchor, stream, heart.label,
-              loop.duration, clock, config.faults.faults, points, measured)
-    fit_predictor(run, progress)
-    return run

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -14,10 +15,12 @@ from rhmpc.control.observer import ObserverSettings
 from rhmpc.control.reference import ReferenceSettings
 from rhmpc.control.settings import MPCSettings
 from rhmpc.errors import UsageError
+from rhmpc.experiment.presets import preset_settings
 from rhmpc.experiment.tables import from_dict, replace_settings, to_dict
 from sim.loop import LoopSettings
 from sim.plant import HardwareSettings, PlantSettings
-from sim.sensors.faults import FaultSettings
+from sim.sensors import sensor_from_name
+from sim.sensors.faults import FaultSettings, parse_fault
 
 #: Sections of a run's TOML file and the settings class each one builds.
 SECTIONS: dict[str, type] = {
@@ -33,6 +36,8 @@ SECTIONS: dict[str, type] = {
 
 
 GROUND_TRUTHS: tuple[str, ...] = ("recorded", "true")
+#: The shortest stretch after settling that a run is scored on [s]: ten 25-ms horizons.
+MIN_SCORED = 0.25
 
 #: The type of each top-level setting of a run (the sections check their own fields).
 TOP_LEVEL: dict[str, object] = {
@@ -148,7 +153,21 @@ class RunConfig:
                 f"ground_truth must be one of {', '.join(GROUND_TRUTHS)}, got {self.ground_truth!r}"
             )
         self.faults.check(self.loop.duration)
+        if self.sensor != "recorded":  # built once, unsampled: a bad setting fails here
+            try:
+                sensor_from_name(self.sensor, dim=3, **self.sensor_settings)
+            except (TypeError, ValueError) as exc:
+                raise ValueError(f"sensor {self.sensor!r}: {exc}") from None
         check_bounds(self)
+
+    def predictor_keywords(self) -> dict[str, Any]:
+        """The predictor's settings as :func:`predictors.registry.resolve` takes them:
+        ``predictor_settings``, with the parameter set ``predictor_params`` names for this
+        predictor unless ``predictor_settings`` names one."""
+        settings = dict(self.predictor_settings)
+        if self.predictor in self.predictor_params and "params" not in settings:
+            settings["params"] = self.predictor_params[self.predictor]
+        return settings
 
     def to_dict(self) -> dict[str, Any]:
         """TOML-ready nested dict (``None`` values left out, and the ``faults`` table when it
@@ -228,24 +247,141 @@ class RunConfig:
             raise UsageError(str(exc)) from None
 
 
-def with_split(config: RunConfig, split: tuple[int, int] | None) -> RunConfig:
-    """``config`` with its settling window and duration set by the literature's split (TRAIN,
-    END) of its recording ``data`` [sample indices from 0]: the run starts at the first sample,
-    its settling window (what a predictor fitted before the run learns from) ends at sample
-    TRAIN, t_TRAIN − t_0, and it lasts t_END − t_0 (the recording's n/f when END = n), so that
-    the scored instants are t_TRAIN ≤ t_k < t_END. Unchanged without a split; a split without a
-    recording, or beyond it, is a one-line ``UsageError``."""
+def run_config(file: str | Path | None = None, preset: str | None = None,
+               options: dict[str, Any] | None = None, sets: Sequence[str] = (),
+               faults: Sequence[str] = (), models: Sequence[str] = (),
+               split: tuple[int, int] | None = None) -> RunConfig:
+    """A run's settings from the command line, the one place its sources merge: the defaults,
+    the TOML ``file`` (``--config``), the ``preset`` (:mod:`rhmpc.experiment.presets`), the
+    command's ``options`` (top-level or dotted keys, ``{"predictor": "ekf", "loop.duration":
+    5.0}``), then ``sets`` (``SECTION.KEY=VALUE``, the value in TOML's syntax: ``--set``), each
+    over the ones before; ``faults`` (``--fault KIND@START…``) join the run's own, and
+    ``split`` (TRAIN, END: ``--split``) sets the settling and the duration (:func:`with_split`).
+
+    A recording among the options (``data``: a file, or a shipped recording's name, read with
+    ``data_read``) makes the sensor ``recorded`` unless ``sensor`` is given and, without a
+    ``file``, ``loop.duration`` or ``split``, the run as long as the recording; ``models`` are
+    the saved models the predictor loads (:func:`rhmpc.experiment.fitting.model_settings`).
+    The run must be scored on at least :data:`MIN_SCORED` seconds. A bad source is a one-line
+    ``UsageError``.
+    """
+    from rhmpc.experiment.fitting import model_settings
+
+    options = dict(options or {})
+    if split is not None and {"loop.duration", "loop.settling"} & set(options):
+        raise UsageError("--split TRAIN:END sets the settling and the duration: give neither "
+                         "--settling nor --duration with it")
+    missing = [f for f in options.get("train", ()) if not Path(f).is_file()]
+    if missing:
+        raise UsageError(f"--train: no such file {', '.join(missing)}")
+    recording = _recording(options, file is None, split) if options.get("data") else None
+    config = load_config(file) if file else RunConfig()
+    changes = {**preset_settings(preset), **options, **parse_sets(sets)}
+    if faults:
+        changes["faults.events"] = (*changes.get("faults.events", config.faults.events),
+                                    *_checked_faults(faults))
+    config = config.replace(**changes)
+    if recording is not None and (config.data, config.data_read) != (options["data"],
+                                                                      options["data_read"]):
+        recording = None  # --set read another recording
+    config = with_split(config, split, recording)
+    if models:
+        config = config.replace(**model_settings(config, models))
+    check_scoring(config)
+    return config
+
+
+def _recording(options: dict[str, Any], whole: bool, split: tuple[int, int] | None):
+    """Resolve the recording of ``options`` in place (its file, how it is read, the sensor
+    that reads it as it is, and with ``whole`` and no duration or split, the run's length) and
+    return it, read once (``None`` when nothing needs it read)."""
+    from sim.recordings.shipped import SHIPPED, resolve
+
+    read = dict(options.get("data_read", {}))
+    point = read.pop("point", None)
+    data, read, poi = resolve(options["data"], read)
+    if not Path(data).is_file():
+        raise UsageError(f"{options['data']}: no such file (nor a shipped recording: "
+                         f"{', '.join(SHIPPED)})")
+    poi = point if point is not None else poi
+    options.setdefault("sensor", "recorded")
+    options["data"], options["data_read"] = data, {**read, **({} if poi is None else
+                                                              {"point": poi})}
+    if split is None and not (whole and "loop.duration" not in options):
+        return None
+    recording = _read(data, options["data_read"])
     if split is None:
-        return config
-    if config.data is None:
-        raise UsageError("--split TRAIN:END splits a recording: it needs --data FILE")
+        options["loop.duration"] = recording.duration
+    return recording
+
+
+def _read(data: str, read: dict):
+    """The POI's recording of ``data`` (:func:`sim.sources.read_points`); an unreadable one is
+    a ``UsageError``."""
     from sim.recordings import RecordingError
     from sim.sources import read_points
 
     try:
-        recording, _ = read_points(config.data, config.data_read)
+        return read_points(data, read)[0]
     except RecordingError as exc:
         raise UsageError(str(exc)) from None
+
+
+def _checked_faults(specs: Sequence[str]) -> tuple[str, ...]:
+    """``specs`` (``--fault``), each checked: a malformed one is a one-line error naming it."""
+    for spec in specs:
+        try:
+            parse_fault(spec)
+        except ValueError as exc:
+            raise UsageError(f"--{exc}") from None
+    return tuple(specs)
+
+
+def parse_value(text: str):
+    """A ``--set`` value: TOML scalar/array syntax (numbers, true/false, "strings", [lists])."""
+    import tomllib
+
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        return text  # a bare word is a string
+
+
+def parse_sets(items: Sequence[str]) -> dict[str, Any]:
+    """``SECTION.KEY=VALUE`` items (``--set``) as dotted settings (:func:`parse_value`)."""
+    changes: dict[str, Any] = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise UsageError(f"--set {item!r}: expected SECTION.KEY=VALUE")
+        changes[key.strip()] = parse_value(value.strip())
+    return changes
+
+
+def check_scoring(config: RunConfig) -> None:
+    """A run must be scored on at least :data:`MIN_SCORED` seconds after settling."""
+    loop = config.loop
+    scored = loop.duration - loop.settling_s
+    if scored < MIN_SCORED:
+        raise UsageError(
+            f"the run is scored on {scored:.3g} s after {loop.settling_s:.3g} s of settling; "
+            f"at least {MIN_SCORED:g} s is needed (raise --duration or lower --settling)")
+
+
+def with_split(config: RunConfig, split: tuple[int, int] | None,
+               recording=None) -> RunConfig:
+    """``config`` with its settling window and duration set by the literature's split (TRAIN,
+    END) of its recording ``data`` [sample indices from 0]: the run starts at the first sample,
+    its settling window (what a predictor fitted before the run learns from) ends at sample
+    TRAIN, t_TRAIN − t_0, and it lasts t_END − t_0 (the recording's n/f when END = n), so that
+    the scored instants are t_TRAIN ≤ t_k < t_END. ``recording``: ``data`` already read
+    (:class:`sim.recordings.RecordedMotion`), else it is read here. Unchanged without a split;
+    a split without a recording, or beyond it, is a one-line ``UsageError``."""
+    if split is None:
+        return config
+    if config.data is None:
+        raise UsageError("--split TRAIN:END splits a recording: it needs --data FILE")
+    recording = _read(config.data, config.data_read) if recording is None else recording
     train, end = split
     n = recording.t.size
     if end > n:

@@ -22,7 +22,7 @@ from sim.loop.closed_loop import Refreshes
 from sim.recordings import RecordingError
 from sim.recordings.points import training_series
 
-__all__ = ["fit_predictor", "settling_series", "with_models"]
+__all__ = ["fit_predictor", "model_settings", "settling_series", "with_models"]
 
 
 def needs_fit(predictor) -> bool:
@@ -68,24 +68,31 @@ def _fit(run, predictor, settling: np.ndarray, progress) -> None:
 
 
 def with_models(config, files, strict: bool = True):
-    """``config`` whose predictor loads the saved models ``files`` (``rhmpc predict
-    --save-models``; each declares its kind) instead of fitting before the run: a predictor
-    fitted before the run takes the file of its kind (``predictor_settings.model``), a
-    combination each file into its member of that kind (``predictor_settings.models``).
+    """``config`` whose predictor loads the saved models ``files`` (:func:`model_settings`)."""
+    changes = model_settings(config, files, strict)
+    return config.replace(**changes) if changes else config
+
+
+def model_settings(config, files, strict: bool = True) -> dict:
+    """The settings with which the predictor of ``config`` loads the saved models ``files``
+    (``rhmpc predict --save-models``; each declares its kind) instead of fitting before the
+    run: a predictor fitted before the run takes the file of its kind
+    (``predictor_settings.model``), a combination each file into its member of that kind
+    (``predictor_settings.models``).
 
     ``strict``: a predictor that takes none of the files, or a file of another kind, is a
     one-line ``UsageError`` (``simulate``); otherwise such a run is left as it is (``compare``,
     where each row takes what is its own).
     """
     if not files:
-        return config
+        return {}
     name = config.predictor
     try:
         kinds = [model_kind(f) for f in files]
     except (ValueError, ImportError) as exc:
         raise UsageError(str(exc)) from None
     if name == "combination":
-        return config.replace(**{"predictor_settings.models": [str(f) for f in files]})
+        return {"predictor_settings.models": [str(f) for f in files]}
     mine = [str(f) for f, kind in zip(files, kinds, strict=True) if kind == name]
     if strict and (name not in LEARNED or len(mine) != len(files)):
         what = (f"{name} takes one {name} model" if name in LEARNED else
@@ -95,7 +102,7 @@ def with_models(config, files, strict: bool = True):
         raise UsageError(f"--model: {what}; given {given}")
     if strict and len(mine) > 1:
         raise UsageError(f"--model: {name} takes one model, given {len(mine)}")
-    return config.replace(**{"predictor_settings.model": mine[0]}) if mine else config
+    return {"predictor_settings.model": mine[0]} if mine else {}
 
 
 def settling_series(run) -> np.ndarray:

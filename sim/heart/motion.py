@@ -291,8 +291,3 @@ def _fourier(coef: np.ndarray, cycles: np.ndarray) -> np.ndarray:
     im = np.ascontiguousarray(coef.imag)
     return (re @ cos_k - im @ sin_k).T
 
-
-def draw_beat_gains(rng: np.random.Generator, n_beats: int, dim: int, std: float) -> np.ndarray:
-    """Per-beat, per-axis gains g_i = 1 + σ·ε_i, ε_i ~ N(0, 1) clipped to ±3 [-]."""
-    eps = np.clip(rng.standard_normal((n_beats, dim)), -3.0, 3.0)
-    return 1.0 + std * eps

@@ -17,18 +17,13 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.heart.arrhythmia import (
-    SHARED_DATA,
-    premature_stroke,
-    record_beats,
-)
+from sim.heart.arrhythmia import SHARED_DATA, premature_stroke, record_beats
 from sim.heart.invivo import InVivoSettings, invivo_motion
 from sim.heart.motion import (
     EPICARDIAL_BUMPS,
     MITRAL_BUMPS,
     MotionSource,
     SyntheticHeartMotion,
-    draw_beat_gains,
     fourier_from_bumps,
 )
 from sim.heart.rr import (
@@ -51,11 +46,9 @@ from sim.heart.specs import (
 )
 from sim.heart.variability import (
     VariabilitySettings,
-    ar1,
     breathing_phase,
-    drift_knots,
     modulated_phase,
-    smooth_knots,
+    variations,
 )
 
 __all__ = ["DEFAULT_SCENARIO", "DEFAULT_SEED", "NEEDS_DATA", "OVERRIDES", "SCENARIOS", "SPECS",
@@ -111,6 +104,9 @@ class Scenario:
         return int(self.source.dim)
 
 
+#: The variability of a spec's own (its band powers), unless the overrides name one.
+_OWN = object()
+
 #: Keyword overrides :func:`make_scenario` accepts.
 OVERRIDES: tuple[str, ...] = (
     "duration", "sensor_rate", "heart_rate", "peak_to_peak", "rms", "rr", "rr_start",
@@ -155,40 +151,44 @@ def make_scenario(name: str, rng: np.random.Generator | None = None, **overrides
     ValueError
         Unknown name (the message lists the valid ones) or unknown/invalid override.
     """
+    spec, duration, sensor_rate = _spec(name, overrides)
+    rng = np.random.default_rng(DEFAULT_SEED) if rng is None else rng
+    nominal = spec.duration
+    horizon = max(duration, nominal)
+    if spec.heart == "invivo":
+        return _invivo(spec, overrides, rng, duration, sensor_rate, horizon)
+    settings = _variability(spec, overrides)
+    beats, stroke = _beats(spec, overrides)
+    breathing_rate = float(overrides.get("breathing_rate", 1.0 / 6.0))
+    breath = None if settings.is_clean else breathing_phase(rng, breathing_rate, horizon,
+                                                            settings.breath_period_cv)
+    phase = _phase(spec, overrides, rng, horizon, settings, breath, beats)
+    if beats is not None and "duration" not in overrides:
+        duration = min(nominal, float(beats[-1] - max(beats[0], 0.0)))
+    shape = _shape(spec, overrides, rng, phase, horizon, settings, breath, stroke)
+    calib_t = np.arange(round(nominal * spec.sensor_rate) + 1) / spec.sensor_rate
+    source = calibrate(shape, calib_t, spec.peak_to_peak, spec.rms)
+    described = spec.description + (" [RR-driven]" if beats is not None else "")
+    return Scenario(name, source, sensor_rate, duration, described, spec)
+
+
+def _spec(name: str, overrides: dict) -> tuple[ScenarioSpec, float, float]:
+    """The named spec with the overrides of its fields, the run's duration [s] and the sensor
+    rate [Hz]; an unknown name or override, or a duration or rate ≤ 0, is a ``ValueError``."""
     if name not in SPECS:
         raise ValueError(f"unknown scenario {name!r}; valid names: {', '.join(SCENARIOS)}")
     unknown = sorted(set(overrides) - set(OVERRIDES))
     if unknown:
         raise ValueError(f"unknown scenario override(s) {', '.join(unknown)}; "
                          f"valid: {', '.join(OVERRIDES)}")
-    rng = np.random.default_rng(DEFAULT_SEED) if rng is None else rng
-    spec = SPECS[name]
     spec_fields = {f.name for f in fields(ScenarioSpec)}
-    spec = replace(spec, **{k: v for k, v in overrides.items()
-                            if k in spec_fields and k not in {"duration", "sensor_rate"}})
-    nominal = spec.duration
-    duration = float(overrides.get("duration", nominal))
+    spec = replace(SPECS[name], **{k: v for k, v in overrides.items()
+                                   if k in spec_fields and k not in {"duration", "sensor_rate"}})
+    duration = float(overrides.get("duration", spec.duration))
     sensor_rate = float(overrides.get("sensor_rate", spec.sensor_rate))
     if not duration > 0 or not sensor_rate > 0:
         raise ValueError("duration and sensor_rate must be positive")
-
-    horizon = max(duration, nominal)
-    if spec.heart == "invivo":
-        return _invivo(spec, overrides, rng, duration, sensor_rate, horizon)
-    settings = _variability(spec, overrides)
-    breath = None
-    if not settings.is_clean:
-        breath = breathing_phase(rng, float(overrides.get("breathing_rate", 1.0 / 6.0)),
-                                 horizon, settings.breath_period_cv)
-    phase, beat_span = _phase_track(spec, overrides, rng, horizon, settings, breath)
-    if beat_span is not None and "duration" not in overrides:
-        duration = min(nominal, beat_span)
-
-    shape = _shape(spec, overrides, rng, phase, horizon, settings, breath)
-    calib_t = np.arange(round(nominal * spec.sensor_rate) + 1) / spec.sensor_rate
-    source = calibrate(shape, calib_t, spec.peak_to_peak, spec.rms)
-    described = spec.description + (" [RR-driven]" if beat_span is not None else "")
-    return Scenario(name, source, sensor_rate, duration, described, spec)
+    return spec, duration, sensor_rate
 
 
 def _invivo(spec: ScenarioSpec, overrides: dict, rng: np.random.Generator, duration: float,
@@ -205,63 +205,74 @@ def _invivo(spec: ScenarioSpec, overrides: dict, rng: np.random.Generator, durat
 
 
 def _variability(spec: ScenarioSpec, overrides: dict) -> VariabilitySettings:
-    """The variability settings with the ``coupling``/``beat_gain_std`` overrides applied."""
-    default = VariabilitySettings()
-    if spec.hrv_band_powers is not None:
-        default = replace(default, band_powers=spec.hrv_band_powers)
-    value = overrides.get("variability", default if spec.variable else "clean")
-    if isinstance(value, str):
+    """The variability settings (the spec's own, or the ``variability`` override) with the
+    ``coupling``/``beat_gain_std`` overrides applied."""
+    value = overrides.get("variability", _OWN if spec.variable else "clean")
+    if value is _OWN:
+        bands = {} if spec.hrv_band_powers is None else {"band_powers": spec.hrv_band_powers}
+        value = VariabilitySettings(**bands)
+    elif isinstance(value, str):
         if value != "clean":
             raise ValueError(f"variability must be a VariabilitySettings or 'clean', got {value!r}")
         value = VariabilitySettings.clean()
     if not isinstance(value, VariabilitySettings):
         raise ValueError(f"variability must be a VariabilitySettings or 'clean', got {value!r}")
-    if spec.site == "mitral":
-        value = replace(value, coupling=0.0)
     changes = {k: float(overrides[k]) for k in ("coupling", "beat_gain_std") if k in overrides}
-    return replace(value, **changes)
+    if spec.site == "mitral":
+        changes = {"coupling": 0.0, **changes}
+    return replace(value, **changes) if changes else value
 
 
-def _phase_track(spec: ScenarioSpec, overrides: dict, rng: np.random.Generator,
-                 horizon: float, settings: VariabilitySettings,
-                 breath: PhaseTrack | None) -> tuple[PhaseTrack, float | None]:
-    """Heart phase for the scenario and, if driven by beat times, the time they span [s]."""
+def _beats(spec: ScenarioSpec, overrides: dict) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """The beat times [s] that drive the heart phase, if any (``beat_times``, ``rr`` with
+    ``rr_start``, ``record``, or the spec's own record), and the stroke gain of each of the
+    spec's record's beats (:func:`~sim.heart.arrhythmia.premature_stroke`; None otherwise)."""
     start = float(overrides.get("rr_start", 0.0))
-    beats = None
-    if spec.heart == "record" and not {"beat_times", "rr", "record"} & set(overrides):
-        times, _ = _spec_beats(spec)
-        track = PhaseTrack.from_beat_times(times)
-        return track, float(times[-1] - max(times[0], 0.0))
     if "beat_times" in overrides:
-        beats = np.asarray(overrides["beat_times"], dtype=float)
-    elif "rr" in overrides:
-        beats = beat_times_from_rr(overrides["rr"], start)
-    elif "record" in overrides:
+        return np.asarray(overrides["beat_times"], dtype=float), None
+    if "rr" in overrides:
+        return beat_times_from_rr(overrides["rr"], start), None
+    if "record" in overrides:
         raw = beat_times_from_annotations(Path(overrides["record"]))
-        beats = raw - raw[0] + start
+        return raw - raw[0] + start, None
+    if spec.heart != "record":
+        return None, None
+    times, premature = record_beats(SHARED_DATA / str(spec.record), spec.record_start,
+                                    spec.duration, spec.name)
+    return times, premature_stroke(times, premature)
+
+
+def _phase(spec: ScenarioSpec, overrides: dict, rng: np.random.Generator, horizon: float,
+           settings: VariabilitySettings, breath: PhaseTrack | None,
+           beats: np.ndarray | None) -> PhaseTrack:
+    """The heart phase: through the beat times ``beats``, else φ₀ ~ U(0, 1) plus the integral
+    of the constant rate or the staircase, with HRV when there is any and a breathing phase."""
     if beats is not None:
-        track = PhaseTrack.from_beat_times(beats)
-        return track, float(beats[-1] - max(beats[0], 0.0))
+        return PhaseTrack.from_beat_times(beats)
     phase0 = float(rng.random())
     constant = "heart_rate" in overrides or spec.heart == "constant"
+    staircase = overrides.get("staircase", StaircaseProfile())
     if constant:
         rate = float(spec.heart_rate)
         if not rate > 0:
             raise ValueError("heart_rate must be positive [Hz]")
         knots = (np.array([0.0, 1.0]), np.array([rate, rate]))
     else:
-        knots = overrides.get("staircase", StaircaseProfile()).knots(horizon)
+        knots = staircase.knots(horizon)
     if settings.hrv_cv > 0 and breath is not None:
-        return modulated_phase(rng, *knots, horizon, settings, breath, phase0), None
+        return modulated_phase(rng, *knots, horizon, settings, breath, phase0)
     if constant:
-        return constant_phase(float(knots[1][0]), phase0), None
-    return staircase_phase(overrides.get("staircase", StaircaseProfile()), horizon, phase0), None
+        return constant_phase(float(knots[1][0]), phase0)
+    return staircase_phase(staircase, horizon, phase0)
 
 
 def _shape(spec: ScenarioSpec, overrides: dict, rng: np.random.Generator, phase: PhaseTrack,
-           horizon: float, settings: VariabilitySettings,
-           breath: PhaseTrack | None) -> SyntheticHeartMotion:
-    """The uncalibrated motion for ``spec`` (unit-less shape, scaled later)."""
+           horizon: float, settings: VariabilitySettings, breath: PhaseTrack | None,
+           stroke: np.ndarray | None) -> SyntheticHeartMotion:
+    """The uncalibrated motion for ``spec`` (unit-less shape, scaled later): the site's beat
+    and breathing coefficients (the breathing's phase ψ drawn), then the variations of the
+    beats and breaths (:func:`~sim.heart.variability.variations`), each beat's gain times its
+    ``stroke`` (beat 0 the record's first)."""
     breathing_rate = float(overrides.get("breathing_rate", 1.0 / 6.0))
     with_breathing = bool(overrides.get("breathing", spec.site != "mitral"))
     if spec.site == "mitral":
@@ -284,65 +295,15 @@ def _shape(spec: ScenarioSpec, overrides: dict, rng: np.random.Generator, phase:
             breathing = np.zeros_like(breathing)
     first = int(np.floor(float(phase(-5.0))))
     last = int(np.ceil(float(phase(horizon + 5.0))))
-    if spec.heart == "record" and not {"beat_times", "rr", "record"} & set(overrides):
-        times, premature = _spec_beats(spec)
-        stroke = premature_stroke(times, premature)
-        motion = (_shape_clean if breath is None else _variable_shape)(
-            rng, phase, heart, breathing, breathing_rate, horizon, settings, breath, first,
-            last - first + 1)
+    heart_range = max(_range_of(c) for c in heart) if settings.drift_std > 0 else 0.0
+    drawn = variations(rng, settings, last - first + 1, heart.shape[0], breath, horizon,
+                       heart_range)
+    if stroke is not None:
         beat = np.arange(first, last + 1)
-        factor = stroke[np.clip(beat, 0, stroke.size - 1)][:, None]
-        return SyntheticHeartMotion(
-            phase, motion.heart, motion.breathing, breathing_rate, motion.coupling,
-            motion.beat_gains * factor, first, coupling_phase=motion.coupling_phase,
-            drift=motion.drift, **motion._variations())
-    if breath is None:  # the clean replica, drawn exactly as before the variability existed
-        return _shape_clean(rng, phase, heart, breathing, breathing_rate, horizon, settings,
-                            breath, first, last - first + 1)
-    return _variable_shape(rng, phase, heart, breathing, breathing_rate, horizon, settings,
-                           breath, first, last - first + 1)
-
-
-def _shape_clean(rng: np.random.Generator, phase: PhaseTrack, heart: np.ndarray,
-                 breathing: np.ndarray, breathing_rate: float, horizon: float,
-                 settings: VariabilitySettings, breath: PhaseTrack | None, first: int,
-                 n_beats: int) -> SyntheticHeartMotion:
-    """The periodic shape (independent beat gains, coupling at the mean breathing rate)."""
-    gains = draw_beat_gains(rng, n_beats, heart.shape[0], settings.beat_gain_std)
+        drawn["beat_gains"] = drawn["beat_gains"] * stroke[np.clip(beat, 0,
+                                                                   stroke.size - 1)][:, None]
     return SyntheticHeartMotion(phase, heart, breathing, breathing_rate, settings.coupling,
-                                gains, first, coupling_phase=2 * np.pi * rng.random())
-
-
-def _variable_shape(rng: np.random.Generator, phase: PhaseTrack, heart: np.ndarray,
-                    breathing: np.ndarray, breathing_rate: float, horizon: float,
-                    settings: VariabilitySettings, breath: PhaseTrack, first: int,
-                    n_beats: int) -> SyntheticHeartMotion:
-    """The shape with the mechanisms of :mod:`sim.heart.variability` (seeded by ``rng``)."""
-    dim = heart.shape[0]
-    rho = settings.beat_gain_correlation
-    gains = 1.0 + ar1(rng, n_beats, settings.beat_gain_std, rho, dim)
-    offsets = ar1(rng, n_beats, settings.beat_timing_std, rho)[:, 0]
-    first_breath = int(np.floor(float(breath(-5.0))))
-    n_breaths = int(np.ceil(float(breath(horizon + 5.0)))) - first_breath + 1
-    depths = 1.0 + settings.breath_depth_cv * np.clip(rng.standard_normal(n_breaths), -2.5, 2.5)
-    drift = None
-    if settings.drift_std > 0:
-        scale = settings.drift_std * max(_range_of(c) for c in heart)
-        drift = smooth_knots(*drift_knots(rng, horizon, dim, scale, settings.drift_cutoff))
-    return SyntheticHeartMotion(
-        phase, heart, breathing, breathing_rate, settings.coupling, gains, first,
-        coupling_phase=2 * np.pi * rng.random(),
-        breath_phase=breath if settings.coupling_follows_breath
-        or settings.breath_period_cv > 0 or settings.breath_depth_cv > 0 else None,
-        breath_depths=depths if settings.breath_depth_cv > 0 else None,
-        first_breath=first_breath,
-        beat_offsets=offsets if settings.beat_timing_std > 0 else None, drift=drift)
-
-
-def _spec_beats(spec: ScenarioSpec) -> tuple[np.ndarray, np.ndarray]:
-    """Beat times [s] from the spec's record (``record_start`` at t = 0) and premature mask."""
-    return record_beats(SHARED_DATA / str(spec.record), spec.record_start, spec.duration,
-                        spec.name)
+                                first_beat=first, **drawn)
 
 
 def _range_of(coef: np.ndarray) -> float:

@@ -159,6 +159,43 @@ def band_limited_noise(rng: np.random.Generator, n: int, rate: float,
     return (x - x.mean()) / std if std > 0 else x
 
 
+def variations(rng: np.random.Generator, settings: VariabilitySettings, n_beats: int, dim: int,
+               breath: PhaseTrack | None, horizon: float, heart_range: float) -> dict:
+    """The draws that make beats and breaths differ, in this order, as the keywords of
+    :class:`~sim.heart.motion.SyntheticHeartMotion` (``beat_gains`` for the ``n_beats``
+    beats, ``coupling_phase``, and with a breathing phase the others).
+
+    Without ``breath`` (the clean replica): independent gains g_i = 1 + σ ε_i, ε_i ~ N(0, 1)
+    clipped to ±3 (σ = ``beat_gain_std``), then ψ_κ ~ U(0, 2π). With ``breath`` (φ_r over
+    [−5 s, horizon + 5 s]): the gains 1 + s_i and timing offsets δ_i as AR(1) series
+    (:func:`ar1`, lag-one correlation ``beat_gain_correlation``), the depths
+    d_j = 1 + c_V ε_j (ε clipped to ±2.5) of breaths ⌊φ_r(−5)⌋ … ⌈φ_r(horizon + 5)⌉, the drift
+    (:func:`drift_knots`, ``drift_std`` × ``heart_range``, the heartbeat's peak-to-peak on its
+    main axis [m]), then ψ_κ.
+    """
+    if breath is None:
+        eps = np.clip(rng.standard_normal((n_beats, dim)), -3.0, 3.0)
+        return {"beat_gains": 1.0 + settings.beat_gain_std * eps,
+                "coupling_phase": 2 * np.pi * rng.random()}
+    rho = settings.beat_gain_correlation
+    gains = 1.0 + ar1(rng, n_beats, settings.beat_gain_std, rho, dim)
+    offsets = ar1(rng, n_beats, settings.beat_timing_std, rho)[:, 0]
+    first_breath = int(np.floor(float(breath(-5.0))))
+    n_breaths = int(np.ceil(float(breath(horizon + 5.0)))) - first_breath + 1
+    depths = 1.0 + settings.breath_depth_cv * np.clip(rng.standard_normal(n_breaths), -2.5, 2.5)
+    drift = None
+    if settings.drift_std > 0:
+        drift = smooth_knots(*drift_knots(rng, horizon, dim, settings.drift_std * heart_range,
+                                          settings.drift_cutoff))
+    follows = settings.coupling_follows_breath or settings.breath_period_cv > 0 \
+        or settings.breath_depth_cv > 0
+    return {"beat_gains": gains, "coupling_phase": 2 * np.pi * rng.random(),
+            "breath_phase": breath if follows else None,
+            "breath_depths": depths if settings.breath_depth_cv > 0 else None,
+            "first_breath": first_breath,
+            "beat_offsets": offsets if settings.beat_timing_std > 0 else None, "drift": drift}
+
+
 def ar1(rng: np.random.Generator, n: int, std: float, correlation: float,
         dim: int = 1) -> np.ndarray:
     """AR(1) series s_i = ρ s_{i−1} + σ√(1−ρ²) ε_i, stationary start, ε clipped to ±3: (n, dim)."""

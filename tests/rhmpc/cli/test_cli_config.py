@@ -9,10 +9,10 @@ import pytest
 
 from rhmpc.cli import main
 from rhmpc.cli.config import attribute_docs, summary, unit_of
-from rhmpc.cli.presets import PRESETS
 from rhmpc.control.reference import ReferenceSettings
 from rhmpc.experiment import RunConfig, load_config
 from rhmpc.experiment.config import SECTIONS
+from rhmpc.experiment.presets import PRESETS
 from sim.loop import LoopSettings
 
 

@@ -7,8 +7,8 @@ import pytest
 
 from rhmpc.cli import build_parser, main
 from rhmpc.cli.compare import configs
-from rhmpc.cli.presets import PRESETS
 from rhmpc.cli.simulate import config_from_args
+from rhmpc.experiment.presets import PRESETS
 from rhmpc.studies.paper import COLUMNS, TUNA2013, paper_table
 
 
