@@ -5,7 +5,7 @@ in-process simulation of the same settings for comparison, builds the controller
 (:mod:`.build`) and starts, on the run's clock (its epoch a moment ahead):
 
 - the **controller** (the exported C at 2 kHz: real time where permitted) and beside it the
-  **host probe** (:mod:`.host`),
+  **host probe** (:mod:`rhmpc.runtime.host`),
 - the **robot**, the **predictor** and the **sensor** (:mod:`.processes`), each a process of its
   own holding the run, on the other processors.
 
