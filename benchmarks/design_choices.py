@@ -5,9 +5,6 @@ alternative, on the same run.
   as a fixed floor (0.25 mm) and no gate, on the main job (sonomicrometer, cycle slips);
 * predictor clock: a 25-Hz recording with the predictor on each raw sample (``sensor``)
   against every 15 ticks on the 2-kHz stream (``downsample``);
-* the plant's dynamics kernel: ``plant.dynamics = "auto"`` (the compiled kernel,
-  ``sim/plant/chain.c``) against Pinocchio — wall time and the largest relative difference in
-  the metrics;
 * the exported controller: ``--controller c`` (the C that ``rhmpc export`` generates) against
   the Python controller it is generated from (where a C compiler is found).
 
@@ -81,21 +78,6 @@ def clock(duration: float) -> tuple[dict, str]:
             for k, v in runs.items()}, tab
 
 
-def plant(duration: float) -> tuple[dict, str]:
-    base = RunConfig(predictor="generalized", scenario="fixed-a2-top", seed=0).replace(
-        **{"loop.duration": duration, "loop.settling": min(20.0, duration / 3)})
-    native = run(base)
-    pin = run(base.replace(**{"plant.dynamics": "pinocchio"}))
-    diff = rel_diff(native, pin)
-    tab = R.table(["plant", "wall [s]", "RMS [mm]", "largest relative difference"], [
-        [f"`{native['plant_dynamics']}`", R.fmt(native["wall_s"], 2),
-         R.fmt(native["rms_error_mm"]), R.fmt(diff, 1, sci=True)],
-        ["`pinocchio`", R.fmt(pin["wall_s"], 2), R.fmt(pin["rms_error_mm"]), "reference"]])
-    return {"native": {m: native[m] for m in (*METRICS, "wall_s", "plant_dynamics")},
-            "pinocchio": {m: pin[m] for m in (*METRICS, "wall_s")}, "relative_difference": diff,
-            "wall_ratio": pin["wall_s"] / native["wall_s"]}, tab
-
-
 def controller(duration: float) -> tuple[dict | None, str | None]:
     base = RunConfig(predictor="generalized", scenario="fixed-a2-top", seed=0).replace(
         **{"loop.duration": duration, "loop.settling": min(20.0, duration / 3)})
@@ -123,7 +105,6 @@ def main() -> None:
     for name, fn, caption in (
             ("gate", lambda d: gate(max(d, 60.0)), "gate|Outlier gate, main job (60 s)"),
             ("clock", clock, "clock|Predictor clock, a 25-Hz recording (one-step)"),
-            ("plant", plant, "plant|The plant's compiled dynamics against Pinocchio, main job"),
             ("controller", controller,
              "controller|The exported controller (C) against the Python one, main job")):
         d, tab = fn(duration)

@@ -16,10 +16,12 @@ after (``--host-stalls``: a loop that only reads the clock; no tick that a stall
 shorter). Where no C compiler is found, this part is skipped and the record says why.
 
 Then the Python simulation's speed on the main job, ``rhmpc simulate --predictor generalized
---duration 60 --seed 2 --json``: the wall time per simulated second and the tick's parts (the
-controller's step, the reference's refreshes) in the gain tick of that run. That is how fast
-a study runs, not a real-time figure: the Python controller is the reference implementation.
-Writes ``docs/results/exported_tick``.
+--duration 60 --seed 2 --json``, on the ideal plant and on the hardware-like one (``--set
+plant.model="hardware"``, all else the same): the wall time per simulated second and the tick's
+parts (the controller's step, the reference's refreshes) in the gain tick of that run, and the
+plant's own tick (``encoders()`` and ``step(τ)``, the dynamics kernel and what composes it)
+timed here beside g. That is how fast a study runs, not a real-time figure: the Python
+controller is the reference implementation. Writes ``docs/results/exported_tick``.
 
     python benchmarks/exported_tick.py [--quick]
 """
@@ -68,16 +70,56 @@ def exported(ticks: int, stalls: float) -> tuple[dict, str | None]:
     return runs, None
 
 
+#: The plants of the simulation's runs: label → ``rhmpc simulate`` options.
+PLANTS = {"ideal": (), "hardware-like": ("--set", 'plant.model="hardware"')}
+
+
 def simulation(duration: float) -> tuple[dict | None, str]:
-    """The main job's document, reduced to its speed and the tick's parts."""
-    doc, command = cli("simulate", "--predictor", "generalized", "--duration", f"{duration:g}",
-                       "--seed", "2")
-    if doc is None:
-        return None, command
-    keep = ("gain_tick_us", "tick_us", "tick_parts_us", "tick_ratio_to_gain",
-            "tick_parts_ratio_to_gain", "wall_per_simulated_s_g", "tick_per_simulated_s_g",
-            "real_time_factor", "wall_s", "rms_error_mm", "plant_dynamics")
-    return {"command": command, "duration_s": duration, **{k: doc[k] for k in keep}}, command
+    """The main job's documents on each plant (label → its speed and the tick's parts)."""
+    out = {}
+    for label, options in PLANTS.items():
+        doc, command = cli("simulate", "--predictor", "generalized", "--duration",
+                           f"{duration:g}", "--seed", "2", *options)
+        if doc is None:
+            return None, command
+        keep = ("gain_tick_us", "tick_us", "tick_parts_us", "tick_ratio_to_gain",
+                "tick_parts_ratio_to_gain", "wall_per_simulated_s_g", "tick_per_simulated_s_g",
+                "real_time_factor", "wall_s", "rms_error_mm")
+        out[label] = {"command": command, "duration_s": duration,
+                      **{k: doc[k] for k in keep}, "plant_tick": plant_tick(label)}
+    return out, ""
+
+
+def plant_tick(label: str, ticks: int = 4000) -> dict:
+    """The plant's tick alone (``encoders()`` then ``step(τ)``, τ holding the arm against
+    gravity plus a 10-Hz swing) and the gain tick g, interleaved in this process: p50 [µs] of
+    each and their ratio."""
+    import time
+
+    import numpy as np
+
+    from rhmpc.experiment import RunConfig, build_run
+    from rhmpc.studies.yardstick import GainTick
+
+    config = RunConfig(predictor="generalized", seed=2)
+    if label != "ideal":
+        config = config.replace(**{"plant.model": "hardware"})
+    run = build_run(config)
+    plant, gain = run.plant, GainTick(run.controller.mpc)
+    hold = run.controller.cancellation.torque(run.robot.q0, np.zeros(3))
+    x, ref, u = np.zeros(6), np.tile(run.arm.y0, (run.controller.N, 1)), np.zeros(3)
+    plant_ns, gain_ns, clock = [], [], time.perf_counter_ns
+    for i in range(ticks):
+        tau = hold + 0.02 * np.sin(2 * np.pi * 10 * i * run.arm.Ts)
+        t0 = clock()
+        plant.encoders()
+        plant.step(tau)
+        t1 = clock()
+        gain(x, ref, u)
+        plant_ns.append(t1 - t0)
+        gain_ns.append(clock() - t1)
+    p, g = np.median(plant_ns) / 1e3, np.median(gain_ns) / 1e3
+    return {"p50_us": p, "gain_tick_us": g, "ratio_to_gain": p / g}
 
 
 def exported_tables(runs: dict) -> dict[str, str]:
@@ -110,16 +152,20 @@ def exported_tables(runs: dict) -> dict[str, str]:
                      *(f"fallback: {k}" for k in FALLBACKS), "solver failures"], levels)}
 
 
-def simulation_table(d: dict) -> str:
-    """The Python simulation's speed and its tick's parts."""
-    tick, parts = d["tick_us"], d["tick_parts_us"]
+def simulation_table(runs: dict) -> str:
+    """The Python simulation's speed on each plant, its tick's parts and the plant's tick."""
+    rows = []
+    for label, d in runs.items():
+        tick, parts, plant = d["tick_us"], d["tick_parts_us"], d["plant_tick"]
+        rows.append([label, R.fmt(d["duration_s"], 0), R.fmt(d["gain_tick_us"]["p50"], 2),
+                     R.fmt(d["wall_per_simulated_s_g"], 0), R.fmt(d["real_time_factor"], 1),
+                     R.fmt(tick["p50"], 1), R.fmt(parts["step"]["p99"], 1),
+                     R.fmt(parts["refresh"]["p99"], 1), R.fmt(plant["p50_us"], 1),
+                     R.fmt(plant["ratio_to_gain"], 1)])
     return R.table(
-        ["simulated [s]", "g [µs]", "wall per simulated s [g]", "× real time",
-         "tick p50 [µs]", "tick p99 [µs]", "step p99 [µs]", "refresh p99 [µs]"],
-        [[R.fmt(d["duration_s"], 0), R.fmt(d["gain_tick_us"]["p50"], 2),
-          R.fmt(d["wall_per_simulated_s_g"], 0), R.fmt(d["real_time_factor"], 1),
-          R.fmt(tick["p50"], 1), R.fmt(tick["p99"], 1), R.fmt(parts["step"]["p99"], 1),
-          R.fmt(parts["refresh"]["p99"], 1)]])
+        ["plant", "simulated [s]", "g [µs]", "wall per simulated s [g]", "× real time",
+         "tick p50 [µs]", "step p99 [µs]", "refresh p99 [µs]", "plant tick p50 [µs]",
+         "plant tick p50 [g]"], rows)
 
 
 def main() -> None:
@@ -136,10 +182,11 @@ def main() -> None:
     tables["simulation|The Python simulation's speed on the main job (not a real-time figure)"] \
         = simulation_table(sim)
     simulation_note = (
-        "The simulation's row is the Python reference implementation running a study (the "
-        "generalized predictor on fixed-a2-top, PHANToM, sonomicrometer): its step is the "
-        "controller's (observer, MPC, cancellation), its refresh the reference's (gate, "
-        "predictor, interpolation).")
+        "The simulation's rows are the Python reference implementation running a study (the "
+        "generalized predictor on fixed-a2-top, PHANToM, sonomicrometer) on each plant: its "
+        "step is the controller's (observer, MPC, cancellation), its refresh the reference's "
+        "(gate, predictor, interpolation); the plant's tick (encoders and step, the dynamics "
+        "kernel and what composes it) is timed beside g in the benchmark's own process.")
     if runs:
         predictor = next(iter(runs.values()))["exported_predictor"]
         notes = ("The exported controller runs in a closed loop of its own on the linear "

@@ -15,8 +15,8 @@ import argparse
 
 import _results as R
 
-from rhmpc.control.yardstick import GainTick
 from rhmpc.experiment import RunConfig, run_experiment
+from rhmpc.studies.yardstick import GainTick
 
 PREDICTORS = ("exact", "one-step", "generalized", "ekf", "hold")
 FIGURE = R.ROOT / "docs" / "_static" / "tracking-run.png"

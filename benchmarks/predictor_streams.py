@@ -3,7 +3,8 @@
 Reproduces the predictor-contract check's stream in-process (scenario and sensor seed
 ``--seed``, 60 s, every second sample of the 257 Hz sonomicrometer, error against the
 measured sample ``z[n+3]``; first 10 s not scored) and also scores against the true motion.
-Heart-rate tracking of ekf/wflc (``sim.loop.metrics.HeartRateScore``, from t = 0) is reported too.
+Heart-rate tracking of ekf/wflc (``rhmpc.experiment.monitor.HeartRateScore``, from t = 0)
+is reported too.
 
     .venv/bin/python benchmarks/predictor_streams.py [--clean] [--set wflc:phase_gain=0.0 ...]
 """
@@ -27,8 +28,8 @@ NAMES = ("hold", "ekf", "dual-ekf", "ar", "fading-ar", "wflc", "one-step", "gene
 def one(job):
     name, clean, seed, sets, names, rr, init = job
     from predictors import make_predictor
+    from rhmpc.experiment.monitor import HeartRateScore
     from sim.heart.scenarios import make_scenario
-    from sim.loop.metrics import HeartRateScore
     from sim.sensors import sensor_from_name
 
     kw = {"duration": 60.0}

@@ -17,10 +17,11 @@ simulated time, runs in about that).
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass
 
-__all__ = ["BOUNDS", "FILE_BYTES", "MEMORY_BUDGET", "TIME_BUDGET", "Bound", "check",
-           "largest", "size_bytes", "time_span"]
+__all__ = ["BOUNDS", "FILE_BYTES", "MEMORY_BUDGET", "TIME_BUDGET", "Bound", "available_memory",
+           "check", "largest", "size_bytes", "time_span"]
 
 #: Memory one command may take [B]: 2 GiB.
 MEMORY_BUDGET = 2 * 2**30
@@ -32,13 +33,14 @@ BUDGETS = "2 GiB of memory and a day of computing"
 MiB = 2**20
 #: The largest file of each kind that is read [B]. A run's settings (TOML) and a sweep's
 #: specification are hand-written, a few kB; a results file holds a line of about 2 kB per
-#: evaluation (500 000 evaluations in 1 GiB); a recording of 10 h at 1 kHz as CSV is about
-#: 1.3 GB; a model holds at most ``MEMORY_BUDGET / 2`` of weights (its copy while it loads).
+#: evaluation, about 10 kB once read (128 000 evaluations in 256 MiB); a recording of 10 h at
+#: 1 kHz as CSV is about 1.3 GB (its samples are bounded by ``BOUNDS["samples"]``); a model holds
+#: at most half the memory budget of weights (its copy while it loads).
 FILE_BYTES: dict[str, int] = {
     "file": 1024 * MiB,
     "config": 4 * MiB,
     "tune spec": 4 * MiB,
-    "results file": 1024 * MiB,
+    "results file": 256 * MiB,
     "recording": 2048 * MiB,
     "model": 1024 * MiB,
     "model header": 4 * MiB,
@@ -159,3 +161,23 @@ def check(name: str, value: float, label: str | None = None, memory_scale: float
     """Refuse ``value`` of count ``name`` when it does not fit (:meth:`Bound.check`); the
     message names ``label`` (the option or setting, default ``name``)."""
     BOUNDS[name].check(value, label or name, memory_scale, time_scale, workers)
+
+
+#: The memory assumed available where the system does not say [B].
+FALLBACK_MEMORY = 8e9
+
+
+def available_memory() -> float:
+    """The memory available to a new allocation [B]: Linux's MemAvailable, else the free pages,
+    else :data:`FALLBACK_MEMORY`."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return float(line.split()[1]) * 1024.0
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return float(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+    except (AttributeError, OSError, ValueError):
+        return FALLBACK_MEMORY

@@ -8,7 +8,7 @@ on the same grid::
     p.predict(steps)     # (steps, d): ẑ_{n+1} … ẑ_{n+steps}
     p.reset()            # forget everything learnt online
 
-Conventions (see ``../shared/DESIGN.md``):
+Conventions:
 
 * The dimension ``d`` is taken from the first valid sample, or from the ``dim``
   setting.  The loop feeds 3-D samples in metres, the Yuen studies 1-D.

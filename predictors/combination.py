@@ -23,19 +23,23 @@ misses.
 Before the first scored miss the members count equally, or by their prior errors: a member
 fitted before the run brings the RMS miss of its validation (``validation_rms``), an online
 member its own running one, each worth ``prior_seconds`` of samples; a member without one
-is taken to be as bad as the worst that has one.
+is taken to be as bad as the worst that has one. A member fitted before the run that has not
+been fitted (there was nothing to fit it on) takes no part: the others run and share the
+weights.
 """
 
 from __future__ import annotations
 
 import math
 import time
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from predictors.base import Predictor, PredictorSettings
+from predictors.learned.fitted import FitWarning
 
 __all__ = ["Combination", "CombinationSettings", "MemberTime"]
 
@@ -65,6 +69,10 @@ class CombinationSettings(PredictorSettings):
         The samples before this one (counted from 0) are not scored: where members fitted
         before the run were fitted on them, their misses there are no forecast errors. The
         priors are taken at it.
+    models : tuple of str
+        Saved models (``rhmpc predict --save-models``) of members fitted before the run, each
+        loaded into the member of its kind (``predictors.registry.load_model``); those without
+        one are fitted by :meth:`Combination.fit`.
     """
 
     members: tuple[str, ...] = ()
@@ -73,6 +81,7 @@ class CombinationSettings(PredictorSettings):
     exponent: float = 2.0
     prior_seconds: float = 2.0
     score_from: int = 0
+    models: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -87,6 +96,10 @@ class CombinationSettings(PredictorSettings):
             raise ValueError(f"exponent must be >= 0, got {self.exponent!r}")
         if not self.prior_seconds >= 0.0:
             raise ValueError(f"prior_seconds must be >= 0, got {self.prior_seconds!r}")
+        if isinstance(self.models, list):  # as TOML reads it
+            object.__setattr__(self, "models", tuple(self.models))
+        if not all(isinstance(f, str) for f in self.models):
+            raise ValueError(f"models must be file names, got {self.models!r}")
         if int(self.score_from) != self.score_from or self.score_from < 0:
             raise ValueError(f"score_from must be an integer >= 0, got {self.score_from!r}")
 
@@ -133,11 +146,17 @@ class Combination(Predictor):
         self.settings = replace(self.settings, score_from=int(samples))
 
     def fit(self, series, progress=None) -> Combination:
-        """Fit the members that are fitted before the run (``fit``) to ``series``."""
+        """Fit the members that are fitted before the run (``fit``) and not yet fitted (nor
+        loaded from a file) to ``series``. A member that cannot be fitted on them (too few
+        samples for its model) takes no part, with a :class:`FitWarning` naming it."""
         for name, m in zip(self.settings.members, self.members, strict=True):
-            if hasattr(m, "fit"):
-                m.fit(series, None if progress is None else
-                      (lambda text, name=name: progress(f"{name}: {text}")))
+            if hasattr(m, "fit") and not m.fitted:
+                try:
+                    m.fit(series, None if progress is None else
+                          (lambda text, name=name: progress(f"{name}: {text}")))
+                except ValueError as exc:
+                    warnings.warn(f"the combination runs without {name}: {exc}", FitWarning,
+                                  stacklevel=2)
         self.reset()
         return self
 
@@ -162,13 +181,19 @@ class Combination(Predictor):
         self._count = np.zeros(L)  # discounted Σ 1
         self._gamma = max(0.0, 1.0 - self.dt / self.settings.memory)
         self._primed = False
+        #: the members that run: all but those fitted before the run and not fitted
+        self._active = np.array([getattr(m, "fitted", True) for m in self.members])
+        if not self._active.any():
+            raise RuntimeError("no member of the combination can run: every one must be "
+                               "fitted first (fit(series))")
 
     def _step(self, z: np.ndarray | None) -> np.ndarray:
         """Every member's update with ``z`` (None: missing) and its forecast of leads 1 … L,
         (K, L, d), each member's pair timed (:attr:`member_time`)."""
         others, L = self.others, self.settings.leads
         fc = np.full((len(self.members), L, self.d), np.nan)
-        for i, m in enumerate(self.members):
+        for i in np.flatnonzero(self._active):
+            m = self.members[i]
             tic = time.perf_counter_ns()
             m.update(z, others)
             try:
@@ -194,7 +219,7 @@ class Combination(Predictor):
         slot = self.n % self.settings.leads
         self._issued[slot] = self.n
         self._fc[slot] = fc
-        self.ready = bool(np.isfinite(fc).all())
+        self.ready = bool(np.isfinite(fc[self._active]).all())
 
     def _score(self, z: np.ndarray) -> None:
         """The misses of the forecasts that reach sample n, into the discounted sums."""
@@ -205,7 +230,7 @@ class Combination(Predictor):
                 continue
             miss = self._fc[slot, :, k - 1] - z
             e2 = np.einsum("ij,ij->i", miss, miss)
-            if not np.isfinite(e2).all():
+            if not np.isfinite(e2[self._active]).all():
                 continue
             self._sq[:, k - 1] = g * self._sq[:, k - 1] + e2
             self._count[k - 1] = g * self._count[k - 1] + 1.0
@@ -230,24 +255,27 @@ class Combination(Predictor):
     def _weights(self) -> np.ndarray:
         """(K, L) w_{m,k} ∝ e_{m,k}^{−κ}; equal where nothing is scored yet (and among the
         members that have not missed at all, if some have not)."""
+        active = self._active
         K, L = self._sq.shape
-        w = np.full((K, L), 1.0 / K)
+        w = np.zeros((K, L))
+        w[active] = 1.0 / active.sum()
         for k in np.flatnonzero(self._count > 0.0):
-            e = self._sq[:, k] / self._count[k]
+            e = self._sq[active, k] / self._count[k]
             best = e.min()
             u = (e / best) ** -self.settings.exponent if best > 0.0 else (e == 0.0) * 1.0
-            w[:, k] = u / u.sum()
+            w[active, k] = u / u.sum()
         return w
 
     def _predict(self, steps: int) -> np.ndarray:
         L = self.settings.leads
         slot = self.n % L
+        active = self._active
         if steps <= L and self._issued[slot] == self.n:
-            f = self._fc[slot, :, :steps]
+            f = self._fc[slot, active, :steps]
         else:
-            f = np.stack([m.predict(steps) for m in self.members])
-        w = self._weights()
-        w = w[:, np.minimum(np.arange(steps), L - 1)]
+            f = np.stack([m.predict(steps) for m, a in zip(self.members, active, strict=True)
+                          if a])
+        w = self._weights()[active][:, np.minimum(np.arange(steps), L - 1)]
         return np.einsum("ik,ikj->kj", w, f)
 
 

@@ -13,8 +13,8 @@ the phases held outside the state Richa's identity transition is recovered.
 
 Parameters (Richa §I-D): H_r = 3, H_c = 5; process variances 1e-5 mm² (respiratory
 coefficients), 1e-6 mm² (offset), 1e-5 mm² (cardiac coefficients), 1e-8 (rad/sample)²
-(frequencies), R = 0.1 mm², all per sample at Richa's 83.3 Hz; stored in SI (m², (rad/s)²:
-1e-8·83.3² = 6.94e-5) and rescaled to the predictor's rate by ``dt · q_rate_hz``.  The initial
+(frequencies), R = 0.1 mm², all per sample at Richa's ``83.3`` Hz; stored in SI (m², (rad/s)²:
+``1e-8·83.3² = 6.94e-5``) and rescaled to the predictor's rate by ``dt · q_rate_hz``.  The initial
 covariance is not given by Richa: ``p0_coefficient``, ``p0_offset``, ``p0_omega_*``.  The
 papers' setting is the parameter set ``richa2010`` (zero start, ``init_seconds=None``).
 
@@ -22,13 +22,10 @@ Initialisation (``init_seconds`` = 10 s, as Yuen's EKF,
 :func:`predictors.fourier_init.initial_dual_state`): ω̂_r by FFT in ``respiratory_band_hz``,
 then (the respiratory fit removed) ω̂_c in ``cardiac_band_hz``, and c_r, a, b, d, e by least
 squares with θ_r = θ_c = 0 at the newest sample; the forecast holds the newest sample until
-then.  Richa's zero start fails on 3-D motion with breathing: over the first breath the
-respiratory sin/cos are nearly collinear with the offset, the coefficients grow to ±10–18 mm
-in opposite signs and ω̂_r is dragged to 40 breaths/min, ω̂_c to its clamp within 4 s
-(varying-a1-top, varying-a3-top).  The respiratory coefficients and the offset then start at
-the fit's least-squares covariance s_a²·(ΦᵀΦ)⁻¹, the cardiac ones at ``p0_coefficient``: with
-flat priors the first innovations re-fitted the breathing (9–14 mm coefficient moves within 2 s
-on varying-a1-side) and ω̂_c ran to its clamp.
+then (over the first breath of 3-D motion with breathing, the respiratory sin/cos are nearly
+collinear with the offset, which a zero start cannot separate).  The respiratory coefficients
+and the offset then start at the fit's least-squares covariance s_a²·(ΦᵀΦ)⁻¹, the cardiac ones
+at ``p0_coefficient`` (flat priors would let the first innovations re-fit the breathing).
 
 Outliers (as :mod:`predictors.ekf_fourier`): a sample whose normalised innovation squared
 exceeds the χ²_d quantile ``gate_probability`` is not used (``innovation_rejected``); after
@@ -36,10 +33,9 @@ exceeds the χ²_d quantile ``gate_probability`` is not used (``innovation_rejec
 
 Re-fit on lost lock: the last ``init_seconds`` of samples are kept; when ω̂_c or ω̂_r leaves the
 band the initialisation's FFT searches (36–180 beats/min, 6–30 breaths/min), the state and
-covariance are fitted again from that window (``lock_refit``).  Richa observe that an
-arrhythmia "is interpreted as a drastic phase change" (§II-C); measured on MIT-BIH record 100
-with atrial premature beats, the re-fit takes the 3-step RMS from 2.4–3.5 × hold's to
-0.49–0.59 ×; a locked filter is unchanged. A re-fit costs a window's FFT searches and fits (a
+covariance are fitted again from that window (``lock_refit``); Richa observe that an
+arrhythmia "is interpreted as a drastic phase change" (§II-C). A locked filter is unchanged.
+A re-fit costs a window's FFT searches and fits (a
 few milliseconds), so a lock lost again soon after is not re-fitted at once: after k re-fits
 in a row the next waits min(2^(k−1) beats, the window) of samples (binary exponential
 back-off; the lost samples are counted ``refit_deferred``, the rates meanwhile clamped to the
@@ -52,10 +48,7 @@ over the last beat less H P⁻ Hᵀ (``adaptive_r``, :mod:`predictors.nonperiodi
 of that residual with the model's increments as input adds to the forecast
 (``residual_order``); the offset and cardiac series are fitted on the window's last 3 beats
 (``fit_beats``); ω̂_c leaving [ω₀/1.5, 1.5 ω₀] of the fitted ω₀ is a lost lock (``rate_band``).
-Measured (25 Hz, 60 s, seed 2; ratio to hold's error at 1 / 3 / 5 samples): ``invivo-video``
-1.36 / 0.94 / 0.77 with ``fitted``, 0.68 / 0.72 / 0.64 with ``adaptive`` (seeds 1–7: at most
-0.93 at 3 samples); the six replicas 0.17–0.21 / 0.10–0.13 / 0.10–0.13 (``fitted`` 0.19–0.25 /
-0.11–0.14 / 0.10–0.14).
+``benchmarks/invivo_regime.py`` measures ``adaptive`` against ``fitted`` (without these parts).
 
 Cost per update: O(n²·d) with n = d(2H_r + 2H_c + 1) + 4 (55 for d = 3).
 """

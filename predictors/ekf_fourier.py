@@ -11,9 +11,7 @@ Breathing (``breathing_harmonics`` = H_b > 0; an extension for 3-D motion with
 breathing, Richa et al. 2010 eq. 1): each axis adds Σ_{h=1}^{H_b} a_{a,h} sin hθ_b +
 b_{a,h} cos hθ_b with one respiratory rate ω_b and accumulated phase θ_b (θ_b += ω_bΔt)
 shared by the axes; a, b, ω_b are random walks with Richa's process variances, appended
-to the state as [a_{a,1..H_b}, b_{a,1..H_b} (for each a), ω_b, θ_b].  Without it the
-offset random walk cannot follow breathing, whose residual pulls ω̂ to the low end of
-its range (measured: on fixed-a2-top ω̂ sat at its 0.5 Hz clamp on 42 % of updates).
+to the state as [a_{a,1..H_b}, b_{a,1..H_b} (for each a), ω_b, θ_b].
 
 Discrete model x⁺ = F x + μ, F = I except ∂θ_{a,i}/∂ω = iΔt,
 μ ~ N(0, Q), z = h(x) + ν, ν ~ N(0, σ_R² I).  EKF recursion (Yuen, §III-A):
@@ -31,9 +29,8 @@ forecast holds the newest sample.  Forecast k steps: θ + iω̂kΔt in eq. (2).
 
 Outliers: a sample whose normalised innovation squared νᵀS⁻¹ν exceeds the χ²_d quantile
 ``gate_probability`` is not used (the filter runs open-loop through it, counted
-``innovation_rejected``) — one 5 mm sonomicrometry echo outlier otherwise pulls ω̂ out of
-lock; after ``gate_seconds`` of consecutive rejections samples are used again, so a real
-change of the motion is followed.
+``innovation_rejected``); after ``gate_seconds`` of consecutive rejections samples are used
+again, so a real change of the motion is followed.
 
 Re-fit on lost lock (as :mod:`predictors.ekf_dual_fourier`): the last
 ``init_seconds`` of samples are kept (:class:`predictors.fourier_init.FitWindow`); when after
@@ -42,8 +39,7 @@ no heart the filter models) or ω̂ was clamped, state and covariance are re-fit
 window exactly as at the start (counted ``lock_refit``; needs ≥ 80 % finite samples); so is a
 lock on a subharmonic (ω̂ ≈ ω/2, inside the band): the second harmonic's power Σ_a r_{a,2}²
 exceeds the fundamental's, which the fit chose as the largest peak (judged once the window
-holds only samples since the last fit; locked, P₂/P₁ = 0.38–0.50 on the replicas, 6–150 on
-ω/2).  No new parameter; a locked filter is unchanged (its forecasts bit-identical).
+holds only samples since the last fit).  A locked filter is unchanged.
 
 Numerics: P is symmetrised each step; phases are wrapped to (−π, π]; ω̂ is clamped
 to ``omega_limits_hz`` (counted ``omega_clamped``); a non-finite or non-positive
@@ -52,41 +48,22 @@ Cost per update: O(n²) for the prediction (F is identity plus two columns) and
 O(n² d) for the correction, n = d(2m + 1) + 1 + 2dH_b + 2 (48 for d = 3, m = 5, H_b = 2;
 34 without breathing).
 
-Motion that is not periodic (``adaptive``, the default parameter set).  In vivo, beats differ
-in shape, amplitude and timing; with R = σ_R² the filter explains that variation as changes
-of phase, rate and amplitude and forecasts from a state that chases the newest sample
-(``invivo-video``, 25 Hz: 1.36 / 1.06 / 1.01 × hold's error at 1 / 3 / 5 samples).  Five
-changes, each measured on that regime and the six replicas (25 Hz, 60 s, seed 2; ratios to
-hold at 1 / 3 / 5 samples):
+Motion that is not periodic (``adaptive``, the default parameter set: ``tuna2013-hrv`` with
+these parts):
 
 * ``adaptive_r``: R follows the long-run variance of the current state's residual over the
-  last beat, minus the model's share H P⁻ Hᵀ (:mod:`predictors.nonperiodic`).  Alone it makes
-  the state stiff (R̂ 1–2 mm in vivo, σ_R on the replicas) but not the forecast: 2.16 / 1.16 /
-  0.95 in vivo.
+  last beat, minus the model's share H P⁻ Hᵀ (:mod:`predictors.nonperiodic`);
 * ``residual_order`` = 16: an AR model of the residual, with the model's increments as input
-  (:mod:`predictors.residual`), added to the forecast: it starts from the newest sample.
-  With ``adaptive_r``: 0.72 / 0.87 / 0.90 in vivo; alone 1.01 / 1.12 / 1.03 (a chasing state's
-  residual has no course to follow).
+  (:mod:`predictors.residual`), added to the forecast, which starts from the newest sample;
 * ``p0_from_fit``: P(T|T) of c, r, θ and of the breathing coefficients is the least-squares
   covariance of the window fit, s²_lr·(AᵀA)⁻¹ (per axis; r and θ by first-order propagation
-  from a, b), with s²_lr the long-run variance of the fit's residual; σ_ω² stays Yuen's.  A fit
-  that explains little starts uncertain and converges quickly: 0.73 / 0.76 / 0.69 in vivo.
+  from a, b), s²_lr the long-run variance of the fit's residual; σ_ω² stays Yuen's;
 * ``fit_beats`` = 3: c, r, θ are fitted again on the window's last 3 beats (its breathing fit
-  removed), which the heart-rate variability of a 10-s window otherwise smears (2.7 mm RMS
-  residual on the last beat of varying-a1-side just after the fit, R̂ rising to 7 mm).  With
-  the two above it keeps every replica at or below the ``tuna2013-hrv`` errors.
+  removed);
+* ``rate_band`` = 1.5: ω̂ leaving [ω₀/1.5, 1.5 ω₀] of the fitted ω₀ is a lost lock too.
 
-* ``rate_band`` = 1.5: R̂ makes the state slow to correct a wrong start: a fit 13 bpm low
-  (fixed-a1-top, seed 7, 128 Hz) drifted to 47 bpm within 9 s with R̂ at 3–20 mm, until the
-  half-rate rule re-fitted.  ω̂ leaving [ω₀/1.5, 1.5 ω₀] of the fitted ω₀ is a lost lock too
-  (re-fit 1.7 s after that start).  1.5 because ω̂ smooths the beat rate, which swings
-  ×0.77–×1.67 about its mean in the in-vivo recording; 1.3 re-fits through the pacing
-  staircase (varying-a3-top 0.29 / 0.16 / 0.15 instead of 0.21 / 0.12 / 0.12).
-
-All five: 0.76 / 0.81 / 0.75 in vivo (seeds 1–7: at most 0.84 at 3 samples); fixed-a1-top
-0.30 / 0.17 / 0.15 (``tuna2013-hrv`` 0.63 / 0.34 / 0.27), the other replicas 0.19–0.25 /
-0.11–0.15 / 0.11–0.14 (0.22–0.37 / 0.12–0.23 / 0.12–0.21); the 128 Hz sonomicrometry stream
-of fixed-a2-top, 3 samples: 0.33 (0.41).
+Each part's effect is measured by ``benchmarks/invivo_regime.py``
+(``docs/validation/predictors.md``).
 
 Units: Q, σ_R and σ₁² are given in SI (the papers give mm, mm²; converted here),
 per sample at the predictor's own rate as in the papers.

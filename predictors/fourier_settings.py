@@ -104,10 +104,11 @@ class EKFSettings(PredictorSettings):
     breathing_band_hz : tuple of float
         Respiratory band [Hz] (6–30 breaths/min): FFT search and clamp of ω̂_b.
     q_breathing : float
-        Process noise of the respiratory coefficients [m² per sample at 83.3 Hz]
+        Process noise of the respiratory coefficients [m² per sample at Richa's ``83.3`` Hz]
         (Richa §I-D: 1e-5 mm²).
     q_omega_breathing : float
-        Process noise of ω_b [(rad/s)² per sample at 83.3 Hz] (Richa: 1e-8 (rad/sample)²).
+        Process noise of ω_b [(rad/s)² per sample at Richa's ``83.3`` Hz] (Richa: 1e-8
+        (rad/sample)²).
     q_omega_per_second : float or None
         Process noise intensity of ω [(rad/s)² per second]; if given it replaces
         ``q_omega`` by ``q_omega_per_second · Δt`` (rate-independent).  ``tuna2013-hrv``
@@ -116,7 +117,7 @@ class EKFSettings(PredictorSettings):
         Sample rate at which q, q_phase, q_omega were tuned [Hz].  ``None``: they are
         per sample at the predictor's own rate.  Otherwise they are rescaled by
         ``dt · q_rate_hz`` so that the random walks diffuse as fast per second as in
-        the paper (Yuen tuned at 28 Hz; used at 133 Hz unscaled they are 4.75× looser).
+        the paper (Yuen's are per sample at 28 Hz).
     adaptive_r : bool
         R follows the residual of the current state over the last beat (covariance matching
         with the residual's long-run variance, :mod:`predictors.nonperiodic`); σ_R² is its
@@ -255,11 +256,10 @@ class DualEKFSettings(PredictorSettings):
         Process variance of each frequency [(rad/s)² per sample at ``q_rate_hz``].
     q_omega_respiratory : float or None
         Process variance of ω_r alone [(rad/s)² per sample at ``q_rate_hz``]; ``None``:
-        ``q_omega`` (Richa).  Default 1e-10 (rad/sample)² at 83.3 Hz, 1 % of Richa's: a
-        ventilator holds the rate constant, so ω̂_r need only converge from the
+        ``q_omega`` (Richa).  Default 1e-10 (rad/sample)² at ``q_rate_hz``, 1 % of Richa's:
+        a ventilator holds the rate constant, so ω̂_r need only converge from the
         initialisation (prior ``p0_omega_respiratory``); the walk spreads by 0.6
-        breaths/min in a minute.  With Richa's value ω̂_r wanders to 1–6 breaths/min on
-        varying-a3-top (clamped 430 times).
+        breaths/min in a minute.
     q_omega_cardiac_per_second : float or None
         Process noise intensity of ω_c [(rad/s)² per second], replacing ``q_omega`` for
         ω_c; ``None``: ``q_omega`` (Richa).  Default: heart-rate variability,
@@ -271,14 +271,7 @@ class DualEKFSettings(PredictorSettings):
         coordinates: d_h sin hθ + e_h cos hθ = r_h sin(hθ + φ_h), a phase step δ moves
         (d_h, e_h) by δ·(−e_h, d_h), so each axis's (d_h, e_h) block of P gains
         q_φΔt·[[e_h², −d_he_h], [−d_he_h, d_h²]] per sample.  Off by default; Tuna 2013
-        §VIII-C's 1e-3 rad² per 133 Hz sample (0.133 rad²/s) follows atrial premature beats
-        better (record 100 from 150 s: 3-step RMS 0.58–0.74 instead of 0.79–0.96 mm on the
-        a1 replicas, hold 0.84–0.95) but costs 11–18 % on the variable replicas (0.38
-        instead of 0.32 mm on fixed-a1-top), and from 1500 s (one premature beat at 18.4 s,
-        30 s at 133 Hz) it is mixed: 0.83–1.32 × hold's, a re-fit on all six, against
-        0.72–1.66 × and two re-fits without.  Yuen 2008's 1e-4 per 28 Hz sample
-        (2.8e-3 rad²/s): +1–4 % on the variable replicas and worse on premature beats
-        (0.94–1.27 mm from 150 s).
+        §VIII-C gives 1e-3 rad² per 133-Hz sample, Yuen 2008 1e-4 per 28-Hz sample.
     r : float
         Measurement variance per axis [m²].
     p0_coefficient : float
@@ -292,7 +285,8 @@ class DualEKFSettings(PredictorSettings):
         Initial variances of the two frequencies [(rad/s)²]: (2π·0.01 Hz)² and (2π·0.05 Hz)²;
         a loose respiratory prior lets ω_r slide to a subharmonic.
     q_rate_hz : float or None
-        Rate the process variances are given at [Hz] (Richa: 83.3); ``None`` = per own sample.
+        Rate the process variances are given at [Hz] (Richa's ``83.3``); ``None`` = per own
+        sample.
     omega_limits_hz : tuple of float
         Both frequencies are clamped to this range [Hz].
     gate_probability : float or None
@@ -306,8 +300,7 @@ class DualEKFSettings(PredictorSettings):
     respiratory_known : bool
         The initialisation takes ω_r = 2π·``respiratory_hz`` (the ventilator's set rate, as
         Richa) instead of the FFT peak in ``respiratory_band_hz``, which a 10 s window of
-        1.7 breaths resolves only to ±0.05 Hz (14.7 instead of 10 breaths/min on
-        varying-a1-side).
+        1.7 breaths resolves only to ±0.05 Hz.
     respiratory_band_hz, cardiac_band_hz : tuple of float
         FFT search bands of the initialisation [Hz] (6–30 breaths/min; 36–180 beats/min,
         as the EKF's); a frequency estimate outside its band triggers the re-fit.

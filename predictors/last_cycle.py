@@ -21,13 +21,8 @@ from where the motion is now:
 the cycle's shape from the newest sample on, the change over one period carried forward.  The
 period's autocorrelation is taken of the window less its least-squares cubic in time (a 5-s
 window holds less than one 6-s breath, which a cubic follows); breathing otherwise dominates
-it, and its maximum sits at the shortest lag of the band.  Measured (25 Hz, 60 s, seeds 2 and
-3 of ``invivo-video``): estimates under half the heart period 57 % / 53 % of the time
-without, none with the cubic removed; ratio to hold's error at 1 / 3 / 5 samples (seed 2):
-``invivo-video`` 3.82 / 1.59 / 1.20 → 1.34 / 1.35 / 1.34 (its beats differ too much for any
-reuse), the six replicas 1.46–1.93 / 0.64–0.81 / 0.55–0.68 → 0.69–0.86 / 0.58–0.73 /
-0.52–0.64, the 128 Hz sonomicrometry stream of fixed-a2-top (3 samples) 3.20 → 0.97.
-``yuen2008`` is the plain last cycle of Yuen et al. 2008 §III-D.
+it, and its maximum sits at the shortest lag of the band.  ``yuen2008`` is the plain last
+cycle of Yuen et al. 2008 §III-D (``benchmarks/invivo_regime.py`` measures both).
 
 A missing sample is filled with its own forecast (open loop).  Until a period is
 known the forecast holds the newest sample.  Cost per update: O(1), plus an

@@ -36,8 +36,8 @@ from predictors.rls_spatiotemporal import SpatioTemporalRLS
 from predictors.wflc import WFLC
 
 __all__ = ["BASELINES", "FITTED_DEFAULTS", "LEARNED", "PREDICTORS", "combination_members",
-           "default_predictors", "family", "load_model", "make_predictor", "needs_torch",
-           "predictor_names", "settings_for", "torch_available"]
+           "default_predictors", "family", "load_model", "make_predictor", "model_kind",
+           "needs_torch", "predictor_names", "settings_for", "torch_available"]
 
 #: name → (class, default overrides of its settings dataclass)
 PREDICTORS: dict[str, tuple[type[Predictor], dict[str, Any]]] = {
@@ -201,9 +201,34 @@ def make_predictor(name: str, dt: float, **settings: Any) -> Predictor:
     if name == "combination":
         if not s.members:
             s = dataclasses.replace(s, members=combination_members())
-        return Combination(dt, s, [make_predictor(member, dt) for member in s.members])
+        files = _models_by_kind(s.models, s.members)
+        return Combination(dt, s, [make_predictor(member, dt, **(
+            {"model": files[member]} if member in files else {})) for member in s.members])
     cls = PREDICTORS[name][0] if name in PREDICTORS else _learned_class(name)
     return cls(dt, s)
+
+
+def model_kind(path) -> str:
+    """The predictor name a saved model declares (its file checked, no array read)."""
+    from predictors.learned.modelfile import ModelFile
+
+    with ModelFile(path, tuple(LEARNED)) as saved:
+        return saved.kind
+
+
+def _models_by_kind(paths, members) -> dict[str, str]:
+    """member name → the file among ``paths`` of its kind; a file of a kind that is no member,
+    or two files of one kind, is a ``ValueError`` naming it."""
+    out: dict[str, str] = {}
+    for path in paths:
+        kind = model_kind(path)
+        if kind not in members:
+            raise ValueError(f"{path}: a {kind} model, and the combination has no {kind} "
+                             f"member ({', '.join(members)})")
+        if kind in out:
+            raise ValueError(f"{path}: a second {kind} model (the first: {out[kind]})")
+        out[kind] = str(path)
+    return out
 
 
 def load_model(path, expected_kind: str | tuple[str, ...] | None = None,

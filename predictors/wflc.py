@@ -17,16 +17,14 @@ mm.  μ₀ multiplies ε·w (mm²), so it is stored in SI as 7e-6 rad/mm² = 7 r
 sample, and converted to data units by unit².  Rate: at another sample rate the same
 gains adapt faster per second (more updates, and ω₀ in rad/sample), so with
 ``gain_rate_hz`` = 28 they are rescaled to adapt as fast per second as at 28 Hz:
-μ₀ · (Δt·28)², μ₁ · (Δt·28).  (Unscaled at 128 Hz, ω̂ ran from 100 bpm to its clamp
-within seconds on fixed-a2-top.)  μ_b is not rescaled: the offset weight is what follows
-breathing (time constant 1/(2μ_b) ≈ 17 samples).
+μ₀ · (Δt·28)², μ₁ · (Δt·28).  μ_b is not rescaled: the offset weight is what follows
+breathing (time constant 1/(2μ_b) samples).
 
-Phase-locked loop (ours; ``loop="pll"``).  With physiological
-heart-rate variability (RSA swings the rate by several bpm within one 4–6 s breath) the
-μ₀ gradient is too slow: on fixed-a2-top ω̂ lagged by up to 14 bpm and the 23 ms forecast
-(1.72 mm) lost to ``hold`` (0.87 mm).  ψ and ω₀ are instead driven by a normalised phase
-detector, a second-order (type-2) phase-locked loop (Gardner, *Phaselock Techniques*, 3rd
-ed., 2005, ch. 2–4; the PLL view of the WFLC's frequency adaptation)::
+Phase-locked loop (ours; ``loop="pll"``).  With physiological heart-rate variability (RSA
+swings the rate by several bpm within one 4–6 s breath) the μ₀ gradient is too slow to
+follow the rate; ψ and ω₀ are instead driven by a normalised phase detector, a second-order
+(type-2) phase-locked loop (Gardner, *Phaselock Techniques*, 3rd ed., 2005, ch. 2–4; the PLL
+view of the WFLC's frequency adaptation)::
 
     (P1) δ_k = Σ_a ε_{a,k} g_{a,k} / P_k,  g_a = Σ_{r≤j} r (w_{a,r} cos rψ − w_{a,m+r} sin rψ),
          P = ½ Σ_a Σ_{r≤j} r² (w_{a,r}² + w_{a,m+r}²)   (cycle mean of Σ_a g_a²),
@@ -36,48 +34,37 @@ ed., 2005, ch. 2–4; the PLL view of the WFLC's frequency adaptation)::
 δ is the least-squares phase error (z ≈ ŷ(ψ + δ) linearised), dimensionless, so the loop
 is independent of the data unit and, with ω_n in Hz, of the sample rate.  j =
 ``pll_harmonics`` = 1: the fundamental only, as ``frequency_harmonics`` for μ₀.  ω_n =
-2π·0.5 Hz, ζ = 1/√2: measured on the six replicas (ω_n = 0.3 Hz lags the RSA, 0.8 Hz
-follows beat-to-beat waveform changes).  δ_max = 1 rad bounds the
-step an echo outlier can make (0.5 rad is worse on the replicas).  A ±10 bpm step is a
-phase ramp, which a type-2 loop follows with no steady-state error, so ω̂ cannot run away.
+2π·0.5 Hz, ζ = 1/√2 (a slower loop lags the RSA, a faster one follows beat-to-beat waveform
+changes).  δ_max = 1 rad bounds the step an echo outlier can make.  A rate step is a phase
+ramp, which a type-2 loop follows with no steady-state error, so ω̂ cannot run away.
 
 Respiration (ours; Richa et al. 2010 eq. 1, the model the EKF also carries):
 ``breathing_harmonics`` = H_b = 2 terms Σ_h a_{a,h} sin hψ_b + b_{a,h} cos hψ_b with their
 own accumulated phase ψ_b, initialised with the heart series (FFT in the breathing band,
 joint least squares, :func:`predictors.fourier_init.initial_dual_state`), adapted by LMS
 with μ₁ and a slow loop (P1–P3 on ψ_b, ω_n = 2π·0.02 Hz) clamped to
-``breathing_band_hz``.  Without it the offset weight, which follows breathing with a lag
-of 1/(2μ_b) samples, was the largest error even with the true heart phase given (0.74 mm,
-oracle test, fixed-a2-top).  With breathing modelled the offset only follows drift:
-μ_b = 0.01 (Riviere's 0.03 is worse: it absorbs heartbeat error).
+``breathing_band_hz``.  Without it the offset weight follows breathing with a lag of
+1/(2μ_b) samples; with breathing modelled the offset only follows drift: μ_b = 0.01
+(Riviere's 0.03 absorbs heartbeat error).
 
-Motion that is not periodic (``adaptive``, the default parameter set).  In vivo (the
-``invivo-video`` regime, 50 beats/min, beats differing in shape and amplitude) the weights,
-adapting within a beat (1/(2μ₁) = 17 samples at 28 Hz), chase each beat's deviations, and a
-0.5 Hz loop — 60 % of the heart rate — turns them into rate swings (204 clamps at the 0.6 Hz
-floor in 60 s): 1.69 / 1.10 / 0.89 × hold's error at 1 / 3 / 5 samples (25 Hz, 60 s, seed 2).
-Sized to the heart rate instead:
+Motion that is not periodic (``adaptive``, the default parameter set: ``pll`` sized to the
+heart rate, so that the weights and the loop do not chase each beat's deviations):
 
-* ``loop_ratio`` = 0.3: ω_n = 0.3 ω̂₀, the replicas' 0.5 Hz at their 1.6 Hz (0.25 Hz in vivo);
+* ``loop_ratio`` = 0.3: ω_n = 0.3 ω̂₀;
 * ``weight_beats`` = 2: μ₁ = ω̂₀Δt/(8π), the weights' time constant two beats, over which
-  beat-to-beat deviations average out (1 beat: 0.80 / 0.91 / 0.79 in vivo; 3 beats: fixed-a2-top
-  0.24 / 0.16 / 0.15 instead of 0.25 / 0.15 / 0.13);
+  beat-to-beat deviations average out;
 * ``residual_order`` = 16: the AR model of the residual of :mod:`predictors.nonperiodic`
   (without R: the WFLC has none) adds to the forecast, which starts from the newest sample.
 
-All three: 0.68 / 0.76 / 0.70 in vivo (seeds 1–7: at most 0.84 at 3 samples), the replicas
-0.20–0.24 / 0.14–0.16 / 0.13–0.15 (``pll`` 0.25–0.32 / 0.15–0.19 / 0.13–0.17), the 128 Hz
-sonomicrometry stream of fixed-a2-top 0.26 (0.55), all at 3 samples.  The residual alone
-leaves the in-vivo forecast at 1.06 / 1.07 / 0.88, the sizing alone at 2.01 / 0.94 / 0.73
-(ratio 0.15, 3 beats).
+Each part's effect is measured by ``benchmarks/invivo_regime.py``
+(``docs/validation/predictors.md``).
 
-``loop="gradient"`` with ``breathing_harmonics=0`` keeps the previous update: the μ₀
+``loop="gradient"`` with ``breathing_harmonics=0`` is the gradient update: the μ₀
 gradient on the fundamental plus the phase-locked correction ω₀ += κΔφ (Δφ the rotation
 of the fundamental weights, κ = 0.01 per sample at 28 Hz); with ``phase_gain=0,
-frequency_harmonics=8, mu_bias=0.03`` it is Riviere's WFLC, which runs to its clamp at
-60 → 70 bpm (tested).  ``offset_natural_hz`` (default off) replaces the offset weight by a
-second-order tracker b ← b + v + k₁ε, v ← v + k₂ε (tried, not used: it competes with the
-loop).  Cost per update: O((m + H_b)·d).
+frequency_harmonics=8, mu_bias=0.03`` it is Riviere's WFLC.  ``offset_natural_hz`` (default
+off) replaces the offset weight by a second-order tracker b ← b + v + k₁ε, v ← v + k₂ε.  Cost
+per update: O((m + H_b)·d).
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """rhmpc: receding-horizon MPC for robot-assisted beating-heart surgery.
 
-The package's parts (see the README's design section for what each may import):
+The package's parts (``docs/design/index.md`` maps what each may import):
 
 - :mod:`rhmpc.control` — the controller: QP, per-tick MPC, reference builder, settings;
 - :mod:`rhmpc.experiment` — one run's configuration (TOML) and its assembly;

@@ -14,11 +14,10 @@ and both are checked before the library is returned. A library that does not mat
 short, a disk error) is rebuilt with a one-line :class:`CacheWarning`, instead of being loaded
 (a truncated shared library ends the process with a bus error).
 
-Flags: ``-O3 -march=native`` — the processor's vector instructions, measured 5 % faster on the
-plant's 6 × 6 spatial algebra — with ``-ffp-contract=off``: no fused multiply-add, so that each
-product is rounded as the source writes it and the results are the same to the bit with or
-without ``-march=native`` (a compiler that does not take it builds without it). No fast-math: the
-order of every sum is the source's.
+Flags: ``-O3 -march=native`` (the processor's vector instructions) with ``-ffp-contract=off``: no
+fused multiply-add, so that each product is rounded as the source writes it and the results are
+the same to the bit with or without ``-march=native`` (a compiler that does not take it builds
+without it). No fast-math: the order of every sum is the source's.
 """
 
 from __future__ import annotations

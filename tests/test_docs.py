@@ -1,16 +1,20 @@
 """The documentation's own rules: a short README, results that cannot go stale, the citation.
 
-The no-stale-numbers rule: README.md and every Markdown page under docs/ are read with code
-(fenced blocks, inline code), mathematics ($…$, $$…$$, ``{math}`` blocks), HTML comments and
-link targets left out, and with each decision record's "At the decision" section left out (a
-dated record of what was measured when the choice was made; it must name the version and the
-date). Every decimal number left (``0.047``, ``2.5``, ``1.9e-11``) must be the value of some
-number in a ``docs/results/*.json`` file, rounded to the digits shown. Integers are not checked:
-they are counts, sizes and settings (2 kHz, 50 points, 6 replicas).
+The no-stale-numbers rule: README.md, every Markdown page under docs/ and every docstring of the
+packages are read with code (fenced blocks, inline code), mathematics ($…$, $$…$$, ``{math}``
+blocks; in a docstring its ``::`` literal blocks), HTML comments, link targets, section numbers and
+arXiv identifiers left out, and with each decision
+record's "At the decision" section left out (a dated record of what was measured when the choice
+was made; it must name the version and the date). Every decimal number left (``0.047``, ``2.5``,
+``1.9e-11``) must be the value of some number in a ``docs/results/*.json`` file, rounded to the
+digits shown: a result is published by a benchmark, not typed. Integers are not checked: they are
+counts, sizes and settings (2 kHz, 50 points, 6 replicas). A value a docstring takes from a
+source is written as the code's literal (````83.3````).
 """
 
 from __future__ import annotations
 
+import ast
 import json
 import re
 import subprocess
@@ -29,6 +33,9 @@ INLINE_CODE = re.compile(r"``.+?``|`[^`\n]+`")
 MATH = re.compile(r"\$\$.+?\$\$|\$[^$\n]+\$", re.S)
 COMMENT = re.compile(r"<!--.*?-->", re.S)
 LINK_TARGET = re.compile(r"\]\([^)]*\)")
+ARXIV = re.compile(r"arXiv:\d{4}\.\d{4,5}|§\s*[\d.]+\d")
+#: The packages whose docstrings the rule reads.
+PACKAGES = ("rhmpc", "sim", "predictors", "robots")
 AT_DECISION = re.compile(r"^(#+) At the decision\s*$(.*?)(?=^#{1,3} |\Z)", re.S | re.M)
 HISTORY = re.compile(r"issue[ -]?[0-9]|\bsession\b|closing\s+note", re.I)
 
@@ -40,7 +47,7 @@ def pages() -> list[Path]:
 
 def prose(text: str) -> str:
     """``text`` without code, mathematics, comments and link targets."""
-    for pattern in (FENCE, COMMENT, INLINE_CODE, MATH, LINK_TARGET):
+    for pattern in (FENCE, COMMENT, INLINE_CODE, MATH, LINK_TARGET, ARXIV):
         text = pattern.sub(" ", text)
     return text
 
@@ -87,6 +94,40 @@ def test_every_number_on_a_page_is_held_by_a_results_file() -> None:
                 if m.group(0).lstrip("-") not in held:
                     missing.append(f"{page.relative_to(ROOT)}: {m.group(0)} in {line.strip()!r}")
     assert not missing, "numbers no results file holds:\n" + "\n".join(missing)
+
+
+def without_literal_blocks(doc: str) -> str:
+    """A docstring without its reStructuredText literal blocks (the indented lines after a line
+    that ends in ``::``)."""
+    out, indent = [], None
+    for line in doc.splitlines():
+        depth = len(line) - len(line.lstrip())
+        if indent is not None and (not line.strip() or depth > indent):
+            continue
+        indent = depth if line.rstrip().endswith("::") else None
+        out.append(line)
+    return "\n".join(out)
+
+
+def docstrings() -> list[tuple[str, str]]:
+    """(where, text) of every module, class and function docstring of the packages."""
+    out = []
+    for package in PACKAGES:
+        for path in sorted((ROOT / package).rglob("*.py")):
+            for node in ast.walk(ast.parse(path.read_text())):
+                if isinstance(node, ast.Module | ast.ClassDef | ast.FunctionDef
+                              | ast.AsyncFunctionDef) and (doc := ast.get_docstring(node)):
+                    name = getattr(node, "name", "module")
+                    out.append((f"{path.relative_to(ROOT)}:{name}", without_literal_blocks(doc)))
+    return out
+
+
+def test_every_number_in_a_docstring_is_held_by_a_results_file() -> None:
+    held = held_strings()
+    missing = [f"{where}: {m.group(0)} in {line.strip()!r}"
+               for where, doc in docstrings() for line in prose(doc).splitlines()
+               for m in NUMBER.finditer(line) if m.group(0).lstrip("-") not in held]
+    assert not missing, "numbers in docstrings no results file holds:\n" + "\n".join(missing)
 
 
 def test_the_rule_catches_a_typed_number() -> None:

@@ -1,4 +1,4 @@
-"""The import layering of the README's design map: an import may only point down.
+"""The import layering of the package map (docs/design/index.md): an import may only point down.
 
 Layers, from the bottom (peers of one layer do not import each other):
 
@@ -11,7 +11,8 @@ Layers, from the bottom (peers of one layer do not import each other):
    ``sim.plant``; ``sim.recordings`` and ``sim.sensors`` (they read ``sim.heart``'s motion
    sources); ``sim.sources`` (a scenario or a recording); ``sim.loop``
 3. ``rhmpc.experiment``
-4. ``rhmpc.studies``, ``rhmpc.tuning``
+4. ``rhmpc.studies``, ``rhmpc.tuning``; above them ``rhmpc.runtime`` (the deployment's
+   processes, which reuse the tuning's processes that die with their parent)
 5. ``rhmpc.cli``
 
 Every ``import`` statement counts, including those inside functions (deferred imports are
@@ -49,6 +50,7 @@ LAYERS: tuple[tuple[str, float, str], ...] = (
     ("rhmpc.experiment", 3, "rhmpc.experiment"),
     ("rhmpc.studies", 4, "rhmpc.studies"),
     ("rhmpc.tuning", 4, "rhmpc.tuning"),
+    ("rhmpc.runtime", 4.5, "rhmpc.runtime"),
     ("rhmpc.cli", 5, "rhmpc.cli"),
 )
 PACKAGES = ("boundary", "robots", "predictors", "sim", "rhmpc")
@@ -143,7 +145,8 @@ def test_no_import_points_up_a_layer() -> None:
 def test_every_module_has_a_layer() -> None:
     unplaced = [module_name(p, REPO) for top in PACKAGES for p in (REPO / top).rglob("*.py")
                 if layer_of(module_name(p, REPO)) is None and module_name(p, REPO) != "rhmpc"]
-    assert unplaced == [], "add these modules' package to LAYERS and to the README's map"
+    assert unplaced == [], ("add these modules' package to LAYERS and to the map in "
+                            "docs/design/index.md")
 
 
 @pytest.mark.parametrize(("where", "source", "expected"), [

@@ -44,8 +44,8 @@ __all__ = ["GRUPredictor", "LSTMPredictor", "MultiPointGRU", "MultiPointLSTM",
 @contextlib.contextmanager
 def _batch_of_one():
     """PyTorch's own CPU kernels inside, not oneDNN's (``torch.backends.mkldnn.enabled``): for
-    one sample of one sequence, oneDNN's recurrent kernel, made for batches, took 4 to 7 times
-    as long (an LSTM of 2 × 600 units: 2.0 ms against 14.7 ms a step, measured on one core)."""
+    one sample of one sequence, oneDNN's recurrent kernel is made for batches, and PyTorch's
+    own is the faster one."""
     before = torch.backends.mkldnn.enabled
     torch.backends.mkldnn.enabled = False
     try:

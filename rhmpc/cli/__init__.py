@@ -35,6 +35,8 @@ COMMANDS: dict[str, str] = {
     "tune": "sweep settings (MPC weights, predictor order, downsampling...) in parallel, "
     "resumably; 'tune report' ranks the results",
     "export": "write the real-time controller as a self-contained C library",
+    "sil": "the deployment in real time: sensor, predictor, exported controller and robot as "
+    "processes over UDP",
     "config": "show every setting of a run (TOML that --config reads back)",
 }
 

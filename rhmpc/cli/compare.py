@@ -14,10 +14,13 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import tempfile
 from dataclasses import dataclass
+from pathlib import Path
 
 from rhmpc.cli import COMMANDS
 from rhmpc.cli.simulate import (
+    add_model_option,
     add_recording_options,
     add_run_options,
     add_split_option,
@@ -27,6 +30,8 @@ from rhmpc.cli.simulate import (
 )
 from rhmpc.errors import UsageError
 from rhmpc.experiment import RunConfig, run_experiment
+from rhmpc.experiment.config import with_split
+from rhmpc.experiment.fitting import with_models
 from rhmpc.studies.tuna2013 import COLUMNS
 from sim.recordings.shipped import resolve_all
 
@@ -111,6 +116,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_recording_options(p)
     add_split_option(p, "; each predictor's closed loop is set beside its open-loop forecast "
                      "of the same samples, one sample ahead")
+    add_model_option(p)
     out = p.add_mutually_exclusive_group()
     out.add_argument("--json", action="store_true", help="print the results as JSON: runs (one "
                      "document per column, predictor and seed, each with scenario (the column: "
@@ -214,8 +220,9 @@ def jobs(args: argparse.Namespace) -> list[Job]:
         run_base = base.replace(**changes)
         for predictor in predictors:
             for seed in seeds:
+                config = run_base.replace(predictor=predictor, seed=seed)
                 out.append(Job(str(len(out)), column,
-                               run_base.replace(predictor=predictor, seed=seed)))
+                               with_models(config, args.model or (), strict=False)))
     return out
 
 
@@ -262,7 +269,8 @@ def _data_columns(args: argparse.Namespace) -> list[tuple[str, dict]]:
             changes = {"data": path, "data_read": {**read, **({"point": point} if point else {})},
                        **sensor}
             if split:
-                changes["split"] = split
+                span = with_split(RunConfig(data=path, data_read=changes["data_read"]), split).loop
+                changes.update({"loop.settling": span.settling, "loop.duration": span.duration})
             elif args.duration is None and not args.config:  # default: the whole recording
                 changes["loop.duration"] = recording.duration
             elif args.duration is not None and args.duration > recording.duration:
@@ -276,7 +284,7 @@ def _base_config(args: argparse.Namespace) -> RunConfig:
     """The settings every run shares, as ``simulate`` makes them: defaults < --config <
     --preset < options < --set (the column, the predictor and the seed come per run)."""
     saved = {k: getattr(args, k, None) for k in ("predictor", "scenario", "data", "seed",
-                                                 "split", "poi", *READ_OPTIONS)}
+                                                 "split", "poi", "model", *READ_OPTIONS)}
     for key in saved:
         setattr(args, key, None)
     try:
@@ -300,8 +308,9 @@ def run(args: argparse.Namespace) -> int:
         print(_header(todo, args), flush=True)
     else:
         note(_header(todo, args), args.quiet)
-    beside = open_loops(todo, args) if args.split else {}
-    outcome, where = execute(todo, args)
+    with tempfile.TemporaryDirectory(prefix="rhmpc-models-") as folder:
+        beside, todo = open_loops(todo, args, Path(folder)) if args.split else ({}, todo)
+        outcome, where = execute(todo, args)
     done = [job for job in todo if job.key in outcome.by_key]
     docs = [outcome.by_key[job.key] for job in done]
     results = _document(docs, done, args, outcome.interrupted)
@@ -368,27 +377,37 @@ def _print_results(results: dict, docs: list[dict], todo: list[Job],
         print("\n".join(gap_table(results["loop_gap"])), flush=True)
 
 
-def open_loops(todo: list[Job], args: argparse.Namespace) -> dict[str, dict]:
+def open_loops(todo: list[Job], args: argparse.Namespace,
+               folder: Path) -> tuple[dict[str, dict], list[Job]]:
     """Per recording column of a split: every predictor's open-loop forecast of the scored
     samples one sample ahead (:func:`rhmpc.studies.loop_gap.open_loop_beside`), made here
-    before the closed loops run."""
+    before the closed loops run; and the jobs, whose predictors fitted before the run load
+    the models fitted there (saved in ``folder``) instead of fitting again (fit once, run
+    many), unless ``--model`` names others or the runs go to a cluster."""
     from rhmpc.studies.loop_gap import open_loop_beside
     from rhmpc.tuning.progress import note
 
-    out = {}
-    for column in dict.fromkeys(job.column for job in todo):
+    out, share, split = {}, not (args.model or args.scheduler), parse_split(args.split)
+    for i, column in enumerate(dict.fromkeys(job.column for job in todo)):
         config = next(job.config for job in todo if job.column == column)
         names = list(dict.fromkeys(job.config.predictor for job in todo if job.column == column))
-        note(f"rhmpc compare: the open loop on {column}, split {config.split[0]}:"
-             f"{config.split[1]}", args.quiet)
+        note(f"rhmpc compare: the open loop on {column}, split {split[0]}:{split[1]}",
+             args.quiet)
+        save = folder / str(i) if share else None
+        if save is not None:
+            save.mkdir()
         try:
             out[column] = open_loop_beside(
-                config.data, config.data_read, config.split, names,
+                config.data, config.data_read, split, names,
                 config.reference.prediction_points, config.seed,
-                None if args.quiet else (lambda text: note(f"  {text}", False)))
+                None if args.quiet else (lambda text: note(f"  {text}", False)), save)
         except ValueError as exc:
             raise UsageError(f"{column}: {exc}") from None
-    return out
+        if save is not None:
+            files = sorted(save.iterdir())
+            todo = [Job(j.key, j.column, with_models(j.config, files, strict=False))
+                    if j.column == column else j for j in todo]
+    return out, todo
 
 
 def _setting(todo: list[Job]) -> str:

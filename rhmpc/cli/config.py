@@ -100,25 +100,14 @@ def summary(description: str, long: bool = False) -> str:
     return text[: DESCRIPTION_CHARS].rsplit(" ", 1)[0] + " … (--long)"
 
 
-def _settings(prefix: str, settings: Any) -> dict[str, Any]:
-    """Dotted key → value of every field of a settings object, nested ones recursively."""
-    out: dict[str, Any] = {}
-    for g in dataclasses.fields(settings):
-        value = getattr(settings, g.name)
-        if dataclasses.is_dataclass(value):
-            out.update(_settings(f"{prefix}{g.name}.", value))
-        else:
-            out[f"{prefix}{g.name}"] = value
-    return out
-
-
 def _flat(config: RunConfig) -> dict[str, Any]:
     """Dotted key → value of every setting (``None`` for unset ones)."""
     out: dict[str, Any] = {}
     for f in dataclasses.fields(config):
         value = getattr(config, f.name)
         if f.name in SECTIONS:
-            out.update(_settings(f"{f.name}.", value))
+            out.update({f"{f.name}.{g.name}": getattr(value, g.name)
+                        for g in dataclasses.fields(value)})
         elif f.name in TABLES:
             out.update({f"{f.name}.{k}": v for k, v in value.items()})
         else:
@@ -206,20 +195,14 @@ def render(config: RunConfig, defaults: RunConfig, sources: dict[str, str],
 
 def _section_lines(section: str, settings: Any, flat: dict[str, Any], base: dict[str, Any],
                    sources: dict[str, str], long: bool) -> list[str]:
-    """A section's table, then its nested tables (``[mpc.osqp]``)."""
+    """A section's table: each setting with its comment."""
     cls = type(settings)
     lines = ["", f"[{section}]", f"# {cls.__module__}.{cls.__qualname__}"]
-    docs, nested = attribute_docs(cls), []
+    docs = attribute_docs(cls)
     for g in dataclasses.fields(cls):
-        if dataclasses.is_dataclass(getattr(settings, g.name)):
-            nested.append(g.name)
-            continue
         key = f"{section}.{g.name}"
         lines += _key_lines(key, g.name, flat[key], base[key], docs.get(g.name),
                             sources.get(key), long)
-    for name in nested:
-        lines += _section_lines(f"{section}.{name}", getattr(settings, name), flat, base,
-                                sources, long)
     return lines
 
 

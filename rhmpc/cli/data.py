@@ -19,7 +19,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import sys
 import textwrap
 from dataclasses import dataclass
@@ -63,8 +62,6 @@ PLOT_SECONDS_PER_SAMPLE = 15e-6
 STATS_SECONDS_PER_SECOND = 5e-3
 #: Work longer than this is announced on stderr before it starts [s].
 ANNOUNCE_AFTER = 10.0
-#: The memory assumed available where the system does not say [B].
-FALLBACK_MEMORY = 8e9
 #: The rate a synthetic motion is drawn at, at least, so that slow sensors show its shape [Hz].
 PLOT_RATE = 250.0
 #: The width of the tables' text [characters].
@@ -228,7 +225,7 @@ def _check_work(action: str, name: str, duration: float, rate: float) -> None:
     """Refuse work that would not fit in memory, saying how much it would take; announce work
     longer than :data:`ANNOUNCE_AFTER` on stderr."""
     memory, seconds = _work(action, duration, rate)
-    available = _available_memory()
+    available = boundary.limits.available_memory()
     if memory > available:
         per_second = _work(action, 1.0, rate)[0]
         raise UsageError(
@@ -239,21 +236,6 @@ def _check_work(action: str, name: str, duration: float, rate: float) -> None:
     if seconds > ANNOUNCE_AFTER:
         print(f"rhmpc data: {action} of {fmt(duration)} s of {name} at {fmt(rate)} Hz "
               f"takes about {time_span(seconds)}", file=sys.stderr)
-
-
-def _available_memory() -> float:
-    """The memory available to a new allocation [B] (Linux: MemAvailable)."""
-    try:
-        with open("/proc/meminfo", encoding="ascii") as fh:
-            for line in fh:
-                if line.startswith("MemAvailable:"):
-                    return float(line.split()[1]) * 1024.0
-    except (OSError, ValueError, IndexError):
-        pass
-    try:
-        return float(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
-    except (AttributeError, OSError, ValueError):
-        return FALLBACK_MEMORY
 
 
 def _read_options(args: argparse.Namespace, path: Path) -> dict:

@@ -8,7 +8,6 @@ from pathlib import Path
 
 from rhmpc.cli import COMMANDS
 from rhmpc.errors import UsageError
-from robots import ROBOTS
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -25,7 +24,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("outdir", metavar="OUTDIR", help="directory to write (created if needed; "
                    "must be empty unless --force)")
-    p.add_argument("--robot", choices=ROBOTS, help="robot (default: the config's, else phantom)")
+    p.add_argument("--robot", metavar="NAME|FILE.toml", help="a registered robot (rhmpc robots) "
+                   "or a robot file (default: the config's, else phantom)")
     p.add_argument("--config", metavar="FILE.toml",
                    help="a run's settings (rhmpc simulate --config): its [mpc], [reference], "
                    "[loop] Ts and downsample, [observer], [mismatch], predictor and "
@@ -46,25 +46,31 @@ def run(args: argparse.Namespace) -> int:
     from rhmpc.control.export import ExportError, export_controller
     from rhmpc.experiment import RunConfig, load_config
     from rhmpc.experiment.assembly import deployable
+    from rhmpc.runtime.build import TRANSPORT, write_transport
 
     config = load_config(args.config) if args.config else RunConfig()
     changes = {k: v for k, v in (("robot", args.robot), ("predictor", args.predictor)) if v}
     config = config.replace(**changes)
     outdir = Path(args.outdir)
     controller = deployable(config, args.rate)
+    name = controller.mpc.arm.robot.name
     try:
-        info = export_controller(controller, outdir, robot=config.robot, force=args.force)
+        info = export_controller(controller, outdir, robot=name, force=args.force)
+        transport = write_transport(outdir)
     except (ExportError, OSError) as exc:
         raise UsageError(str(exc)) from None
     q, ref = controller.mpc.qp, controller.reference
     build = shlex.quote(str(outdir.with_name(outdir.name + "-build")))
     src = shlex.quote(str(outdir))
-    print(f"rhmpc export: {config.robot}, {config.predictor} predictor every "
-          f"{1e3 * ref.dt:g} ms, N = {q.N}, {q.nz} QP variables, {q.A.shape[0]} constraints, "
-          f"{len(info.files)} files in {outdir} (key {info.key})")
+    print(f"rhmpc export: {name}, {config.predictor} predictor every {1e3 * ref.dt:g} ms, "
+          f"N = {q.N}, {q.P.shape[0]} QP variables (RHMPC_NV: {q.nz} block inputs, "
+          f"{q.P.shape[0] - q.nz} envelope slacks), {q.A.shape[0]} constraints, "
+          f"{len(info.files) + len(transport)} files in {outdir} (key {info.key})")
     for note in info.notes:
         print(f"note:  {note}")
     print(f"build: cmake -S {src} -B {build} && cmake --build {build}")
     print(f"run:   {build}/rhmpc_example 2    (a fixed-rate loop with a fake sensor)")
     print(f"API:   {outdir / 'rhmpc.h'} (units and array layouts)")
+    print(f"udp:   {outdir / TRANSPORT} (the controller's real-time program over the wire format "
+          "and a robot-side client: cmake -S it; rhmpc sil runs it)")
     return 0

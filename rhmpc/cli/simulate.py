@@ -14,6 +14,7 @@ from rhmpc.cli.presets import add_preset_option, apply_preset
 from rhmpc.errors import UsageError
 from rhmpc.experiment import RunConfig, check_sensor, load_config, run_experiment
 from rhmpc.experiment.config import with_split
+from rhmpc.experiment.fitting import with_models
 from sim.loop.settings import DEFAULT_SETTLING, LoopSettings
 from sim.recordings.matfile import parse_indices
 
@@ -33,7 +34,7 @@ def add_run_options(
 ) -> None:
     """Options shared by ``simulate`` and ``compare`` (``duration``/``settling``: for the help)."""
     p.add_argument("--config", metavar="FILE.toml", help="every setting of the run (TOML)")
-    p.add_argument("--robot", help="robot name (rhmpc robots); default phantom")
+    p.add_argument("--robot", help="a robot (rhmpc robots) or robot file X.toml; default phantom")
     p.add_argument("--sensor", help="sonomicrometry (default; the instrument from its "
                    "physics), white (additive white noise), ultrasound, video (stereo video "
                    "tracking, 25 Hz), ideal; 'recorded' uses a "
@@ -59,7 +60,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "simulate", help=COMMANDS["simulate"],
         description="Closed loop at 2 kHz: heart motion -> sensor -> predictor (every "
-        "downsample ticks) -> quadratic interpolation to 50 reference points -> MPC (OSQP) -> "
+        "downsample ticks) -> cubic interpolation to 50 reference points -> MPC (OSQP) -> "
         "nonlinearity cancellation -> Pinocchio plant. Prints RMS/max tracking error, RMS "
         "control effort, prediction error and per-tick controller timing.")
     p.add_argument("--predictor", help="predictor name (default generalized; 'exact' = the true "
@@ -74,13 +75,14 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "of a --data file of several tracked points; a predictor that reads the "
                    "other points (st-rls, st-ridge, st-lstm, ...) gets their samples")
     add_split_option(p)
+    add_model_option(p)
     p.add_argument("--train", nargs="+", metavar="FILE", help="recordings a predictor fitted "
                    "before the run (ridge, lstm, ...) learns from, beside the run's own "
                    "settling window (same rate and layout; --poi applies)")
     p.add_argument("--seed", type=int, help="seed of every random draw (default 0)")
     p.add_argument("--controller", choices=("python", "c"), default="python",
                    help="'c': the compiled controller of `rhmpc export` in the loop (built once, "
-                   "cached; needs cmake and a C compiler)")
+                   "cached; needs a C compiler)")
     add_run_options(p)
     p.add_argument("--out", metavar="FILE", help="write the result document: FILE.json, or "
                    "FILE.mat for MATLAB (the summary and the trace: time, error, ee, poi, "
@@ -100,15 +102,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--trace", metavar="FILE.npz", help="write every tick to an NPZ file as the "
                    "run goes (chunked; read it with sim.loop.trace.read_trace)")
     add_host_stalls_option(p, "the run")
+    from sim.sensors.faults import GRAMMAR
+
     p.add_argument("--fault", action="append", default=[], metavar="KIND@START[:ARG…]",
-                   help="inject a fault into the run (repeatable; the truth is untouched): "
-                   "freeze@START:DURATION (the sensor repeats its last sample), "
-                   "jump@START:OFFSET[:DURATION] (the stream steps by OFFSET, a length with its "
-                   "unit along x, 5mm, or x,y,z, 5,0,-2mm; to the end of the run by default), "
-                   "nan@START[:DURATION] (missing samples, default 0.5), "
-                   "stick@START:DURATION[:JOINTS] (encoder readings hold; 0-based joints, e.g. "
-                   "0,2; default all). Times in s, e.g. --fault freeze@14:0.3 --fault "
-                   "jump@20:5mm. The summary states each fault's errors and counts")
+                   help=f"inject a fault into the run (repeatable; the truth is untouched): "
+                   f"{GRAMMAR}; e.g. --fault freeze@14:0.3 --fault jump@20:5mm. The summary "
+                   "states each fault's errors and counts")
     p.set_defaults(func=run)
 
 
@@ -120,7 +119,7 @@ def add_host_stalls_option(p: argparse.ArgumentParser, after: str) -> None:
     """``--host-stalls SECONDS``: the host's stalls, timed after ``after``."""
     p.add_argument("--host-stalls", type=float, default=0.0, metavar="SECONDS",
                    help=f"after {after}, time a busy loop for SECONDS and report the host's "
-                   "stalls beside the tick's maximum (sim.loop.metrics.host_stalls; default 0: "
+                   "stalls beside the tick's maximum (rhmpc.studies.host.host_stalls; default 0: "
                    "off)")
 
 
@@ -133,8 +132,8 @@ def check_host_stalls(seconds: float) -> None:
 
 def host_stalls_document(seconds: float, gain_us: float | None) -> dict:
     """The host's stalls in a busy loop of ``seconds``, in µs and in gain ticks of ``gain_us``
-    (:func:`sim.loop.metrics.stall_summary`)."""
-    from sim.loop.metrics import host_stalls, stall_summary
+    (:func:`rhmpc.studies.host.stall_summary`)."""
+    from rhmpc.studies.host import host_stalls, stall_summary
 
     return stall_summary(host_stalls(seconds), seconds, gain_us)
 
@@ -161,6 +160,14 @@ def add_split_option(p: argparse.ArgumentParser, more: str = "") -> None:
                    "predictor fitted before the run learns from the samples before TRAIN (as "
                    "the loop delivers them) and the score covers the instants of samples TRAIN "
                    f"to END - 1 (numbered from 0); replaces --settling and --duration{more}")
+
+
+def add_model_option(p: argparse.ArgumentParser) -> None:
+    """``--model FILE...``: saved models instead of fitting before the run."""
+    p.add_argument("--model", nargs="+", metavar="FILE", help="models saved by rhmpc predict "
+                   "--save-models, loaded instead of fitted before the run: a fitted "
+                   "predictor (ridge, st-ridge, lstm, ...) takes the file of its kind, the "
+                   "combination each file into its member of that kind (the others it fits)")
 
 
 def parse_split(text: str | None) -> tuple[int, int] | None:
@@ -224,11 +231,12 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
              for k in ("var", "rows", "cols", "data_rate", "units", "poi", "split")):
         raise UsageError("--var, --rows, --cols, --rate, --units, --poi and --split need "
                          "--data FILE")
+    split = None
     if getattr(args, "split", None):
         if args.duration is not None or args.settling is not None:
             raise UsageError("--split TRAIN:END sets the settling and the duration: give "
                              "neither --settling nor --duration with it")
-        changes["split"] = parse_split(args.split)
+        split = parse_split(args.split)
     if getattr(args, "train", None):
         missing = [f for f in args.train if not Path(f).is_file()]
         if missing:
@@ -245,7 +253,9 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
         changes[key.strip()] = parse_value(value.strip())
     if getattr(args, "fault", None):
         changes["faults.events"] = fault_events(config, changes, args.fault)
-    config = with_split(config.replace(**changes))
+    config = with_split(config.replace(**changes), split)
+    if getattr(args, "model", None):
+        config = with_models(config, args.model)
     check_sensor(config)
     check_scoring(config)
     return config
@@ -368,7 +378,7 @@ def run(args: argparse.Namespace) -> int:
     stalls = getattr(args, "host_stalls", 0.0)
     check_host_stalls(stalls)
     try:
-        from rhmpc.control.yardstick import GainTick  # timed in the same run
+        from rhmpc.studies.yardstick import GainTick  # timed in the same run
 
         result, doc = run_experiment(config, progress=not args.json, trace=trace,
                                      gain_tick=GainTick, implementation=args.controller)
@@ -377,6 +387,8 @@ def run(args: argparse.Namespace) -> int:
             raise UsageError(str(exc)) from None
         raise
     check_score(doc)
+    if getattr(args, "split", None):
+        doc["split"] = list(parse_split(args.split))
     if stalls > 0:
         g = (doc.get("gain_tick_us") or {}).get("p50")
         doc["host_stalls"] = host_stalls_document(stalls, g)

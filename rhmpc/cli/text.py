@@ -11,7 +11,7 @@ __all__ = ["fmt", "mm", "size_bytes", "time_span"]
 
 def fmt(x: float, digits: int = 4) -> str:
     """``x`` to ``digits`` significant digits, without exponent or trailing zeros
-    (9.98667 → 9.987, 472.0 → 472, 257.069 → 257.1)."""
+    (``9.98667`` → ``9.987``, ``472.0`` → ``472``, ``257.069`` → ``257.1``)."""
     if not math.isfinite(x) or x == 0 or abs(x) >= 1e6:
         return f"{x:.{digits}g}"
     decimals = max(0, digits - 1 - math.floor(math.log10(abs(x))))

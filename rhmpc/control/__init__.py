@@ -1,17 +1,18 @@
-"""The controller: the MPC's QP (formulated once with CasADi), the per-tick controller (OSQP,
-exact screening, fallbacks), the reference builder, and their settings.
+"""The controller: the MPC's QP (formulated once with CasADi), the per-tick controller (the
+exact screening cascade, OSQP, fallbacks), the reference builder, and their settings.
 
 - :mod:`~rhmpc.control.settings` — :class:`MPCSettings` and the dataclass ↔ dict helpers;
 - :mod:`~rhmpc.control.qp` — the condensed QP, built once (CasADi);
 - :mod:`~rhmpc.control.envelope` — joint position/velocity and Cartesian limits as soft rows;
 - :mod:`~rhmpc.control.offset` — the output offset from forward kinematics (offset-free MPC);
-- :mod:`~rhmpc.control.active_set` — DAQP behind the solver interface;
+- :mod:`~rhmpc.control.box_qp` — level 2 of the cascade, the torque-box QP by active set;
+- :mod:`~rhmpc.control.osqp_solver` — level 3, OSQP set up once;
 - :mod:`~rhmpc.control.fallback` — :class:`MPCStats`, the fallback torques;
 - :mod:`~rhmpc.control.mpc` — :class:`RecedingHorizonMPC`, the per-tick controller;
 - :mod:`~rhmpc.control.reference` — the N-point reference from a predictor or the true future.
 
-Imports only :mod:`robots`, :mod:`predictors`, :mod:`sim` and :mod:`rhmpc.errors`. The names
-below load on first use, so that ``rhmpc.control.settings`` stays cheap to import.
+Imports only :mod:`robots`, :mod:`predictors` and :mod:`rhmpc.compiled` (the export's build).
+The names below load on first use, so that ``rhmpc.control.settings`` stays cheap to import.
 """
 
 from __future__ import annotations

@@ -15,8 +15,8 @@ Range-space (Schur-complement) step
 
     (Nocedal & Wright, *Numerical Optimization*, 2nd ed., §16.2, range-space / Schur-complement
     method). ``W_𝒜𝒜`` is a principal submatrix of an SPD matrix, so it is SPD and factorised by
-    Cholesky; it has ``|𝒜|`` rows (1–4 on the bench's saturated ticks). An active upper bound needs
-    ``μ_i ≥ 0``, an active lower bound ``μ_i ≤ 0`` (OSQP's sign convention for ``z ≤ 1``).
+    Cholesky; it has ``|𝒜|`` rows. An active upper bound needs ``μ_i ≥ 0``, an active lower
+    bound ``μ_i ≤ 0`` (OSQP's sign convention for ``z ≤ 1``).
 
 Phase 1: primal-dual active set (PDAS)
     Hintermüller, Ito & Kunisch, *SIAM J. Optim.* 13(3), 865–888, 2002 (a semismooth Newton
@@ -26,13 +26,10 @@ Phase 1: primal-dual active set (PDAS)
         𝒜⁺ = {i ∈ 𝒜 : b_i μ_i ≥ −ε_d} ∪ {i ∉ 𝒜 : |z_i| > 1 + ε_p}
 
     It stops when 𝒜⁺ = 𝒜: then every KKT condition of the box QP holds (within the
-    tolerances). It starts from the bounds the unconstrained minimiser ẑ* violates. Measured on
-    ``rhmpc bench`` (≈ 120 saturated ticks of 5000): 1 / 2 / 3 solves on 101 / 17 / 2 ticks; a
-    start from the previous tick's final set needed 1 / 2 / 3 / 4 solves on 64 / 40 / 13 / 2, so
-    the stateless start from ẑ* is also the faster one. PDAS can cycle when H is not an
-    M-matrix (Kunisch & Rendl, *ESAIM: M2AN* 37(6), 2003) — this H couples neighbouring
-    blocks strongly, and it does cycle on targets with many saturated blocks — so it gets
-    ``pdas_iter`` solves.
+    tolerances). It starts from the bounds the unconstrained minimiser ẑ* violates (stateless:
+    the tick's decision depends on its QP alone). PDAS can cycle when H is not an M-matrix
+    (Kunisch & Rendl, *ESAIM: M2AN* 37(6), 2003) — this H couples neighbouring blocks
+    strongly — so it gets ``pdas_iter`` solves.
 
 Phase 2: dual active set (Goldfarb & Idnani, *Math. Program.* 27, 1–33, 1983)
     If PDAS has not converged, the dual method starts again from ẑ* (𝒜 = ∅, dual feasible)
@@ -47,7 +44,7 @@ Phase 2: dual active set (Goldfarb & Idnani, *Math. Program.* 27, 1–33, 1983)
     whose violations tie within rounding enter in the order of their index, so that the path,
     and the number of solves, is the same on every processor: violations within ε_p of the
     largest are a tie, broken by the lowest index.
-    Solves of both phases count towards ``max_iter``; past it the tick goes to level 3.
+    Solves of both phases count towards ``max_iter``; past it the tick takes the fallback.
 
 Certificate
     A result is accepted only if the stationarity residual, computed from ``H`` and ``q`` (not
@@ -95,12 +92,10 @@ class BoxQPSettings:
     Attributes
     ----------
     max_iter : int
-        Cap on the Cholesky solves per tick, both phases together [-]; past it the tick goes
-        to level 3. Measured (MPC Hessian): the bench's saturated ticks need 1–5; targets with
-        1–6 saturated blocks ≤ 18 (p50 2); with 10–30 saturated blocks up to 40.
+        Cap on the Cholesky solves per tick, both phases together [-]; past it the call
+        returns without an answer (``capped``).
     pdas_iter : int
-        Solves of phase 1 (PDAS) before phase 2 (the dual active set) takes over [-]. PDAS
-        settles 84 % of the bench's saturated ticks in one solve, all in three.
+        Solves of phase 1 (PDAS) before phase 2 (the dual active set) takes over [-].
     primal_tol : float
         ε_p: a free variable counts as violating its bound when ``|z_i| > 1 + ε_p``
         [normalised torque, 1 = u_max]. The applied torque is clipped to ±u_max anyway.
@@ -109,7 +104,6 @@ class BoxQPSettings:
         cost's gradient scale, -].
     kkt_tol : float
         ε_kkt: acceptance bound on the stationarity residual relative to ``1 + ‖q‖∞`` [-].
-        Measured residuals: ≤ 1e-12 relative (bench, 120 saturated ticks).
     """
 
     max_iter: int = 16
@@ -182,7 +176,7 @@ class BoxQP:
 
         Returns False without a step when ẑ* violates no bound (the box QP's minimiser is ẑ*
         itself: if level 1 rejected it, an envelope row is the reason), and False when the cap
-        is reached or the certificate fails (the caller then goes to level 3).
+        is reached or the certificate fails.
         """
         st = self.settings
         self.iterations = 0

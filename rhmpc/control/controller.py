@@ -5,6 +5,8 @@ Two calls make the whole controller, the same for this Python reference and for 
 
     controller.refresh(tick, z, stamp)     a sensor sample's arrival: gate → predictor →
                                            interpolation (:mod:`rhmpc.control.reference`)
+    controller.forecast(tick, stamp, pts)  or a forecast made outside (another process):
+                                           interpolation, in place of the refresh's own
     tau = controller.step(tick, q)         every control tick, from the encoders' angles q̃
 
 A step, with the reference's points r_{i+1..i+N} of tick i::
@@ -127,6 +129,15 @@ class Controller:
         start = clock()
         self.reference.refresh(tick, z, stamp, others)
         self.refresh_ns = clock() - start
+
+    def forecast(self, tick: int, stamp: float, points: np.ndarray) -> bool:
+        """A forecast made outside arriving on ``tick``: ``points[k]`` the centred POI at
+        ``stamp + k·dt`` [m] (see :meth:`rhmpc.control.reference.PredictedReference.forecast`);
+        returns whether it was taken."""
+        start = clock()
+        taken = self.reference.forecast(tick, stamp, points)
+        self.refresh_ns = clock() - start
+        return taken
 
     def horizon(self, tick: int) -> np.ndarray:
         """The reference's points r_{tick+1..tick+N} (N, 3) [m] (a read-only view)."""

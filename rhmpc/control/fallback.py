@@ -47,8 +47,8 @@ class MPCStats:
         Ticks solved by level 2 (the torque-box QP by active set, every envelope row holding:
         :mod:`rhmpc.control.box_qp`), without calling the solver (``source`` ``"qp"``).
     level : int
-        Last tick: the cascade level that produced the QP solution (1, 2, or 3 = the configured
-        solver), 0 if the tick never reached the QP (non-finite inputs).
+        Last tick: the cascade level that produced the QP solution (1, 2, or 3 = OSQP), 0 if
+        the tick never reached the QP (non-finite inputs).
     box_iterations : int
         Last tick: level 2's active-set solves (also when it was tried and the tick went on to
         level 3), else 0.
@@ -157,17 +157,13 @@ class FallbackChain:
     def _rejected(self, reason: str) -> np.ndarray:
         """A solve not used: the fallback's torque; an unfinished iterate starts the next solve."""
         out = self._fallback(reason, inputs_finite=True)
-        if reason in _CONTINUE and self._ws != "none":
+        if reason in _CONTINUE:
             # An unfinished solve is a good start for the next, nearly identical QP: carry
             # the ADMM iterate over instead of restarting from the old plan.
             z, y = self.last_solution()
-            if not (np.isfinite(z).all() and np.isfinite(y).all()):
-                pass
-            elif self._ws != "keep":
+            if np.isfinite(z).all() and np.isfinite(y).all():
                 self._ws_x = self._shift @ z
                 self._ws_y = self._shift_dual @ y
-            else:
-                self._ws_x = None  # "keep": OSQP's own iterate
         return out
 
     def _fallback(self, reason: str, *, inputs_finite: bool) -> np.ndarray:
@@ -201,7 +197,7 @@ class FallbackChain:
         self._p_u[:] = tau
         # Next warm start: the plan shifted to the next tick (or cold if there is none).
         self._ws_pending = False
-        if self._plan is not None and self._ws != "none":
+        if self._plan is not None:
             self._ws_x = self._shift @ self._plan
             self._ws_y = self._y_zero
         return tau

@@ -1,6 +1,7 @@
-"""`RecedingHorizonMPC`: the condensed, move-blocked tracking QP solved every tick (DAQP or OSQP).
+"""`RecedingHorizonMPC`: the condensed, move-blocked tracking QP solved every tick by the screening
+cascade.
 
-Built once (:func:`rhmpc.control.qp.build_condensed_qp`: CasADi → numpy data → solver setup);
+Built once (:func:`rhmpc.control.qp.build_condensed_qp`: CasADi → numpy data → OSQP's setup);
 each tick then only does::
 
     d = p(q0 + x̂_q) − (C x̂ + y0)       (output offset: one forward-kinematics call)
@@ -11,16 +12,13 @@ each tick then only does::
     l, u = l0 − G p, u0 − G p           (envelope rows: only the state and offset columns)
     q_z = F_z p + f0_z                  (one mat-vec; the slacks' q is the constant ρ₁)
     level 2: the torque-box QP by active set (:mod:`rhmpc.control.box_qp`); if it converges, its
-             KKT certificate holds and every envelope row holds at [z; 0]: v = [z; 0], done
-             if it stops at its cap (box_max_iter solves) and the solver is OSQP: the fallback
-    level 3: solver.update(q, l, u) ; warm start ; solver.solve()   (DAQP: hot-started working
-             set; OSQP: previous solution shifted one tick)
+             KKT certificate holds and every envelope row holds at [z; 0]: v = [z; 0], done;
+             if it stops at its cap (box_max_iter solves): the fallback
+    level 3: OSQP: update(q, l, u), warm start from the last plan shifted one tick, solve
     τ = clip(u_max ∘ ẑ_0, −u_max, u_max)   if the status is "solved", else the fallback
 
-A capped level 2 goes to OSQP's level 3 no more: ADMM bounded at ``max_iter`` iterations never
-finished what ``box_max_iter`` exact active-set solves could not (measured on ``rhmpc bench``
-with reference jumps of 1 cm to 1 m: 0 of 13 055 capped ticks), so the tick takes the fallback
-at once; DAQP, exact, gets the tick.
+A capped level 2 takes the fallback rather than level 3: ADMM bounded at ``max_iter``
+iterations does not finish what ``box_max_iter`` exact active-set solves could not.
 
 Back-off
     A tick stream the solver cannot settle (a reference out of the arm's reach, an envelope the
@@ -28,8 +26,7 @@ Back-off
     failed ticks, levels 2 and 3 rest for ``min(2ᵏ − 1, backoff_max_ticks)`` ticks (binary
     exponential back-off, as Ethernet's retransmissions: Metcalfe & Boggs, *Commun. ACM*
     19(7), 1976), while level 1 still runs every tick and the fallback acts (reason
-    ``"backoff"``). Any solved tick ends the back-off. At the default 255, 0.4 % of the ticks
-    of such a stream try the solver.
+    ``"backoff"``). Any solved tick ends the back-off.
 
 The screening cascade is exact, not an approximation. Level 1: with the slacks at 0 and every
 row satisfied, the point satisfies the QP's KKT conditions (zero multipliers on the envelope and
@@ -37,7 +34,12 @@ torque rows, multiplier ρ₁ on each slack's bound s ≥ 0), and P ≻ 0 makes 
 every row. Level 2 is the same argument with the torque rows' multipliers of the box QP: the
 envelope rows' multipliers are zero, so the box QP's KKT conditions are the full QP's (proof in
 :mod:`rhmpc.control.box_qp`). It checks every envelope row; the torque rows are its own
-constraints.
+constraints. The tests hold the cascade to a plain solve of the same QP.
+
+Warm start: OSQP's next solve starts from the last plan shifted one tick (its primal; its dual
+is OSQP's own after a solve, zero but −ρ₁ on the slack bounds after a screened tick or a
+fallback); after a solve stopped at ``max_iter`` it starts from that iterate, primal and dual,
+shifted, so that a solve that needs more iterations finishes over a few ticks.
 
 A tick whose solve is not "solved" never uses OSQP's ``x``: it takes a fallback of
 :mod:`rhmpc.control.fallback` (the shifted plan, the clipped LQ input if it keeps the envelope,
@@ -51,7 +53,6 @@ import time
 
 import numpy as np
 
-from rhmpc.control.active_set import ActiveSetSolver
 from rhmpc.control.box_qp import BoxQP, BoxQPSettings
 from rhmpc.control.fallback import FallbackChain, MPCStats
 from rhmpc.control.offset import OutputOffset
@@ -104,8 +105,6 @@ class RecedingHorizonMPC(FallbackChain):
         self.N, self.nx, self.nu, self.ny = qp.N, qp.nx, qp.nu, qp.ny
         self.u_max = qp.u_max.copy()
         self.u_max.setflags(write=False)
-        self._ws = self.settings.warm_start
-        self._ws_dual = self._ws == "shift"
 
         # -- per-tick buffers and views ------------------------------------------------------
         # One mat-vec per tick gives q: p_ext = [p; 1], F_ext = [F, f0], q = F_ext p_ext. The
@@ -121,7 +120,6 @@ class RecedingHorizonMPC(FallbackChain):
         self._p_d = self._p_ext[nx + N * ny + self.nu:-1]
         self._offset = (OutputOffset(arm, out=self._p_d, state=self._p_x)
                         if self.settings.offset_correction else None)
-        self._probe = OutputOffset(arm) if self._offset is not None else None  # for offset()
         self._x_shape, self._ref_shape = (nx,), (N, ny)
         self._F_ext = np.ascontiguousarray(np.column_stack([qp.F, qp.f0]))
         self._q = np.empty(qp.nv)
@@ -133,8 +131,6 @@ class RecedingHorizonMPC(FallbackChain):
         self._nz, self._nv = qp.nz, qp.nv
         self._shift, self._shift_dual = qp.shift, qp.shift_dual
         self._scale0 = qp.u_max.copy()
-        self._gain, self._gain0 = qp.gain, qp.gain0
-        self._screen = self.settings.screening
         self._Z_ext = np.ascontiguousarray(qp.minimiser)
         # Level 1 in two mat-vecs (:meth:`_level1`): w = [ẑ*; 0; p_B; 1] with ẑ* = K_z p_ext
         # (K_z = −W F_z), and every row of l ≤ A [ẑ*; 0] ≤ u as a row of H w ≤ 0.
@@ -149,47 +145,24 @@ class RecedingHorizonMPC(FallbackChain):
         self._q[qp.nz:] = qp.f0[qp.nz:]
         self._q_z = self._q[: qp.nz]
         self._F_z = np.ascontiguousarray(self._F_ext[: qp.nz])
-        self.box = BoxQP(qp.P[: qp.nz, : qp.nz],
-                         BoxQPSettings(max_iter=self.settings.box_max_iter))
+        cap = self.settings.box_max_iter
+        self.box = BoxQP(qp.P[: qp.nz, : qp.nz], BoxQPSettings(
+            max_iter=BoxQPSettings.pdas_iter + qp.nz if cap is None else cap))
         self._K_z = np.ascontiguousarray(self.box._negW @ self._F_z)
-        self._box_on = self.settings.box_screening
-        self._box_final = self.settings.solver == "osqp"  # a capped level 2 ends the tick
         self._A_env = np.ascontiguousarray(qp.A[qp.nv:, : qp.nz])
         self._g_env = np.empty(qp.A.shape[0] - qp.nv)
         self._level = 0
         # Multipliers of a screened solution: 0 on every row but the slack bounds s ≥ 0, whose
-        # multiplier is −ρ₁ (stationarity in s at s = 0). Starting ADMM from them matters: from
-        # 0 it needs thousands of iterations to build up ρ₁ (measured: > 4000 vs 25–75).
+        # multiplier is −ρ₁ (stationarity in s at s = 0): ADMM's start, so that it need not
+        # build ρ₁ up over its iterations.
         self._y_zero = np.zeros(qp.A.shape[0])
         self._y_zero[qp.nz:qp.nv] = -self.settings.envelope_penalty
         self._neg_umax = -qp.u_max
         self._nu_ = self.nu
-        self._v_cold = np.zeros(qp.nv)
-
-        self._setup_solver()
+        self._solver = OSQPSolver(qp, self.settings)
+        self._osqp = self._solver.osqp  # what rhmpc export generates C from
         self.stats = MPCStats()
         self.reset()
-
-    # -- solver ------------------------------------------------------------------------------
-    def _setup_solver(self) -> None:
-        s, qp = self.settings, self.qp
-        # OSQP is always set up: the C export generates its code, and reset() seeds it.
-        self._osqp_solver = OSQPSolver(qp, s, want_dual=self._ws_dual)
-        self._osqp = self._osqp_solver.osqp
-        # DAQP's work per tick is bounded by the QP's size: at most one change of its active
-        # set per constraint row (each a rank-one update of its factorisation)
-        self._solver = (ActiveSetSolver(qp, qp.A.shape[0]) if s.solver == "daqp"
-                        else self._osqp_solver)
-
-    def _update_q(self) -> None:
-        self._solver.update(self._q, self._l, self._u, self.qp.param_bounds)
-
-    def _warm_start(self, x: np.ndarray, y: np.ndarray | None) -> None:
-        if self._solver is self._osqp_solver:  # DAQP hot-starts from its last working set
-            self._osqp_solver.warm_start(x, y)
-
-    def _solve(self) -> tuple[int, int, np.ndarray, np.ndarray | None]:
-        return self._solver.solve()
 
     # -- public API --------------------------------------------------------------------------
     def reset(self, u_prev: np.ndarray | None = None) -> None:
@@ -210,7 +183,7 @@ class RecedingHorizonMPC(FallbackChain):
         self._last_screened = False
         self._ws_pending = False
         self.stats = MPCStats()
-        self._osqp_solver.warm_start(np.zeros(self.qp.nv), self._y_zero)
+        self._solver.warm_start(np.zeros(self.qp.nv), self._y_zero)
 
     def force_failures(self, count: int = 1, reason: str = "injected") -> None:
         """Make the next ``count`` solves report failure ``reason`` (tests, fault injection).
@@ -221,29 +194,6 @@ class RecedingHorizonMPC(FallbackChain):
         if count < 0:
             raise ValueError(f"count must be >= 0, got {count}")
         self._forced.extend([reason] * int(count))
-
-    def offset(self, x: np.ndarray) -> np.ndarray:
-        """Output offset d = p(q0 + x_q) − (C x + y0) [m] the controller uses at ``x`` (0 when
-        ``offset_correction`` is off)."""
-        if self._offset is None:
-            return np.zeros(self.ny)
-        return self._probe(np.asarray(x, dtype=float), out=np.empty(self.ny))
-
-    def params(
-        self, x: np.ndarray, ref: np.ndarray, u_prev: np.ndarray | None = None
-    ) -> np.ndarray:
-        """QP parameter vector p = [x; r_1..r_N; u_{−1}; d] (u_{−1} defaults to the last output,
-        d is :meth:`offset` at ``x``)."""
-        up = self._p_u if u_prev is None else u_prev
-        x = np.asarray(x, float)
-        return self.qp.params(x, np.asarray(ref, float), np.asarray(up, float), self.offset(x))
-
-    def qp_vectors(
-        self, x: np.ndarray, ref: np.ndarray, u_prev: np.ndarray | None = None
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(q, l, u) of the QP the controller would solve for ``x``, ``ref`` (P, A: ``self.qp``)."""
-        p = self.params(x, ref, u_prev)
-        return (self.qp.q(p), *self.qp.bounds(p))
 
     def last_solution(self) -> tuple[np.ndarray, np.ndarray]:
         """Primal ẑ and dual y of the last tick's QP, as copies.
@@ -257,9 +207,7 @@ class RecedingHorizonMPC(FallbackChain):
             if self._level == 2:
                 y[: self._nz] = self.box.mu
             return self._plan.copy(), y
-        if self._solver is not self._osqp_solver:
-            return self._solver.x.copy(), self._solver.y.copy()
-        return self._osqp_solver.last_solution()
+        return self._solver.last_solution()
 
     @property
     def u_prev(self) -> np.ndarray:
@@ -276,12 +224,6 @@ class RecedingHorizonMPC(FallbackChain):
         if value.shape != (self.nu,) or not np.all(np.isfinite(value)):
             raise ValueError(f"u_prev must be {self.nu} finite torques [N·m], got {value!r}")
         self._p_u[:] = np.clip(value, -self.u_max, self.u_max)
-
-    def unconstrained(
-        self, x: np.ndarray, ref: np.ndarray, u_prev: np.ndarray | None = None
-    ) -> np.ndarray:
-        """First input of the unconstrained minimiser, not clipped [N·m] (the LQ fallback)."""
-        return self._gain @ self.params(x, ref, u_prev) + self._gain0
 
     def step(self, x: np.ndarray, ref: np.ndarray) -> np.ndarray:
         """One control tick: MPC torque τ_mpc (nu,) [N·m] for state ``x`` and reference ``ref``.
@@ -301,7 +243,7 @@ class RecedingHorizonMPC(FallbackChain):
             stats.iterations = 0
             stats.solve_time = 0.0
             return self._fallback("nonfinite_input", inputs_finite=False)
-        if self._screen and not self._forced and self._level1():
+        if not self._forced and self._level1():
             return self._screened_output(t0, self._v_star, 1)
         if self.qp.param_bounds:
             np.dot(self._G, self._p[self._G_take], out=self._g)
@@ -309,21 +251,18 @@ class RecedingHorizonMPC(FallbackChain):
             np.subtract(self.qp.u0, self._g, out=self._u)
         if self._rest > 0 and not self._forced:
             self._rest -= 1
-            stats.level = 1 if self._screen else 0
+            stats.level = 1
             return self._unsolved(t0, "backoff")
-        if self._screen and not self._forced:
-            np.dot(self._F_z, self._p_ext, out=self._q_z)
-            if self._box_on and self._box_solved():
+        np.dot(self._F_z, self._p_ext, out=self._q_z)
+        if not self._forced:
+            if self._box_solved():
                 v = np.zeros(self._nv)
                 v[: self._nz] = self.box.z
                 return self._screened_output(t0, v, 2)
-            stats.box_iterations = self.box.iterations if self._box_on else 0
-            if self._box_on and self.box.capped and self._box_final:
+            stats.box_iterations = self.box.iterations
+            if self.box.capped:
                 stats.level = 2
                 return self._unsolved(t0, "box_max_iter")
-        else:
-            np.dot(self._F_ext, self._p_ext, out=self._q)
-            stats.box_iterations = 0
         return self._solver_tick(t0)
 
     def _set_parameters(self, x: np.ndarray, ref: np.ndarray) -> bool:
@@ -344,17 +283,17 @@ class RecedingHorizonMPC(FallbackChain):
         return math.isfinite(np.vdot(self._p_ext, self._p_ext))  # NaN, ±inf, > 1e154: no warning
 
     def _solver_tick(self, t0: int) -> np.ndarray:
-        """Level 3: the configured solver, warm-started; its result or the fallback chain."""
+        """Level 3: OSQP, warm-started; its result or the fallback chain."""
         clock, stats = time.perf_counter_ns, self.stats
         self._last_screened = False
         self._level = 3
         stats.level = 3
         t1 = clock()
         try:
-            self._update_q()
+            self._solver.update(self._q, self._l, self._u, self.qp.param_bounds)
             self._apply_warm_start()
             t2 = clock()
-            status, iters, z, y = self._solve()
+            status, iters, z = self._solver.solve()
         except Exception:  # the loop must survive any solver error
             t2 = clock()
             stats.parts_ns[:] = [t1 - t0, t2 - t1, 0, 0]
@@ -372,24 +311,20 @@ class RecedingHorizonMPC(FallbackChain):
             tau = z[: self._nu_] * self._scale0
             if not math.isfinite(np.dot(tau, tau)):
                 reason = "nonfinite_solution"
-        out = self._rejected(reason) if reason is not None else self._accepted(tau, z, y)
+        out = self._rejected(reason) if reason is not None else self._accepted(tau, z)
         stats.parts_ns[:] = [t1 - t0, t2 - t1, t3 - t2, clock() - t3]
         return out
 
     def _apply_warm_start(self) -> None:
-        """The solver's start: the shifted plan of the last solve, its own iterate, or v = 0."""
+        """OSQP's start (module docstring): the shifted plan, or its own iterate."""
         if self._ws_pending:
             self._ws_x, self._ws_y = self._shift @ self._plan, self._y_zero
             self._ws_pending = False
-        if self._ws == "none":
-            # OSQP 1.x keeps its last iterate even with warm_starting=False (measured: the
-            # same iterations as "keep"); a cold start is an explicit start from v = 0.
-            self._warm_start(self._v_cold, self._y_zero)
-        elif self._ws_x is not None:
-            self._warm_start(self._ws_x, self._ws_y)
+        if self._ws_x is not None:
+            self._solver.warm_start(self._ws_x, self._ws_y)
             self._ws_x = self._ws_y = None
 
-    def _accepted(self, tau: np.ndarray, z: np.ndarray, y: np.ndarray) -> np.ndarray:
+    def _accepted(self, tau: np.ndarray, z: np.ndarray) -> np.ndarray:
         """A solved QP: τ clipped to ±u_max, the plan kept, the next warm start prepared."""
         stats = self.stats
         np.maximum(tau, self._neg_umax, out=tau)
@@ -401,14 +336,10 @@ class RecedingHorizonMPC(FallbackChain):
             if slack > stats.slack_max:
                 stats.slack_max = slack
         self._p_u[:] = tau  # u_{−1} of the next tick (a copy: the caller owns tau)
-        self._plan = z  # a fresh array from OSQP on every access of solution.x
+        self._plan = z  # a fresh array from OSQP on every solve
         self._plan_age = 0
         self._streak = 0
-        if self._ws == "shift":
-            self._ws_x = self._shift @ z
-            self._ws_y = self._shift_dual @ y
-        elif self._ws == "shift_primal":
-            self._ws_x = self._shift @ z
+        self._ws_x = self._shift @ z  # OSQP keeps its own dual
         stats.status = "solved"
         stats.source = "qp"
         return tau
@@ -427,7 +358,7 @@ class RecedingHorizonMPC(FallbackChain):
         self._streak = 0
         # The next OSQP solve starts from this plan shifted (computed only when it runs); all
         # multipliers are zero here.
-        self._ws_pending = self._ws != "none"
+        self._ws_pending = True
         self._last_screened = True
         self._level = level
         stats = self.stats

@@ -52,13 +52,7 @@ class ObserverSettings:
         Measurement noise used when the robot has no encoder model [rad].
     innovation_gate : float
         γ: a reading whose innovation exceeds γ √S_jj is held out [standard deviations of the
-        innovation]; 0 fuses every finite reading. Measured on the main job (generalized,
-        20–26 s): the largest healthy innovation is 3.0 √S on the ideal plant and 7.1 √S on
-        the hardware-like one (stiction break-away, the DAC's steps); all encoders stuck for
-        0.2 s: max error 1.5 mm at γ = 5, 3.7 mm at 6, 17 mm at 8, and the arm leaves its joint
-        limits without the gate. At γ = 5 the hardware-like plant's readings are held now and
-        then and taken again (invivo-video: 997 readings held of 40 000, RMS error 0.229 mm
-        against 0.227 mm ungated); the ideal plant's never.
+        innovation]; 0 fuses every finite reading.
     reacquire_ticks : int
         Ticks a reading is held before one that has changed is taken again [ticks].
     fault_timeout : float

@@ -1,9 +1,13 @@
-"""OSQP behind the MPC's solver interface (the same shape as :mod:`rhmpc.control.active_set`).
+"""Level 3 of the screening cascade: the condensed QP in OSQP, set up once.
 
-Set up once with the condensed QP's ``P``, ``A`` and the settings, then per tick only vectors
-change (``update_data_vec``), as in the OSQP examples. The public ``OSQP.solve()`` wraps every
-result in namespaces (≈ 10 µs per call), so the extension object underneath (``_solver``) is
-used directly when it is there, the public API otherwise.
+``min ½vᵀPv + qᵀv, l ≤ Av ≤ u`` by ADMM (Stellato et al., "OSQP: an operator splitting solver
+for quadratic programs", Math. Prog. Comp. 12, 2020), set up once with ``P``, ``A`` and the
+settings; per tick only the vectors change (``update_data_vec``), as in OSQP's examples. The
+options are those the exported C reproduces (OSQP's generated code in vectors mode): a fixed
+step ρ (no adaptation: its KKT matrix is factorised once), no polishing, no timer, no scaling
+(the QP is scaled physically: inputs by u_max, envelope rows to unit norm), the residuals
+checked every 5 iterations and the duality gap not required (the envelope's slack penalty ρ₁
+turns slack noise into a gap far above the tolerance).
 """
 
 from __future__ import annotations
@@ -32,61 +36,36 @@ SOLVED = int(osqp.SolverStatus.OSQP_SOLVED)
 
 
 class OSQPSolver:
-    """The condensed QP ``min ½vᵀPv + qᵀv, l ≤ Av ≤ u`` in OSQP (ADMM; Stellato et al., Math.
-    Prog. Comp. 12, 2020), set up once; ``want_dual`` returns y from :meth:`solve`."""
+    """The condensed QP in OSQP (module docstring); ``osqp`` is the solver object that
+    ``rhmpc export`` generates C from."""
 
-    def __init__(self, qp: CondensedQP, s: MPCSettings, want_dual: bool) -> None:
+    def __init__(self, qp: CondensedQP, s: MPCSettings) -> None:
         self.osqp = osqp.OSQP()
-        o = s.osqp
-        extra = {"time_limit": o.time_limit} if o.time_limit > 0 else {}
         self.osqp.setup(
             sp.csc_matrix(np.triu(qp.P)), qp.f0.copy(), sp.csc_matrix(qp.A), qp.l0.copy(),
-            qp.u0.copy(), verbose=False, eps_abs=o.eps_abs, eps_rel=o.eps_rel,
-            max_iter=s.max_iter, rho=o.rho, adaptive_rho=o.adaptive_rho,
-            adaptive_rho_interval=o.adaptive_rho_interval,
-            adaptive_rho_tolerance=o.adaptive_rho_tolerance,
-            check_termination=o.check_termination, check_dualgap=o.check_dualgap,
-            polishing=o.polish, scaling=o.scaling, warm_starting=s.warm_start != "none",
-            **extra,
-        )
-        self._raw = getattr(self.osqp, "_solver", None)
-        self._want_dual = want_dual
+            qp.u0.copy(), verbose=False, eps_abs=s.osqp_eps_abs, eps_rel=0.0,
+            max_iter=s.max_iter, rho=s.osqp_rho, adaptive_rho=False, check_termination=5,
+            check_dualgap=False, polishing=False, scaling=0, warm_starting=True)
+        self._result = None
 
     def update(self, q: np.ndarray, lower: np.ndarray, upper: np.ndarray, bounds: bool) -> None:
         """New linear cost ``q`` and, if ``bounds``, new ``l``/``u`` (P and A never change)."""
-        if self._raw is not None:
-            if bounds:
-                self._raw.update_data_vec(q=q, l=lower, u=upper)
-            else:
-                self._raw.update_data_vec(q=q, l=None, u=None)
-        elif bounds:
+        if bounds:
             self.osqp.update(q=q, l=lower, u=upper)
         else:
             self.osqp.update(q=q)
 
     def warm_start(self, x: np.ndarray, y: np.ndarray | None) -> None:
         """Start the next solve from primal ``x`` and dual ``y`` (``None``: OSQP's own)."""
-        if self._raw is not None:
-            self._raw.warm_start(x, y)
-        else:
-            self.osqp.warm_start(x=x, y=y)
+        self.osqp.warm_start(x=x, y=y)
 
-    def solve(self) -> tuple[int, int, np.ndarray, np.ndarray | None]:
-        """(status value, iterations, primal v, dual y or ``None``)."""
-        if self._raw is not None:
-            raw = self._raw
-            raw.solve()
-            info, sol = raw.info, raw.solution
-            return info.status_val, info.iter, sol.x, sol.y if self._want_dual else None
-        res = self.osqp.solve(raise_error=False)
-        return res.info.status_val, res.info.iter, res.x, res.y
+    def solve(self) -> tuple[int, int, np.ndarray]:
+        """(status value, iterations, primal v)."""
+        self._result = res = self.osqp.solve(raise_error=False)
+        return res.info.status_val, res.info.iter, res.x
 
     def last_solution(self) -> tuple[np.ndarray, np.ndarray]:
         """Copies of the last iterate (primal, dual), whatever its status."""
-        if self._raw is not None:
-            sol = self._raw.solution
-            return np.array(sol.x, dtype=float), np.array(sol.y, dtype=float)
-        res = self.osqp._derivative_cache.get("results")  # public API fallback
-        if res is None:
+        if self._result is None:
             raise RuntimeError("no solve has run yet")
-        return np.array(res.x, dtype=float), np.array(res.y, dtype=float)
+        return np.array(self._result.x, dtype=float), np.array(self._result.y, dtype=float)

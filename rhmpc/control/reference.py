@@ -13,14 +13,19 @@ period ``dt``::
     nodes  t_a + k·dt,  k = 0 … K      values  z(t_a), ẑ(t_a + dt), …, ẑ(t_a + K·dt)
 
 Each control tick ``t`` until the next refresh takes its N points ``r_j = r(t + j·Ts),
-j = 1 … N`` from a piecewise-quadratic (3-node Lagrange) interpolation of these nodes: with
-``s = (τ − t_a)/dt`` and the window of nodes ``m, m+1, m+2`` (``m = min(⌊s⌋, K − 2)``),
-``u = s − m``::
+j = 1 … N`` from a piecewise-cubic (4-node Lagrange) interpolation of these nodes: with
+``s = (τ − t_a)/dt``, the window of nodes ``m … m+3`` around the interval of s
+(``m = clip(⌊s⌋ − 1, 0, K − 3)``) and ``u = s − m``::
 
-    r(τ) = ½(u−1)(u−2)·z_m − u(u−2)·z_{m+1} + ½u(u−1)·z_{m+2}
+    r(τ) = −(u−1)(u−2)(u−3)/6·z_m + u(u−2)(u−3)/2·z_{m+1}
+           − u(u−1)(u−3)/2·z_{m+2} + u(u−1)(u−2)/6·z_{m+3}
 
-Beyond the last node the last window's quadratic extrapolates (at most the last 2.5 ms of the
-last horizon with the paper's K = 4 and downsample 15). ``K = prediction_points +
+The nodes are passed through exactly, so that at each sample instant the reference is the
+forecast of that sample; the cubic follows the motion's curvature between two samples of a slow
+sensor closer than Tuna et al.'s quadratic, which the robot tracks with a smaller miss at the
+samples (the decision record *The reference's interpolation*). Beyond the last node the last
+window's cubic extrapolates (at most the last 2.5 ms of the last horizon with the paper's K = 4
+and downsample 15). ``K = prediction_points +
 ⌈latency/dt⌉``: a sensor's latency is predicted across (Yuen et al. 2009's delay compensation).
 
 Outlier gate (innovation gating, :mod:`rhmpc.control.gate`): while *locked*, a sample whose miss
@@ -42,6 +47,10 @@ accepted sample z_n, it is z_n that was off: the predictor retracts z_n (``retra
 by its forecast, as if missing; ``counts["retracted"]``) and z_{n+1} is accepted. Predictors
 that cannot retract (the default) keep the plain gate.
 
+A forecast made outside (``forecast(tick, stamp, points)``, a predictor in another process) takes
+the place of the refresh's own nodes: the same interpolation and guard, then the refreshes
+only keep the predictor learning until ``refresh_ticks`` ticks pass without one.
+
 Placement: both references work in centred heart coordinates (d = 1 or 3 axes); after
 ``place(origin)`` their ``horizon`` returns workspace points ``r = origin + E r_c`` (N, 3), with
 ``E`` embedding a 1-D motion along x.
@@ -56,9 +65,14 @@ import numpy as np
 
 from predictors.base import is_measured
 from rhmpc.control.gate import OutlierGate
+from rhmpc.control.interpolation import WINDOW, interpolation_matrix, lagrange_weights, windows
 
-__all__ = ["ExactReference", "PredictedReference", "ReferenceSettings", "embed3",
-           "interpolation_matrix", "quadratic_weights", "windows"]
+#: The most latency the exported controller's refresh forecasts across, and the oldest a
+#: forecast from outside may be when it arrives [s].
+LATENCY_CAP = 0.25
+
+__all__ = ["LATENCY_CAP", "ExactReference", "PredictedReference", "ReferenceSettings", "embed3",
+           "interpolation_matrix", "lagrange_weights", "windows"]
 
 
 @dataclass(frozen=True)
@@ -69,7 +83,8 @@ class ReferenceSettings:
     ----------
     prediction_points : int
         Points the predictor forecasts per refresh, before latency compensation (4: Tuna et
-        al. 2013 §VIII-B, M = 4 at 7.5 ms covers the 25-ms horizon).
+        al. 2013 §VIII-B, M = 4 at 7.5 ms covers the 25-ms horizon); at least 4, the cubic's
+        window.
     outlier_gate : float or str
         A sensor sample farther from its one-step forecast than max(floor, 4 × the running RMS
         forecast miss) is treated as missing (echo outliers: the heart cannot jump millimetres
@@ -86,7 +101,7 @@ class ReferenceSettings:
         After this many consecutive rejected samples the gate opens (a real jump, or a forecast
         gone wrong) until 20 samples in a row fall inside it again [samples]. Default 3: a
         sonomicrometer's cycle slip lasts up to 8 ms and the causal playback adds one raw period
-        (3.9 ms at 257 Hz), so it reaches ⌈11.9 / 7.5⌉ + 1 = 3 samples of the predictor.
+        (3.9 ms at 257 Hz), so it reaches ``⌈11.9 / 7.5⌉ + 1 = 3`` samples of the predictor.
     guard_speed : float
         Reference guard: forecasts farther from the last accepted sample than ``guard_margin +
         guard_speed · lead`` mean a diverged predictor; the reference then holds that sample and
@@ -104,7 +119,7 @@ class ReferenceSettings:
     guard_margin: float = 2e-3
 
     def __post_init__(self) -> None:
-        for name, least in (("prediction_points", 2), ("outlier_max_rejections", 0)):
+        for name, least in (("prediction_points", WINDOW), ("outlier_max_rejections", 0)):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < least:
                 raise ValueError(f"{name} must be an integer >= {least}, got {value!r}")
@@ -133,66 +148,6 @@ def embed3(p: np.ndarray) -> np.ndarray:
         return p
     out = np.zeros((p.shape[0], 3))
     out[:, : p.shape[1]] = p
-    return out
-
-
-#: The three Lagrange weights on nodes m, m+1, m+2 as polynomials in u = s − m, in the basis
-#: (u², u, 1): ½(u−1)(u−2), −u(u−2), ½u(u−1).
-_LAGRANGE = np.array([[0.5, -1.5, 1.0], [-1.0, 2.0, 0.0], [0.5, -0.5, 0.0]])
-
-
-def _window_weights(s: np.ndarray, n_nodes: int) -> tuple[np.ndarray, np.ndarray]:
-    """``m`` (n,) and the weights as rows, shape (3, n)."""
-    if n_nodes < 3:
-        raise ValueError(f"quadratic interpolation needs at least 3 nodes, got {n_nodes}")
-    m = np.floor(s)
-    np.minimum(m, float(n_nodes - 3), out=m)
-    np.maximum(m, 0.0, out=m)
-    basis = np.ones((3, s.shape[0]))
-    u = np.subtract(s, m, out=basis[1])
-    np.multiply(u, u, out=basis[0])
-    return m.astype(np.intp), _LAGRANGE @ basis
-
-
-def quadratic_weights(s: np.ndarray, n_nodes: int) -> tuple[np.ndarray, np.ndarray]:
-    """Window start ``m`` and the three Lagrange weights for node coordinates ``s`` (in periods).
-
-    Returns ``m`` (n,) and ``w`` (n, 3) with r(s) = Σ_j w[:, j] · node[m + j].
-    """
-    m, w = _window_weights(s, n_nodes)
-    return m, w.T
-
-
-def interpolation_matrix(s: np.ndarray, n_nodes: int) -> np.ndarray:
-    """W (n, n_nodes) with W @ nodes = the piecewise-quadratic interpolation at ``s``."""
-    m, w = _window_weights(s, n_nodes)
-    n = s.shape[0]
-    W = np.zeros(n * n_nodes)
-    m += np.arange(0, n * n_nodes, n_nodes)  # flat index of each row's first node
-    W[m] = w[0]
-    m += 1
-    W[m] = w[1]
-    m += 1
-    W[m] = w[2]
-    return W.reshape(n, n_nodes)
-
-
-def windows(points: np.ndarray, first: int, count: int, N: int) -> np.ndarray:
-    """Rows ``first + k … first + k + N − 1`` of ``points`` (n, d) for k < count, as one
-    read-only (count, N, d) array: a view of overlapping windows, or a copy when it runs past
-    the last row (the last window is then repeated: a skipped refresh holds its points).
-    ``points`` must hold at least N rows."""
-    last = points.shape[0] - N
-    if last < 0:
-        raise ValueError(f"{points.shape[0]} points cannot make windows of {N}")
-    if first + count - 1 > last or not points.flags.c_contiguous:
-        starts = np.minimum(np.arange(first, first + count), last)
-        out = points[starts[:, None] + np.arange(N)]
-    else:
-        row = points.strides[0]
-        out = np.ndarray((count, N, points.shape[1]), points.dtype, points, first * row,
-                         (row, row, points.strides[1]))
-    out.flags.writeable = False
     return out
 
 
@@ -274,6 +229,7 @@ class PredictedReference:
         self._held: np.ndarray | None = None  # the last accepted sample …
         self._held_stamp = 0.0  # … and its time [s]
         self.age_sum, self.age_count = 0.0, 0  # Σ (now − t_a) over forecasts from a sample
+        self._external_stamp, self._external_until = -math.inf, 0  # forecasts from outside
         if self.gate is not None:
             self.gate.reset()
 
@@ -282,9 +238,18 @@ class PredictedReference:
         """A sample's arrival on ``tick``: ``z`` measured at ``stamp`` [s] (None or NaN: none
         new), and ``others`` the other tracked points' samples of that instant (a multi-point
         predictor reads them). Gate, update, forecast, interpolation, guard, placement."""
+        made = self.nodes(tick, z, stamp, others)
+        if made is not None and tick >= self._external_until:  # else a forecast from outside
+            self._interpolate(tick, *made, self._held, self._held_stamp, restart=True)
+
+    def nodes(self, tick: int, z: np.ndarray | None, stamp: float,
+              others: np.ndarray | None = None) -> tuple[np.ndarray, float] | None:
+        """A refresh's gate, update and forecast: the nodes it interpolates, (K, d) [m] at
+        ``t0 + k·dt``, and ``t0`` [s] — what a predictor in another process sends
+        (:meth:`forecast`) — or None while nothing has been measured."""
         z = self._gated(z)
         if z is None and self._anchor is None:
-            return  # nothing measured yet (nor lost): keep holding
+            return None  # nothing measured yet (nor lost): keep holding
         if self._multi_point:
             self.predictor.update(z, others)
         else:
@@ -297,7 +262,34 @@ class PredictedReference:
         points = self.predictor.predict(self.prediction_points
                                         + math.ceil(latency / self.dt - 1e-9))
         self._keep_forecasts(points, measured=z is not None)
-        self._interpolate(tick, z, points, latency)
+        if z is None:
+            return points, self._anchor + self.dt
+        self.age_sum += latency
+        self.age_count += 1
+        return np.concatenate((np.reshape(z, (1, -1)), points)), self._anchor
+
+    def forecast(self, tick: int, stamp: float, points: np.ndarray) -> bool:
+        """A forecast made outside (a predictor in another process) arriving on ``tick``:
+        ``points[k]`` the centred POI at ``stamp + k·dt`` [m], k = 0 … K − 1, 4 ≤ K ≤
+        ``prediction_points + ⌈LATENCY_CAP/dt⌉ + 1``, ``points[0]`` the newest sample as that
+        predictor took it. Interpolated and guarded as a refresh's own nodes (the guard holds
+        ``points[0]``); for the next ``refresh_ticks`` ticks the refreshes only keep the
+        predictor learning, then they serve again. Returns whether it was taken: points not
+        finite or of another shape count ``external_rejected``; a stamp older than the last
+        taken one's or more than LATENCY_CAP before ``tick``, ``external_stale``."""
+        nodes, counts = np.array(points, dtype=float), self.predictor.counts
+        most = self.prediction_points + math.ceil(LATENCY_CAP / self.dt) + 1
+        if not (math.isfinite(stamp) and nodes.ndim == 2 and WINDOW <= len(nodes) <= most
+                and np.isfinite(nodes).all()):
+            counts["external_rejected"] += 1
+            return False
+        if stamp < self._external_stamp or tick * self.Ts - stamp > LATENCY_CAP:
+            counts["external_stale"] += 1
+            return False
+        counts["external"] += 1
+        self._external_stamp, self._external_until = stamp, tick + self.refresh_ticks
+        self._interpolate(tick, nodes, stamp, nodes[0], stamp, restart=False)
+        return True
 
     def _gated(self, z: np.ndarray | None) -> np.ndarray | None:
         """``z`` if it is a measurement the gate accepts (retracting the previous sample where
@@ -324,25 +316,19 @@ class PredictedReference:
         self._forecast = points[0] if ready else None
         self._second = points[1] if ready else None
 
-    def _interpolate(self, tick: int, z: np.ndarray | None, points: np.ndarray,
-                     latency: float) -> None:
-        """The points of the ticks after ``tick``: interpolated, guarded, placed."""
+    def _interpolate(self, tick: int, nodes: np.ndarray, t0: float, held: np.ndarray | None,
+                     held_stamp: float, restart: bool) -> None:
+        """The points of the ticks after ``tick`` from the nodes at ``t0 + k·dt``:
+        interpolated, guarded against ``held`` (measured at ``held_stamp``), placed."""
         now = tick * self.Ts
-        if z is not None:
-            nodes = np.concatenate((np.reshape(z, (1, -1)), points))
-            t0 = self._anchor
-            self.age_sum += latency
-            self.age_count += 1
-        else:
-            nodes, t0 = points, self._anchor + self.dt
         self._dense = self._interpolation(nodes.shape[0], now - t0) @ nodes
         self._first = tick + 1
         s = self.settings
-        if s.guard_speed > 0 and self._held is not None:
-            lead = now + self._span * self.Ts - self._held_stamp  # [s] to the last point
-            gap = np.abs(self._dense - self._held)
+        if s.guard_speed > 0 and held is not None:
+            lead = now + self._span * self.Ts - held_stamp  # [s] to the last point
+            gap = np.abs(self._dense - held)
             if gap.flat[gap.argmax()] > s.guard_margin + s.guard_speed * lead:
-                self._diverged()
+                self._diverged(held, restart)
         self._placed = self._origin + embed3(self._dense)
         if self.monitor is not None:
             self.monitor.observe(now, self.predictor.heart_rate_hz)
@@ -357,15 +343,16 @@ class PredictedReference:
             W = self._matrices[key] = interpolation_matrix(self._lead + age / self.dt, n_nodes)
         return W
 
-    def _diverged(self) -> None:
-        """Hold the last accepted sample; restart the predictor from it (counts are kept)."""
-        counts = self.predictor.counts.copy()
-        self.predictor.reset()
-        self.predictor.counts.update(counts)
+    def _diverged(self, held: np.ndarray, restart: bool) -> None:
+        """Hold ``held``; with ``restart``, restart the predictor from it (counts are kept)."""
+        if restart:
+            counts = self.predictor.counts.copy()
+            self.predictor.reset()
+            self.predictor.counts.update(counts)
+            self.predictor.update(held)
+            self._forecast = self._second = self._before = None
         self.predictor.counts["reference_guard"] += 1
-        self.predictor.update(self._held)
-        self._forecast = self._second = self._before = None
-        self._dense = np.broadcast_to(self._held, self._dense.shape)
+        self._dense = np.broadcast_to(held, self._dense.shape)
 
     @property
     def locked(self) -> bool:

@@ -1,27 +1,20 @@
-"""Settings of the application: frozen dataclasses with their units, and TOML-friendly helpers.
+"""The MPC's settings: a frozen dataclass with the units of every field.
 
-Every field carries its unit in the class docstring. Settings are validated when they are
-constructed (what can be checked without a robot) and again when a controller is built (what
-depends on the robot, e.g. the torque limits left after the cancellation margin).
-
-:func:`to_dict` / :func:`from_dict` convert a settings object to and from a plain ``dict`` of
-TOML-representable values (tuples become lists, ``None`` fields are left out).
+Settings are validated when they are constructed (what can be checked without a robot) and again
+when a controller is built (what depends on the robot, e.g. the torque limits left after the
+cancellation margin).
 """
 
 from __future__ import annotations
 
-import dataclasses
 import math
-from dataclasses import dataclass, field
-from typing import Any, TypeVar
+from dataclasses import dataclass
 
 #: Default move-blocking of the MPC inputs [ticks]: short blocks first, longer ones towards the end
 #: of the 50-tick horizon; 10 blocks (30 QP variables for 3 joints), sum 50.
 DEFAULT_BLOCKS: tuple[int, ...] = (2, 2, 3, 3, 4, 5, 6, 7, 8, 10)
 
-WARM_STARTS: tuple[str, ...] = ("shift", "shift_primal", "keep", "none")
 CARTESIAN: tuple[str, ...] = ("none", "halfspace", "box")
-SOLVERS: tuple[str, ...] = ("osqp", "daqp")
 TERMINALS: tuple[str, ...] = ("none", "dare")
 
 
@@ -37,71 +30,6 @@ def _finite(name: str, value: float, *, positive: bool = False, nonneg: bool = F
 def _integer(name: str, value: int, minimum: int) -> None:
     if not isinstance(value, int) or isinstance(value, bool) or value < minimum:
         raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
-
-
-@dataclass(frozen=True)
-class OSQPSettings:
-    """OSQP's own options, passed to its ``setup`` (Stellato et al., "OSQP: an operator
-    splitting solver for quadratic programs", Math. Prog. Comp. 12, 2020; the names of its
-    settings documentation).
-
-    Attributes
-    ----------
-    eps_abs, eps_rel : float
-        Termination tolerances (on the scaled problem, inputs normalised by u_max) [-].
-    rho : float
-        ADMM step size [-].
-    adaptive_rho : bool
-        Let OSQP adapt rho (each change refactorises the KKT matrix inside the tick; the
-        exported C cannot).
-    adaptive_rho_interval : int
-        Iterations between rho adaptations; 0 = OSQP's automatic choice, which depends on
-        measured setup time and so is not reproducible [-].
-    adaptive_rho_tolerance : float
-        Rho is only changed when the new estimate differs by more than this factor [-].
-    check_termination : int
-        OSQP checks its residuals every this many iterations [-].
-    check_dualgap : bool
-        Also require the duality gap to be below the tolerance to stop. Off: the envelope's
-        slack penalty ρ₁ s turns slack noise of ~1e-6 into a gap of ~1e-3, so with the gap
-        check OSQP runs into ``max_iter`` on every tick where a slack is active.
-    polish : bool
-        Solution polishing (an extra reduced KKT factorisation per tick; the exported C cannot).
-    scaling : int
-        Ruiz equilibration iterations (0 = rely on the physical scaling) [-].
-    time_limit : float
-        Wall-clock limit per solve [s]; 0 disables (the exported C has no timer: it is bounded
-        by ``max_iter``).
-    """
-
-    eps_abs: float = 1e-3
-    eps_rel: float = 0.0
-    rho: float = 3.0
-    adaptive_rho: bool = False
-    adaptive_rho_interval: int = 25
-    adaptive_rho_tolerance: float = 5.0
-    check_termination: int = 5
-    check_dualgap: bool = False
-    polish: bool = False
-    scaling: int = 0
-    time_limit: float = 0.0
-
-    def __post_init__(self) -> None:
-        _finite("eps_abs", self.eps_abs, nonneg=True)
-        _finite("eps_rel", self.eps_rel, nonneg=True)
-        if self.eps_abs == 0 and self.eps_rel == 0:
-            raise ValueError("eps_abs and eps_rel cannot both be 0")
-        _finite("time_limit", self.time_limit, nonneg=True)
-        _finite("rho", self.rho, positive=True)
-        _integer("check_termination", self.check_termination, 1)
-        _integer("adaptive_rho_interval", self.adaptive_rho_interval, 0)
-        _finite("adaptive_rho_tolerance", self.adaptive_rho_tolerance, positive=True)
-        if self.adaptive_rho_tolerance < 1:
-            raise ValueError("adaptive_rho_tolerance must be >= 1")
-        _integer("scaling", self.scaling, 0)
-        for name in ("adaptive_rho", "check_dualgap", "polish"):
-            if not isinstance(getattr(self, name), bool):
-                raise ValueError(f"{name} must be true or false, got {getattr(self, name)!r}")
 
 
 @dataclass(frozen=True)
@@ -179,47 +107,26 @@ class MPCSettings:
         multipliers of the hard constraints.
     envelope_quadratic : float
         ρ₂, quadratic slack weight [-]; it keeps the Hessian positive definite in the slacks.
-    solver : str
-        ``"osqp"`` (ADMM, with the options of ``osqp``; what ``rhmpc export`` generates as C)
-        or ``"daqp"`` (dual active set, exact, hot-started). Both solve the same QP, only on
-        ticks that screening does not settle (an envelope row binds). Choose ``"daqp"`` for a
-        Python study where the envelope is expected to bind: it solves those ticks exactly in a
-        few changes of its active set, where ADMM needs hundreds of iterations (the validation
-        pages measure both).
     max_iter : int
-        OSQP's work per tick: its ADMM iterations [-] (DAQP, exact, is bounded by the QP's size:
-        at most one change of its active set per constraint row). A real-time bound: each
-        iteration is a solve with the factorised KKT matrix, and 10 of them keep a tick that
-        reaches the solver well inside the 0.5-ms period in the exported C (``rhmpc bench
-        --controller c`` measures it; the validation pages give the figures). A solve that
-        reaches it is not used: the tick takes the fallback at once (the shifted plan, then the
-        clipped LQ input or braking) and the next tick's solve starts from its iterate, shifted
-        (its QP is nearly the same), so that a solve that needs more iterations finishes over a
-        few ticks. A cap in iterations rather than time keeps runs reproducible.
-    osqp : OSQPSettings
-        OSQP's own options, passed through (the ``[mpc.osqp]`` table).
-    warm_start : str
-        ``"shift"`` (previous primal and dual shifted one tick), ``"shift_primal"`` (primal
-        shifted, OSQP's dual kept), ``"keep"`` (OSQP's previous iterate as is) or ``"none"``
-        (cold start every tick).
-    screening : bool
-        Level 1 of the screening cascade: try the unconstrained minimiser first, ẑ* = −P_zz⁻¹
-        q_z(p) (two mat-vecs with matrices from build time); if l ≤ A [ẑ*; 0] ≤ u it *is* the
-        QP's solution (the KKT conditions hold with zero multipliers), so the solver is not
-        called. ``False`` calls the solver on every tick (and turns ``box_screening`` off too).
-    box_screening : bool
-        Level 2 of the screening cascade, tried when level 1 fails: the QP with the torque
-        boxes only (slacks 0) solved exactly by active-set methods (primal-dual, then dual;
-        :mod:`rhmpc.control.box_qp`); if its KKT certificate holds and every envelope row
-        holds, it is the full QP's solution (the envelope's multipliers are zero) and the
-        solver is not called. Measured on ``rhmpc bench``: it settles every torque-saturated
-        tick in 1–3 solves; the solver (level 3) runs only where an envelope row binds.
-    box_max_iter : int
-        Cap on level 2's active-set solves (Cholesky factorisations of at most 30 × 30) per
-        tick [-]; past it the tick goes to the solver. Measured on the PHANToM: the bench's and
-        the closed loop's saturated ticks need 1–5; tight joint bounds with 2-mm reference
-        jumps up to 21 (p99 18); targets with 10–30 saturated blocks up to 40. Past the cap
-        the tick takes the fallback (with DAQP as the solver: goes to level 3).
+        OSQP's ADMM iterations per tick [-] on the ticks the screening cascade hands it (an
+        envelope row binds): a bound on the tick's work, each iteration a solve with the
+        factorised KKT matrix (``rhmpc bench --controller c`` times the exported tick). A solve
+        that reaches it is not used: the tick takes the fallback, and the next tick's solve
+        starts from its iterate, shifted one tick (its QP is nearly the same), so that a solve
+        that needs more iterations finishes over a few ticks. A cap in iterations rather than
+        time keeps runs reproducible.
+    osqp_rho : float
+        ρ, OSQP's ADMM step size [-] (Stellato et al., "OSQP: an operator splitting solver for
+        quadratic programs", Math. Prog. Comp. 12, 2020), fixed: the KKT matrix is factorised
+        once.
+    osqp_eps_abs : float
+        OSQP's absolute termination tolerance on the primal and dual residuals, on the QP
+        scaled by u_max (inputs of magnitude ≤ 1) [-]; the relative one is 0.
+    box_max_iter : int or None
+        Cap on level 2's active-set solves (Cholesky factorisations of at most nz × nz) per
+        tick [-]; past it the tick takes the fallback (:mod:`rhmpc.control.box_qp`). None
+        (default): its PDAS solves plus nz, those of a dual phase in which every torque bound
+        enters once and none leaves (Goldfarb & Idnani 1983).
     backoff_max_ticks : int
         Longest rest of levels 2 and 3 after consecutive failed ticks [ticks]: after k of
         them the next ``min(2ᵏ − 1, backoff_max_ticks)`` ticks take the fallback unless level
@@ -252,13 +159,10 @@ class MPCSettings:
     cartesian_half_width: tuple[float, float, float] = (5e-3, 5e-3, 5e-3)
     envelope_penalty: float = 1e3
     envelope_quadratic: float = 1e2
-    solver: str = "osqp"
     max_iter: int = 10
-    osqp: OSQPSettings = field(default_factory=lambda: OSQPSettings())
-    warm_start: str = "shift_primal"
-    screening: bool = True
-    box_screening: bool = True
-    box_max_iter: int = 24
+    osqp_rho: float = 3.0
+    osqp_eps_abs: float = 1e-3
+    box_max_iter: int | None = None
     backoff_max_ticks: int = 255
     plan_fallback_ticks: int = 10
 
@@ -272,11 +176,7 @@ class MPCSettings:
         self._check_weights()
         self._check_envelope()
         self._check_solver()
-        if isinstance(self.osqp, dict):
-            object.__setattr__(self, "osqp", from_dict(OSQPSettings, self.osqp))
-        if not isinstance(self.osqp, OSQPSettings):
-            raise ValueError(f"osqp must be a table of OSQP's options, got {self.osqp!r}")
-        for name in ("screening", "box_screening", "offset_correction", "joint_envelope"):
+        for name in ("offset_correction", "joint_envelope"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name} must be true or false, got {getattr(self, name)!r}")
 
@@ -343,13 +243,12 @@ class MPCSettings:
         _finite("envelope_quadratic", self.envelope_quadratic, positive=True)
 
     def _check_solver(self) -> None:
-        if self.solver not in SOLVERS:
-            raise ValueError(f"solver must be one of {SOLVERS}, got {self.solver!r}")
         _integer("max_iter", self.max_iter, 1)
-        if self.warm_start not in WARM_STARTS:
-            raise ValueError(f"warm_start must be one of {WARM_STARTS}, got {self.warm_start!r}")
+        _finite("osqp_rho", self.osqp_rho, positive=True)
+        _finite("osqp_eps_abs", self.osqp_eps_abs, positive=True)
         _integer("plan_fallback_ticks", self.plan_fallback_ticks, 0)
-        _integer("box_max_iter", self.box_max_iter, 1)
+        if self.box_max_iter is not None:
+            _integer("box_max_iter", self.box_max_iter, 1)
         _integer("backoff_max_ticks", self.backoff_max_ticks, 0)
         if self.backoff_max_ticks > 2**30:
             raise ValueError(f"backoff_max_ticks must be <= 2**30, got {self.backoff_max_ticks}")
@@ -358,65 +257,3 @@ class MPCSettings:
     def block_lengths(self) -> tuple[int, ...]:
         """Move-block lengths [ticks]; all ones when blocking is off."""
         return self.blocks if self.blocks is not None else (1,) * self.horizon
-
-
-S = TypeVar("S")
-
-
-def to_dict(settings: Any) -> dict[str, Any]:
-    """Settings dataclass → TOML-friendly ``dict`` (tuples → lists, nested settings → tables,
-    ``None`` fields dropped)."""
-    out: dict[str, Any] = {}
-    for f in dataclasses.fields(settings):
-        value = getattr(settings, f.name)
-        if value is None:
-            continue
-        if dataclasses.is_dataclass(value):
-            value = to_dict(value)
-        out[f.name] = list(value) if isinstance(value, tuple) else value
-    return out
-
-
-def from_dict(cls: type[S], data: dict[str, Any]) -> S:
-    """``dict`` (e.g. a parsed TOML table) → settings dataclass ``cls`` (a nested table builds
-    its nested settings).
-
-    Raises
-    ------
-    ValueError
-        On unknown keys or values the dataclass rejects.
-    """
-    if not isinstance(data, dict):
-        raise ValueError(f"{cls.__name__} must be a table, got {data!r}")
-    names = [f.name for f in dataclasses.fields(cls)]
-    unknown = sorted(set(data) - set(names))
-    if unknown:
-        raise ValueError(f"unknown {cls.__name__} setting(s): {', '.join(unknown)}; "
-                         f"valid: {', '.join(names)}")
-    kwargs = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items()}
-    return cls(**kwargs)
-
-
-def replace_settings(settings: S, changes: dict[str, Any]) -> S:
-    """``dataclasses.replace`` with dotted names into nested settings (``"osqp.rho"``); a
-    ValueError names the valid keys of an unknown one."""
-    direct: dict[str, Any] = {}
-    nested: dict[str, dict[str, Any]] = {}
-    for key, value in changes.items():
-        head, _, rest = key.partition(".")
-        if rest:
-            nested.setdefault(head, {})[rest] = value
-        else:
-            direct[head] = value
-    names = [f.name for f in dataclasses.fields(settings)]
-    for head in [*direct, *nested]:
-        if head not in names:
-            raise ValueError(f"unknown {type(settings).__name__} setting {head!r}; valid: "
-                             f"{', '.join(names)}")
-    for head, sub in nested.items():
-        inner = getattr(settings, head)
-        if not dataclasses.is_dataclass(inner):
-            raise ValueError(f"{head} is not a table of settings")
-        direct[head] = replace_settings(inner, sub)
-    return dataclasses.replace(settings, **{
-        k: tuple(v) if isinstance(v, list) else v for k, v in direct.items()})

@@ -19,21 +19,19 @@ from rhmpc.control.mpc import RecedingHorizonMPC
 from rhmpc.control.observer import JointObserver
 from rhmpc.control.reference import ExactReference, PredictedReference
 from rhmpc.errors import UsageError
-from rhmpc.experiment.config import RunConfig, with_split
+from rhmpc.experiment.config import RunConfig
 from rhmpc.experiment.fitting import fit_predictor
+from rhmpc.experiment.monitor import HeartRateScore
 from robots import LinearArm, Robot, linearize, load_robot
 from sim.loop.clock import PredictorClock, clock_for_rate, predictor_clock
-from sim.loop.faults import FaultyEncoders, FaultySamples, split_faults
-from sim.loop.metrics import HeartRateScore
-from sim.loop.streams import (
-    PointsAt,
-    SampleSource,
-    SourceTruth,
-    UpsampledSamples,
-    sensor_samples,
-)
+from sim.loop.faults import FaultyEncoders, split_faults
+from sim.loop.streams import SourceTruth
 from sim.plant import make_plant
+from sim.recordings.points import PointsAt
 from sim.sensors import DEFAULT_PLAYBACK, SampleStream, Sensor, playback, sensor_from_name
+from sim.sensors.faults import FaultySamples
+from sim.sensors.playback import UpsampledSamples, sensor_samples
+from sim.sensors.stream import SampleSource
 from sim.sources import HeartSource, heart_source
 
 if TYPE_CHECKING:
@@ -103,7 +101,7 @@ def build_stream(config: RunConfig, heart: HeartSource, duration: float,
                  rng: np.random.Generator) -> SampleSource:
     """The sensor samples the controller sees (SI units), over ``duration`` seconds.
 
-    A sample source read in blocks (:func:`sim.loop.streams.sensor_samples`): the samples and
+    A sample source read in blocks (:func:`sim.sensors.playback.sensor_samples`): the samples and
     random draws of ``sensor.measure`` over the whole run, without holding the 2-kHz stream.
     """
     control_rate = 1.0 / config.loop.Ts
@@ -252,12 +250,10 @@ def build_run(config: RunConfig, implementation: str = "python", progress=None) 
     """Build robot, plant, controller, heart motion and sensor stream for ``config``.
 
     ``implementation="c"``: the controller is the C one of ``rhmpc export`` (built once and
-    cached, :func:`rhmpc.control.export.controller_in_c`) instead of the Python one. A split
-    of the recording sets the run's span (:func:`~rhmpc.experiment.config.with_split`). A
+    cached, :func:`rhmpc.control.export.controller_in_c`) instead of the Python one. A
     predictor that learns before the run is fitted (:mod:`rhmpc.experiment.fitting`);
     ``progress(text)`` hears how that goes.
     """
-    config = with_split(config)
     loop, N = config.loop, config.mpc.horizon
     heart_rng, sensor_rng = np.random.default_rng(config.seed).spawn(2)
     robot = load_robot(config.robot)

@@ -12,8 +12,9 @@ from boundary import FileError
 from rhmpc.control.cancellation import ModelMismatch
 from rhmpc.control.observer import ObserverSettings
 from rhmpc.control.reference import ReferenceSettings
-from rhmpc.control.settings import MPCSettings, from_dict, replace_settings, to_dict
+from rhmpc.control.settings import MPCSettings
 from rhmpc.errors import UsageError
+from rhmpc.experiment.tables import from_dict, replace_settings, to_dict
 from sim.loop import LoopSettings
 from sim.plant import HardwareSettings, PlantSettings
 from sim.sensors.faults import FaultSettings
@@ -38,11 +39,9 @@ TOP_LEVEL: dict[str, object] = {
     "robot": str, "scenario": str, "data": (str, None), "data_read": dict, "rr": (str, None),
     "sensor": str, "sensor_settings": dict, "predictor": str, "predictor_settings": dict,
     "predictor_params": dict, "ground_truth": str, "seed": int, "train": tuple,
-    "split": (tuple, None),
 }
 KIND_NAMES = {str: "a name (a string)", (str, None): "a string or absent", dict: "a table",
-              int: "an integer", tuple: "a list of file names",
-              (tuple, None): "[TRAIN, END] (two sample indices) or absent"}
+              int: "an integer", tuple: "a list of file names"}
 
 
 def _is(value: Any, kind: object) -> bool:
@@ -75,11 +74,6 @@ class RunConfig:
     train : tuple of str
         Recordings a predictor fitted before the run learns from (read as ``data``, the POI
         first), besides the run's own samples of its settling window.
-    split : tuple of int, optional
-        (TRAIN, END), the literature's split of a recording [sample indices from 0]: the run
-        starts at the first sample, its settling window ends at sample TRAIN (what a
-        predictor fitted before the run learns from) and the score covers the instants in
-        [TRAIN, END) (:func:`with_split` sets ``loop.settling`` and ``loop.duration``).
     rr : str | None
         PhysioNet record whose beat annotations drive the heart phase: a shipped name
         (``mitdb-100``, ``1003``) or a path without extension.
@@ -121,7 +115,6 @@ class RunConfig:
     data: str | None = None
     data_read: dict = field(default_factory=dict)
     train: tuple[str, ...] = ()
-    split: tuple[int, int] | None = None
     rr: str | None = None
     sensor: str = "sonomicrometry"
     sensor_settings: dict = field(default_factory=dict)
@@ -140,20 +133,14 @@ class RunConfig:
     faults: FaultSettings = field(default_factory=FaultSettings)
 
     def __post_init__(self) -> None:
-        for name in ("train", "split"):
-            if isinstance(getattr(self, name), list):  # as TOML reads it
-                object.__setattr__(self, name, tuple(getattr(self, name)))
+        if isinstance(self.train, list):  # as TOML reads it
+            object.__setattr__(self, "train", tuple(self.train))
         for name, kind in TOP_LEVEL.items():
             value = getattr(self, name)
             if not _is(value, kind):
                 raise ValueError(f"{name} must be {KIND_NAMES[kind]}, got {value!r}")
         if not all(isinstance(f, str) for f in self.train):
             raise ValueError(f"train must be a list of file names, got {self.train!r}")
-        if self.split is not None and not (
-                len(self.split) == 2 and all(_is(v, int) for v in self.split)
-                and 0 < self.split[0] < self.split[1]):
-            raise ValueError(f"split must be [TRAIN, END], sample indices with 0 < TRAIN < END, "
-                             f"got {list(self.split)!r}")
         if not 0 <= self.seed < 2**63:
             raise ValueError(f"seed must be an integer in 0 … 2⁶³ − 1, got {self.seed!r}")
         if self.ground_truth not in GROUND_TRUTHS:
@@ -170,7 +157,7 @@ class RunConfig:
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
             if (f.name == "faults" and value == FaultSettings()) or (
-                    f.name in ("train", "split") and not value):
+                    f.name == "train" and not value):
                 continue
             if f.name in SECTIONS:
                 out[f.name] = to_dict(value)
@@ -241,12 +228,14 @@ class RunConfig:
             raise UsageError(str(exc)) from None
 
 
-def with_split(config: RunConfig) -> RunConfig:
-    """``config`` with its settling window and duration from its ``split`` (TRAIN, END) of the
-    recording ``data``: settling t_TRAIN − t_0, duration t_END − t_0 (the recording's n/f when
-    END = n), so that the scored instants are t_TRAIN ≤ t_k < t_END. Unchanged without a
-    split; a split without a recording, or beyond it, is a one-line ``UsageError``."""
-    if config.split is None:
+def with_split(config: RunConfig, split: tuple[int, int] | None) -> RunConfig:
+    """``config`` with its settling window and duration set by the literature's split (TRAIN,
+    END) of its recording ``data`` [sample indices from 0]: the run starts at the first sample,
+    its settling window (what a predictor fitted before the run learns from) ends at sample
+    TRAIN, t_TRAIN − t_0, and it lasts t_END − t_0 (the recording's n/f when END = n), so that
+    the scored instants are t_TRAIN ≤ t_k < t_END. Unchanged without a split; a split without a
+    recording, or beyond it, is a one-line ``UsageError``."""
+    if split is None:
         return config
     if config.data is None:
         raise UsageError("--split TRAIN:END splits a recording: it needs --data FILE")
@@ -257,7 +246,7 @@ def with_split(config: RunConfig) -> RunConfig:
         recording, _ = read_points(config.data, config.data_read)
     except RecordingError as exc:
         raise UsageError(str(exc)) from None
-    train, end = config.split
+    train, end = split
     n = recording.t.size
     if end > n:
         raise UsageError(f"--split {train}:{end}: {config.data} holds {n} samples (END <= {n})")
@@ -299,8 +288,10 @@ def load_config(path: str | Path) -> RunConfig:
 
 def input_files(config: RunConfig) -> list[str]:
     """The files a run of ``config`` reads: its recording, its training recordings and its
-    predictor's saved model (what no output of the run may replace)."""
-    files = [config.data, *config.train, config.predictor_settings.get("model")]
+    predictor's saved models (what no output of the run may replace)."""
+    models = config.predictor_settings.get("models") or ()
+    files = [config.data, *config.train, config.predictor_settings.get("model"),
+             *(models if isinstance(models, list | tuple) else ())]
     return [f for f in files if isinstance(f, str)]
 
 

@@ -16,12 +16,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from predictors.registry import LEARNED, model_kind
 from rhmpc.errors import UsageError
 from sim.loop.closed_loop import Refreshes
 from sim.recordings import RecordingError
 from sim.recordings.points import training_series
 
-__all__ = ["fit_predictor", "settling_series"]
+__all__ = ["fit_predictor", "settling_series", "with_models"]
 
 
 def needs_fit(predictor) -> bool:
@@ -31,13 +32,27 @@ def needs_fit(predictor) -> bool:
 
 def fit_predictor(run, progress=None) -> None:
     """Fit the run's predictor on its settling window and ``run.config.train`` (module
-    docstring), when it learns before the run; nothing otherwise."""
+    docstring), when it learns before the run and was not loaded from saved models; a
+    combination then scores its members after the settling window only."""
     predictor = getattr(run.reference, "predictor", None)
-    if predictor is None or not needs_fit(predictor):
+    if predictor is None or not hasattr(predictor, "fit"):
         return
     settling = settling_series(run)
+    if needs_fit(predictor):
+        _fit(run, predictor, settling, progress)
+    if hasattr(predictor, "score_after"):  # a combination: its members learnt the settling
+        predictor.score_after(settling.shape[0])
+
+
+def _fit(run, predictor, settling: np.ndarray, progress) -> None:
+    """Fit ``predictor`` on the settling window ``settling`` and the training recordings."""
     series = [settling, *training_recordings(run.config, predictor.dt)]
     series = [s for s in series if np.isfinite(s[:, 0]).any()]
+    if not series and hasattr(predictor, "score_after"):  # a combination: its online members
+        if progress is not None:
+            progress(f"{run.config.predictor}: nothing before the run to fit its fitted "
+                     "members on; it runs the others")
+        return
     if not series:
         raise UsageError(f"{run.config.predictor} learns before the run and has nothing to "
                          "learn from: give it a settling window (loop.settling) or --train "
@@ -50,8 +65,37 @@ def fit_predictor(run, progress=None) -> None:
         predictor.fit(series, progress)
     except ValueError as exc:
         raise UsageError(f"fitting {run.config.predictor}: {exc}") from None
-    if hasattr(predictor, "score_after"):  # a combination: its members learnt the settling
-        predictor.score_after(settling.shape[0])
+
+
+def with_models(config, files, strict: bool = True):
+    """``config`` whose predictor loads the saved models ``files`` (``rhmpc predict
+    --save-models``; each declares its kind) instead of fitting before the run: a predictor
+    fitted before the run takes the file of its kind (``predictor_settings.model``), a
+    combination each file into its member of that kind (``predictor_settings.models``).
+
+    ``strict``: a predictor that takes none of the files, or a file of another kind, is a
+    one-line ``UsageError`` (``simulate``); otherwise such a run is left as it is (``compare``,
+    where each row takes what is its own).
+    """
+    if not files:
+        return config
+    name = config.predictor
+    try:
+        kinds = [model_kind(f) for f in files]
+    except (ValueError, ImportError) as exc:
+        raise UsageError(str(exc)) from None
+    if name == "combination":
+        return config.replace(**{"predictor_settings.models": [str(f) for f in files]})
+    mine = [str(f) for f, kind in zip(files, kinds, strict=True) if kind == name]
+    if strict and (name not in LEARNED or len(mine) != len(files)):
+        what = (f"{name} takes one {name} model" if name in LEARNED else
+                f"{name} is not fitted before the run (models are for "
+                f"{', '.join(LEARNED)} and the combination)")
+        given = ", ".join(f"{f} ({k})" for f, k in zip(files, kinds, strict=True))
+        raise UsageError(f"--model: {what}; given {given}")
+    if strict and len(mine) > 1:
+        raise UsageError(f"--model: {name} takes one model, given {len(mine)}")
+    return config.replace(**{"predictor_settings.model": mine[0]}) if mine else config
 
 
 def settling_series(run) -> np.ndarray:

@@ -14,8 +14,8 @@ import numpy as np
 
 from rhmpc.experiment.assembly import Run, build_run
 from rhmpc.experiment.config import RunConfig
+from rhmpc.experiment.faults import fault_marks, fault_report
 from sim.loop import LoopResult, run_closed_loop
-from sim.loop.faults import fault_marks, fault_report
 from sim.sensors import DEFAULT_PLAYBACK
 
 
@@ -42,10 +42,10 @@ def run_experiment(config: RunConfig, progress: bool = False, trace: str | None 
     timed in the run on every 64th tick so that the document has ``gain_tick_us`` and the
     tick's ratios to its p50 (``tick_ratio_to_gain``). ``implementation``: ``"python"`` or
     ``"c"`` (:func:`~rhmpc.experiment.assembly.build_run`). With faults (``config.faults``),
-    the document's ``faults`` holds one record per fault (:func:`sim.loop.faults.fault_report`).
+    the document's ``faults`` holds one record per fault
+    (:func:`rhmpc.experiment.faults.fault_report`).
     """
     run = build_run(config, implementation, _say if progress else None)
-    config = run.config  # its span set by its split, if any
     loop = config.loop
     marks = fault_marks(run.faults, config.faults.after_s, loop.Ts, loop.duration)
     bar, callback = _progress_bar(config, run.label) if progress else (None, None)
@@ -106,13 +106,12 @@ def document(config: RunConfig, run: Run, result: LoopResult, wall: float,
         "encoder": jsonable(run.controller.encoder_counts),
         "wall_s": wall,
         "real_time_factor": config.loop.duration / wall,
-        "plant_dynamics": result.plant_dynamics,
         "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,  # Linux: KiB
         "settings": config.to_dict(),
         "versions": versions(),
     }
     predictor = getattr(run.reference, "predictor", None)
-    if predictor is not None:  # its running RMS miss per lead (rhmpc.control.confidence)
+    if predictor is not None:  # its running RMS miss per lead (benchmarks/horizon_weights.py)
         errors = np.asarray(predictor.forecast_error_rms, dtype=float)
         doc["forecast_error_rms_mm"] = [None if not np.isfinite(v) else 1e3 * float(v)
                                         for v in errors]

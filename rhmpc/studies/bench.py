@@ -7,9 +7,9 @@ bounds (so that the QP has active constraints). Every tick measures, with
 
 * the MPC tick ``mpc.step(x, r)`` (whole call) with the given settings (by default screening
   on: OSQP runs only on ticks where the unconstrained minimiser violates a bound);
-* the same MPC with OSQP on *every* tick (``screening=False``), whole call and its parts
-  (``mpc.stats.parts_ns``), fed the same state and reference;
-* the *gain tick* g (:class:`rhmpc.control.yardstick.GainTick`): the unconstrained gain on
+* the same MPC with OSQP on *every* tick (:class:`EveryTick`: levels 1 and 2 of the cascade
+  skipped), whole call and its parts (``mpc.stats.parts_ns``), fed the same state and reference;
+* the *gain tick* g (:class:`rhmpc.studies.yardstick.GainTick`): the unconstrained gain on
   p = [x; r; u_{−1}], u = K p + k₀ — the yardstick every timing is a multiple of — and the same
   mat-vec in plain NumPy (``K @ concatenate(...) + k0``), so that g reads as what it is;
 * an *exact tick*: the same QP (same P, q, A, l, u) solved by the active-set solver DAQP,
@@ -41,8 +41,9 @@ import numpy as np
 
 from rhmpc.control.mpc import RecedingHorizonMPC
 from rhmpc.control.offset import OutputOffset
-from rhmpc.control.settings import MPCSettings, to_dict
-from rhmpc.control.yardstick import GainTick, numpy_gain_step
+from rhmpc.control.settings import MPCSettings
+from rhmpc.experiment.tables import to_dict
+from rhmpc.studies.yardstick import GainTick, numpy_gain_step
 from robots import linearize, load_robot
 from robots.linearize import LinearArm
 from sim.loop.metrics import warm_ns
@@ -125,6 +126,20 @@ class QPParameters:
         return math.isfinite(p.sum())
 
 
+class EveryTick(RecedingHorizonMPC):
+    """Reference 1: the MPC with its QP given to OSQP on every tick (no screening, no back-off
+    after its failures)."""
+
+    def __init__(self, mpc: RecedingHorizonMPC) -> None:
+        super().__init__(mpc.arm, dataclasses.replace(mpc.settings, backoff_max_ticks=0))
+
+    def _level1(self) -> bool:
+        return False
+
+    def _box_solved(self) -> bool:
+        return False
+
+
 class ExactTick:
     """Reference 2: the same QP solved exactly by DAQP (active set, hot-started)."""
 
@@ -201,9 +216,7 @@ class _Ticks:
     def __init__(self, mpc: RecedingHorizonMPC, total: int) -> None:
         arm = mpc.arm
         self.mpc, self.arm = mpc, arm
-        # OSQP on every tick, as it is: no screening, and no back-off after its failures
-        self.every = RecedingHorizonMPC(arm, dataclasses.replace(mpc.settings, screening=False,
-                                                                 backoff_max_ticks=0))
+        self.every = EveryTick(mpc)
         self.gain, self.exact = GainTick(mpc), ExactTick(mpc)
         self.numpy_gain = numpy_gain_step(self.gain._K, self.gain._k0)
         self.tau_max = np.asarray(arm.torque_limit, dtype=float)

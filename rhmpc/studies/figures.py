@@ -169,28 +169,50 @@ def _samples(ax, result, k: int, centre: np.ndarray, span: tuple[float, float],
             mew=0, color=COLOURS["samples"], label="measured samples", zorder=2)
 
 
+def measured_errors(result) -> tuple[np.ndarray, np.ndarray] | None:
+    """On a recording, the instants of the samples in the score and ‖tool − sample‖ there
+    [s], [mm] (the trace keeps the ticks at those instants); None for a continuous truth."""
+    measured = getattr(result, "measured", ())
+    if not len(measured):
+        return None
+    t_k, p, scored = measured
+    t, ee = np.asarray(result.time, float), np.asarray(result.ee, float)
+    t_k, p = np.asarray(t_k, float)[scored], np.asarray(p, float)[scored]
+    tool = np.column_stack([np.interp(t_k, t, ee[:, a]) for a in range(ee.shape[1])])
+    return t_k, 1e3 * np.linalg.norm(tool - p, axis=1)
+
+
 def _error_row(row, result, spans, rms: float | None = None) -> None:
     """‖e‖ over the run on a log axis with the RMS after settling (``rms`` [mm], the run's
-    score, or else that of ‖e‖); ‖e‖ in the zoom and detail."""
+    score, or else that of ‖e‖); ‖e‖ in the zoom and detail. On a recording the score's own
+    errors, at the measured instants, are drawn over it."""
     t = np.asarray(result.time, float)
     err = 1e3 * np.linalg.norm(np.asarray(result.ee, float) - np.asarray(result.poi, float),
                                axis=1)
     scored = t >= result.settings.settling_s
     if rms is None:
         rms = float(np.sqrt(np.mean(np.square(err[scored])))) if scored.any() else np.nan
+    at = measured_errors(result)
     ax = row[0]
-    ax.plot(t, np.where(err > 0, err, np.nan), color="0.55", lw=0.5, label="‖tool − POI‖")
+    ax.plot(t, np.where(err > 0, err, np.nan), color="0.55", lw=0.5,
+            label="‖tool − POI‖" if at is None else "‖tool − line between samples‖")
     centres, rms_per, _, width = binned(t, err)
     ax.plot(centres, rms_per, color="k", lw=1.3, drawstyle="steps-mid",
             label=f"RMS per {width:.3g} s")
+    if at is not None:
+        ax.plot(*at, ls="none", marker="o", ms=2.5, color=COLOURS["samples"],
+                label="‖tool − sample‖ at the measured instants")
     if np.isfinite(rms):
-        ax.axhline(rms, color=COLOURS["poi"], lw=1.0, ls=":",
-                   label=f"RMS after settling, {rms:.3f} mm")
+        where = "at the measured instants" if at is not None else "after settling"
+        ax.axhline(rms, color=COLOURS["poi"], lw=1.0, ls=":", label=f"RMS {where}, {rms:.3f} mm")
     _log_scale(ax, err)
     ax.set_ylabel("tracking error [mm]")
     for ax, span in zip(row[1:], spans[1:], strict=True):
         w = _window(t, span)
         ax.plot(t[w], err[w], color="0.2", lw=0.9)
+        if at is not None:
+            m = _window(at[0], span)
+            ax.plot(at[0][m], at[1][m], ls="none", marker="o", ms=3, color=COLOURS["samples"])
         ax.set_ylim(bottom=0)
         ax.set_ylabel("tracking error [mm]")
 

@@ -16,7 +16,14 @@ from pathlib import Path
 
 import numpy as np
 
-from rhmpc.studies.figures import COLOURS, ZOOM_S, _detail_span, _forecasts, _samples
+from rhmpc.studies.figures import (
+    COLOURS,
+    ZOOM_S,
+    _detail_span,
+    _forecasts,
+    _samples,
+    measured_errors,
+)
 
 __all__ = ["HEIGHT_IN", "WIDTH_IN", "plot_paper"]
 
@@ -59,13 +66,19 @@ def plot_paper(result, doc: dict, path: str | Path) -> None:
 
 
 def _error_panel(ax, result, doc: dict) -> None:
-    """(a) ‖tool − POI‖ [mm] over the run, settling shaded, the document's RMS and maximum."""
+    """(a) ‖tool − POI‖ [mm] over the run, settling shaded, the document's RMS and maximum; on
+    a recording, ‖tool − sample‖ at the measured instants, where the run is scored."""
     t = np.asarray(result.time, float)
-    err = 1e3 * np.linalg.norm(np.asarray(result.ee, float) - np.asarray(result.poi, float),
-                               axis=1)
     settling = float(doc.get("settling_s", result.settings.settling_s))
     ax.axvspan(t[0], settling, color=COLOURS["settling"], lw=0, label="settling")
-    ax.plot(t, err, color="0.3", lw=0.5, label="‖tool − POI‖")
+    at = measured_errors(result)
+    if at is None:
+        err = 1e3 * np.linalg.norm(np.asarray(result.ee, float) - np.asarray(result.poi, float),
+                                   axis=1)
+        ax.plot(t, err, color="0.3", lw=0.5, label="‖tool − POI‖")
+    else:
+        ax.plot(*at, color="0.3", lw=0.5, marker="o", ms=1.5,
+                label="‖tool − sample‖ at the measured instants")
     rms, peak = doc["rms_error_mm"], doc["max_error_mm"]
     ax.axhline(rms, color=COLOURS["poi"], lw=1.0, ls="--",
                label=f"RMS {rms:.3f} mm (max {peak:.3f} mm)")
@@ -83,7 +96,8 @@ def _tracking_panel(ax, result) -> None:
     span = _detail_span(result, zoom)
     w = (t >= span[0]) & (t <= span[1])
     centre = np.nanmean(poi, axis=0)
-    ax.plot(t[w], 1e3 * (poi[w, k] - centre[k]), color=COLOURS["poi"], lw=1.0, label="POI")
+    label = "POI" if measured_errors(result) is None else "POI, a line between samples"
+    ax.plot(t[w], 1e3 * (poi[w, k] - centre[k]), color=COLOURS["poi"], lw=1.0, label=label)
     ax.plot(t[w], 1e3 * (np.asarray(result.ee, float)[w, k] - centre[k]),
             color=COLOURS["tool"], lw=1.0, ls="--", label="tool")
     _samples(ax, result, k, centre, span, size=2.5)

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+from rhmpc.experiment.faults import REPORTED as FAULT_COUNTS
 from rhmpc.studies.figures import plot_run as plot_run
 
 
@@ -165,14 +166,6 @@ def format_summary(doc: dict, settling_rule: str | None = None) -> str:
     return "\n".join(lines)
 
 
-#: How a fault record's counts read in the summary (:func:`sim.loop.faults.fault_report`).
-FAULT_COUNTS = {"missing": "samples missing", "outliers_rejected": "rejected",
-                "gate_unlocked": "gate unlocked", "retracted": "retracted",
-                "reference_guard": "reference guard", "encoder_held_ticks": "encoder ticks held",
-                "qp_failures": "QP failures", "fallback_plan": "plan", "fallback_lq": "lq",
-                "fallback_brake": "brake", "fallback_zero": "zero",
-                "saturated_ticks": "saturated ticks"}
-
 
 def fault_lines(doc: dict) -> list[str]:
     """One line per injected fault (its window, the largest error during it and after it,
@@ -227,7 +220,7 @@ def _gate_line(gate: dict) -> str:
 
 
 def stall_line(stalls: dict) -> str:
-    """What the host took from a busy loop (:func:`sim.loop.metrics.host_stalls`), in a line."""
+    """What the host took from a busy loop (:func:`rhmpc.studies.host.host_stalls`), in a line."""
     over = stalls.get("over_g")
     longest = f"{stalls['longest_us']:.0f} µs" + (
         f" = {stalls['longest_g']:.0f} g" if "longest_g" in stalls else "")

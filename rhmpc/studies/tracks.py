@@ -50,7 +50,7 @@ class Track:
     @property
     def period(self) -> float:
         """Δ, the median sample interval [s] (to 12 significant digits: timestamps written in
-        decimal make 1/25 s 0.03999999999999915)."""
+        decimal make 1/25 s ``0.03999999999999915``)."""
         return twelve_digits(float(np.median(np.diff(self.t))))
 
     def points(self) -> np.ndarray:

@@ -18,9 +18,9 @@ import traceback
 from dataclasses import dataclass
 from typing import Any
 
-from rhmpc.control.settings import to_dict as settings_to_dict
 from rhmpc.experiment import SECTIONS, RunConfig
 from rhmpc.experiment.run import jsonable
+from rhmpc.experiment.tables import to_dict as settings_to_dict
 
 __all__ = ["RUN_LOCK", "Task", "apply_point", "current_value", "evaluate_task",
            "evaluation_key", "record_for"]

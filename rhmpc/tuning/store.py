@@ -96,18 +96,20 @@ def read_results(path: str | Path) -> ResultsFile:
     if not os.path.lexists(path):
         return out
     try:
-        raw = boundary.read_bytes(path, "results file")
+        with boundary.open_input(path, "results file") as f:
+            for number, line in enumerate(f, 1):
+                if not line.strip():
+                    continue
+                record = _parse(line, f"{path}, line {number}")
+                if record is None:
+                    out.bad_lines += 1
+                    out.first_bad = out.first_bad or number
+                else:
+                    out.records.append(record)
     except FileError as exc:
         raise UsageError(str(exc)) from None
-    for number, line in enumerate(raw.split(b"\n"), 1):
-        if not line.strip():
-            continue
-        record = _parse(line, f"{path}, line {number}")
-        if record is None:
-            out.bad_lines += 1
-            out.first_bad = out.first_bad or number
-        else:
-            out.records.append(record)
+    except OSError as exc:
+        raise UsageError(f"{path}: cannot read: {exc.strerror or exc}") from None
     return out
 
 
@@ -134,8 +136,12 @@ class ResultsWriter:
     def open(self) -> None:
         if self.path.parent and not self.path.parent.exists():
             self.path.parent.mkdir(parents=True, exist_ok=True)
+        if self.path.is_symlink():  # never written through a link (boundary.writer)
+            raise UsageError(f"{self.path}: a symbolic link (to {os.readlink(self.path)}); rhmpc "
+                             "writes nothing through a link: give the file itself")
         try:
-            fd = os.open(self.path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+            fd = os.open(self.path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NOFOLLOW,
+                         0o644)
         except OSError as exc:
             raise UsageError(f"{self.path}: cannot open for appending: {exc.strerror}") from None
         try:

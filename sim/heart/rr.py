@@ -24,6 +24,8 @@ from pathlib import Path
 import numpy as np
 from scipy.interpolate import PchipInterpolator, PPoly
 
+import boundary
+
 #: Annotation symbols that mark a heartbeat (PhysioNet/MIT-BIH convention). Premature beats
 #: (A, a, J, S, V, F, e, j, n, E) are kept on purpose: they are the arrhythmia events.
 BEAT_SYMBOLS: frozenset[str] = frozenset("NLRBAaJSVrFejnE/fQ?")
@@ -268,6 +270,17 @@ def _local_base(path: Path) -> Path:
     return path
 
 
+def _annotations(base: Path):
+    """The record's beat annotations (``wfdb.rdann``), once the one reader has checked its
+    ``.atr`` file (a regular file within its size bound, :func:`boundary.open_input`)."""
+    boundary.open_input(base.with_name(base.name + ".atr"), "annotation file").close()
+    with warnings.catch_warnings():  # wfdb's pandas deprecation noise, not ours
+        warnings.filterwarnings("ignore", module=r"wfdb(\.|$)")
+        import wfdb
+
+        return wfdb.rdann(str(base), "atr")
+
+
 def beat_times_from_annotations(record_path: str | Path) -> np.ndarray:
     """Beat times [s] of a PhysioNet annotated record (``.atr``), beat symbols only.
 
@@ -282,11 +295,7 @@ def beat_times_from_annotations(record_path: str | Path) -> np.ndarray:
         (``mitdb-100``, ``1003``: :func:`shipped_records`).
     """
     base = find_record(record_path)
-    with warnings.catch_warnings():  # wfdb's pandas deprecation noise, not ours
-        warnings.filterwarnings("ignore", module=r"wfdb(\.|$)")
-        import wfdb
-
-        ann = wfdb.rdann(str(base), "atr")
+    ann = _annotations(base)
     keep = np.array([s in BEAT_SYMBOLS for s in ann.symbol], dtype=bool)
     samples = np.asarray(ann.sample)[keep]
     if samples.size < 2:
@@ -302,11 +311,7 @@ PREMATURE_SYMBOLS: frozenset[str] = frozenset("AaJSVFE")
 def beats_from_annotations(record_path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     """Beat times [s] and a mask of premature beats (:data:`PREMATURE_SYMBOLS`) of a record."""
     base = find_record(record_path)
-    with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", module=r"wfdb(\.|$)")
-        import wfdb
-
-        ann = wfdb.rdann(str(base), "atr")
+    ann = _annotations(base)
     symbols = [s for s in ann.symbol if s in BEAT_SYMBOLS]
     keep = np.array([s in BEAT_SYMBOLS for s in ann.symbol], dtype=bool)
     times = np.asarray(ann.sample)[keep] / float(ann.fs)

@@ -7,7 +7,7 @@ of :mod:`sim.heart.motion` exactly):
 
 1. heart-rate variability,
    :math:`f_h(t) = \bar f_h(t)\,\bigl(1 + m_\text{VLF}(t) + m_\text{LF}(t) + m_\text{RSA}(t)\bigr)`:
-   Gaussian processes with flat spectra in the VLF (0.0033–0.04 Hz) and LF (0.04–0.15 Hz)
+   Gaussian processes with flat spectra in the VLF (``0.0033``–0.04 Hz) and LF (0.04–0.15 Hz)
    bands, plus respiratory sinus arrhythmia
    :math:`m_\text{RSA} = a \cos(2\pi \varphi_r(t) + \psi)` locked to the breathing phase
    :math:`\varphi_r`, which puts the HF power at the breathing rate (Task Force 1996);
@@ -75,11 +75,11 @@ class VariabilitySettings:
         period (systolic time intervals, a few ms; assumption of that order).
     breath_period_cv : float
         Coefficient of variation of breath duration [-]. Tobin et al. (1988), J. Appl.
-        Physiol. 65:309: respiratory frequency CV 20.8 ± 11.5 % in 65 subjects breathing
+        Physiol. 65:309: respiratory frequency CV ``20.8 ± 11.5`` % in 65 subjects breathing
         spontaneously at rest (0.21). The replicated animals were mechanically ventilated
         (Tuna et al. 2013 §III-B: one breathing line at 0.17 Hz with its harmonic), which
         fixes the period: default 0. With 0.21 and 0.33 (below) the reported RMS/peak-to-peak
-        of 3.55/8.39 mm (fixed-a2-top) is out of reach (3.3 mm at most, measured): the
+        of ``3.55/8.39`` mm (fixed-a2-top) is out of reach (3.3 mm at most, measured): the
         paper's ratio itself says the breathing was regular.
     breath_depth_cv : float
         Coefficient of variation of breath depth (tidal volume) [-]. Tobin et al. (1988):

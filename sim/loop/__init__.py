@@ -4,11 +4,11 @@
 ``settings``       :class:`LoopSettings`: control period, refresh clock, duration, placement
 ``clock``          when the reference refreshes: every ``downsample`` ticks, or on each sample
 ``closed_loop``    :func:`run_closed_loop`: refreshes, the controller's step, the plant's step
-``streams``        sensor samples and POI truth read block by block (flat memory)
+``streams``        the newest sample by a time, the POI truth by window (flat memory)
 ``results``        :class:`LoopResult`, the recorder of each chunk
 ``metrics``        running tracking statistics, tick histograms, heart-rate score
 ``trace``          the decimated trace and the per-tick NPZ file
-``faults``         faults injected into the stream and the encoders, and their report
+``faults``         faults injected into the encoders, each fault's report
 =================  ==============================================================
 """
 

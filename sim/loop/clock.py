@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sim.loop.settings import LoopSettings
-from sim.loop.streams import SampledSamples, SampleSource, as_samples
+from sim.sensors.stream import SampledSamples, SampleSource, as_samples
 
 #: Raw samples read to estimate a stream's rate.
 RATE_SAMPLES = 4096

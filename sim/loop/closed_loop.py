@@ -48,7 +48,9 @@ from sim.loop.results import (
     event_counts,
 )
 from sim.loop.settings import LoopSettings
-from sim.loop.streams import BLOCK, ArrayTruth, PointsAt, SampleSource, StreamCursor, as_samples
+from sim.loop.streams import ArrayTruth, StreamCursor
+from sim.recordings.points import PointsAt
+from sim.sensors.stream import BLOCK, SampleSource, as_samples
 
 clock = time.perf_counter_ns
 #: Ticks between two calls of ``progress``.
@@ -228,7 +230,7 @@ def run_closed_loop(plant, controller, truth, stream, settings: LoopSettings,
         Write every tick to this NPZ file as the run goes (:class:`sim.loop.trace.TraceFile`).
     yardstick
         A reference computation ``yardstick(x̂, r, u_{−1})`` (the gain tick g of
-        :class:`rhmpc.control.yardstick.GainTick`) timed on every 64th tick after the controller,
+        :class:`rhmpc.studies.yardstick.GainTick`) timed on every 64th tick after the controller,
         with the tick's own inputs, so that tick times can be stated as ratios to it measured in
         the same run (``LoopResult.yardstick_us``); not part of the tick, its result is not used.
     chunk_ticks
@@ -252,22 +254,20 @@ def run_closed_loop(plant, controller, truth, stream, settings: LoopSettings,
     if truth.n_ticks < n + N + 1:
         raise ValueError(f"truth covers {truth.n_ticks} ticks, the run needs {n + N + 1}")
     refreshes = Refreshes(stream, truth.center, settings, clock, points)
-    marks = sorted({int(m) for m in marks if 0 < m < n})
-    record = Recorder(robot, settings, N, truth, anchor, trace_file, clock, bool(marks),
-                      measured)
+    marks = [int(m) for m in marks]
+    segmented = bool(marks)  # also when every mark is an end of the run (a fault from 0 to n)
+    record = Recorder(robot, settings, N, truth, anchor, trace_file, clock, segmented, measured)
     with quiet_gc():
         try:
             for c0, c1 in chunks(n, chunk_ticks, marks):
                 log = record.start_chunk(c0, c1)
                 _run_ticks(plant, controller, refreshes, c0, c1, log, yardstick, progress)
                 record.end_chunk(c0, c1, log)
-                if marks:
+                if segmented:
                     record.count(event_counts(controller, plant))
         finally:
             record.close()
-    note = getattr(plant, "dynamics_note", None)
-    dynamics = getattr(plant, "dynamics", "pinocchio") + (f" ({note})" if note else "")
-    return record.result(controller, dynamics)
+    return record.result(controller)
 
 
 def chunks(n: int, size: int, marks: Iterable[int] = ()) -> list[tuple[int, int]]:

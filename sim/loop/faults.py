@@ -1,16 +1,12 @@
 """Faults injected into a closed loop, and what each one did to the run.
 
-The faults of :mod:`sim.sensors.faults` act on what the controller reads, never on the truth:
+The faults of :mod:`sim.sensors.faults` act on what the controller reads, never on the truth,
+each on the stream its kind declares (``target``) and by its own ``corrupt``:
 
-- the sensor's faults on its stream, block by block (:class:`FaultySamples`: the samples
-  delivered to the control rate and the raw ones a slow sensor's clock reads, both by their
-  measurement time);
-- an encoder fault on the plant's ``encoders()`` (:class:`FaultyEncoders`: the arm moves on,
-  its readings hold).
+- the sensor's samples, block by block (:class:`sim.sensors.faults.FaultySamples`);
+- the plant's ``encoders()``, tick by tick (:class:`FaultyEncoders`: the arm moves on).
 
-:func:`fault_marks` gives the ticks where the loop reads its counters
-(``run_closed_loop(marks=…)``), and :func:`fault_report` turns the result's segments into one
-record per fault: what changed during it and in the ``after_s`` seconds after it.
+What each fault did to the run is the document's (:mod:`rhmpc.experiment.faults`).
 """
 
 from __future__ import annotations
@@ -20,79 +16,32 @@ import math
 import numpy as np
 
 from sim.loop.clock import arrival_tick
-from sim.sensors.faults import EncoderStick
 
-__all__ = ["FaultyEncoders", "FaultySamples", "fault_marks", "fault_report", "split_faults"]
-
-#: The counts a fault's record states (the differences over its windows).
-REPORTED = ("missing", "outliers_rejected", "gate_unlocked", "retracted", "reference_guard",
-            "encoder_held_ticks", "qp_failures", "fallback_plan", "fallback_lq",
-            "fallback_brake", "fallback_zero", "saturated_ticks")
-
+__all__ = ["FaultyEncoders", "split_faults"]
 
 def split_faults(faults) -> tuple[tuple, tuple]:
-    """(the sensor's faults, the encoders' faults) of ``faults``."""
-    encoders = tuple(f for f in faults if isinstance(f, EncoderStick))
-    return tuple(f for f in faults if not isinstance(f, EncoderStick)), encoders
-
-
-class FaultySamples:
-    """A sample source (:mod:`sim.loop.streams`) with sensor faults applied to each block.
-
-    Sample ``k`` is ``z_k`` after every fault in turn (``fault.corrupt``), the sample each one
-    holds (the last measured before its window) read once, at construction, with the faults
-    before it applied. Stamps and arrivals are the source's. A source with raw samples
-    (``recorded``, read by a slow sensor's clock) gets them with the same faults.
-    """
-
-    def __init__(self, samples, faults) -> None:
-        self.samples, self.faults = samples, tuple(faults)
-        self.held: list[np.ndarray | None] = []
-        for k, fault in enumerate(self.faults):
-            self.held.append(self._before(fault.start_s, k))
-        if hasattr(samples, "recorded"):
-            self.recorded = FaultySamples(samples.recorded, self.faults)
-
-    def _before(self, start_s: float, upto: int) -> np.ndarray | None:
-        """The last sample measured before ``start_s``, the first ``upto`` faults applied."""
-        j = self.samples.index_at(start_s)
-        if j >= 0 and float(self.samples.block(j, j + 1)[0][0]) >= start_s:
-            j -= 1
-        if j < 0:
-            return None
-        t, z, _ = self.samples.block(j, j + 1)
-        for fault, held in zip(self.faults[:upto], self.held, strict=False):
-            z = fault.corrupt(t, z, held)
-        return np.array(z[0], dtype=float)
-
-    def __len__(self) -> int:
-        return len(self.samples)
-
-    def index_at(self, t: float) -> int:
-        return self.samples.index_at(t)
-
-    def block(self, a: int, b: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        t, z, arrival = self.samples.block(a, b)
-        for fault, held in zip(self.faults, self.held, strict=True):
-            z = fault.corrupt(t, z, held)
-        return t, z, arrival
+    """(the faults on the sensor's samples, those on the encoders) of ``faults``."""
+    return (tuple(f for f in faults if f.target == "samples"),
+            tuple(f for f in faults if f.target == "encoders"))
 
 
 class FaultyEncoders:
-    """A plant whose encoders stick (:class:`~sim.sensors.faults.EncoderStick`).
+    """A plant whose encoder readings a fault corrupts (:class:`~sim.sensors.faults.EncoderStick`).
 
     On tick ``i`` (time ``i·Ts``, counted by ``step``) inside a fault's window, ``encoders()``
-    returns the reading of the tick before the window on the stuck joints; ``held_ticks``
-    counts the ticks with a held reading. Everything else is the plant's (``q``, ``step`` …):
-    the arm moves on.
+    returns the reading as the fault's ``corrupt`` leaves it, the reading of the tick before the
+    window the held one; ``held_ticks`` counts the ticks with a corrupted reading. Everything
+    else is the plant's (``q``, ``step`` …): the arm moves on.
     """
 
     def __init__(self, plant, faults, Ts: float) -> None:
-        self.plant, self.faults = plant, tuple(faults)
+        self.plant, self.faults, self.Ts = plant, tuple(faults), Ts
         nq = np.size(plant.encoders())
+        for f in self.faults:
+            f.columns(nq)  # ValueError for a joint the arm does not have
         self.windows = [(arrival_tick(f.start_s, Ts),
-                         math.inf if math.isinf(f.end_s) else arrival_tick(f.end_s, Ts),
-                         f.columns(nq)) for f in self.faults]
+                         math.inf if math.isinf(f.end_s) else arrival_tick(f.end_s, Ts))
+                        for f in self.faults]
         self._held: list[np.ndarray | None] = [None] * len(self.faults)
         self._last: np.ndarray | None = None
         self.tick = 0
@@ -101,12 +50,13 @@ class FaultyEncoders:
     def encoders(self) -> np.ndarray:
         reading = self.plant.encoders()
         i, out = self.tick, reading
-        for k, (a, b, joints) in enumerate(self.windows):
+        for k, (fault, (a, b)) in enumerate(zip(self.faults, self.windows, strict=True)):
             if a <= i < b:
                 if self._held[k] is None:
                     self._held[k] = np.array(reading if self._last is None else self._last)
-                out = np.array(out, dtype=float) if out is reading else out
-                out[joints] = self._held[k][joints]
+                rows = out[None]
+                corrupted = fault.corrupt(np.array([i * self.Ts]), rows, self._held[k])
+                out = out if corrupted is rows else corrupted[0]
         if out is not reading:
             self.held_ticks += 1
         self._last = out
@@ -118,59 +68,3 @@ class FaultyEncoders:
 
     def __getattr__(self, name: str):
         return getattr(self.plant, name)
-
-
-def _windows(fault, after_s: float, duration: float) -> tuple[tuple[float, float], ...]:
-    """(during, after) of ``fault`` [s], clipped to the run: after is empty for one that lasts
-    to the end."""
-    end = min(fault.end_s, duration)
-    return (fault.start_s, end), (end, min(end + after_s, duration))
-
-
-def fault_marks(faults, after_s: float, Ts: float, duration: float) -> list[int]:
-    """The ticks at which each fault's windows begin and end (:func:`_windows`)."""
-    marks = set()
-    for fault in faults:
-        for a, b in _windows(fault, after_s, duration):
-            marks.update((arrival_tick(a, Ts), arrival_tick(b, Ts)))
-    return sorted(marks)
-
-
-def _span(segments, a: int, b: int) -> dict:
-    """Largest error [mm], envelope and counts over ticks a … b − 1 (segments tile the run,
-    their edges include a and b)."""
-    inside = [s for s in segments if a <= s["ticks"][0] and s["ticks"][1] <= b]
-    if not inside:
-        return {}
-    errors = [s["max_error_m"] for s in inside if np.isfinite(s["max_error_m"])]
-    start = next((s["counts"] for s in reversed(segments) if s["ticks"][1] <= a), {})
-    end = inside[-1]["counts"]
-    return {
-        "max_error_mm": 1e3 * max(errors) if errors else None,
-        "position_margin_rad": min(s["envelope"]["position_margin_rad"] for s in inside),
-        "speed_margin_rad_s": min(s["envelope"]["speed_margin_rad_s"] for s in inside),
-        "envelope_held": all(s["envelope"]["held"] for s in inside),
-        "counts": {k: end.get(k, 0) - start.get(k, 0) for k in REPORTED},
-    }
-
-
-def fault_report(specs, faults, segments, after_s: float, Ts: float,
-                 duration: float) -> list[dict]:
-    """One record per fault: its form, kind, window [s] and ``after_s``, and for ``during`` and
-    ``after`` (the ``after_s`` seconds that follow it, None for a fault to the end of the run)
-    the largest error [mm], the joint envelope and the counts of :data:`REPORTED` over the
-    window. A sample the gate rejected is counted in ``outliers_rejected`` alone (the predictor
-    counts it missing too)."""
-    out = []
-    for spec, fault in zip(specs, faults, strict=True):
-        during, after = _windows(fault, after_s, duration)
-        record = {"fault": spec, "kind": fault.kind, "start_s": fault.start_s,
-                  "end_s": during[1], "after_s": after_s}
-        for name, (a, b) in (("during", during), ("after", after)):
-            span = _span(segments, arrival_tick(a, Ts), arrival_tick(b, Ts))
-            if span:
-                counts = span["counts"]
-                counts["missing"] -= counts["outliers_rejected"]
-            record[name] = span or None
-        out.append(record)
-    return out

@@ -22,68 +22,9 @@ def warm_ns(fn: Callable[..., object], *args, repeats: int = 3) -> int:
     return best
 
 
-#: The shortest gap :func:`host_stalls` keeps [ns]: longer than any pause of the loop itself.
-STALL_FLOOR_NS = 20_000
-
-
-def host_stalls(seconds: float, floor_ns: int = STALL_FLOOR_NS,
-                clock: Callable[[], int] = time.perf_counter_ns) -> np.ndarray:
-    """The host's stalls: every gap of at least ``floor_ns`` between consecutive readings of
-    ``clock`` [ns] in a loop that does nothing else for ``seconds``; returns the gaps [ns].
-
-    A busy loop never waits, so a gap is time the host took from the process: an interrupt, the
-    scheduler, the hypervisor. It is the measurement of the Linux kernel's hardware-latency
-    tracer (``hwlat``, Documentation/trace/hwlat_detector.rst) and of jHiccup, here in the
-    process and at the moment that a run's ticks are timed. A tick cannot be shorter than the
-    stall that lands in it, so the longest stall bounds the longest tick a host can promise.
-    """
-    if not (seconds >= 0 and math.isfinite(seconds)):
-        raise ValueError(f"seconds must be finite and >= 0, got {seconds!r}")
-    gaps: list[int] = []
-    last = clock()
-    end = last + int(seconds * 1e9)
-    while last < end:
-        now = clock()
-        if now - last >= floor_ns:
-            gaps.append(now - last)
-        last = now
-    return np.asarray(gaps, dtype=np.int64)
-
-
-def stall_summary(gaps_ns: np.ndarray, seconds: float, gain_us: float | None = None,
-                  over_g: float = 50.0, floor_ns: int = STALL_FLOOR_NS) -> dict:
-    """:func:`host_stalls`' gaps (of at least ``floor_ns``) as a document: how many, how many
-    longer than ``over_g`` gain ticks, and the longest, in µs and (given ``gain_us``) in g."""
-    gaps_us = np.asarray(gaps_ns, dtype=float) / 1e3
-    longest = float(gaps_us.max()) if gaps_us.size else 0.0
-    doc = {"seconds": float(seconds), "floor_us": floor_ns / 1e3, "stalls": int(gaps_us.size),
-           "longest_us": longest}
-    if gain_us is not None and gain_us > 0:
-        doc["longest_g"] = longest / gain_us
-        doc["over_g"] = float(over_g)  # the threshold of the count below [g]
-        doc[f"over_{over_g:g}_g"] = int(np.count_nonzero(gaps_us > over_g * gain_us))
-    return doc
-
-
 def rms(x: np.ndarray, axis: int | None = None) -> np.ndarray:
     """Root mean square, ignoring NaN."""
     return np.sqrt(np.nanmean(np.square(x), axis=axis))
-
-
-def tracking_metrics(error: np.ndarray, tau_mpc: np.ndarray, tau_total: np.ndarray) -> dict:
-    """3-D position error RMS / max [mm] and RMS control effort [mN·m] over the given ticks.
-
-    ``error`` is (n, 3) end-effector minus POI in metres; efforts are (n, nv) in N·m. The effort
-    is the RMS over time of the Euclidean norm of the joint torque vector.
-    """
-    norm = np.linalg.norm(error, axis=1)
-    return {
-        "rms_error_mm": float(1e3 * rms(norm)),
-        "max_error_mm": float(1e3 * np.nanmax(norm)) if norm.size else float("nan"),
-        "rms_error_axis_mm": (1e3 * rms(error, axis=0)).tolist(),
-        "rms_effort_mNm": float(1e3 * rms(np.linalg.norm(tau_mpc, axis=1))),
-        "rms_total_torque_mNm": float(1e3 * rms(np.linalg.norm(tau_total, axis=1))),
-    }
 
 
 class TickHistogram:
@@ -173,7 +114,7 @@ class RunningError:
 
 
 class RunningTracking:
-    """:func:`tracking_metrics` accumulated chunk by chunk: the errors' :class:`RunningError`
+    """The run's tracking metrics accumulated chunk by chunk: the errors' :class:`RunningError`
     and the efforts' sums of squares. NaN errors (no truth) are skipped per axis and per norm.
     """
 
@@ -191,7 +132,8 @@ class RunningTracking:
         self.n_effort += int(tau_mpc.shape[0])
 
     def result(self) -> dict:
-        """The dict of :func:`tracking_metrics` [mm, mN·m]."""
+        """RMS and max error, per-axis RMS [mm], RMS ‖τ_mpc‖ and ‖τ‖ [mN·m]: the RMS over time of
+        the Euclidean norm of the joint torque vector."""
         nan = float("nan")
         n = self.n_effort
         return {**self.error.result(),
@@ -309,69 +251,3 @@ class MeasuredScore:
     def result(self) -> dict:
         """``rms_error_mm``, ``max_error_mm``, ``rms_error_axis_mm`` and ``scored_samples``."""
         return {**self.error.result(), "scored_samples": self.error.n}
-
-
-class HeartRateScore:
-    """Running score of a predictor's heart-rate estimate against the true heart rate.
-
-    At each observation after ``settling`` the error e = 60·(f̂_h − f_h(t)) [bpm] is added to
-    running sums (constant memory): RMS and max of ``|e|`` and the fraction of observations with
-    ``|e|`` < ``tolerance_bpm`` (5 bpm, the lock criterion). From the first observation
-    on (settling included; an estimate that is not ready yet counts as unlocked) it keeps the
-    "lock time": the time of the first observation after which ``|e|`` stayed below the tolerance to
-    the end. ``ready_time_s`` is the first finite estimate (the EKF's initialisation window is
-    Yuen's 10 s, so lock is judged from there).
-
-    Parameters
-    ----------
-    true_rate : callable
-        ``true_rate(t) -> f_h`` [Hz], e.g. ``PhaseTrack.rate`` of the heart source.
-    settling : float
-        Observations before this time [s] are not scored (the run's metric window).
-    tolerance_bpm : float
-        Lock tolerance [bpm].
-    """
-
-    def __init__(self, true_rate: Callable[[float], float], settling: float = 0.0,
-                 tolerance_bpm: float = 5.0) -> None:
-        self.true_rate, self.settling, self.tolerance = true_rate, settling, tolerance_bpm
-        self.n = self.within = 0
-        self.sum_sq = self.max_abs = self.sum_est = self.sum_true = 0.0
-        self.lock_time: float | None = None
-        self.ready_time: float | None = None
-
-    def observe(self, t: float, estimate_hz: float) -> None:
-        """Score the estimate ``estimate_hz`` [Hz] made at time ``t`` [s] (NaN: not yet)."""
-        if self.ready_time is None and math.isfinite(estimate_hz):
-            self.ready_time = t
-        true_bpm = 60.0 * float(self.true_rate(t))
-        error = abs(60.0 * estimate_hz - true_bpm) if math.isfinite(estimate_hz) else math.inf
-        if error < self.tolerance:
-            if self.lock_time is None:
-                self.lock_time = t
-        else:
-            self.lock_time = None
-        if t < self.settling or not math.isfinite(error):
-            return
-        self.n += 1
-        self.sum_sq += error * error
-        self.max_abs = max(self.max_abs, error)
-        self.sum_est += 60.0 * estimate_hz
-        self.sum_true += true_bpm
-        self.within += error < self.tolerance
-
-    def summary(self) -> dict[str, float | int | None]:
-        """``rms_error_bpm``, ``max_error_bpm``, ``within_tolerance``, means, ``lock_time_s``."""
-        if not self.n:
-            return {"observations": 0}
-        return {
-            "observations": self.n,
-            "rms_error_bpm": math.sqrt(self.sum_sq / self.n),
-            "max_error_bpm": self.max_abs,
-            "within_tolerance": self.within / self.n,
-            "tolerance_bpm": self.tolerance,
-            "mean_estimate_bpm": self.sum_est / self.n,
-            "mean_true_bpm": self.sum_true / self.n,
-            "ready_time_s": self.ready_time,
-            "lock_time_s": self.lock_time,
-        }

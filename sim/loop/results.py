@@ -54,7 +54,7 @@ class LoopResult:
     settings: object  # sim.loop.LoopSettings
     trace: dict  # field -> array over the traced ticks
     stride: int  # ticks between traced samples before the full-rate tail
-    #: tracking_metrics after settling: at every tick against the truth, or with
+    #: the tracking metrics after settling: at every tick against the truth, or with
     #: ``measured`` at the recorded samples' instants (:class:`~sim.loop.metrics.MeasuredScore`;
     #: the all-tick score against the samples' interpolant then in ``interpolated``)
     tracking: dict
@@ -71,7 +71,6 @@ class LoopResult:
     controller_stats: dict = field(default_factory=dict)
     saturated_ticks: int = 0
     predictor_counts: dict = field(default_factory=dict)
-    plant_dynamics: str = "pinocchio"  # who integrated the plant (and why not native)
     #: what the score leaves out: the samples taken as outliers, the ticks whose truth touches
     #: them, and the recorded samples that are no measurements (their truth is missing)
     excluded: dict = field(default_factory=dict)
@@ -178,12 +177,6 @@ class Recorder:
         self.robot, self.settings, self.N = robot, settings, horizon
         self.truth, self.anchor = truth, np.asarray(anchor, dtype=float)
         self.model, self.data, self.fid = robot.model, robot.create_data(), robot.ee_frame_id
-        from sim.plant.native import load_chain
-
-        # end-effector positions of a whole chunk in one compiled call (else Pinocchio per tick)
-        self.chain = load_chain(robot.model)
-        frame = robot.model.frames[self.fid]
-        self.ee_joint, self.ee_point = frame.parentJoint, np.array(frame.placement.translation)
         self.tracking = RunningTracking()
         #: a recording's samples (t [s], z (n, d) [m], uncentred): scored at their instants
         self.measured = None if measured is None else self._measured_score(*measured)
@@ -235,9 +228,7 @@ class Recorder:
                 "outliers": self.outliers, "last_stamp": self.last_stamp}
 
     def _ee(self, q_log: np.ndarray) -> np.ndarray:
-        """End-effector positions (m, 3) of the joint angles (m, nq)."""
-        if self.chain is not None:
-            return self.chain.points(q_log, self.ee_joint, self.ee_point)
+        """End-effector positions (m, 3) of the joint angles (m, nq) (Pinocchio)."""
         model, data, fid = self.model, self.data, self.fid
         ee = np.empty((q_log.shape[0], 3))
         for k, q in enumerate(q_log):
@@ -382,7 +373,7 @@ class Recorder:
         return {**h.stats_us(), "refreshes": h.n, "period_us": self.period_ns / 1e3,
                 "over_period": over}
 
-    def result(self, controller, dynamics: str = "pinocchio") -> LoopResult:
+    def result(self, controller) -> LoopResult:
         tracking, interpolated, excluded = self._scores()
         with np.errstate(invalid="ignore", divide="ignore"):
             horizon_error = np.sqrt(self.horizon2 / self.n_horizons)  # NaN where no refresh
@@ -402,7 +393,7 @@ class Recorder:
             control_tick_us=self.parts["step"].stats_us(), horizon_error=horizon_error,
             refresh_us=self._refresh_budget(),
             controller_stats=controller_stats(controller), saturated_ticks=self.saturated_ticks,
-            predictor_counts=dict(controller.predictor_counts), plant_dynamics=dynamics,
+            predictor_counts=dict(controller.predictor_counts),
             horizons=(ticks, points), samples=(stamps, samples),
             excluded=excluded,
             envelope=self.envelope.result(), segments=tuple(self.segments or ()),

@@ -1,12 +1,12 @@
 """The robot the controller drives: torques in, encoder angles out.
 
 ================  ================================================================
-``arm``           :class:`ArmPlant`: Pinocchio's forward dynamics integrated over a tick,
-                  torque limits, friction; :class:`PlantSettings`
+``kernel``        the one dynamics kernel (``chain.c``): the arm's rigid-body dynamics and
+                  its drives integrated over a tick, checked against Pinocchio
+``arm``           :class:`ArmPlant`, the ideal plant (torque limits, friction);
+                  :class:`PlantSettings`
 ``hardware``      the hardware-like plant (:class:`HardwareSettings`: I/O delay, DAC, current
                   amplifier, friction with stiction, cables) and the linear plant
-``native``        the plant's dynamics compiled (the one dynamics kernel, checked against
-                  Pinocchio)
 ================  ================================================================
 
 Every plant has ``encoders()`` (the joint angles the controller reads [rad]), ``step(tau)`` (one
@@ -33,7 +33,5 @@ def make_plant(robot: Robot, arm: LinearArm, Ts: float, settings: PlantSettings 
     if settings.model == "linear":
         return LinearPlant(robot, arm)
     if settings.model == "hardware":
-        return HardwarePlant(robot, Ts, hardware or HardwareSettings(), settings.dynamics)
-    plant = ArmPlant(robot, Ts, settings)
-    plant.reset()
-    return plant
+        return HardwarePlant(robot, Ts, hardware or HardwareSettings())
+    return ArmPlant(robot, Ts, settings)

@@ -1,15 +1,20 @@
-/* Rigid-body dynamics of a tree of revolute joints, for the plant's inner loop (sim/plant/native.py).
+/* The plant's dynamics kernel (sim/plant/kernel.py): a tree of revolute joints and its drives.
  *
- * Recursive Newton-Euler (RNEA) and the composite-rigid-body algorithm (CRBA) in body coordinates,
- * spatial vectors ordered (angular; linear), with the parameters of a Pinocchio model: joint
- * placement (R_p, p_p) in the parent body, joint axis a, spatial inertia and rotor armature. Body
- * i's pose in its parent: (R_p Rot(a, qb_i), p_p), qb_i = s_i q[c_i] + o_i: a body follows one
- * degree of freedom, scaled and offset (mimic joints: a closed linkage such as a parallelogram
- * written as a tree). The forward dynamics are q'' = M(q)^-1 (tau - h(q, q')), M by CRBA and h by
- * RNEA from one set of body poses, transforms and inertias kept in their structured form.
- * Friction acts on the motors' output rates w = S q' (S the motor map) and reaches the joints as
- * S^T f(w). Dynamics only: no controller logic. The reference is Pinocchio
- * (tests/sim/plant/test_native.py compares every function with it).
+ * Rigid-body dynamics: recursive Newton-Euler (RNEA) and the composite-rigid-body algorithm (CRBA)
+ * in body coordinates, spatial vectors ordered (angular; linear), with the parameters of a
+ * Pinocchio model: joint placement (R_p, p_p) in the parent body, joint axis a, spatial inertia and
+ * rotor armature. Body i's pose in its parent: (R_p Rot(a, qb_i), p_p), qb_i = s_i q[c_i] + o_i: a
+ * body follows one degree of freedom, scaled and offset (mimic joints: a closed linkage such as a
+ * parallelogram written as a tree). The forward dynamics are q'' = M(q)^-1 (tau - h(q, q')), M by
+ * CRBA and h by RNEA from one set of body poses, transforms and inertias kept in their structured
+ * form (Featherstone, Rigid Body Dynamics Algorithms, 2008).
+ *
+ * The drives (plant_tick): each motor's command from the joint torques (torque limits, the DAC's
+ * step and range), its current following the command through a first-order lag, its torque on
+ * its output coordinate through the motor map S, Stribeck friction on the output rate, and
+ * optionally a two-mass cable between rotor and link; explicit midpoint steps over the tick. The equations are those of sim/plant/hardware.py's docstring; the ideal
+ * plant is the case with the current equal to the command, no stiction peak and rigid cables.
+ * Pinocchio and a plain reference in tests/sim/plant/ check every function.
  */
 #include <math.h>
 #include <string.h>
@@ -36,11 +41,6 @@ typedef struct {
     double axis[MAXJ][3];       /* unit joint axis in the body frame */
     double inertia[MAXJ][36];   /* 6x6 spatial inertia about the body origin, (ang; lin) */
     double armature[MAXJ];      /* rotor inertia reflected to each degree of freedom [kg m^2] */
-    double motor[MAXJ * MAXJ];  /* S (n x n, row-major): motor output rates w = S q' */
-    int mapped;                 /* S is not the identity */
-    double damping[MAXJ];       /* viscous friction D of each motor [N m s/rad] */
-    double coulomb[MAXJ];       /* Coulomb friction F_c of each motor [N m] */
-    double inv_stiction;        /* 1 / v_s [s/rad] */
     double gravity[3];          /* [m/s^2], e.g. (0, 0, -9.81) */
 } chain_t;
 
@@ -90,18 +90,8 @@ typedef struct {
     double m, h[3], I[9];
 } rbi_t;
 
-/* The coordinate axis that body i turns about with an identity placement rotation, or -1. */
-static int plane_axis(const chain_t *m, int i) {
-    static const double I3[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
-    const double *a = m->axis[i];
-    if (memcmp(m->Rp[i], I3, sizeof I3) != 0) return -1;
-    for (int k = 0; k < 3; k++)
-        if (a[k] == 1.0 && a[(k + 1) % 3] == 0.0 && a[(k + 2) % 3] == 0.0) return k;
-    return -1;
-}
-
 /* E = (R_p Rot(a, q))^T with Rot(a, q) = I + s K + (1 - c) K^2 (Rodrigues), K = a x. */
-static void general_rotation(const chain_t *m, int i, double q, double E[9]) {
+static void rotation(const chain_t *m, int i, double q, double E[9]) {
     const double *a = m->axis[i], *P = m->Rp[i];
     double s = sin(q), c = 1.0 - cos(q), J[9];
     double K[9] = {0, -a[2], a[1], a[2], 0, -a[0], -a[1], a[0], 0};
@@ -115,23 +105,11 @@ static void general_rotation(const chain_t *m, int i, double q, double E[9]) {
             E[3 * l + k] = P[3 * k] * J[l] + P[3 * k + 1] * J[3 + l] + P[3 * k + 2] * J[6 + l];
 }
 
-/* The bodies' poses at the body angles qb: E = Rot(e_k, -q) directly for a joint about
- * coordinate axis k of an unrotated placement (RX, RY, RZ), else the general rotation. */
+/* The bodies' poses at the body angles qb. */
 static void poses(const chain_t *m, const double *qb, pose_t *X) {
     for (int i = 0; i < m->nb; i++) {
-        pose_t *P = &X[i];
-        int k = plane_axis(m, i), u = (k + 1) % 3, w = (k + 2) % 3;
-        memcpy(P->p, m->pp[i], sizeof P->p);
-        if (k < 0) {
-            general_rotation(m, i, qb[i], P->E);
-            continue;
-        }
-        double c = cos(qb[i]), s = sin(qb[i]);
-        memset(P->E, 0, sizeof P->E);
-        P->E[4 * k] = 1.0;
-        P->E[4 * u] = P->E[4 * w] = c;
-        P->E[3 * u + w] = s;
-        P->E[3 * w + u] = -s;
+        memcpy(X[i].p, m->pp[i], sizeof X[i].p);
+        rotation(m, i, qb[i], X[i].E);
     }
 }
 
@@ -360,159 +338,117 @@ void chain_forward(const chain_t *m, const double *q, const double *qd, const do
     spd_solve(m->n, M, b, qdd);
 }
 
-/* Friction torque S^T (D w + F_c tanh(w / v_s)), w = S qd (S = I: D qd + F_c tanh(qd / v_s)). */
-static void friction(const chain_t *m, const double *qd, double *out) {
-    int n = m->n;
-    if (!m->mapped) {
-        for (int i = 0; i < n; i++)
-            out[i] = m->damping[i] * qd[i] + m->coulomb[i] * tanh(qd[i] * m->inv_stiction);
-        return;
-    }
-    double f[MAXJ];
-    for (int k = 0; k < n; k++) {
-        double w = 0;
-        for (int l = 0; l < n; l++) w += m->motor[n * k + l] * qd[l];
-        f[k] = m->damping[k] * w + m->coulomb[k] * tanh(w * m->inv_stiction);
-    }
-    for (int j = 0; j < n; j++) {
-        double s = 0;
-        for (int k = 0; k < n; k++) s += m->motor[n * k + j] * f[k];
-        out[j] = s;
-    }
-}
-
-/* Explicit midpoint, `substeps` steps of h, torque held (sim.plant.ArmPlant._midpoint_steps):
- * qd_half = qd + h/2 a(q, qd), q_half = q + h/2 qd, q+ = q + h qd_half, qd+ = qd + h a(q_half,
- * qd_half), with a = forward dynamics(q, qd, tau - friction(qd)). Updates q and qd in place. */
-void chain_midpoint(const chain_t *m, double *q, double *qd, const double *tau, double h,
-                    int substeps) {
-    int n = m->n;
-    double f[MAXJ], t[MAXJ], a[MAXJ], qh[MAXJ], vh[MAXJ], hh = 0.5 * h;
-    for (int s = 0; s < substeps; s++) {
-        friction(m, qd, f);
-        for (int i = 0; i < n; i++) t[i] = tau[i] - f[i];
-        chain_forward(m, q, qd, t, a);
-        for (int i = 0; i < n; i++) {
-            vh[i] = qd[i] + hh * a[i];
-            qh[i] = q[i] + hh * qd[i];
-        }
-        friction(m, vh, f);
-        for (int i = 0; i < n; i++) t[i] = tau[i] - f[i];
-        chain_forward(m, qh, vh, t, a);
-        for (int i = 0; i < n; i++) {
-            q[i] += h * vh[i];
-            qd[i] += h * a[i];
-        }
-    }
-}
-
-/* Position [m] in the world of `point` (body coordinates of body `joint`) at configuration q,
- * for `count` configurations (rows of q, n each) -> out (count x 3): world rotation R_i =
- * R_parent E_i^T and origin o_i = o_parent + R_parent p_i, from the base to the body. */
-void chain_point(const chain_t *m, const double *q, int count, int joint, const double *point,
-                 double *out) {
-    double R[MAXJ][9], o[MAXJ][3], qc[MAXJ];
-    pose_t X[MAXJ];
-    for (int c = 0; c < count; c++) {
-        expand(m, q + (size_t)c * m->n, 1, qc);
-        poses(m, qc, X);
-        for (int i = 0; i <= joint; i++) {
-            int pa = m->parent[i];
-            const double *E = X[i].E;
-            for (int k = 0; k < 3; k++) {
-                for (int l = 0; l < 3; l++)
-                    R[i][3 * k + l] = pa < 0 ? E[3 * l + k] : R[pa][3 * k] * E[3 * l] +
-                                      R[pa][3 * k + 1] * E[3 * l + 1] + R[pa][3 * k + 2] * E[3 * l + 2];
-                o[i][k] = pa < 0 ? X[i].p[k] : o[pa][k] + R[pa][3 * k] * X[i].p[0] +
-                          R[pa][3 * k + 1] * X[i].p[1] + R[pa][3 * k + 2] * X[i].p[2];
-            }
-        }
-        for (int k = 0; k < 3; k++)
-            out[3 * c + k] = o[joint][k] + R[joint][3 * k] * point[0] +
-                             R[joint][3 * k + 1] * point[1] + R[joint][3 * k + 2] * point[2];
-    }
-}
-
-/* ---- The hardware-like plant's tick (sim/plant/hardware.py HardwarePlant): motor currents
- * through a first-order lag, Stribeck friction on the motors' output rates, optional two-mass
- * cables; the same equations as the Python reference there. ---- */
+/* ---- The drives between the motor commands and the arm ---- */
 
 typedef struct {
-    const chain_t *arm;         /* M(q) and h(q, q') (its own friction fields unused) */
-    int cables, steps;
-    double S[MAXJ * MAXJ];      /* motor map, n x n row-major */
-    double gain[MAXJ];          /* eta K_t: output torque per ampere */
-    double coulomb[MAXJ], damping[MAXJ];
-    double ratio, v_stribeck, inv_smooth;
-    double rotor[MAXJ];         /* J_r on each output coordinate */
-    double R[MAXJ * MAXJ];      /* S^T diag(J_r) S, taken off M with cables */
-    double k[MAXJ], c[MAXJ];    /* cable stiffness and damping */
-    double q0[MAXJ];
+    const chain_t *arm;         /* M(q) and h(q, q') */
+    int cables, steps;          /* two-mass cables (else rigid); midpoint steps per tick */
+    double S[MAXJ * MAXJ];      /* motor map, n x n row-major: output angles theta = S (q - q0) */
+    double gain[MAXJ];          /* output torque per unit of command (eta K_t per ampere) */
+    double coulomb[MAXJ], damping[MAXJ];  /* F_c [N m], D [N m s/rad] on each output */
+    double ratio, v_stribeck, inv_smooth; /* F_s / F_c, v_S [rad/s], 1 / v_s [s/rad] */
+    double rotor[MAXJ];         /* J_r on each output coordinate [kg m^2] */
+    double R[MAXJ * MAXJ];      /* S^T diag(J_r) S, the rotors taken off M with cables */
+    double k[MAXJ], c[MAXJ];    /* cable stiffness [N m/rad] and damping [N m s/rad] */
+    double q0[MAXJ];            /* home posture, where the cables are relaxed [rad] */
     double tau_e, h;            /* current lag, step [s] */
-} hw_t;
+    double tau_max[MAXJ];       /* joint torque limits [N m] (INFINITY: none) */
+    double map[MAXJ * MAXJ];    /* the motors' commands from the joint torques, n x n */
+    double c_max, c_step;       /* the command's full scale (INFINITY: none), its DAC step (0) */
+} plant_t;
 
-static double hw_friction(const hw_t *w, int k, double rate) {
-    double x = rate / w->v_stribeck;
-    double peak = w->coulomb[k] * (1.0 + (w->ratio - 1.0) * exp(-x * x));
-    return w->damping[k] * rate + peak * tanh(rate * w->inv_smooth);
+/* f(w) = D w + [F_c + (F_s - F_c) exp(-(w / v_S)^2)] tanh(w / v_s) on output k. */
+static double friction(const plant_t *p, int k, double w) {
+    double x = w / p->v_stribeck, peak = p->coulomb[k];
+    if (p->ratio != 1.0) peak *= 1.0 + (p->ratio - 1.0) * exp(-x * x);
+    return p->damping[k] * w + peak * tanh(w * p->inv_smooth);
 }
 
-/* d/dt of x = [q, q', theta_r, theta_r'] (4n) with winding currents cur. */
-static void hw_rates(const hw_t *w, const double *x, const double *cur, double *dx) {
-    int n = w->arm->n;
+/* d/dt of x = [q, q', theta_r, theta_r'] (4n) with the winding currents cur: rigid,
+ * M q'' + h = S^T (eta K_t i - f(S q')); with cables, tau_s = k (theta_r - S (q - q0)) +
+ * c (theta_r' - S q'), (M - S^T J_r S) q'' + h = S^T tau_s, J_r theta_r'' = eta K_t i - tau_s -
+ * f(theta_r'). */
+static void rates(const plant_t *p, const double *x, const double *cur, double *dx) {
+    int n = p->arm->n;
     const double *q = x, *v = x + n, *th = x + 2 * n, *om = x + 3 * n;
     double out[MAXJ], joint[MAXJ];
     for (int k = 0; k < n; k++) {
         double sq = 0, sv = 0;
         for (int l = 0; l < n; l++) {
-            sq += w->S[n * k + l] * (q[l] - w->q0[l]);
-            sv += w->S[n * k + l] * v[l];
+            sq += p->S[n * k + l] * (q[l] - p->q0[l]);
+            sv += p->S[n * k + l] * v[l];
         }
-        double motor = w->gain[k] * cur[k];
-        if (w->cables) {
-            out[k] = w->k[k] * (th[k] - sq) + w->c[k] * (om[k] - sv);  /* cable torque */
-            dx[3 * n + k] = (motor - out[k] - hw_friction(w, k, om[k])) / w->rotor[k];
+        double motor = p->gain[k] * cur[k];
+        if (p->cables) {
+            out[k] = p->k[k] * (th[k] - sq) + p->c[k] * (om[k] - sv);
+            dx[3 * n + k] = (motor - out[k] - friction(p, k, om[k])) / p->rotor[k];
         } else {
-            out[k] = motor - hw_friction(w, k, sv);
+            out[k] = motor - friction(p, k, sv);
             dx[3 * n + k] = 0.0;
         }
         dx[2 * n + k] = om[k];
     }
     for (int j = 0; j < n; j++) {
         double s = 0;
-        for (int k = 0; k < n; k++) s += w->S[n * k + j] * out[k];
+        for (int k = 0; k < n; k++) s += p->S[n * k + j] * out[k];
         joint[j] = s;
         dx[j] = v[j];
     }
-    if (!w->cables) {
-        chain_forward(w->arm, q, v, joint, dx + n);
+    if (!p->cables) {
+        chain_forward(p->arm, q, v, joint, dx + n);
         return;
     }
     double h[MAXJ], M[MAXJ][MAXJ], b[MAXJ];
-    bias_and_mass(w->arm, q, v, h, M);
+    bias_and_mass(p->arm, q, v, h, M);
     for (int i = 0; i < n; i++) {
         b[i] = joint[i] - h[i];
-        for (int j = 0; j < n; j++) M[i][j] -= w->R[n * i + j];
+        for (int j = 0; j < n; j++) M[i][j] -= p->R[n * i + j];
     }
     spd_solve(n, M, b, dx + n);
 }
 
-/* One tick: `steps` explicit-midpoint steps, each with the current's exact mean over the step
- * (command cmd held, lag tau_e from i0); x (4n) and i0 updated in place. */
-void hw_integrate(const hw_t *w, double *x, double *i0, const double *cmd) {
-    int n = w->arm->n, nx = 4 * n;
-    double k1[4 * MAXJ], mid[4 * MAXJ], k2[4 * MAXJ], cur[MAXJ], h = w->h;
-    for (int s = 0; s < w->steps; s++) {
+/* The command of each motor for the joint torques tau: c = map clip(tau, +-tau_max), rounded to
+ * the DAC's step c_step (c_step > 0; to even on a tie) and clipped to +-c_max. Returns 1 if a
+ * limit cut the torque or the command. */
+static int command(const plant_t *p, const double *tau, double *cmd) {
+    int n = p->arm->n, cut = 0;
+    double u[MAXJ];
+    for (int j = 0; j < n; j++) {
+        u[j] = tau[j] > p->tau_max[j] ? p->tau_max[j] : tau[j] < -p->tau_max[j] ? -p->tau_max[j]
+                                                                                 : tau[j];
+        cut |= u[j] != tau[j];
+    }
+    for (int k = 0; k < n; k++) {
+        double c = 0;
+        for (int j = 0; j < n; j++) c += p->map[n * k + j] * u[j];
+        cut |= fabs(c) > p->c_max;
+        if (p->c_step > 0) c = p->c_step * nearbyint(c / p->c_step);
+        cmd[k] = c > p->c_max ? p->c_max : c < -p->c_max ? -p->c_max : c;
+    }
+    return cut;
+}
+
+/* One tick with the joint torques tau held: the motors' command (command()), then `steps`
+ * explicit-midpoint steps of h, x+ = x + h f(x + h/2 f(x, i_s), i_s), each with the current's
+ * exact mean over its step, i_s = c + (i0 - c) (tau_e / h) (e^(-t/tau_e) - e^(-(t+h)/tau_e))
+ * (i_s = c when tau_e = 0); then i0 = c + (i0 - c) e^(-steps h / tau_e). x (4n) and i0 (n) are
+ * updated in place. Returns command()'s cut. */
+int plant_tick(const plant_t *p, double *x, double *i0, const double *tau) {
+    int n = p->arm->n, nx = 4 * n;
+    double k1[4 * MAXJ], mid[4 * MAXJ], k2[4 * MAXJ], cur[MAXJ], cmd[MAXJ], h = p->h;
+    int cut = command(p, tau, cmd);
+    for (int s = 0; s < p->steps; s++) {
         double t = s * h;
         for (int k = 0; k < n; k++)
-            cur[k] = w->tau_e > 0 ? cmd[k] + (i0[k] - cmd[k]) * (w->tau_e / h) *
-                                                 (exp(-t / w->tau_e) - exp(-(t + h) / w->tau_e))
+            cur[k] = p->tau_e > 0 ? cmd[k] + (i0[k] - cmd[k]) * (p->tau_e / h) *
+                                                 (exp(-t / p->tau_e) - exp(-(t + h) / p->tau_e))
                                   : cmd[k];
-        hw_rates(w, x, cur, k1);
+        rates(p, x, cur, k1);
         for (int k = 0; k < nx; k++) mid[k] = x[k] + 0.5 * h * k1[k];
-        hw_rates(w, mid, cur, k2);
+        rates(p, mid, cur, k2);
         for (int k = 0; k < nx; k++) x[k] += h * k2[k];
     }
     for (int k = 0; k < n; k++)
-        i0[k] = w->tau_e > 0 ? cmd[k] + (i0[k] - cmd[k]) * exp(-w->steps * h / w->tau_e) : cmd[k];
+        i0[k] = p->tau_e > 0 ? cmd[k] + (i0[k] - cmd[k]) * exp(-p->steps * h / p->tau_e) : cmd[k];
+    return cut;
 }

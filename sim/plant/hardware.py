@@ -31,11 +31,10 @@ torque constant K_t:
    (J_r + J_l)).
 6. **Encoders** on the motor shafts count θ (rigid) or θ_r (cables): q̃ = q0 + S⁻¹ Δ round(θ/Δ).
 
-Pinocchio gives M and h (:func:`robots.model.forward_dynamics`'s equations), or the compiled
-chain (:mod:`sim.plant.native`, checked against Pinocchio) where it builds; the ODE is
-integrated by explicit midpoint steps, each with the current's exact mean over the step. The
-controller is unchanged: it knows its own I/O delay (its observer predicts with the torque that
-acts over each tick), not what the DAC, amplifier and cables make of it.
+The kernel (:mod:`sim.plant.kernel`) integrates these equations by explicit midpoint steps, each
+with the current's exact mean over the step; this module holds the delay, the DAC and the
+encoders. The controller is unchanged: it knows its own I/O delay (its observer predicts with the
+torque that acts over each tick), not what the DAC, amplifier and cables make of it.
 """
 
 from __future__ import annotations
@@ -44,11 +43,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import pinocchio as pin
-import scipy.linalg
 
 from robots import LinearArm, Robot
-from sim.plant import native
+from sim.plant.kernel import Chain, Drive, state
 
 ERRORS_FROM = ("true", "encoders")
 
@@ -64,7 +61,7 @@ class HardwareSettings:
         Tuna et al. give only the 0.5-ms xPC Target period (§VIII); one tick is what a loop
         that samples the encoders at the start of a tick and writes the DAC at its end has.
     current_time_constant : float
-        τ_e of the current-mode amplifier [s]: L/R = 0.238 mH / 2.18 Ω = 0.109 ms, the Maxon
+        τ_e of the current-mode amplifier [s]: L/R = ``0.238`` mH / 2.18 Ω = 0.109 ms, the Maxon
         RE 25 118743's winding (mahilab/Phantom README.md). The amplifier's own bandwidth is
         not published; a current loop closed around the winding is faster than L/R, so this is
         the slow bound. 0: the current follows the command at once.
@@ -97,7 +94,7 @@ class HardwareSettings:
         ζ of each cable [-]: 0.05. Assumption (light damping of steel cable drives).
     substeps : int
         Integration steps per tick; 0: 4 rigid (h = 125 µs against J v_s/F_s ≈ 120 µs for the
-        elbow's ≈ 1e-3 kg·m²), 20 with cables (h = 25 µs: the rotor, 1.3e-4 kg·m², alone on
+        elbow's ≈ 1e-3 kg·m²), 20 with cables (h = 25 µs: the rotor, ``1.3e-4`` kg·m², alone on
         its friction).
     error_from : str
         Which joint angles the loop scores the tip from: ``"true"`` (the arm's) or
@@ -143,39 +140,9 @@ class HardwareSettings:
         return self.substeps or (20 if self.cable_resonance > 0 else 4)
 
 
-def dac(current: np.ndarray, bits: int, full_scale: float) -> np.ndarray:
-    """The DAC's output: ``current`` rounded to the step 2 I_max / 2^bits, clipped to ±I_max [A]
-    (``bits`` 0: only clipped)."""
-    out = np.asarray(current, dtype=float)
-    if bits:
-        step = 2.0 * full_scale / 2**bits
-        out = step * np.round(out / step)
-    return np.clip(out, -full_scale, full_scale)
-
-
-def lagged(i0: np.ndarray, target: np.ndarray, t: float, tau: float) -> np.ndarray:
-    """First-order response i(t) = i* + (i₀ − i*) e^(−t/τ) of a lag τ to a held command i*
-    (τ = 0: i*)."""
-    if tau == 0:
-        return np.asarray(target, dtype=float)
-    return target + (i0 - target) * math.exp(-t / tau)
-
-
-def lagged_mean(i0: np.ndarray, target: np.ndarray, t: float, h: float,
-                tau: float) -> np.ndarray:
-    """Mean of the first-order response over [t, t + h]:
-    i* + (i₀ − i*) (τ/h) (e^(−t/τ) − e^(−(t+h)/τ))."""
-    if tau == 0:
-        return np.asarray(target, dtype=float)
-    return target + (i0 - target) * (tau / h) * (math.exp(-t / tau) - math.exp(-(t + h) / tau))
-
-
-def stribeck(w: np.ndarray, coulomb: np.ndarray, damping: np.ndarray, ratio: float,
-             v_stribeck: float, v_smooth: float) -> np.ndarray:
-    """Friction D ω + [F_c + (F_s − F_c) exp(−(ω/v_S)²)] tanh(ω/v_s) on output rates ω [N·m],
-    F_s = ``ratio``·F_c."""
-    peak = coulomb * (1.0 + (ratio - 1.0) * np.exp(-np.square(w / v_stribeck)))
-    return damping * w + peak * np.tanh(w / v_smooth)
+def dac_step(settings: HardwareSettings) -> float:
+    """The DAC's step 2 I_max / 2^bits [A] (0: no quantisation)."""
+    return 2.0 * settings.dac_range / 2**settings.dac_bits if settings.dac_bits else 0.0
 
 
 def cable_stiffness(resonance: float, rotor: np.ndarray, link: np.ndarray,
@@ -185,12 +152,6 @@ def cable_stiffness(resonance: float, rotor: np.ndarray, link: np.ndarray,
     reduced = rotor * link / (rotor + link)
     k = (2 * math.pi * resonance) ** 2 * reduced
     return k, 2 * damping_ratio * np.sqrt(k * reduced)
-
-
-def _check_drives(robot: Robot) -> None:
-    if robot.gear_ratio is None or robot.encoder_resolution is None:
-        raise ValueError(f"the hardware plant needs the robot's drives (gear ratios, encoders); "
-                         f"robot {robot.name!r} has none")
 
 
 class HardwarePlant:
@@ -203,53 +164,72 @@ class HardwarePlant:
     Ts : float
         Control period [s].
     settings : HardwareSettings
-    dynamics : str
-        Who computes M and h: ``"pinocchio"`` (the reference), ``"native"`` (the compiled
-        chain) or ``"auto"`` (native where it builds).
+
+    Raises
+    ------
+    ValueError
+        A robot without drives, or no dynamics kernel (:mod:`sim.plant.kernel`).
     """
 
-    dynamics_note = "hardware-like plant"
-
-    def __init__(self, robot: Robot, Ts: float, settings: HardwareSettings,
-                 dynamics: str = "auto") -> None:
-        _check_drives(robot)
-        self._chain = None if dynamics == "pinocchio" else native.load_chain(robot.model)
-        if dynamics == "native" and self._chain is None:
-            raise ValueError(f"native plant dynamics unavailable: {native.unavailable_reason}")
-        self.dynamics = "pinocchio" if self._chain is None else "native"
+    def __init__(self, robot: Robot, Ts: float, settings: HardwareSettings) -> None:
+        if robot.gear_ratio is None or robot.encoder_resolution is None:
+            raise ValueError(f"the hardware plant needs the robot's drives (gear ratios, "
+                             f"encoders); robot {robot.name!r} has none")
         self.robot, self.Ts, self.settings = robot, float(Ts), settings
-        n, S = robot.nv, robot.motor_map
+        S, n = robot.motor_map, robot.nv
         self._S, self._S_inv = S, np.linalg.inv(S)
-        self._gain = robot.gear_ratio * settings.torque_constant  # output torque per ampere
-        self._model, self._data = robot.model, robot.create_data()
-        self._rotor, self._h = robot.rotor_inertia, self.Ts / settings.steps
-        self._cables = settings.cable_resonance > 0
-        self._rotor_matrix = S.T @ np.diag(self._rotor) @ S if self._cables else 0.0
-        self.q_arm, self.v = robot.q0.copy(), np.zeros(n)
-        gravity = pin.computeGeneralizedGravity(self._model, self._data, robot.q0).copy()
-        self.k = self.c = np.zeros(n)
-        self.theta_r, self.omega_r = np.zeros(n), np.zeros(n)
-        if self._cables:
-            M_l = robot.mass_matrix(robot.q0) - self._rotor_matrix
+        gain = robot.gear_ratio * settings.torque_constant  # output torque per ampere
+        chain = Chain(robot.model)
+        gravity = chain.rnea(robot.q0, np.zeros(n), np.zeros(n))  # g(q0) [N·m]
+        self._cables = cables = None
+        if settings.cable_resonance > 0:
+            M_l = chain.mass(robot.q0) - S.T @ np.diag(robot.rotor_inertia) @ S
             link = np.diag(self._S_inv.T @ M_l @ self._S_inv)
-            self.k, self.c = cable_stiffness(settings.cable_resonance, self._rotor, link,
-                                             settings.cable_damping_ratio)
-            self.theta_r = (self._S_inv.T @ gravity) / self.k  # the cables hold the arm
-        self.current = (self._S_inv.T @ gravity) / self._gain  # held against gravity at rest
-        self._compiled = None if self._chain is None else native.HardwareStep(
-            self._chain, S=S, gain=self._gain, coulomb=robot.coulomb_friction,
-            damping=robot.damping, ratio=settings.stiction_ratio,
-            v_stribeck=settings.stribeck_velocity, v_smooth=settings.friction_smoothing,
-            rotor=self._rotor, cables=(self.k, self.c) if self._cables else None, q0=robot.q0,
-            tau_e=settings.current_time_constant, h=self._h, steps=settings.steps)
-        self._pending = [gravity.copy()] * settings.delay_ticks
+            cables = (robot.rotor_inertia, *cable_stiffness(
+                settings.cable_resonance, robot.rotor_inertia, link, settings.cable_damping_ratio))
+            self._cables = cables
+        self._drive = Drive(chain, self.Ts, settings.steps, motor_map=S, gain=gain,
+                            coulomb=robot.coulomb_friction, damping=robot.damping,
+                            stiction_ratio=settings.stiction_ratio,
+                            stribeck_velocity=settings.stribeck_velocity,
+                            smoothing_velocity=settings.friction_smoothing, q0=robot.q0,
+                            command_map=self._S_inv.T / gain[:, None],  # i* = S⁻ᵀ τ / (η K_t)
+                            full_scale=settings.dac_range, dac_step=dac_step(settings),
+                            current_lag=settings.current_time_constant, cables=cables)
+        held = self._S_inv.T @ gravity  # the motors hold the arm against gravity at rest
+        if cables is not None:
+            self.theta_r = held / cables[1]  # the cables' twist that holds it
+        self._drive.current[:] = held / gain
+        self._pending = [gravity] * settings.delay_ticks
         self.saturated = False
+        res = robot.encoder_resolution  # the encoders' counts: Δ⁻¹ S (q − q0), and back
+        self._to_counts, self._from_counts = S / res[:, None], self._S_inv * res
+        self._counts0 = self._to_counts @ robot.q0
+
+    q_arm = state(0, "The arm's joint angles [rad].")
+    v = state(1, "The arm's joint rates [rad/s].")
+    theta_r = state(2, "The rotors' angles on the output coordinates, with cables [rad].")
+    omega_r = state(3, "The rotors' rates on the output coordinates, with cables [rad/s].")
+
+    @property
+    def current(self) -> np.ndarray:
+        """The winding currents [A]."""
+        return self._drive.current.copy()
+
+    @property
+    def k(self) -> np.ndarray:
+        """The cables' stiffness [N·m/rad] (zeros: rigid)."""
+        return np.zeros(self.robot.nv) if self._cables is None else self._cables[1]
 
     def encoders(self) -> np.ndarray:
-        """q̃ = q0 + S⁻¹ Δ round(θ/Δ): joint angles from the motor encoders [rad]."""
-        theta = self.theta_r if self._cables else self._S @ (self.q_arm - self.robot.q0)
-        res = self.robot.encoder_resolution
-        return self.robot.q0 + self._S_inv @ (res * np.round(theta / res))
+        """q̃ = q0 + S⁻¹ Δ round(θ/Δ): joint angles from the motor encoders [rad], θ = S (q −
+        q0) rigid, θ_r with cables."""
+        n, res = self.robot.nv, self.robot.encoder_resolution
+        if self._cables is None:
+            counts = np.rint(self._to_counts @ self._drive.x[:n] - self._counts0)
+        else:
+            counts = np.rint(self._drive.x[2 * n:3 * n] / res)
+        return self.robot.q0 + self._from_counts @ counts
 
     @property
     def q(self) -> np.ndarray:
@@ -260,60 +240,7 @@ class HardwarePlant:
     def step(self, tau: np.ndarray) -> None:
         """The I/O delay, the DAC, the amplifier and one tick of the arm with ``tau`` [N·m]."""
         self._pending.append(np.array(tau, dtype=float))
-        tau = self._pending.pop(0)
-        wanted = (self._S_inv.T @ tau) / self._gain
-        command = dac(wanted, self.settings.dac_bits, self.settings.dac_range)
-        self.saturated = bool(np.any(np.abs(wanted) > self.settings.dac_range))
-        self._integrate(command)
-
-    def _integrate(self, command: np.ndarray) -> None:
-        """Explicit midpoint steps over the tick, each with the current's exact mean over the
-        step (the 0.1-ms lag is shorter than a step: its impulse is then exact)."""
-        h, tau_e, i0 = self._h, self.settings.current_time_constant, self.current
-        state = [self.q_arm, self.v, self.theta_r, self.omega_r]
-        if self._compiled is not None:
-            state, self.current = self._compiled.integrate(state, i0, command)
-            self.q_arm, self.v, self.theta_r, self.omega_r = state
-            return
-        for s in range(self.settings.steps):
-            current = lagged_mean(i0, command, s * h, h, tau_e)
-            k1 = self._rates(state, current)
-            mid = [x + 0.5 * h * dx for x, dx in zip(state, k1, strict=True)]
-            k2 = self._rates(mid, current)
-            state = [x + h * dx for x, dx in zip(state, k2, strict=True)]
-        self.q_arm, self.v, self.theta_r, self.omega_r = state
-        self.current = lagged(i0, command, self.Ts, tau_e)
-
-    def _friction(self, w: np.ndarray) -> np.ndarray:
-        s, robot = self.settings, self.robot
-        return stribeck(w, robot.coulomb_friction, robot.damping, s.stiction_ratio,
-                        s.stribeck_velocity, s.friction_smoothing)
-
-    def _rates(self, state: list, current: np.ndarray) -> list:
-        """d/dt [q, q̇, θ_r, θ̇_r] at ``state`` with winding currents ``current`` [A]."""
-        q, v, theta, omega = state
-        S, motor = self._S, self._gain * current
-        if self._cables:
-            spring = self.k * (theta - S @ (q - self.robot.q0)) + self.c * (omega - S @ v)
-            joint = S.T @ spring
-            rotor_acc = (motor - spring - self._friction(omega)) / self._rotor
-        else:
-            joint = S.T @ (motor - self._friction(S @ v))
-            rotor_acc = omega
-        return [v, self._link_acceleration(q, v, joint), omega, rotor_acc]
-
-    def _link_acceleration(self, q: np.ndarray, v: np.ndarray, joint: np.ndarray) -> np.ndarray:
-        """q̈ = (M(q) − Sᵀ J_r S)⁻¹ (τ − h(q, q̇)) with cables, M(q)⁻¹ (τ − h) without."""
-        chain = self._chain
-        if chain is not None and not self._cables:
-            return chain.forward_dynamics(q, v, joint)
-        if chain is not None:
-            M = chain.mass(q) - self._rotor_matrix
-            return np.linalg.solve(M, joint - chain.rnea(q, v, np.zeros_like(v)))
-        M = pin.crba(self._model, self._data, q)
-        M = np.triu(M) + np.triu(M, 1).T - self._rotor_matrix
-        bias = pin.nonLinearEffects(self._model, self._data, q, v)
-        return scipy.linalg.cho_solve(scipy.linalg.cho_factor(M), joint - bias)
+        self.saturated = self._drive.tick(self._pending.pop(0))
 
 
 class LinearPlant:
@@ -324,8 +251,6 @@ class LinearPlant:
     absent, so nothing is cancelled), τ clipped to the torque limits; the encoders quantise
     q = q0 + x_q per joint. The loop scores the forward kinematics of q.
     """
-
-    dynamics, dynamics_note = "linear", None
 
     def __init__(self, robot: Robot, arm: LinearArm) -> None:
         self.robot, self.arm = robot, arm

@@ -47,6 +47,8 @@ __all__ = ["BLOCK_BYTES", "read_csv"]
 
 #: Bytes of the file parsed at a time.
 BLOCK_BYTES = 1 << 24
+#: The longest line read [bytes]: a sample of 64 points is about 2 kB.
+MAX_LINE = 1 << 20
 #: A comma before an empty field (a dropout), to be read as NaN by NumPy's parser (an empty
 #: first field, a missing time, is refused by the careful parser).
 _EMPTY = re.compile(r",(?=[ \t]*(?:,|$))", re.M)
@@ -155,6 +157,9 @@ class _Blocks:
         if not data and not self._left:
             return False
         data, cut = self._left + data, (self._left + data).rfind(b"\n") if data else -2
+        if cut == -1 and len(data) > MAX_LINE:
+            raise fail(self.path, f"a line longer than {MAX_LINE} bytes: not a CSV recording",
+                       self.line + len(self._pending) + 1)
         self._left = b"" if cut == -2 else data[cut + 1:]
         if cut != -2:
             data = data[: cut + 1]

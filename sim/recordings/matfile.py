@@ -21,6 +21,7 @@ Every problem raises :class:`~sim.recordings.RecordingError` naming the file and
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -49,6 +50,8 @@ def parse_indices(text: str) -> list[int]:
             f"expected comma-separated indices, got {text!r}") from None
 
 
+#: The longest text variable read (``units``, ``time_units``) [characters].
+MAX_TEXT = 64
 #: MATLAB classes of numeric arrays (a recording's matrix, its times, its rate).
 NUMERIC = ("double", "single", "int8", "uint8", "int16", "uint16", "int32", "uint32", "int64",
            "uint64", "logical")
@@ -214,9 +217,11 @@ def load_mat(path: str | Path, var: str | None = None, rows=None, cols=None,
         numeric = {k: shape for k, (shape, cls) in catalog.items() if cls in NUMERIC}
         time_key = next((k for k in TIME_NAMES if k in numeric), None)
         var = _variable(path, numeric, var, time_key)
-        boundary.check("samples", max(numeric[var]), f"{path}: {var!r}")
-        wanted = [var, *(k for k in (time_key, *RATE_NAMES) if k in numeric),
-                  *(k for k in ("units", "time_units") if catalog.get(k, ((), ""))[1] == "char")]
+        wanted = [var, *(k for k in (time_key, *RATE_NAMES) if k in numeric)]
+        for name in wanted:  # three values make a sample of positions
+            boundary.check("samples", math.prod(numeric[name]) // 3, f"{path}: {name!r}")
+        wanted += [k for k in ("units", "time_units") if catalog.get(k, ((), ""))[1] == "char"
+                   and math.prod(catalog[k][0]) <= MAX_TEXT]
         variables = _load(path, f, kind, list(dict.fromkeys(wanted)))
     arrays = {k: v for k, v in variables.items() if isinstance(v, np.ndarray)}
     if var not in arrays:

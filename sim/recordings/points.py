@@ -146,3 +146,37 @@ def training_series(files, poi: int | None, read: dict, period: float) -> list[n
         _, grid = on_grid(rec.t, stack.reshape(rec.t.size, -1), rec.period)
         out.append(grid.reshape(grid.shape[0], stack.shape[1], -1))
     return out
+
+
+class PointsAt:
+    """The other tracked points of a recording, looked up by measurement time: what a
+    multi-point predictor reads beside the POI's sample (:meth:`predictors.base.Predictor.update`).
+
+    Parameters
+    ----------
+    t : ndarray (n,)
+        The recording's sample times, in the run's time [s].
+    others : ndarray (n, P − 1, d)
+        The other points' positions at those times [m] (NaN where a point is missing).
+    """
+
+    #: Times closer than this to a sample's time count as that sample [s].
+    SNAP = 1e-9
+
+    def __init__(self, t: np.ndarray, others: np.ndarray) -> None:
+        self.t = np.asarray(t, dtype=float)
+        self.others = np.asarray(others, dtype=float)
+        if self.others.ndim != 3 or self.others.shape[0] != self.t.size:
+            raise ValueError(f"others must be (n, P - 1, d) with n = {self.t.size} samples, "
+                             f"got {self.others.shape}")
+
+    def centred(self, center: np.ndarray) -> PointsAt:
+        """The same points less ``center`` [m] (the POI's placement)."""
+        return PointsAt(self.t, self.others - np.asarray(center, dtype=float))
+
+    def at(self, t: float) -> np.ndarray | None:
+        """The (P − 1, d) positions measured at ``t`` [m], or None when no sample was."""
+        i = int(np.searchsorted(self.t, t - self.SNAP))
+        if i < self.t.size and abs(self.t[i] - t) <= self.SNAP:
+            return self.others[i]
+        return None

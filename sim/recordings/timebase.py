@@ -6,7 +6,7 @@ checked against two facts of heart motion, whatever the rate:
 
 - its strongest periodic component, the highest peak of the motion's spectrum that repeats at
   least :data:`MIN_CYCLES` times in the recording, lies between breathing and the fastest
-  heartbeat, :data:`MOTION_BAND` (0.1–4.17 Hz: 6 breaths/min to 250 beats/min, the heart-rate
+  heartbeat, :data:`MOTION_BAND` (6 breaths/min to 250 beats/min, the heart-rate
   range of ``rhmpc data --bpm``);
 - its sample rate is one an instrument of heart motion delivers, at most :data:`MAX_RATE`
   (sonomicrometry 257 Hz in Tuna et al. 2013, trackers and cameras up to 1 kHz).
@@ -47,7 +47,11 @@ STATE_UNIT = {".csv": "a CSV header t_{unit}", ".txt": "a CSV header t_{unit}",
 def strongest_frequency(rec: RecordedMotion) -> float | None:
     """f₀, the frequency of the highest peak of the motion's power spectrum [cycles per unit
     of ``rec.t``] among those with at least :data:`MIN_CYCLES` periods in the recording; None
-    when there is none (too few samples, no motion)."""
+    when there is none (too few samples, no motion).
+
+    The spectrum is the sum over the axes of |FFT|² of the first :data:`MAX_SAMPLES` samples,
+    each axis clipped to its 1st–99th percentiles (outliers do not decide it), interpolated
+    across gaps onto a uniform grid, its linear trend removed and a Hann window applied."""
     n = min(rec.t.size, MAX_SAMPLES)
     if n < 4 * MIN_CYCLES:
         return None

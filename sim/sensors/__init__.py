@@ -5,15 +5,18 @@ through stages, each a frozen settings dataclass with ``apply(stream, rng)``. Al
 comes from the injected ``numpy.random.Generator``.
 
 =====================  ===================================================================
-``stream``             :class:`SampleStream`, :class:`Sensor` (the sampler), :class:`Latency`
+``stream``             :class:`SampleStream`, :class:`Sensor` (the sampler), :class:`Latency`;
+                       sample sources read in blocks (``ArraySamples``, ``SampledSamples``)
 ``sonomicrometry``     the physical sonomicrometer (time of flight, quantisation, speed of
                        sound, leading-edge error, cycle slips), :func:`sonomicrometry`
 ``crystals``           :class:`CrystalArray`, the reference base and POI crystal geometry
 ``trilateration``      :func:`trilaterate`, 3-D positions from ranges
 ``white``              additive white Gaussian noise (:class:`WhiteNoise`, :func:`white`)
 ``events``             :class:`EchoOutliers`, :class:`Dropouts`
-``faults``             injected faults: a freeze, a jump, missing samples, stuck encoders
-``playback``           delivery to the control rate: :class:`Upsample`, :data:`PLAYBACKS`
+``faults``             injected faults, each kind declared once: a freeze, a jump, missing
+                       samples, stuck encoders; ``FaultySamples``
+``playback``           delivery to the control rate: :class:`Upsample`, :data:`PLAYBACKS`,
+                       made block by block (``UpsampledSamples``, ``sensor_samples``)
 ``ultrasound``         3-D ultrasound (Yuen et al.): 28 Hz, σ = 1.3 mm, 68 ms latency
 ``video``              stereo-endoscopic video tracking: 25 Hz, σ = 0.15 mm, one frame late
 ``encoder``            :class:`Encoder`, quantised joint angles

@@ -1,9 +1,9 @@
 """Injected faults of the instruments: a sensor that freezes, a stream that jumps, a burst of
-missing samples, encoders that stick.
+missing samples, encoders that stick — each kind declared once, here.
 
-Each fault is a frozen dataclass acting on the samples whose measurement time lies in its
-window ``start_s ≤ t < end_s``, with ``apply(stream, rng)`` like every sensor stage
-(:mod:`sim.sensors.stream`); the truth the sensor measures is never touched:
+Each kind is a frozen dataclass acting on the samples whose measurement time lies in its window
+``start_s ≤ t < end_s`` (:meth:`corrupt`; ``apply(stream, rng)`` like every sensor stage,
+:mod:`sim.sensors.stream`); the truth the sensor measures is never touched:
 
 ======================  ================================================================
 :class:`SensorFreeze`   z_k = z_h for t_k in the window, h the last sample before it
@@ -14,21 +14,19 @@ window ``start_s ≤ t < end_s``, with ``apply(stream, rng)`` like every sensor 
                         of encoder readings, one row a control tick)
 ======================  ================================================================
 
-:func:`parse_fault` reads the one-line form of the command line and of a run's ``[faults]``
-table (:class:`FaultSettings`), ``KIND@START[:ARGUMENT…]``::
-
-    freeze@START:DURATION       nan@START[:DURATION]         (default 0.5 s)
-    jump@START:OFFSET[:DURATION] (OFFSET a length with its unit along x, "5mm", or x,y,z:
-                                 "5,0,-2mm"; default persistent)
-    stick@START:DURATION[:JOINTS] (JOINTS 0-based, comma-separated; default every joint)
-
-Times are in seconds from the start of the run.
+A kind declares its name (``kind``), its one-line form (``form``, ``KIND@START[:ARGUMENT…]``, the
+start in seconds from the start of the run, and ``arguments``, read in order), what it does
+(``what``) and the stream it acts on (``target``: the sensor's ``"samples"`` or the
+``"encoders"``). :data:`GRAMMAR`, :func:`parse_fault` (the command line's ``--fault`` and a
+run's ``[faults]`` table, :class:`FaultSettings`), the loop (:mod:`sim.loop.faults`) and each
+fault's record read the declaration; a new kind is a class here, added to :data:`FAULT_KINDS`.
 """
 
 from __future__ import annotations
 
 import math
 import re
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import ClassVar
 
@@ -36,14 +34,9 @@ import numpy as np
 
 from sim.sensors.stream import SampleStream
 
-__all__ = ["FAULT_KINDS", "GRAMMAR", "EncoderStick", "FaultSettings", "NaNBurst", "SensorFault",
+__all__ = ["FAULT_KINDS", "GRAMMAR", "EncoderStick", "FaultSettings", "FaultySamples", "NaNBurst",
            "SensorFreeze", "StreamJump", "parse_fault"]
 
-#: The one-line form of a fault, for help texts and error messages.
-GRAMMAR = ("KIND@START[:ARG…] with START in s: freeze@START:DURATION, "
-           "jump@START:OFFSET[:DURATION] (OFFSET with its unit along x, e.g. 5mm, or x,y,z "
-           "e.g. 5,0,-2mm; persistent by default), nan@START[:DURATION] (default 0.5 s), "
-           "stick@START:DURATION[:JOINTS] (0-based, e.g. 0,2; default all)")
 #: Length units a jump's offset may carry [m per unit].
 LENGTH_UNITS: dict[str, float] = {"mm": 1e-3, "um": 1e-6, "m": 1.0}
 
@@ -65,11 +58,61 @@ def held_index(t: np.ndarray, start_s: float) -> int:
     return int(np.searchsorted(t, start_s, side="left")) - 1
 
 
+def _number(text: str, what: str, spec: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise ValueError(f"fault {spec!r}: {what} must be a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise ValueError(f"fault {spec!r}: {what} must be finite, got {text!r}")
+    return value
+
+
+def _duration(text: str, spec: str) -> float:
+    return _number(text, "the duration", spec)
+
+
+def _offset(text: str, spec: str) -> tuple[float, float, float]:
+    """``5mm`` (along x) or ``5,0,-2mm`` → metres."""
+    m = _LENGTH.match(text.strip().lower())
+    if m is None:
+        raise ValueError(f"fault {spec!r}: the offset needs a length unit (mm, um or m), e.g. "
+                         f"5mm or 5,0,-2mm, got {text!r}")
+    values = [_number(v, "the offset", spec) for v in m["values"].split(",")]
+    if len(values) not in (1, 3):
+        raise ValueError(f"fault {spec!r}: the offset is one length (along x) or three (x,y,z)")
+    scale = LENGTH_UNITS[m["unit"]]
+    values = [*values, 0.0, 0.0] if len(values) == 1 else values
+    return tuple(scale * v for v in values)
+
+
+def _joints(text: str, spec: str) -> tuple[int, ...]:
+    try:
+        return tuple(int(j) for j in text.split(","))
+    except ValueError:
+        raise ValueError(f"fault {spec!r}: joints are 0-based integers separated by commas, "
+                         f"got {text!r}") from None
+
+
+_LENGTH = re.compile(r"^(?P<values>[0-9e+\-., ]+?)\s*(?P<unit>mm|um|m)$")
+
+
 @dataclass(frozen=True)
 class _Windowed:
     """A fault over the samples measured in ``start_s ≤ t < start_s + duration_s``."""
 
+    #: its name in the one-line form
     kind: ClassVar[str] = ""
+    #: its one-line form
+    form: ClassVar[str] = ""
+    #: what it does, for help texts
+    what: ClassVar[str] = ""
+    #: the stream it acts on: the sensor's "samples" or the "encoders"
+    target: ClassVar[str] = "samples"
+    #: the arguments after START, in order: (field, reader of its text)
+    arguments: ClassVar[tuple[tuple[str, Callable[[str, str], object]], ...]] = ()
+    #: how many of them the form requires
+    required: ClassVar[int] = 1
     start_s: float
     duration_s: float
 
@@ -112,6 +155,9 @@ class SensorFreeze(_Windowed):
     """
 
     kind: ClassVar[str] = "freeze"
+    form: ClassVar[str] = "freeze@START:DURATION"
+    what: ClassVar[str] = "the sensor repeats its last sample"
+    arguments: ClassVar = (("duration_s", _duration),)
 
     def corrupt(self, t, z, held):
         mask = self.inside(t)
@@ -138,6 +184,10 @@ class StreamJump(_Windowed):
     """
 
     kind: ClassVar[str] = "jump"
+    form: ClassVar[str] = "jump@START:OFFSET[:DURATION]"
+    what: ClassVar[str] = ("the stream steps by OFFSET, a length with its unit along x, 5mm, or "
+                           "x,y,z, 5,0,-2mm; to the end of the run by default")
+    arguments: ClassVar = (("offset_m", _offset), ("duration_s", _duration))
     offset_m: tuple[float, float, float] = (5e-3, 0.0, 0.0)
     duration_s: float = math.inf
 
@@ -172,6 +222,10 @@ class NaNBurst(_Windowed):
     """
 
     kind: ClassVar[str] = "nan"
+    form: ClassVar[str] = "nan@START[:DURATION]"
+    what: ClassVar[str] = "missing samples, 0.5 s by default"
+    arguments: ClassVar = (("duration_s", _duration),)
+    required: ClassVar[int] = 0
     duration_s: float = 0.5
 
     def corrupt(self, t, z, held):
@@ -202,6 +256,10 @@ class EncoderStick(_Windowed):
     """
 
     kind: ClassVar[str] = "stick"
+    form: ClassVar[str] = "stick@START:DURATION[:JOINTS]"
+    what: ClassVar[str] = "encoder readings hold; 0-based joints, e.g. 0,2; every joint by default"
+    target: ClassVar[str] = "encoders"
+    arguments: ClassVar = (("duration_s", _duration), ("joints", _joints))
     joints: tuple[int, ...] | None = None
 
     def __post_init__(self) -> None:
@@ -234,48 +292,16 @@ class EncoderStick(_Windowed):
         return z
 
 
-#: Faults of the sensor's stream (what the controller's reference sees).
-SensorFault = SensorFreeze | StreamJump | NaNBurst
 #: Every fault by the name of its one-line form.
-FAULT_KINDS: dict[str, type] = {c.kind: c for c in (SensorFreeze, StreamJump, NaNBurst,
-                                                    EncoderStick)}
-_LENGTH = re.compile(r"^(?P<values>[0-9e+\-., ]+?)\s*(?P<unit>mm|um|m)$")
+FAULT_KINDS: dict[str, type[_Windowed]] = {c.kind: c for c in (SensorFreeze, StreamJump, NaNBurst,
+                                                                EncoderStick)}
+#: The one-line forms, for help texts and error messages.
+GRAMMAR = "KIND@START[:ARG…] with START in s: " + ", ".join(
+    f"{c.form} ({c.what})" for c in FAULT_KINDS.values())
 
 
-def _number(text: str, what: str, spec: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise ValueError(f"fault {spec!r}: {what} must be a number, got {text!r}") from None
-    if not math.isfinite(value):
-        raise ValueError(f"fault {spec!r}: {what} must be finite, got {text!r}")
-    return value
-
-
-def _offset(text: str, spec: str) -> tuple[float, float, float]:
-    """``5mm`` (along x) or ``5,0,-2mm`` → metres."""
-    m = _LENGTH.match(text.strip().lower())
-    if m is None:
-        raise ValueError(f"fault {spec!r}: the offset needs a length unit (mm, um or m), e.g. "
-                         f"5mm or 5,0,-2mm, got {text!r}")
-    values = [_number(v, "the offset", spec) for v in m["values"].split(",")]
-    if len(values) not in (1, 3):
-        raise ValueError(f"fault {spec!r}: the offset is one length (along x) or three (x,y,z)")
-    scale = LENGTH_UNITS[m["unit"]]
-    values = [*values, 0.0, 0.0] if len(values) == 1 else values
-    return tuple(scale * v for v in values)
-
-
-def _joints(text: str, spec: str) -> tuple[int, ...]:
-    try:
-        return tuple(int(j) for j in text.split(","))
-    except ValueError:
-        raise ValueError(f"fault {spec!r}: joints are 0-based integers separated by commas, "
-                         f"got {text!r}") from None
-
-
-def parse_fault(spec: str):
-    """A fault from its one-line form (see the module; :data:`GRAMMAR`).
+def parse_fault(spec: str) -> _Windowed:
+    """A fault from its one-line form (its kind's ``form`` and ``arguments``; :data:`GRAMMAR`).
 
     Raises
     ------
@@ -283,25 +309,62 @@ def parse_fault(spec: str):
         A malformed form or a value out of range, in one line naming the form.
     """
     kind, at, rest = str(spec).strip().partition("@")
-    kind = kind.lower()
-    if not at or kind not in FAULT_KINDS:
-        raise ValueError(f"fault {spec!r}: expected {GRAMMAR}")
+    cls = FAULT_KINDS.get(kind.lower())
     args = rest.split(":")
-    most = {"freeze": 2, "nan": 2, "jump": 3, "stick": 3}[kind]
-    least = 1 if kind == "nan" else 2
-    if not least <= len(args) <= most or any(not a.strip() for a in args):
+    if not at or cls is None or not 1 + cls.required <= len(args) <= 1 + len(cls.arguments) \
+            or any(not a.strip() for a in args):
         raise ValueError(f"fault {spec!r}: expected {GRAMMAR}")
     start = _number(args[0], "the start", spec)
+    values = {name: read(text, spec)
+              for (name, read), text in zip(cls.arguments, args[1:], strict=False)}
     try:
-        if kind == "jump":
-            extra = {"duration_s": _number(args[2], "the duration", spec)} if len(args) > 2 else {}
-            return StreamJump(start, offset_m=_offset(args[1], spec), **extra)
-        extra = {"duration_s": _number(args[1], "the duration", spec)} if len(args) > 1 else {}
-        if kind == "stick" and len(args) > 2:
-            extra["joints"] = _joints(args[2], spec)
-        return FAULT_KINDS[kind](start, **extra)
+        return cls(start, **values)
     except ValueError as exc:
         raise ValueError(f"fault {spec!r}: {str(exc).partition(': ')[2]}") from None
+
+
+class FaultySamples:
+    """A sample source (:class:`sim.sensors.stream.SampleSource`) with faults on its samples
+    applied to each block, by their measurement time (the samples delivered to the control rate,
+    and the raw ones a slow sensor's clock reads).
+
+    Sample ``k`` is ``z_k`` after every fault in turn (``fault.corrupt``), the sample each one
+    holds (the last measured before its window) read once, at construction, with the faults
+    before it applied. Stamps and arrivals are the source's. A source with raw samples
+    (``recorded``, read by a slow sensor's clock) gets them with the same faults.
+    """
+
+    def __init__(self, samples, faults) -> None:
+        self.samples, self.faults = samples, tuple(faults)
+        self.held: list[np.ndarray | None] = []
+        for k, fault in enumerate(self.faults):
+            self.held.append(self._before(fault.start_s, k))
+        if hasattr(samples, "recorded"):
+            self.recorded = FaultySamples(samples.recorded, self.faults)
+
+    def _before(self, start_s: float, upto: int) -> np.ndarray | None:
+        """The last sample measured before ``start_s``, the first ``upto`` faults applied."""
+        j = self.samples.index_at(start_s)
+        if j >= 0 and float(self.samples.block(j, j + 1)[0][0]) >= start_s:
+            j -= 1
+        if j < 0:
+            return None
+        t, z, _ = self.samples.block(j, j + 1)
+        for fault, held in zip(self.faults[:upto], self.held, strict=False):
+            z = fault.corrupt(t, z, held)
+        return np.array(z[0], dtype=float)
+
+    def __len__(self) -> int:
+        return len(self.samples)
+
+    def index_at(self, t: float) -> int:
+        return self.samples.index_at(t)
+
+    def block(self, a: int, b: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        t, z, arrival = self.samples.block(a, b)
+        for fault, held in zip(self.faults, self.held, strict=True):
+            z = fault.corrupt(t, z, held)
+        return t, z, arrival
 
 
 @dataclass(frozen=True)

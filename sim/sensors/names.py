@@ -13,9 +13,6 @@ from sim.sensors.ultrasound import UltrasoundSettings, ultrasound
 from sim.sensors.video import VideoSettings, video
 from sim.sensors.white import WhiteSettings, white
 
-#: Names :func:`sensor_from_name` accepts.
-SENSORS: tuple[str, ...] = ("sonomicrometry", "white", "ultrasound", "video", "ideal")
-
 #: The default playback of a sensor's samples to the control rate (causal: linear
 #: interpolation delivered one raw period late, every sample equally old).
 DEFAULT_PLAYBACK = "linear"
@@ -159,6 +156,8 @@ def _ideal(timing: dict, noise, dropouts, outliers: bool, delivery, dim: int,
 #: Each sensor name's builder: (timing, noise, dropouts, outliers, delivery, dim, physics).
 _BUILDERS = {"sonomicrometry": _sonomicrometer, "white": _white, "ultrasound": _ultrasound,
              "video": _video, "ideal": _ideal}
+#: Names :func:`sensor_from_name` accepts.
+SENSORS: tuple[str, ...] = tuple(_BUILDERS)
 
 
 def _playback(rate: float, name: str):

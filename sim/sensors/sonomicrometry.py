@@ -68,7 +68,7 @@ class SonomicrometrySettings:
         Reference base and POI crystal geometry (five crystals on a 50-mm circle, §III-A).
     sound_speed : float
         Speed of sound the instrument converts times of flight with, c [m/s]: 1590 m/s, the
-        value with which Sonometrics quotes its step (7.8 ns ≈ 12 µm).
+        value with which Sonometrics quotes its step (``7.8`` ns ≈ 12 µm).
     sound_speed_error : float
         Standard deviation of the relative error ε of the true speed against ``sound_speed``
         [-], one draw per run: 0.2 %. The balloon's glycerine solution is mixed to the set speed;
@@ -76,7 +76,7 @@ class SonomicrometrySettings:
         (Del Grosso & Mader 1972), so ±1.5 °C ≈ ±3 m/s ≈ 0.2 %. (Across soft tissues the speed
         spreads 1540–1600 m/s, Duck 1990; the path here is through the solution.)
     clock : float
-        Time-of-flight counter step Δ [s]: 7.8 ns (Sonometrics' digital sonomicrometer,
+        Time-of-flight counter step Δ [s]: ``7.8`` ns (Sonometrics' digital sonomicrometer,
         128-MHz counter; 12.4 µm at 1590 m/s).
     frequency : float
         Crystal frequency f [Hz]: λ = c/f. Tuna §III-A: the 250-µm absolute accuracy is
@@ -91,9 +91,9 @@ class SonomicrometrySettings:
         middle of 0.10–0.14 mm, which leaves the rest of that residual (the motion's own
         content above 26 Hz, the counter step) inside the bound. White noise of σ_r per range
         gives σ_r·G per position (3-D; G = ‖:func:`~sim.sensors.trilateration.dilution`‖ =
-        √trace((HᵀH)⁻¹) = 1.534 for the default crystals at rest, H the unit lines of sight),
+        √trace((HᵀH)⁻¹) = ``1.534`` for the default crystals at rest, H the unit lines of sight),
         of which the share √(1 − 2·26/f_s) lies above 26 Hz:
-        σ_r = 0.12 mm / (1.534 · √(1 − 52/257)) = 88 µm at 257 Hz (0.125 mm above 26 Hz at
+        σ_r = 0.12 mm / (``1.534`` · √(1 − 52/257)) = 88 µm at 257 Hz (0.125 mm above 26 Hz at
         404 Hz). 0 disables it.
     tilt_lever : float
         L [m]: the POI crystal's axis turns by d⊥/L rad with the displacement d⊥ across it;

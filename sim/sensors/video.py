@@ -5,8 +5,7 @@
 the sensor of the ``invivo-video`` regime (:mod:`sim.heart.invivo`). σ is measured from the in-vivo
 recording that regime was built from: its ``hold`` error one frame ahead (0.57 mm, 3-D) exceeds
 that of the regime's motion (0.43 mm, the mean over seeds 1–10) by what white noise adds at
-every lead, 2·3σ² in the square: σ = √((0.57² − 0.43²)/6) = 0.15 mm per axis (it then gives
-1.10 / 1.41 mm at 3 / 5 frames against the recording's 1.04 / 1.32).
+every lead, 2·3σ² in the square: σ = √((0.57² − 0.43²)/6) = 0.15 mm per axis.
 """
 
 from __future__ import annotations

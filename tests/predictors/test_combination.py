@@ -117,3 +117,15 @@ def test_the_default_members_are_the_open_loop_study_s() -> None:
     assert {"one-step", "st-rls", "ridge", "st-ridge"} <= set(names)
     assert "hold" not in names and "combination" not in names
     assert CombinationSettings().members == ()
+
+
+def test_members_that_are_not_fitted_take_no_part() -> None:
+    """Nothing to fit on: the fitted member (ridge) stays out of the weights and the updates;
+    the online ones run and share the weight."""
+    stream = tracked_points(300, DT)[:, :1]
+    c = make_predictor("combination", DT, members=("one-step", "ridge", "generalized"))
+    f = feed(c, stream, 4)
+    assert np.isfinite(f).all()
+    w = c.weights
+    assert np.allclose(w[1], 0.0) and np.allclose(w.sum(axis=0), 1.0)
+    assert c.members[1].n == 0 and c.member_time.n.tolist() == [300, 0, 300]

@@ -21,7 +21,7 @@ def test_urdf_found_after_non_editable_install(tmp_path):
     )
     (wheel,) = wheel_dir.glob("rhmpc-*.whl")
     names = set(zipfile.ZipFile(wheel).namelist())
-    assert "robots/urdf/phantom_premium_1_5a.urdf" in names
+    assert {"robots/urdf/phantom_premium_1_5a.urdf", "robots/urdf/phantom.toml"} <= names
     physionet = {f"sim/heart/physionet/{f}" for f in (
         "README.md", "mitdb-100/100.hea", "mitdb-100/100.atr", "1003/1003.hea", "1003/1003.atr")}
     assert physionet <= names

@@ -10,7 +10,7 @@ import pytest
 
 from robots import load_robot
 from robots.model import forward_dynamics
-from robots.registry import PHANTOM_GEAR_RATIO, PHANTOM_ROTOR_INERTIA, urdf_path
+from robots.registry import urdf_path
 
 G = 9.80665
 #: ∂(q2_src, q3_src)/∂(q2, q3), and the full map on (q1, q2, q3)
@@ -137,7 +137,7 @@ def test_rotor_inertia_acts_on_the_motor_angles(solidworks):
     bare = pin.buildModelFromUrdf(urdf_path("phantom_premium_1_5a.urdf"), mimic=True)
     bare.gravity.linear[:] = [0.0, 0.0, -G]
     S = solidworks.motor_map
-    rotor = PHANTOM_GEAR_RATIO**2 * PHANTOM_ROTOR_INERTIA
+    rotor = np.array([13.3, 11.2, 11.2]) ** 2 * 1.03e-6  # η² J_m (phantom.toml's drives)
     np.testing.assert_allclose(solidworks.rotor_inertia, rotor)
     for q in postures(solidworks, 20, 3):
         Mb = pin.crba(bare, bare.createData(), q)

@@ -23,17 +23,7 @@ from rhmpc.compiled import build, compiler
 from rhmpc.control.fallback import MPCStats
 
 from .generate import ExportError, _generate_into
-
-#: Status names in the order of ``enum rhmpc_status`` (rhmpc.h); 0 = solved.
-STATUS_NAMES = (
-    "solved", "nonfinite_input", "nonfinite_solution", "solver_error", "injected",
-    "solved_inaccurate", "primal_infeasible", "dual_infeasible", "max_iter", "time_limit",
-    "non_convex", "interrupted", "unsolved", "box_max_iter", "backoff", "encoder_fault",
-)
-SOURCE_NAMES = ("qp", "plan", "lq", "brake", "zero")
-COUNT_NAMES = ("updates", "missing", "outliers_rejected", "gate_unlocked", "retracted",
-               "forecast_clamped", "forecast_nonfinite", "rls_reset", "rls_bound",
-               "reference_guard", "repaired", "forecast_capped")
+from .layout import COUNTS, SOURCES, STATUS_NAMES, public_struct
 
 _in_use: dict[str, weakref.ref] = {}
 
@@ -45,27 +35,6 @@ class ToolchainError(OSError):
 def missing_toolchain() -> str | None:
     """None if a C compiler is on the PATH, else a one-line reason."""
     return None if compiler() else "the C controller needs a C compiler (cc or gcc; or $CC)"
-
-
-def _public(dims: dict) -> type[ctypes.Structure]:
-    """``rhmpc_public_t`` of rhmpc.h for these dimensions."""
-    ll, i, d = ctypes.c_longlong, ctypes.c_int, ctypes.c_double
-    nx, nu, span = dims["NX"], dims["NU"], dims["SPAN"]
-
-    class Public(ctypes.Structure):
-        _fields_ = (
-            ("ticks", ll), ("screened", ll), ("boxed", ll),
-            ("failures", ll * dims["N_STATUS"]), ("fallbacks", ll * dims["N_SOURCES"]),
-            ("counts", ll * dims["N_COUNTS"]),
-            ("status", i), ("source", i), ("iterations", i), ("level", i),
-            ("box_iterations", i), ("saturated", i), ("step_ns", ll), ("refresh_ns", ll),
-            ("x_hat", d * nx), ("u", d * nu), ("tau_command", d * nu), ("tau", d * nu),
-            ("first", ll), ("points", d * (3 * span)), ("gate_floor", d),
-            ("gate_locked", i), ("ready", i), ("age_sum", d), ("age_count", ll),
-            ("encoder_held", ll), ("encoder_reacquired", ll),
-        )
-
-    return Public
 
 
 _DIMS = ("N", "NX", "NU", "NY", "NV", "M", "NPAR", "NZ", "NEXTRA", "D", "SPAN", "N_STATUS",
@@ -86,6 +55,7 @@ def _load(path: str) -> tuple[str, ctypes.CDLL, tempfile.TemporaryDirectory | No
     for name, args, result in (("rhmpc_init", (vp,), None), ("rhmpc_place", (vp, vp), None),
                                ("rhmpc_refresh", (vp, ll, d, vp), ctypes.c_int),
                                ("rhmpc_step", (vp, ll, vp, vp), ctypes.c_int),
+                               ("rhmpc_forecast", (vp, ll, d, vp, ctypes.c_int), ctypes.c_int),
                                ("rhmpc_force_failures", (vp, ll), None),
                                ("rhmpc_sizeof", (), ll), ("rhmpc_public_sizeof", (), ll),
                                ("rhmpc_dims", (vp,), None)):
@@ -112,7 +82,7 @@ class CController:
         lib.rhmpc_dims(raw.ctypes.data)
         self.dims = dict(zip(_DIMS, (int(v) for v in raw), strict=True))
         self.N, self.nu, self.span = self.dims["N"], self.dims["NU"], self.dims["SPAN"]
-        public = _public(self.dims)
+        public = public_struct(self.dims)
         if ctypes.sizeof(public) != lib.rhmpc_public_sizeof():
             raise ToolchainError(f"library {path}: rhmpc_public_t does not match the binding")
         self._state = np.zeros(int(lib.rhmpc_sizeof()) // 8 + 2)  # 8-byte aligned
@@ -147,6 +117,13 @@ class CController:
         if status != 0:
             raise ValueError(f"rhmpc_refresh: the stamp {stamp!r} is not a finite time")
 
+    def forecast(self, tick: int, stamp: float, points: np.ndarray) -> bool:
+        """``rhmpc_forecast``: forecast points (K, 3) [m] made outside, the first at ``stamp``
+        [s]; whether they were taken."""
+        nodes = np.ascontiguousarray(points, dtype=float)
+        count = nodes.shape[0] if nodes.ndim == 2 and nodes.shape[1] == 3 else 0
+        return self._lib.rhmpc_forecast(self._addr, tick, stamp, nodes.ctypes.data, count) == 0
+
     def step(self, tick: int, q: np.ndarray) -> np.ndarray:
         """``rhmpc_step``: the torques τ [N·m] from the encoders' angles ``q`` [rad]."""
         self._q[:] = q
@@ -179,15 +156,15 @@ class CController:
     @property
     def predictor_counts(self) -> Counter:
         """The reference's events, with the Python predictor's names."""
-        return Counter({name: int(n) for name, n in zip(COUNT_NAMES, self._pub.counts,
+        return Counter({name: int(n) for name, n in zip(COUNTS, self._pub.counts,
                                                         strict=True) if n})
 
     @property
     def outliers(self) -> tuple[int, int]:
         """(samples the gate rejected, samples retracted after the fact) so far."""
         counts = self._pub.counts
-        return int(counts[COUNT_NAMES.index("outliers_rejected")]), int(
-            counts[COUNT_NAMES.index("retracted")])
+        return int(counts[COUNTS.index("outliers_rejected")]), int(
+            counts[COUNTS.index("retracted")])
 
     @property
     def gate_floor(self) -> float | None:
@@ -212,12 +189,12 @@ class CController:
         ticks = int(pub.ticks)
         return MPCStats(
             ticks=ticks, status=STATUS_NAMES[pub.status] if ticks else "none",
-            source=SOURCE_NAMES[pub.source] if ticks else "none",
+            source=SOURCES[pub.source] if ticks else "none",
             iterations=int(pub.iterations), screened=int(pub.screened), boxed=int(pub.boxed),
             level=int(pub.level), box_iterations=int(pub.box_iterations), solve_time=0.0,
             parts_ns=[int(pub.step_ns), 0, 0, 0],
             failures={STATUS_NAMES[i]: int(n) for i, n in enumerate(pub.failures) if n},
-            fallbacks={name: int(pub.fallbacks[SOURCE_NAMES.index(name)])
+            fallbacks={name: int(pub.fallbacks[SOURCES.index(name)])
                        for name in MPCStats().fallbacks},
         )
 

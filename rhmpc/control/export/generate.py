@@ -42,21 +42,18 @@ import numpy as np
 
 import boundary
 from rhmpc.control.mpc import MPCStats, RecedingHorizonMPC
-from rhmpc.control.reference import PredictedReference
+from rhmpc.control.reference import LATENCY_CAP, PredictedReference
 
 from .dynamics import cancel_function, generate, offset_function
+from .layout import template_subs
 
 #: Prefix of OSQP's generated globals (``rhmpc_osqp_solver``) and workspace files.
 OSQP_PREFIX = "rhmpc_osqp_"
-_WARM_STARTS = {"shift": 0, "shift_primal": 1, "keep": 2, "none": 3}
 #: The template files, copied with their placeholders filled.
 TEMPLATES = ("rhmpc.h", "rhmpc.c", "rhmpc_mpc.c", "rhmpc_reference.c", "rhmpc_data.h",
              "CMakeLists.txt", "example/main.c")
 #: The predictors the exported controller runs (the registry's names and their classes').
 PREDICTORS = {"one-step": "OneStepRLS", "generalized": "GeneralizedRLS"}
-#: The latest sample a refresh forecasts across [s]: K is capped at prediction_points +
-#: ⌈LATENCY_CAP / dt⌉ (``counts[forecast_capped]``).
-LATENCY_CAP = 0.25
 
 
 class ExportError(ValueError):
@@ -106,7 +103,7 @@ def _brakes(mpc: RecedingHorizonMPC) -> bool:
 
 def _check(mpc: RecedingHorizonMPC) -> None:
     """Raise ExportError for what the generated code does not reproduce."""
-    qp, s = mpc.qp, mpc.settings
+    qp = mpc.qp
     if _n_extra(mpc) < 0:
         raise ExportError(f"the QP has {qp.npar} parameters, fewer than x, ref and u_prev")
     if _n_extra(mpc) not in (0, qp.ny):
@@ -115,16 +112,6 @@ def _check(mpc: RecedingHorizonMPC) -> None:
     unknown = set(MPCStats().fallbacks) - {"plan", "lq", "brake", "zero"}
     if unknown:
         raise ExportError(f"fallback source(s) {sorted(unknown)} are not exported yet")
-    if s.solver != "osqp":
-        raise ExportError(f"the exported controller's level 3 is OSQP's generated code, not "
-                          f"{s.solver}; set mpc.solver = \"osqp\"")
-    if s.osqp.adaptive_rho:
-        raise ExportError("adaptive_rho needs OSQP's KKT refactorisation, which the vectors-mode "
-                          "embedded code does not have; set mpc.osqp.adaptive_rho = false")
-    if s.osqp.polish:
-        raise ExportError("OSQP's embedded code does not polish; set mpc.osqp.polish = false")
-    if s.warm_start not in _WARM_STARTS:
-        raise ExportError(f"warm start {s.warm_start!r} is not exported")
     m, nv = qp.A.shape
     arrays = {"P": qp.P, "F": qp.F, "f0": qp.f0, "A": qp.A, "G": qp.G,
               "minimiser": qp.minimiser, "gain": qp.gain, "gain0": qp.gain0}
@@ -302,13 +289,13 @@ def _reference_subs(reference) -> dict[str, object]:
 
 
 def _controller_arrays(controller) -> dict[str, np.ndarray]:
-    """The observer's matrices, the torque limits, q0 and y0."""
+    """The observer's matrices, the torque limits, q0, y0 and the output map C (y = C x + y0)."""
     arm, n = controller.mpc.arm, controller.nu
     predict = np.hstack([controller.observer.predict_matrix, np.zeros((2 * n, 1))])
     return {"correct": np.asarray(controller.observer.correct_matrix), "predict": predict,
             "tau_max": controller.torque_limit, "q0": np.asarray(arm.q0, dtype=float),
             "gate": np.asarray(controller.observer.gate, dtype=float),
-            "y0": np.asarray(arm.y0, dtype=float)}
+            "y0": np.asarray(arm.y0, dtype=float), "output": np.asarray(arm.C, dtype=float)}
 
 
 def _mpc_subs(mpc: RecedingHorizonMPC) -> dict[str, object]:
@@ -323,9 +310,7 @@ def _mpc_subs(mpc: RecedingHorizonMPC) -> dict[str, object]:
         "BRAKE": int(_brakes(mpc)), "BRAKE_TICKS": s.block_lengths[0],
         "PLAN_FALLBACK_TICKS": s.plan_fallback_ticks, "MAX_ITER": s.max_iter,
         "BACKOFF_MAX_TICKS": s.backoff_max_ticks,
-        "WARM_START": _WARM_STARTS[s.warm_start], "WARM_START_NAME": s.warm_start,
-        "SCREENING": int(s.screening), "PARAM_BOUNDS": int(qp.param_bounds),
-        "BOX_SCREENING": int(s.box_screening), "BOX_MAX_ITER": mpc.box.settings.max_iter,
+        "PARAM_BOUNDS": int(qp.param_bounds), "BOX_MAX_ITER": mpc.box.settings.max_iter,
         "BOX_PDAS_ITER": mpc.box.settings.pdas_iter,
         "BOX_PRIMAL_TOL": repr(float(mpc.box.settings.primal_tol)),
         "BOX_DUAL_TOL": repr(float(mpc.box.settings.dual_tol)),
@@ -335,14 +320,8 @@ def _mpc_subs(mpc: RecedingHorizonMPC) -> dict[str, object]:
 
 def _notes(controller) -> list[str]:
     """What the C does not reproduce of the Python controller."""
-    s = controller.mpc.settings
-    notes = [f"a refresh forecasts across at most {LATENCY_CAP:g} s of a sample's latency "
-             "(counts[forecast_capped] beyond)"]
-    if s.osqp.time_limit > 0:  # OSQP's embedded sources have no timer
-        notes.append(f"time_limit = {s.osqp.time_limit:g} s is not enforced in C (OSQP's "
-                     f"embedded code has no timer); a solve is bounded by max_iter = "
-                     f"{s.max_iter}")
-    return notes
+    return [f"a refresh forecasts across at most {LATENCY_CAP:g} s of a sample's latency "
+            "(counts[forecast_capped] beyond)"]
 
 
 def _data_source(controller, robot: str, key: str) -> str:
@@ -383,6 +362,7 @@ def _generate_into(controller, robot: str, out: Path) -> tuple[list[str], list[s
     for leftover in ("emosqp.c", "Makefile"):  # OSQP's example program (printf, main)
         (out / "osqp" / leftover).unlink(missing_ok=True)
     notes = _notes(controller)
+    robot = getattr(getattr(mpc.arm, "robot", None), "name", robot)  # a name, not a file's path
     subs = {"ROBOT": robot, "ROBOT_ID": "".join(c if c.isalnum() else "_" for c in robot),
             "VERSION": _version("rhmpc"), "OSQP_VERSION": _version("osqp"),
             "REACQUIRE_TICKS": controller.observer.settings.reacquire_ticks,
@@ -390,7 +370,8 @@ def _generate_into(controller, robot: str, out: Path) -> tuple[list[str], list[s
             "INPUT_DELAY": controller.input_delay, "CANCEL": int(controller.cancellation
                                                                  is not None),
             **_mpc_subs(mpc), **_reference_subs(controller.reference),
-            **sizes, "NOTES": "".join(f"\n * - {n}." for n in notes)}
+            **sizes, **template_subs(), "LATENCY_CAP": repr(LATENCY_CAP),
+            "NOTES": "".join(f"\n * - {n}." for n in notes)}
     key = hashlib.sha256(repr(sorted(subs.items())).encode())
     data = _data_source(controller, robot, "@HASH@")
     key.update(data.encode())

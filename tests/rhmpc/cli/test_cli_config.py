@@ -50,7 +50,7 @@ def test_show_states_unit_default_and_source(capsys, tmp_path: Path) -> None:
     assert comment("Ts = 0.0005").startswith("# Control period (0.5 ms: 2 kHz in Tuna et al.")
     assert "[m/s]" in comment("guard_speed = 0.3")
     assert "[s] — default 30.0, source: default" in comment("duration = 30.0")
-    assert "osqp.rho" not in text and "[mpc.osqp]" in lines and "rho = 3.0" in lines
+    assert "osqp_rho = 3.0" in lines and "[mpc.osqp]" not in lines
     assert "# joint_lower =   (unset)" in lines  # unset keys stay out, commented
     for section in SECTIONS:
         assert f"[{section}]" in lines

@@ -45,3 +45,14 @@ def test_the_faults_table_round_trips_and_is_left_out_when_empty(tmp_path):
         RunConfig.from_dict({"faults": {"events": ["freeze@2"]}})
     with pytest.raises(UsageError, match="after the run's 1 s"):
         RunConfig().replace(**{"loop.duration": 1.0, "faults.events": ["freeze@0.5:0.6"]})
+
+
+def test_a_fault_over_the_whole_run_has_its_during_record(capsys):
+    """A jump from the first tick to the end of the run: its record measures the whole run."""
+    assert main(["simulate", "--fault", "jump@0:5mm", "--duration", "1.0", "--settling", "0.3",
+                 "--json"]) == 0
+    (fault,) = json.loads(capsys.readouterr().out)["faults"]
+    assert fault["after"] is None and fault["during"]["max_error_mm"] > 4.0
+    assert main(["simulate", "--fault", "jump@0:5mm", "--duration", "1.0", "--settling", "0.3"
+                 ]) == 0
+    assert "max error —" not in capsys.readouterr().out

@@ -40,3 +40,22 @@ def test_console_script_runs_in_a_subprocess():
         [sys.executable, "-m", "rhmpc.cli", "robots"], capture_output=True, text=True, check=True
     ).stdout
     assert "phantom" in out
+
+
+def test_a_robot_file_wherever_a_robot_name_goes(tmp_path, capsys):
+    """`robots --robot FILE` shows the robot of a file; a bad one stops `simulate` and `export`
+    with one line naming the key, before anything runs."""
+    from robots.registry import urdf_path
+
+    text = open(urdf_path("phantom.toml")).read()
+    (tmp_path / "phantom_premium_1_5a.urdf").write_text(
+        open(urdf_path("phantom_premium_1_5a.urdf")).read())
+    (tmp_path / "mine.toml").write_text(text.replace('name = "phantom"', 'name = "mine"'))
+    assert main(["robots", "--robot", str(tmp_path / "mine.toml"), "--json"]) == 0
+    (row,) = json.loads(capsys.readouterr().out)
+    assert row["name"] == "mine" and row["q0_deg"] == [0.0, 0.0, 90.0]
+    (tmp_path / "bad.toml").write_text(text.replace('"elbow"]', '"elbow2"]'))
+    for argv in (["simulate", "--duration", "1"], ["export", str(tmp_path / "out")]):
+        assert main([*argv, "--robot", str(tmp_path / "bad.toml")]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "joints: no joint 'elbow2'" in err[0], err

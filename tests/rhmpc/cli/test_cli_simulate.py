@@ -29,7 +29,7 @@ def test_simulate_json_document(capsys, tmp_path):
     assert doc["scenario"] == "fixed-a2-top"
     assert set(doc["tick_us"]) >= {"p50", "p99", "max"}
     assert np.isfinite(doc["rms_error_mm"]) and doc["rms_error_mm"] > 0
-    # the predictor's running RMS miss per lead, the input of rhmpc.control.confidence
+    # the predictor's running RMS miss per lead, the input of benchmarks/horizon_weights.py
     errors = [e for e in doc["forecast_error_rms_mm"] if e is not None]
     assert len(errors) >= 4 and 0 < errors[0] < errors[-1] < 5
     assert doc["forecast_lead_s"] == pytest.approx(15 * 0.0005)

@@ -1,8 +1,10 @@
 """The safety envelope holds in closed loop on the nonlinear plant, and every fallback keeps it.
 
-The plant is :class:`sim.plant.ArmPlant` (Pinocchio forward dynamics) with the nonlinearity
-cancellation; the controller sees the true joint state. Each run drives the reference past a
-limit; the limit is checked on the plant's own trajectory (its q, q̇ and forward kinematics).
+The plant is :class:`sim.plant.ArmPlant` (the nonlinear arm) with the nonlinearity cancellation;
+the controller sees the true joint state. Each run goes with the controller as it is (OSQP at
+level 3) and with an exact level 3 (DAQP, :mod:`tests.rhmpc.control.exact`), and drives the
+reference past a limit; the limit is checked on the plant's own trajectory (its q, q̇ and
+forward kinematics).
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ from rhmpc.control.mpc import RecedingHorizonMPC
 from rhmpc.control.settings import MPCSettings
 from robots import load_robot
 from sim.plant import ArmPlant
+from tests.rhmpc.control.exact import exact_mpc, qp_vectors, unconstrained
 
 N = 50
 
@@ -28,8 +31,8 @@ def robot(phantom):
     return phantom
 
 
-def _closed_loop(robot, arm, settings, reference, ticks):
-    mpc = RecedingHorizonMPC(arm, settings)
+def _closed_loop(robot, arm, settings, reference, ticks, solver="osqp"):
+    mpc = exact_mpc(arm, settings) if solver == "daqp" else RecedingHorizonMPC(arm, settings)
     plant = ArmPlant(robot, arm.Ts)
     plant.reset()
     cancel = NonlinearityCancellation(robot)
@@ -44,11 +47,11 @@ def _closed_loop(robot, arm, settings, reference, ticks):
     return mpc, np.array(q), np.array(v), np.array(y)
 
 
-def _no_failures(mpc):
+def _no_failures(mpc, solver):
     """DAQP: never infeasible, never a fallback. OSQP (ADMM) does not converge within max_iter
-    once envelope rows are active (measured 450–3900 iterations needed): its ticks fall back to
-    the plan or braking, which keep the envelope but stop the tracking; never infeasible."""
-    if mpc.settings.solver == "daqp":
+    once envelope rows are active: its ticks fall back to the plan or braking, which keep the
+    envelope but stop the tracking; never infeasible."""
+    if solver == "daqp":
         assert mpc.stats.failures == {}, mpc.stats.failures
         assert mpc.stats.fallback_total == 0
     assert "primal_infeasible" not in mpc.stats.failures
@@ -62,15 +65,16 @@ SOLVERS = pytest.mark.parametrize("solver", ["daqp", "osqp"])
 def test_joint_position_limits_hold_with_the_reference_past_them(robot, arm, solver):
     lo, hi = arm.q0 - np.radians(2.0), arm.q0 + np.radians(2.0)
     target = np.tile(arm.y0 + np.array([0.0, 20e-3, 5e-3]), (N, 1))  # needs ≈ 6° of motion
-    settings = MPCSettings(solver=solver, joint_lower=tuple(lo), joint_upper=tuple(hi))
-    mpc, q, _, y = _closed_loop(robot, arm, settings, lambda k: target, 1500)
+    settings = MPCSettings(joint_lower=tuple(lo), joint_upper=tuple(hi))
+    mpc, q, _, y = _closed_loop(robot, arm, settings, lambda k: target, 1500,
+                                solver)
     excess = np.max(np.maximum(q - hi, lo - q), axis=0) / (hi - lo)
     # Measured: −1.2e-4 (the yaw joint sits on its limit); the target is 1 % of the range.
     assert np.all(excess <= 0.01), excess
     assert np.linalg.norm(y[-1] - target[0]) > 5e-3  # it could not follow the reference
     if solver == "daqp":
         assert excess.max() > -0.01  # …and went up to the limit
-    _no_failures(mpc)
+    _no_failures(mpc, solver)
 
 
 @SOLVERS
@@ -82,14 +86,14 @@ def test_joint_velocity_limits_hold_through_reference_steps(robot, arm, solver):
     def reference(k):
         return np.tile(arm.y0 + (step if (k // 600) % 2 else 0.0), (N, 1))
 
-    settings = MPCSettings(solver=solver, velocity_limit=tuple(vmax))
-    mpc, _, v, _ = _closed_loop(robot, arm, settings, reference, 1800)
+    settings = MPCSettings(velocity_limit=tuple(vmax))
+    mpc, _, v, _ = _closed_loop(robot, arm, settings, reference, 1800, solver)
     speed = np.abs(v).max(axis=0)
     # Measured: at most 1.2e-4 of the range 2·q̇_max above the limit; target 1 %.
     assert np.all((speed - vmax) / (2 * vmax) <= 0.01), speed
     if solver == "daqp":
         assert np.any(speed >= 0.99 * vmax)  # the limit was reached
-    _no_failures(mpc)
+    _no_failures(mpc, solver)
 
 
 def _swinging_reference(arm, ticks, amplitude=6e-3):
@@ -102,16 +106,17 @@ def _swinging_reference(arm, ticks, amplitude=6e-3):
 def test_cartesian_half_space_holds(robot, arm, solver):
     ticks = 2500
     ref = _swinging_reference(arm, ticks)
-    settings = MPCSettings(solver=solver, cartesian="halfspace", cartesian_point=(1e-3, 0.0, 0.0),
+    settings = MPCSettings(cartesian="halfspace", cartesian_point=(1e-3, 0.0, 0.0),
                            cartesian_normal=(1.0, 0.0, 0.0), cartesian_depth=0.5e-3)
-    mpc, _, _, y = _closed_loop(robot, arm, settings, lambda k: ref[k + 1:k + 1 + N], ticks)
+    mpc, _, _, y = _closed_loop(robot, arm, settings, lambda k: ref[k + 1:k + 1 + N], ticks,
+                                solver)
     past = y[:, 0] - (arm.y0[0] + 1e-3)
     # Measured: 0.473 mm at most (the linear output model + offset keeps it inside); allowed
     # 0.5 mm + 1 % of the 12 mm reference swing.
     assert past.max() <= 0.5e-3 + 0.12e-3
     assert past.max() > 0.4e-3  # the tool did go up to the limit (OSQP: 0.476 mm, braking)
     assert (ref[:, 0] - arm.y0[0] - 1e-3).max() > 4e-3  # while the reference went far past it
-    _no_failures(mpc)
+    _no_failures(mpc, solver)
 
 
 @SOLVERS
@@ -119,13 +124,14 @@ def test_cartesian_half_space_holds(robot, arm, solver):
 def test_cartesian_box_holds(robot, arm, solver):
     ticks = 2500
     ref = _swinging_reference(arm, ticks)
-    settings = MPCSettings(solver=solver, cartesian="box",
+    settings = MPCSettings(cartesian="box",
                            cartesian_half_width=(3e-3, 3e-3, 3e-3))
-    mpc, _, _, y = _closed_loop(robot, arm, settings, lambda k: ref[k + 1:k + 1 + N], ticks)
+    mpc, _, _, y = _closed_loop(robot, arm, settings, lambda k: ref[k + 1:k + 1 + N], ticks,
+                                solver)
     # Measured: 2.973 mm at most; allowed 3 mm + 1 % of the 6 mm box.
     assert np.abs(y - arm.y0).max() <= 3e-3 + 0.06e-3
     assert np.abs(y - arm.y0).max() > 2.9e-3
-    _no_failures(mpc)
+    _no_failures(mpc, solver)
 
 
 def test_lq_fallback_that_would_break_a_limit_is_replaced_by_braking(arm):
@@ -150,7 +156,7 @@ def test_lq_fallback_that_would_break_a_limit_is_replaced_by_braking(arm):
     ref_mid = np.tile(arm.y0 + np.array([0.0, 0.5e-3, 0.0]), (N, 1))
     tau = mpc.step(x_mid, ref_mid)
     assert mpc.stats.source == "lq"
-    lq = np.clip(mpc.unconstrained(x_mid, ref_mid, np.zeros(3)), -mpc.u_max, mpc.u_max)
+    lq = np.clip(unconstrained(mpc, x_mid, ref_mid, np.zeros(3)), -mpc.u_max, mpc.u_max)
     np.testing.assert_allclose(tau, lq, rtol=0, atol=1e-9)  # rounding: measured 5e-14 N·m
 
 
@@ -167,7 +173,7 @@ def test_envelope_rows_come_from_the_urdf_and_are_certified_between_block_ends(a
     mpc = RecedingHorizonMPC(arm, s)
     qp = mpc.qp
     x = np.zeros(6)
-    _, _, up = mpc.qp_vectors(x, np.tile(arm.y0, (N, 1)))
+    _, _, up = qp_vectors(mpc, x, np.tile(arm.y0, (N, 1)))
     nv, me = qp.nv, env.m
     rows_b0 = slice(nv, nv + me)
     # rows are normalised; the slack coefficient of an upper row is −(its scale factor)
@@ -201,21 +207,21 @@ def test_a_coupled_joint_limit_holds_with_the_reference_past_it(robot, arm, solv
     J = arm.C[:, :3]
     direction = np.linalg.pinv(J).T @ c  # the tip's direction that turns c·q the most
     target = np.tile(arm.y0 + 10e-3 * direction / np.linalg.norm(direction), (N, 1))
-    settings = MPCSettings(solver=solver)
+    settings = MPCSettings()
     mpc, q, _, y = _closed_loop(robot, dataclasses.replace(arm, robot=tight), settings,
-                                lambda k: target, 1500)
+                                lambda k: target, 1500, solver)
     excess = np.max(np.maximum(q @ c - (mid + band), (mid - band) - q @ c)) / (2 * band)
     assert excess <= 0.01, excess  # the target is 1 % of the band
     assert np.linalg.norm(y[-1] - target[0]) > 5e-3  # it could not follow the reference
     if solver == "daqp":
         assert excess > -0.01  # …and went up to the limit
-    _no_failures(mpc)
+    _no_failures(mpc, solver)
 
 
 @pytest.mark.parametrize("bad", [
     {"cartesian": "sphere"}, {"cartesian_normal": (0.0, 0.0, 0.0)},
     {"cartesian_half_width": (1e-3, 0.0, 1e-3)}, {"velocity_limit": (1.0, -1.0, 1.0)},
-    {"envelope_penalty": 0.0}, {"solver": "qpoases"},
+    {"envelope_penalty": 0.0}, {"osqp_rho": 0.0},
 ])
 def test_bad_envelope_settings_raise(bad):
     with pytest.raises(ValueError):
@@ -233,11 +239,12 @@ def test_offset_free_tracking_on_the_nonlinear_plant(robot, arm, offset_correcti
     ticks = 3000
     traj = heart_like_reference(ticks + N + 1, arm.Ts, np.random.default_rng(3), arm.y0,
                                 heart_pp=12e-3)
-    settings = MPCSettings(solver="daqp", offset_correction=offset_correction)
-    mpc, _, _, y = _closed_loop(robot, arm, settings, lambda k: traj[k + 1:k + 1 + N], ticks)
+    solver, settings = "daqp", MPCSettings(offset_correction=offset_correction)
+    mpc, _, _, y = _closed_loop(robot, arm, settings, lambda k: traj[k + 1:k + 1 + N], ticks,
+                                solver)
     err = np.linalg.norm(y - traj[1:ticks + 1], axis=1)[500:]
     rms = float(np.sqrt(np.mean(err**2)))
-    _no_failures(mpc)
+    _no_failures(mpc, solver)
     if offset_correction:
         assert rms <= 8e-6  # measured 4.3 µm; margin ≈ 2×
     else:

@@ -9,13 +9,14 @@ import pytest
 import scipy.linalg
 
 from rhmpc.control.mpc import RecedingHorizonMPC
+from rhmpc.control.offset import OutputOffset
 from rhmpc.control.settings import MPCSettings
 from rhmpc.studies.bench import heart_like_reference
 from robots import linearize, load_robot
+from tests.rhmpc.control.exact import EveryTick, exact_mpc, qp_vectors, unconstrained
 
 #: OSQP run to (near) machine accuracy, for comparisons at 1e-6.
-TIGHT = {"max_iter": 100_000, "solver": "osqp",
-         "osqp": {"eps_abs": 1e-10, "eps_rel": 0.0, "check_termination": 1}}
+TIGHT = {"max_iter": 100_000, "osqp_eps_abs": 1e-10}
 
 
 @pytest.fixture(scope="module")
@@ -126,7 +127,7 @@ def test_unblocked_first_input_equals_backward_riccati(arm, fk, point_weights):
         x, ref, u_prev = _small_problem(arm, rng)
         u_lq = riccati_first_input(arm, Q, R, Rd, x, ref, u_prev, y0=_y0_seen(arm, fk, x))
         assert np.all(np.abs(u_lq) < 0.5 * mpc.u_max)  # the bounds are inactive
-        assert _rel(mpc.unconstrained(x, ref, u_prev), u_lq) < 1e-6  # the QP data
+        assert _rel(unconstrained(mpc, x, ref, u_prev), u_lq) < 1e-6  # the QP data
         mpc.reset(u_prev)
         u = mpc.step(x, ref)
         assert mpc.stats.status == "solved"
@@ -141,7 +142,7 @@ def test_blocked_first_input_equals_blocked_least_squares(arm, fk):
     x, ref, u_prev = _small_problem(arm, rng)
     y0 = _y0_seen(arm, fk, x)
     u_ls = blocked_lstsq_first_input(arm, settings.blocks, Q, R, Rd, x, ref, u_prev, y0=y0)
-    assert _rel(mpc.unconstrained(x, ref, u_prev), u_ls) < 1e-6
+    assert _rel(unconstrained(mpc, x, ref, u_prev), u_ls) < 1e-6
     mpc.reset(u_prev)
     assert _rel(mpc.step(x, ref), u_ls) < 1e-6
     # …and blocking really changes the problem: the unblocked solution differs.
@@ -158,15 +159,15 @@ def test_output_offset_is_the_forward_kinematics_residual(arm, fk, displacement_
     x[:3] = np.radians(displacement_deg) * np.array([1.0, -0.7, 0.5])
     d = fk(arm.q0 + x[:3]) - (arm.C @ x + arm.y0)
     mpc = RecedingHorizonMPC(arm)
-    np.testing.assert_allclose(mpc.offset(x), d, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(OutputOffset(arm)(x), d, rtol=0, atol=1e-15)
     assert np.linalg.norm(d) > 1e-4  # 0.1 mm or more: the linearisation's floor
     ref = np.tile(fk(arm.q0 + x[:3]), (mpc.N, 1))
-    u = mpc.unconstrained(x, ref, np.zeros(3))
+    u = unconstrained(mpc, x, ref, np.zeros(3))
     # |u| is rounding only: F p cancels terms of ~1e3 (absolute positions [m] times the gain);
     # measured 1.1e-11 of u_max, asserted at 1e-9.
     assert np.max(np.abs(u) / mpc.u_max) <= 1e-9
     plain = RecedingHorizonMPC(arm, MPCSettings(offset_correction=False))
-    u_lin = plain.unconstrained(x, ref, np.zeros(3))
+    u_lin = unconstrained(plain, x, ref, np.zeros(3))
     assert np.max(np.abs(u_lin) / mpc.u_max) > 1e-3
 
 
@@ -187,7 +188,7 @@ def test_dare_terminal_weight_gives_the_lqr_action(arm):
             x_s = np.concatenate([np.linalg.solve(arm.C[:, :3], offset), np.zeros(3)])
             u_lqr = -K @ (x - x_s)
             assert np.all(np.abs(u_lqr) < mpc.u_max)
-            assert _rel(mpc.unconstrained(x, ref, np.zeros(3)), u_lqr) < 1e-6
+            assert _rel(unconstrained(mpc, x, ref, np.zeros(3)), u_lqr) < 1e-6
             mpc.reset()
             assert _rel(mpc.step(x, ref), u_lqr) < 1e-6
     # Without the terminal weight a short horizon gives a different action; with it, the same.
@@ -196,7 +197,7 @@ def test_dare_terminal_weight_gives_the_lqr_action(arm):
         short = RecedingHorizonMPC(arm, MPCSettings(
             blocks=None, effort_weight=1e-2, rate_weight=0.0, horizon=3, terminal=terminal,
             offset_correction=False))
-        u3 = short.unconstrained(x, np.tile(arm.y0, (3, 1)), np.zeros(3))
+        u3 = unconstrained(short, x, np.tile(arm.y0, (3, 1)), np.zeros(3))
         assert (_rel(u3, -K @ x) > 1e-2) == differs
 
 
@@ -229,11 +230,12 @@ def _saturating_problem(arm, mpc, jump):
 
 @pytest.mark.parametrize("settings_kind", ["default", "tight", "daqp"])
 def test_active_torque_bounds_agree_with_daqp(arm, settings_kind):
-    settings = {"default": MPCSettings(), "tight": MPCSettings(**TIGHT),
-                "daqp": MPCSettings(solver="daqp")}[settings_kind]
-    mpc = RecedingHorizonMPC(arm, settings)
+    if settings_kind == "daqp":
+        mpc = exact_mpc(arm)
+    else:
+        mpc = RecedingHorizonMPC(arm, MPCSettings(**(TIGHT if settings_kind == "tight" else {})))
     x, ref = _saturating_problem(arm, mpc, np.array([3e-3, -2e-3, 2e-3]))
-    q, lo, up = mpc.qp_vectors(x, ref)
+    q, lo, up = qp_vectors(mpc, x, ref)
     tau = mpc.step(x, ref)
     assert mpc.stats.status == "solved"
     z, y = mpc.last_solution()
@@ -264,7 +266,7 @@ def test_active_joint_bounds_agree_with_daqp(arm):
     # A target 10 mm away needs ≈3° of joint motion: the joint bounds must become active.
     x, ref = _saturating_problem(arm, mpc, np.array([0.0, 10e-3, 0.0]))
     x[3:] = 0.05  # moving already
-    q, lo, up = mpc.qp_vectors(x, ref)
+    q, lo, up = qp_vectors(mpc, x, ref)
     tau = mpc.step(x, ref)
     assert mpc.stats.status == "solved"
     z, y = mpc.last_solution()
@@ -335,7 +337,7 @@ def test_screening_is_exact_and_hands_binding_ticks_to_osqp(arm, joint_bounds):
         extra = {"joint_lower": tuple(arm.q0 - np.radians(5.0)),
                  "joint_upper": tuple(arm.q0 + np.radians(5.0)), "max_iter": 100}
     mpc = RecedingHorizonMPC(arm, MPCSettings(**extra))
-    every = RecedingHorizonMPC(arm, MPCSettings(screening=False, **extra))
+    every = EveryTick(arm, MPCSettings(**extra))
     ticks = 1500
     traj = heart_like_reference(ticks + mpc.N + 1, arm.Ts, np.random.default_rng(2), arm.y0,
                                 jump=4e-3, jump_every=500)
@@ -344,7 +346,7 @@ def test_screening_is_exact_and_hands_binding_ticks_to_osqp(arm, joint_bounds):
     for k in range(ticks):
         ref = traj[k + 1:k + 1 + mpc.N]
         every.u_prev = mpc.u_prev
-        q, lo, up = mpc.qp_vectors(x, ref)
+        q, lo, up = qp_vectors(mpc, x, ref)
         tau = mpc.step(x, ref)
         tau_every = every.step(x, ref)
         level = mpc.stats.level
@@ -381,9 +383,9 @@ def test_level_2_checks_every_envelope_row_it_skips(arm):
     from scipy.optimize import lsq_linear
 
     q0 = arm.q0
-    mpc = RecedingHorizonMPC(arm, MPCSettings(
+    mpc = exact_mpc(arm, MPCSettings(
         joint_lower=tuple(q0 - np.array([0.015, 0.01, 0.03])),
-        joint_upper=tuple(q0 + np.array([0.015, 0.01, 0.03])), solver="daqp"))
+        joint_upper=tuple(q0 + np.array([0.015, 0.01, 0.03]))))
     qp, nz = mpc.qp, mpc.qp.nz
     Lc = np.linalg.cholesky(qp.P[:nz, :nz])
     ticks = 3000
@@ -393,7 +395,7 @@ def test_level_2_checks_every_envelope_row_it_skips(arm):
     seen = {"level2": 0, "envelope_breaks": 0}
     for k in range(ticks):
         ref = traj[k + 1:k + 1 + mpc.N]
-        q, lo, up = mpc.qp_vectors(x, ref)
+        q, lo, up = qp_vectors(mpc, x, ref)
         tau = mpc.step(x, ref)
         level = mpc.stats.level
         if level != 1:
@@ -419,13 +421,15 @@ def test_level_2_checks_every_envelope_row_it_skips(arm):
     assert seen["level2"] > 0 and seen["envelope_breaks"] > 0, seen
 
 
-def test_the_offset_asked_of_the_controller_leaves_its_tick_alone():
-    """``mpc.offset(x)`` at a state that is not finite is answered (NaN) without touching the
-    tick's parameters: the next tick with finite inputs solves, as it would have anyway."""
+def test_a_state_that_is_not_finite_leaves_the_next_tick_alone():
+    """A tick at a state that is not finite takes the fallback without touching what the next
+    tick computes: with finite inputs it solves as it would have anyway."""
     arm = linearize(load_robot("phantom"))
     mpc, twin = RecedingHorizonMPC(arm), RecedingHorizonMPC(arm)
     x = np.zeros(arm.nx)
     ref = np.tile(arm.y0, (mpc.N, 1))
-    assert not np.isfinite(mpc.offset(np.full(arm.nx, np.nan))).any()
+    mpc.step(np.full(arm.nx, np.nan), ref)
+    assert mpc.stats.status == "nonfinite_input"
+    mpc.reset()
     np.testing.assert_array_equal(mpc.step(x, ref), twin.step(x, ref))
     assert mpc.stats.fallback_total == 0

@@ -10,8 +10,19 @@ import osqp
 import pytest
 
 from rhmpc.control.mpc import RecedingHorizonMPC
-from rhmpc.control.settings import MPCSettings, from_dict, to_dict
+from rhmpc.control.settings import MPCSettings
+from rhmpc.experiment.tables import from_dict, to_dict
 from robots import linearize, load_robot
+from tests.rhmpc.control.exact import EveryTick, exact_mpc, qp_vectors, unconstrained
+
+TIME_LIMIT = int(osqp.SolverStatus.OSQP_TIME_LIMIT_REACHED)
+
+
+class WithoutLevel2(RecedingHorizonMPC):
+    """The controller with level 2 skipped: a tick with a bound active goes to OSQP."""
+
+    def _box_solved(self) -> bool:
+        return False
 
 
 @pytest.fixture
@@ -64,7 +75,7 @@ def test_injected_failures_take_the_shifted_plan_then_lq(arm, mpc):
             np.testing.assert_allclose(tau, np.clip(planned[k], -mpc.u_max, mpc.u_max))
         else:
             assert mpc.stats.source == "lq"
-            lq = np.clip(mpc.unconstrained(x, ref, u_prev), -mpc.u_max, mpc.u_max)
+            lq = np.clip(unconstrained(mpc, x, ref, u_prev), -mpc.u_max, mpc.u_max)
             np.testing.assert_allclose(tau, lq)
         x = arm.A @ x + arm.B @ tau
     assert mpc.stats.failures == {"injected": n_plan + 2}
@@ -82,14 +93,12 @@ def test_failure_without_a_plan_uses_the_clipped_lq_input(arm, mpc):
     tau = mpc.step(x, ref)
     assert mpc.stats.source == "lq"
     np.testing.assert_allclose(
-        tau, np.clip(mpc.unconstrained(x, ref, np.zeros(3)), -mpc.u_max, mpc.u_max)
+        tau, np.clip(unconstrained(mpc, x, ref, np.zeros(3)), -mpc.u_max, mpc.u_max)
     )
 
 
 def test_real_solver_failure_max_iter_takes_the_fallback(arm):
-    mpc = RecedingHorizonMPC(arm, MPCSettings(solver="osqp", max_iter=1,
-                                              osqp={"check_termination": 1},
-                                              box_screening=False))  # level 3 on bound ticks
+    mpc = WithoutLevel2(arm, MPCSettings(max_iter=1))
     x = np.zeros(6)
     for k in range(5):
         tau = mpc.step(x, _moving_ref(arm, mpc.N, k, amp=5e-3))
@@ -100,23 +109,22 @@ def test_real_solver_failure_max_iter_takes_the_fallback(arm):
     assert mpc.stats.fallback_total >= 1
 
 
-def test_time_limit_failure_takes_the_fallback(arm):
-    mpc = RecedingHorizonMPC(arm, MPCSettings(solver="osqp", osqp={"time_limit": 1e-7},  # 0.1 µs
-                                              box_screening=False,  # level 3 on bound ticks
-                                              backoff_max_ticks=0))  # a solve on every tick
-    ref = np.tile(arm.y0 + np.array([3e-3, 0.0, 0.0]), (mpc.N, 1))
+def _failing(arm, **settings):
+    """An MPC whose level 3 always fails (OSQP's status replaced by "time_limit") on a
+    torque-saturating target that level 2 does not settle."""
+    mpc = WithoutLevel2(arm, MPCSettings(**settings))
+    solve = mpc._solver.solve
+    mpc._solver.solve = lambda: (TIME_LIMIT, *solve()[1:])
+    return mpc, np.tile(arm.y0 + np.array([3e-3, 0.0, 0.0]), (mpc.N, 1))
+
+
+def test_a_failing_solve_takes_the_fallback(arm):
+    mpc, ref = _failing(arm, backoff_max_ticks=0)  # a solve on every tick
     for _ in range(3):
         tau = mpc.step(np.zeros(6), ref)
         assert mpc.stats.status == "time_limit" and mpc.stats.source == "lq"
         assert np.all(np.abs(tau) <= mpc.u_max)
     assert mpc.stats.failures == {"time_limit": 3}
-
-
-def _failing(arm, **settings):
-    """An MPC whose level 3 always fails (a 0.1 µs time limit) on a torque-saturating target."""
-    mpc = RecedingHorizonMPC(arm, MPCSettings(solver="osqp", osqp={"time_limit": 1e-7},
-                                              box_screening=False, **settings))
-    return mpc, np.tile(arm.y0 + np.array([3e-3, 0.0, 0.0]), (mpc.N, 1))
 
 
 def test_consecutive_failures_back_off_exponentially_up_to_the_cap(arm):
@@ -146,15 +154,13 @@ def test_a_solved_tick_ends_the_back_off(arm):
     assert mpc.stats.status == "backoff"  # the streak restarted at 1 after this failure
 
 
-def test_a_capped_box_qp_takes_the_fallback_with_osqp_and_goes_to_daqp(arm):
-    for solver, status, level in (("osqp", "box_max_iter", 2), ("daqp", None, 3)):
-        mpc = RecedingHorizonMPC(arm, MPCSettings(solver=solver, box_max_iter=2))
-        ref = np.tile(arm.y0 + np.array([0.3, -0.3, 0.3]), (mpc.N, 1))  # far out of reach
-        tau = mpc.step(np.zeros(6), ref)
-        assert mpc.box.capped and mpc.stats.level == level
-        assert np.all(np.isfinite(tau)) and np.all(np.abs(tau) <= mpc.u_max)
-        if status is not None:
-            assert mpc.stats.status == status and mpc.stats.iterations == 0
+def test_a_capped_box_qp_takes_the_fallback(arm):
+    mpc = RecedingHorizonMPC(arm, MPCSettings(box_max_iter=2))
+    ref = np.tile(arm.y0 + np.array([0.3, -0.3, 0.3]), (mpc.N, 1))  # far out of reach
+    tau = mpc.step(np.zeros(6), ref)
+    assert mpc.box.capped and mpc.stats.level == 2
+    assert np.all(np.isfinite(tau)) and np.all(np.abs(tau) <= mpc.u_max)
+    assert mpc.stats.status == "box_max_iter" and mpc.stats.iterations == 0
 
 
 @pytest.mark.parametrize("bad", ["x_nan", "x_inf", "ref_nan", "ref_inf", "ref_neg_inf"])
@@ -186,7 +192,7 @@ def _planned_then(mpc, arm, monkeypatch, fake):
     x = _run(mpc, arm, 30)
     plan, _ = mpc.last_solution()
     planned = np.clip(mpc.qp.inputs(plan)[1], -mpc.u_max, mpc.u_max)
-    monkeypatch.setattr(mpc, "_solve", fake)
+    monkeypatch.setattr(mpc._solver, "solve", fake)
     return mpc.step(x, _moving_ref(arm, mpc.N, 30)), planned
 
 
@@ -202,14 +208,16 @@ def _raise():
 ])
 @pytest.mark.slow
 def test_injected_solver_faults_apply_the_shifted_plan(arm, monkeypatch, solver, fault, reason):
-    # OSQP on every tick with 100 iterations (not the real-time bound): only the faults fail
-    mpc = RecedingHorizonMPC(arm, MPCSettings(solver=solver, screening=False, max_iter=100))
-    nv, m = mpc.qp.nv, mpc.qp.A.shape[0]
+    # level 3 on every tick, OSQP with 100 iterations (not the real-time bound) or DAQP: only
+    # the faults fail
+    mpc = EveryTick(arm, MPCSettings(max_iter=100))
+    if solver == "daqp":
+        mpc._solver = exact_mpc(arm)._solver
+    nv = mpc.qp.nv
     fakes = {
         "exception": _raise,
-        "nan_solution": lambda: (1, 5, np.full(nv, np.nan), np.zeros(m)),
-        "infeasible": lambda: (int(osqp.SolverStatus.OSQP_PRIMAL_INFEASIBLE), 5, np.zeros(nv),
-                               np.zeros(m)),
+        "nan_solution": lambda: (1, 5, np.full(nv, np.nan)),
+        "infeasible": lambda: (int(osqp.SolverStatus.OSQP_PRIMAL_INFEASIBLE), 5, np.zeros(nv)),
     }
     tau, planned = _planned_then(mpc, arm, monkeypatch, fakes[fault])
     assert mpc.stats.status == reason and mpc.stats.source == "plan"
@@ -251,40 +259,32 @@ def test_unclipped_solutions_are_feasible_and_fallbacks_are_the_documented_torqu
     assert mpc.stats.ticks == 300 and {"qp", "plan"} <= sources
 
 
-def _warm_start_run(arm, mode):
-    """120 OSQP ticks on the linear model, 5 mm sine: (mean iterations, u0 errors vs DAQP, mpc)."""
+@pytest.mark.slow
+def test_osqp_on_every_tick_agrees_with_the_exact_solution_and_its_warm_start_pays(arm):
+    """120 ticks of level 3 on the linear model, 5 mm sine, 100 iterations: u0 within 1 % of
+    τ_max of DAQP's, in fewer iterations than from a cold start (v = 0 every tick)."""
     import daqp
 
-    mpc = RecedingHorizonMPC(arm, MPCSettings(solver="osqp", warm_start=mode, screening=False,
-                                              offset_correction=False, max_iter=100))
-    qp = mpc.qp
-    x = np.zeros(6)
-    iters, errs = [], []
-    for k in range(120):
-        ref = _moving_ref(arm, mpc.N, k, amp=5e-3)
-        q, lo, up = mpc.qp_vectors(x, ref)
-        tau = mpc.step(x, ref)
-        z_ex, *_ = daqp.solve(qp.P, q, qp.A[qp.nv:], np.minimum(up, 1e30), np.maximum(lo, -1e30))
-        if mpc.stats.source == "qp":
-            errs.append(np.max(np.abs(tau - z_ex[:3] * mpc.u_max) / arm.torque_limit))
-        iters.append(mpc.stats.iterations)
-        x = arm.A @ x + arm.B @ tau
-    return float(np.mean(iters)), errs, mpc
-
-
-@pytest.mark.parametrize("mode", ["shift", "shift_primal", "keep"])
-@pytest.mark.slow
-def test_osqp_warm_start_modes_agree_with_the_exact_solution(arm, mode):
-    """Every warm-start mode gives u0 within 1 % of τ_max of DAQP; each saves iterations over
-    the cold start "none" (measured means: shift 16.8, shift_primal 16.9, keep 22.5, none 27.8)."""
-    for m in (mode, "none"):
-        mean, errs, mpc = _warm_start_run(arm, m)
-        # Measured: one "solved_inaccurate" tick (the first, a cold 5 mm start) in every mode.
-        assert mpc.stats.fallback_total <= 2, mpc.stats.failures
+    runs = {}
+    for cold in (False, True):
+        mpc = EveryTick(arm, MPCSettings(offset_correction=False, max_iter=100))
+        qp, x, iters, errs = mpc.qp, np.zeros(6), [], []
+        for k in range(120):
+            ref = _moving_ref(arm, mpc.N, k, amp=5e-3)
+            q, lo, up = qp_vectors(mpc, x, ref)
+            if cold:
+                mpc._ws_x, mpc._ws_y, mpc._ws_pending = np.zeros(qp.nv), mpc._y_zero, False
+            tau = mpc.step(x, ref)
+            z_ex, *_ = daqp.solve(qp.P, q, qp.A[qp.nv:], np.minimum(up, 1e30),
+                                  np.maximum(lo, -1e30))
+            if mpc.stats.source == "qp":
+                errs.append(np.max(np.abs(tau - z_ex[:3] * mpc.u_max) / arm.torque_limit))
+            iters.append(mpc.stats.iterations)
+            x = arm.A @ x + arm.B @ tau
+        assert mpc.stats.fallback_total <= 2, mpc.stats.failures  # a cold 5 mm first tick
         assert len(errs) >= 118 and max(errs) <= 0.01
-        if m == mode:
-            warm = mean
-    assert warm < mean - 3.0
+        runs[cold] = float(np.mean(iters))
+    assert runs[False] < runs[True] - 3.0
 
 
 def test_returned_torque_is_not_aliased(arm, mpc):
@@ -309,15 +309,14 @@ def test_returned_torque_is_not_aliased(arm, mpc):
         {"torque_margin": 1.0},
         {"torque_margin": -0.1},
         {"terminal": "lqr"},
-        {"warm_start": "hot"},
-        {"osqp": {"eps_abs": 0.0, "eps_rel": 0.0}},
+        {"osqp_eps_abs": 0.0},
         {"max_iter": 0},
-        {"osqp": {"rho": 0.0}},
+        {"osqp_rho": 0.0},
         {"joint_lower": (0.0, 0.0, 0.0)},
         {"joint_lower": (1.0,), "joint_upper": (0.0,)},
         {"plan_fallback_ticks": -1},
         {"box_max_iter": 0},
-        {"box_screening": 1},
+        {"offset_correction": 1},
     ],
 )
 def test_bad_settings_raise_value_error(kwargs):
@@ -351,10 +350,10 @@ def test_settings_that_do_not_fit_the_arm_raise_at_build_time(arm):
 
 
 def test_settings_round_trip_through_a_dict():
-    s = MPCSettings(point_weights=tuple(np.linspace(1, 0.5, 50)), osqp={"rho": 1.5})
+    s = MPCSettings(point_weights=tuple(np.linspace(1, 0.5, 50)), osqp_rho=1.5)
     d = to_dict(s)
     assert isinstance(d["blocks"], list) and "joint_lower" not in d
-    assert d["osqp"]["rho"] == 1.5
+    assert d["osqp_rho"] == 1.5
     assert from_dict(MPCSettings, d) == s
     with pytest.raises(ValueError, match="unknown"):
         from_dict(MPCSettings, {"horizon": 50, "rhoo": 1.0})

@@ -1,4 +1,6 @@
-"""Quadratic interpolation of the predictor's points into the N control-rate references."""
+"""Cubic interpolation of the predictor's points into the N control-rate references."""
+
+from collections import Counter
 
 import numpy as np
 import pytest
@@ -7,7 +9,7 @@ from rhmpc.control.reference import (
     ExactReference,
     PredictedReference,
     ReferenceSettings,
-    quadratic_weights,
+    lagrange_weights,
 )
 
 TS, DS, N = 0.5e-3, 15, 50
@@ -25,7 +27,7 @@ class Scripted:
     """A 'predictor' that knows the signal f(t): its forecasts are exact at its own grid."""
 
     def __init__(self, f, dt=DS * TS):
-        self.f, self.dt = f, dt
+        self.f, self.dt, self.counts = f, dt, Counter()
         self.reset()
 
     def reset(self):
@@ -42,14 +44,19 @@ class Scripted:
         return np.column_stack([self.f(t), t])
 
 
-def test_weights_reproduce_quadratics_exactly():
+def test_weights_reproduce_cubics_exactly_and_pass_through_the_nodes():
     s = np.linspace(-0.5, 6.5, 57)
-    m, w = quadratic_weights(s, 6)
-    nodes = 3.0 - 2.0 * np.arange(6) + 0.7 * np.arange(6) ** 2
-    got = w[:, 0] * nodes[m] + w[:, 1] * nodes[m + 1] + w[:, 2] * nodes[m + 2]
-    np.testing.assert_allclose(got, 3.0 - 2.0 * s + 0.7 * s**2, atol=1e-12)
+    m, w = lagrange_weights(s, 6)
+    cubic = lambda x: 3.0 - 2.0 * x + 0.7 * x**2 - 0.2 * x**3  # noqa: E731
+    nodes = cubic(np.arange(6.0))
+    got = sum(w[:, j] * nodes[m + j] for j in range(4))
+    np.testing.assert_allclose(got, cubic(s), atol=1e-11)
+    k = np.arange(6.0)
+    m, w = lagrange_weights(k, 6)
+    np.testing.assert_allclose(sum(w[:, j] * nodes[m + j] for j in range(4)), nodes, atol=1e-12)
+    assert m.tolist() == [0, 0, 1, 2, 2, 2]  # the window around the interval, clipped
     with pytest.raises(ValueError):
-        quadratic_weights(s, 2)
+        lagrange_weights(s, 3)
 
 
 def build(f, latency_ticks=0, points=4):
@@ -326,3 +333,30 @@ def test_a_fixed_gate_floor_is_used_as_given():
     assert not gate.accept(np.array([2e-3, 0, 0]), np.zeros(3), {"outliers_rejected": 0})
     with pytest.raises(ValueError, match="> 0"):
         OutlierGate(-1.0)
+
+
+def test_a_forecast_from_outside_serves_until_refreshes_take_over_again():
+    """A quadratic's nodes sent from outside are reproduced at every tick; the refreshes
+    within ``refresh_ticks`` after it leave the points alone, later ones interpolate again;
+    points not finite, or older than the last, are counted and not taken."""
+    f = lambda t: 1e-3 + 0.2 * t - 3.0 * t**2  # noqa: E731
+    g = lambda t: -f(t)  # noqa: E731
+    ref, _, tick = build(f)
+    dt = ref.dt
+    stamp = (tick - 2) * TS
+    nodes = np.column_stack([g(stamp + dt * np.arange(6)), np.zeros(6)])
+    assert ref.forecast(tick, stamp, nodes)
+    t = (tick + np.arange(1, N + 1)) * TS
+    np.testing.assert_allclose(ref.horizon(tick)[:, 0], g(t), atol=1e-15)
+    soon = tick + DS - 1  # within refresh_ticks (DS) of the forecast
+    ref.refresh(soon, np.array([f(soon * TS), soon * TS]), soon * TS)
+    np.testing.assert_allclose(ref.horizon(soon)[:, 0], g(t + (DS - 1) * TS), atol=1e-15)
+    assert not ref.forecast(soon, stamp - TS, nodes)  # older than the last one taken
+    bad = nodes.copy()
+    bad[2, 0] = np.nan
+    assert not ref.forecast(soon, stamp, bad)
+    later = tick + 2 * DS
+    ref.refresh(later, np.array([f(later * TS), later * TS]), later * TS)
+    np.testing.assert_allclose(ref.horizon(later)[:, 0], f(t + 2 * DS * TS), atol=1e-15)
+    counts = ref.predictor.counts
+    assert (counts["external"], counts["external_stale"], counts["external_rejected"]) == (1, 1, 1)

@@ -31,7 +31,7 @@ def small_config(**changes):
 def test_result_document_has_the_documented_keys():
     import json
 
-    from rhmpc.control.yardstick import GainTick
+    from rhmpc.studies.yardstick import GainTick
 
     _, doc = run_experiment(small_config(), gain_tick=GainTick)
     doc = json.loads(json.dumps(doc))  # it is plain JSON
@@ -74,13 +74,13 @@ def test_streamed_run_is_the_run_on_whole_arrays(tmp_path, predictor):
     with the whole-array ``tracking_metrics``: equal to 1e-9 relative (measured ≤ 3e-13: sums in
     another order, the mean summed per block)."""
     from predictors import make_predictor
-    from sim.loop.metrics import tracking_metrics
     from sim.loop.trace import read_trace
     from sim.recordings import RecordedMotion
     from sim.sensors import sensor_from_name
+    from tests.sim.loop.test_streams import tracking_metrics
 
     config = small_config(predictor=predictor, seed=5, **{
-        "loop.duration": 4.0, "loop.settling": 1.0, "plant.dynamics": "pinocchio"})
+        "loop.duration": 4.0, "loop.settling": 1.0})
     loop, run, N = config.loop, build_run(config), config.mpc.horizon
     streamed = run_closed_loop(  # chunks of 600 ticks: 14 chunk boundaries
         run.plant, run.controller, run.truth, run.stream, loop, run.clock, anchor=run.anchor,

@@ -8,8 +8,9 @@ import pytest
 from sim.loop import LoopSettings
 from sim.loop.clock import arrival_tick, predictor_clock
 from sim.loop.closed_loop import Refreshes
-from sim.loop.streams import ArraySamples, UpsampledSamples
 from sim.sensors import SampleStream, playback
+from sim.sensors.playback import UpsampledSamples
+from sim.sensors.stream import ArraySamples
 from tests.sim.loop.stand_ins import HarmonicHeart, ideal_stream
 
 TS = 0.5e-3

@@ -4,11 +4,13 @@ the report of what each fault did (the closed loop itself: tests/rhmpc/experimen
 import numpy as np
 import pytest
 
+from rhmpc.experiment.faults import fault_marks, fault_report
 from sim.loop.closed_loop import chunks
-from sim.loop.faults import FaultyEncoders, FaultySamples, fault_marks, fault_report, split_faults
-from sim.loop.streams import ArraySamples, SampledSamples, UpsampledSamples
+from sim.loop.faults import FaultyEncoders, split_faults
 from sim.sensors import SampleStream, Upsample
-from sim.sensors.faults import EncoderStick, NaNBurst, SensorFreeze, StreamJump
+from sim.sensors.faults import EncoderStick, FaultySamples, NaNBurst, SensorFreeze, StreamJump
+from sim.sensors.playback import UpsampledSamples
+from sim.sensors.stream import ArraySamples, SampledSamples
 from tests.sim.loop.stand_ins import HarmonicHeart
 
 FAULTS = (SensorFreeze(0.31, 0.2), StreamJump(0.6, offset_m=(1e-3, 2e-3, 0.0)),

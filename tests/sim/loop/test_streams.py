@@ -4,21 +4,33 @@ import numpy as np
 import pytest
 
 from sim.loop.closed_loop import poi_truth
-from sim.loop.metrics import RunningTracking, TickHistogram, tracking_metrics
-from sim.loop.streams import (
-    ArraySamples,
-    SampledSamples,
-    SourceTruth,
-    StreamCursor,
-    UpsampledSamples,
-    measure,
-)
+from sim.loop.metrics import RunningTracking, TickHistogram, rms
+from sim.loop.streams import SourceTruth, StreamCursor
 from sim.loop.trace import DecimatedTrace, TraceFile, read_trace
 from sim.recordings import RecordedMotion
-from sim.sensors import Dropouts, SonomicrometrySettings, Upsample, ideal, sonomicrometry
+from sim.sensors import Dropouts, Sensor, SonomicrometrySettings, Upsample, ideal, sonomicrometry
+from sim.sensors.playback import UpsampledSamples
+from sim.sensors.stream import ArraySamples, SampledSamples
 from tests.sim.loop.stand_ins import HarmonicHeart
 
 TS = 0.5e-3
+
+
+
+def tracking_metrics(error: np.ndarray, tau_mpc: np.ndarray, tau_total: np.ndarray) -> dict:
+    """3-D position error RMS / max [mm] and RMS control effort [mN·m] over the given ticks.
+
+    ``error`` is (n, 3) end-effector minus POI in metres; efforts are (n, nv) in N·m. The effort
+    is the RMS over time of the Euclidean norm of the joint torque vector.
+    """
+    norm = np.linalg.norm(error, axis=1)
+    return {
+        "rms_error_mm": float(1e3 * rms(norm)),
+        "max_error_mm": float(1e3 * np.nanmax(norm)) if norm.size else float("nan"),
+        "rms_error_axis_mm": (1e3 * rms(error, axis=0)).tolist(),
+        "rms_effort_mNm": float(1e3 * rms(np.linalg.norm(tau_mpc, axis=1))),
+        "rms_total_torque_mNm": float(1e3 * rms(np.linalg.norm(tau_total, axis=1))),
+    }
 
 
 def raw_stream(latency=0.0):
@@ -157,11 +169,12 @@ def test_decimated_trace_is_bounded_and_keeps_a_full_rate_tail():
     assert trace.stride == 1000 and tick[1] - tick[0] == 1000
 
 
-def test_chunked_measure_is_the_sensor_measure():
+def test_a_sensor_samples_its_source_in_chunks(monkeypatch):
     cfg = SonomicrometrySettings(dropouts=Dropouts(rate=0.5), latency=0.004)
     sensor = sonomicrometry(cfg)
     whole = sensor.measure(HarmonicHeart(), 30.0, np.random.default_rng(8))
-    chunked = measure(sensor, HarmonicHeart(), 30.0, np.random.default_rng(8), chunk=1000)
+    monkeypatch.setattr(Sensor, "CHUNK", 1000)
+    chunked = sensor.measure(HarmonicHeart(), 30.0, np.random.default_rng(8))
     np.testing.assert_array_equal(chunked.t, whole.t)
     np.testing.assert_array_equal(chunked.arrival, whole.arrival)
     np.testing.assert_array_equal(np.isnan(chunked.z), np.isnan(whole.z))

@@ -10,14 +10,8 @@ from rhmpc.control.cancellation import ModelMismatch, NonlinearityCancellation
 from rhmpc.control.observer import JointObserver
 from robots import Robot, linearize
 from sim.plant import HardwareSettings, PlantSettings, make_plant
-from sim.plant.hardware import (
-    HardwarePlant,
-    LinearPlant,
-    cable_stiffness,
-    dac,
-    lagged,
-    stribeck,
-)
+from sim.plant.hardware import HardwarePlant, LinearPlant, cable_stiffness
+from tests.sim.plant import reference
 
 TS = 0.5e-3
 J_LINK, J_ROTOR, ETA, KT = 2.0e-3, 1.5e-4, 10.0, 0.0234
@@ -86,16 +80,17 @@ def test_delay_shifts_the_torque_by_one_tick_exactly():
 
 
 def test_dac_rounds_to_its_step_and_clips():
+    """τ_e = 0: the current is the DAC's output, i* rounded to 2 I_max / 2^b and clipped."""
     step = 2 * 5.5 / 4096  # 12 bits over ±5.5 A
-    i = np.array([0.4 * step, 0.6 * step, -1.49 * step, 7.0, -7.0])
-    np.testing.assert_allclose(dac(i, 12, 5.5), [0.0, step, -step, 5.5, -5.5])
-    np.testing.assert_array_equal(dac(i[:3], 0, 5.5), i[:3])
-    plant = tick_of(drum(), dac_bits=12, dac_range=5.5)
-    plant.step(np.array([0.6 * step * ETA * KT]))
-    assert plant.current[0] == pytest.approx(step, rel=1e-12)  # τ_e = 0: the DAC's output
-    assert not plant.saturated
-    plant.step(np.array([6.0 * ETA * KT]))
-    assert plant.saturated and plant.current[0] == 5.5
+    for wanted, out in ((0.4 * step, 0.0), (0.6 * step, step), (-1.49 * step, -step),
+                        (2.5 * step, 2 * step), (7.0, 5.5), (-7.0, -5.5)):
+        plant = tick_of(drum(), dac_bits=12, dac_range=5.5)
+        plant.step(np.array([wanted * ETA * KT]))
+        assert plant.current[0] == pytest.approx(out, rel=1e-12, abs=1e-15)
+        assert plant.saturated == (abs(wanted) > 5.5)
+    plant = tick_of(drum(), dac_bits=0, dac_range=5.5)
+    plant.step(np.array([0.4 * step * ETA * KT]))
+    assert plant.current[0] == pytest.approx(0.4 * step, rel=1e-12)
 
 
 def test_current_and_motion_follow_the_first_order_lag():
@@ -112,7 +107,6 @@ def test_current_and_motion_follow_the_first_order_lag():
     assert tick.current[0] == pytest.approx(i_star * (1 - math.exp(-40 * TS / tau_e)), rel=1e-12)
     ref = torque / (J_LINK + J_ROTOR) * (t**2 / 2 - tau_e * t + tau_e**2 * (1 - np.exp(-t / tau_e)))
     np.testing.assert_allclose(angles, ref, rtol=0, atol=2e-8)
-    assert lagged(np.zeros(1), np.ones(1), tau_e, tau_e)[0] == pytest.approx(1 - math.exp(-1))
 
 
 def test_cable_resonance_is_the_two_mass_frequency():
@@ -143,10 +137,20 @@ def test_encoders_count_the_motor_through_the_cable():
     assert tick.q[0] == tick.encoders()[0] and tick.q_arm[0] == 0.0
 
 
-def test_stribeck_friction_peaks_at_rest():
-    w = np.array([1e-4, 1.0, -1.0])
-    f = stribeck(w, np.full(3, 0.01), np.zeros(3), 1.25, 0.01, 1e-6)  # v_s ≪ ω
-    np.testing.assert_allclose(f, [0.0125, 0.01, -0.01], rtol=1e-4)  # exp(−1e-4) at 0.1 mrad/s
+def test_friction_is_the_stribeck_law():
+    """The drum's deceleration over a tick of 1 ns at rate ω, times its inertia, is the
+    friction law of ``reference.friction`` (peaking at rest: 1.25 F_c at 0.1 mrad/s)."""
+    ts = 1e-9
+    for w in (1e-4, 3e-3, 0.02, 1.0, -1.0):
+        plant = HardwarePlant(drum(coulomb=0.01), ts, HardwareSettings(
+            **{**BARE, "stiction_ratio": 1.25, "substeps": 1}))
+        plant.v = np.array([w])
+        plant.step(np.zeros(1))
+        seen = -(J_LINK + J_ROTOR) * (plant.v[0] - w) / ts
+        assert seen == pytest.approx(reference.friction(w, 0.01, 0.0, 1.25, 0.01, 1e-3),
+                                     rel=1e-5)
+    assert reference.friction(1e-4, 0.01, 0.0, 1.25, 0.01, 1e-6) == pytest.approx(0.0125,
+                                                                                   rel=1e-4)
 
 
 def test_stiction_holds_a_torque_below_the_peak():
@@ -196,20 +200,3 @@ def test_linear_plant_is_the_mpc_model(phantom, arm):
         plant.step(u)
         x = arm.A @ x + arm.B @ u
     np.testing.assert_allclose(plant.q, arm.q0 + x[:3], atol=1e-15)
-
-
-@pytest.mark.parametrize("cables", [0.0, 80.0])
-@pytest.mark.slow
-def test_compiled_hardware_tick_is_the_pinocchio_one(phantom, arm, cables):
-    """The compiled step (sim/plant/chain.c hw_integrate) against the Python steps on
-    Pinocchio, rigid and with cables, the controller's model the Çavuşoğlu set: 400 ticks of
-    a swinging torque agree to 1e-13 (rad, rad/s, A)."""
-    hardware = HardwareSettings(cable_resonance=cables)
-    mismatch = ModelMismatch(parameters="phantom-cavusoglu")
-    plants = [make_plant(phantom, arm, TS, PlantSettings(model="hardware", dynamics=d),
-                         hardware) for d in ("pinocchio", "native")]
-    if plants[1].dynamics != "native":
-        pytest.skip("no compiled chain")
-    swing = lambda i: 0.03 * math.sin(i / 20.0) * np.array([1.0, 0.5, -0.7])  # noqa: E731
-    a, b = (hold_home(phantom, arm, plant, 400, swing, mismatch) for plant in plants)
-    assert np.abs(np.array(a) - np.array(b)).max() < 1e-13

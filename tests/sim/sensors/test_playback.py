@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 from sim.heart import make_scenario
-from sim.loop.streams import StreamCursor, UpsampledSamples
+from sim.loop.streams import StreamCursor
 from sim.sensors import PLAYBACKS, Sensor, playback, sensor_from_name
+from sim.sensors.playback import UpsampledSamples
 from sim.sensors.stream import Latency
 
 TS = 5e-4

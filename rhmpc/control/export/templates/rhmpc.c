@@ -2,6 +2,7 @@
  * The controller of rhmpc.h: rhmpc.control.controller.Controller in C.
  *
  *   refresh:  the reference (rhmpc_reference.c): gate -> predictor -> interpolation -> guard
+ *   forecast: a forecast made outside -> interpolation -> guard (rhmpc_reference.c)
  *   step:     x_hat = [I - L H, L, -L q0] [x_prior; q; 1]          (the observer's correction)
  *             d = p(q0 + x_q) - (C x_hat + y0)                     (rhmpc_model.c: offset)
  *             u = MPC(x_hat, r_{tick+1..tick+N}, d)                (rhmpc_mpc.c)
@@ -44,6 +45,13 @@ void rhmpc_init(rhmpc_t *ctl) {
 int rhmpc_refresh(rhmpc_t *ctl, long long tick, double stamp, const double *z) {
   long long t0 = now_ns();
   int status = rhmpc_reference_refresh(ctl, tick, stamp, z);
+  ctl->pub.refresh_ns = now_ns() - t0;
+  return status;
+}
+
+int rhmpc_forecast(rhmpc_t *ctl, long long tick, double stamp, const double *points, int count) {
+  long long t0 = now_ns();
+  int status = rhmpc_reference_forecast(ctl, tick, stamp, points, count);
   ctl->pub.refresh_ns = now_ns() - t0;
   return status;
 }
@@ -167,15 +175,9 @@ int rhmpc_step(rhmpc_t *ctl, long long tick, const double q[RHMPC_NU], double ta
   return status;
 }
 
-static const char *const status_names[RHMPC_N_STATUS] = {
-    "solved", "nonfinite_input", "nonfinite_solution", "solver_error", "injected",
-    "solved_inaccurate", "primal_infeasible", "dual_infeasible", "max_iter", "time_limit",
-    "non_convex", "interrupted", "unsolved", "box_max_iter", "backoff", "encoder_fault"};
-static const char *const source_names[RHMPC_N_SOURCES] = {"qp", "plan", "lq", "brake", "zero"};
-static const char *const count_names[RHMPC_N_COUNTS] = {
-    "updates", "missing", "outliers_rejected", "gate_unlocked", "retracted", "forecast_clamped",
-    "forecast_nonfinite", "rls_reset", "rls_bound", "reference_guard", "repaired",
-    "forecast_capped"};
+static const char *const status_names[RHMPC_N_STATUS] = {@STATUS_NAMES@};
+static const char *const source_names[RHMPC_N_SOURCES] = {@SOURCE_NAMES@};
+static const char *const count_names[RHMPC_N_COUNTS] = {@COUNT_NAMES@};
 
 const char *rhmpc_status_name(int status) {
   return (status >= 0 && status < RHMPC_N_STATUS) ? status_names[status] : "unknown";

@@ -9,12 +9,18 @@
  *     rhmpc_place(&ctl, origin);          // where the centred heart motion sits [m]
  *     on a sample's arrival (every RHMPC_REFRESH_TICKS ticks at most):
  *         rhmpc_refresh(&ctl, tick, stamp, z);      // z: the POI [m], NULL = none new
+ *     and/or on a forecast's arrival from a predictor running elsewhere:
+ *         rhmpc_forecast(&ctl, tick, stamp, points, count);
  *     every tick (Ts = @TS_US@ us):
  *         rhmpc_step(&ctl, tick, q, tau);           // encoders in, motor torques out
  *
  * rhmpc_refresh: the outlier gate, the @PREDICTOR@ predictor (update and
  * forecast of RHMPC_PREDICTION_POINTS points at its period RHMPC_DT, plus the latency of the
- * sample), the piecewise-quadratic interpolation to the control ticks, the reference guard.
+ * sample), the piecewise-cubic interpolation to the control ticks, the reference guard.
+ * rhmpc_forecast: forecast points made outside (a learned predictor in another process) take the
+ * place of the refresh's own, with the same interpolation and guard; for RHMPC_REFRESH_TICKS
+ * ticks after one, rhmpc_refresh only keeps its predictor learning (a forecast lost for longer:
+ * its forecasts serve again; with no rhmpc_refresh at all, the last points hold).
  * rhmpc_step: the observer (x_hat = [q - q0; qdot] from the encoders), the output offset by
  * forward kinematics, the MPC (screening cascade, OSQP, fallbacks, envelope), the cancellation
  * of gravity, Coriolis and friction with the controller's model, the torque clip.
@@ -93,69 +99,32 @@ extern "C" {
 #define RHMPC_GATE @GATE@  /* the outlier gate is on */
 #define RHMPC_GATE_CALIBRATION @GATE_CALIBRATION@ /* misses per half of its calibration (0: fixed floor) */
 #define RHMPC_ENVELOPE_BLOCKS 8
+#define RHMPC_LATENCY_CAP @LATENCY_CAP@ /* the oldest forecast taken, by its stamp [s] */
 
 /* Status codes: why the QP result was (not) used. Names as in Python's MPCStats.failures. */
 enum rhmpc_status {
-  RHMPC_SOLVED = 0,
-  RHMPC_NONFINITE_INPUT,
-  RHMPC_NONFINITE_SOLUTION,
-  RHMPC_SOLVER_ERROR,
-  RHMPC_INJECTED,
-  RHMPC_SOLVED_INACCURATE,
-  RHMPC_PRIMAL_INFEASIBLE,
-  RHMPC_DUAL_INFEASIBLE,
-  RHMPC_MAX_ITER_REACHED,
-  RHMPC_TIME_LIMIT,
-  RHMPC_NON_CONVEX,
-  RHMPC_INTERRUPTED,
-  RHMPC_UNSOLVED,
-  RHMPC_BOX_CAPPED,                     /* level 2 reached its cap: the fallback at once */
-  RHMPC_BACKOFF,                        /* levels 2-3 rest after failed ticks */
-  RHMPC_ENCODER_FAULT,                  /* the encoders' reading held out too long: brake */
+@STATUS_ENUM@
   RHMPC_N_STATUS
 };
-#define RHMPC_BAD_STAMP (-1)
+#define RHMPC_BAD_STAMP (-1)       /* rhmpc_refresh, rhmpc_forecast: a stamp that is not finite */
+#define RHMPC_BAD_FORECAST (-2)    /* rhmpc_forecast: points not finite, or a count out of range */
+#define RHMPC_STALE_FORECAST (-3)  /* rhmpc_forecast: older than the last, or than the cap */
 
 /* Where the MPC torque of a tick came from. */
 enum rhmpc_source {
-  RHMPC_SOURCE_QP = 0, RHMPC_SOURCE_PLAN, RHMPC_SOURCE_LQ, RHMPC_SOURCE_BRAKE, RHMPC_SOURCE_ZERO,
+@SOURCE_ENUM@
   RHMPC_N_SOURCES
 };
 
 /* The reference's and the predictor's events (names as in Python's predictor.counts). */
 enum rhmpc_count {
-  RHMPC_UPDATES, RHMPC_MISSING, RHMPC_OUTLIERS_REJECTED, RHMPC_GATE_UNLOCKED, RHMPC_RETRACTED,
-  RHMPC_FORECAST_CLAMPED, RHMPC_FORECAST_NONFINITE, RHMPC_RLS_RESET, RHMPC_RLS_BOUND,
-  RHMPC_REFERENCE_GUARD, RHMPC_REPAIRED, RHMPC_FORECAST_CAPPED, RHMPC_N_COUNTS
+@COUNT_ENUM@
+  RHMPC_N_COUNTS
 };
 
 /* What a program reads (read it freely; write nothing). */
 typedef struct {
-  long long ticks;                      /* rhmpc_step calls since rhmpc_init */
-  long long screened;                   /* ticks solved by level 1 (screening), without OSQP */
-  long long boxed;                      /* ticks solved by level 2 (the torque-box QP) */
-  long long failures[RHMPC_N_STATUS];   /* ticks whose QP result was not used, by status */
-  long long fallbacks[RHMPC_N_SOURCES]; /* ticks served by each source; [0] (QP) stays 0 */
-  long long counts[RHMPC_N_COUNTS];     /* the reference's events (enum rhmpc_count) */
-  int status;                           /* the last step's enum rhmpc_status */
-  int source;                           /* enum rhmpc_source */
-  int iterations;                       /* OSQP iterations (0: screened or no solve) */
-  int level;                            /* cascade level: 1 screened, 2 box QP, 3 OSQP; 0 none */
-  int box_iterations;                   /* level 2's active-set solves in the last step */
-  int saturated;                        /* the last step's torque was clipped */
-  long long step_ns, refresh_ns;        /* the last calls' durations [ns], CLOCK_MONOTONIC */
-  double x_hat[RHMPC_NX];               /* the last step's state estimate [q - q0; qdot] */
-  double u[RHMPC_NU];                   /* its MPC torque [N*m] */
-  double tau_command[RHMPC_NU];         /* u plus the cancellation, before the clip [N*m] */
-  double tau[RHMPC_NU];                 /* the torque returned [N*m] */
-  long long first;                      /* the tick of points[0] */
-  double points[RHMPC_SPAN * 3];        /* the last refresh's reference points [m] */
-  double gate_floor;                    /* the outlier gate's floor [m] (NaN: calibrating) */
-  int gate_locked, ready;               /* the gate's and the predictor's states */
-  double age_sum;                       /* sum of (tick Ts - stamp) over the forecasts [s] */
-  long long age_count;
-  long long encoder_held;               /* encoder readings the observer held out */
-  long long encoder_reacquired;         /* held readings taken again once they moved */
+@PUBLIC_FIELDS@
 } rhmpc_public_t;
 
 /* The MPC's internal state (do not touch). */
@@ -190,6 +159,8 @@ typedef struct {
   double held[RHMPC_D], forecast[RHMPC_D], second[RHMPC_D], before[RHMPC_D];
   double dense[RHMPC_SPAN * RHMPC_D];
   double origin[3];
+  double ext_stamp;                     /* the last forecast taken from outside [s] */
+  long long ext_until;                  /* rhmpc_refresh interpolates from this tick on */
   /* the predictor: its recent range, delay line and RLS */
   long long n_upd, bounds_n;
   int has_last;
@@ -233,6 +204,13 @@ void rhmpc_place(rhmpc_t *ctl, const double origin[3]);
 /* A sensor sample's arrival on `tick`: z (RHMPC_D values [m], NULL: none new) measured at
  * `stamp` [s]. Returns 0, or RHMPC_BAD_STAMP. */
 int rhmpc_refresh(rhmpc_t *ctl, long long tick, double stamp, const double *z);
+
+/* Forecast points made outside, arriving on `tick`: points[k] (RHMPC_D values each [m],
+ * centred like z) the POI at stamp + k RHMPC_DT, k = 0 ... count - 1, points[0] the newest sample
+ * as that predictor took it; 3 <= count <= RHMPC_KMAX + 1. Returns 0 (taken), RHMPC_BAD_STAMP,
+ * RHMPC_BAD_FORECAST (counts[external_rejected]) or RHMPC_STALE_FORECAST (a stamp older than the
+ * last taken one, or than RHMPC_LATENCY_CAP before tick: counts[external_stale]). */
+int rhmpc_forecast(rhmpc_t *ctl, long long tick, double stamp, const double *points, int count);
 
 /* One control tick from the encoders' angles q [rad]: the torques tau [N*m]. Returns an
  * enum rhmpc_status. */

@@ -5,13 +5,6 @@
 #include "rhmpc.h"
 
 /* the MPC (rhmpc.control.mpc, rhmpc.control.settings.MPCSettings) */
-#define RHMPC_WS_SHIFT 0
-#define RHMPC_WS_SHIFT_PRIMAL 1
-#define RHMPC_WS_KEEP 2
-#define RHMPC_WS_NONE 3
-#define RHMPC_WARM_START @WARM_START@ /* settings.warm_start = "@WARM_START_NAME@" */
-#define RHMPC_SCREENING @SCREENING@
-#define RHMPC_BOX_SCREENING @BOX_SCREENING@ /* level 2 of the cascade (settings.box_screening) */
 #define RHMPC_BOX_MAX_ITER @BOX_MAX_ITER@ /* Cholesky solves of level 2 per tick, in all */
 #define RHMPC_BOX_PDAS_ITER @BOX_PDAS_ITER@ /* of which the primal-dual active set's */
 #define RHMPC_BOX_PRIMAL_TOL @BOX_PRIMAL_TOL@
@@ -85,6 +78,8 @@ extern const double rhmpc_y_plan[RHMPC_M];
 extern const double rhmpc_correct[RHMPC_NX * (RHMPC_NX + RHMPC_NU + 1)];
 extern const double rhmpc_predict[RHMPC_NX * (RHMPC_NX + RHMPC_NU + 1)];
 extern const double rhmpc_gate[RHMPC_NU]; /* the observer's innovation gate per joint [rad] */
+/* The MPC's output map C (NY x NX): the tool's position y = C x + y0 in its linear model [m]. */
+extern const double rhmpc_output[RHMPC_NY * RHMPC_NX];
 
 /* The functions the controller's files share */
 void rhmpc_mpc_reset(rhmpc_t *ctl);
@@ -93,4 +88,6 @@ int rhmpc_mpc_tick(rhmpc_t *ctl, const double x[RHMPC_NX], const double *ref, co
 int rhmpc_mpc_brake(rhmpc_t *ctl, const double x[RHMPC_NX], int status, double tau[RHMPC_NU]);
 void rhmpc_reference_reset(rhmpc_t *ctl);
 int rhmpc_reference_refresh(rhmpc_t *ctl, long long tick, double stamp, const double *z);
+int rhmpc_reference_forecast(rhmpc_t *ctl, long long tick, double stamp, const double *points,
+                             int count);
 #endif

@@ -195,7 +195,7 @@ static int fallen_back(rhmpc_t *ctl, int status, int source, double tau[RHMPC_NU
   ctl->pub.fallbacks[source] += 1;
   for (int i = 0; i < RHMPC_NU; ++i) ctl->mpc.p_ext[RHMPC_NX + RHMPC_NY * RHMPC_N + i] = tau[i];
   ctl->mpc.ws_pending = 0;
-  if (ctl->mpc.plan_valid && RHMPC_WARM_START != RHMPC_WS_NONE) {
+  if (ctl->mpc.plan_valid) {
     spmv(CSR(shift), RHMPC_NV, ctl->mpc.plan, ctl->mpc.ws_x);
     memcpy(ctl->mpc.ws_y, rhmpc_y_plan, sizeof(ctl->mpc.ws_y));
     ctl->mpc.ws_x_set = ctl->mpc.ws_y_set = 1;
@@ -263,7 +263,6 @@ static int screened(rhmpc_t *ctl) {
   return envelope_holds_at(ctl, ctl->mpc.z_star);
 }
 
-#if RHMPC_BOX_SCREENING
 /* Cholesky W_AA = L L' of the rows/columns idx[0..k) of W (L lower, row-major, stride NZ);
  * 0 if a pivot is not positive. */
 static int chol_active(const int *idx, int k, double *L) {
@@ -461,7 +460,6 @@ static int box_solved(rhmpc_t *ctl) {
   if (!(rmax <= RHMPC_BOX_KKT_TOL * scale)) return 0;
   return envelope_holds_at(ctl, ctl->mpc.box_z);
 }
-#endif
 
 /* One MPC tick (RecedingHorizonMPC.step): tau = tau_mpc for the state x, the reference ref
  * (N x 3) and the output offset d (RHMPC_NEXTRA values); u_prev is the last tau. */
@@ -494,7 +492,7 @@ int rhmpc_mpc_tick(rhmpc_t *ctl, const double x[RHMPC_NX], const double *ref, co
     ctl->mpc.u[RHMPC_NV + i] = rhmpc_u0[RHMPC_NV + i] - gi;
   }
 #endif
-  if (RHMPC_SCREENING && ctl->mpc.forced == 0) {
+  if (ctl->mpc.forced == 0) {
     const double *zsol = NULL;
     /* q_z; q[NZ..NV) = rho_1 since rhmpc_init */
     matvec_blocks(rhmpc_F_z_T, rhmpc_F_z_cptr, rhmpc_F_z_cols, rhmpc_F_z_perm, p, RHMPC_NZ,
@@ -508,7 +506,6 @@ int rhmpc_mpc_tick(rhmpc_t *ctl, const double x[RHMPC_NX], const double *ref, co
       ctl->pub.level = 1;
       ctl->mpc.last_screened = 0;
       return fallback(ctl, RHMPC_BACKOFF, 1, tau);
-#if RHMPC_BOX_SCREENING
     } else if (box_solved(ctl)) {
       zsol = ctl->mpc.box_z;
       ctl->pub.level = 2;
@@ -517,7 +514,6 @@ int rhmpc_mpc_tick(rhmpc_t *ctl, const double x[RHMPC_NX], const double *ref, co
       ctl->pub.level = 2;
       ctl->mpc.last_screened = 0;
       return fallback(ctl, RHMPC_BOX_CAPPED, 1, tau);
-#endif
     }
     if (zsol != NULL) {
       for (int i = 0; i < RHMPC_NU; ++i) {
@@ -529,16 +525,12 @@ int rhmpc_mpc_tick(rhmpc_t *ctl, const double x[RHMPC_NX], const double *ref, co
       ctl->mpc.plan_valid = 1;
       ctl->mpc.plan_age = 0;
       ctl->mpc.streak = 0;
-      ctl->mpc.ws_pending = RHMPC_WARM_START != RHMPC_WS_NONE;
+      ctl->mpc.ws_pending = 1;
       ctl->mpc.last_screened = 1;
       ctl->pub.status = RHMPC_SOLVED;
       ctl->pub.source = RHMPC_SOURCE_QP;
       return RHMPC_SOLVED;
     }
-  } else if (ctl->mpc.rest > 0 && ctl->mpc.forced == 0) {
-    ctl->mpc.rest -= 1;
-    ctl->mpc.last_screened = 0;
-    return fallback(ctl, RHMPC_BACKOFF, 1, tau);
   } else {
     matvec(rhmpc_F_ext, p, RHMPC_NV, NPE, ctl->mpc.q);
   }
@@ -582,18 +574,15 @@ int rhmpc_mpc_tick(rhmpc_t *ctl, const double x[RHMPC_NX], const double *ref, co
   }
   if (status != RHMPC_SOLVED) {
     fallback(ctl, status, 1, tau);
-    if (continues(status) && RHMPC_WARM_START != RHMPC_WS_NONE) {
+    if (continues(status)) {
       /* An unfinished solve is a good start for the next, nearly identical QP. */
       int finite = 1;
       for (int i = 0; finite && i < RHMPC_NV; ++i) finite = isfinite(z[i]);
       for (int i = 0; finite && i < RHMPC_M; ++i) finite = isfinite(y[i]);
-      if (!finite) {
-      } else if (RHMPC_WARM_START != RHMPC_WS_KEEP) {
+      if (finite) {
         spmv(CSR(shift), RHMPC_NV, z, ctl->mpc.ws_x);
         spmv(CSR(shift_dual), RHMPC_M, y, ctl->mpc.ws_y);
         ctl->mpc.ws_x_set = ctl->mpc.ws_y_set = 1;
-      } else {
-        ctl->mpc.ws_x_set = 0; /* "keep": OSQP's own iterate */
       }
     }
     return status;
@@ -606,14 +595,8 @@ int rhmpc_mpc_tick(rhmpc_t *ctl, const double x[RHMPC_NX], const double *ref, co
   ctl->mpc.plan_valid = 1;
   ctl->mpc.plan_age = 0;
   ctl->mpc.streak = 0;
-  if (RHMPC_WARM_START == RHMPC_WS_SHIFT) {
-    spmv(CSR(shift), RHMPC_NV, z, ctl->mpc.ws_x);
-    spmv(CSR(shift_dual), RHMPC_M, y, ctl->mpc.ws_y);
-    ctl->mpc.ws_x_set = ctl->mpc.ws_y_set = 1;
-  } else if (RHMPC_WARM_START == RHMPC_WS_SHIFT_PRIMAL) {
-    spmv(CSR(shift), RHMPC_NV, z, ctl->mpc.ws_x);
-    ctl->mpc.ws_x_set = 1;
-  }
+  spmv(CSR(shift), RHMPC_NV, z, ctl->mpc.ws_x); /* the plan shifted; OSQP keeps its dual */
+  ctl->mpc.ws_x_set = 1;
   ctl->pub.status = RHMPC_SOLVED;
   ctl->pub.source = RHMPC_SOURCE_QP;
   return RHMPC_SOLVED;

@@ -510,6 +510,8 @@ void rhmpc_reference_reset(rhmpc_t *ctl) {
   s->have_anchor = s->have_held = 0;
   s->have_forecast = s->have_second = s->have_before = 0;
   s->held_stamp = 0.0;
+  s->ext_stamp = -INFINITY;
+  s->ext_until = 0;
   ctl->pub.age_sum = 0.0;
   ctl->pub.age_count = 0;
   ctl->pub.first = 0;
@@ -549,45 +551,50 @@ static const double *gated(rhmpc_t *ctl, const double *z) {
   return gate_accept(ctl, m2) ? z : NULL;
 }
 
-/* PredictedReference._diverged: hold the last accepted sample, restart the predictor from it
+/* PredictedReference._diverged: hold `held`; with `restart`, restart the predictor from it
  * (counts kept) */
-static void diverged(rhmpc_t *ctl) {
+static void diverged(rhmpc_t *ctl, const double *held_in, int restart) {
   rhmpc_reference_t *s = &ctl->ref;
   long long counts[RHMPC_N_COUNTS];
   double held[D];
-  memcpy(counts, ctl->pub.counts, sizeof counts);
-  memcpy(held, s->held, sizeof held);
-  predictor_reset(ctl);
-  memcpy(ctl->pub.counts, counts, sizeof counts);
+  memcpy(held, held_in, sizeof held);
+  if (restart) {
+    memcpy(counts, ctl->pub.counts, sizeof counts);
+    predictor_reset(ctl);
+    memcpy(ctl->pub.counts, counts, sizeof counts);
+    predictor_update(ctl, held);
+    s->have_forecast = s->have_second = s->have_before = 0;
+  }
   ctl->pub.counts[RHMPC_REFERENCE_GUARD]++;
-  predictor_update(ctl, held);
-  s->have_forecast = s->have_second = s->have_before = 0;
   for (int i = 0; i < RHMPC_SPAN; i++) memcpy(s->dense + i * D, held, sizeof held);
 }
 
-/* PredictedReference._interpolate: the span points after `tick`, piecewise-quadratic Lagrange
- * on the nodes (s = lead + age/dt, window m = clamp(floor(s), 0, nodes - 3), u = s - m),
- * guarded and placed */
-static void interpolate(rhmpc_t *ctl, long long tick, int n_nodes, double t0) {
+/* PredictedReference._interpolate: the span points after `tick` from the nodes at t0 + k dt,
+ * piecewise-cubic Lagrange (s = lead + age/dt, window m = clamp(floor(s) - 1, 0, nodes - 4),
+ * u = s - m), guarded against `held` (measured at held_stamp; NULL: none) and placed */
+static void interpolate(rhmpc_t *ctl, long long tick, int n_nodes, double t0,
+                        const double *held, double held_stamp, int restart) {
   rhmpc_reference_t *s = &ctl->ref;
   const double now = (double)tick * RHMPC_TS, shift = (now - t0) / RHMPC_DT;
-  const double top = (double)(n_nodes - 3);
+  const double top = (double)(n_nodes - 4);
   for (int i = 0; i < RHMPC_SPAN; i++) {
-    double si = (i + 1) * (RHMPC_TS / RHMPC_DT) + shift, m = floor(si);
+    double si = (i + 1) * (RHMPC_TS / RHMPC_DT) + shift, m = floor(si) - 1.0;
     m = m > top ? top : m;
     m = m >= 0.0 ? m : 0.0;
-    double u = si - m, u2 = u * u;
-    double w0 = 0.5 * u2 - 1.5 * u + 1.0, w1 = -u2 + 2.0 * u, w2 = 0.5 * u2 - 0.5 * u;
+    double u = si - m, u1 = u - 1.0, u2 = u - 2.0, u3 = u - 3.0;
+    double w[4] = {-u1 * u2 * u3 / 6.0, u * u2 * u3 / 2.0, -u * u1 * u3 / 2.0,
+                   u * u1 * u2 / 6.0};
     const double *r = s->nodes + (int)m * D;
-    for (int c = 0; c < D; c++) s->dense[i * D + c] = w0 * r[c] + w1 * r[D + c] + w2 * r[2 * D + c];
+    for (int c = 0; c < D; c++)
+      s->dense[i * D + c] = w[0] * r[c] + w[1] * r[D + c] + w[2] * r[2 * D + c] + w[3] * r[3 * D + c];
   }
   ctl->pub.first = tick + 1;
-  if (RHMPC_GUARD_SPEED > 0.0 && s->have_held) {
+  if (RHMPC_GUARD_SPEED > 0.0 && held != NULL) {
     double reach = RHMPC_GUARD_MARGIN +
-                   RHMPC_GUARD_SPEED * (now + RHMPC_SPAN * RHMPC_TS - s->held_stamp);
+                   RHMPC_GUARD_SPEED * (now + RHMPC_SPAN * RHMPC_TS - held_stamp);
     for (int k = 0; k < RHMPC_SPAN * D; k++)
-      if (fabs(s->dense[k] - s->held[k % D]) > reach) {
-        diverged(ctl);
+      if (fabs(s->dense[k] - held[k % D]) > reach) {
+        diverged(ctl, held, restart);
         break;
       }
   }
@@ -628,6 +635,30 @@ int rhmpc_reference_refresh(rhmpc_t *ctl, long long tick, double stamp, const do
     ctl->pub.age_sum += latency > 0.0 ? latency : 0.0;
     ctl->pub.age_count++;
   }
-  interpolate(ctl, tick, K + off, off ? s->anchor : s->anchor + RHMPC_DT);
+  if (tick >= s->ext_until) /* else a forecast from outside serves these ticks */
+    interpolate(ctl, tick, K + off, off ? s->anchor : s->anchor + RHMPC_DT,
+                s->have_held ? s->held : NULL, s->held_stamp, 1);
+  return 0;
+}
+
+/* PredictedReference.forecast: points made outside, interpolated and guarded as the refresh's
+ * own nodes (the guard holds points[0]) */
+int rhmpc_reference_forecast(rhmpc_t *ctl, long long tick, double stamp, const double *points,
+                             int count) {
+  rhmpc_reference_t *s = &ctl->ref;
+  if (!isfinite(stamp)) return RHMPC_BAD_STAMP;
+  if (points == NULL || count < 4 || count > RHMPC_KMAX + 1 || !all_finite(points, count * D)) {
+    ctl->pub.counts[RHMPC_EXTERNAL_REJECTED]++;
+    return RHMPC_BAD_FORECAST;
+  }
+  if (stamp < s->ext_stamp || (double)tick * RHMPC_TS - stamp > RHMPC_LATENCY_CAP) {
+    ctl->pub.counts[RHMPC_EXTERNAL_STALE]++;
+    return RHMPC_STALE_FORECAST;
+  }
+  ctl->pub.counts[RHMPC_EXTERNAL]++;
+  s->ext_stamp = stamp;
+  s->ext_until = tick + RHMPC_REFRESH_TICKS;
+  memcpy(s->nodes, points, (size_t)count * D * sizeof(double));
+  interpolate(ctl, tick, count, stamp, s->nodes, stamp, 0);
   return 0;
 }

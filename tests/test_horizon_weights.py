@@ -1,12 +1,17 @@
-"""Horizon weights from forecast confidence (rhmpc.control.confidence)."""
+"""Horizon weights from forecast confidence (``benchmarks/horizon_weights.py``)."""
 
 from __future__ import annotations
+
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from rhmpc.control.confidence import confidence_weights
 from rhmpc.control.settings import MPCSettings
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+from horizon_weights import confidence_weights
 
 
 def test_weights_follow_the_formula_at_the_predictors_leads() -> None:

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from sim.loop.metrics import HeartRateScore
+from rhmpc.experiment.monitor import HeartRateScore
 
 
 def test_score_equals_direct_computation() -> None:
