@@ -79,7 +79,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "stderr, the tables to stdout as soon as the runs are done.")
     p.add_argument("--predictors",
                    help=f"comma-separated predictor names (default {','.join(TABLE_PREDICTORS)}; "
-                   f"with --data {','.join(DATA_PREDICTORS)})")
+                   "with --paper the published tables' rows; with --data "
+                   f"{','.join(DATA_PREDICTORS)})")
     p.add_argument("--scenarios",
                    help="comma-separated scenario names (default: the six Table-I replicas)")
     p.add_argument("--data", nargs="+", metavar="FILE", help="recordings instead of scenarios, "

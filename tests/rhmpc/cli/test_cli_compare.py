@@ -101,7 +101,7 @@ def test_header_and_progress_come_before_the_first_run_ends(
     assert out.getvalue().startswith("rhmpc compare: 4 runs (2 predictors × 2 scenarios × 1 "
                                      "seed)")
     text = err.getvalue()
-    assert text.startswith("rhmpc compare: running 4 run(s) on 2 process(es)")
+    assert text.startswith("rhmpc compare: running 4 run(s) on 2 local process(es)")
     assert "4/4" in text and ("run/s" in text or "s/run" in text)  # tqdm's bar and rate
     assert "each run 80× faster than real time" in text  # 8 s simulated in 0.1 s
     assert "8 s each (metrics after 2.7 s)" in out.getvalue()
