@@ -55,6 +55,9 @@ class NpzArchive:
             self._zip = zipfile.ZipFile(self._file)
             self._members = {i.filename.removesuffix(".npy"): i for i in self._zip.infolist()
                              if i.filename.endswith(".npy")}
+        except FileError:
+            self._file.close()
+            raise
         except _DAMAGE as exc:
             self._file.close()
             raise self.damaged(exc) from None

@@ -255,7 +255,7 @@ BAD_INPUTS = [
                                                         "directory"),
     (["plot", "fixed-a2-top", "f.png", "--window", "nan"], "--window must be positive"),
     (["plot", "fixed-a2-top", "no/such/dir/f.png", "--duration", "5"],
-     "no/such/dir/f.png: cannot write the figure"),
+     "no/such/dir/f.png: no such directory"),
 ]
 
 

@@ -195,7 +195,7 @@ def test_predict_the_literatures_protocol(surface: Path, tmp_path: Path,
     assert all(r["scored"] == 100 for r in doc["results"])
     assert main([*argv, "--train", str(surface)]) == 0
     out = capsys.readouterr().out
-    assert "fitted on training recordings" in out and "multi-point" in out
+    assert "fitted on the training recordings" in out and "multi-point" in out
 
 
 @pytest.mark.parametrize(("extra", "message"), [

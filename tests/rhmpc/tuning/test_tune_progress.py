@@ -8,6 +8,7 @@ import time
 import tomllib
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import pytest
@@ -86,16 +87,20 @@ def test_cli_refuses_a_huge_budget_in_one_line(tmp_path: Path,
     assert not (tmp_path / "r.jsonl").exists()
 
 
-def _slow_evaluate(task: int, extra: dict | None = None) -> dict:
+class _Task(NamedTuple):
+    key: str
+
+
+def _slow_evaluate(task: _Task, extra: dict | None = None) -> dict:
     time.sleep(0.6)
-    return {"key": str(task), "status": "ok"}
+    return {"key": task.key, "status": "ok"}
 
 
 @pytest.mark.slow
 def test_heartbeat_runs_while_evaluations_are_in_flight(tmp_path: Path) -> None:
     beats = []
     with ResultsWriter(tmp_path / "r.jsonl") as writer:
-        out = run_sweep([1, 2], writer, lambda: ThreadPoolExecutor(1), window=1,
+        out = run_sweep([_Task("1"), _Task("2")], writer, lambda: ThreadPoolExecutor(1), window=1,
                         evaluate=_slow_evaluate, heartbeat=lambda: beats.append(1))
     assert out.ok == 2 and len(beats) >= 3  # every 0.5 s, and after each result
 
