@@ -49,9 +49,10 @@ def strongest_frequency(rec: RecordedMotion) -> float | None:
     of ``rec.t``] among those with at least :data:`MIN_CYCLES` periods in the recording; None
     when there is none (too few samples, no motion).
 
-    The spectrum is the sum over the axes of |FFT|² of the first :data:`MAX_SAMPLES` samples,
-    each axis clipped to its 1st–99th percentiles (outliers do not decide it), interpolated
-    across gaps onto a uniform grid, its linear trend removed and a Hann window applied."""
+    The spectrum is the sum over the axes of the squared magnitude of the FFT of the first
+    :data:`MAX_SAMPLES` samples, each axis clipped to its 1st–99th percentiles (outliers do not
+    decide it), interpolated across gaps onto a uniform grid, its linear trend removed and a
+    Hann window applied."""
     n = min(rec.t.size, MAX_SAMPLES)
     if n < 4 * MIN_CYCLES:
         return None

@@ -157,9 +157,14 @@ def _rms_with_shifted_forecasts(monkeypatch, predictor: str, shift: float) -> fl
         return original(self, steps) + shift
 
     monkeypatch.setattr(Predictor, "predict", shifted)
-    config = small_config(predictor=predictor, seed=1, **{"loop.duration": 1.2,
-                                                         "loop.settling": 0.6})
+    config = small_config(predictor=predictor, seed=1, predictor_settings=_QUICK.get(predictor, {}),
+                          **{"loop.duration": 1.2, "loop.settling": 0.6})
     return run_experiment(config)[1]["rms_error_mm"]
+
+
+#: A combination of members that fit in a moment (its default members include networks, whose
+#: fits on the settling window take minutes and test nothing more here).
+_QUICK = {"combination": {"members": ["one-step", "st-rls", "st-ridge"]}}
 
 
 def _patched_run_changes(monkeypatch, predictor: str) -> None:
