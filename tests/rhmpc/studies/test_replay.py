@@ -20,12 +20,12 @@ import pinocchio as pin
 import pytest
 
 from rhmpc.studies.replay import (
-    arm_parts,
     forecast_frames,
     frame_times,
     joint_poses,
     write_replay,
 )
+from rhmpc.studies.replay_scene import arm_parts
 from tests.rhmpc.studies.stand_in_run import stand_in_run
 
 try:
