@@ -63,10 +63,11 @@ def table(r: dict) -> str:
     late = sum(v.get("late", 0) for v in r["packets"].values())
     lines = [
         f"rhmpc sil: {r['predictor']} on {r['recording']}, {r['duration_s']:g} s in real time",
-        _row("ticks, deadline misses", f"{r['ticks']}, {r['deadline_misses']}"),
+        _row("ticks, deadline misses", f"{r['ticks']}, {r['deadline_misses']} "
+             f"({100 * r['deadline_misses'] / max(r['ticks'], 1):.3g} %)"),
         _row("controller wake-up latency", _p(r["wakeup_latency_us"], "us")),
         _row("host wake-up latency", _p(r["host_wakeup_latency_us"], "us")
-             + f" ({r['host_wakeup_latency_us']['tool']}; a period late: "
+             + f" ({r['host_wakeup_latency_us']['tool']}; the misses the host alone causes: "
              f"{100 * r['host_wakeup_latency_us']['late_periods']:.3g} %)"),
         _row("controller step", _p(r["controller_step_us"], "us")),
         _row("sensor to torque", _p(r["sensor_to_torque_ms"], "ms")),
