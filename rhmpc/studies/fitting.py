@@ -106,7 +106,7 @@ def fit_all(plans: Sequence[FitPlan], period: float, series: list[np.ndarray], l
             save: Path | None = None, label: str = "") -> dict:
     """name → (fitted predictor, seconds): each planned predictor forecasting leads 1 …
     ``leads`` directly, fitted on ``series`` with the study's ``seed``; its progress told
-    round by round; each saved in the folder ``save`` (``LABEL.NAME.npz``/``.pt``) if given."""
+    round by round; each saved in the folder ``save`` (``LABEL.NAME.npz``) if given."""
     out = {}
     for plan in plans:
         extra = {"seed": seed} if "seed" in LEARNED[plan.name].settings.__dataclass_fields__ \
