@@ -22,12 +22,14 @@ Innovation gate (encoders that stick, a reading that is not finite)
     acts, moves on: the filter absorbs a steady acceleration a as the innovation bias
     a Ts / L_v, so the gate sees an acceleration past γ √S L_v / Ts, which a loop fighting a
     stuck joint reaches as its torque grows. A reading held for ``reacquire_ticks`` whose joints
-    past the gate have all changed since it was first held is alive (a disturbance the model
-    did not know, not a fault): the estimate's angles move to it, its velocity to the
-    reading's mean over the hold, and the next ``reacquire_ticks`` readings are fused whatever
-    their innovation while the filter settles. A reading held for
-    ``fault_timeout`` is an encoder fault: :attr:`JointObserver.faulted` tells the
-    controller to brake (on the predicted velocity, the best it has).
+    that were past the gate when the hold began have all changed since is alive (a disturbance
+    the model did not know, or a quantised reading flipping back a step, not a fault); a joint
+    that the open-loop prediction carries past its gate during the hold is no suspect (an arm
+    at rest reads the same). The estimate's angles then move to the reading, its velocity to
+    the reading's mean over the hold, and the next ``reacquire_ticks`` readings are fused
+    whatever their innovation while the filter settles. A reading held for ``fault_timeout``
+    is an encoder fault: :attr:`JointObserver.faulted` tells the controller to brake (on the
+    predicted velocity, the best it has).
 """
 
 from __future__ import annotations
@@ -135,6 +137,7 @@ class JointObserver:
         self._nu, self._abs_nu = np.zeros(n), np.zeros(n)
         self._gate_min = float(self.gate.min())
         self._first = np.zeros(n)  # the reading when it was first held
+        self._suspect = np.zeros(n, dtype=bool)  # its joints past the gate then
         self.reset()
 
     @property
@@ -185,19 +188,22 @@ class JointObserver:
 
     def _hold(self, nu: np.ndarray) -> bool:
         """Whether the reading is held out (then x̂ = x̂⁻ and the prediction stands in for it);
-        a reading held ``reacquire_ticks`` whose joints past the gate have all changed since
-        is taken again."""
+        a reading held ``reacquire_ticks`` whose joints that were past the gate when the hold
+        began have all changed since is taken again (a joint the open-loop prediction drifts
+        away from during the hold is not a suspect: an arm at rest reads the same)."""
         q = self._q_in
         past = ~(np.abs(nu) <= self.gate)  # NaN is past
         if not past.any():
             self.held = 0
             return False
+        suspect = self._suspect
         if self.held >= self.settings.reacquire_ticks and np.all(np.isfinite(q)) \
-                and np.all(q[past] != self._first[past]):
+                and np.all(q[suspect] != self._first[suspect]):
             self._reacquire(q)
             return False
         if self.held == 0:
             self._first[:] = q
+            suspect[:] = past
         self.held += 1
         self.counts["held"] += 1
         np.add(self.q0, self.x_prior[: self.n], out=q)

@@ -136,6 +136,27 @@ def test_a_reading_that_moves_again_is_taken_again(phantom_arm):
     assert np.all(np.isfinite(q))
 
 
+def test_a_joint_the_prediction_drifts_from_during_a_hold_is_no_suspect(phantom_arm):
+    """A reading held for joint 0 (a step past its gate, then a quantum further: alive) while
+    the open-loop prediction carries joint 1, whose encoder reads an arm at rest, past its own
+    gate: the hold ends on joint 0's change alone; joint 1's steady reading is no fault."""
+    robot, arm = phantom_arm
+    res = robot.encoder_resolution
+    observer = JointObserver(arm, res)
+    x = np.zeros(2 * arm.nu)
+    x[arm.nu + 1] = 0.05  # [rad/s]: the estimate believes joint 1 moves
+    observer.reset(x)
+    step = 3.0 * observer.gate[0]
+    for k in range(2 * observer.timeout_ticks):
+        q = arm.q0.copy()
+        q[0] += step + res[0] * (k > 0)
+        observer.correct(q)
+        observer.predict(np.zeros(arm.nu))
+        if k == observer.settings.reacquire_ticks - 1:  # the prediction is past joint 1's gate
+            assert abs(observer.x_prior[1]) > observer.gate[1]
+    assert observer.counts["reacquired"] == 1 and not observer.faulted
+
+
 def test_readings_that_are_not_finite_are_held_out(phantom_arm):
     robot, arm = phantom_arm
     observer = JointObserver(arm, robot.encoder_resolution)

@@ -97,7 +97,7 @@ static int held_out(rhmpc_t *ctl, const double q[RHMPC_NU], double qf[RHMPC_NU])
     past[j] = !(fabs(nu) <= rhmpc_gate[j]); /* NaN is past */
     any |= past[j];
     finite &= isfinite(q[j]) != 0;
-    if (past[j] && !(q[j] != ctl->first[j])) moved = 0;
+    if (ctl->suspect[j] && !(q[j] != ctl->first[j])) moved = 0;
   }
   if (!any) {
     ctl->held = 0;
@@ -116,7 +116,10 @@ static int held_out(rhmpc_t *ctl, const double q[RHMPC_NU], double qf[RHMPC_NU])
     ctl->pub.encoder_reacquired += 1;
     return 0;
   }
-  if (ctl->held == 0) memcpy(ctl->first, q, sizeof ctl->first);
+  if (ctl->held == 0) {
+    memcpy(ctl->first, q, sizeof ctl->first);
+    memcpy(ctl->suspect, past, sizeof ctl->suspect);
+  }
   ctl->held += 1;
   ctl->pub.encoder_held += 1;
   for (int j = 0; j < RHMPC_NU; j++) qf[j] = rhmpc_q0[j] + ctl->x_prior[j];

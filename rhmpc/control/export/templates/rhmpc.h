@@ -189,6 +189,7 @@ typedef struct {
   rhmpc_reference_t ref;
   double x_prior[RHMPC_NX];             /* the observer's prediction for the next step */
   double first[RHMPC_NU];               /* the reading when it was first held */
+  int suspect[RHMPC_NU];                /* its joints past the gate then */
   int held, grace;                      /* ticks held in a row; ticks still fused ungated */
   double acting[RHMPC_INPUT_DELAY + 1][RHMPC_NU];  /* the MPC torques still to act (a ring) */
   int acting_next;
