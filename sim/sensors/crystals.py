@@ -19,9 +19,10 @@ class CrystalArray:
     Defaults from Tuna et al. (2013) §III-A: "five other crystals were asymmetrically mounted
     on a rigid plastic base of diameter 60 mm, on a circle of diameter 50 mm", the base in a
     balloon of glycerine solution against the heart. The angles are not published: crystal k
-    sits at k × 137.5° (the golden angle, asymmetric for any count). The POI crystal's distance
-    from the base (``standoff``) is not published either: 30 mm is an assumption (a balloon a
-    few centimetres thick; every line of sight then lies within 40° of the base's axis).
+    sits at k × :data:`GOLDEN_ANGLE_DEG` (the golden angle, asymmetric for any count). The POI
+    crystal's distance from the base (``standoff``) is not published either: 30 mm is an
+    assumption (a balloon a few centimetres thick; every line of sight then lies within 40° of
+    the base's axis).
 
     Attributes
     ----------
@@ -33,7 +34,8 @@ class CrystalArray:
     standoff : float
         Nominal distance of the POI crystal from the base's plane, on its axis [m] (30 mm).
     angles : tuple of float or None
-        Angular positions of the crystals on the circle [deg]; None: k × 137.5°.
+        Angular positions of the crystals on the circle [deg]; None: k ×
+        :data:`GOLDEN_ANGLE_DEG`.
     """
 
     count: int = 5
