@@ -419,8 +419,10 @@ def _setting(todo: list[Job]) -> str:
 def execute(todo: list[Job], args: argparse.Namespace):
     """Run the jobs through the sweep runner, with a progress bar on stderr.
 
-    Local worker processes are forked (the parent has the run stack loaded) and die with this
-    process; ``--scheduler`` sends the jobs to a Dask cluster. Ctrl-C stops the workers at
+    Local worker processes are forked (the parent has the run stack loaded), or started afresh
+    where the open loops of a split may have run PyTorch here (a fork does not carry its
+    threads: the workers hung), and die with this process; ``--scheduler`` sends the jobs
+    to a Dask cluster. Ctrl-C stops the workers at
     once and keeps the runs that finished.
 
     Returns
@@ -432,7 +434,9 @@ def execute(todo: list[Job], args: argparse.Namespace):
     from rhmpc.tuning.progress import Heartbeat, note, progress_bar
     from rhmpc.tuning.runner import executors, run_sweep
 
-    backend = executors(args.jobs, args.scheduler, len(todo), start_method="fork")
+    fitted_here = args.split and "torch" in sys.modules  # the open loops ran PyTorch
+    backend = executors(args.jobs, args.scheduler, len(todo),
+                        start_method="spawn" if fitted_here else "fork")
     note(f"rhmpc compare: running {len(todo)} run(s) on {backend.where}", args.quiet)
     bar = progress_bar(len(todo), "run", "compare", args.quiet)
     failed = 0
