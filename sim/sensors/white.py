@@ -54,7 +54,7 @@ class WhiteSettings:
         Sample rate [Hz] (Tuna et al. §III-A: 257 or 404).
     accuracy : float
         RMS of the 3-D error vector [m]; σ per axis = accuracy/√dim (250 µm, the
-        sonomicrometer's absolute accuracy read as noise: 0.144 mm per axis in 3-D).
+        sonomicrometer's absolute accuracy read as noise: 0.25 mm / √3 per axis in 3-D).
     outliers : EchoOutliers or None
         Echo outliers; None disables them.
     dropouts : Dropouts or None
