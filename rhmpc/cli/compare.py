@@ -421,9 +421,8 @@ def execute(todo: list[Job], args: argparse.Namespace):
 
     Local worker processes are forked (the parent has the run stack loaded), or started afresh
     where the open loops of a split may have run PyTorch here (a fork does not carry its
-    threads: the workers hung), and die with this process; ``--scheduler`` sends the jobs
-    to a Dask cluster. Ctrl-C stops the workers at
-    once and keeps the runs that finished.
+    threads: the workers hung), and die with this process; ``--scheduler`` sends the jobs to a
+    Dask cluster. Ctrl-C stops the workers at once and keeps the runs that finished.
 
     Returns
     -------
