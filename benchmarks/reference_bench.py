@@ -44,9 +44,9 @@ def drive(changes: dict) -> Iterator[tuple[int, object, list]]:
     run : rhmpc.experiment.assembly.Run
         The run (``run.reference`` is the reference driven).
     arrivals : list of (z, stamp, forecast)
-        The samples that refreshed the reference on this tick (centred [m]; None: no new
-        sample), their time [s], and the one-step forecast the outlier gate judged ``z`` by
-        (centred [m]; None while the gate has none).
+        The samples that refreshed the reference on this tick (in the sensor's frame [m];
+        None: no new sample), their time [s], and the one-step forecast the outlier gate
+        judged ``z`` by (alike; None while the gate has none).
     """
     from rhmpc.experiment import RunConfig, build_run
     from sim.loop.closed_loop import Refreshes
@@ -54,7 +54,7 @@ def drive(changes: dict) -> Iterator[tuple[int, object, list]]:
     config = RunConfig().replace(**changes)
     run = build_run(config)
     reference = run.reference
-    refreshes = Refreshes(run.stream, run.truth.center, config.loop, run.clock)
+    refreshes = Refreshes(run.stream, config.loop, run.clock)
     for tick in range(config.loop.ticks):
         arrivals = []
         for z, stamp, _ in refreshes.due(tick):

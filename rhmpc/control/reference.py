@@ -51,9 +51,13 @@ A forecast made outside (``forecast(tick, stamp, points)``, a predictor in anoth
 the place of the refresh's own nodes: the same interpolation and guard, then the refreshes
 only keep the predictor learning until ``refresh_ticks`` ticks pass without one.
 
-Placement: both references work in centred heart coordinates (d = 1 or 3 axes); after
-``place(origin)`` their ``horizon`` returns workspace points ``r = origin + E r_c`` (N, 3), with
-``E`` embedding a 1-D motion along x.
+Placement: the predicted reference works in the sensor's own frame (d = 1 or 3 axes), the frame
+its samples were measured in, so that a predictor sees in the loop the samples it would see
+open loop, and a model fitted on a recording runs on it unchanged; the exact reference works in
+the centred truth. After ``place(origin, center)`` their ``horizon`` returns workspace points
+``r = origin + E (r_s − c)`` (N, 3), with ``c`` the sensor's point placed at ``origin`` (the
+registration of the sensor to the workspace; 0 for the centred truth) and ``E`` embedding a 1-D
+motion along x.
 """
 
 from __future__ import annotations
@@ -151,10 +155,10 @@ def embed3(p: np.ndarray) -> np.ndarray:
     return out
 
 
-def _origin(origin) -> np.ndarray:
+def _origin(origin, name: str = "origin") -> np.ndarray:
     origin = np.array(origin, dtype=float).reshape(-1)
     if origin.shape != (3,) or not np.all(np.isfinite(origin)):
-        raise ValueError(f"origin must be 3 finite coordinates [m], got {origin!r}")
+        raise ValueError(f"{name} must be 3 finite coordinates [m], got {origin!r}")
     return origin
 
 
@@ -164,9 +168,10 @@ class PredictedReference:
     Parameters
     ----------
     predictor : predictors.Predictor
-        Runs at its ``dt`` (``downsample · Ts``, or a slow sensor's sample period); fed centred
-        heart coordinates [m]. A multi-point predictor (``multi_point``) also gets the other
-        tracked points' samples of each refresh.
+        Runs at its ``dt`` (``downsample · Ts``, or a slow sensor's sample period); fed the
+        POI's samples in the sensor's frame [m] (module docstring: placement). A multi-point
+        predictor (``multi_point``) also gets the other tracked points' samples of each
+        refresh.
     Ts : float
         Control period [s].
     horizon : int
@@ -205,20 +210,30 @@ class PredictedReference:
         # Interpolation matrices by (nodes, (now − t0)/Ts): with sensor stamps on the tick grid
         # only a few offsets occur, so a refresh is one small product instead of a rebuild.
         self._matrices: dict[tuple[int, float], np.ndarray] = {}
-        self._origin = np.zeros(3)
+        self._origin = self._center = self._shift = np.zeros(3)
         self.reset()
 
-    def place(self, origin) -> None:
-        """From now on :meth:`horizon` returns workspace points origin + E r_c (N, 3) [m]."""
+    def place(self, origin, center=(0.0, 0.0, 0.0)) -> None:
+        """From now on :meth:`horizon` returns workspace points origin + E (r_s − center)
+        (N, 3) [m], r_s in the sensor's frame: ``center`` [m] (d or 3 coordinates) is the
+        sensor's point that sits at ``origin``, where the tool holds before the first
+        sample."""
         self._origin = _origin(origin)
+        self._center = _origin(embed3(np.reshape(center, (1, -1)))[0], "center")
+        self._shift = self._origin - self._center
         self._hold = np.broadcast_to(self._origin, (self.N, 3))
         if self._dense is not None:
-            self._placed = self._origin + embed3(self._dense)
+            self._placed = self._shift + embed3(self._dense)
+
+    @property
+    def placement(self) -> tuple[np.ndarray, np.ndarray]:
+        """(origin, center) of the last :meth:`place` [m] (3 coordinates each)."""
+        return self._origin, self._center
 
     def reset(self) -> None:
         """Forget the predictor, the gate and the points."""
         self.predictor.reset()
-        self._dense: np.ndarray | None = None  # (span, d) centred points of the last refresh
+        self._dense: np.ndarray | None = None  # (span, d) points of the last refresh
         self._placed = np.broadcast_to(self._origin, (self._span, 3))  # until the first sample
         self._hold = np.broadcast_to(self._origin, (self.N, 3))
         self._first = 0  # tick of the first point
@@ -270,7 +285,7 @@ class PredictedReference:
 
     def forecast(self, tick: int, stamp: float, points: np.ndarray) -> bool:
         """A forecast made outside (a predictor in another process) arriving on ``tick``:
-        ``points[k]`` the centred POI at ``stamp + k·dt`` [m], k = 0 … K − 1, 4 ≤ K ≤
+        ``points[k]`` the POI at ``stamp + k·dt`` in the sensor's frame [m], k = 0 … K − 1, 4 ≤ K ≤
         ``prediction_points + ⌈LATENCY_CAP/dt⌉ + 1``, ``points[0]`` the newest sample as that
         predictor took it. Interpolated and guarded as a refresh's own nodes (the guard holds
         ``points[0]``); for the next ``refresh_ticks`` ticks the refreshes only keep the
@@ -329,7 +344,7 @@ class PredictedReference:
             gap = np.abs(self._dense - held)
             if gap.flat[gap.argmax()] > s.guard_margin + s.guard_speed * lead:
                 self._diverged(held, restart)
-        self._placed = self._origin + embed3(self._dense)
+        self._placed = self._shift + embed3(self._dense)
         if self.monitor is not None:
             self.monitor.observe(now, self.predictor.heart_rate_hz)
 
@@ -464,8 +479,9 @@ class ExactReference:
             self._points = np.concatenate(parts)
         return self._points
 
-    def place(self, origin) -> None:
-        """From now on :meth:`horizon` returns workspace points origin + E r_c (N, 3) [m]."""
+    def place(self, origin, center=(0.0, 0.0, 0.0)) -> None:
+        """From now on :meth:`horizon` returns workspace points origin + E r_c (N, 3) [m], r_c
+        the centred truth (``center``, the sensor's registration, is not read: no sample is)."""
         self._origin = _origin(origin)
         self._restart()
 

@@ -63,7 +63,8 @@ class Run:
     truth : SourceTruth
         The centred POI truth, read per window.
     anchor : ndarray, shape (3,)
-        Where the centred motion's origin sits in the workspace [m].
+        Where the motion's mean sits in the workspace [m] (its reference placed with the
+        mean as the sensor's point there).
     stream : SampleSource
         The sensor samples the controller sees, read in blocks.
     label : str
@@ -116,7 +117,7 @@ def build_run(config: RunConfig, implementation: str = "python", progress=None) 
     anchor = motion_anchor(config, arm)
     check_reach(robot, truth, anchor, loop.ticks)
     reference = build_reference(config, truth, heart, clock)
-    reference.place(anchor)
+    reference.place(anchor, truth.center)
     controller = build_controller(config, robot, arm, reference, implementation)
     plant = build_plant(config, robot, arm)
     run = Run(config, robot, arm, plant, controller, truth, anchor, stream, heart.label,
@@ -316,6 +317,6 @@ def check_reach(robot: Robot, truth, anchor: np.ndarray, ticks: int) -> float:
 
 
 def motion_anchor(config: RunConfig, arm: LinearArm) -> np.ndarray:
-    """Where the centred motion's origin sits in the workspace [m] (``loop.placement``)."""
+    """Where the motion's mean sits in the workspace [m] (``loop.placement``)."""
     offset = np.asarray(config.loop.poi_offset, dtype=float)
     return arm.y0 + offset if config.loop.placement == "centred" else offset

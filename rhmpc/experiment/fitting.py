@@ -6,10 +6,14 @@ from series on its own sampling grid, (T, P, d) [m] with the POI first
 
 - the samples it will itself read during the run's settling window, exactly as the loop will
   give them (:class:`sim.loop.closed_loop.Refreshes`: the predictor's clock, its gaps, the other
-  tracked points of a recording), centred as the loop centres them; the metrics start after
-  that window, so no scored sample is ever in the training;
-- and the recordings of ``RunConfig.train``, read as the run's own (the same POI), each centred
-  on its POI's mean; they must be sampled at the predictor's period.
+  tracked points of a recording), in the sensor's frame as the loop gives them; the metrics
+  start after that window, so no scored sample is ever in the training;
+- and the recordings of ``RunConfig.train``, read as the run's own (the same POI), each in its
+  own frame, as the open-loop study fits on them; they must be sampled at the predictor's
+  period.
+
+Fitted here or open loop (``rhmpc predict --save-models``, loaded with ``--model``), a model
+sees the same samples in the loop: the loop hands the predictor the samples as measured.
 """
 
 from __future__ import annotations
@@ -109,7 +113,7 @@ def settling_series(run) -> np.ndarray:
     """(T, P, d) [m]: what the predictor reads during the settling window, one row per
     refresh (NaN where a sample or a point is missing), the POI first."""
     loop = run.config.loop
-    refreshes = Refreshes(run.stream, run.truth.center, loop, run.clock, run.points)
+    refreshes = Refreshes(run.stream, loop, run.clock, run.points)
     P = 1 if run.points is None else 1 + run.points.others.shape[1]
     rows = []
     for tick in range(round(loop.settling_s / loop.Ts)):
@@ -125,7 +129,7 @@ def settling_series(run) -> np.ndarray:
 
 def training_recordings(config, period: float) -> list[np.ndarray]:
     """The recordings of ``config.train`` as (T, P, d) [m] on their grid, POI first, each
-    centred on its POI's mean (:func:`sim.recordings.training_series`)."""
+    in its own frame (:func:`sim.recordings.training_series`)."""
     if not config.train:
         return []
     read = dict(config.data_read)
@@ -134,4 +138,4 @@ def training_recordings(config, period: float) -> list[np.ndarray]:
         series = training_series(config.train, poi, read, period)
     except RecordingError as exc:
         raise UsageError(f"--train: {exc}") from None
-    return [s - np.nanmean(s[:, 0], axis=0) for s in series]
+    return series

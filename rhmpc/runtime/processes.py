@@ -119,7 +119,7 @@ def sensor(run, role: Role, parent: int) -> None:
     """The sensor's samples at their arrival ticks, to the predictor and the controller."""
     stop, scheduling = _start(role, parent)
     loop = run.config.loop
-    refreshes = Refreshes(run.stream, run.truth.center, loop, run.clock, run.points)
+    refreshes = Refreshes(run.stream, loop, run.clock, run.points)
     link = Link(0, role.epoch_ns)
     sent = 0
     while not stop.asked and refreshes.next < role.ticks:

@@ -19,7 +19,8 @@ little-endian (``rhmpc/runtime/export/rhmpc_wire.h`` is the same format in C)::
 The run's clock is ``CLOCK_MONOTONIC`` less the run's epoch: every process of a run reads the
 same clock (one host). The kinds carry CRTK names (the dVRK's robot interfaces): ``measured_cp``
 a tracker's sample, row 0 the POI and rows 1 … the other tracked points (NaN: not measured), in
-metres relative to the origin the controller is placed at; ``measured_js`` the encoders' joint
+metres in the tracker's frame (the controller is placed with the tracker's point that sits at its
+origin, ``--center``); ``measured_js`` the encoders' joint
 angles [rad] of one tick (its stamp is that tick's instant); ``servo_jf`` the joint torques
 [N·m] computed from them (the same stamp). ``forecast_cp`` (CRTK has no name for it) is a
 predictor's forecast: row k the POI at ``stamp + k · period``, row 0 the newest sample as the

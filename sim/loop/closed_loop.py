@@ -22,9 +22,12 @@ and a fixed-size decimated trace, and every tick can go to an NPZ file as the ru
 
 The POI trajectory is placed in the workspace (``LoopSettings.placement``): by default centred
 on its mean over the run, at the end-effector's home position plus ``poi_offset``. A 1-D motion
-moves along the x axis. The error is ``p_ee(q_{i+1}) − p_poi((i+1)·Ts)``: at every tick for a
-synthetic motion, whose truth is continuous; at the instants of its samples for a recording,
-where the POI was measured only then (``measured``).
+moves along the x axis. The sensor's samples reach the reference in the sensor's own frame, as
+measured; the reference is placed with that mean (``reference.place(anchor, center)``), so that
+a predictor sees the samples it would see open loop. The error is
+``p_ee(q_{i+1}) − p_poi((i+1)·Ts)``: at every tick for a synthetic motion, whose truth is
+continuous; at the instants of its samples for a recording, where the POI was measured only then
+(``measured``).
 """
 
 from __future__ import annotations
@@ -105,19 +108,18 @@ class Refreshes:
     arrived by then, stamped with its measurement time (None and the tick's time when no sample
     is new). With the ``"sensor"`` clock, each raw sample once, on the tick it arrives, with its
     own stamp; a gap in the stamps is first filled with missing samples (at most
-    :attr:`MAX_FILL`), so that the predictor's clock keeps its period. Samples are centred by
-    ``center`` (the motion's placement, :mod:`sim.loop.closed_loop`). With ``points`` (the
-    other tracked points of a recording), each refresh also carries the other points measured
-    at its stamp, centred alike (None where none was measured then).
+    :attr:`MAX_FILL`), so that the predictor's clock keeps its period. Samples are in the
+    sensor's own frame, as measured (the reference places them, :mod:`sim.loop.closed_loop`).
+    With ``points`` (the other tracked points of a recording), each refresh also carries the
+    other points measured at its stamp (None where none was measured then).
     """
 
     #: The most missing samples filled into one gap of the stamps.
     MAX_FILL = 50
 
-    def __init__(self, stream, center: np.ndarray, settings: LoopSettings,
-                 clock: PredictorClock, points: PointsAt | None = None) -> None:
-        self.center, self.Ts, self.clock = center, settings.Ts, clock
-        self.points = None if points is None else points.centred(center)
+    def __init__(self, stream, settings: LoopSettings, clock: PredictorClock,
+                 points: PointsAt | None = None) -> None:
+        self.Ts, self.clock, self.points = settings.Ts, clock, points
         self.sensor = clock.mode == "sensor"
         if self.sensor:
             self.queue = RawQueue(clock.raw, settings.Ts)
@@ -151,19 +153,19 @@ class Refreshes:
             for _ in range(min(max(fills, 0), self.MAX_FILL)):
                 yield None, t_k
             self.last_stamp = t_k
-            yield z_k - self.center, t_k
+            yield z_k, t_k
         arrived = queue.tick()
         self.next = math.inf if arrived is None else arrived
 
     def _newest(self, tick: int) -> tuple[np.ndarray | None, float]:
-        """The centred newest sample arrived by ``tick`` and its time, or None and the tick's
+        """The newest sample arrived by ``tick`` and its time, or None and the tick's
         time when none is new."""
         j = self.cursor.newest(tick * self.Ts + 1e-12)
         if j < 0 or j == self.last:
             return None, tick * self.Ts
         self.last = j
         t_j, z_j = self.cursor.sample(j)
-        return z_j - self.center, t_j
+        return z_j, t_j
 
 
 @contextlib.contextmanager
@@ -210,7 +212,8 @@ def run_closed_loop(plant, controller, truth, stream, settings: LoopSettings,
     controller
         ``refresh(tick, z, stamp)``, ``step(tick, q) -> τ``, with ``u``, ``tau_command``,
         ``x_hat``, ``horizon(tick)``, ``step_ns``, ``refresh_ns`` and ``stats``
-        (:class:`rhmpc.control.controller.Controller`), its reference placed at ``anchor``.
+        (:class:`rhmpc.control.controller.Controller`), its reference placed at ``anchor``
+        with the truth's ``center`` (``reference.place(anchor, truth.center)``).
     truth
         The centred POI truth over at least ``ticks + N + 1`` ticks: an object with
         ``window(i0, i1)``, ``n_ticks`` and ``center`` (:class:`sim.loop.streams.SourceTruth`),
@@ -221,7 +224,7 @@ def run_closed_loop(plant, controller, truth, stream, settings: LoopSettings,
     clock
         When the reference refreshes (:func:`sim.loop.clock.predictor_clock`).
     anchor : ndarray (3,)
-        Where the centred motion's origin sits in the workspace [m].
+        Where the motion's mean sits in the workspace [m].
     robot
         The plant's robot (forward kinematics of the records).
     progress
@@ -253,7 +256,7 @@ def run_closed_loop(plant, controller, truth, stream, settings: LoopSettings,
         truth = ArrayTruth(truth, np.zeros(np.shape(truth)[1]))
     if truth.n_ticks < n + N + 1:
         raise ValueError(f"truth covers {truth.n_ticks} ticks, the run needs {n + N + 1}")
-    refreshes = Refreshes(stream, truth.center, settings, clock, points)
+    refreshes = Refreshes(stream, settings, clock, points)
     marks = [int(m) for m in marks]
     segmented = bool(marks)  # also when every mark is an end of the run (a fault from 0 to n)
     record = Recorder(robot, settings, N, truth, anchor, trace_file, clock, segmented, measured)

@@ -170,10 +170,6 @@ class PointsAt:
             raise ValueError(f"others must be (n, P - 1, d) with n = {self.t.size} samples, "
                              f"got {self.others.shape}")
 
-    def centred(self, center: np.ndarray) -> PointsAt:
-        """The same points less ``center`` [m] (the POI's placement)."""
-        return PointsAt(self.t, self.others - np.asarray(center, dtype=float))
-
     def at(self, t: float) -> np.ndarray | None:
         """The (P − 1, d) positions measured at ``t`` [m], or None when no sample was."""
         i = int(np.searchsorted(self.t, t - self.SNAP))

@@ -52,7 +52,7 @@ def _load(path: str) -> tuple[str, ctypes.CDLL, tempfile.TemporaryDirectory | No
         path = str(copy)
     lib = ctypes.CDLL(path)
     vp, ll, d = ctypes.c_void_p, ctypes.c_longlong, ctypes.c_double
-    for name, args, result in (("rhmpc_init", (vp,), None), ("rhmpc_place", (vp, vp), None),
+    for name, args, result in (("rhmpc_init", (vp,), None), ("rhmpc_place", (vp, vp, vp), None),
                                ("rhmpc_refresh", (vp, ll, d, vp), ctypes.c_int),
                                ("rhmpc_step", (vp, ll, vp, vp), ctypes.c_int),
                                ("rhmpc_forecast", (vp, ll, d, vp, ctypes.c_int), ctypes.c_int),
@@ -93,18 +93,21 @@ class CController:
         self._q, self._tau, self._z = np.zeros(self.nu), np.zeros(self.nu), np.zeros(3)
         self.torque_limit = np.ctypeslib.as_array(
             (ctypes.c_double * self.nu).in_dll(lib, "rhmpc_tau_max")).copy()
-        self._origin = np.zeros(3)
+        self._origin, self._center = np.zeros(3), np.zeros(3)
         self.reset()
 
     def reset(self) -> None:
         """At rest at the home posture: no plan, no points, zero counters (placed as before)."""
         self._lib.rhmpc_init(self._addr)
-        self.place(self._origin)
+        self.place(self._origin, self._center)
 
-    def place(self, origin) -> None:
-        """Where the centred motion sits in the workspace [m]."""
+    def place(self, origin, center=(0.0, 0.0, 0.0)) -> None:
+        """Where the motion sits in the workspace [m]: the sensor's point ``center`` at
+        ``origin`` (``rhmpc_place``; :meth:`PredictedReference.place`)."""
         self._origin = np.array(origin, dtype=float).reshape(3)
-        self._lib.rhmpc_place(self._addr, self._origin.ctypes.data)
+        self._center = np.zeros(3)
+        self._center[: np.size(center)] = np.reshape(center, -1)
+        self._lib.rhmpc_place(self._addr, self._origin.ctypes.data, self._center.ctypes.data)
 
     def refresh(self, tick: int, z: np.ndarray | None, stamp: float,
                 others: np.ndarray | None = None) -> None:
@@ -225,5 +228,5 @@ def controller_in_c(controller, robot: str) -> CController:
     except ExportError as exc:
         raise ExportError(f"--controller c: {exc}") from None
     c = CController(library, controller.mpc)
-    c.place(controller.reference._origin)
+    c.place(*controller.reference.placement)
     return c

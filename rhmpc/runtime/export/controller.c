@@ -3,7 +3,7 @@
  * 2-kHz clock, fed over UDP in the wire format of rhmpc_wire.h.
  *
  *   rhmpc_sil_controller --epoch NS --ticks N --port P --robot-port R --out PREFIX
- *                        [--origin X Y Z] [--cpu C] [--priority P] [--no-internal] [--probe]
+ *                        [--origin X Y Z [--center X Y Z]] [--cpu C] [--priority P] [--no-internal] [--probe]
  *                        [--phase NS]
  *
  * Each tick i wakes at epoch + i Ts (clock_nanosleep, TIMER_ABSTIME), takes what has arrived
@@ -64,7 +64,7 @@ static long long mono_ns(void) {
 
 typedef struct {
   long long epoch, ticks, phase, done, wakeups, behind, last_seq[N_KINDS];
-  double origin[3];
+  double origin[3], center[3];
   int placed;
   long long received[N_KINDS], lost[N_KINDS], late[N_KINDS], bad, stale_encoders, misses;
   long long forecasts_rejected, served[N_SERVED], n_s2t, torques_sent, send_errors;
@@ -282,16 +282,18 @@ int main(int argc, char **argv) {
     else if (!strcmp(a, "--cpu")) r.cpu = (int)number(v, a), i++;
     else if (!strcmp(a, "--priority")) r.priority = (int)number(v, a), i++;
     else if (!strcmp(a, "--out")) r.out = v, i++;
-    else if (!strcmp(a, "--origin") && i + 3 < argc) { /* where the centred motion sits [m] */
+    else if ((!strcmp(a, "--origin") || !strcmp(a, "--center")) && i + 3 < argc) {
+      /* where the motion sits [m]: the sensor's point --center at --origin (rhmpc_place) */
+      double *to = a[2] == 'o' ? r.origin : r.center;
       for (int c = 0; c < 3; c++) {
         char *end = NULL;
-        r.origin[c] = strtod(argv[i + 1 + c], &end);
-        if (end == argv[i + 1 + c] || *end != '\0' || !isfinite(r.origin[c])) {
-          fprintf(stderr, "rhmpc_sil_controller: --origin takes 3 finite numbers [m]\n");
+        to[c] = strtod(argv[i + 1 + c], &end);
+        if (end == argv[i + 1 + c] || *end != '\0' || !isfinite(to[c])) {
+          fprintf(stderr, "rhmpc_sil_controller: %s takes 3 finite numbers [m]\n", a);
           return 2;
         }
       }
-      r.placed = 1, i += 3;
+      r.placed |= a[2] == 'o', i += 3;
     }
     else { fprintf(stderr, "rhmpc_sil_controller: unknown option %s\n", a); return 2; }
   }
@@ -312,7 +314,7 @@ int main(int argc, char **argv) {
     return 1;
   }
   rhmpc_init(&ctl);
-  if (r.placed) rhmpc_place(&ctl, r.origin);
+  if (r.placed) rhmpc_place(&ctl, r.origin, r.center);
   for (int j = 0; j < RHMPC_NU; j++) q[j] = NAN;
   go_realtime(&r);
   run_loop(&r, fd, wake, work, step, s2t);

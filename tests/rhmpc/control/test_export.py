@@ -239,6 +239,7 @@ def test_closed_loop_c_against_python_on_the_main_job(tmp_path):
     z = np.c_[2.5 * np.sin(2 * np.pi * 1.2 * t), 1.5 * np.sin(2 * np.pi * 1.2 * t + 1),
               np.sin(2 * np.pi * 0.25 * t)]
     z += np.random.default_rng(0).normal(scale=0.05, size=z.shape)
+    z += [40.0, -25.0, 60.0]  # the tracker's frame: the controllers place its mean
     path = tmp_path / "video.csv"
     np.savetxt(path, np.c_[t, z], delimiter=",", header="t,x,y,z", comments="")
     for config in (RunConfig(seed=2).replace(**{"loop.duration": 4.0}),
@@ -247,6 +248,25 @@ def test_closed_loop_c_against_python_on_the_main_job(tmp_path):
         rms = [run_experiment(config, implementation=way)[1]["rms_error_mm"]
                for way in ("python", "c")]
         assert abs(rms[1] / rms[0] - 1) <= 0.01, rms
+
+
+@needs_cc
+@pytest.mark.slow
+def test_the_sensors_frame_is_placed_alike():
+    """Samples in a tracker's frame 50 mm away, both controllers placed with that frame's
+    point at the tool's home: the same torques and points, tick for tick."""
+    python, c = pair({})
+    center = np.array([0.03, -0.02, 0.05])
+    python.reference.place(python.reference.placement[0], center)
+    c.place(*python.reference.placement)
+    base = bench_samples(python.mpc.arm.Ts, 2000)
+
+    def samples(k):
+        return [(z + center, stamp) for z, stamp in base(k)]
+
+    err, differ = lockstep(python, c, 2000, samples)
+    assert differ == [] and err.max() <= TOL, (err.max(), int(err.argmax()))
+    np.testing.assert_allclose(c.horizon(1999), python.reference.horizon(1999), atol=1e-9)
 
 
 @needs_cc

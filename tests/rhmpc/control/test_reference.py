@@ -231,6 +231,28 @@ def test_placement_and_a_skipped_refresh_holds_the_last_window():
                                                        np.zeros((N, 2))])
 
 
+def test_samples_in_the_sensors_frame_are_placed_by_its_registration():
+    """A sample z is the workspace point origin + E (z − center); before the first sample the
+    reference holds the origin itself; a center that is not 3 finite numbers is refused."""
+    origin, center = np.array([0.1, -0.2, 0.3]), np.array([0.05, 0.04])
+    ref = PredictedReference(Scripted(lambda t: np.sin(t) + center[0]), TS, N, DS, PLAIN)
+    ref.place(origin, center)
+    np.testing.assert_array_equal(ref.horizon(0), np.broadcast_to(origin, (N, 3)))
+    for k in range(3):
+        t = k * DS * TS
+        ref.refresh(k * DS, np.array([np.sin(t) + center[0], t]), t)
+    tick = 2 * DS
+    h = ref.horizon(tick)
+    t = (tick + np.arange(1, N + 1)) * TS
+    np.testing.assert_allclose(h[:, 0], origin[0] + np.sin(t), atol=1e-3)
+    np.testing.assert_allclose(h[:, 1], origin[1] + t - center[1], atol=1e-12)
+    o, c = ref.placement
+    np.testing.assert_array_equal(o, origin)
+    np.testing.assert_array_equal(c, [*center, 0.0])
+    with pytest.raises(ValueError, match="center must be 3 finite"):
+        ref.place(origin, [np.nan, 0.0, 0.0])
+
+
 def test_exact_reference_read_in_windows_is_the_whole_array():
     """Gaps longer than a window, at window edges and at both ends, bridged as on the array."""
     from sim.loop.streams import ArrayTruth

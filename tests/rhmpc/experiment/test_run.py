@@ -107,7 +107,7 @@ def test_streamed_run_is_the_run_on_whole_arrays(tmp_path, predictor):
         reference = PredictedReference(
             make_predictor(predictor, dt=dt, unit=1.0),  # metres, as the loop says
             loop.Ts, N, loop.downsample, config.reference)
-    reference.place(run.anchor)
+    reference.place(run.anchor, center)
     controller = build_controller(config, run.robot, run.arm, reference)
     whole = run_closed_loop(make_plant(run.robot, run.arm, loop.Ts, config.plant), controller,
                             ArrayTruth(truth, center), stream, loop, run.clock,

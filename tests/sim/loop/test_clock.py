@@ -53,7 +53,7 @@ def test_the_clock_can_be_forced_either_way():
 
 def _due(settings: LoopSettings, raw, ticks: int | None = None) -> list[tuple[int, object, float]]:
     """Every refresh the loop would make: (tick, z or None, stamp)."""
-    refreshes = Refreshes(raw, np.zeros(3), settings, predictor_clock(settings, raw))
+    refreshes = Refreshes(raw, settings, predictor_clock(settings, raw))
     return [(i, z, stamp) for i in range(settings.ticks if ticks is None else ticks)
             for z, stamp, _ in refreshes.due(i)]
 

@@ -36,7 +36,7 @@ def run_with(world, reference_of, stream_of=None, settings=SHORT, failures=0):
     center, truth = poi_truth(src, settings.ticks + N + 1, settings.Ts)
     stream = (stream_of or (lambda s: ideal_stream(s, settings.duration + 0.1)))(src)
     reference = reference_of(truth)
-    reference.place(arm.y0)
+    reference.place(arm.y0, center)
     controller = Controller(RecedingHorizonMPC(arm, MPCSettings()), reference,
                             JointObserver(arm, robot.encoder_resolution),
                             NonlinearityCancellation(robot), robot.torque_limit)

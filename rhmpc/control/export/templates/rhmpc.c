@@ -38,7 +38,8 @@ static long long now_ns(void) {
 void rhmpc_init(rhmpc_t *ctl) {
   memset(ctl, 0, sizeof *ctl);
   rhmpc_mpc_reset(ctl);
-  rhmpc_place(ctl, rhmpc_y0);
+  static const double zero[3] = {0.0, 0.0, 0.0};
+  rhmpc_place(ctl, rhmpc_y0, zero);
   rhmpc_reference_reset(ctl);
 }
 

@@ -6,7 +6,7 @@
  *
  *     static rhmpc_t ctl;                 // static or on the stack: no heap anywhere
  *     rhmpc_init(&ctl);                   // at rest at the home posture q0
- *     rhmpc_place(&ctl, origin);          // where the centred heart motion sits [m]
+ *     rhmpc_place(&ctl, origin, center);  // the sensor's point center sits at origin [m]
  *     on a sample's arrival (every RHMPC_REFRESH_TICKS ticks at most):
  *         rhmpc_refresh(&ctl, tick, stamp, z);      // z: the POI [m], NULL = none new
  *     and/or on a forecast's arrival from a predictor running elsewhere:
@@ -31,11 +31,14 @@
  *   tick        the control tick's index (time = tick * RHMPC_TS); the same clock in both calls
  *   stamp       the sample's measurement time [s] on that clock (a sensor's latency makes it
  *               older than tick * RHMPC_TS; the forecast spans the difference)
- *   z[RHMPC_D]  the point of interest [m], centred: the workspace point is origin + z
+ *   z[RHMPC_D]  the point of interest [m] in the sensor's frame: the workspace point is
+ *               origin + z - center
  *   q[RHMPC_NU] the encoders' joint angles [rad]
  *   tau[RHMPC_NU] out: the joint torques to apply [N*m], finite, |tau_i| <= rhmpc_tau_max[i]
  *   origin[3]   [m] in the robot model's world frame (rhmpc_y0, the tool's home position, by
  *               default)
+ *   center[3]   [m] the sensor's point placed at origin (its first RHMPC_D values are read;
+ *               zero by default): the registration of the sensor to the workspace
  *
  * rhmpc_step returns RHMPC_SOLVED (0) when the QP's solution was applied, else the reason the
  * QP result was not used (RHMPC_MAX_ITER_REACHED, ...): the torque then came from the fallback
@@ -158,7 +161,7 @@ typedef struct {
   double anchor, held_stamp;
   double held[RHMPC_D], forecast[RHMPC_D], second[RHMPC_D], before[RHMPC_D];
   double dense[RHMPC_SPAN * RHMPC_D];
-  double origin[3];
+  double origin[3], center[3];
   double ext_stamp;                     /* the last forecast taken from outside [s] */
   long long ext_until;                  /* rhmpc_refresh interpolates from this tick on */
   /* the predictor: its recent range, delay line and RLS */
@@ -198,16 +201,17 @@ typedef struct {
 /* At rest at the home posture: no plan, no points (they hold the origin), zero counters. */
 void rhmpc_init(rhmpc_t *ctl);
 
-/* Where the centred motion sits in the workspace [m]; the points held until the first sample
+/* Where the motion sits in the workspace [m]: the sensor's point center[3] at origin[3] (a
+ * sample z is the workspace point origin + z - center); the points held until the first sample
  * are that origin. */
-void rhmpc_place(rhmpc_t *ctl, const double origin[3]);
+void rhmpc_place(rhmpc_t *ctl, const double origin[3], const double center[3]);
 
 /* A sensor sample's arrival on `tick`: z (RHMPC_D values [m], NULL: none new) measured at
  * `stamp` [s]. Returns 0, or RHMPC_BAD_STAMP. */
 int rhmpc_refresh(rhmpc_t *ctl, long long tick, double stamp, const double *z);
 
 /* Forecast points made outside, arriving on `tick`: points[k] (RHMPC_D values each [m],
- * centred like z) the POI at stamp + k RHMPC_DT, k = 0 ... count - 1, points[0] the newest sample
+ * in the sensor's frame like z) the POI at stamp + k RHMPC_DT, k = 0 ... count - 1, points[0] the newest sample
  * as that predictor took it; 3 <= count <= RHMPC_KMAX + 1. Returns 0 (taken), RHMPC_BAD_STAMP,
  * RHMPC_BAD_FORECAST (counts[external_rejected]) or RHMPC_STALE_FORECAST (a stamp older than the
  * last taken one, or than RHMPC_LATENCY_CAP before tick: counts[external_stale]). */

@@ -524,16 +524,17 @@ void rhmpc_reference_reset(rhmpc_t *ctl) {
   }
 }
 
-void rhmpc_place(rhmpc_t *ctl, const double origin[3]) {
+void rhmpc_place(rhmpc_t *ctl, const double origin[3], const double center[3]) {
   rhmpc_reference_t *s = &ctl->ref;
-  memcpy(s->origin, origin, sizeof s->origin);
+  memmove(s->origin, origin, sizeof s->origin);
+  memmove(s->center, center, sizeof s->center);
   if (!s->have_anchor) {
-    for (int i = 0; i < RHMPC_SPAN; i++) memcpy(ctl->pub.points + 3 * i, origin, 3 * sizeof(double));
+    for (int i = 0; i < RHMPC_SPAN; i++) memcpy(ctl->pub.points + 3 * i, s->origin, sizeof s->origin);
     return;
   }
   for (int i = 0; i < RHMPC_SPAN; i++)
     for (int c = 0; c < 3; c++)
-      ctl->pub.points[3 * i + c] = origin[c] + (c < D ? s->dense[i * D + c] : 0.0);
+      ctl->pub.points[3 * i + c] = s->origin[c] + (c < D ? s->dense[i * D + c] - s->center[c] : 0.0);
 }
 
 /* PredictedReference._gated: z if the gate accepts it (retracting the previous sample where it
@@ -598,7 +599,7 @@ static void interpolate(rhmpc_t *ctl, long long tick, int n_nodes, double t0,
         break;
       }
   }
-  rhmpc_place(ctl, s->origin);
+  rhmpc_place(ctl, s->origin, s->center);
 }
 
 int rhmpc_reference_refresh(rhmpc_t *ctl, long long tick, double stamp, const double *z) {

@@ -71,7 +71,8 @@ int main(int argc, char **argv) {
   struct timespec next;
 
   rhmpc_init(&ctl);
-  rhmpc_place(&ctl, rhmpc_y0); /* the heart's mean at the tool's home position */
+  const double center[3] = {0.0, 0.0, 0.0}; /* the heart's mean in the sensor's frame */
+  rhmpc_place(&ctl, rhmpc_y0, center);       /* … at the tool's home position */
   for (int j = 0; j < RHMPC_NU; j++) q[j] = rhmpc_q0[j];
   clock_gettime(CLOCK_MONOTONIC, &next);
   for (long long tick = 0; tick < ticks; tick++) {
