@@ -22,6 +22,7 @@ import numpy as np
 
 from predictors.registry import LEARNED, model_kind
 from rhmpc.errors import UsageError
+from rhmpc.experiment.fit_plan import describe, plan_fits
 from sim.loop.closed_loop import Refreshes
 from sim.recordings import RecordingError
 from sim.recordings.points import training_series
@@ -62,13 +63,26 @@ def _fit(run, predictor, settling: np.ndarray, progress) -> None:
                          "learn from: give it a settling window (loop.settling) or --train "
                          "recordings")
     if progress is not None:
-        frames = sum(s.shape[0] for s in series)
-        progress(f"fitting {run.config.predictor} on {frames} samples "
-                 f"({len(series)} series) before the run")
+        for line in announcement(run.config.predictor, predictor, series, run.config.seed):
+            progress(line)
     try:
         predictor.fit(series, progress)
     except ValueError as exc:
         raise UsageError(f"fitting {run.config.predictor}: {exc}") from None
+
+
+def announcement(name: str, predictor, series: list[np.ndarray], seed: int) -> list[str]:
+    """What the run's predictor ``name`` (or its members) fits on ``series`` before the run,
+    why in two rounds, and about how long it will take (:mod:`rhmpc.experiment.fit_plan`: each
+    network predictor timed from a few epochs of one network on these samples)."""
+    names, models = (predictor.settings.members, predictor.members) \
+        if hasattr(predictor, "members") else ((name,), (predictor,))
+    todo = [n for n, m in zip(names, models, strict=True) if needs_fit(m)]
+    leads = max((getattr(m.settings, "leads", 1) for m in models if needs_fit(m)), default=1)
+    plans = plan_fits(todo, predictor.dt, series, leads, seed)
+    frames = sum(s.shape[0] for s in series)
+    return describe(plans, f"{frames} samples ({len(series)} series) before the run",
+                    series[0].shape[0] if len(series) == 1 else None)
 
 
 def with_models(config, files, strict: bool = True):

@@ -56,7 +56,7 @@ import numpy as np
 from predictors import LEARNED, family, make_predictor, needs_torch, predictor_names
 from predictors.combination import Combination, CombinationSettings
 from predictors.registry import default_predictors, torch_available
-from rhmpc.studies.fitting import describe, fit_all, plan_fits
+from rhmpc.experiment.fit_plan import describe, fit_all, plan_fits
 from rhmpc.studies.tracks import Track, twelve_digits
 from sim.recordings.points import on_grid
 
@@ -311,7 +311,7 @@ def left_out(names: Sequence[str]) -> list[str]:
 def _fit(names, settings: OpenLoopSettings, period: float, series: list[np.ndarray],
          leads: int, progress, save: Path | None, label: str, where: str) -> dict:
     """name → (fitted predictor, seconds) of the fitted predictors among ``names``, after the
-    plan is said (:func:`rhmpc.studies.fitting.describe`): what, on which frames, why in two
+    plan is said (:func:`rhmpc.experiment.fit_plan.describe`): what, on which frames, why in two
     rounds, how long, and which fitted predictors the default set leaves out."""
     plans = plan_fits(names, period, series, leads, settings.seed)
     if not plans:

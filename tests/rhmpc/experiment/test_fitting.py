@@ -81,3 +81,19 @@ def test_train_files_and_poi_need_data(capsys):
     assert main(["simulate", "--data", "hamlyn-phantom", "--train", "nosuch.csv",
                  "--duration", "1"]) == 2
     assert "--train: no such file nosuch.csv" in capsys.readouterr().err
+
+
+def test_a_run_says_what_it_fits_and_about_how_long_before_it_fits():
+    """The members fitted before the run, and only they, named with their estimate."""
+    pytest.importorskip("torch")
+    from predictors import make_predictor
+    from rhmpc.experiment.fitting import announcement
+
+    combination = make_predictor("combination", 0.04, members=("one-step", "st-ridge", "tcn"))
+    t = np.arange(300) * 0.04
+    series = [np.sin(2 * np.pi * 1.2 * t)[:, None, None] * np.ones((1, 1, 3)) * 1e-3]
+    lines = announcement("combination", combination, series, seed=0)
+    assert lines[0] == "fitting st-ridge, tcn on 300 samples (1 series) before the run"
+    assert "validation round on the first 80 % of those frames (0–239)" in lines[1]
+    assert lines[2].startswith("about ") and "st-ridge under a second" in lines[2]
+    assert "tcn " in lines[2] and "networks × 2 rounds" in lines[2]

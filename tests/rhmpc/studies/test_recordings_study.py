@@ -212,7 +212,7 @@ def test_the_split_says_what_it_fits_on_which_frames_and_how_long_before_fitting
 
 
 def test_the_plan_names_the_rounds_their_frames_and_what_the_defaults_leave_out() -> None:
-    from rhmpc.studies.fitting import FitPlan, describe
+    from rhmpc.experiment.fit_plan import FitPlan, describe
 
     plans = [FitPlan("ridge", 0, 0.2, None), FitPlan("lstm", 4, 0.2, 95.0),
              FitPlan("tcn", 4, 0.2, 20.0)]
@@ -230,7 +230,7 @@ def test_the_plan_names_the_rounds_their_frames_and_what_the_defaults_leave_out(
 
 
 def test_each_network_line_names_its_round() -> None:
-    from rhmpc.studies.fitting import FitPlan, _rounds
+    from rhmpc.experiment.fit_plan import FitPlan, _rounds
 
     said: list[str] = []
     say = _rounds(FitPlan("tcn", 2, 0.2, 1.0), said.append)
@@ -252,7 +252,7 @@ def test_the_defaults_leave_out_the_grus_and_say_so() -> None:
 @pytest.mark.slow
 def test_a_network_fit_is_estimated_from_a_probe_of_a_few_epochs() -> None:
     pytest.importorskip("torch")
-    from rhmpc.studies.fitting import plan_fits
+    from rhmpc.experiment.fit_plan import plan_fits
 
     track = points_track()
     (plan,) = plan_fits(["tcn"], track.period, [track.points()[:300]], 2, 0)

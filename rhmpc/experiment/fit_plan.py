@@ -1,5 +1,6 @@
-"""Fitting the learned predictors before an open-loop study: what is fitted, on which frames,
-why in two rounds, and how long it will take, said before the fits start.
+"""Fitting the learned predictors before they run (an open-loop study, or a closed loop's
+settling window): what is fitted, on which frames, why in two rounds, and how long it will
+take, said before the fits start.
 
 A network predictor (:class:`predictors.learned.settings.NetworkSettings`) trains
 ``ensemble`` networks per head (one head per lead with ``heads = "per-lead"``, one for every
