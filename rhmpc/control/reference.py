@@ -51,13 +51,11 @@ A forecast made outside (``forecast(tick, stamp, points)``, a predictor in anoth
 the place of the refresh's own nodes: the same interpolation and guard, then the refreshes
 only keep the predictor learning until ``refresh_ticks`` ticks pass without one.
 
-Placement: the predicted reference works in the sensor's own frame (d = 1 or 3 axes), the frame
-its samples were measured in, so that a predictor sees in the loop the samples it would see
-open loop, and a model fitted on a recording runs on it unchanged; the exact reference works in
-the centred truth. After ``place(origin, center)`` their ``horizon`` returns workspace points
-``r = origin + E (r_s − c)`` (N, 3), with ``c`` the sensor's point placed at ``origin`` (the
-registration of the sensor to the workspace; 0 for the centred truth) and ``E`` embedding a 1-D
-motion along x.
+Placement: the predicted reference works in the sensor's frame (d = 1 or 3 axes), where its
+samples were measured: a predictor reads in the loop what it reads open loop. After
+``place(origin, center)`` its ``horizon`` returns workspace points ``r = origin + E (r_s − c)``
+(N, 3), ``c`` the sensor's point placed at ``origin`` (0 for the exact reference's centred
+truth), ``E`` embedding a 1-D motion along x.
 """
 
 from __future__ import annotations
@@ -75,8 +73,8 @@ from rhmpc.control.interpolation import WINDOW, interpolation_matrix, lagrange_w
 #: forecast from outside may be when it arrives [s].
 LATENCY_CAP = 0.25
 
-__all__ = ["LATENCY_CAP", "ExactReference", "PredictedReference", "ReferenceSettings", "embed3",
-           "interpolation_matrix", "lagrange_weights", "windows"]
+__all__ = ["LATENCY_CAP", "ArrayTruth", "ExactReference", "PredictedReference",
+           "ReferenceSettings", "embed3", "interpolation_matrix", "lagrange_weights", "windows"]
 
 
 @dataclass(frozen=True)
@@ -210,7 +208,7 @@ class PredictedReference:
         # Interpolation matrices by (nodes, (now − t0)/Ts): with sensor stamps on the tick grid
         # only a few offsets occur, so a refresh is one small product instead of a rebuild.
         self._matrices: dict[tuple[int, float], np.ndarray] = {}
-        self._origin = self._center = self._shift = np.zeros(3)
+        self.origin = self.center = np.zeros(3)  # the placement (:meth:`place`)
         self.reset()
 
     def place(self, origin, center=(0.0, 0.0, 0.0)) -> None:
@@ -218,24 +216,18 @@ class PredictedReference:
         (N, 3) [m], r_s in the sensor's frame: ``center`` [m] (d or 3 coordinates) is the
         sensor's point that sits at ``origin``, where the tool holds before the first
         sample."""
-        self._origin = _origin(origin)
-        self._center = _origin(embed3(np.reshape(center, (1, -1)))[0], "center")
-        self._shift = self._origin - self._center
-        self._hold = np.broadcast_to(self._origin, (self.N, 3))
+        self.origin = _origin(origin)
+        self.center = _origin(embed3(np.reshape(center, (1, -1)))[0], "center")
+        self._hold = np.broadcast_to(self.origin, (self.N, 3))
         if self._dense is not None:
-            self._placed = self._shift + embed3(self._dense)
-
-    @property
-    def placement(self) -> tuple[np.ndarray, np.ndarray]:
-        """(origin, center) of the last :meth:`place` [m] (3 coordinates each)."""
-        return self._origin, self._center
+            self._placed = self.origin - self.center + embed3(self._dense)
 
     def reset(self) -> None:
         """Forget the predictor, the gate and the points."""
         self.predictor.reset()
         self._dense: np.ndarray | None = None  # (span, d) points of the last refresh
-        self._placed = np.broadcast_to(self._origin, (self._span, 3))  # until the first sample
-        self._hold = np.broadcast_to(self._origin, (self.N, 3))
+        self._placed = np.broadcast_to(self.origin, (self._span, 3))  # until the first sample
+        self._hold = np.broadcast_to(self.origin, (self.N, 3))
         self._first = 0  # tick of the first point
         self._anchor: float | None = None  # t_a of the newest node [s]
         self._forecast: np.ndarray | None = None  # ẑ of the next sample, made one period ago
@@ -344,7 +336,7 @@ class PredictedReference:
             gap = np.abs(self._dense - held)
             if gap.flat[gap.argmax()] > s.guard_margin + s.guard_speed * lead:
                 self._diverged(held, restart)
-        self._placed = self._shift + embed3(self._dense)
+        self._placed = self.origin - self.center + embed3(self._dense)
         if self.monitor is not None:
             self.monitor.observe(now, self.predictor.heart_rate_hz)
 
@@ -389,14 +381,16 @@ class PredictedReference:
         return self._placed[start : start + self.N]
 
 
-class _ArrayTruth:
-    """Centred truth from an array of positions at ticks 0 … n − 1."""
+class ArrayTruth:
+    """Centred POI truth from an array of positions at ticks 0 … n − 1 (n, d), and the
+    ``center`` [m] it was centred on (zero by default)."""
 
-    def __init__(self, truth: np.ndarray) -> None:
+    def __init__(self, truth: np.ndarray, center: np.ndarray | None = None) -> None:
         self.truth = np.array(truth, dtype=float).reshape(len(truth), -1)
-        if not np.all(np.isfinite(self.truth).any(axis=0)):
-            raise ValueError("the exact reference has no finite sample on some axis")
         self.n_ticks, self.dim = self.truth.shape
+        self.center = np.zeros(self.dim) if center is None else np.asarray(center, dtype=float)
+        if not np.all(np.isfinite(self.truth).any(axis=0)):
+            raise ValueError("the truth has no finite sample on some axis")
 
     def window(self, i0: int, i1: int) -> np.ndarray:
         return self.truth[i0:i1]
@@ -417,7 +411,7 @@ class ExactReference:
     predictor = None
 
     def __init__(self, truth, horizon: int, window: int = 8192) -> None:
-        self._truth = truth if hasattr(truth, "window") else _ArrayTruth(truth)
+        self._truth = truth if hasattr(truth, "window") else ArrayTruth(truth)
         self.N, self._size = horizon, int(window)
         self._origin = np.zeros(3)
         self._restart()

@@ -20,14 +20,11 @@ Memory is flat in run length: the sensor stream and the POI truth are read per c
 and a fixed-size decimated trace, and every tick can go to an NPZ file as the run goes
 (:mod:`sim.loop.trace`). The garbage collector is frozen and disabled during the run.
 
-The POI trajectory is placed in the workspace (``LoopSettings.placement``): by default centred
-on its mean over the run, at the end-effector's home position plus ``poi_offset``. A 1-D motion
-moves along the x axis. The sensor's samples reach the reference in the sensor's own frame, as
-measured; the reference is placed with that mean (``reference.place(anchor, center)``), so that
-a predictor sees the samples it would see open loop. The error is
-``p_ee(q_{i+1}) − p_poi((i+1)·Ts)``: at every tick for a synthetic motion, whose truth is
-continuous; at the instants of its samples for a recording, where the POI was measured only then
-(``measured``).
+The POI trajectory is placed in the workspace (``LoopSettings.placement``): by default its mean
+over the run at the end-effector's home position plus ``poi_offset`` (a 1-D motion along x).
+The samples reach the reference as measured, which places them (``place(anchor, center)``).
+The error is ``p_ee(q_{i+1}) − p_poi((i+1)·Ts)``: at every tick for a synthetic motion, whose
+truth is continuous; at the instants of its samples for a recording (``measured``).
 """
 
 from __future__ import annotations
@@ -41,6 +38,7 @@ from collections.abc import Callable, Iterable, Iterator
 
 import numpy as np
 
+from rhmpc.control.reference import ArrayTruth
 from sim.loop.clock import PredictorClock, arrival_tick
 from sim.loop.metrics import warm_ns
 from sim.loop.results import (
@@ -51,7 +49,7 @@ from sim.loop.results import (
     event_counts,
 )
 from sim.loop.settings import LoopSettings
-from sim.loop.streams import ArrayTruth, StreamCursor
+from sim.loop.streams import StreamCursor
 from sim.recordings.points import PointsAt
 from sim.sensors.stream import BLOCK, SampleSource, as_samples
 
@@ -108,10 +106,9 @@ class Refreshes:
     arrived by then, stamped with its measurement time (None and the tick's time when no sample
     is new). With the ``"sensor"`` clock, each raw sample once, on the tick it arrives, with its
     own stamp; a gap in the stamps is first filled with missing samples (at most
-    :attr:`MAX_FILL`), so that the predictor's clock keeps its period. Samples are in the
-    sensor's own frame, as measured (the reference places them, :mod:`sim.loop.closed_loop`).
-    With ``points`` (the other tracked points of a recording), each refresh also carries the
-    other points measured at its stamp (None where none was measured then).
+    :attr:`MAX_FILL`), so that the predictor's clock keeps its period. With ``points`` (the
+    other tracked points of a recording), each refresh also carries the other points measured
+    at its stamp (None where none was measured then). Samples are as measured.
     """
 
     #: The most missing samples filled into one gap of the stamps.
@@ -253,7 +250,7 @@ def run_closed_loop(plant, controller, truth, stream, settings: LoopSettings,
     """
     n, N = settings.ticks, controller.N
     if not hasattr(truth, "window"):
-        truth = ArrayTruth(truth, np.zeros(np.shape(truth)[1]))
+        truth = ArrayTruth(truth)
     if truth.n_ticks < n + N + 1:
         raise ValueError(f"truth covers {truth.n_ticks} ticks, the run needs {n + N + 1}")
     refreshes = Refreshes(stream, settings, clock, points)

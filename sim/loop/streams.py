@@ -6,8 +6,9 @@ position at every tick; the loop reads both in blocks:
 - :class:`StreamCursor` walks a sample source (:mod:`sim.sensors.stream`) forward in time: the
   newest sample arrived by a given instant;
 - a *truth* has ``center`` (the POI's mean over the run), ``n_ticks`` and ``window(i0, i1)``, the
-  centred positions of ticks ``i0 … i1 − 1``: :class:`ArrayTruth` wraps an array,
-  :class:`SourceTruth` evaluates a motion source per window (two passes: the mean, then the run).
+  centred positions of ticks ``i0 … i1 − 1``: :class:`rhmpc.control.reference.ArrayTruth` wraps
+  an array, :class:`SourceTruth` evaluates a motion source per window (two passes: the mean,
+  then the run).
 
 Only the mean is not identical to the whole-array ``np.nanmean``: it is summed per block, which
 changes its last bits (≤ 1e-19 m for millimetre motion, far below anything printed).
@@ -55,19 +56,6 @@ class StreamCursor:
         k = j - self._b * self.size
         t, z, _ = self._current if k >= 0 else self._previous
         return float(t[k]), z[k]
-
-
-class ArrayTruth:
-    """Centred POI truth from an array of positions at ticks 0 … n − 1 (already centred)."""
-
-    def __init__(self, truth: np.ndarray, center: np.ndarray) -> None:
-        self.truth = np.asarray(truth, dtype=float)
-        self.truth = self.truth.reshape(self.truth.shape[0], -1)
-        self.center = np.asarray(center, dtype=float)
-        self.n_ticks, self.dim = self.truth.shape
-
-    def window(self, i0: int, i1: int) -> np.ndarray:
-        return self.truth[i0:i1]
 
 
 def measurements(z: np.ndarray) -> np.ndarray:

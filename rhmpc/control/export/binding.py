@@ -105,8 +105,7 @@ class CController:
         """Where the motion sits in the workspace [m]: the sensor's point ``center`` at
         ``origin`` (``rhmpc_place``; :meth:`PredictedReference.place`)."""
         self._origin = np.array(origin, dtype=float).reshape(3)
-        self._center = np.zeros(3)
-        self._center[: np.size(center)] = np.reshape(center, -1)
+        self._center = np.array(center, dtype=float).reshape(3)
         self._lib.rhmpc_place(self._addr, self._origin.ctypes.data, self._center.ctypes.data)
 
     def refresh(self, tick: int, z: np.ndarray | None, stamp: float,
@@ -228,5 +227,5 @@ def controller_in_c(controller, robot: str) -> CController:
     except ExportError as exc:
         raise ExportError(f"--controller c: {exc}") from None
     c = CController(library, controller.mpc)
-    c.place(*controller.reference.placement)
+    c.place(controller.reference.origin, controller.reference.center)
     return c

@@ -257,8 +257,8 @@ def test_the_sensors_frame_is_placed_alike():
     point at the tool's home: the same torques and points, tick for tick."""
     python, c = pair({})
     center = np.array([0.03, -0.02, 0.05])
-    python.reference.place(python.reference.placement[0], center)
-    c.place(*python.reference.placement)
+    python.reference.place(python.reference.origin, center)
+    c.place(python.reference.origin, center)
     base = bench_samples(python.mpc.arm.Ts, 2000)
 
     def samples(k):

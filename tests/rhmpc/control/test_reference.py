@@ -246,16 +246,15 @@ def test_samples_in_the_sensors_frame_are_placed_by_its_registration():
     t = (tick + np.arange(1, N + 1)) * TS
     np.testing.assert_allclose(h[:, 0], origin[0] + np.sin(t), atol=1e-3)
     np.testing.assert_allclose(h[:, 1], origin[1] + t - center[1], atol=1e-12)
-    o, c = ref.placement
-    np.testing.assert_array_equal(o, origin)
-    np.testing.assert_array_equal(c, [*center, 0.0])
+    np.testing.assert_array_equal(ref.origin, origin)
+    np.testing.assert_array_equal(ref.center, [*center, 0.0])
     with pytest.raises(ValueError, match="center must be 3 finite"):
         ref.place(origin, [np.nan, 0.0, 0.0])
 
 
 def test_exact_reference_read_in_windows_is_the_whole_array():
     """Gaps longer than a window, at window edges and at both ends, bridged as on the array."""
-    from sim.loop.streams import ArrayTruth
+    from rhmpc.control.reference import ArrayTruth
 
     rng = np.random.default_rng(3)
     truth = rng.normal(size=(3000, 3))

@@ -7,12 +7,11 @@ import numpy as np
 import pytest
 
 from predictors import PREDICTORS, Predictor
-from rhmpc.control.reference import ExactReference, PredictedReference
+from rhmpc.control.reference import ArrayTruth, ExactReference, PredictedReference
 from rhmpc.experiment import RunConfig, build_run, run_experiment
 from rhmpc.experiment.assembly import build_controller
 from sim.loop import LoopSettings, run_closed_loop
 from sim.loop.closed_loop import poi_truth
-from sim.loop.streams import ArrayTruth
 from sim.plant import make_plant
 from sim.sources import heart_source
 

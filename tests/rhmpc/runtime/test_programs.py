@@ -79,7 +79,7 @@ def test_the_controller_counts_and_survives_bad_traffic(program, tmp_path):
     (late: dropped), forecasts of the wrong period (rejected) and good ones (taken),
     datagrams of another format, an encoder reading sent twice (late) and 20 ticks without a
     reading (stale: the observer's fault path). Every torque is finite and within its limits."""
-    ticks, origin = 800, program.controller.reference._origin
+    ticks, origin = 800, program.controller.reference.origin
     epoch = time.clock_gettime_ns(time.CLOCK_MONOTONIC) + 400_000_000
     me = Link(epoch_ns=epoch)
     ports = [Link(epoch_ns=epoch) for _ in range(2)]

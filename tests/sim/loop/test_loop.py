@@ -9,11 +9,15 @@ from rhmpc.control.cancellation import NonlinearityCancellation
 from rhmpc.control.controller import Controller
 from rhmpc.control.mpc import RecedingHorizonMPC
 from rhmpc.control.observer import JointObserver
-from rhmpc.control.reference import ExactReference, PredictedReference, ReferenceSettings
+from rhmpc.control.reference import (
+    ArrayTruth,
+    ExactReference,
+    PredictedReference,
+    ReferenceSettings,
+)
 from rhmpc.control.settings import MPCSettings
 from sim.loop import LoopSettings, poi_truth, run_closed_loop
 from sim.loop.clock import predictor_clock
-from sim.loop.streams import ArrayTruth
 from sim.plant import make_plant
 from tests.sim.loop.stand_ins import HarmonicHeart, ideal_stream
 

@@ -37,8 +37,7 @@
  *   tau[RHMPC_NU] out: the joint torques to apply [N*m], finite, |tau_i| <= rhmpc_tau_max[i]
  *   origin[3]   [m] in the robot model's world frame (rhmpc_y0, the tool's home position, by
  *               default)
- *   center[3]   [m] the sensor's point placed at origin (its first RHMPC_D values are read;
- *               zero by default): the registration of the sensor to the workspace
+ *   center[3]   [m] the sensor's point placed at origin (the first RHMPC_D are read; 0 default)
  *
  * rhmpc_step returns RHMPC_SOLVED (0) when the QP's solution was applied, else the reason the
  * QP result was not used (RHMPC_MAX_ITER_REACHED, ...): the torque then came from the fallback
@@ -201,9 +200,8 @@ typedef struct {
 /* At rest at the home posture: no plan, no points (they hold the origin), zero counters. */
 void rhmpc_init(rhmpc_t *ctl);
 
-/* Where the motion sits in the workspace [m]: the sensor's point center[3] at origin[3] (a
- * sample z is the workspace point origin + z - center); the points held until the first sample
- * are that origin. */
+/* Where the motion sits [m]: the sensor's point center at origin (a sample z is the workspace
+ * point origin + z - center); the points held until the first sample are that origin. */
 void rhmpc_place(rhmpc_t *ctl, const double origin[3], const double center[3]);
 
 /* A sensor sample's arrival on `tick`: z (RHMPC_D values [m], NULL: none new) measured at
