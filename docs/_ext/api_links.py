@@ -139,12 +139,14 @@ def _module_exists(name: str) -> bool:
 
 
 def remove_stale_stubs(app: Sphinx) -> None:
-    """``builder-inited``, before autosummary: delete the pages of modules that are gone."""
+    """``builder-inited``, before autosummary: where a module is gone, delete every page of its
+    folder (its package's page lists it too), which autosummary then writes afresh."""
     for folder in Path(app.srcdir).rglob("_autosummary"):
         if Path(app.outdir) in folder.parents:
             continue
-        for stub in folder.glob("*.rst"):
-            if not _module_exists(stub.stem):
+        stubs = list(folder.glob("*.rst"))
+        if not all(_module_exists(stub.stem) for stub in stubs):
+            for stub in stubs:
                 stub.unlink()
 
 
