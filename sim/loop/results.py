@@ -184,8 +184,9 @@ class Recorder:
         self.ticks = TickHistogram()
         self.yardstick = TickHistogram()
         self.parts = {name: TickHistogram() for name in TICK_PARTS}
-        #: each refresh (gate, predictor, interpolation) against the predictor's period
-        self.refreshes, self.period_ns = TickHistogram(span_ns=100_000_000), 1e9 * clock.dt
+        #: each refresh against the predictor's period: up to 100 ms in 1-µs bins (0.8 MB)
+        self.refreshes = TickHistogram(resolution_ns=1000, span_ns=100_000_000)
+        self.period_ns = 1e9 * clock.dt
         self.trace = DecimatedTrace(settings.ticks)
         self.file = None if trace_file is None else TraceFile(trace_file)
         self.lead = np.arange(1, horizon + 1)
