@@ -77,9 +77,9 @@ def announcement(name: str, predictor, series: list[np.ndarray], seed: int) -> l
     network predictor timed from a few epochs of one network on these samples)."""
     names, models = (predictor.settings.members, predictor.members) \
         if hasattr(predictor, "members") else ((name,), (predictor,))
-    todo = [n for n, m in zip(names, models, strict=True) if needs_fit(m)]
-    leads = max((getattr(m.settings, "leads", 1) for m in models if needs_fit(m)), default=1)
-    plans = plan_fits(todo, predictor.dt, series, leads, seed)
+    todo = {n: m for n, m in zip(names, models, strict=True) if needs_fit(m)}
+    leads = max((getattr(m.settings, "leads", 1) for m in todo.values()), default=1)
+    plans = plan_fits(list(todo), predictor.dt, series, leads, seed)
     frames = sum(s.shape[0] for s in series)
     return describe(plans, f"{frames} samples ({len(series)} series) before the run",
                     series[0].shape[0] if len(series) == 1 else None)

@@ -172,8 +172,8 @@ def run_sil(config: RunConfig, settings: SilSettings = SilSettings(), progress=N
                    "--port", str(ports.controller), "--robot-port", str(ports.robot),
                    "--cpu", str(cpu), "--priority", str(settings.priority),
                    "--out", str(folder / "controller"),
-                   "--origin", *(repr(float(v)) for v in run.anchor),
-                   "--center", *(repr(float(v)) for v in embed3(run.truth.center)[0])]
+                   "--origin", *(repr(float(v)) for v in run.reference.origin),
+                   "--center", *(repr(float(v)) for v in run.reference.center)]
         if not settings.internal:
             command.append("--no-internal")
         group = _Processes()
