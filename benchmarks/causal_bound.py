@@ -31,9 +31,9 @@ from rhmpc.cli.presets import PRESETS
 from rhmpc.control.reference import ArrayTruth, ExactReference
 from rhmpc.experiment import RunConfig
 from rhmpc.experiment.assembly import build_controller, build_run
+from rhmpc.sim.heart.analysis import fill_gaps
+from rhmpc.sim.loop import run_closed_loop
 from rhmpc.studies.paper import COLUMNS
-from sim.heart.analysis import fill_gaps
-from sim.loop import run_closed_loop
 
 #: Cut-off frequencies of the bound [Hz].
 CUTOFFS = (26.0, 40.0, 60.0)

@@ -1,7 +1,7 @@
 """Clean vs variable replicas: open-loop forecast error per predictor on the noise-free motion.
 
 (a) 25 Hz, 3 samples (120 ms) ahead: RMS error / hold's (the predictability statistic of
-    ``sim.heart.analysis.predictability``);
+    ``rhmpc.sim.heart.analysis.predictability``);
 (b) Tuna et al.'s predictor rate, 2 kHz / 15 = 133.3 Hz, 4 samples (30 ms ≥ the 25 ms horizon)
     ahead: RMS error [mm].
 
@@ -16,9 +16,9 @@ import warnings
 
 import numpy as np
 
-from predictors import make_predictor
+from rhmpc.predictors import make_predictor
+from rhmpc.sim.heart import make_scenario
 from rhmpc.studies.paper import COLUMNS
-from sim.heart import make_scenario
 
 NAMES = (*COLUMNS, "arrhythmia-apb")  # Tuna et al.'s six replicas and an arrhythmia
 PREDICTORS = ("hold", "one-step", "generalized", "ekf", "dual-ekf", "ar", "last-cycle")

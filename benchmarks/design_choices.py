@@ -59,8 +59,8 @@ def gate(duration: float) -> tuple[dict, str]:
 
 
 def clock(duration: float) -> tuple[dict, str]:
-    from sim.heart import make_scenario
-    from sim.recordings.text import save_recording
+    from rhmpc.sim.heart import make_scenario
+    from rhmpc.sim.recordings.text import save_recording
 
     rng = np.random.default_rng(1)
     length = duration + 2.0

@@ -2,7 +2,7 @@
 
 ``rhmpc simulate`` with its defaults (``generalized`` on ``fixed-a2-top``, physical
 sonomicrometer, PHANToM, 30 s, seed 0), run once clean, once per fault and once with the four
-together (``--fault``, :mod:`sim.sensors.faults`), each after the outlier gate's calibration:
+together (``--fault``, :mod:`rhmpc.sim.sensors.faults`), each after the outlier gate's calibration:
 
 - a sensor that freezes for 0.3 s, a burst of missing samples for 0.5 s, a persistent 5-mm
   jump of the stream (the truth does not move), all encoders stuck for 0.2 s, and for 20 ms.

@@ -41,7 +41,7 @@ PRESET = {"resonance": ("tuna2013-hardware", "II"), "mismatch": ("tuna2013-hardw
 #: Cable resonances [Hz] and damping ratios of the stability map.
 RESONANCES = (40.0, 60.0, 80.0, 100.0, 150.0)
 DAMPING_RATIOS = (0.05, 0.1, 0.2, 0.3, 0.5)
-#: The default white range error [m] (sim.sensors.SonomicrometrySettings.range_noise).
+#: The default white range error [m] (rhmpc.sim.sensors.SonomicrometrySettings.range_noise).
 _SIGMA = 88e-6
 #: The exact reference's RMS error [mm] above which a stability cell is "unstable".
 UNSTABLE_MM = 5.0

@@ -17,7 +17,7 @@ import _results as R
 import numpy as np
 from invivo_regime import LEADS, RATE, SCENARIOS, score
 
-from sim.heart import make_scenario
+from rhmpc.sim.heart import make_scenario
 
 PREDICTORS = ("hold", "last-cycle", "one-step", "generalized", "ekf", "dual-ekf", "ar",
               "fading-ar", "wflc")

@@ -25,9 +25,9 @@ from pathlib import Path
 import _results as R
 import numpy as np
 
-from predictors import LEARNED, needs_torch
-from predictors.registry import default_predictors, torch_available
 from rhmpc.cli import main as rhmpc
+from rhmpc.predictors import LEARNED, needs_torch
+from rhmpc.predictors.registry import default_predictors, torch_available
 
 DATA, POI, SPLIT, LEADS = "hamlyn-phantom", 4, "600:700", 4
 SEEDS = (0, 1, 2)

@@ -14,8 +14,8 @@ import argparse
 
 import numpy as np
 
+from rhmpc.sim.heart import make_scenario
 from rhmpc.studies.paper import COLUMNS
-from sim.heart import make_scenario
 
 REPLICAS = COLUMNS  # Tuna et al. Tables I–III
 

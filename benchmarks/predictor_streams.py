@@ -27,10 +27,10 @@ NAMES = ("hold", "ekf", "dual-ekf", "ar", "fading-ar", "wflc", "one-step", "gene
 
 def one(job):
     name, clean, seed, sets, names, rr, init = job
-    from predictors import make_predictor
     from rhmpc.experiment.monitor import HeartRateScore
-    from sim.heart.scenarios import make_scenario
-    from sim.sensors import sensor_from_name
+    from rhmpc.predictors import make_predictor
+    from rhmpc.sim.heart.scenarios import make_scenario
+    from rhmpc.sim.sensors import sensor_from_name
 
     kw = {"duration": 60.0}
     if clean:

@@ -4,7 +4,7 @@ The samples that refresh the reference, and the points it makes, do not depend o
 the reference the MPC would track is reproduced exactly without the arm: the run is built by
 ``rhmpc.experiment.build_run`` from the same settings as ``rhmpc simulate`` (scenario, ``--rr``,
 seed, sensor, ``[reference]`` table: outlier gate, guard), and only its reference is driven, by
-the loop's own delivery of the samples (:class:`sim.loop.closed_loop.Refreshes`: the same
+the loop's own delivery of the samples (:class:`rhmpc.sim.loop.closed_loop.Refreshes`: the same
 refresh on the same tick as in the closed loop). Scored from ``settling`` on, against the
 recorded stream (the paper's ground truth, as ``simulate``): the reference's error at 25 ms (the
 last horizon point) — RMS, max — and the *episodes*: ticks where it exceeds 1 mm.
@@ -49,7 +49,7 @@ def drive(changes: dict) -> Iterator[tuple[int, object, list]]:
         judged ``z`` by (alike; None while the gate has none).
     """
     from rhmpc.experiment import RunConfig, build_run
-    from sim.loop.closed_loop import Refreshes
+    from rhmpc.sim.loop.closed_loop import Refreshes
 
     config = RunConfig().replace(**changes)
     run = build_run(config)

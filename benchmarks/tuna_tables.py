@@ -37,8 +37,8 @@ from pathlib import Path
 import _results as R
 import numpy as np
 
-from predictors import settings_for
 from rhmpc.cli.compare import PAPER_SEEDS
+from rhmpc.predictors import settings_for
 from rhmpc.studies.findings import cross_finding, findings
 from rhmpc.studies.paper import COLUMNS, SETTING, TUNA2013, cell
 

@@ -10,7 +10,9 @@ Choices:
 
 * **The checkout, not the installed package**: the repository's root goes first on
   ``sys.path`` and the version is read from ``pyproject.toml``, so the API pages, the CLI
-  reference and the gallery show the code being edited, whatever copy of rhmpc is installed.
+  reference and the gallery show the code being edited, whatever copy of rhmpc is installed
+  (``rhmpc.robots``, ``rhmpc.predictors`` and ``rhmpc.sim``, whose folders are at the root,
+  included: ``rhmpc`` imported from a checkout finds them in that checkout).
 * **numpydoc** renders the API docstrings (the code is written in numpydoc style). Its
   validation is off and class members are not listed by numpydoc (autodoc lists them), so that
   reasonable docstrings build without warnings; ``numpydoc_xref_param_type`` stays off because
@@ -20,8 +22,9 @@ Choices:
   meaning from the ``Attributes`` sections of the class and its bases.
 * **API pages and links** (``_ext/api_links.py``): the pages of modules that were moved or
   deleted are removed before autosummary writes the current ones; a module named like the
-  function its package re-exports (``robots.linearize``) gets its own page; a reference through
-  a re-export (``sim.loop.LoopResult``) links to the page of the object where it is defined.
+  function its package re-exports (``rhmpc.robots.linearize``) gets its own page; a reference
+  through a re-export (``rhmpc.sim.loop.LoopResult``) links to the page of the object where it
+  is defined.
 * **Typography**: quotes and ellipses are made typographic, dashes are not (prose types its
   dashes as the Unicode characters, and ``--`` is always a command-line option); the CLI
   reference, generated from the parser, keeps every character as typed, for copy and paste.
@@ -83,7 +86,7 @@ autosummary_generate = True
 autosummary_imported_members = False
 # ``ignore-module-all``: a package's page lists what the package defines, not what its
 # ``__all__`` re-exports from its modules (documented on their own pages; listing both would
-# describe ``robots.linearize`` twice, as a function and as a module).
+# describe ``rhmpc.robots.linearize`` twice, as a function and as a module).
 # Undocumented members are listed (the autosummary tables link to them) and so are the bases;
 # autodoc's flag options are on whenever present, whatever their value, hence True.
 autodoc_default_options = {"members": True, "undoc-members": True, "show-inheritance": True,

@@ -11,9 +11,9 @@ after a 10-s warm-up.
 import matplotlib.pyplot as plt
 import numpy as np
 
-from predictors import make_predictor
-from sim.heart import make_scenario
-from sim.sensors import sensor_from_name
+from rhmpc.predictors import make_predictor
+from rhmpc.sim.heart import make_scenario
+from rhmpc.sim.sensors import sensor_from_name
 
 rng = np.random.default_rng(4)
 scenario = make_scenario("fixed-a2-top", rng, duration=20.0)

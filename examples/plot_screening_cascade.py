@@ -14,8 +14,8 @@ import numpy as np
 
 from rhmpc.control.mpc import RecedingHorizonMPC
 from rhmpc.control.settings import MPCSettings
+from rhmpc.robots import linearize, load_robot
 from rhmpc.studies.bench import heart_like_reference
-from robots import linearize, load_robot
 
 arm = linearize(load_robot("phantom"))
 mpc = RecedingHorizonMPC(arm, MPCSettings())

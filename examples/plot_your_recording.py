@@ -17,8 +17,8 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 
 from rhmpc.cli import main
-from sim.recordings import load_points
-from sim.recordings.shipped import resolve
+from rhmpc.sim.recordings import load_points
+from rhmpc.sim.recordings.shipped import resolve
 
 path, read, poi = resolve("hamlyn-phantom", {})
 points = load_points(path, **read)

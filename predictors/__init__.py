@@ -1,12 +1,12 @@
-"""Heart-motion predictors, all on the `Predictor` contract of `predictors.base`.
+"""Heart-motion predictors, all on the `Predictor` contract of `rhmpc.predictors.base`.
 
 ``make_predictor(name, dt, **settings)`` builds one by name; ``PREDICTORS`` lists the online
-ones, ``LEARNED`` those fitted before the run (:mod:`predictors.learned`), and ``family(name)``
-tells which kind a name is.
+ones, ``LEARNED`` those fitted before the run (:mod:`rhmpc.predictors.learned`), and
+``family(name)`` tells which kind a name is.
 """
 
-from predictors.base import Predictor
-from predictors.registry import (
+from rhmpc.predictors.base import Predictor
+from rhmpc.predictors.registry import (
     LEARNED,
     PREDICTORS,
     family,

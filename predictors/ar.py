@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from predictors.rls_one_step import OneStepRLS, OneStepSettings
+from rhmpc.predictors.rls_one_step import OneStepRLS, OneStepSettings
 
 __all__ = ["ARSettings", "AutoregressivePredictor"]
 

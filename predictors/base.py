@@ -17,7 +17,7 @@ Conventions:
   metres per data unit (1.0 for samples in metres, 1e-3 for samples in millimetres)
   and converts its SI parameters to data units once: a variance σ² [m²] becomes
   σ²/unit², a gain per m² becomes gain·unit².  ``unit=None`` (the default) infers it
-  from the first ``SCALE_SECONDS`` of data (:func:`predictors.monitor.infer_unit`,
+  from the first ``SCALE_SECONDS`` of data (:func:`rhmpc.predictors.monitor.infer_unit`,
   a power of 1000): the predictor serves the hold forecast meanwhile, then allocates
   its state and replays the window.  Fed the same motion in m or in mm, a predictor
   produces the same forecasts (×1000) either way.
@@ -51,7 +51,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from predictors.monitor import LeadErrorRMS, RangeEnvelope, infer_unit
+from rhmpc.predictors.monitor import LeadErrorRMS, RangeEnvelope, infer_unit
 
 __all__ = ["Predictor", "PredictorSettings", "as_others", "as_sample", "is_measured"]
 

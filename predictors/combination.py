@@ -38,8 +38,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from predictors.base import Predictor, PredictorSettings
-from predictors.learned.fitted import FitWarning
+from rhmpc.predictors.base import Predictor, PredictorSettings
+from rhmpc.predictors.learned.fitted import FitWarning
 
 __all__ = ["Combination", "CombinationSettings", "MemberTime"]
 
@@ -51,9 +51,9 @@ class CombinationSettings(PredictorSettings):
     Attributes
     ----------
     members : tuple of str
-        Predictor names (``predictors.make_predictor``); empty (the default): every default
+        Predictor names (``rhmpc.predictors.make_predictor``); empty (the default): every default
         predictor that is not a baseline, the fitted ones included
-        (``predictors.registry.combination_members``), as in the open-loop study.
+        (``rhmpc.predictors.registry.combination_members``), as in the open-loop study.
     leads : int
         L, leads scored and weighted on their own [samples]; longer ones take lead L's
         weights. 4 (160 ms at 25 frames/s).
@@ -71,7 +71,7 @@ class CombinationSettings(PredictorSettings):
         priors are taken at it.
     models : tuple of str
         Saved models (``rhmpc predict --save-models``) of members fitted before the run, each
-        loaded into the member of its kind (``predictors.registry.load_model``); those without
+        loaded into the member of its kind (``rhmpc.predictors.registry.load_model``); those without
         one are fitted by :meth:`Combination.fit`.
     """
 

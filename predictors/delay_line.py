@@ -7,7 +7,7 @@ from functools import cache
 
 import numpy as np
 
-from predictors.base import Predictor
+from rhmpc.predictors.base import Predictor
 
 __all__ = ["DelayLinePredictor", "TappedDelayLine"]
 
@@ -95,7 +95,7 @@ class DelayLinePredictor(Predictor):
 
     The gap handling the line's owners share: a gap is filled open-loop with ``_next``, the
     fills are repaired when measurements return (:meth:`_push`), and the newest sample can be
-    retracted (:meth:`predictors.base.Predictor.retract`).
+    retracted (:meth:`rhmpc.predictors.base.Predictor.retract`).
     """
 
     @abstractmethod

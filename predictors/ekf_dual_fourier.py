@@ -19,7 +19,7 @@ covariance is not given by Richa: ``p0_coefficient``, ``p0_offset``, ``p0_omega_
 papers' setting is the parameter set ``richa2010`` (zero start, ``init_seconds=None``).
 
 Initialisation (``init_seconds`` = 10 s, as Yuen's EKF,
-:func:`predictors.fourier_init.initial_dual_state`): ω̂_r by FFT in ``respiratory_band_hz``,
+:func:`rhmpc.predictors.fourier_init.initial_dual_state`): ω̂_r by FFT in ``respiratory_band_hz``,
 then (the respiratory fit removed) ω̂_c in ``cardiac_band_hz``, and c_r, a, b, d, e by least
 squares with θ_r = θ_c = 0 at the newest sample; the forecast holds the newest sample until
 then (over the first breath of 3-D motion with breathing, the respiratory sin/cos are nearly
@@ -27,7 +27,7 @@ collinear with the offset, which a zero start cannot separate).  The respiratory
 and the offset then start at the fit's least-squares covariance s_a²·(ΦᵀΦ)⁻¹, the cardiac ones
 at ``p0_coefficient`` (flat priors would let the first innovations re-fit the breathing).
 
-Outliers (as :mod:`predictors.ekf_fourier`): a sample whose normalised innovation squared
+Outliers (as :mod:`rhmpc.predictors.ekf_fourier`): a sample whose normalised innovation squared
 exceeds the χ²_d quantile ``gate_probability`` is not used (``innovation_rejected``); after
 ``gate_seconds`` of consecutive rejections samples are used again.
 
@@ -43,9 +43,9 @@ bands the fit searches), and a lock held for a beat ends the run of re-fits. Mot
 cannot lock to then costs a re-fit per window, not one per sample.
 
 Motion that is not periodic (``adaptive``, the default parameter set), as the ``ekf``'s
-(:mod:`predictors.ekf_fourier`): R follows the long-run variance of the current state's residual
-over the last beat less H P⁻ Hᵀ (``adaptive_r``, :mod:`predictors.nonperiodic`); an AR(16) model
-of that residual with the model's increments as input adds to the forecast
+(:mod:`rhmpc.predictors.ekf_fourier`): R follows the long-run variance of the current state's
+residual over the last beat less H P⁻ Hᵀ (``adaptive_r``, :mod:`rhmpc.predictors.nonperiodic`); an
+AR(16) model of that residual with the model's increments as input adds to the forecast
 (``residual_order``); the offset and cardiac series are fitted on the window's last 3 beats
 (``fit_beats``); ω̂_c leaving [ω₀/1.5, 1.5 ω₀] of the fitted ω₀ is a lost lock (``rate_band``).
 ``benchmarks/invivo_regime.py`` measures ``adaptive`` against ``fitted`` (without these parts).
@@ -59,16 +59,16 @@ import math
 
 import numpy as np
 
-from predictors.fourier_init import (
+from rhmpc.predictors.fourier_init import (
     FitWindow,
     fit_harmonics,
     initial_dual_state,
     spd_inverse,
     wrap_phase,
 )
-from predictors.fourier_settings import DUAL_PARAMETER_SETS as PARAMETER_SETS
-from predictors.fourier_settings import DualEKFSettings
-from predictors.nonperiodic import (
+from rhmpc.predictors.fourier_settings import DUAL_PARAMETER_SETS as PARAMETER_SETS
+from rhmpc.predictors.fourier_settings import DualEKFSettings
+from rhmpc.predictors.nonperiodic import (
     FourierPredictor,
     NonPeriodic,
     chi2_quantile,

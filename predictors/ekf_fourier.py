@@ -22,7 +22,7 @@ Discrete model x⁺ = F x + μ, F = I except ∂θ_{a,i}/∂ω = iΔt,
 with H = ∂h/∂x: ∂y_a/∂c_a = 1, ∂y_a/∂r_{a,i} = sin θ_{a,i}, ∂y_a/∂θ_{a,i} = r_{a,i} cos θ_{a,i}.
 
 Initialisation (Yuen): the first ``init_seconds`` of samples give ω̂₀ by FFT and
-c, r, θ by least squares (:mod:`predictors.fourier_init`; with breathing, ω̂_b is found
+c, r, θ by least squares (:mod:`rhmpc.predictors.fourier_init`; with breathing, ω̂_b is found
 first and its fit removed, so ω̂₀ comes from the heart band only); then
 P(T|T) = diag[σ_R²/N, σ₁², σ₁²/2², …, σ₁²/m², σ_ω², σ_θ², …].  Until then the
 forecast holds the newest sample.  Forecast k steps: θ + iω̂kΔt in eq. (2).
@@ -32,8 +32,8 @@ Outliers: a sample whose normalised innovation squared νᵀS⁻¹ν exceeds the
 ``innovation_rejected``); after ``gate_seconds`` of consecutive rejections samples are used
 again, so a real change of the motion is followed.
 
-Re-fit on lost lock (as :mod:`predictors.ekf_dual_fourier`): the last
-``init_seconds`` of samples are kept (:class:`predictors.fourier_init.FitWindow`); when after
+Re-fit on lost lock (as :mod:`rhmpc.predictors.ekf_dual_fourier`): the last
+``init_seconds`` of samples are kept (:class:`rhmpc.predictors.fourier_init.FitWindow`); when after
 an update ω̂ ∉ 2π·``band_hz`` (the band the initialisation's FFT searches, 36–180 beats/min:
 no heart the filter models) or ω̂ was clamped, state and covariance are re-fitted from that
 window exactly as at the start (counted ``lock_refit``; needs ≥ 80 % finite samples); so is a
@@ -52,9 +52,9 @@ Motion that is not periodic (``adaptive``, the default parameter set: ``tuna2013
 these parts):
 
 * ``adaptive_r``: R follows the long-run variance of the current state's residual over the
-  last beat, minus the model's share H P⁻ Hᵀ (:mod:`predictors.nonperiodic`);
+  last beat, minus the model's share H P⁻ Hᵀ (:mod:`rhmpc.predictors.nonperiodic`);
 * ``residual_order`` = 16: an AR model of the residual, with the model's increments as input
-  (:mod:`predictors.residual`), added to the forecast, which starts from the newest sample;
+  (:mod:`rhmpc.predictors.residual`), added to the forecast, which starts from the newest sample;
 * ``p0_from_fit``: P(T|T) of c, r, θ and of the breathing coefficients is the least-squares
   covariance of the window fit, s²_lr·(AᵀA)⁻¹ (per axis; r and θ by first-order propagation
   from a, b), s²_lr the long-run variance of the fit's residual; σ_ω² stays Yuen's;
@@ -75,7 +75,7 @@ import math
 
 import numpy as np
 
-from predictors.fourier_init import (
+from rhmpc.predictors.fourier_init import (
     FitWindow,
     fit_covariance,
     fit_harmonics,
@@ -84,9 +84,9 @@ from predictors.fourier_init import (
     spd_inverse,
     wrap_phase,
 )
-from predictors.fourier_settings import EKF_PARAMETER_SETS as PARAMETER_SETS
-from predictors.fourier_settings import Q_OMEGA_HRV, EKFSettings
-from predictors.nonperiodic import (
+from rhmpc.predictors.fourier_settings import EKF_PARAMETER_SETS as PARAMETER_SETS
+from rhmpc.predictors.fourier_settings import Q_OMEGA_HRV, EKFSettings
+from rhmpc.predictors.nonperiodic import (
     FourierPredictor,
     NonPeriodic,
     chi2_quantile,

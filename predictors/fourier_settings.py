@@ -1,8 +1,8 @@
 """Settings of the Fourier-series EKFs and their named parameter sets.
 
-:class:`EKFSettings` is the quasi-periodic EKF's (:mod:`predictors.ekf_fourier`, Yuen et al.
+:class:`EKFSettings` is the quasi-periodic EKF's (:mod:`rhmpc.predictors.ekf_fourier`, Yuen et al.
 2008; Tuna et al. 2013), :class:`DualEKFSettings` the dual respiratory + cardiac EKF's
-(:mod:`predictors.ekf_dual_fourier`, Richa et al. 2010). Each predictor's ``PARAMETER_SETS``
+(:mod:`rhmpc.predictors.ekf_dual_fourier`, Richa et al. 2010). Each predictor's ``PARAMETER_SETS``
 keeps the papers' settings by name beside its default.
 """
 
@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from predictors.base import PredictorSettings
+from rhmpc.predictors.base import PredictorSettings
 
 __all__ = ["DUAL_PARAMETER_SETS", "EKF_PARAMETER_SETS", "Q_OMEGA_HRV", "DualEKFSettings",
            "EKFSettings"]
@@ -120,10 +120,10 @@ class EKFSettings(PredictorSettings):
         the paper (Yuen's are per sample at 28 Hz).
     adaptive_r : bool
         R follows the residual of the current state over the last beat (covariance matching
-        with the residual's long-run variance, :mod:`predictors.nonperiodic`); σ_R² is its
+        with the residual's long-run variance, :mod:`rhmpc.predictors.nonperiodic`); σ_R² is its
         floor and start.  False: R = σ_R² (Yuen, Tuna).
     residual_order : int
-        p of the autoregression of the residual (:mod:`predictors.residual`); 0: none.
+        p of the autoregression of the residual (:mod:`rhmpc.predictors.residual`); 0: none.
     residual_forgetting : float
         λ of its RLS [-] (0.999: the RLS predictors' default).
     p0_from_fit : bool
@@ -263,7 +263,7 @@ class DualEKFSettings(PredictorSettings):
     q_omega_cardiac_per_second : float or None
         Process noise intensity of ω_c [(rad/s)² per second], replacing ``q_omega`` for
         ω_c; ``None``: ``q_omega`` (Richa).  Default: heart-rate variability,
-        :data:`predictors.ekf_fourier.Q_OMEGA_HRV` (≈ 0.124 (rad/s)²/s, 21× Richa's), as
+        :data:`rhmpc.predictors.ekf_fourier.Q_OMEGA_HRV` (≈ 0.124 (rad/s)²/s, 21× Richa's), as
         the ``ekf``'s ``tuna2013-hrv``.
     q_phase_cardiac_per_second : float or None
         Phase walk of every cardiac harmonic [rad² per second], ``None``: none (Richa).  As
@@ -306,9 +306,9 @@ class DualEKFSettings(PredictorSettings):
         as the EKF's); a frequency estimate outside its band triggers the re-fit.
     adaptive_r : bool
         R follows the residual of the current state over the last beat
-        (:mod:`predictors.nonperiodic`), ``r`` its floor and start; False: R = ``r``.
+        (:mod:`rhmpc.predictors.nonperiodic`), ``r`` its floor and start; False: R = ``r``.
     residual_order : int
-        p of the autoregression of the residual (:mod:`predictors.residual`); 0: none.
+        p of the autoregression of the residual (:mod:`rhmpc.predictors.residual`); 0: none.
     residual_forgetting : float
         λ of its RLS [-].
     p0_cardiac_from_fit : bool
@@ -322,7 +322,7 @@ class DualEKFSettings(PredictorSettings):
         b: ω̂_c leaving [ω₀/b, ω₀·b] around the cardiac rate ω₀ of the last fit is a lost lock
         (re-fit); ``None``: only ``cardiac_band_hz``.
     unit : float or None
-        Metres per data unit; ``None``: inferred from the data (see ``predictors.base``).
+        Metres per data unit; ``None``: inferred from the data (see ``rhmpc.predictors.base``).
     """
 
     respiratory_harmonics: int = 3
@@ -376,7 +376,7 @@ class DualEKFSettings(PredictorSettings):
 #: given frequencies, Richa's process variances for both frequencies, no gate, no re-fit).
 #: ``fitted``: the fitted start, HRV-sized q_ω_c, the ventilator-held q_ω_r and the innovation
 #: gate (this module's docstring).  ``adaptive`` (the ``dual-ekf`` default): ``fitted`` with the
-#: non-periodic part of :mod:`predictors.nonperiodic` (R from the current state's residual
+#: non-periodic part of :mod:`rhmpc.predictors.nonperiodic` (R from the current state's residual
 #: over the last beat, the residual's AR(16)), the cardiac series fitted on the last 3 beats
 #: and ω̂_c held within 1.5× of the fitted rate (module docstring, "Motion that is not
 #: periodic").

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from predictors.base import Predictor
+from rhmpc.predictors.base import Predictor
 
 __all__ = ["Hold"]
 

@@ -35,7 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from predictors.base import Predictor, PredictorSettings
+from rhmpc.predictors.base import Predictor, PredictorSettings
 
 __all__ = ["PARAMETER_SETS", "LastCycle", "LastCycleSettings"]
 

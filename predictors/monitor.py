@@ -162,7 +162,7 @@ class LeadErrorRMS:
 def rms_by_lead(predictor, z: np.ndarray, steps: int, first: int) -> np.ndarray:
     """(steps,) RMS over n ≥ ``first`` of e_k = ‖ẑ_{n+k|n} − z_{n+k}‖, k = 1 … ``steps``.
 
-    ``predictor`` (:class:`predictors.base.Predictor`) is fed the samples ``z`` (n, d) in
+    ``predictor`` (:class:`rhmpc.predictors.base.Predictor`) is fed the samples ``z`` (n, d) in
     order, open loop; after each sample n with n + steps < len(z) and n ≥ ``first`` (its
     warm-up) it forecasts ``steps`` samples, scored against those that follow. Units: z's.
     """

@@ -28,10 +28,10 @@ residual of its *current* state over the recent samples,
    the model holds the motion (the replicas: R̂ = σ_R); the one-step innovations cannot tell
    the two apart, since a chasing filter whitens them. R̂ belongs to the data, not to a fit:
    it is kept through re-fits.
-2. **A forecast of the residual** (:class:`predictors.residual.ResidualAR`), learnt on the
+2. **A forecast of the residual** (:class:`rhmpc.predictors.residual.ResidualAR`), learnt on the
    same residuals, so that ẑ_{n+k} = ŷ_{n+k|n} + ê_{n+k|n} starts from the newest sample.
 
-Samples are kept newest first (:class:`predictors.residual.RecentSamples`); a missing or
+Samples are kept newest first (:class:`rhmpc.predictors.residual.RecentSamples`); a missing or
 gated sample is NaN: no residual, nothing learnt from a window holding it.
 """
 
@@ -45,8 +45,8 @@ from collections.abc import Callable
 import numpy as np
 from scipy.special import gammaincinv
 
-from predictors.base import Predictor
-from predictors.residual import RecentSamples, ResidualAR
+from rhmpc.predictors.base import Predictor
+from rhmpc.predictors.residual import RecentSamples, ResidualAR
 
 __all__ = ["FourierPredictor", "NonPeriodic", "long_run_variance"]
 

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from predictors.base import Predictor, PredictorSettings
+from rhmpc.predictors.base import Predictor, PredictorSettings
 
 __all__ = ["Oracle", "OracleSettings"]
 

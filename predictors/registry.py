@@ -4,11 +4,11 @@ A name is resolved in one place, :func:`resolve`: into the predictor's class and
 settings (its named parameter set, the registry's overrides, then the caller's settings);
 :func:`build` makes the predictor of them, and ``make_predictor`` is the two in one.
 ``PREDICTORS`` holds the online predictors (ready to run once built), ``LEARNED`` the ones
-fitted before the run (``fit`` or a ``model`` file, :mod:`predictors.learned`); the neural
+fitted before the run (``fit`` or a ``model`` file, :mod:`rhmpc.predictors.learned`); the neural
 ones are imported only when one is built, and need PyTorch (``pip install "rhmpc[learned]"``).
 ``family(name)`` tells the kind of each: ``baseline``, ``adaptive``, ``multi-point``,
 ``learned`` or ``combination``. ``load_model(path)`` builds the fitted predictor a file saved
-(:mod:`predictors.learned.modelfile`: the one loader, which checks a file before it reads it).
+(:mod:`rhmpc.predictors.learned.modelfile`: the one loader, which checks a file before it reads it).
 """
 
 from __future__ import annotations
@@ -18,25 +18,25 @@ import importlib
 import importlib.util
 from typing import Any, NamedTuple
 
-from predictors.ar import AutoregressivePredictor
-from predictors.base import Predictor
-from predictors.combination import Combination
-from predictors.ekf_dual_fourier import DualFourierEKF
-from predictors.ekf_fourier import FourierEKF
-from predictors.hold import Hold
-from predictors.last_cycle import LastCycle
-from predictors.learned.ridge import RidgeSettings
-from predictors.learned.settings import (
+from rhmpc.predictors.ar import AutoregressivePredictor
+from rhmpc.predictors.base import Predictor
+from rhmpc.predictors.combination import Combination
+from rhmpc.predictors.ekf_dual_fourier import DualFourierEKF
+from rhmpc.predictors.ekf_fourier import FourierEKF
+from rhmpc.predictors.hold import Hold
+from rhmpc.predictors.last_cycle import LastCycle
+from rhmpc.predictors.learned.ridge import RidgeSettings
+from rhmpc.predictors.learned.settings import (
     GRU_PRESETS,
     LSTM_PRESETS,
     TCN_PRESETS,
     NetworkSettings,
 )
-from predictors.oracle import Oracle
-from predictors.rls_generalized import GeneralizedRLS
-from predictors.rls_one_step import OneStepRLS
-from predictors.rls_spatiotemporal import SpatioTemporalRLS
-from predictors.wflc import WFLC
+from rhmpc.predictors.oracle import Oracle
+from rhmpc.predictors.rls_generalized import GeneralizedRLS
+from rhmpc.predictors.rls_one_step import OneStepRLS
+from rhmpc.predictors.rls_spatiotemporal import SpatioTemporalRLS
+from rhmpc.predictors.wflc import WFLC
 
 __all__ = ["BASELINES", "FITTED_DEFAULTS", "LEARNED", "PREDICTORS", "build",
            "combination_members", "default_predictors", "family", "load_model", "make_predictor",
@@ -69,11 +69,11 @@ class Learned(NamedTuple):
     presets: dict | None = None
 
 
-_NEURAL = "predictors.learned.neural"
+_NEURAL = "rhmpc.predictors.learned.neural"
 #: name → the predictors fitted before the run
 LEARNED: dict[str, Learned] = {
-    "ridge": Learned("predictors.learned.ridge", "Ridge", RidgeSettings),
-    "st-ridge": Learned("predictors.learned.ridge", "MultiPointRidge", RidgeSettings),
+    "ridge": Learned("rhmpc.predictors.learned.ridge", "Ridge", RidgeSettings),
+    "st-ridge": Learned("rhmpc.predictors.learned.ridge", "MultiPointRidge", RidgeSettings),
     "lstm": Learned(_NEURAL, "LSTMPredictor", NetworkSettings, LSTM_PRESETS),
     "st-lstm": Learned(_NEURAL, "MultiPointLSTM", NetworkSettings, LSTM_PRESETS),
     "gru": Learned(_NEURAL, "GRUPredictor", NetworkSettings, GRU_PRESETS),
@@ -267,7 +267,7 @@ def make_predictor(name: str, dt: float, *, data_unit: float | None = None,
 
 def model_kind(path) -> str:
     """The predictor name a saved model declares (its file checked, no array read)."""
-    from predictors.learned.modelfile import ModelFile
+    from rhmpc.predictors.learned.modelfile import ModelFile
 
     with ModelFile(path, tuple(LEARNED)) as saved:
         return saved.kind
@@ -295,7 +295,7 @@ def load_model(path, expected_kind: str | tuple[str, ...] | None = None,
     Parameters
     ----------
     path : str or Path
-        A model file (:mod:`predictors.learned.modelfile`).
+        A model file (:mod:`rhmpc.predictors.learned.modelfile`).
     expected_kind : str or tuple of str, optional
         The predictor name(s) of :data:`LEARNED` asked for (``"ridge"``, ``("lstm",
         "st-lstm")``); a file of another kind is refused.
@@ -312,13 +312,13 @@ def load_model(path, expected_kind: str | tuple[str, ...] | None = None,
     Raises
     ------
     ValueError
-        (:class:`boundary.FileError`) In one line naming the file: not a regular file, empty,
+        (:class:`rhmpc.io.FileError`) In one line naming the file: not a regular file, empty,
         not a model, another kind or period, a damaged or altered file, one larger than the
         bounds (checked before any array is allocated).
     ImportError
         A network's file without PyTorch (``pip install "rhmpc[learned]"``).
     """
-    from predictors.learned.modelfile import ModelFile
+    from rhmpc.predictors.learned.modelfile import ModelFile
 
     with ModelFile(path, expected_kind or tuple(LEARNED)) as saved:
         kind, saved_dt = saved.kind, saved.dt

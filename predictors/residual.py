@@ -10,7 +10,7 @@ current state over the last p + 1 samples,
 
 (ŷ_{t|n} the model with its newest state, evaluated at sample t, past or future) is followed
 by a per-axis autoregression fitted by exponentially weighted RLS (the kernel of
-:mod:`predictors.rls`; the one-step predictor of Tuna et al. 2013 §V, run on e instead of z):
+:mod:`rhmpc.predictors.rls`; the one-step predictor of Tuna et al. 2013 §V, run on e instead of z):
 
     ê_{n+1} = Σ_{i=1}^{p} a_i e_{n+1−i},    a ← RLS(λ, δ) on (e_{n−1…n−p} ↦ e_n),
     a⁰ = (1, 0, …, 0),
@@ -33,7 +33,7 @@ from collections import Counter
 
 import numpy as np
 
-from predictors.rls import RecursiveLeastSquares
+from rhmpc.predictors.rls import RecursiveLeastSquares
 
 __all__ = ["RecentSamples", "ResidualAR"]
 

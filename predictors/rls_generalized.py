@@ -22,8 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from predictors.delay_line import DelayLinePredictor, TappedDelayLine
-from predictors.rls_one_step import RLSCommon, make_rls
+from rhmpc.predictors.delay_line import DelayLinePredictor, TappedDelayLine
+from rhmpc.predictors.rls_one_step import RLSCommon, make_rls
 
 __all__ = ["GeneralizedRLS", "GeneralizedSettings"]
 

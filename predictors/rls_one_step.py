@@ -18,9 +18,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from predictors.base import PredictorSettings
-from predictors.delay_line import DelayLinePredictor, TappedDelayLine
-from predictors.rls import RecursiveLeastSquares
+from rhmpc.predictors.base import PredictorSettings
+from rhmpc.predictors.delay_line import DelayLinePredictor, TappedDelayLine
+from rhmpc.predictors.rls import RecursiveLeastSquares
 
 __all__ = ["OneStepRLS", "OneStepSettings"]
 

@@ -6,7 +6,7 @@ The stereo-video trackers of the beating heart follow several points of one surf
 past tells the POI's future. This predictor is the linear model of that coupling, a vector
 autoregression with the other points as exogenous inputs (VARX, Lütkepohl 2005, *New
 Introduction to Multiple Time Series Analysis*, ch. 10), fitted by RLS with the generalized
-predictor's direct blocks (Tuna et al. 2013, §VI; :mod:`predictors.rls_generalized`).
+predictor's direct blocks (Tuna et al. 2013, §VI; :mod:`rhmpc.predictors.rls_generalized`).
 
 Model.  With r_n = [z_n; o_n^1; …; o_n^{P−1}] ∈ ℝ^{Pd} the stacked samples of the POI z and the
 P − 1 other points at instant n, the increment form (translation-equivariant: the forecast
@@ -23,7 +23,7 @@ forecasts of every point pushed as if observed), as in the generalized predictor
 Gaps.  A missing sample of any point is filled by the model's own one-step forecast of it
 (its newest sample while the model is not ready); windows with a filled value teach nothing;
 when a whole row returns, the fills of the gap are repaired as in
-:class:`predictors.delay_line.TappedDelayLine`, and measured values are never altered.
+:class:`rhmpc.predictors.delay_line.TappedDelayLine`, and measured values are never altered.
 
 With independent axes (``correlated=False``, the default) each axis is one such problem on
 that axis of every point. Cost per update: one Sherman–Morrison step per problem, ≈ 2n² + 2nq
@@ -37,9 +37,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from predictors.base import Predictor, PredictorSettings
-from predictors.delay_line import TappedDelayLine
-from predictors.rls import RecursiveLeastSquares
+from rhmpc.predictors.base import Predictor, PredictorSettings
+from rhmpc.predictors.delay_line import TappedDelayLine
+from rhmpc.predictors.rls import RecursiveLeastSquares
 
 __all__ = ["PointsDelayLine", "SpatioTemporalRLS", "SpatioTemporalSettings"]
 

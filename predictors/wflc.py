@@ -41,7 +41,7 @@ ramp, which a type-2 loop follows with no steady-state error, so ω̂ cannot run
 Respiration (ours; Richa et al. 2010 eq. 1, the model the EKF also carries):
 ``breathing_harmonics`` = H_b = 2 terms Σ_h a_{a,h} sin hψ_b + b_{a,h} cos hψ_b with their
 own accumulated phase ψ_b, initialised with the heart series (FFT in the breathing band,
-joint least squares, :func:`predictors.fourier_init.initial_dual_state`), adapted by LMS
+joint least squares, :func:`rhmpc.predictors.fourier_init.initial_dual_state`), adapted by LMS
 with μ₁ and a slow loop (P1–P3 on ψ_b, ω_n = 2π·0.02 Hz) clamped to
 ``breathing_band_hz``.  Without it the offset weight follows breathing with a lag of
 1/(2μ_b) samples; with breathing modelled the offset only follows drift: μ_b = 0.01
@@ -53,7 +53,7 @@ heart rate, so that the weights and the loop do not chase each beat's deviations
 * ``loop_ratio`` = 0.3: ω_n = 0.3 ω̂₀;
 * ``weight_beats`` = 2: μ₁ = ω̂₀Δt/(8π), the weights' time constant two beats, over which
   beat-to-beat deviations average out;
-* ``residual_order`` = 16: the AR model of the residual of :mod:`predictors.nonperiodic`
+* ``residual_order`` = 16: the AR model of the residual of :mod:`rhmpc.predictors.nonperiodic`
   (without R: the WFLC has none) adds to the forecast, which starts from the newest sample.
 
 Each part's effect is measured by ``benchmarks/invivo_regime.py``
@@ -74,9 +74,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from predictors.base import PredictorSettings
-from predictors.fourier_init import initial_dual_state, initial_fourier_state
-from predictors.nonperiodic import FourierPredictor, NonPeriodic
+from rhmpc.predictors.base import PredictorSettings
+from rhmpc.predictors.fourier_init import initial_dual_state, initial_fourier_state
+from rhmpc.predictors.nonperiodic import FourierPredictor, NonPeriodic
 
 __all__ = ["WFLC", "WFLCSettings"]
 
@@ -155,11 +155,11 @@ class WFLCSettings(PredictorSettings):
         μ₁ such that the weights' LMS time constant 1/(2μ₁) lasts this many beats at ω̂₀:
         μ₁ = ω̂₀Δt/(4π·beats); ``None``: ``mu1``.
     residual_order : int
-        p of the autoregression of the residual (:mod:`predictors.residual`); 0: none.
+        p of the autoregression of the residual (:mod:`rhmpc.predictors.residual`); 0: none.
     residual_forgetting : float
         λ of its RLS [-].
     unit : float or None
-        Metres per data unit; ``None``: inferred from the data (see ``predictors.base``).
+        Metres per data unit; ``None``: inferred from the data (see ``rhmpc.predictors.base``).
     """
 
     harmonics: int = 8

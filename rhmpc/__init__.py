@@ -2,11 +2,19 @@
 
 The package's parts (``docs/design/index.md`` maps what each may import):
 
+- :mod:`rhmpc.io` — the one guarded reader, the one atomic writer, the table of bounds;
+- :mod:`rhmpc.robots`, :mod:`rhmpc.predictors` — the robots, the heart-motion predictors;
+- :mod:`rhmpc.sim` — the simulated world: heart, sensors, plant, recordings, closed loop;
 - :mod:`rhmpc.control` — the controller: QP, per-tick MPC, reference builder, settings;
 - :mod:`rhmpc.experiment` — one run's configuration (TOML) and its assembly;
 - :mod:`rhmpc.studies` — bench, prediction studies, the Tables I–III comparison;
 - :mod:`rhmpc.tuning` — resumable parameter sweeps;
 - :mod:`rhmpc.cli` — the ``rhmpc`` console script.
+
+``rhmpc.robots``, ``rhmpc.predictors`` and ``rhmpc.sim`` keep their folders at the repository's
+root (``robots/``, ``predictors/``, ``sim/``), installed here by ``package-dir`` in
+``pyproject.toml``; imported from a source checkout, they come from that checkout's folders
+(``_CheckoutFinder`` below).
 
 The most used names are importable from here (``from rhmpc import RecedingHorizonMPC``); they
 load on first use.
@@ -15,7 +23,11 @@ load on first use.
 from __future__ import annotations
 
 import importlib
+import importlib.util
+import sys
+from importlib.machinery import ModuleSpec
 from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path
 from typing import Any
 
 try:
@@ -34,6 +46,40 @@ _EXPORTS = {
 }
 
 __all__ = ["__version__", *sorted(_EXPORTS)]
+
+#: The repository's root, when this package is imported from a source checkout.
+_ROOT = Path(__file__).resolve().parent.parent
+#: The subpackages whose folders are at the repository's root (pyproject.toml's package-dir).
+_ROOT_FOLDERS = {f"{__name__}.{name}": _ROOT / name for name in ("robots", "predictors", "sim")}
+
+
+class _CheckoutFinder:
+    """Finds ``rhmpc.robots``, ``rhmpc.predictors`` and ``rhmpc.sim`` in the folders of the
+    source checkout this package is imported from (their subpackages follow from each one's
+    ``__path__``).
+
+    A wheel holds those folders inside ``rhmpc/``, and an editable install's finder maps them to
+    its checkout; but Python started at a checkout's root (``python``, ``python -m pytest``,
+    Sphinx with the root on ``sys.path``) imports ``rhmpc`` from ``./rhmpc``, whose folder
+    holds none of the three, whatever is installed: a wheel, an editable install of another
+    checkout, or nothing. Installed first on ``sys.meta_path``, and only where this package
+    lies in a checkout (``pyproject.toml`` and the three folders beside it; never in an
+    installed copy), this finder makes the three the checkout's own, as ``rhmpc`` is.
+    """
+
+    @staticmethod
+    def find_spec(fullname: str, path: Any = None, target: Any = None) -> ModuleSpec | None:
+        folder = _ROOT_FOLDERS.get(fullname)
+        if folder is None:
+            return None
+        return importlib.util.spec_from_file_location(
+            fullname, folder / "__init__.py", submodule_search_locations=[str(folder)])
+
+
+if (_ROOT / "pyproject.toml").is_file() and all(
+        (folder / "__init__.py").is_file() for folder in _ROOT_FOLDERS.values()) and not any(
+        getattr(finder, "__name__", None) == _CheckoutFinder.__name__ for finder in sys.meta_path):
+    sys.meta_path.insert(0, _CheckoutFinder)
 
 
 def __getattr__(name: str) -> Any:

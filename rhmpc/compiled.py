@@ -34,8 +34,8 @@ import tempfile
 import warnings
 from pathlib import Path
 
-import boundary
-from boundary import FileError
+from rhmpc import io
+from rhmpc.io import FileError
 
 __all__ = ["FLAGS", "CacheWarning", "build", "cache_dir", "compiler", "load"]
 
@@ -79,7 +79,7 @@ def build_key(sources: list[Path], headers: list[Path]) -> str:
     lines of :data:`GENERATED_AT` removed."""
     key = hashlib.sha256(" ".join((*FLAGS, *_TUNED, _processor())).encode())
     for path in (*sources, *headers):
-        text = GENERATED_AT.sub(b"", boundary.read_bytes(path, "C source", track=False))
+        text = GENERATED_AT.sub(b"", io.read_bytes(path, "C source", track=False))
         key.update(path.name.encode() + b"\0" + text)
     return key.hexdigest()[:16]
 
@@ -94,8 +94,8 @@ def _intact(target: Path) -> str | None:
     if not target.exists() and not _record(target).exists():
         return ""
     try:
-        record = boundary.read_json(_record(target), "file", track=False)
-        data = boundary.read_bytes(target, "library", track=False)
+        record = io.read_json(_record(target), "file", track=False)
+        data = io.read_bytes(target, "library", track=False)
     except FileError as exc:
         return str(exc)
     recorded = record.get("size") if isinstance(record, dict) else None
@@ -116,7 +116,7 @@ def _compile(cc: str, flags, include, sources: list[Path], target: Path) -> None
                         *map(str, sources), "-lm"], check=True, capture_output=True, timeout=300)
         data = built.read_bytes()
         os.replace(built, target)
-    boundary.write_text(_record(target), json.dumps(
+    io.write_text(_record(target), json.dumps(
         {"size": len(data), "sha256": hashlib.sha256(data).hexdigest()}) + "\n")
 
 

@@ -22,7 +22,7 @@ A robot file is TOML. Its keys (SI units; angles in radians)::
     gravity = 9.81                        # [m/s²] along the world's −z; default Pinocchio's
     workspace = 0.01                      # half-width of the cube about the tool's home that
                                           # the POI may visit [m] (default 10 mm)
-    motor_map = [[1, 0, 0], [0, 1, 0], [0, 0, 1]]    # θ = S (q − q0): see robots.Robot
+    motor_map = [[1, 0, 0], [0, 1, 0], [0, 0, 1]]    # θ = S (q − q0): see rhmpc.robots.Robot
     coupling = [{ row = [0, 1, 1], lower = -2.16, upper = 2.08 }]   # lower ≤ row·q ≤ upper
     [drives]                              # geared motors, all keys together: they give the
     gear_ratio = [13.3, 11.2, 11.2]       # torque limits η·peak_torque, the friction
@@ -53,8 +53,8 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from boundary import FileError, read_text, read_toml
-from robots.model import Robot
+from rhmpc.io import FileError, read_text, read_toml
+from rhmpc.robots.model import Robot
 
 #: Keys of a robot file and of its [drives] table.
 KEYS = ("urdf", "joints", "locked", "tool_frame", "tool", "home", "name", "description",
@@ -64,7 +64,7 @@ DRIVE_KEYS = ("gear_ratio", "peak_torque", "torque_constant", "no_load_current",
               "rotor_inertia", "encoder_counts", "rotor_joints")
 #: The POI's reach about the tool's home position by default [m] (Yuen et al. 2009, §2).
 WORKSPACE = 0.01
-#: The largest URDF read [bytes] (the robot file is a settings file: ``boundary``'s bound).
+#: The largest URDF read [bytes] (the robot file is a settings file: ``rhmpc.io``'s bound).
 MAX_URDF_BYTES = 2**26
 #: A home posture whose Jacobian's singular values differ by more than this is singular.
 MAX_CONDITION = 1e3
@@ -124,7 +124,7 @@ def _number(table: dict, key: str, where: str = "") -> float:
 
 
 def read_file(path: str | Path) -> dict:
-    """The robot file's table (:func:`boundary.read_toml`: a file that cannot be read, or is
+    """The robot file's table (:func:`rhmpc.io.read_toml`: a file that cannot be read, or is
     not TOML, is a ``FileError`` naming it); unknown or missing keys raise
     :class:`RobotFileError`."""
     doc = read_toml(path)  # FileError, naming the file

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
-from robots.model import Robot
+from rhmpc.robots.model import Robot
 
 
 @dataclass(frozen=True, eq=False)

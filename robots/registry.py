@@ -1,7 +1,7 @@
 """`load_robot(name)`: a registered robot by its name, or any robot by its file.
 
 Each registered robot is a robot file shipped in ``robots/urdf`` (``phantom.toml``, ...), the
-same kind of file a user writes for an arm of their own (:mod:`robots.description`), so there
+same kind of file a user writes for an arm of their own (:mod:`rhmpc.robots.description`), so there
 is one way to describe a robot.
 """
 
@@ -10,8 +10,8 @@ from __future__ import annotations
 from importlib import resources
 from pathlib import Path
 
-from robots.description import robot_from_file
-from robots.model import Robot
+from rhmpc.robots.description import robot_from_file
+from rhmpc.robots.model import Robot
 
 #: Registered robot names (each ``robots/urdf/NAME.toml``).
 ROBOTS: tuple[str, ...] = ("phantom", "phantom-cavusoglu", "finger_edu", "ur5")
@@ -19,9 +19,10 @@ ROBOTS: tuple[str, ...] = ("phantom", "phantom-cavusoglu", "finger_edu", "ur5")
 
 def urdf_path(filename: str) -> str:
     """Path of a file shipped in ``robots/urdf`` (works from an installed wheel too)."""
-    ref = resources.files("robots") / "urdf" / filename
+    ref = resources.files("rhmpc.robots") / "urdf" / filename
     if not ref.is_file():
-        raise FileNotFoundError(f"robot description {filename!r} is not installed with 'robots'")
+        raise FileNotFoundError(
+            f"robot description {filename!r} is not installed with 'rhmpc.robots'")
     return str(ref)
 
 
@@ -32,13 +33,13 @@ def is_robot_file(name: str) -> bool:
 
 def load_robot(name: str) -> Robot:
     """A registered robot (``ROBOTS``) or the robot of a file ``*.toml``
-    (:func:`robots.description.robot_from_file`).
+    (:func:`rhmpc.robots.description.robot_from_file`).
 
     Raises
     ------
     ValueError
         If ``name`` is neither (the message lists the valid names), or the file does not
-        describe a robot (:class:`robots.description.RobotFileError`, naming the key).
+        describe a robot (:class:`rhmpc.robots.description.RobotFileError`, naming the key).
     """
     if name in ROBOTS:
         return robot_from_file(urdf_path(f"{name}.toml"))

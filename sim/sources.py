@@ -1,8 +1,8 @@
 """Where a run's heart motion comes from: a named scenario or a user's recording.
 
-This module sits above :mod:`sim.heart` (synthetic motion) and :mod:`sim.recordings` (files),
-and picks between them: :func:`heart_source` for a run, :func:`export_scenario` to write a
-scenario's motion to a file that :func:`sim.recordings.load_recording` reads back.
+This module sits above :mod:`rhmpc.sim.heart` (synthetic motion) and :mod:`rhmpc.sim.recordings`
+(files), and picks between them: :func:`heart_source` for a run, :func:`export_scenario` to write a
+scenario's motion to a file that :func:`rhmpc.sim.recordings.load_recording` reads back.
 """
 
 from __future__ import annotations
@@ -12,12 +12,12 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.heart.motion import MotionSource
-from sim.heart.scenarios import Scenario, make_scenario
-from sim.recordings.files import load_recording
-from sim.recordings.points import PointsAt, load_poi
-from sim.recordings.recorded import RecordedMotion
-from sim.recordings.text import export_source
+from rhmpc.sim.heart.motion import MotionSource
+from rhmpc.sim.heart.scenarios import Scenario, make_scenario
+from rhmpc.sim.recordings.files import load_recording
+from rhmpc.sim.recordings.points import PointsAt, load_poi
+from rhmpc.sim.recordings.recorded import RecordedMotion
+from rhmpc.sim.recordings.text import export_source
 
 __all__ = ["HeartSource", "Shifted", "export_scenario", "heart_source", "read_points"]
 
@@ -76,7 +76,7 @@ def heart_source(scenario: str, rng: np.random.Generator, *, data: str | None = 
                  data_read: dict | None = None, rr: str | None = None,
                  needed: float = 0.0) -> HeartSource:
     """The motion of a recording (``data``, read with ``data_read``) or of a named scenario
-    (:func:`sim.heart.make_scenario`, the one builder of a scenario).
+    (:func:`rhmpc.sim.heart.make_scenario`, the one builder of a scenario).
 
     A scenario is made ``needed`` seconds long: its random processes (HRV, drift, breathing)
     are drawn over its nominal length or ``needed`` seconds, whichever is longer (past that
@@ -114,15 +114,15 @@ def export_scenario(scenario: Scenario | str, path: str | Path, duration: float 
     Parameters
     ----------
     scenario : Scenario or str
-        A scenario, or a name for :func:`~sim.heart.make_scenario` (with ``rng``).
+        A scenario, or a name for :func:`~rhmpc.sim.heart.make_scenario` (with ``rng``).
     path : str or Path
-        ``.csv`` or ``.npz``; :func:`~sim.recordings.load_recording` reads it back.
+        ``.csv`` or ``.npz``; :func:`~rhmpc.sim.recordings.load_recording` reads it back.
     duration : float, optional
         Seconds to write [s]; default the scenario's duration.
     rate : float, optional
         Sample rate [Hz]; default the scenario's sensor rate.
     rng : numpy.random.Generator, optional
-        Passed to :func:`~sim.heart.make_scenario` when ``scenario`` is a name.
+        Passed to :func:`~rhmpc.sim.heart.make_scenario` when ``scenario`` is a name.
     """
     sc = make_scenario(scenario, rng) if isinstance(scenario, str) else scenario
     duration = sc.duration if duration is None else float(duration)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from robots import LinearArm, Robot, linearize, load_robot
+from rhmpc.robots import LinearArm, Robot, linearize, load_robot
 
 
 @pytest.fixture(scope="session")

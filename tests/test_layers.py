@@ -2,14 +2,15 @@
 
 Layers, from the bottom (peers of one layer do not import each other):
 
--1. ``boundary``, the one guarded reader, the one atomic writer and the table of bounds, which
+-1. ``rhmpc.io``, the one guarded reader, the one atomic writer and the table of bounds, which
     every package may import (it imports the standard library and NumPy only)
-0. ``robots``, ``predictors``
+0. ``rhmpc.robots``, ``rhmpc.predictors``
 1. ``rhmpc.control``, the controller a robot runs (with ``rhmpc.errors`` and ``rhmpc.compiled``,
    the one build helper of every compiled piece, which every part above may use)
-2. ``sim``, the world that composes a controller, itself in floors: ``sim.heart`` and
-   ``sim.plant``; ``sim.recordings`` and ``sim.sensors`` (they read ``sim.heart``'s motion
-   sources); ``sim.sources`` (a scenario or a recording); ``sim.loop``
+2. ``rhmpc.sim``, the world that composes a controller, itself in floors: ``rhmpc.sim.heart``
+   and ``rhmpc.sim.plant``; ``rhmpc.sim.recordings`` and ``rhmpc.sim.sensors`` (they read
+   ``rhmpc.sim.heart``'s motion sources); ``rhmpc.sim.sources`` (a scenario or a recording);
+   ``rhmpc.sim.loop``
 3. ``rhmpc.experiment``
 4. ``rhmpc.studies``, ``rhmpc.tuning``; above them ``rhmpc.runtime`` (the deployment's
    processes, which reuse the tuning's processes that die with their parent)
@@ -17,9 +18,14 @@ Layers, from the bottom (peers of one layer do not import each other):
 
 Every ``import`` statement counts, including those inside functions (deferred imports are
 still dependencies), and no module may reach itself through imports (no cycle).
-``predictors`` also depends on nothing outside numpy, scipy, the standard library and
-``boundary``, so that a predictor can be lifted into another project; only the learned predictors
-(``predictors.learned``) import their optional deep-learning extra, and only when asked for.
+``rhmpc.predictors`` also depends on nothing outside numpy, scipy, the standard library and
+``rhmpc.io``, so that a predictor can be lifted into another project; only the learned
+predictors (``rhmpc.predictors.learned``) import their optional deep-learning extra, and only
+when asked for.
+
+``rhmpc.robots``, ``rhmpc.predictors`` and ``rhmpc.sim`` keep their folders at the repository's
+root (``robots/``, ``predictors/``, ``sim/``; pyproject.toml's ``package-dir``): a file's module
+is named from :data:`FOLDERS`.
 """
 
 from __future__ import annotations
@@ -34,48 +40,63 @@ REPO = Path(__file__).resolve().parents[1]
 
 #: (package prefix, layer, peer group); the longest matching prefix decides.
 LAYERS: tuple[tuple[str, float, str], ...] = (
-    ("boundary", -1, "boundary"),
-    ("robots", 0, "robots"),
-    ("predictors", 0, "predictors"),
+    ("rhmpc.io", -1, "rhmpc.io"),
+    ("rhmpc.robots", 0, "rhmpc.robots"),
+    ("rhmpc.predictors", 0, "rhmpc.predictors"),
     ("rhmpc.errors", 0.9, "rhmpc.errors"),
     ("rhmpc.compiled", 0.9, "rhmpc.compiled"),
     ("rhmpc.control", 1, "rhmpc.control"),
-    ("sim", 2, "sim"),
-    ("sim.heart", 2.0, "sim.heart"),
-    ("sim.plant", 2.0, "sim.plant"),
-    ("sim.recordings", 2.1, "sim.recordings"),
-    ("sim.sensors", 2.1, "sim.sensors"),
-    ("sim.sources", 2.2, "sim.sources"),
-    ("sim.loop", 2.3, "sim.loop"),
+    ("rhmpc.sim", 2, "rhmpc.sim"),
+    ("rhmpc.sim.heart", 2.0, "rhmpc.sim.heart"),
+    ("rhmpc.sim.plant", 2.0, "rhmpc.sim.plant"),
+    ("rhmpc.sim.recordings", 2.1, "rhmpc.sim.recordings"),
+    ("rhmpc.sim.sensors", 2.1, "rhmpc.sim.sensors"),
+    ("rhmpc.sim.sources", 2.2, "rhmpc.sim.sources"),
+    ("rhmpc.sim.loop", 2.3, "rhmpc.sim.loop"),
     ("rhmpc.experiment", 3, "rhmpc.experiment"),
     ("rhmpc.studies", 4, "rhmpc.studies"),
     ("rhmpc.tuning", 4, "rhmpc.tuning"),
     ("rhmpc.runtime", 4.5, "rhmpc.runtime"),
     ("rhmpc.cli", 5, "rhmpc.cli"),
 )
-PACKAGES = ("boundary", "robots", "predictors", "sim", "rhmpc")
-#: What ``predictors`` may import besides itself and the standard library.
-PREDICTOR_DEPENDENCIES = ("numpy", "scipy", "boundary")
-#: What ``boundary`` may import besides itself and the standard library.
-BOUNDARY_DEPENDENCIES = ("numpy",)
-#: The optional extra the learned predictors (``predictors.learned``) may import besides.
+#: The folders of the repository's packages and the module each holds.
+FOLDERS = {"robots": "rhmpc.robots", "predictors": "rhmpc.predictors", "sim": "rhmpc.sim",
+           "rhmpc": "rhmpc"}
+PACKAGES = tuple(FOLDERS)
+#: What ``rhmpc.predictors`` may import besides itself and the standard library.
+PREDICTOR_DEPENDENCIES = ("numpy", "scipy", "rhmpc.io")
+#: What ``rhmpc.io`` may import besides itself and the standard library.
+IO_DEPENDENCIES = ("numpy",)
+#: The optional extra the learned predictors (``rhmpc.predictors.learned``) may import besides.
 LEARNED_DEPENDENCIES = ("torch",)
+
+
+def within(module: str, package: str) -> bool:
+    """Whether ``module`` is ``package`` or one of its submodules (or names in them)."""
+    return module == package or module.startswith(package + ".")
+
+
+def allowed(target: str, own: str, dependencies: tuple[str, ...]) -> bool:
+    """Whether ``target`` is in package ``own``, in one of ``dependencies`` or the stdlib."""
+    return (within(target, own) or any(within(target, d) for d in dependencies)
+            or target.split(".")[0] in sys.stdlib_module_names)
 
 
 def layer_of(module: str) -> tuple[float, str] | None:
     """(layer, peer group) of a first-party module, or None for third-party/stdlib ones."""
     best = None
     for prefix, layer, group in LAYERS:
-        if (module == prefix or module.startswith(prefix + ".")) and (
-                best is None or len(prefix) > len(best[0])):
+        if within(module, prefix) and (best is None or len(prefix) > len(best[0])):
             best = (prefix, layer, group)
     return None if best is None else best[1:]
 
 
 def module_name(path: Path, root: Path) -> str:
+    """The module a file under ``root`` is installed as (``sim/loop/x.py``: rhmpc.sim.loop.x)."""
     parts = list(path.relative_to(root).with_suffix("").parts)
     if parts[-1] == "__init__":
         parts.pop()
+    parts[0] = FOLDERS.get(parts[0], parts[0])
     return ".".join(parts)
 
 
@@ -107,20 +128,16 @@ def violations(root: Path) -> list[str]:
                 continue  # the facade: lazy re-exports only, resolved on first use
             own = layer_of(module)
             for line, target in imports_of(path, module):
-                if top == "boundary":
-                    first = target.split(".")[0]
-                    if first not in ("boundary", *BOUNDARY_DEPENDENCIES) and \
-                            first not in sys.stdlib_module_names:
-                        found.append(f"{path.relative_to(root)}:{line}: boundary imports "
-                                     f"{target} (the standard library and numpy only)")
-                if top == "predictors":
-                    first = target.split(".")[0]
-                    extra = LEARNED_DEPENDENCIES if module.startswith("predictors.learned") \
+                if within(module, "rhmpc.io") and not allowed(target, "rhmpc.io",
+                                                               IO_DEPENDENCIES):
+                    found.append(f"{path.relative_to(root)}:{line}: rhmpc.io imports "
+                                 f"{target} (the standard library and numpy only)")
+                if within(module, "rhmpc.predictors"):
+                    extra = LEARNED_DEPENDENCIES if within(module, "rhmpc.predictors.learned") \
                         else ()
-                    if first not in ("predictors", *PREDICTOR_DEPENDENCIES, *extra) and \
-                            first not in sys.stdlib_module_names:
-                        found.append(f"{path.relative_to(root)}:{line}: predictors imports "
-                                     f"{target} (numpy, scipy and boundary only)")
+                    if not allowed(target, "rhmpc.predictors", (*PREDICTOR_DEPENDENCIES, *extra)):
+                        found.append(f"{path.relative_to(root)}:{line}: rhmpc.predictors "
+                                     f"imports {target} (numpy, scipy and rhmpc.io only)")
                 if target.split(".")[0] == "rhmpc" and layer_of(target) is None \
                         and target not in ("rhmpc", "rhmpc.__version__"):
                     found.append(f"{path.relative_to(root)}:{line}: {module} imports {target} "
@@ -150,15 +167,15 @@ def test_every_module_has_a_layer() -> None:
 
 
 @pytest.mark.parametrize(("where", "source", "expected"), [
-    ("rhmpc/control/bad.py", "from sim.loop import run_closed_loop\n", "layer 2"),
+    ("rhmpc/control/bad.py", "from rhmpc.sim.loop import run_closed_loop\n", "layer 2"),
     ("rhmpc/control/bad.py", "def f():\n    from rhmpc.experiment import run_experiment\n",
      "layer 3"),
     ("rhmpc/studies/bad.py", "from rhmpc.tuning import spec\n", "layer 4"),
     ("rhmpc/tuning/bad.py", "from ..cli import main\n", "layer 5"),
-    ("robots/bad.py", "import predictors\n", "layer 0"),
-    ("predictors/bad.py", "import pinocchio\n", "numpy, scipy and boundary only"),
-    ("predictors/bad.py", "import torch\n", "numpy, scipy and boundary only"),
-    ("boundary/bad.py", "import scipy\n", "the standard library and numpy only"),
+    ("robots/bad.py", "import rhmpc.predictors\n", "layer 0"),
+    ("predictors/bad.py", "import pinocchio\n", "numpy, scipy and rhmpc.io only"),
+    ("predictors/bad.py", "import torch\n", "numpy, scipy and rhmpc.io only"),
+    ("rhmpc/io/bad.py", "import scipy\n", "the standard library and numpy only"),
     ("rhmpc/control/bad.py", "from rhmpc import run_experiment\n", "facade"),
 ])
 def test_the_check_catches_an_upward_import(tmp_path: Path, where: str, source: str,
@@ -177,9 +194,10 @@ def test_allowed_imports_pass(tmp_path: Path) -> None:
     (tmp_path / "rhmpc" / "cli").mkdir()
     (tmp_path / "rhmpc" / "cli" / "ok.py").write_text(
         "from rhmpc import __version__\nfrom rhmpc.errors import UsageError\n"
-        "from rhmpc.tuning.spec import load_spec\nfrom sim.loop import run_closed_loop\n")
+        "from rhmpc.tuning.spec import load_spec\nfrom rhmpc.sim.loop import run_closed_loop\n")
     (tmp_path / "predictors" / "ok.py").write_text("import math\nimport numpy as np\n"
-                                                   "from scipy import linalg\n")
+                                                   "from scipy import linalg\n"
+                                                   "from rhmpc import io\n")
     assert violations(tmp_path) == []
 
 
@@ -244,6 +262,7 @@ def test_no_import_cycle() -> None:
 def test_the_cycle_check_catches_a_deferred_cycle(tmp_path: Path) -> None:
     for top in PACKAGES:
         (tmp_path / top).mkdir()
-    (tmp_path / "sim" / "a.py").write_text("from sim.b import g\n")
-    (tmp_path / "sim" / "b.py").write_text("def g():\n    from sim import a\n    return a\n")
-    assert cycles(import_graph(tmp_path)) == [["sim.a", "sim.b"]]
+    (tmp_path / "sim" / "a.py").write_text("from rhmpc.sim.b import g\n")
+    (tmp_path / "sim" / "b.py").write_text("def g():\n    from rhmpc.sim import a\n"
+                                           "    return a\n")
+    assert cycles(import_graph(tmp_path)) == [["rhmpc.sim.a", "rhmpc.sim.b"]]

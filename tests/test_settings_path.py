@@ -3,7 +3,7 @@ repository files a command's calls cross on their way from the command line to t
 
 ``python -m tests.test_settings_path [rhmpc arguments]`` runs the command (by default the
 three ``rhmpc simulate`` runs of :data:`RUNS`) under :func:`sys.setprofile` up to the call of
-:func:`sim.loop.run_closed_loop` (the loop itself is not run), ignores library files and the
+:func:`rhmpc.sim.loop.run_closed_loop` (the loop itself is not run), ignores library files and the
 module bodies an import runs, and prints
 
 - ``files_crossed``, ``returns_crossed``: the repository files entered by any call, and the
@@ -53,7 +53,7 @@ import pytest
 from tests.test_layers import layer_of, module_name
 
 REPO = Path(__file__).resolve().parents[1]
-PACKAGES = ("rhmpc", "sim", "predictors", "robots", "boundary")
+PACKAGES = ("rhmpc", "sim", "predictors", "robots")
 
 
 class _Reached(Exception):
@@ -163,9 +163,9 @@ def trace(argv: list[str], heart_builder: str = "build_heart") -> Crossing:
     ``heart_builder``: the function whose call builds the heart (its entries make the heart's
     span).
     """
-    from predictors.base import Predictor
     from rhmpc.cli import main
-    from sim.loop import run_closed_loop
+    from rhmpc.predictors.base import Predictor
+    from rhmpc.sim.loop import run_closed_loop
 
     loop_code = run_closed_loop.__code__
     out = Crossing()

@@ -6,13 +6,13 @@ Three things the packages' layout would otherwise cost the API reference:
   ``_autosummary`` and never removes one; after a module is moved or deleted its old page fails
   to import and breaks the build. Pages of modules that cannot be found are removed first.
 * **Modules named like a function.** A package that re-exports a function under its module's
-  name (``robots.linearize`` is the module and, in ``robots``, the function) makes autosummary
-  document the function where the module's page belongs, and the module's classes
+  name (``rhmpc.robots.linearize`` is the module and, in ``rhmpc.robots``, the function) makes
+  autosummary document the function where the module's page belongs, and the module's classes
   (``LinearArm``, ``SonomicrometrySettings`` …) on no page at all. A name that is a submodule
   is here resolved to the submodule.
 * **References through a re-export.** The API pages document each object where it is defined
-  (``sim.loop.results.LoopResult``), while docstrings name it as users import it
-  (``sim.loop.LoopResult``, or ``RunConfig`` where the module imported it). A Python reference
+  (``rhmpc.sim.loop.results.LoopResult``), while docstrings name it as users import it
+  (``rhmpc.sim.loop.LoopResult``, or ``RunConfig`` where the module imported it). A Python reference
   that finds no target is resolved by importing the name it gives, in the module and class it
   is written in, and linking to the page that documents the object it imports (for a constant,
   the one documented name of the same last part that imports to that very object).

@@ -16,7 +16,7 @@ order of the constructor's parameters, inherited fields included:
 Field entries leave the ``Attributes`` section before numpydoc renders it (entries that are not
 fields, such as properties, stay), and autodoc's own members for the fields are skipped, so that
 each field is described once and is a cross-reference target
-(``:attr:`~sim.loop.settings.LoopSettings.duration```) wherever it was defined.
+(``:attr:`~rhmpc.sim.loop.settings.LoopSettings.duration```) wherever it was defined.
 """
 
 from __future__ import annotations

@@ -25,10 +25,10 @@ from abc import abstractmethod
 
 import numpy as np
 
-from boundary import FileError
-from predictors.base import Predictor
-from predictors.learned.modelfile import ModelFile, write_model
-from predictors.learned.series import as_series
+from rhmpc.io import FileError
+from rhmpc.predictors.base import Predictor
+from rhmpc.predictors.learned.modelfile import ModelFile, write_model
+from rhmpc.predictors.learned.series import as_series
 
 __all__ = ["MIN_FIT_SECONDS", "FitWarning", "FittedPredictor", "settings_from_dict"]
 
@@ -43,7 +43,7 @@ class FitWarning(UserWarning):
 
 def settings_from_dict(cls, values: dict, where: str):
     """The settings dataclass ``cls`` from a model file's ``settings`` (lists become tuples);
-    unknown keys and invalid values are a :class:`boundary.FileError` naming ``where``."""
+    unknown keys and invalid values are a :class:`rhmpc.io.FileError` naming ``where``."""
     fields = {f.name for f in dataclasses.fields(cls)}
     unknown = sorted(set(values) - fields)
     if unknown:
@@ -67,7 +67,7 @@ class FittedPredictor(Predictor):
     Their settings have ``leads``, ``unit`` and ``model``.
     """
 
-    #: the predictor's name (``predictors.registry.LEARNED``), the ``kind`` of its files
+    #: the predictor's name (``rhmpc.predictors.registry.LEARNED``), the ``kind`` of its files
     KIND = ""
     #: the file name suffix of :meth:`save`
     SUFFIX = ".npz"
@@ -85,7 +85,7 @@ class FittedPredictor(Predictor):
         return self.model is not None
 
     def fit(self, series, progress=None) -> FittedPredictor:
-        """Fit the model to ``series`` (module :mod:`predictors.learned.series`: (T, P, d) [m]
+        """Fit the model to ``series`` (module :mod:`rhmpc.predictors.learned.series`: (T, P, d) [m]
         on this predictor's ``dt`` grid, POI in row 0; a predictor that does not read the
         other points uses row 0 only). ``progress(text)``, if given, hears how it goes.
         Returns the predictor, its online history reset."""
@@ -109,13 +109,13 @@ class FittedPredictor(Predictor):
 
     def load(self, path) -> FittedPredictor:
         """Load a model written by :meth:`save`, checked before any array is read
-        (:class:`~predictors.learned.modelfile.ModelFile`); its settings replace this
+        (:class:`~rhmpc.predictors.learned.modelfile.ModelFile`); its settings replace this
         predictor's, except ``unit`` and ``model``.
 
         Raises
         ------
         ValueError
-            (:class:`boundary.FileError`) Naming the file: not a model of this predictor, of
+            (:class:`rhmpc.io.FileError`) Naming the file: not a model of this predictor, of
             another sampling period, damaged, altered or too large.
         """
         with ModelFile(path, self.KIND) as saved:
@@ -133,7 +133,7 @@ class FittedPredictor(Predictor):
 
     def save(self, path) -> None:
         """Write the fitted model and its settings to ``path`` (the one model format,
-        :mod:`predictors.learned.modelfile`; atomically, never through a link)."""
+        :mod:`rhmpc.predictors.learned.modelfile`; atomically, never through a link)."""
         if self.model is None:
             raise RuntimeError(f"{type(self).__name__} is not fitted: nothing to save")
         m = self.model

@@ -7,18 +7,18 @@ that runs code when read) with a member ``header``, a JSON text::
      "dim": 3, "settings": {...},
      "arrays": {"orders": {"shape": [5], "dtype": "<i8"}, "W0": {...}, ...}}
 
-``kind`` is the predictor's name (:data:`predictors.registry.LEARNED`), ``dt`` the sampling
+``kind`` is the predictor's name (:data:`rhmpc.predictors.registry.LEARNED`), ``dt`` the sampling
 period it was fitted at [s], ``points`` and ``dim`` the tracked points and coordinates it reads,
 ``settings`` its settings dataclass, and ``arrays`` every other member with its shape and dtype.
 
 :class:`ModelFile` checks, before any array is read: the file (a regular file of at most
-``FILE_BYTES["model"]``, :mod:`boundary.reader`), the header (at most 4 MiB and 64 levels of
+``FILE_BYTES["model"]``, :mod:`rhmpc.io.reader`), the header (at most 4 MiB and 64 levels of
 JSON, the format, a version this code reads, the kind asked for, a period, points and
 dimension in range), and every declared array against its member (the same names, each
 member's ``.npy`` header equal to its declaration, its length exact) with their total size
 within ``FILE_BYTES["model"]``. The predictor then checks the shapes its settings imply
-(:meth:`~predictors.learned.fitted.FittedPredictor.model_shapes`) before the arrays are read.
-Every problem is one ``ValueError`` (:class:`boundary.FileError`) naming the file.
+(:meth:`~rhmpc.predictors.learned.fitted.FittedPredictor.model_shapes`) before the arrays are read.
+Every problem is one ``ValueError`` (:class:`rhmpc.io.FileError`) naming the file.
 """
 
 from __future__ import annotations
@@ -30,9 +30,9 @@ from pathlib import Path
 
 import numpy as np
 
-import boundary
-from boundary import FILE_BYTES, FileError, NpzArchive
-from boundary.limits import size_bytes
+from rhmpc import io
+from rhmpc.io import FILE_BYTES, FileError, NpzArchive
+from rhmpc.io.limits import size_bytes
 
 __all__ = ["FORMAT", "MAX_POINTS", "VERSION", "ModelFile", "write_model"]
 
@@ -48,7 +48,7 @@ MAX_ARRAYS = 10_000
 
 def write_model(path, kind: str, dt: float, points: int, dim: int, settings,
                 arrays: dict[str, np.ndarray]) -> Path:
-    """Write a model in the format above, atomically (:class:`boundary.AtomicFile`).
+    """Write a model in the format above, atomically (:class:`rhmpc.io.AtomicFile`).
 
     ``settings``: the predictor's settings dataclass; ``arrays``: name → numeric array.
     """
@@ -58,7 +58,7 @@ def write_model(path, kind: str, dt: float, points: int, dim: int, settings,
               "settings": dataclasses.asdict(settings),
               "arrays": {k: {"shape": list(v.shape), "dtype": v.dtype.str}
                          for k, v in arrays.items()}}
-    with boundary.atomic_write(path) as f:
+    with io.atomic_write(path) as f:
         np.savez(f, header=np.array(json.dumps(header, sort_keys=True)), **arrays)
     return Path(path)
 
@@ -107,7 +107,7 @@ class ModelFile:
         text = self._npz.read("header", FILE_BYTES["model header"])
         if text.dtype.kind != "U" or text.shape != ():
             raise FileError(f"{path}: the model's header is not a text")
-        header = boundary.json_loads(str(text), f"{path}: the model's header")
+        header = io.json_loads(str(text), f"{path}: the model's header")
         if not isinstance(header, dict) or header.get("format") != FORMAT:
             raise FileError(f"{path}: not a saved rhmpc model (its header is not {FORMAT}'s)")
         version = header.get("version")

@@ -1,4 +1,5 @@
-"""The networks and their training (PyTorch; imported only by :mod:`predictors.learned.neural`).
+"""The networks and their training (PyTorch; imported only by
+:mod:`rhmpc.predictors.learned.neural`).
 
 Recurrent networks (``nn.LSTM``/``nn.GRU`` and a linear head) and the temporal convolutional
 network of Bai, Kolter & Koltun 2018 (arXiv:1803.01271, Fig. 1): residual blocks of two causal
@@ -99,7 +100,8 @@ class TCN(nn.Module):
 
 
 def build(s, inputs: int, q: int) -> nn.Module:
-    """The network of settings ``s`` (:class:`predictors.learned.settings.NetworkSettings`)."""
+    """The network of settings ``s``
+    (:class:`rhmpc.predictors.learned.settings.NetworkSettings`)."""
     if s.architecture == "tcn":
         return TCN(inputs, s.channels, s.dilations, s.kernel, q, s.dropout)
     return Recurrent(s.architecture, inputs, s.hidden, s.layers, q, s.dropout)

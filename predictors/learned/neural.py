@@ -4,17 +4,17 @@
 Names: ``lstm``, ``gru``, ``tcn`` read the POI only; ``st-lstm``, ``st-gru``, ``st-tcn`` read
 every tracked point (the spatio-temporal models of Zhang et al. 2022 and Li et al. 2022,
 which feed the other points' past as well as the POI's). The architectures and training
-settings are the papers' (:mod:`predictors.learned.settings`).
+settings are the papers' (:mod:`rhmpc.predictors.learned.settings`).
 
 Fitting.  Every channel is z-scored with its mean and standard deviation over the training
 series; a missing input takes the channel's previous value. For each lead k (or all at once,
 ``heads="joint"``) and each of the ``ensemble`` seeds, a network is trained on the sequences
-(:func:`predictors.learned.networks.train`), the target at instant t the z-scored POI at
+(:func:`rhmpc.predictors.learned.networks.train`), the target at instant t the z-scored POI at
 t + k. Seeds: ``numpy.random.SeedSequence(seed)`` spawns one per network.
 
 Online.  The networks run one step per sample through their own modules, from the state at
-the start of a sequence as in training (:meth:`~predictors.learned.networks.Recurrent.run`: a
-recurrent network's state; :meth:`~predictors.learned.networks.TCN.run`: a TCN's last inputs
+the start of a sequence as in training (:meth:`~rhmpc.predictors.learned.networks.Recurrent.run`: a
+recurrent network's state; :meth:`~rhmpc.predictors.learned.networks.TCN.run`: a TCN's last inputs
 of each convolution, zeros before the first sample as the training's padding), one definition
 for both. The forecast is the mean of the ensemble, ẑ_{n+k} = μ + σ ⊙ mean_e f_{k,e}.
 """
@@ -26,11 +26,11 @@ import contextlib
 import numpy as np
 import torch
 
-from boundary import FileError
-from predictors.learned.fitted import FittedPredictor
-from predictors.learned.networks import build, train
-from predictors.learned.series import channel_stats, fill_forward
-from predictors.learned.settings import (
+from rhmpc.io import FileError
+from rhmpc.predictors.learned.fitted import FittedPredictor
+from rhmpc.predictors.learned.networks import build, train
+from rhmpc.predictors.learned.series import channel_stats, fill_forward
+from rhmpc.predictors.learned.settings import (
     GRU_PRESETS,
     LSTM_PRESETS,
     TCN_PRESETS,

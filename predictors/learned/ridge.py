@@ -3,7 +3,7 @@
 One direct linear model per lead k = 1 … L (Ben Taieb et al. 2012, "A review and comparison
 of strategies for multi-step ahead time series forecasting", Expert Syst. Appl. 39:7067) on
 the increment form of the delay embedding of every tracked point (``st-ridge``) or of the POI
-only (``ridge``), as :mod:`predictors.rls_spatiotemporal` adapts online:
+only (``ridge``), as :mod:`rhmpc.predictors.rls_spatiotemporal` adapts online:
 
     ẑ_{n+k} = z_n + W_k x_n,   x_n = [r_{n−1} − r_n; …; r_{n−N+1} − r_n],
 
@@ -26,11 +26,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-import boundary
-from boundary import FileError
-from predictors.base import PredictorSettings
-from predictors.learned.fitted import FittedPredictor
-from predictors.learned.series import relative_windows
+from rhmpc import io
+from rhmpc.io import FileError
+from rhmpc.predictors.base import PredictorSettings
+from rhmpc.predictors.learned.fitted import FittedPredictor
+from rhmpc.predictors.learned.series import relative_windows
 
 __all__ = ["MultiPointRidge", "Ridge", "RidgeSettings"]
 
@@ -111,7 +111,7 @@ class Ridge(FittedPredictor):
         s, d, L = self.settings, series[0].shape[2], self.settings.leads
         orders = sorted({max(2, round(w / self.dt)) for w in s.windows})
         m, width = sum(a.shape[0] for a in series), series[0].shape[1] * d
-        boundary.check("window", orders[-1], "windows", memory_scale=3 * m * width)
+        io.check("window", orders[-1], "windows", memory_scale=3 * m * width)
         best: list[tuple] = [(np.inf, 0, 0.0)] * L  # per lead: (validation MSE, N, α)
         for N in orders:
             fit, val = [], []
@@ -165,15 +165,15 @@ class Ridge(FittedPredictor):
 
     def model_shapes(self, settings, saved):
         """W_k is (d, (N_k − 1)·P·d) for the window N_k of lead k (``orders``, read first and
-        bounded: 2 ≤ N_k and the online history of N_k rows fits, :data:`boundary.BOUNDS`)."""
+        bounded: 2 ≤ N_k and the online history of N_k rows fits, :data:`rhmpc.io.BOUNDS`)."""
         L, d = settings.leads, saved.dim
         width = (saved.points if self.multi_point else 1) * d
         saved.expect({"orders": (L,)}, tuple(n for n in saved.shapes if n != "orders"))
         orders = saved.read("orders")
         if orders.dtype.kind != "i" or np.any(orders < 2) or np.any(
-                orders > boundary.largest("window", width)):
+                orders > io.largest("window", width)):
             raise FileError(f"{saved.path}: the model's windows {orders.tolist()} are not "
-                            f"between 2 and {boundary.largest('window', width)} samples")
+                            f"between 2 and {io.largest('window', width)} samples")
         shapes = {"orders": (L,), "alphas": (L,), "validation_rms": (L,)}
         shapes.update({f"W{k}": (d, (int(N) - 1) * width) for k, N in enumerate(orders)})
         return shapes, ()

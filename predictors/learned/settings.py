@@ -30,7 +30,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from predictors.base import PredictorSettings
+from rhmpc.predictors.base import PredictorSettings
 
 __all__ = [
     "ARCHITECTURES",

@@ -67,7 +67,7 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 0
-    from boundary import tracking_inputs
+    from rhmpc.io import tracking_inputs
 
     try:
         with one_line_warnings(f"rhmpc {args.command}"), tracking_inputs():

@@ -10,9 +10,9 @@ from rhmpc.cli import COMMANDS
 from rhmpc.cli.simulate import add_host_stalls_option, check_host_stalls, host_stalls_document
 from rhmpc.control.settings import MPCSettings
 from rhmpc.errors import UsageError
+from rhmpc.robots import ROBOTS
 from rhmpc.studies.bench import run_bench
 from rhmpc.studies.bench_report import format_table
-from robots import ROBOTS
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -32,8 +32,8 @@ from rhmpc.errors import UsageError
 from rhmpc.experiment import RunConfig, run_experiment
 from rhmpc.experiment.config import with_split
 from rhmpc.experiment.fitting import with_models
+from rhmpc.sim.recordings.shipped import resolve_all
 from rhmpc.studies.tuna2013 import COLUMNS
-from sim.recordings.shipped import resolve_all
 
 #: Tuna et al. Table I/II column order (fixed rate: animals 1, 2; varying: 1, 3 top; 1, 3 side).
 TABLE_SCENARIOS = COLUMNS
@@ -190,7 +190,7 @@ def setting_of_config(config: RunConfig) -> str:
 
 def _predictors(args: argparse.Namespace, base: RunConfig) -> list[str]:
     """--predictors, or the default rows: the published tables' with --paper."""
-    from predictors import predictor_names
+    from rhmpc.predictors import predictor_names
     from rhmpc.studies.paper import table_predictors
 
     if args.predictors:
@@ -228,7 +228,7 @@ def jobs(args: argparse.Namespace) -> list[Job]:
 
 def _scenario_columns(args: argparse.Namespace) -> list[tuple[str, dict]]:
     """(column, settings) of each scenario."""
-    from sim.heart import SCENARIOS, SPECS
+    from rhmpc.sim.heart import SCENARIOS, SPECS
 
     if args.points is not None or args.poi is not None or args.split is not None or any(
             getattr(args, k, None) is not None for k in READ_OPTIONS):
@@ -295,13 +295,13 @@ def _base_config(args: argparse.Namespace) -> RunConfig:
 
 
 def run(args: argparse.Namespace) -> int:
-    import boundary
+    from rhmpc import io
     from rhmpc.experiment.config import input_files
     from rhmpc.tuning.progress import note
 
     todo = jobs(args)
     if args.out:
-        boundary.check_output(args.out, "--out", inputs=[
+        io.check_output(args.out, "--out", inputs=[
             *(f for job in todo for f in input_files(job.config)), *filter(None, [args.config])])
     text = not (args.json or args.csv)
     if text:
@@ -319,7 +319,7 @@ def run(args: argparse.Namespace) -> int:
 
         results["loop_gap"] = gap_rows(docs, beside)
     if args.out:
-        boundary.write_text(args.out, json.dumps(results, indent=2) + "\n")
+        io.write_text(args.out, json.dumps(results, indent=2) + "\n")
     _print_results(results, docs, todo, args)
     note(_footer(docs, [job.config for job in done], outcome.elapsed_s, where), args.quiet)
     if outcome.interrupted:

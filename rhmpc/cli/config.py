@@ -210,7 +210,7 @@ def _table_lines(config: RunConfig, table: str, flat: dict[str, Any],
     docs: dict[str, tuple[str, str]] = {}
     defaults: dict[str, Any] = {}
     if table == "predictor_settings":
-        from predictors import settings_for
+        from rhmpc.predictors import settings_for
 
         made = settings_for(config.predictor)
         cls = type(made)

@@ -26,28 +26,28 @@ from pathlib import Path
 
 import numpy as np
 
-import boundary
+from rhmpc import io
 from rhmpc.cli import COMMANDS
 from rhmpc.cli.data_figure import heart_rate, motion_figure
 from rhmpc.cli.text import fmt, mm, size_bytes, time_span
 from rhmpc.errors import UsageError, one_line_warnings
-from sim.heart import DEFAULT_SCENARIO, SCENARIOS, SPECS, make_scenario
-from sim.heart.analysis import (
+from rhmpc.sim.heart import DEFAULT_SCENARIO, SCENARIOS, SPECS, make_scenario
+from rhmpc.sim.heart.analysis import (
     motion_stats,
     predictability,
 )
-from sim.heart.invivo import source_statistics, statistics_table
-from sim.heart.motion import MotionSource
-from sim.heart.scenarios import DEFAULT_SEED, missing_data
-from sim.heart.specs import ScenarioSpec
-from sim.recordings import (
+from rhmpc.sim.heart.invivo import source_statistics, statistics_table
+from rhmpc.sim.heart.motion import MotionSource
+from rhmpc.sim.heart.scenarios import DEFAULT_SEED, missing_data
+from rhmpc.sim.heart.specs import ScenarioSpec
+from rhmpc.sim.recordings import (
     RecordedMotion,
     export_source,
     load_recording,
     parse_indices,
     save_recording,
 )
-from sim.sensors import SENSORS, sensor_from_name
+from rhmpc.sim.sensors import SENSORS, sensor_from_name
 
 #: The heart rates --bpm accepts [beats/min]: from deep bradycardia to a fast tachycardia.
 BPM_RANGE = (20.0, 250.0)
@@ -225,7 +225,7 @@ def _check_work(action: str, name: str, duration: float, rate: float) -> None:
     """Refuse work that would not fit in memory, saying how much it would take; announce work
     longer than :data:`ANNOUNCE_AFTER` on stderr."""
     memory, seconds = _work(action, duration, rate)
-    available = boundary.limits.available_memory()
+    available = io.limits.available_memory()
     if memory > available:
         per_second = _work(action, 1.0, rate)[0]
         raise UsageError(
@@ -302,7 +302,7 @@ def _spec_row(spec: ScenarioSpec) -> dict:
 
 def _heart_text(spec: ScenarioSpec) -> str:
     """The heart rate a scenario is built with, in words."""
-    from sim.heart.rr import STAIRCASE_LEVELS_HZ
+    from rhmpc.sim.heart.rr import STAIRCASE_LEVELS_HZ
 
     variation = " + HRV" if spec.variable and spec.heart in ("constant", "staircase") else ""
     if spec.heart == "staircase":
@@ -389,7 +389,7 @@ def _show(args: argparse.Namespace) -> int:
         return 0
     print("\n".join(_show_lines(row)))
     if invivo:
-        print("  the in-vivo recording's statistics (sim.heart.invivo, sampled at 25 Hz):")
+        print("  the in-vivo recording's statistics (rhmpc.sim.heart.invivo, sampled at 25 Hz):")
         print("\n".join(statistics_table(row["regime"])))
     return 0
 
@@ -434,7 +434,7 @@ def _export(args: argparse.Namespace) -> int:
         raise UsageError(f"{out}: output must end in .csv or .npz")
     if out.exists() and not args.force:
         raise UsageError(f"{out} exists; pass --force to overwrite")
-    boundary.check_output(out, inputs=[args.name])
+    io.check_output(out, inputs=[args.name])
     target = _target(args.name, args)
     rate = target.rate if args.rate is None else args.rate
     comment = f"rhmpc {target.name}: {target.description}"
@@ -473,8 +473,8 @@ def _plot(args: argparse.Namespace) -> int:
     fig = motion_figure(plt, target, t, p, rate, heart, stats, args)
     out = Path(args.file)
     try:
-        boundary.save_figure(fig, out, dpi=110)
-    except boundary.FileError:
+        io.save_figure(fig, out, dpi=110)
+    except io.FileError:
         raise
     except (OSError, ValueError) as exc:
         raise UsageError(f"{out}: cannot write the figure ({exc})") from None

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rhmpc.cli.text import fmt
-from sim.heart.analysis import fill_gaps, heart_rate_track, psd
+from rhmpc.sim.heart.analysis import fill_gaps, heart_rate_track, psd
 
 __all__ = ["Heart", "heart_rate", "motion_figure"]
 

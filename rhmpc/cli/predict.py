@@ -9,11 +9,12 @@ import os
 import sys
 from pathlib import Path
 
-import boundary
-from predictors import PREDICTORS
+from rhmpc import io
 from rhmpc.cli import COMMANDS
 from rhmpc.cli.simulate import add_recording_options, parse_split, recording_options
 from rhmpc.errors import UsageError
+from rhmpc.predictors import PREDICTORS
+from rhmpc.sim.recordings.shipped import resolve_all
 from rhmpc.studies.prediction import (
     BASE_BPM,
     DEFAULT_PREDICTORS,
@@ -26,7 +27,6 @@ from rhmpc.studies.prediction import (
     run_study,
 )
 from rhmpc.studies.recordings import DEFAULT_LEADS, WARMUP_FRACTION, WARMUP_SECONDS
-from sim.recordings.shipped import resolve_all
 
 #: Options of the synthetic studies (``--study``) and of the recordings (``--data``).
 STUDY_OPTIONS = ("trials", "noise_mm", "delta_bpm", "records", "scenarios")
@@ -145,7 +145,7 @@ def _settings(args: argparse.Namespace) -> StudySettings:
         raise UsageError(str(exc)) from None
     if args.records:
         recs = tuple(r.strip() for r in args.records.split(",") if r.strip())
-        from sim.heart.rr import shipped_records
+        from rhmpc.sim.heart.rr import shipped_records
 
         missing = [r for r in recs if not _is_record(r)]
         if missing:
@@ -153,7 +153,7 @@ def _settings(args: argparse.Namespace) -> StudySettings:
                              f"{', '.join(shipped_records())}, or a path without extension)")
         kw["records"] = recs
     if args.scenarios:
-        from sim.heart import SCENARIOS
+        from rhmpc.sim.heart import SCENARIOS
 
         scns = tuple(s.strip() for s in args.scenarios.split(",") if s.strip())
         bad = [s for s in scns if s not in SCENARIOS]
@@ -168,7 +168,7 @@ def _settings(args: argparse.Namespace) -> StudySettings:
 
 def _is_record(name: str) -> bool:
     """Whether ``name`` resolves to a PhysioNet record (a path or a shipped name)."""
-    from sim.heart.rr import find_record
+    from rhmpc.sim.heart.rr import find_record
 
     try:
         find_record(name)
@@ -197,7 +197,7 @@ def _check_outputs(args: argparse.Namespace) -> None:
     inputs = [*(args.data or []), *(args.train or [])] if args.data is not None else []
     for option in ("out", "plot"):
         if getattr(args, option) is not None:
-            boundary.check_output(getattr(args, option), f"--{option}", inputs=inputs)
+            io.check_output(getattr(args, option), f"--{option}", inputs=inputs)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -210,7 +210,7 @@ def run(args: argparse.Namespace) -> int:
     if jobs < 1:
         raise UsageError(f"--jobs must be >= 0, got {args.jobs}")
     values = len(s.parameters())
-    boundary.check(f"{s.study} trials", s.trials, "--trials", memory_scale=values,
+    io.check(f"{s.study} trials", s.trials, "--trials", memory_scale=values,
                    time_scale=values * len(s.names), workers=jobs)
     bar = None
     if sys.stderr.isatty():
@@ -248,10 +248,10 @@ def _run_data(args: argparse.Namespace) -> int:
     """``--data``: every predictor on the recordings, open loop (rhmpc.studies.recordings)."""
     from functools import partial
 
+    from rhmpc.sim.recordings import training_series
     from rhmpc.studies.recordings import OpenLoopSettings, run_open_loop
     from rhmpc.studies.recordings_report import format_report, plot_leads
     from rhmpc.studies.tracks import load_tracks, parse_points, poi_tracks
-    from sim.recordings import training_series
 
     names = tuple(n.strip() for n in (args.predictors or "").split(",") if n.strip())
     if args.poi is not None and args.points is not None:
@@ -274,14 +274,14 @@ def _run_data(args: argparse.Namespace) -> int:
         train = None
         if args.train:
             for f in args.train:  # each a regular file the one reader takes
-                boundary.open_input(f, "recording").close()
+                io.open_input(f, "recording").close()
             train = partial(training_series, args.train, args.poi, read)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     if args.save_models is not None:
         if split is None and train is None:
             raise UsageError("--save-models needs --split TRAIN:END or --train FILE...")
-        boundary.make_folder(args.save_models, root=args.save_models)
+        io.make_folder(args.save_models, root=args.save_models)
 
     def progress(what: str) -> None:
         if not args.json:
@@ -299,7 +299,7 @@ def _publish(args: argparse.Namespace, doc: dict, plot, text) -> None:
     """The document to ``--out``, its figure to ``--plot``, and to stdout as JSON (``--json``)
     or as ``text(doc)``."""
     if args.out:
-        boundary.write_text(args.out, json.dumps(doc, indent=2) + "\n")
+        io.write_text(args.out, json.dumps(doc, indent=2) + "\n")
     if args.plot:
         plot(doc, args.plot)
     print(json.dumps(doc, indent=2) if args.json else text(doc))

@@ -8,7 +8,7 @@ import json
 import numpy as np
 
 from rhmpc.cli import COMMANDS
-from robots import ROBOTS, load_robot
+from rhmpc.robots import ROBOTS, load_robot
 
 
 def register(sub: argparse._SubParsersAction) -> None:

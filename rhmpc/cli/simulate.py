@@ -14,8 +14,8 @@ from rhmpc.cli.presets import add_preset_option
 from rhmpc.errors import UsageError
 from rhmpc.experiment import RunConfig, run_experiment
 from rhmpc.experiment.config import run_config
-from sim.loop.settings import DEFAULT_SETTLING, LoopSettings
-from sim.recordings.matfile import parse_indices
+from rhmpc.sim.loop.settings import DEFAULT_SETTLING, LoopSettings
+from rhmpc.sim.recordings.matfile import parse_indices
 
 #: Default run length [s] of every command (``LoopSettings.duration``).
 DEFAULT_DURATION = LoopSettings.duration
@@ -97,9 +97,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "self-contained page that opens offline (the arm, the POI's and the tool's "
                    "paths, the forecasts; play, pause, time slider)")
     p.add_argument("--trace", metavar="FILE.npz", help="write every tick to an NPZ file as the "
-                   "run goes (chunked; read it with sim.loop.trace.read_trace)")
+                   "run goes (chunked; read it with rhmpc.sim.loop.trace.read_trace)")
     add_host_stalls_option(p, "the run")
-    from sim.sensors.faults import GRAMMAR
+    from rhmpc.sim.sensors.faults import GRAMMAR
 
     p.add_argument("--fault", action="append", default=[], metavar="KIND@START[:ARG…]",
                    help=f"inject a fault into the run (repeatable; the truth is untouched): "
@@ -232,8 +232,8 @@ OUTPUTS = {"out": (".json", ".mat"), "plot": (".png", ".pdf", ".svg"), "view": (
 def check_outputs(args: argparse.Namespace, inputs=()) -> None:
     """Every output file can be written, checked before the run starts (a missing or
     read-only directory, a suffix the option does not write, a link, or one of ``inputs``, the
-    run's files, is a one-line error: :func:`boundary.check_output`)."""
-    import boundary
+    run's files, is a one-line error: :func:`rhmpc.io.check_output`)."""
+    from rhmpc import io
 
     for option, suffixes in OUTPUTS.items():
         path = getattr(args, option, None)
@@ -243,7 +243,7 @@ def check_outputs(args: argparse.Namespace, inputs=()) -> None:
         if path.suffix.lower() not in suffixes:
             raise UsageError(f"--{option} {path}: the file must end in "
                              f"{' or '.join(suffixes)}")
-        boundary.check_output(path, f"--{option}", inputs=inputs)
+        io.check_output(path, f"--{option}", inputs=inputs)
 
 
 def check_score(doc: dict) -> None:
@@ -266,11 +266,11 @@ def write_outputs(args: argparse.Namespace, result, doc: dict) -> None:
 
         write_mat(args.out, result, doc)
     elif args.out:
-        import boundary
+        from rhmpc import io
 
-        boundary.write_text(args.out, json.dumps(doc, indent=2) + "\n")
+        io.write_text(args.out, json.dumps(doc, indent=2) + "\n")
     if args.plot or getattr(args, "view", None):
-        from robots import load_robot
+        from rhmpc.robots import load_robot
 
         robot = load_robot(doc["robot"])
     if args.plot and getattr(args, "figure", "dashboard") == "paper":

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from boundary.limits import size_bytes, time_span
+from rhmpc.io.limits import size_bytes, time_span
 
 __all__ = ["fmt", "mm", "size_bytes", "time_span"]
 

@@ -103,11 +103,11 @@ def _extra(spec) -> dict:
 def _check_outputs(args: argparse.Namespace, inputs: tuple = ()) -> None:
     """--plot and --best-toml must be writable, and none of ``inputs`` (the spec, the results
     file), before a sweep starts."""
-    import boundary
+    from rhmpc import io
 
     for option, path in (("--plot", args.plot), ("--best-toml", args.best_toml)):
         if path:
-            boundary.check_output(path, option, inputs=inputs)
+            io.check_output(path, option, inputs=inputs)
 
 
 def _speed(records: list[dict]) -> str:
@@ -285,9 +285,9 @@ def report_records(args, records, objective, points, results: str, title: str,
         if top is None:
             raise UsageError("--best-toml: no point has finished all its evaluations "
                              "successfully")
-        import boundary
+        from rhmpc import io
 
-        boundary.write_text(args.best_toml, best_toml(top, objective, results))
+        io.write_text(args.best_toml, best_toml(top, objective, results))
     if args.plot:
         plot_objective(summaries, objective, args.plot, title=f"rhmpc tune: {title}",
                        log_keys=log_keys)

@@ -11,8 +11,8 @@ exact screening cascade, OSQP, fallbacks), the reference builder, and their sett
 - :mod:`~rhmpc.control.mpc` — :class:`RecedingHorizonMPC`, the per-tick controller;
 - :mod:`~rhmpc.control.reference` — the N-point reference from a predictor or the true future.
 
-Imports only :mod:`robots`, :mod:`predictors` and :mod:`rhmpc.compiled` (the export's build).
-The names below load on first use, so that ``rhmpc.control.settings`` stays cheap to import.
+Imports only :mod:`rhmpc.robots`, :mod:`rhmpc.predictors` and :mod:`rhmpc.compiled` (the export's
+build). The names below load on first use, so that ``rhmpc.control.settings`` stays cheap to import.
 """
 
 from __future__ import annotations

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from robots import ROBOTS, Robot, load_robot
+from rhmpc.robots import ROBOTS, Robot, load_robot
 
 
 @dataclass(frozen=True)

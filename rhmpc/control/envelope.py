@@ -155,8 +155,8 @@ def _joint_limits(arm, s, nq: int) -> tuple[np.ndarray, np.ndarray]:
 
 def _couplings(arm) -> tuple:
     """The robot's linear joint limits beyond the box, ``(c, lo, hi)`` with lo ≤ c·q ≤ hi
-    (:attr:`robots.Robot.coupling`, e.g. a parallelogram's), checked to hold at q0
-    (:meth:`robots.Robot.check_posture`)."""
+    (:attr:`rhmpc.robots.Robot.coupling`, e.g. a parallelogram's), checked to hold at q0
+    (:meth:`rhmpc.robots.Robot.check_posture`)."""
     if arm.robot is None or not arm.robot.coupling:
         return ()
     arm.robot.check_posture(arm.q0)

@@ -59,7 +59,7 @@ from rhmpc.control.offset import OutputOffset
 from rhmpc.control.osqp_solver import SOLVED, STATUS_REASON, OSQPSolver
 from rhmpc.control.qp import CondensedQP, build_condensed_qp, screening_rows
 from rhmpc.control.settings import MPCSettings
-from robots.linearize import LinearArm
+from rhmpc.robots.linearize import LinearArm
 
 #: Failure reasons counted in :attr:`MPCStats.failures` besides OSQP's statuses.
 EXTRA_REASONS = ("nonfinite_input", "nonfinite_solution", "solver_error", "injected",
@@ -76,8 +76,8 @@ class RecedingHorizonMPC(FallbackChain):
     Parameters
     ----------
     arm : LinearArm
-        Discrete model x⁺ = A x + B u, y = C x + y0 (``robots.linearize``); its robot gives the
-        output offset and the joint limits.
+        Discrete model x⁺ = A x + B u, y = C x + y0 (``rhmpc.robots.linearize``); its robot gives
+        the output offset and the joint limits.
     settings : MPCSettings
         Horizon, weights, bounds and solver settings (see
         :class:`rhmpc.control.settings.MPCSettings` for the cost and constraints).

@@ -3,7 +3,7 @@
 The encoders deliver quantised joint angles ``q̃ = Δ·round(q/Δ)``; differentiating them at
 2 kHz would give velocity noise of Δ/Ts (0.27 rad/s for the PHANToM's elbow). Instead the
 controller estimates ``x = [q − q0; q̇]`` with the model it already has (the MPC's
-:class:`~robots.LinearArm`, valid because the nonlinearities are cancelled)::
+:class:`~rhmpc.robots.LinearArm`, valid because the nonlinearities are cancelled)::
 
     predict:  x̂⁻_{k+1} = A x̂_k + B u_k                     (u_k = applied τ_mpc)
     correct:  x̂_k     = x̂⁻_k + L (q̃_k − q0 − H x̂⁻_k),     H = [I 0]
@@ -39,7 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
-from robots import LinearArm
+from rhmpc.robots import LinearArm
 
 
 @dataclass(frozen=True)

@@ -26,7 +26,7 @@ class OutputOffset:
 
     Parameters
     ----------
-    arm : robots.LinearArm
+    arm : rhmpc.robots.LinearArm
         The linearised arm; ``arm.robot`` gives the forward kinematics.
     out : ndarray (3,), optional
         Where every evaluation writes d (e.g. a controller's parameter slot); default its own.
@@ -37,7 +37,7 @@ class OutputOffset:
     Raises
     ------
     ValueError
-        If the arm does not carry its robot (``robots.linearize`` keeps it).
+        If the arm does not carry its robot (``rhmpc.robots.linearize`` keeps it).
     """
 
     def __init__(self, arm, out: np.ndarray | None = None,
@@ -46,7 +46,7 @@ class OutputOffset:
         if robot is None:
             raise ValueError(
                 "offset_correction needs the arm's robot for forward kinematics "
-                "(robots.linearize(robot) keeps it); set offset_correction = false otherwise"
+                "(rhmpc.robots.linearize(robot) keeps it); set offset_correction = false otherwise"
             )
         self._model = robot.model
         self._data = robot.create_data()  # our own work data: no sharing with other users

@@ -29,7 +29,7 @@ import scipy.linalg
 
 from rhmpc.control.envelope import EnvelopeRows, envelope_rows
 from rhmpc.control.settings import MPCSettings
-from robots.linearize import LinearArm
+from rhmpc.robots.linearize import LinearArm
 
 
 @dataclass(frozen=True, eq=False)

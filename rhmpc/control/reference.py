@@ -65,9 +65,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from predictors.base import is_measured
 from rhmpc.control.gate import OutlierGate
 from rhmpc.control.interpolation import WINDOW, interpolation_matrix, lagrange_weights, windows
+from rhmpc.predictors.base import is_measured
 
 #: The most latency the exported controller's refresh forecasts across, and the oldest a
 #: forecast from outside may be when it arrives [s].
@@ -165,7 +165,7 @@ class PredictedReference:
 
     Parameters
     ----------
-    predictor : predictors.Predictor
+    predictor : rhmpc.predictors.Predictor
         Runs at its ``dt`` (``downsample · Ts``, or a slow sensor's sample period); fed the
         POI's samples in the sensor's frame [m] (module docstring: placement). A multi-point
         predictor (``multi_point``) also gets the other tracked points' samples of each

@@ -80,7 +80,7 @@ class MPCSettings:
         estimated joint state every tick (offset-free MPC). Needs the arm's robot.
     joint_envelope : bool
         Enforce the joint position and velocity limits, and the robot's coupled joint limits
-        (:attr:`robots.Robot.coupling`, e.g. the PHANToM's parallelogram), soft with an exact
+        (:attr:`rhmpc.robots.Robot.coupling`, e.g. the PHANToM's parallelogram), soft with an exact
         L1 penalty, at every move block's end, certified in between
         (:mod:`rhmpc.control.envelope`).
     joint_lower, joint_upper : tuple[float, ...] | None

@@ -5,7 +5,8 @@ the robot and its linear model (:func:`build_robot`), the heart motion (:func:`b
 the sensor's samples and the truth (:func:`build_stream`), the predictor and the reference
 (:func:`build_reference`), the controller (:func:`build_controller`) and the plant
 (:func:`build_plant`); each hands its part of the settings down to the package that holds the
-thing (``robots``, ``sim``, ``predictors``, :mod:`rhmpc.control`) and none calls back up.
+thing (``rhmpc.robots``, ``rhmpc.sim``, ``rhmpc.predictors``, :mod:`rhmpc.control`) and none calls
+back up.
 """
 
 from __future__ import annotations
@@ -16,7 +17,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from predictors.registry import make_predictor
 from rhmpc.control.cancellation import NonlinearityCancellation
 from rhmpc.control.controller import Controller
 from rhmpc.control.mpc import RecedingHorizonMPC
@@ -26,17 +26,18 @@ from rhmpc.errors import UsageError
 from rhmpc.experiment.config import RunConfig
 from rhmpc.experiment.fitting import fit_predictor
 from rhmpc.experiment.monitor import HeartRateScore
-from robots import LinearArm, Robot, linearize, load_robot
-from sim.loop.clock import PredictorClock, clock_for_rate, predictor_clock
-from sim.loop.faults import FaultyEncoders, split_faults
-from sim.loop.streams import SourceTruth
-from sim.plant import make_plant
-from sim.recordings.points import PointsAt
-from sim.sensors import DEFAULT_PLAYBACK, SampleStream, Sensor, playback, sensor_from_name
-from sim.sensors.faults import FaultySamples
-from sim.sensors.playback import UpsampledSamples, sensor_samples
-from sim.sensors.stream import SampleSource
-from sim.sources import HeartSource, heart_source
+from rhmpc.predictors.registry import make_predictor
+from rhmpc.robots import LinearArm, Robot, linearize, load_robot
+from rhmpc.sim.loop.clock import PredictorClock, clock_for_rate, predictor_clock
+from rhmpc.sim.loop.faults import FaultyEncoders, split_faults
+from rhmpc.sim.loop.streams import SourceTruth
+from rhmpc.sim.plant import make_plant
+from rhmpc.sim.recordings.points import PointsAt
+from rhmpc.sim.sensors import DEFAULT_PLAYBACK, SampleStream, Sensor, playback, sensor_from_name
+from rhmpc.sim.sensors.faults import FaultySamples
+from rhmpc.sim.sensors.playback import UpsampledSamples, sensor_samples
+from rhmpc.sim.sensors.stream import SampleSource
+from rhmpc.sim.sources import HeartSource, heart_source
 
 if TYPE_CHECKING:
     from rhmpc.control.export.binding import CController
@@ -74,7 +75,7 @@ class Run:
     clock : PredictorClock
         When the reference refreshes: every ``downsample`` ticks, or on each raw sample.
     faults : tuple
-        The injected faults (:mod:`sim.sensors.faults`), already in ``stream`` and ``plant``.
+        The injected faults (:mod:`rhmpc.sim.sensors.faults`), already in ``stream`` and ``plant``.
     points : PointsAt or None
         The other tracked points of a recording, which the loop gives with each sample.
     measured : tuple or None
@@ -129,15 +130,15 @@ def build_run(config: RunConfig, implementation: str = "python", progress=None) 
 
 def build_robot(config: RunConfig) -> tuple[Robot, LinearArm]:
     """The robot ``config.robot`` and its linear model about its home posture at the loop's
-    period (:func:`robots.linearize`)."""
+    period (:func:`rhmpc.robots.linearize`)."""
     robot = load_robot(config.robot)
     return robot, linearize(robot, Ts=config.loop.Ts)
 
 
 def build_heart(config: RunConfig, rng: np.random.Generator) -> HeartSource:
-    """The run's heart motion, a named scenario or a recording (:func:`sim.sources.heart_source`,
-    a scenario's random processes drawn from ``rng`` over the run and its last horizon). A
-    recording shorter than the run is a one-line ``UsageError``."""
+    """The run's heart motion, a named scenario or a recording
+    (:func:`rhmpc.sim.sources.heart_source`, a scenario's random processes drawn from ``rng`` over
+    the run and its last horizon). A recording shorter than the run is a one-line ``UsageError``."""
     loop = config.loop
     heart = heart_source(config.scenario, rng, data=config.data, data_read=config.data_read,
                          rr=config.rr, needed=loop.duration + config.mpc.horizon * loop.Ts + 1.0)
@@ -157,10 +158,10 @@ def build_stream(config: RunConfig, heart: HeartSource,
     """The sensor samples the controller sees (SI units) over the run and its last horizon,
     with the injected sensor faults, and the truth they are scored against.
 
-    The samples are a source read in blocks (:func:`sim.sensors.playback.sensor_samples`: the
+    The samples are a source read in blocks (:func:`rhmpc.sim.sensors.playback.sensor_samples`: the
     samples and random draws of ``sensor.measure`` over the whole run, without holding the
     2-kHz stream), or a recording's own samples (``sensor = "recorded"``). The truth, read per
-    window (:class:`sim.loop.streams.SourceTruth`), is the clean samples as recorded (before
+    window (:class:`rhmpc.sim.loop.streams.SourceTruth`), is the clean samples as recorded (before
     their delivery to the loop), linearly interpolated at the ticks, as the paper's
     prerecorded data (``ground_truth = "recorded"``), or the true motion (``"true"``).
     """
@@ -204,7 +205,7 @@ def _recorded_stream(config: RunConfig, recording, settings: dict,
 
 
 def make_sensor(name: str, dim: int, settings: dict) -> Sensor:
-    """``sim.sensors.sensor_from_name(name, dim=dim, **settings)``; a bad setting raises
+    """``rhmpc.sim.sensors.sensor_from_name(name, dim=dim, **settings)``; a bad setting raises
     ``UsageError`` naming the sensor (one line)."""
     try:
         return sensor_from_name(name, dim=dim, **settings)
@@ -216,7 +217,7 @@ def build_reference(config: RunConfig, truth: SourceTruth, heart: HeartSource,
                     clock: PredictorClock) -> ExactReference | PredictedReference:
     """The exact future (``predictor = "exact"``) or the predictor's forecast on ``clock``.
 
-    The predictor is built by name (:func:`predictors.registry.make_predictor`, which resolves
+    The predictor is built by name (:func:`rhmpc.predictors.registry.make_predictor`, which resolves
     the name once into its class and settings) with :meth:`RunConfig.predictor_keywords`, fed
     metres."""
     N = config.mpc.horizon
@@ -254,7 +255,7 @@ def build_controller(config: RunConfig, robot: Robot, arm: LinearArm, reference,
 
 
 def build_plant(config: RunConfig, robot: Robot, arm: LinearArm):
-    """The plant of ``config.plant`` (:func:`sim.plant.make_plant`) at the home posture, its
+    """The plant of ``config.plant`` (:func:`rhmpc.sim.plant.make_plant`) at the home posture, its
     encoders with the injected encoder faults."""
     loop = config.loop
     plant = make_plant(robot, arm, loop.Ts, config.plant, config.hardware)
@@ -293,7 +294,7 @@ def check_reach(robot: Robot, truth, anchor: np.ndarray, ticks: int) -> float:
     """The farthest the POI's path (``anchor`` + the centred truth over ``ticks``) lies from
     the end-effector positions the joint limits allow [m].
 
-    Measured by :meth:`robots.Robot.distance_to_reach` at :data:`REACH_POINTS` points; a path
+    Measured by :meth:`rhmpc.robots.Robot.distance_to_reach` at :data:`REACH_POINTS` points; a path
     outside is warned about, with the distance and the fix. The run goes on: the controller
     keeps the arm in its envelope and takes its safe actions (a recorded jump can leave the
     workspace for a moment)."""

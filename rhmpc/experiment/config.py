@@ -8,8 +8,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import boundary
-from boundary import FileError
+from rhmpc import io
 from rhmpc.control.cancellation import ModelMismatch
 from rhmpc.control.observer import ObserverSettings
 from rhmpc.control.reference import ReferenceSettings
@@ -17,10 +16,11 @@ from rhmpc.control.settings import MPCSettings
 from rhmpc.errors import UsageError
 from rhmpc.experiment.presets import preset_settings
 from rhmpc.experiment.tables import from_dict, replace_settings, to_dict
-from sim.loop import LoopSettings
-from sim.plant import HardwareSettings, PlantSettings
-from sim.sensors import sensor_from_name
-from sim.sensors.faults import FaultSettings, parse_fault
+from rhmpc.io import FileError
+from rhmpc.sim.loop import LoopSettings
+from rhmpc.sim.plant import HardwareSettings, PlantSettings
+from rhmpc.sim.sensors import sensor_from_name
+from rhmpc.sim.sensors.faults import FaultSettings, parse_fault
 
 #: Sections of a run's TOML file and the settings class each one builds.
 SECTIONS: dict[str, type] = {
@@ -71,7 +71,7 @@ class RunConfig:
     scenario : str
         Named heart-motion scenario (``rhmpc data list``); ignored when ``data`` is given.
     data : str | None
-        A recording (CSV/NPZ/MAT, see ``sim.recordings``) to track instead of a scenario.
+        A recording (CSV/NPZ/MAT, see ``rhmpc.sim.recordings``) to track instead of a scenario.
     data_read : dict
         How to read it: ``load_recording`` keywords ``var``, ``rows``, ``cols``, ``rate`` [Hz],
         ``units`` (MATLAB files), and ``point`` (from 1), the POI in a file of several tracked
@@ -83,22 +83,22 @@ class RunConfig:
         PhysioNet record whose beat annotations drive the heart phase: a shipped name
         (``mitdb-100``, ``1003``) or a path without extension.
     sensor : str
-        Sensor model name (``sim.sensors.SENSORS``: the physical ``sonomicrometry`` by
+        Sensor model name (``rhmpc.sim.sensors.SENSORS``: the physical ``sonomicrometry`` by
         default, ``white``, ``ultrasound``, ``ideal``), or ``"recorded"`` to use a recording's
         samples as they are.
     sensor_settings : dict
-        Keyword settings of the sensor model (SI units, ``sim.sensors.sensor_from_name``),
+        Keyword settings of the sensor model (SI units, ``rhmpc.sim.sensors.sensor_from_name``),
         among them ``playback``: how the samples reach the 2-kHz loop, ``"linear"`` (causal
         interpolation one raw period late, default), ``"hold"`` (causal zero-order hold) or
         ``"offline"`` (the non-causal interpolation of a
         prerecorded file, Tuna et al.'s protocol).
     predictor : str
-        Predictor name (``predictors.PREDICTORS``), or ``"exact"`` for the true future.
+        Predictor name (``rhmpc.predictors.PREDICTORS``), or ``"exact"`` for the true future.
     predictor_settings : dict
-        Keyword settings passed to ``predictors.make_predictor``.
+        Keyword settings passed to ``rhmpc.predictors.make_predictor``.
     predictor_params : dict
         The named parameter set each predictor runs with (``{"ekf": "tuna2013"}``: a paper's
-        protocol, ``predictors.registry``), unless ``predictor_settings`` names one; the
+        protocol, ``rhmpc.predictors.registry``), unless ``predictor_settings`` names one; the
         others take their default set.
     ground_truth : str
         What the error is measured against and what ``exact`` reads: ``"recorded"`` — the
@@ -111,7 +111,7 @@ class RunConfig:
         Component settings (see their classes for units); ``hardware`` applies when
         ``plant.model = "hardware"``.
     faults
-        Faults injected into the run (:class:`sim.sensors.faults.FaultSettings`): each starts
+        Faults injected into the run (:class:`rhmpc.sim.sensors.faults.FaultSettings`): each starts
         within the run, and one with an end ends within it.
     """
 
@@ -161,7 +161,7 @@ class RunConfig:
         check_bounds(self)
 
     def predictor_keywords(self) -> dict[str, Any]:
-        """The predictor's settings as :func:`predictors.registry.resolve` takes them:
+        """The predictor's settings as :func:`rhmpc.predictors.registry.resolve` takes them:
         ``predictor_settings``, with the parameter set ``predictor_params`` names for this
         predictor unless ``predictor_settings`` names one."""
         settings = dict(self.predictor_settings)
@@ -295,7 +295,7 @@ def _recording(options: dict[str, Any], whole: bool, split: tuple[int, int] | No
     """Resolve the recording of ``options`` in place (its file, how it is read, the sensor
     that reads it as it is, and with ``whole`` and no duration or split, the run's length) and
     return it, read once (``None`` when nothing needs it read)."""
-    from sim.recordings.shipped import SHIPPED, resolve
+    from rhmpc.sim.recordings.shipped import SHIPPED, resolve
 
     read = dict(options.get("data_read", {}))
     point = read.pop("point", None)
@@ -316,10 +316,10 @@ def _recording(options: dict[str, Any], whole: bool, split: tuple[int, int] | No
 
 
 def _read(data: str, read: dict):
-    """The POI's recording of ``data`` (:func:`sim.sources.read_points`); an unreadable one is
+    """The POI's recording of ``data`` (:func:`rhmpc.sim.sources.read_points`); an unreadable one is
     a ``UsageError``."""
-    from sim.recordings import RecordingError
-    from sim.sources import read_points
+    from rhmpc.sim.recordings import RecordingError
+    from rhmpc.sim.sources import read_points
 
     try:
         return read_points(data, read)[0]
@@ -375,7 +375,7 @@ def with_split(config: RunConfig, split: tuple[int, int] | None,
     its settling window (what a predictor fitted before the run learns from) ends at sample
     TRAIN, t_TRAIN − t_0, and it lasts t_END − t_0 (the recording's n/f when END = n), so that
     the scored instants are t_TRAIN ≤ t_k < t_END. ``recording``: ``data`` already read
-    (:class:`sim.recordings.RecordedMotion`), else it is read here. Unchanged without a split;
+    (:class:`rhmpc.sim.recordings.RecordedMotion`), else it is read here. Unchanged without a split;
     a split without a recording, or beyond it, is a one-line ``UsageError``."""
     if split is None:
         return config
@@ -392,10 +392,10 @@ def with_split(config: RunConfig, split: tuple[int, int] | None,
 
 
 def check_bounds(config: RunConfig) -> None:
-    """Refuse the counts of a run that do not fit the bounds of :data:`boundary.BOUNDS`: the
+    """Refuse the counts of a run that do not fit the bounds of :data:`rhmpc.io.BOUNDS`: the
     MPC's horizon (its memory, and its computing over the run's ticks)."""
     ticks = config.loop.duration / config.loop.Ts
-    boundary.check("horizon", config.mpc.horizon, "mpc.horizon", time_scale=ticks)
+    io.check("horizon", config.mpc.horizon, "mpc.horizon", time_scale=ticks)
 
 
 def _check_keys(section: str, cls: type, values: dict[str, Any]) -> None:
@@ -408,11 +408,11 @@ def _check_keys(section: str, cls: type, values: dict[str, Any]) -> None:
 
 
 def read_toml(path: str | Path, kind: str = "config") -> dict[str, Any]:
-    """A TOML file as a ``dict``, through the one reader (:func:`boundary.read_toml`: a
+    """A TOML file as a ``dict``, through the one reader (:func:`rhmpc.io.read_toml`: a
     regular file, bounded in size and depth); a file that cannot be read or parsed raises
     ``UsageError`` naming it."""
     try:
-        return boundary.read_toml(path, kind)
+        return io.read_toml(path, kind)
     except FileError as exc:
         raise UsageError(str(exc)) from None
 
@@ -432,7 +432,7 @@ def input_files(config: RunConfig) -> list[str]:
 
 
 def save_config(config: RunConfig, path: str | Path) -> None:
-    """Write ``config`` as TOML to ``path`` (atomically: :func:`boundary.write_text`)."""
+    """Write ``config`` as TOML to ``path`` (atomically: :func:`rhmpc.io.write_text`)."""
     import tomli_w
 
-    boundary.write_text(path, tomli_w.dumps(config.to_dict()))
+    io.write_text(path, tomli_w.dumps(config.to_dict()))

@@ -1,14 +1,15 @@
 """What each fault injected into a run did to it: the ticks where the loop reads its counters
 (:func:`fault_marks`, ``run_closed_loop(marks=…)``) and one record per fault from the result's
 segments (:func:`fault_report`): what changed during it and in the ``after_s`` seconds after it.
-The faults themselves act in the loop (:mod:`sim.loop.faults`, :mod:`sim.sensors.faults`).
+The faults themselves act in the loop (:mod:`rhmpc.sim.loop.faults`,
+:mod:`rhmpc.sim.sensors.faults`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from sim.loop.clock import arrival_tick
+from rhmpc.sim.loop.clock import arrival_tick
 
 __all__ = ["REPORTED", "fault_marks", "fault_report"]
 

@@ -2,7 +2,7 @@
 settling window): what is fitted, on which frames, why in two rounds, and how long it will
 take, said before the fits start.
 
-A network predictor (:class:`predictors.learned.settings.NetworkSettings`) trains
+A network predictor (:class:`rhmpc.predictors.learned.settings.NetworkSettings`) trains
 ``ensemble`` networks per head (one head per lead with ``heads = "per-lead"``, one for every
 lead with ``"joint"``), for ``epochs`` epochs, in two rounds when ``validation`` = v > 0: a
 *validation round* on the first 1 − v of each training series, whose forecasts on the last v
@@ -29,8 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
-import boundary
-from predictors import LEARNED, make_predictor, settings_for
+from rhmpc import io
+from rhmpc.predictors import LEARNED, make_predictor, settings_for
 
 __all__ = ["PROBE_EPOCHS", "FitPlan", "describe", "fit_all", "plan_fits"]
 
@@ -117,7 +117,7 @@ def fit_all(plans: Sequence[FitPlan], period: float, series: list[np.ndarray], l
         p.fit(series, None if progress is None else _rounds(plan, progress))
         out[plan.name] = (p, time.perf_counter() - tic)
         if save is not None:
-            p.save(save / f"{boundary.file_stem(label)}.{plan.name}{p.SUFFIX}")
+            p.save(save / f"{io.file_stem(label)}.{plan.name}{p.SUFFIX}")
     return out
 
 

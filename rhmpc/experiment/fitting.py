@@ -1,12 +1,12 @@
 """Predictors that learn before the run, in a closed-loop run: what they are fitted on.
 
-A predictor with ``fit`` (:mod:`predictors.learned`, or a combination with such members) learns
-from series on its own sampling grid, (T, P, d) [m] with the POI first
-(:mod:`predictors.learned.series`). In a run it is fitted, before the first tick, on
+A predictor with ``fit`` (:mod:`rhmpc.predictors.learned`, or a combination with such members)
+learns from series on its own sampling grid, (T, P, d) [m] with the POI first
+(:mod:`rhmpc.predictors.learned.series`). In a run it is fitted, before the first tick, on
 
 - the samples it will itself read during the run's settling window, exactly as the loop will
-  give them (:class:`sim.loop.closed_loop.Refreshes`: the predictor's clock, its gaps, the other
-  tracked points of a recording), in the sensor's frame as the loop gives them; the metrics
+  give them (:class:`rhmpc.sim.loop.closed_loop.Refreshes`: the predictor's clock, its gaps, the
+  other tracked points of a recording), in the sensor's frame as the loop gives them; the metrics
   start after that window, so no scored sample is ever in the training;
 - and the recordings of ``RunConfig.train``, read as the run's own (the same POI), each in its
   own frame, as the open-loop study fits on them; they must be sampled at the predictor's
@@ -20,12 +20,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from predictors.registry import LEARNED, model_kind
 from rhmpc.errors import UsageError
 from rhmpc.experiment.fit_plan import describe, plan_fits
-from sim.loop.closed_loop import Refreshes
-from sim.recordings import RecordingError
-from sim.recordings.points import training_series
+from rhmpc.predictors.registry import LEARNED, model_kind
+from rhmpc.sim.loop.closed_loop import Refreshes
+from rhmpc.sim.recordings import RecordingError
+from rhmpc.sim.recordings.points import training_series
 
 __all__ = ["fit_predictor", "model_settings", "settling_series", "with_models"]
 
@@ -143,7 +143,7 @@ def settling_series(run) -> np.ndarray:
 
 def training_recordings(config, period: float) -> list[np.ndarray]:
     """The recordings of ``config.train`` as (T, P, d) [m] on their grid, POI first, each
-    in its own frame (:func:`sim.recordings.training_series`)."""
+    in its own frame (:func:`rhmpc.sim.recordings.training_series`)."""
     if not config.train:
         return []
     read = dict(config.data_read)

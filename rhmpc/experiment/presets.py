@@ -18,7 +18,7 @@ A preset is a set of dotted settings applied to the run's settings after the def
     (``--set sensor_settings.playback="offline"`` for the paper's playback of a prerecorded
     file).
 ``hardware``
-    The hardware-like plant (:mod:`sim.plant.hardware`, every default with its source or
+    The hardware-like plant (:mod:`rhmpc.sim.plant.hardware`, every default with its source or
     stated assumption: one tick of I/O delay, 12-bit DAC over ±5.5 A, the winding's L/R lag,
     Coulomb friction from the motors' no-load current with a 1.25× stiction peak, rigid
     cables), cancelled by a controller whose model is the published parameter set of

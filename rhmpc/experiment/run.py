@@ -15,8 +15,8 @@ import numpy as np
 from rhmpc.experiment.assembly import Run, build_run
 from rhmpc.experiment.config import RunConfig
 from rhmpc.experiment.faults import fault_marks, fault_report
-from sim.loop import LoopResult, run_closed_loop
-from sim.sensors import DEFAULT_PLAYBACK
+from rhmpc.sim.loop import LoopResult, run_closed_loop
+from rhmpc.sim.sensors import DEFAULT_PLAYBACK
 
 
 def versions() -> dict[str, str]:
@@ -32,12 +32,13 @@ def versions() -> dict[str, str]:
 
 def run_experiment(config: RunConfig, progress: bool = False, trace: str | None = None,
                    gain_tick=None, implementation: str = "python") -> tuple[LoopResult, dict]:
-    """Run ``config`` in closed loop; returns the :class:`~sim.loop.LoopResult` and its document.
+    """Run ``config`` in closed loop; returns the :class:`~rhmpc.sim.loop.LoopResult` and its
+    document.
 
     The document holds the settings, the metrics (``rms_error_mm``, ``max_error_mm``,
     ``rms_effort_mNm``, ``tick_us`` with ``p50``/``p99``/``max``, ``fallbacks`` …), the wall
     time, the peak resident memory of the process so far (``peak_rss_mb``) and the package
-    versions. ``trace``: write every tick to this NPZ file (:mod:`sim.loop.trace`).
+    versions. ``trace``: write every tick to this NPZ file (:mod:`rhmpc.sim.loop.trace`).
     ``gain_tick``: the class of ``rhmpc bench``'s gain tick (``GainTick(mpc)(x, r, u_prev)``),
     timed in the run on every 64th tick so that the document has ``gain_tick_us`` and the
     tick's ratios to its p50 (``tick_ratio_to_gain``). ``implementation``: ``"python"`` or

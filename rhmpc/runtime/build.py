@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from importlib.resources import files
 from pathlib import Path
 
-import boundary
+from rhmpc import io
 from rhmpc.compiled import cache_dir
 from rhmpc.control.export import PREDICTORS, export_controller
 from rhmpc.errors import UsageError
@@ -99,10 +99,10 @@ def _source(name: str) -> bytes:
 def write_transport(outdir: Path) -> list[str]:
     """Write the transport into the export folder ``outdir`` (``udp/``: the controller's
     real-time program over the wire format, a robot-side client, their CMake project), each
-    file atomically and inside ``outdir`` (:mod:`boundary`). Returns the files' names."""
-    boundary.make_folder(outdir / TRANSPORT, root=outdir)
+    file atomically and inside ``outdir`` (:mod:`rhmpc.io`). Returns the files' names."""
+    io.make_folder(outdir / TRANSPORT, root=outdir)
     for source in SOURCES:
-        boundary.write_bytes(outdir / TRANSPORT / source, _source(source), root=outdir)
+        io.write_bytes(outdir / TRANSPORT / source, _source(source), root=outdir)
     return [f"{TRANSPORT}/{source}" for source in SOURCES]
 
 

@@ -12,13 +12,12 @@ in-process simulation of the same settings for comparison, builds the controller
 They end by themselves after the run's ticks. Ctrl-C or SIGTERM stops every one of them
 (SIGTERM, then SIGKILL after :data:`GRACE_S`), and each ends with the run anyway (its
 parent-death signal). The tool's positions the robot logged are scored where the POI was
-measured, as the in-process run is (:class:`sim.loop.metrics.MeasuredScore`).
+measured, as the in-process run is (:class:`rhmpc.sim.loop.metrics.MeasuredScore`).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import io
 import multiprocessing
 import os
 import signal
@@ -27,17 +26,18 @@ import subprocess
 import tempfile
 import time
 from dataclasses import dataclass
+from io import BytesIO
 from pathlib import Path
 
 import numpy as np
 
-import boundary
+from rhmpc import io
 from rhmpc.control.reference import embed3
 from rhmpc.experiment import RunConfig, run_experiment
 from rhmpc.experiment.assembly import build_run
 from rhmpc.runtime import host, processes
 from rhmpc.runtime.build import build_controller
-from sim.loop.metrics import MeasuredScore
+from rhmpc.sim.loop.metrics import MeasuredScore
 
 __all__ = ["GRACE_S", "DeploymentError", "SilSettings", "run_sil"]
 
@@ -193,11 +193,11 @@ def run_sil(config: RunConfig, settings: SilSettings = SilSettings(), progress=N
         if not finished or failed:
             raise DeploymentError("the deployment did not finish: " + ("; ".join(failed) or
                                                                       "a process hung"))
-        documents = {name: boundary.read_json(folder / f"{name}.json", track=False)
+        documents = {name: io.read_json(folder / f"{name}.json", track=False)
                      for name in ("controller", "robot", "predictor", "sensor")}
         arrays = {name: host.read_int64(folder / f"controller.{name}")
                   for name in ("wake", "work", "step", "s2t")}
-        q = np.load(io.BytesIO(boundary.read_bytes(folder / "robot_q.npy", track=False)))
+        q = np.load(BytesIO(io.read_bytes(folder / "robot_q.npy", track=False)))
         host_latency = host.read_probe(folder / "host", tool, loop.Ts)
     score = _score(run, q, documents["predictor"]["outliers"])
     return report(config, built, settings.internal, documents, arrays, host_latency, score,

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-import boundary
+from rhmpc import io
 
 __all__ = ["HISTOGRAM_US", "histogram_percentiles", "percentiles", "probe_command",
            "read_histogram", "read_int64", "read_probe"]
@@ -87,7 +87,7 @@ def read_int64(path: Path) -> np.ndarray:
     """A raw array of int64 the controller's program wrote (empty if it wrote none)."""
     if not path.is_file():
         return np.zeros(0, dtype=np.int64)
-    return np.frombuffer(boundary.read_bytes(path, track=False), dtype=np.int64)
+    return np.frombuffer(io.read_bytes(path, track=False), dtype=np.int64)
 
 
 def read_probe(out: Path, tool: str, Ts: float) -> dict:
@@ -96,7 +96,7 @@ def read_probe(out: Path, tool: str, Ts: float) -> dict:
     had, a stall of L counting floor(L / Ts), as the controller's misses do) and its name."""
     if tool == "cyclictest":
         hist = Path(f"{out}.hist")
-        text = boundary.read_bytes(hist, track=False).decode() if hist.is_file() else ""
+        text = io.read_bytes(hist, track=False).decode() if hist.is_file() else ""
         values, weights, top = read_histogram(text)
         found = histogram_percentiles(values, weights, top)
         # a wake-up L late finds floor(L / Ts) periods begun while it slept, which cyclictest
@@ -107,6 +107,6 @@ def read_probe(out: Path, tool: str, Ts: float) -> dict:
         us = read_int64(Path(f"{out}.wake")) * 1e-3
         found = percentiles(us)
         doc = Path(f"{out}.json")
-        behind = boundary.read_json(doc, track=False)["ticks_behind"] if doc.is_file() else 0
+        behind = io.read_json(doc, track=False)["ticks_behind"] if doc.is_file() else 0
         late = (np.sum(us >= Ts * 1e6) + behind) / max(us.size + behind, 1)
     return {**found, "late_periods": round(float(late), 6), "tool": tool}

@@ -6,8 +6,8 @@ in-process simulation), and talks to the others only over UDP in the wire format
 :mod:`.wire`. Time is the run's clock: tick i starts at ``epoch + i·Ts``.
 
 - **sensor** (:func:`sensor`): the samples the in-process loop would give the controller
-  (:class:`sim.loop.closed_loop.Refreshes`: a recording's or a scenario's sensor, its rate, its
-  latency, its gaps), each sent as ``measured_cp`` on the tick it arrives, to the predictor and
+  (:class:`rhmpc.sim.loop.closed_loop.Refreshes`: a recording's or a scenario's sensor, its rate,
+  its latency, its gaps), each sent as ``measured_cp`` on the tick it arrives, to the predictor and
   the controller.
 - **predictor** (:func:`predictor`): any predictor of the contract behind the run's reference
   (gate, update, forecast: :meth:`rhmpc.control.reference.PredictedReference.nodes`), a
@@ -33,12 +33,12 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-import boundary
+from rhmpc import io
 from rhmpc.control.reference import embed3
 from rhmpc.runtime.host import percentiles
 from rhmpc.runtime.wire import Link, run_clock
+from rhmpc.sim.loop.closed_loop import Refreshes, _note_outliers
 from rhmpc.tuning.workers import die_with_parent
-from sim.loop.closed_loop import Refreshes, _note_outliers
 
 __all__ = ["BRAKE_S", "ROBOT_WAIT", "WATCHDOG_TICKS", "Ports", "Role", "predictor", "robot",
            "sensor"]
@@ -112,7 +112,7 @@ def _sleep_until(role: Role, tick: float) -> None:
 
 
 def _write(role: Role, name: str, document: dict) -> None:
-    boundary.write_text(role.folder / f"{name}.json", json.dumps(document))
+    io.write_text(role.folder / f"{name}.json", json.dumps(document))
 
 
 def sensor(run, role: Role, parent: int) -> None:
@@ -237,7 +237,7 @@ def robot(run, role: Role, parent: int) -> None:
         reading = plant.encoders()
         link.send(role.ports.controller, "measured_js", (i + 1) * Ts, reading)
     link.close()
-    with boundary.atomic_write(role.folder / "robot_q.npy") as out:
+    with io.atomic_write(role.folder / "robot_q.npy") as out:
         np.save(out, q)
     _write(role, "robot", {"torques_missed": drivers.missed, "torques_late": late,
                            "safe_state_ticks": drivers.safe, "scheduling": scheduling,

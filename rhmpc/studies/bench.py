@@ -43,10 +43,10 @@ from rhmpc.control.mpc import RecedingHorizonMPC
 from rhmpc.control.offset import OutputOffset
 from rhmpc.control.settings import MPCSettings
 from rhmpc.experiment.tables import to_dict
+from rhmpc.robots import linearize, load_robot
+from rhmpc.robots.linearize import LinearArm
+from rhmpc.sim.loop.metrics import warm_ns
 from rhmpc.studies.yardstick import GainTick, numpy_gain_step
-from robots import linearize, load_robot
-from robots.linearize import LinearArm
-from sim.loop.metrics import warm_ns
 
 #: Controllers :func:`run_bench` can time: the Python MPC alone, or with its compiled twin.
 CONTROLLERS: tuple[str, ...] = ("python", "c")

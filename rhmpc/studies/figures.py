@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-import boundary
+from rhmpc import io
 
 #: Colours shared with the 3-D replay (:mod:`rhmpc.studies.replay`).
 COLOURS = {"poi": "#d62728", "tool": "#1f77b4", "forecast": "#2ca02c", "samples": "#ff7f0e",
@@ -44,7 +44,7 @@ def plot_run(result, path: str | Path, title: str = "", zoom: tuple[float, float
 
     Parameters
     ----------
-    result : sim.loop.LoopResult
+    result : rhmpc.sim.loop.LoopResult
         The run: its trace (``time``, ``ee``, ``poi``, ``tau``, and ``trace["tau_command"]``
         where present) and ``settings`` (``Ts``, ``settling``); where present, ``horizons`` =
         (ticks (R,), points (R, N, 3)) [m], the reference points of each refresh, and
@@ -91,7 +91,7 @@ def plot_run(result, path: str | Path, title: str = "", zoom: tuple[float, float
         ax.set_xlim(*span)
     if title:
         fig.suptitle(title)
-    boundary.save_figure(fig, path, dpi=120)
+    io.save_figure(fig, path, dpi=120)
     plt.close(fig)
 
 

@@ -1,7 +1,7 @@
 """The closed loop beside the open loop on the same samples of a recording: what the robot loses.
 
 With the literature's split (TRAIN, END), the closed loop is scored at the instants of samples
-TRAIN … END − 1 (:class:`sim.loop.metrics.MeasuredScore`). At each of those instants the
+TRAIN … END − 1 (:class:`rhmpc.sim.loop.metrics.MeasuredScore`). At each of those instants the
 reference stands on the forecast made one sample earlier, so the open-loop figure of the same
 samples is each predictor's forecast one sample ahead issued at samples TRAIN − 1 … END − 2,
 the predictors fitted before the run fitted on the samples before TRAIN, as in the loop
@@ -17,11 +17,11 @@ from pathlib import Path
 
 import numpy as np
 
-from predictors.registry import combination_members, family
+from rhmpc.predictors.registry import combination_members, family
+from rhmpc.sim.recordings import load_recording
+from rhmpc.sim.recordings.points import on_grid
 from rhmpc.studies.recordings import OpenLoopSettings, score_track
 from rhmpc.studies.tracks import Track, poi_tracks
-from sim.recordings import load_recording
-from sim.recordings.points import on_grid
 
 __all__ = ["gap_rows", "open_loop_beside", "open_names"]
 
@@ -29,7 +29,7 @@ __all__ = ["gap_rows", "open_loop_beside", "open_names"]
 def open_names(names: Sequence[str]) -> tuple[str, ...]:
     """The predictors the open loop scores for closed-loop rows ``names``: those that forecast
     (not ``exact``), and with the combination every one of its default members, so that it is
-    the closed loop's combination (:func:`predictors.registry.combination_members`)."""
+    the closed loop's combination (:func:`rhmpc.predictors.registry.combination_members`)."""
     out = [n for n in names if n != "exact"]
     if "combination" in out:
         out.remove("combination")

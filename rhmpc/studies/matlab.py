@@ -47,7 +47,7 @@ def write_mat(path: str | Path, result, doc: dict) -> Path:
     ----------
     path : str or pathlib.Path
         The ``.mat`` file to write.
-    result : sim.loop.LoopResult
+    result : rhmpc.sim.loop.LoopResult
         The run: its trace, ``settings.Ts`` and ``stride``; ``trace["q"]``, ``horizons`` and
         ``samples`` where present.
     doc : dict
@@ -60,7 +60,7 @@ def write_mat(path: str | Path, result, doc: dict) -> Path:
     """
     from scipy.io import savemat
 
-    import boundary
+    from rhmpc import io
 
     variables = {"summary": matlab_value(doc), "summary_json": json.dumps(doc, indent=1)}
     variables.update(trace_variables(result))
@@ -70,7 +70,7 @@ def write_mat(path: str | Path, result, doc: dict) -> Path:
         "tick of the run's last seconds); positions in the robot's workspace frame; "
         "summary holds the run's metrics in mm and mN*m as their names say")
     path = Path(path)
-    with boundary.atomic_write(path) as f:
+    with io.atomic_write(path) as f:
         savemat(f, variables, do_compression=True, oned_as="column", long_field_names=True)
     return path
 

@@ -40,7 +40,7 @@ def plot_paper(result, doc: dict, path: str | Path) -> None:
 
     Parameters
     ----------
-    result : sim.loop.LoopResult
+    result : rhmpc.sim.loop.LoopResult
         The run's trace (``time``, ``ee``, ``poi``, ``horizons``, ``samples``, ``settings``).
     doc : dict
         The run's document (:func:`rhmpc.experiment.run_experiment`): the numbers written on

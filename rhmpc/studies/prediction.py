@@ -25,7 +25,7 @@ with order N = 30 at 28 Hz (Tuna Figs 12–13 compare them at the AR filter's or
 133 Hz orders 16/10 span too short a history at 28 Hz).  ``last-cycle`` is Yuen's
 (``params="yuen2008"``), synchronised on the beat times of the simulated heart (Yuen and
 Bebek synchronise it on the ECG).
-``wflc`` runs Yuen's algorithm (``params="yuen2009"``, :meth:`predictors.wflc.WFLCSettings.
+``wflc`` runs Yuen's algorithm (``params="yuen2009"``, :meth:`rhmpc.predictors.wflc.WFLCSettings.
 yuen2009`: the μ₀ gradient frequency update, no respiratory series), not the 3-D default's
 phase-locked loop, whose 0.5 Hz bandwidth passes the noise at 28 Hz and σ_R = 1.3 mm.  In
 ``horizon`` the predictors that estimate the heart rate (``heart_rate_hz``) are also scored
@@ -44,8 +44,8 @@ from pathlib import Path
 
 import numpy as np
 
-import boundary
-from predictors import make_predictor
+from rhmpc import io
+from rhmpc.predictors import make_predictor
 
 __all__ = [
     "BASE_BPM",
@@ -92,7 +92,7 @@ class StudySettings:
     seed : int
         Seed of the study's ``SeedSequence``.
     predictors : tuple of str
-        Predictor names (:func:`predictors.make_predictor`).
+        Predictor names (:func:`rhmpc.predictors.make_predictor`).
     noise_mm : tuple of float
         σ_R values of the ``noise`` study [mm].
     delta_bpm : tuple of float
@@ -144,8 +144,8 @@ class StudySettings:
 
 def default_records() -> tuple[str, ...]:
     """The names of the PhysioNet annotation records shipped with the package
-    (:func:`sim.heart.rr.shipped_records`: ``1003``, ``mitdb-100``)."""
-    from sim.heart.rr import shipped_records
+    (:func:`rhmpc.sim.heart.rr.shipped_records`: ``1003``, ``mitdb-100``)."""
+    from rhmpc.sim.heart.rr import shipped_records
 
     return tuple(shipped_records())
 
@@ -177,8 +177,8 @@ def _one_step_rms(pred, z: np.ndarray, truth: np.ndarray, first: int) -> tuple[f
 
 
 def _mitral_trial(param, study: str, trial_seed: np.random.SeedSequence, s: StudySettings):
-    from sim.heart import beat_times_from_annotations, make_scenario
-    from sim.sensors import Sensor, WhiteNoise
+    from rhmpc.sim.heart import beat_times_from_annotations, make_scenario
+    from rhmpc.sim.sensors import Sensor, WhiteNoise
 
     rng_scn, rng_noise = (np.random.default_rng(c) for c in trial_seed.spawn(2))
     dur = INIT_S + EVAL_S
@@ -218,8 +218,8 @@ def _mitral_trial(param, study: str, trial_seed: np.random.SeedSequence, s: Stud
 
 
 def _horizon_trial(param, study: str, trial_seed: np.random.SeedSequence, s: StudySettings):
-    from sim.heart import make_scenario
-    from sim.sensors import SonomicrometrySettings, sonomicrometry
+    from rhmpc.sim.heart import make_scenario
+    from rhmpc.sim.sensors import SonomicrometrySettings, sonomicrometry
 
     rng_scn, rng_noise = (np.random.default_rng(c) for c in trial_seed.spawn(2))
     dur = HORIZON_WARM_S + HORIZON_EVAL_S
@@ -415,7 +415,7 @@ def plot_study(result: dict, path: str | Path) -> Path:
         ax.legend(fontsize=8)
     fig.tight_layout()
     path = Path(path)
-    boundary.save_figure(fig, path, dpi=120)
+    io.save_figure(fig, path, dpi=120)
     plt.close(fig)
     return path
 

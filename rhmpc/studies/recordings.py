@@ -23,19 +23,19 @@ Events
     ``forecast_nonfinite``) and samples it retracted (``retracted``); ``missing``: samples
     fed as missing. The closed loop's outlier gate is not part of the open loop.
 Several points
-    A file of several tracked points (:mod:`sim.recordings.points`) is scored point by point;
+    A file of several tracked points (:mod:`rhmpc.sim.recordings.points`) is scored point by point;
     with ``mean`` the study adds a row per predictor and lead whose errors are the means over
     the points. With a point of interest (``poi``), that point is scored and every predictor
     that reads the other points (``multi_point``) is fed them, sample by sample: at update n
     the samples ≤ n of every point.
 The literature's protocol (``split`` = (TRAIN, END))
-    The predictors fitted before the run (``predictors.LEARNED``) are fitted on the samples
+    The predictors fitted before the run (``rhmpc.predictors.LEARNED``) are fitted on the samples
     before TRAIN (all points, the POI first), or on other recordings (``train``); every other
     predictor runs causally from the first sample; the forecasts issued in [TRAIN, END) are
     scored, at leads 1 … L. Without ``split`` the warm-up rule holds, and the fitted
     predictors take part only when there are training recordings.
 Families
-    Each row names its predictor's family (``predictors.family``): ``baseline``,
+    Each row names its predictor's family (``rhmpc.predictors.family``): ``baseline``,
     ``adaptive``, ``multi-point``, ``learned`` or ``combination``. The combination weighs the
     other scored predictors that are not baselines, per lead, by their recent errors; in the
     literature's protocol it scores nothing before TRAIN, where the fitted members' misses are
@@ -53,12 +53,12 @@ from pathlib import Path
 
 import numpy as np
 
-from predictors import LEARNED, family, make_predictor, needs_torch, predictor_names
-from predictors.combination import Combination, CombinationSettings
-from predictors.registry import default_predictors, torch_available
 from rhmpc.experiment.fit_plan import describe, fit_all, plan_fits
+from rhmpc.predictors import LEARNED, family, make_predictor, needs_torch, predictor_names
+from rhmpc.predictors.combination import Combination, CombinationSettings
+from rhmpc.predictors.registry import default_predictors, torch_available
+from rhmpc.sim.recordings.points import on_grid
 from rhmpc.studies.tracks import Track, twelve_digits
-from sim.recordings.points import on_grid
 
 #: Leads 1 … DEFAULT_LEADS are scored [samples].
 DEFAULT_LEADS = 5
@@ -78,7 +78,7 @@ class OpenLoopSettings:
     Attributes
     ----------
     predictors : tuple[str, ...]
-        Predictor names (``predictors.predictor_names()``, not ``exact``); empty = the
+        Predictor names (``rhmpc.predictors.predictor_names()``, not ``exact``); empty = the
         defaults (:func:`default_predictors`).
     leads : int
         L: leads 1 … L are scored, and the closed loop's lead K_loop [samples].
@@ -245,8 +245,8 @@ def score_track(track: Track, settings: OpenLoopSettings,
     """The source's description and the result rows of every predictor on ``track``.
 
     ``train``: the recordings to fit the fitted predictors on
-    (:func:`sim.recordings.training_series`); default, with a split, the track's samples before
-    TRAIN. ``save``: a folder to write the fitted models to (their ``save``).
+    (:func:`rhmpc.sim.recordings.training_series`); default, with a split, the track's samples
+    before TRAIN. ``save``: a folder to write the fitted models to (their ``save``).
 
     Raises
     ------
@@ -380,7 +380,7 @@ def run_open_loop(tracks: Sequence[Track | list[Track]], settings: OpenLoopSetti
     gets its ``mean`` rows, labelled ``FILE:mean``.
 
     ``train(period)``: the recordings to fit the fitted predictors on, on the grid of
-    ``period`` [s] (e.g. :func:`sim.recordings.training_series`); default, with a split, each
+    ``period`` [s] (e.g. :func:`rhmpc.sim.recordings.training_series`); default, with a split, each
     track's samples before TRAIN. ``save``: a folder to write the fitted models to.
 
     Returns

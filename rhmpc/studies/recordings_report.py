@@ -3,7 +3,7 @@ tables of ``rhmpc predict --data`` and the figure of ``--plot``."""
 
 from __future__ import annotations
 
-import boundary
+from rhmpc import io
 from rhmpc.studies.recordings import WARMUP_FRACTION, WARMUP_SECONDS
 
 __all__ = ["format_report", "plot_leads"]
@@ -106,5 +106,5 @@ def plot_leads(doc: dict, path) -> None:
         ax.set_yscale("log")
         ax.legend(fontsize=7, ncol=2)
     fig.tight_layout()
-    boundary.save_figure(fig, path, dpi=110)
+    io.save_figure(fig, path, dpi=110)
     plt.close(fig)

@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-import boundary
+from rhmpc import io
 from rhmpc.studies.replay_scene import COLOURS, scene_commands
 
 with warnings.catch_warnings():  # meshcat's package imports its server's deprecated zmq loop
@@ -90,12 +90,12 @@ def write_replay(path: str | Path, result, robot, *, fps: float = 60.0, max_fram
     ----------
     path : str or pathlib.Path
         The page to write.
-    result : sim.loop.LoopResult
+    result : rhmpc.sim.loop.LoopResult
         The run: its trace (``time``, ``ee``, ``poi`` and ``trace["q"]``, the joint angles),
         ``settings.Ts``, and where present ``horizons`` = (ticks (R,), points (R, N, 3)), the
         reference points of each refresh, and ``samples`` = (t (S,), z (S, 3)), the measured
         samples placed in the workspace [m].
-    robot : robots.Robot
+    robot : rhmpc.robots.Robot
         The arm the run drove (its Pinocchio model draws and poses it).
     fps : float
         Animation frames per simulated second.
@@ -120,7 +120,7 @@ def write_replay(path: str | Path, result, robot, *, fps: float = 60.0, max_fram
     data["title"] = title or "rhmpc replay"
     commands = scene_commands(robot, data.pop("_scene"))
     page = _page(commands, data)
-    path = boundary.write_text(path, page)
+    path = io.write_text(path, page)
     return ReplayInfo(path, t_frames.size, float(t_frames[0]), float(t_frames[-1]), float(fps),
                       path.stat().st_size)
 

@@ -2,7 +2,7 @@
 
 A :class:`Track` is one point's samples; a file of several tracked points gives a track per
 point (``--points``), or the point of interest's with the others beside it (``--poi``). Points
-are numbered from 1, in the file's order (:mod:`sim.recordings.points`).
+are numbered from 1, in the file's order (:mod:`rhmpc.sim.recordings.points`).
 """
 
 from __future__ import annotations
@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.recordings import RecordedMotion, load_points
-from sim.recordings.points import load_poi, pick_point
+from rhmpc.sim.recordings import RecordedMotion, load_points
+from rhmpc.sim.recordings.points import load_poi, pick_point
 
 __all__ = ["Track", "file_points", "load_tracks", "parse_points", "poi_tracks", "twelve_digits"]
 

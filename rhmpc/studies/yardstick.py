@@ -6,7 +6,7 @@ and loads. g is a fixed piece of work — the unconstrained MPC's gain applied t
 that no feature of the controller grows: the output offset, the envelope and the clipping are
 the controller's, not the yardstick's. ``rhmpc bench`` also times the same mat-vec written in
 plain NumPy (:func:`numpy_gain_step`), so that a reader sees g for what it is. g is timed as the
-least of three consecutive calls (:func:`sim.loop.metrics.warm_ns`): the fixed work itself,
+least of three consecutive calls (:func:`rhmpc.sim.loop.metrics.warm_ns`): the fixed work itself,
 not the state that the work around it leaves the caches in, which differs between ``rhmpc
 bench`` (an MPC, an exact solve and an OSQP solve each tick) and the closed loop.
 """

@@ -85,7 +85,7 @@ def current_value(config: RunConfig, key: str) -> Any:
 
 def resolved_predictor_settings(config: RunConfig) -> dict | None:
     """The predictor's complete settings as a dict, or ``None`` if they cannot be resolved."""
-    from predictors.registry import settings_for
+    from rhmpc.predictors.registry import settings_for
 
     try:
         return settings_to_dict(settings_for(config.predictor, **dict(config.predictor_settings)))

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-import boundary
+from rhmpc import io
 from rhmpc.errors import UsageError
 from rhmpc.experiment import RunConfig
 from rhmpc.tuning.objective import Objective, metric_value
@@ -318,7 +318,7 @@ def plot_objective(summaries: Sequence[PointSummary], objective: Objective, path
     import matplotlib.pyplot as plt
 
     fig = objective_figure(summaries, objective, title, log_keys)
-    boundary.save_figure(fig, path, dpi=120)
+    io.save_figure(fig, path, dpi=120)
     plt.close(fig)
 
 

@@ -376,7 +376,7 @@ def _parse_parameters(table: Any, where: str) -> tuple[Parameter, ...]:
 
 def _parse_evaluate(table: dict, base: RunConfig, where: str) -> tuple[tuple[str, ...],
                                                                        tuple[int, ...]]:
-    from sim.heart import SCENARIOS
+    from rhmpc.sim.heart import SCENARIOS
 
     _check_keys(table, ("scenarios", "seeds"), f"{where}: evaluate")
     scenarios = table.get("scenarios", [])
@@ -475,7 +475,7 @@ def _check_size(spec: TuneSpec, where: str) -> None:
 
 def _validate_points(spec: TuneSpec, where: str) -> None:
     """Every parameter and every point must build a valid run configuration."""
-    from predictors.registry import settings_for
+    from rhmpc.predictors.registry import settings_for
 
     for p in spec.parameters:
         values = p.grid() if (p.values is not None or p.num) else (p.from_unit(0.0),

@@ -3,7 +3,7 @@
 One line per finished evaluation (see :func:`rhmpc.tuning.record_for`). Each line is written with
 a single ``write`` on a file opened ``O_APPEND``, then flushed to disk (``fsync``), so a crash
 leaves at most a truncated last line. The file is read through the one reader
-(:func:`boundary.read_bytes`: a regular file of at most 1 GiB), and a line is a record only if it
+(:func:`rhmpc.io.read_bytes`: a regular file of at most 1 GiB), and a line is a record only if it
 is a JSON object with the fields a record has (:func:`is_record`); the others (a line cut short
 by a crash, a line edited by hand) are skipped and counted. One writer at a time is enforced
 with an advisory ``flock``.
@@ -17,9 +17,9 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import boundary
-from boundary import FileError
+from rhmpc import io
 from rhmpc.errors import UsageError
+from rhmpc.io import FileError
 
 #: The statuses of a record.
 STATUSES = ("ok", "failed")
@@ -82,7 +82,7 @@ def _parse(line: bytes, where: str) -> dict | None:
     if len(line) > MAX_LINE:
         return None
     try:
-        record = boundary.json_loads(line, where)
+        record = io.json_loads(line, where)
     except FileError:
         return None
     return record if is_record(record) else None
@@ -96,7 +96,7 @@ def read_results(path: str | Path) -> ResultsFile:
     if not os.path.lexists(path):
         return out
     try:
-        with boundary.open_input(path, "results file") as f:
+        with io.open_input(path, "results file") as f:
             for number, line in enumerate(f, 1):
                 if not line.strip():
                     continue
@@ -136,7 +136,7 @@ class ResultsWriter:
     def open(self) -> None:
         if self.path.parent and not self.path.parent.exists():
             self.path.parent.mkdir(parents=True, exist_ok=True)
-        if self.path.is_symlink():  # never written through a link (boundary.writer)
+        if self.path.is_symlink():  # never written through a link (rhmpc.io.writer)
             raise UsageError(f"{self.path}: a symbolic link (to {os.readlink(self.path)}); rhmpc "
                              "writes nothing through a link: give the file itself")
         try:

@@ -19,9 +19,9 @@ Every source has ``dim`` and ``position(t)`` → metres, shape ``(dim,)`` for a 
 ``(n, dim)`` for an array of ``n`` times; NaN marks missing data.
 """
 
-from sim.heart.analysis import MotionStats, motion_stats
-from sim.heart.motion import MotionSource, SyntheticHeartMotion
-from sim.heart.rr import (
+from rhmpc.sim.heart.analysis import MotionStats, motion_stats
+from rhmpc.sim.heart.motion import MotionSource, SyntheticHeartMotion
+from rhmpc.sim.heart.rr import (
     BEAT_SYMBOLS,
     PhaseTrack,
     RRSettings,
@@ -31,7 +31,7 @@ from sim.heart.rr import (
     rr_from_annotations,
     synthetic_rr,
 )
-from sim.heart.scenarios import (
+from rhmpc.sim.heart.scenarios import (
     DEFAULT_SCENARIO,
     SCENARIOS,
     SPECS,
@@ -39,7 +39,7 @@ from sim.heart.scenarios import (
     ScenarioSpec,
     make_scenario,
 )
-from sim.heart.variability import VariabilitySettings
+from rhmpc.sim.heart.variability import VariabilitySettings
 
 __all__ = [
     "BEAT_SYMBOLS", "DEFAULT_SCENARIO", "SCENARIOS", "SPECS", "MotionSource", "MotionStats",

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sim.heart.motion import MotionSource
+from rhmpc.sim.heart.motion import MotionSource
 
 
 def peak_to_peak(p: np.ndarray) -> float:
@@ -219,7 +219,7 @@ def predictability(source: MotionSource, duration: float, t0: float = 0.0,
     phantom and ≈ 0.69 on in-vivo 3-D heart motion tracked at 25 frames/s. Samples that
     are NaN are fed as missing and not scored. Returns NaN when nothing can be scored.
     """
-    from predictors import make_predictor
+    from rhmpc.predictors import make_predictor
 
     n = round(duration * rate) + 1
     z = np.asarray(source.position(t0 + np.arange(n) / rate), dtype=float).reshape(n, -1)

@@ -1,7 +1,7 @@
 """Arrhythmia: a real annotated rhythm drives the heart phase; premature beats change the stroke.
 
-The ``arrhythmia-apb`` scenario (:mod:`sim.heart.scenarios`) takes its beat times from the MIT-BIH
-record 100 annotations shipped with the package (``sim/heart/physionet``), so the RR
+The ``arrhythmia-apb`` scenario (:mod:`rhmpc.sim.heart.scenarios`) takes its beat times from the
+MIT-BIH record 100 annotations shipped with the package (``sim/heart/physionet``), so the RR
 intervals — the premature beats' short coupling intervals and the pauses after them — are real.
 The beat morphology is the replica's, with the stroke of each premature beat and of the beat
 after it changed (:func:`premature_stroke`).
@@ -13,10 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.heart.rr import RECORDS_DIR, beats_from_annotations
+from rhmpc.sim.heart.rr import RECORDS_DIR, beats_from_annotations
 
 #: The real data the scenarios name their records in: the PhysioNet annotations shipped with
-#: the package (:data:`sim.heart.rr.RECORDS_DIR`).
+#: the package (:data:`rhmpc.sim.heart.rr.RECORDS_DIR`).
 SHARED_DATA: Path = RECORDS_DIR
 
 #: Premature beats: stroke gain = (coupling interval / median RR)^PREMATURE_STROKE_EXPONENT

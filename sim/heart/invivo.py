@@ -12,12 +12,12 @@ with
 
 * φ(t): the heart phase through the beat times t_i (φ(t_i) = i). The RR intervals are the
   LF/HF tachogram of McSharry et al. (2003), IEEE Trans. Biomed. Eng. 50:289
-  (:func:`sim.heart.rr.synthetic_rr`): Gaussian spectral bumps at 0.1 Hz (Mayer waves) and at the
-  breathing rate (respiratory sinus arrhythmia), mean and SD those of the recording
+  (:func:`rhmpc.sim.heart.rr.synthetic_rr`): Gaussian spectral bumps at 0.1 Hz (Mayer waves) and at
+  the breathing rate (respiratory sinus arrhythmia), mean and SD those of the recording
   (1.2 s = 50 beats/min, 0.14 s, the middle of its 0.10–0.18 s), clipped to its 0.72–1.56 s.
 * ψ(t): the mechanical phase at which the beat template h is read. The template
-  (:data:`sim.heart.motion.EPICARDIAL_BUMPS`, the replicas' beat at ``REFERENCE_RR`` = 0.6 s) is
-  split at its end of systole ψ_S, end of rapid filling ψ_E and onset of atrial contraction
+  (:data:`rhmpc.sim.heart.motion.EPICARDIAL_BUMPS`, the replicas' beat at ``REFERENCE_RR`` = 0.6 s)
+  is split at its end of systole ψ_S, end of rapid filling ψ_E and onset of atrial contraction
   ψ_A. In beat i of length RR_i:
 
   - systole [0, ψ_S] lasts S_i = ψ_S·RR_ref·QS2(HR_i)/QS2(HR_ref), with the electromechanical
@@ -33,12 +33,12 @@ with
   of the beat changes with every RR interval, which a Fourier series in one phase cannot
   follow.
 * g_i: per-beat, per-axis stroke gains 1 + s_i, s an AR(1) series
-  (:func:`sim.heart.variability.ar1`) with lag-one correlation 0.3 (as
-  :mod:`sim.heart.variability`) and SD ``beat_gain_std``.
+  (:func:`rhmpc.sim.heart.variability.ar1`) with lag-one correlation 0.3 (as
+  :mod:`rhmpc.sim.heart.variability`) and SD ``beat_gain_std``.
 * b, d, φ_r: breathing at 0.165 Hz (the recording's), fundamental plus a second harmonic of
   0.35 (as the replicas), through breath onsets of varying period and depth
-  (:func:`sim.heart.variability.breathing_phase`); κ = 0.08 and the drift as
-  :class:`sim.heart.variability.VariabilitySettings`.
+  (:func:`rhmpc.sim.heart.variability.breathing_phase`); κ = 0.08 and the drift as
+  :class:`rhmpc.sim.heart.variability.VariabilitySettings`.
 
 Calibration (:func:`invivo_motion`): the beat template is scaled to ``heart_rms`` (3-D RMS of
 one unvaried beat), then each axis's breathing amplitude is solved so that the axis's
@@ -60,9 +60,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.interpolate import PchipInterpolator, PPoly
 
-from sim.heart.motion import EPICARDIAL_BUMPS, SyntheticHeartMotion, fourier_from_bumps
-from sim.heart.rr import PhaseTrack, RRSettings, beat_times_from_rr, synthetic_rr
-from sim.heart.variability import (
+from rhmpc.sim.heart.motion import EPICARDIAL_BUMPS, SyntheticHeartMotion, fourier_from_bumps
+from rhmpc.sim.heart.rr import PhaseTrack, RRSettings, beat_times_from_rr, synthetic_rr
+from rhmpc.sim.heart.variability import (
     VariabilitySettings,
     ar1,
     breathing_phase,

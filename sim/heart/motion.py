@@ -13,11 +13,11 @@ with
   (ventilator: constant rate :math:`f_r`),
 * :math:`h(\varphi) = \operatorname{Re} \sum_{k=1}^{K} c_k e^{i 2\pi k \varphi}`, the beat
   morphology as a band-limited Fourier series in the heart phase φ [cycles] (see
-  :mod:`sim.heart.rr`),
+  :mod:`rhmpc.sim.heart.rr`),
 * g(φ), a per-axis gain that varies from beat to beat (seeded, interpolated linearly in φ),
 * κ, the breathing–heartbeat amplitude coupling.
 
-The physiological variability of :mod:`sim.heart.variability` enters through optional terms: a
+The physiological variability of :mod:`rhmpc.sim.heart.variability` enters through optional terms: a
 breathing phase φ_r(t) of varying period replacing f_r·t, per-breath depths d(φ_r) scaling b,
 per-beat timing offsets δ(φ) (h is evaluated at φ + δ), and a slow drift added to p.
 
@@ -32,7 +32,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 from scipy.interpolate import PPoly
 
-from sim.heart.rr import PhaseTrack
+from rhmpc.sim.heart.rr import PhaseTrack
 
 
 @runtime_checkable
@@ -126,7 +126,7 @@ class SyntheticHeartMotion:
         ψ_κ [rad].
     breath_phase : PhaseTrack, optional
         Breathing phase φ_r(t) [cycles] of a breathing with varying period; the breathing and
-        the coupling then use φ_r(t) instead of f_r·t (:mod:`sim.heart.variability`).
+        the coupling then use φ_r(t) instead of f_r·t (:mod:`rhmpc.sim.heart.variability`).
     breath_depths : ndarray, shape (n_breaths,), optional
         Depth d_j of breaths ``first_breath`` …: b(t) is multiplied by d(φ_r), interpolated
         like the beat gains (needs ``breath_phase``).

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 from scipy.interpolate import PchipInterpolator, PPoly
 
-import boundary
+from rhmpc import io
 
 #: Annotation symbols that mark a heartbeat (PhysioNet/MIT-BIH convention). Premature beats
 #: (A, a, J, S, V, F, e, j, n, E) are kept on purpose: they are the arrhythmia events.
@@ -272,8 +272,8 @@ def _local_base(path: Path) -> Path:
 
 def _annotations(base: Path):
     """The record's beat annotations (``wfdb.rdann``), once the one reader has checked its
-    ``.atr`` file (a regular file within its size bound, :func:`boundary.open_input`)."""
-    boundary.open_input(base.with_name(base.name + ".atr"), "annotation file").close()
+    ``.atr`` file (a regular file within its size bound, :func:`rhmpc.io.open_input`)."""
+    io.open_input(base.with_name(base.name + ".atr"), "annotation file").close()
     with warnings.catch_warnings():  # wfdb's pandas deprecation noise, not ours
         warnings.filterwarnings("ignore", module=r"wfdb(\.|$)")
         import wfdb

@@ -6,8 +6,8 @@ scenario is a *synthetic replica* calibrated to what the paper reports for that 
 rate, duration and heart-rate profile. ``mitral-1d`` is a replica of the mitral-annulus motion
 of Yuen et al. (IJRR 2009 §2). Nothing here is measured data.
 
-Statistics are defined as in :mod:`sim.heart.analysis`: peak-to-peak is the largest per-axis range
-max_d (max_t p_d − min_t p_d); RMS is the 3-D RMS about the mean √(mean_t ‖p − p̄‖²).
+Statistics are defined as in :mod:`rhmpc.sim.heart.analysis`: peak-to-peak is the largest per-axis
+range max_d (max_t p_d − min_t p_d); RMS is the 3-D RMS about the mean √(mean_t ‖p − p̄‖²).
 """
 
 from __future__ import annotations
@@ -17,16 +17,16 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.heart.arrhythmia import SHARED_DATA, premature_stroke, record_beats
-from sim.heart.invivo import InVivoSettings, invivo_motion
-from sim.heart.motion import (
+from rhmpc.sim.heart.arrhythmia import SHARED_DATA, premature_stroke, record_beats
+from rhmpc.sim.heart.invivo import InVivoSettings, invivo_motion
+from rhmpc.sim.heart.motion import (
     EPICARDIAL_BUMPS,
     MITRAL_BUMPS,
     MotionSource,
     SyntheticHeartMotion,
     fourier_from_bumps,
 )
-from sim.heart.rr import (
+from rhmpc.sim.heart.rr import (
     PhaseTrack,
     StaircaseProfile,
     beat_times_from_annotations,
@@ -34,7 +34,7 @@ from sim.heart.rr import (
     constant_phase,
     staircase_phase,
 )
-from sim.heart.specs import (
+from rhmpc.sim.heart.specs import (
     DEFAULT_SCENARIO,
     DEFAULT_SEED,
     NEEDS_DATA,
@@ -44,7 +44,7 @@ from sim.heart.specs import (
     available_scenarios,
     missing_data,
 )
-from sim.heart.variability import (
+from rhmpc.sim.heart.variability import (
     VariabilitySettings,
     breathing_phase,
     modulated_phase,
@@ -127,13 +127,13 @@ def make_scenario(name: str, rng: np.random.Generator | None = None, **overrides
         ``default_rng(DEFAULT_SEED)``, so the named replica is reproducible.
     **overrides
         ``duration`` [s], ``sensor_rate`` [Hz], ``heart_rate`` [Hz] (constant rate),
-        ``staircase`` (:class:`~sim.heart.rr.StaircaseProfile`), ``rr`` (RR intervals [s]) with
-        ``rr_start`` (time of the first beat [s], default 0), ``beat_times`` [s], ``record``
+        ``staircase`` (:class:`~rhmpc.sim.heart.rr.StaircaseProfile`), ``rr`` (RR intervals [s])
+        with ``rr_start`` (time of the first beat [s], default 0), ``beat_times`` [s], ``record``
         (PhysioNet record path: its annotated beat times, shifted so the first beat is at
         ``rr_start``), ``peak_to_peak`` [m], ``rms`` [m or None], ``breathing_rate`` [Hz],
         ``coupling`` [-], ``beat_gain_std`` [-], ``breathing`` (False removes it),
-        ``variability`` (:class:`~sim.heart.variability.VariabilitySettings`, or ``"clean"`` for
-        the periodic replica; default ``VariabilitySettings()``: HRV, beat-to-beat stroke and
+        ``variability`` (:class:`~rhmpc.sim.heart.variability.VariabilitySettings`, or ``"clean"``
+        for the periodic replica; default ``VariabilitySettings()``: HRV, beat-to-beat stroke and
         timing, breath period and depth, drift, coupling — except ``mitral-1d``, periodic by
         default because Yuen et al.'s §III-D studies perturb that signal themselves: noise,
         heart-rate steps, RR intervals). ``coupling`` and
@@ -143,8 +143,8 @@ def make_scenario(name: str, rng: np.random.Generator | None = None, **overrides
     Returns
     -------
     Scenario
-        With a :class:`~sim.heart.motion.SyntheticHeartMotion` source whose heart phase satisfies
-        φ(t_i) = i at the given beat times, or φ(t) = φ₀ + ∫ f_h dτ for rate profiles.
+        With a :class:`~rhmpc.sim.heart.motion.SyntheticHeartMotion` source whose heart phase
+        satisfies φ(t_i) = i at the given beat times, or φ(t) = φ₀ + ∫ f_h dτ for rate profiles.
 
     Raises
     ------
@@ -193,7 +193,7 @@ def _spec(name: str, overrides: dict) -> tuple[ScenarioSpec, float, float]:
 
 def _invivo(spec: ScenarioSpec, overrides: dict, rng: np.random.Generator, duration: float,
             sensor_rate: float, horizon: float) -> Scenario:
-    """The in-vivo regime of :mod:`sim.heart.invivo` (overrides: ``heart_rate``,
+    """The in-vivo regime of :mod:`rhmpc.sim.heart.invivo` (overrides: ``heart_rate``,
     ``breathing_rate``)."""
     unsupported = sorted(set(overrides) - {"duration", "sensor_rate", "heart_rate",
                                            "breathing_rate"})
@@ -226,7 +226,7 @@ def _variability(spec: ScenarioSpec, overrides: dict) -> VariabilitySettings:
 def _beats(spec: ScenarioSpec, overrides: dict) -> tuple[np.ndarray | None, np.ndarray | None]:
     """The beat times [s] that drive the heart phase, if any (``beat_times``, ``rr`` with
     ``rr_start``, ``record``, or the spec's own record), and the stroke gain of each of the
-    spec's record's beats (:func:`~sim.heart.arrhythmia.premature_stroke`; None otherwise)."""
+    spec's record's beats (:func:`~rhmpc.sim.heart.arrhythmia.premature_stroke`; None otherwise)."""
     start = float(overrides.get("rr_start", 0.0))
     if "beat_times" in overrides:
         return np.asarray(overrides["beat_times"], dtype=float), None
@@ -271,7 +271,7 @@ def _shape(spec: ScenarioSpec, overrides: dict, rng: np.random.Generator, phase:
            stroke: np.ndarray | None) -> SyntheticHeartMotion:
     """The uncalibrated motion for ``spec`` (unit-less shape, scaled later): the site's beat
     and breathing coefficients (the breathing's phase ψ drawn), then the variations of the
-    beats and breaths (:func:`~sim.heart.variability.variations`), each beat's gain times its
+    beats and breaths (:func:`~rhmpc.sim.heart.variability.variations`), each beat's gain times its
     ``stroke`` (beat 0 the record's first)."""
     breathing_rate = float(overrides.get("breathing_rate", 1.0 / 6.0))
     with_breathing = bool(overrides.get("breathing", spec.site != "mitral"))

@@ -1,7 +1,7 @@
 """The named scenarios' specifications: what the papers report for each data set replicated.
 
 :class:`ScenarioSpec` is the calibration target and the heart-rate profile of one replica;
-:data:`SPECS` holds them by name. :mod:`sim.heart.scenarios` builds the motion from a spec.
+:data:`SPECS` holds them by name. :mod:`rhmpc.sim.heart.scenarios` builds the motion from a spec.
 """
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from sim.heart.arrhythmia import SHARED_DATA
+from rhmpc.sim.heart.arrhythmia import SHARED_DATA
 
 #: The seed used when :func:`make_scenario` is given no generator, so that a named replica is
 #: the same everywhere unless a caller asks for another draw.
@@ -35,7 +35,8 @@ class ScenarioSpec:
     duration : float
         Duration [s].
     heart : str
-        ``"constant"``, ``"staircase"``, ``"record"`` or ``"invivo"`` (:mod:`sim.heart.invivo`).
+        ``"constant"``, ``"staircase"``, ``"record"`` or ``"invivo"``
+        (:mod:`rhmpc.sim.heart.invivo`).
     heart_rate : float
         Heart rate for ``"constant"`` [Hz] (the first staircase level otherwise).
     site : str
@@ -49,12 +50,12 @@ class ScenarioSpec:
     record_start : float
         Time in the record where the scenario starts [s].
     variable : bool
-        Whether the default is the physiological variability of :mod:`sim.heart.variability`
+        Whether the default is the physiological variability of :mod:`rhmpc.sim.heart.variability`
         (True) or the periodic replica (False).
     hrv_band_powers : tuple of float or None
         Relative VLF/LF/HF powers of the default heart-rate variability
-        (:attr:`~sim.heart.variability.VariabilitySettings.band_powers`; its total ``hrv_cv`` is
-        kept); ``None``: the Task Force norms.
+        (:attr:`~rhmpc.sim.heart.variability.VariabilitySettings.band_powers`; its total ``hrv_cv``
+        is kept); ``None``: the Task Force norms.
     """
 
     name: str
@@ -123,8 +124,8 @@ _SPECS: tuple[ScenarioSpec, ...] = (
     ScenarioSpec(
         "invivo-video", "in-vivo regime: breathing-dominated 3-D epicardial motion at 50 bpm "
         "with large beat-to-beat variation, as tracked by stereo endoscopic video at 25 "
-        "frames/s (built from a recording's statistics, sim.heart.invivo)", 5.1e-3, None, 25.0,
-        60.0,
+        "frames/s (built from a recording's statistics, rhmpc.sim.heart.invivo)", 5.1e-3, None,
+        25.0, 60.0,
         "invivo", 0.83, "invivo", ("peak_to_peak", "heart_rate", "sensor_rate")),
 )
 

@@ -3,7 +3,7 @@ r"""Physiological variability of the synthetic heart motion: seeded draws with c
 A real heart is not a line spectrum. Five mechanisms make consecutive beats and breaths differ;
 each is one group of :class:`VariabilitySettings` and each can be switched off on its own
 (:meth:`VariabilitySettings.clean` switches all of them off and gives back the periodic replica
-of :mod:`sim.heart.motion` exactly):
+of :mod:`rhmpc.sim.heart.motion` exactly):
 
 1. heart-rate variability,
    :math:`f_h(t) = \bar f_h(t)\,\bigl(1 + m_\text{VLF}(t) + m_\text{LF}(t) + m_\text{RSA}(t)\bigr)`:
@@ -34,7 +34,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.interpolate import PchipInterpolator, PPoly
 
-from sim.heart.rr import PhaseTrack
+from rhmpc.sim.heart.rr import PhaseTrack
 
 #: Task Force of the ESC and NASPE (1996), Eur. Heart J. 17:354–381: very-low-frequency band
 #: [Hz] (short-term recordings).
@@ -162,7 +162,7 @@ def band_limited_noise(rng: np.random.Generator, n: int, rate: float,
 def variations(rng: np.random.Generator, settings: VariabilitySettings, n_beats: int, dim: int,
                breath: PhaseTrack | None, horizon: float, heart_range: float) -> dict:
     """The draws that make beats and breaths differ, in this order, as the keywords of
-    :class:`~sim.heart.motion.SyntheticHeartMotion` (``beat_gains`` for the ``n_beats``
+    :class:`~rhmpc.sim.heart.motion.SyntheticHeartMotion` (``beat_gains`` for the ``n_beats``
     beats, ``coupling_phase``, and with a breathing phase the others).
 
     Without ``breath`` (the clean replica): independent gains g_i = 1 + σ ε_i, ε_i ~ N(0, 1)

@@ -12,8 +12,8 @@
 =================  ==============================================================
 """
 
-from sim.loop.closed_loop import poi_truth, run_closed_loop
-from sim.loop.results import LoopResult
-from sim.loop.settings import LoopSettings
+from rhmpc.sim.loop.closed_loop import poi_truth, run_closed_loop
+from rhmpc.sim.loop.results import LoopResult
+from rhmpc.sim.loop.settings import LoopSettings
 
 __all__ = ["LoopResult", "LoopSettings", "poi_truth", "run_closed_loop"]

@@ -15,8 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sim.loop.settings import LoopSettings
-from sim.sensors.stream import SampledSamples, SampleSource, as_samples
+from rhmpc.sim.loop.settings import LoopSettings
+from rhmpc.sim.sensors.stream import SampledSamples, SampleSource, as_samples
 
 #: Raw samples read to estimate a stream's rate.
 RATE_SAMPLES = 4096

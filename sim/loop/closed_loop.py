@@ -5,20 +5,21 @@ Time is integer ticks of ``Ts`` (seconds = tick·Ts). Each tick ``i``:
 1. every sample due on tick i refreshes the controller's reference, in one call each
    (``controller.refresh``): every ``downsample`` ticks the newest sample delivered to the
    control rate, or each raw sample of a slow sensor on the tick it arrives
-   (:class:`Refreshes`, :mod:`sim.loop.clock`);
+   (:class:`Refreshes`, :mod:`rhmpc.sim.loop.clock`);
 2. the controller steps from the plant's encoder angles (``controller.step``: observer, MPC on
    the reference's points r_{i+1..i+N}, cancellation), and returns the torque;
 3. the plant integrates one tick with that torque held.
 
 The heart and its sensor do not see the robot; their samples are made a block at a time
-(:mod:`sim.loop.streams`). The controller is a :class:`rhmpc.control.controller.Controller`, or
-the exported C controller behind the same two calls (:mod:`rhmpc.control.export`); the loop uses
+(:mod:`rhmpc.sim.loop.streams`). The controller is a :class:`rhmpc.control.controller.Controller`,
+or the exported C controller behind the same two calls (:mod:`rhmpc.control.export`); the loop uses
 nothing else of it but what it reports (its torques, state estimate, points and timings).
 
 Memory is flat in run length: the sensor stream and the POI truth are read per chunk
-(:mod:`sim.loop.streams`), results accumulate as running statistics (:mod:`sim.loop.metrics`)
-and a fixed-size decimated trace, and every tick can go to an NPZ file as the run goes
-(:mod:`sim.loop.trace`). The garbage collector is frozen and disabled during the run.
+(:mod:`rhmpc.sim.loop.streams`), results accumulate as running statistics
+(:mod:`rhmpc.sim.loop.metrics`) and a fixed-size decimated trace, and every tick can go to an NPZ
+file as the run goes (:mod:`rhmpc.sim.loop.trace`). The garbage collector is frozen and disabled
+during the run.
 
 The POI trajectory is placed in the workspace (``LoopSettings.placement``): by default its mean
 over the run at the end-effector's home position plus ``poi_offset`` (a 1-D motion along x).
@@ -39,19 +40,19 @@ from collections.abc import Callable, Iterable, Iterator
 import numpy as np
 
 from rhmpc.control.reference import ArrayTruth
-from sim.loop.clock import PredictorClock, arrival_tick
-from sim.loop.metrics import warm_ns
-from sim.loop.results import (
+from rhmpc.sim.loop.clock import PredictorClock, arrival_tick
+from rhmpc.sim.loop.metrics import warm_ns
+from rhmpc.sim.loop.results import (
     YARDSTICK_EVERY,
     YARDSTICK_PHASE,
     LoopResult,
     Recorder,
     event_counts,
 )
-from sim.loop.settings import LoopSettings
-from sim.loop.streams import StreamCursor
-from sim.recordings.points import PointsAt
-from sim.sensors.stream import BLOCK, SampleSource, as_samples
+from rhmpc.sim.loop.settings import LoopSettings
+from rhmpc.sim.loop.streams import StreamCursor
+from rhmpc.sim.recordings.points import PointsAt
+from rhmpc.sim.sensors.stream import BLOCK, SampleSource, as_samples
 
 clock = time.perf_counter_ns
 #: Ticks between two calls of ``progress``.
@@ -205,7 +206,7 @@ def run_closed_loop(plant, controller, truth, stream, settings: LoopSettings,
     Parameters
     ----------
     plant
-        ``encoders()``, ``step(tau)``, ``q`` (:mod:`sim.plant`).
+        ``encoders()``, ``step(tau)``, ``q`` (:mod:`rhmpc.sim.plant`).
     controller
         ``refresh(tick, z, stamp)``, ``step(tick, q) -> τ``, with ``u``, ``tau_command``,
         ``x_hat``, ``horizon(tick)``, ``step_ns``, ``refresh_ns`` and ``stats``
@@ -213,13 +214,13 @@ def run_closed_loop(plant, controller, truth, stream, settings: LoopSettings,
         with the truth's ``center`` (``reference.place(anchor, truth.center)``).
     truth
         The centred POI truth over at least ``ticks + N + 1`` ticks: an object with
-        ``window(i0, i1)``, ``n_ticks`` and ``center`` (:class:`sim.loop.streams.SourceTruth`),
-        or an array (with ``center`` zero).
+        ``window(i0, i1)``, ``n_ticks`` and ``center``
+        (:class:`rhmpc.sim.loop.streams.SourceTruth`), or an array (with ``center`` zero).
     stream
         Sensor samples: arrays ``t`` [s], ``z`` (n, d) [m] (NaN = missing) and ``arrival`` [s],
-        or a sample source of :mod:`sim.loop.streams` read block by block.
+        or a sample source of :mod:`rhmpc.sim.loop.streams` read block by block.
     clock
-        When the reference refreshes (:func:`sim.loop.clock.predictor_clock`).
+        When the reference refreshes (:func:`rhmpc.sim.loop.clock.predictor_clock`).
     anchor : ndarray (3,)
         Where the motion's mean sits in the workspace [m].
     robot
@@ -227,7 +228,7 @@ def run_closed_loop(plant, controller, truth, stream, settings: LoopSettings,
     progress
         Called with the number of ticks done, every :data:`PROGRESS` ticks.
     trace_file
-        Write every tick to this NPZ file as the run goes (:class:`sim.loop.trace.TraceFile`).
+        Write every tick to this NPZ file as the run goes (:class:`rhmpc.sim.loop.trace.TraceFile`).
     yardstick
         A reference computation ``yardstick(x̂, r, u_{−1})`` (the gain tick g of
         :class:`rhmpc.studies.yardstick.GainTick`) timed on every 64th tick after the controller,
@@ -237,15 +238,15 @@ def run_closed_loop(plant, controller, truth, stream, settings: LoopSettings,
         Ticks per chunk of records.
     marks
         Ticks at which a chunk also ends and the controller's and the plant's event counts are
-        read (:func:`sim.loop.results.event_counts`): the result's ``segments`` then hold, for
+        read (:func:`rhmpc.sim.loop.results.event_counts`): the result's ``segments`` then hold, for
         each stretch between two marks, its largest error, its joint envelope and the counts
-        at its end (how an injected fault is measured, :mod:`sim.loop.faults`).
+        at its end (how an injected fault is measured, :mod:`rhmpc.sim.loop.faults`).
     points
         The other tracked points of a recording, given with each sample to the controller's
         refresh (``others``: what a multi-point predictor reads).
     measured
         A recording's own samples ``(t [s], z (n, d) [m])`` in the run's time, uncentred: the
-        run is then scored at their instants (:class:`sim.loop.metrics.MeasuredScore`), and
+        run is then scored at their instants (:class:`rhmpc.sim.loop.metrics.MeasuredScore`), and
         the all-tick score against their interpolant is kept beside it.
     """
     n, N = settings.ticks, controller.N
@@ -279,7 +280,7 @@ def chunks(n: int, size: int, marks: Iterable[int] = ()) -> list[tuple[int, int]
 def _run_ticks(plant, controller, refreshes: Refreshes, c0: int, c1: int, log: dict,
                yardstick, progress) -> None:
     """Ticks c0 … c1 − 1 (the module's steps 1–3), written into the chunk's records ``log``
-    (:meth:`~sim.loop.results.Recorder.start_chunk`)."""
+    (:meth:`~rhmpc.sim.loop.results.Recorder.start_chunk`)."""
     due, refresh, step, advance = refreshes.due, controller.refresh, controller.step, plant.step
     q_log, ref0, u_log, tau_log, cmd_log = (log[k] for k in ("q", "ref0", "u", "tau", "cmd"))
     step_ns, refresh_ns, horizons, samples = (log[k] for k in ("step_ns", "refresh_ns",

@@ -1,9 +1,9 @@
 """Faults injected into a closed loop, and what each one did to the run.
 
-The faults of :mod:`sim.sensors.faults` act on what the controller reads, never on the truth,
+The faults of :mod:`rhmpc.sim.sensors.faults` act on what the controller reads, never on the truth,
 each on the stream its kind declares (``target``) and by its own ``corrupt``:
 
-- the sensor's samples, block by block (:class:`sim.sensors.faults.FaultySamples`);
+- the sensor's samples, block by block (:class:`rhmpc.sim.sensors.faults.FaultySamples`);
 - the plant's ``encoders()``, tick by tick (:class:`FaultyEncoders`: the arm moves on).
 
 What each fault did to the run is the document's (:mod:`rhmpc.experiment.faults`).
@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 
-from sim.loop.clock import arrival_tick
+from rhmpc.sim.loop.clock import arrival_tick
 
 __all__ = ["FaultyEncoders", "split_faults"]
 
@@ -26,7 +26,8 @@ def split_faults(faults) -> tuple[tuple, tuple]:
 
 
 class FaultyEncoders:
-    """A plant whose encoder readings a fault corrupts (:class:`~sim.sensors.faults.EncoderStick`).
+    """A plant whose encoder readings a fault corrupts
+    (:class:`~rhmpc.sim.sensors.faults.EncoderStick`).
 
     On tick ``i`` (time ``i·Ts``, counted by ``step``) inside a fault's window, ``encoders()``
     returns the reading as the fault's ``corrupt`` leaves it, the reading of the tick before the

@@ -1,9 +1,10 @@
 """What a closed-loop run leaves: running statistics, a fixed-size trace, the trace file.
 
-:class:`Recorder` takes each chunk of ticks from :func:`sim.loop.run_closed_loop` (joint angles,
-references, torques, tick times), turns it into running statistics (:mod:`sim.loop.metrics`), the
-decimated trace and the optional trace file (:mod:`sim.loop.trace`), and forgets it; memory does not
-grow with the run. :class:`LoopResult` is what the run returns.
+:class:`Recorder` takes each chunk of ticks from :func:`rhmpc.sim.loop.run_closed_loop` (joint
+angles, references, torques, tick times), turns it into running statistics
+(:mod:`rhmpc.sim.loop.metrics`), the decimated trace and the optional trace file
+(:mod:`rhmpc.sim.loop.trace`), and forgets it; memory does not grow with the run.
+:class:`LoopResult` is what the run returns.
 """
 
 from __future__ import annotations
@@ -15,9 +16,9 @@ import numpy as np
 import pinocchio as pin
 
 from rhmpc.control.reference import embed3
-from robots import Robot
-from sim.loop.metrics import MeasuredScore, RunningTracking, TickHistogram, rms
-from sim.loop.trace import DecimatedTrace, TraceFile
+from rhmpc.robots import Robot
+from rhmpc.sim.loop.metrics import MeasuredScore, RunningTracking, TickHistogram, rms
+from rhmpc.sim.loop.trace import DecimatedTrace, TraceFile
 
 #: The parts of a tick, timed separately: the controller's step (observer, MPC, cancellation)
 #: and the refreshes of its reference on that tick (gate, predictor, interpolation).
@@ -42,21 +43,22 @@ class LoopResult:
 
     The per-tick arrays (``time``, ``ee``, ``poi``, ``reference0``, ``tau_mpc``, ``tau``,
     ``tick_ns``, and ``trace["q"]``) are those of the decimated trace
-    (:class:`sim.loop.trace.DecimatedTrace`: every tick of a run up to 20 000 ticks long; beyond,
-    every ``stride``-th tick plus the last 2 s at full rate). ``horizons`` holds the N points
-    each refresh made (ticks (R,), points (R, N, 3) [m]) and ``samples`` the sensor samples
+    (:class:`rhmpc.sim.loop.trace.DecimatedTrace`: every tick of a run up to 20 000 ticks long;
+    beyond, every ``stride``-th tick plus the last 2 s at full rate). ``horizons`` holds the N
+    points each refresh made (ticks (R,), points (R, N, 3) [m]) and ``samples`` the sensor samples
     that refreshed them, placed in the workspace (t (S,) [s], z (S, 3) [m], NaN for a missing
     one), each of at most :data:`KEPT_REFRESHES` evenly spread refreshes. The metrics cover
     the run after settling: every tick of a continuous truth, or a recording's samples at their
     own instants (:attr:`score`).
     """
 
-    settings: object  # sim.loop.LoopSettings
+    settings: object  # rhmpc.sim.loop.LoopSettings
     trace: dict  # field -> array over the traced ticks
     stride: int  # ticks between traced samples before the full-rate tail
     #: the tracking metrics after settling: at every tick against the truth, or with
-    #: ``measured`` at the recorded samples' instants (:class:`~sim.loop.metrics.MeasuredScore`;
-    #: the all-tick score against the samples' interpolant then in ``interpolated``)
+    #: ``measured`` at the recorded samples' instants
+    #: (:class:`~rhmpc.sim.loop.metrics.MeasuredScore`; the all-tick score against the samples'
+    #: interpolant then in ``interpolated``)
     tracking: dict
     tick_us: dict  # p50 / p99 / p999 / max / mean of the whole control tick [µs]
     yardstick_us: dict  # the same of the yardstick (gain tick) timed in the run [µs]
@@ -132,7 +134,7 @@ class JointEnvelope:
     """The plant's joint angles against the robot's joint limits, chunk by chunk.
 
     The position margin is the least of q − q_lower, q_upper − q and, for each coupled limit
-    lo ≤ c·q ≤ hi (:attr:`robots.Robot.coupling`), c·q − lo and hi − c·q [rad]; the speed
+    lo ≤ c·q ≤ hi (:attr:`rhmpc.robots.Robot.coupling`), c·q − lo and hi − c·q [rad]; the speed
     margin is the least of v_max − abs(q_{i+1} − q_i) / Ts, the mean speed over each tick [rad/s].
     The envelope *held* when both stay ≥ 0 (the limits the MPC's envelope enforces by default,
     :mod:`rhmpc.control.envelope`).

@@ -3,7 +3,7 @@
 A run of ``n`` ticks needs, at 2 kHz, the sensor samples the controller sees and the true POI
 position at every tick; the loop reads both in blocks:
 
-- :class:`StreamCursor` walks a sample source (:mod:`sim.sensors.stream`) forward in time: the
+- :class:`StreamCursor` walks a sample source (:mod:`rhmpc.sim.sensors.stream`) forward in time: the
   newest sample arrived by a given instant;
 - a *truth* has ``center`` (the POI's mean over the run), ``n_ticks`` and ``window(i0, i1)``, the
   centred positions of ticks ``i0 … i1 − 1``: :class:`rhmpc.control.reference.ArrayTruth` wraps
@@ -20,7 +20,7 @@ import bisect
 
 import numpy as np
 
-from sim.sensors.stream import BLOCK
+from rhmpc.sim.sensors.stream import BLOCK
 
 
 class StreamCursor:
@@ -61,7 +61,7 @@ class StreamCursor:
 def measurements(z: np.ndarray) -> np.ndarray:
     """Samples (n, d) with every one that is no measurement (a non-finite component, or a
     squared norm that overflows: ‖z‖ > 1e154) set to NaN, as the predictors take them
-    (:func:`predictors.base.is_measured`): no score is taken against them."""
+    (:func:`rhmpc.predictors.base.is_measured`): no score is taken against them."""
     z = np.asarray(z, dtype=float)
     with np.errstate(over="ignore", invalid="ignore"):
         bad = ~np.isfinite(np.einsum("ij,ij->i", z, z))
@@ -79,7 +79,7 @@ class SourceTruth:
     ``chunk`` ticks; ``centred=False`` keeps the motion's own coordinates (``center`` zero, the
     mean still checked for a finite sample). ``source`` may instead be a sample source
     (``ground_truth = "recorded"``): the truth is then the stream linearly interpolated at the
-    tick times (:class:`sim.recordings.RecordedMotion` on the samples around each window), its
+    tick times (:class:`rhmpc.sim.recordings.RecordedMotion` on the samples around each window), its
     samples that are no measurements missing (:func:`measurements`).
     """
 
@@ -106,7 +106,7 @@ class SourceTruth:
     def _raw(self, i0: int, i1: int) -> np.ndarray:
         t = np.arange(i0, i1) * self.Ts
         if hasattr(self.source, "block"):
-            from sim.recordings import RecordedMotion
+            from rhmpc.sim.recordings import RecordedMotion
 
             a = max(self.source.index_at(t[0]) - 2, 0)
             b = min(self.source.index_at(t[-1]) + 3, len(self.source))

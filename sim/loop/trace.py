@@ -7,7 +7,7 @@ The loop hands each chunk of ticks to both as a dict of arrays of equal length (
 members, ``np.load`` opens it) with one member per field and chunk, ``<field>.<chunk:06d>``,
 plus ``fields`` and ``chunks``; :func:`read_trace` concatenates the chunks into one array per field.
 Memory: one chunk. The archive is written to a temporary file beside ``FILE`` and renamed over it
-when the run closes it (:class:`boundary.AtomicFile`); after a failed write it is dropped and a
+when the run closes it (:class:`rhmpc.io.AtomicFile`); after a failed write it is dropped and a
 previous ``FILE`` stays.
 """
 
@@ -19,8 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-from boundary import AtomicFile
-from boundary.npz import NpzArchive
+from rhmpc.io import AtomicFile
+from rhmpc.io.npz import NpzArchive
 
 
 class DecimatedTrace:

@@ -16,9 +16,9 @@ control tick with the torque τ [N·m] held), ``q`` (the joint angles the loop s
 
 from __future__ import annotations
 
-from robots import LinearArm, Robot
-from sim.plant.arm import ArmPlant, PlantSettings
-from sim.plant.hardware import HardwarePlant, HardwareSettings, LinearPlant
+from rhmpc.robots import LinearArm, Robot
+from rhmpc.sim.plant.arm import ArmPlant, PlantSettings
+from rhmpc.sim.plant.hardware import HardwarePlant, HardwareSettings, LinearPlant
 
 __all__ = ["ArmPlant", "HardwarePlant", "HardwareSettings", "LinearPlant", "PlantSettings",
            "make_plant"]

@@ -8,9 +8,9 @@ With the joint torque ``τ`` (clipped to the actuator limits) held over a contro
 Coulomb friction of each motor, acting on its output rate ω (``S`` the robot's motor map, the
 identity where each joint has its own motor), smoothed by ``tanh`` over the stiction velocity
 ``v_s`` so that the ODE stays integrable. It is the hardware-like plant's equation
-(:mod:`sim.plant.hardware`) with the current equal to the command (gain 1, the motor torques
+(:mod:`rhmpc.sim.plant.hardware`) with the current equal to the command (gain 1, the motor torques
 S⁻ᵀτ), no stiction peak and rigid cables, integrated by the same kernel
-(:mod:`sim.plant.kernel`): explicit midpoint steps of ``Ts / substeps``. The controller's
+(:mod:`rhmpc.sim.plant.kernel`): explicit midpoint steps of ``Ts / substeps``. The controller's
 cancellation of these terms, with its own model, is :mod:`rhmpc.control.cancellation`.
 """
 from __future__ import annotations
@@ -19,8 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from robots import Robot
-from sim.plant.kernel import Chain, Drive, state
+from rhmpc.robots import Robot
+from rhmpc.sim.plant.kernel import Chain, Drive, state
 
 MODELS = ("ideal", "linear", "hardware")
 
@@ -35,7 +35,7 @@ class PlantSettings:
         ``"ideal"``: the nonlinear arm, the torque applied as commanded (this module);
         ``"linear"``: the MPC's own linear model as the plant (Tuna et al.'s Table I
         simulation); ``"hardware"``: the arm behind an I/O delay, a DAC, a current amplifier,
-        friction with stiction and optionally compliant cables (:mod:`sim.plant.hardware`,
+        friction with stiction and optionally compliant cables (:mod:`rhmpc.sim.plant.hardware`,
         its settings in ``HardwareSettings``).
     substeps : int
         Explicit-midpoint steps per control tick; the step is ``Ts / substeps`` [s]. Two steps

@@ -1,7 +1,7 @@
 """A hardware-like plant: I/O delay, DAC, current amplifier, friction with stiction, cables.
 
-The plant as :class:`~sim.plant.arm.ArmPlant` (encoders, step), with what the ideal plant leaves
-out between the controller's torque and the arm. Per motor k, with
+The plant as :class:`~rhmpc.sim.plant.arm.ArmPlant` (encoders, step), with what the ideal plant
+leaves out between the controller's torque and the arm. Per motor k, with
 the motors' output angles θ = S (q − q0) (S the robot's motor map), transmission ratio η_k and
 torque constant K_t:
 
@@ -31,8 +31,8 @@ torque constant K_t:
    (J_r + J_l)).
 6. **Encoders** on the motor shafts count θ (rigid) or θ_r (cables): q̃ = q0 + S⁻¹ Δ round(θ/Δ).
 
-The kernel (:mod:`sim.plant.kernel`) integrates these equations by explicit midpoint steps, each
-with the current's exact mean over the step; this module holds the delay, the DAC and the
+The kernel (:mod:`rhmpc.sim.plant.kernel`) integrates these equations by explicit midpoint steps,
+each with the current's exact mean over the step; this module holds the delay, the DAC and the
 encoders. The controller is unchanged: it knows its own I/O delay (its observer predicts with the
 torque that acts over each tick), not what the DAC, amplifier and cables make of it.
 """
@@ -44,8 +44,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from robots import LinearArm, Robot
-from sim.plant.kernel import Chain, Drive, state
+from rhmpc.robots import LinearArm, Robot
+from rhmpc.sim.plant.kernel import Chain, Drive, state
 
 ERRORS_FROM = ("true", "encoders")
 
@@ -168,7 +168,7 @@ class HardwarePlant:
     Raises
     ------
     ValueError
-        A robot without drives, or no dynamics kernel (:mod:`sim.plant.kernel`).
+        A robot without drives, or no dynamics kernel (:mod:`rhmpc.sim.plant.kernel`).
     """
 
     def __init__(self, robot: Robot, Ts: float, settings: HardwareSettings) -> None:
@@ -247,7 +247,7 @@ class LinearPlant:
     """The MPC's own linear model as the plant (Tuna et al.'s Table I plant, "a linearized,
     reduced order model of the actual hardware").
 
-    The arm is x⁺ = A x + B τ (the :class:`~robots.LinearArm`, gravity, Coriolis and friction
+    The arm is x⁺ = A x + B τ (the :class:`~rhmpc.robots.LinearArm`, gravity, Coriolis and friction
     absent, so nothing is cancelled), τ clipped to the torque limits; the encoders quantise
     q = q0 + x_q per joint. The loop scores the forward kinematics of q.
     """

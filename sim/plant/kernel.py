@@ -6,8 +6,8 @@ Newton–Euler for h(q, q̇) = C(q, q̇) q̇ + g(q), the composite-rigid-body al
 the forward dynamics q̈ = M(q)⁻¹(τ − h) by Cholesky (Featherstone, *Rigid Body Dynamics
 Algorithms*, 2008, chapters 5–6); a body on a mimic joint (the PHANToM's parallelogram) follows
 its degree of freedom. And it holds the drives between the motor commands and the arm, integrated
-over a tick (:class:`Drive`; the equations are :mod:`sim.plant.hardware`'s). Both plants of
-:mod:`sim.plant` compose it. It is compiled at first use by :mod:`rhmpc.compiled`; where it
+over a tick (:class:`Drive`; the equations are :mod:`rhmpc.sim.plant.hardware`'s). Both plants of
+:mod:`rhmpc.sim.plant` compose it. It is compiled at first use by :mod:`rhmpc.compiled`; where it
 cannot be (no C compiler, a joint that is not revolute), building a plant is a one-line
 ``ValueError``. Pinocchio is the reference: ``tests/sim/plant/test_kernel.py`` compares it with
 ``pin.aba``, ``pin.rnea``, ``pin.crba`` and with a plain midpoint integration written in the test.
@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from rhmpc.compiled import load
-from robots.model import bodies
+from rhmpc.robots.model import bodies
 
 MAX_JOINTS = 8
 _SOURCE = Path(__file__).with_name("chain.c")

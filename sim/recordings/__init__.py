@@ -14,17 +14,17 @@
 ==============  =================================================================
 """
 
-from sim.recordings.files import load_recording
-from sim.recordings.matfile import load_mat, parse_indices
-from sim.recordings.plausible import Plausibility, RecordingWarning, check_recording
-from sim.recordings.points import load_points, on_grid, training_series
-from sim.recordings.recorded import (
+from rhmpc.sim.recordings.files import load_recording
+from rhmpc.sim.recordings.matfile import load_mat, parse_indices
+from rhmpc.sim.recordings.plausible import Plausibility, RecordingWarning, check_recording
+from rhmpc.sim.recordings.points import load_points, on_grid, training_series
+from rhmpc.sim.recordings.recorded import (
     LENGTH_UNITS,
     TIME_UNITS,
     RecordedMotion,
     RecordingError,
 )
-from sim.recordings.text import export_source, save_recording
+from rhmpc.sim.recordings.text import export_source, save_recording
 
 __all__ = [
     "LENGTH_UNITS", "TIME_UNITS", "Plausibility", "RecordedMotion", "RecordingError",

@@ -11,30 +11,30 @@ caller passes ``units=``. A file of several tracked points numbers them from 1, 
 
     t,x1,y1,z1,x2,y2,z2,x3,y3,z3
 
-and is read point by point (:func:`sim.recordings.points.load_points`). Lines starting with
+and is read point by point (:func:`rhmpc.sim.recordings.points.load_points`). Lines starting with
 ``#`` and blank lines are ignored. An empty position field or ``nan`` is a dropout and is kept
 as missing (NaN); every other field must be a finite number. Time must be finite and strictly
 increasing.
 
-The file is opened by :func:`boundary.open_input` (a regular file of at most
+The file is opened by :func:`rhmpc.io.open_input` (a regular file of at most
 ``FILE_BYTES["recording"]``), its lines are counted first and bounded (``BOUNDS["samples"]``),
 then it is read in blocks of :data:`BLOCK_BYTES`, each parsed by NumPy's parser
 (:func:`numpy.loadtxt`) and, should that fail, line by line to name the line and the problem.
-Every problem raises :class:`~sim.recordings.recorded.RecordingError` naming the file, the line
-and what is wrong.
+Every problem raises :class:`~rhmpc.sim.recordings.recorded.RecordingError` naming the file, the
+line and what is wrong.
 """
 
 from __future__ import annotations
 
 import csv
-import io
 import re
+from io import StringIO
 from pathlib import Path
 
 import numpy as np
 
-import boundary
-from sim.recordings.recorded import (
+from rhmpc import io
+from rhmpc.sim.recordings.recorded import (
     AXES,
     LENGTH_UNITS,
     TIME_UNITS,
@@ -83,7 +83,7 @@ def _columns_ok(names: list[str], points: bool) -> bool:
 def _parse_header(path: Path, fields: list[str], units: str | None,
                   points: bool = False) -> tuple[int, str | None, str, str]:
     """(columns, the time unit it states or None, length unit, where the length unit came
-    from) of a header line (:data:`~sim.recordings.recorded.UNIT_ORIGINS`)."""
+    from) of a header line (:data:`~rhmpc.sim.recordings.recorded.UNIT_ORIGINS`)."""
     if all(_looks_numeric(f) for f in fields):
         raise fail(path, "missing header line: the first line must name the columns "
                     "(t,x,y,z or t,x)", 1)
@@ -127,9 +127,9 @@ def _looks_numeric(text: str) -> bool:
 
 def read_csv(path: Path, units: str | None, points: bool = False) -> RecordedMotion:
     """A CSV recording (module docstring); ``points``: every column of a several-point file."""
-    with boundary.open_input(path, "recording") as f:
+    with io.open_input(path, "recording") as f:
         lines = sum(block.count(b"\n") for block in iter(lambda: f.read(BLOCK_BYTES), b""))
-        boundary.check("samples", lines, str(path))
+        io.check("samples", lines, str(path))
         f.seek(0)
         reader = _Blocks(path, f)
         header = reader.header()
@@ -208,7 +208,7 @@ def _fast(lines: list[str], dim: int, prev: float) -> np.ndarray | None:
     rows = None
     for attempt in (lambda: text, lambda: _EMPTY.sub(",nan", text)):  # dropouts, if need be
         try:
-            rows = np.loadtxt(io.StringIO(attempt()), delimiter=",", comments="#", ndmin=2,
+            rows = np.loadtxt(StringIO(attempt()), delimiter=",", comments="#", ndmin=2,
                               dtype=float)
             break
         except (ValueError, IndexError):

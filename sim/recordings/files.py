@@ -6,19 +6,20 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.recordings.csvfile import read_csv
-from sim.recordings.matfile import load_mat
-from sim.recordings.plausible import check_recording
-from sim.recordings.points import load_points, pick_point
-from sim.recordings.recorded import RecordedMotion, RecordingError, check_file, check_rate
-from sim.recordings.text import read_npz
-from sim.recordings.timebase import check_time_unit
+from rhmpc.sim.recordings.csvfile import read_csv
+from rhmpc.sim.recordings.matfile import load_mat
+from rhmpc.sim.recordings.plausible import check_recording
+from rhmpc.sim.recordings.points import load_points, pick_point
+from rhmpc.sim.recordings.recorded import RecordedMotion, RecordingError, check_file, check_rate
+from rhmpc.sim.recordings.text import read_npz
+from rhmpc.sim.recordings.timebase import check_time_unit
 
 
 def load_recording(path: str | Path, units: str | None = None, var: str | None = None,
                    rows=None, cols=None, rate: float | None = None,
                    point: int | None = None) -> RecordedMotion:
-    """Load a heart-motion recording (CSV, NPZ, or MATLAB .mat: see :mod:`sim.recordings.matfile`).
+    """Load a heart-motion recording (CSV, NPZ, or MATLAB .mat: see
+    :mod:`rhmpc.sim.recordings.matfile`).
 
     Parameters
     ----------
@@ -31,10 +32,10 @@ def load_recording(path: str | Path, units: str | None = None, var: str | None =
     var, rows, cols, rate : optional
         For ``.mat`` files: the variable, its 0-based rows or columns holding the coordinates,
         and the sample rate [Hz] when the file has neither a time vector nor a rate
-        (:func:`sim.recordings.matfile.load_mat`).
+        (:func:`rhmpc.sim.recordings.matfile.load_mat`).
     point : int, optional
         In a file of several tracked points, the point to read, from 1
-        (:mod:`sim.recordings.points`); such a file needs it.
+        (:mod:`rhmpc.sim.recordings.points`); such a file needs it.
 
     Returns
     -------
@@ -46,14 +47,14 @@ def load_recording(path: str | Path, units: str | None = None, var: str | None =
     RecordingError
         Naming the file, the line and the problem; also when its times, read in seconds
         because the file states no unit, look like milliseconds or frame numbers
-        (:mod:`sim.recordings.timebase`).
+        (:mod:`rhmpc.sim.recordings.timebase`).
 
     Warns
     -----
     RecordingWarning
         When the recording is implausible as heart motion: a span outside 0.5–40 mm (with the
         unit that would fit), outliers, or more than half of its samples missing
-        (:mod:`sim.recordings.plausible`).
+        (:mod:`rhmpc.sim.recordings.plausible`).
     """
     path = Path(path)
     if point is not None:

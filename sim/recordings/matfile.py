@@ -16,7 +16,7 @@ Length unit
     convention, and millimetres and centimetres are both plausible for heart motion, so no
     unit is assumed.
 
-Every problem raises :class:`~sim.recordings.RecordingError` naming the file and the problem.
+Every problem raises :class:`~rhmpc.sim.recordings.RecordingError` naming the file and the problem.
 """
 
 from __future__ import annotations
@@ -26,8 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-import boundary
-from sim.recordings.recorded import LENGTH_UNITS, TIME_UNITS, RecordedMotion, RecordingError
+from rhmpc import io
+from rhmpc.sim.recordings.recorded import LENGTH_UNITS, TIME_UNITS, RecordedMotion, RecordingError
 
 #: Names recognised as the time vector, in order of preference.
 TIME_NAMES = ("t", "time", "timestamps", "t_s")
@@ -204,7 +204,7 @@ def load_mat(path: str | Path, var: str | None = None, rows=None, cols=None,
         Length unit (``m``, ``mm``, ``um``, ``cm``); required when the file does not state it.
     points : bool
         Accept a matrix of several tracked points: 3P coordinates (x1, y1, z1, x2, …) along
-        its shorter axis, returned as (n, 3P) (:func:`sim.recordings.points.load_points`).
+        its shorter axis, returned as (n, 3P) (:func:`rhmpc.sim.recordings.points.load_points`).
 
     Returns
     -------
@@ -212,14 +212,14 @@ def load_mat(path: str | Path, var: str | None = None, rows=None, cols=None,
         Times in seconds from 0 (or the file's time vector), positions in metres.
     """
     path = Path(path)
-    with boundary.open_input(path, "recording") as f:
+    with io.open_input(path, "recording") as f:
         kind, catalog = _catalog(path, f)
         numeric = {k: shape for k, (shape, cls) in catalog.items() if cls in NUMERIC}
         time_key = next((k for k in TIME_NAMES if k in numeric), None)
         var = _variable(path, numeric, var, time_key)
         wanted = [var, *(k for k in (time_key, *RATE_NAMES) if k in numeric)]
         for name in wanted:  # three values make a sample of positions
-            boundary.check("samples", math.prod(numeric[name]) // 3, f"{path}: {name!r}")
+            io.check("samples", math.prod(numeric[name]) // 3, f"{path}: {name!r}")
         wanted += [k for k in ("units", "time_units") if catalog.get(k, ((), ""))[1] == "char"
                    and math.prod(catalog[k][0]) <= MAX_TEXT]
         variables = _load(path, f, kind, list(dict.fromkeys(wanted)))
@@ -326,8 +326,8 @@ def _scalar(value: object) -> float | None:
 
 def _units(path: Path, file_units: object, units: str | None) -> tuple[str, str]:
     """The length unit and where it came from: the file's ``units``, else ``units``, else
-    millimetres, the format's default as for CSV (:mod:`sim.recordings.plausible` warns, naming
-    the likely unit, when the motion's span is implausible in it)."""
+    millimetres, the format's default as for CSV (:mod:`rhmpc.sim.recordings.plausible` warns,
+    naming the likely unit, when the motion's span is implausible in it)."""
     if isinstance(file_units, str) and units is not None and file_units != units:
         raise RecordingError(f"{path}: units {file_units!r} in the file disagree with {units!r}")
     if file_units is None and units is None:

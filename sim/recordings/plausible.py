@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sim.recordings.recorded import LENGTH_UNITS, RecordedMotion
+from rhmpc.sim.recordings.recorded import LENGTH_UNITS, RecordedMotion
 
 #: The length units a fix may name, smallest first (``µm`` is ``um``).
 SUGGESTED_UNITS = ("um", "mm", "cm", "m")

@@ -20,12 +20,12 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.recordings.csvfile import read_csv
-from sim.recordings.matfile import load_mat
-from sim.recordings.plausible import check_recording
-from sim.recordings.recorded import RecordedMotion, RecordingError, check_file, check_rate
-from sim.recordings.text import read_npz
-from sim.recordings.timebase import check_time_unit
+from rhmpc.sim.recordings.csvfile import read_csv
+from rhmpc.sim.recordings.matfile import load_mat
+from rhmpc.sim.recordings.plausible import check_recording
+from rhmpc.sim.recordings.recorded import RecordedMotion, RecordingError, check_file, check_rate
+from rhmpc.sim.recordings.text import read_npz
+from rhmpc.sim.recordings.timebase import check_time_unit
 
 
 def _wide(path: Path, units, var, rows, cols, rate) -> RecordedMotion:
@@ -54,7 +54,7 @@ def load_points(path: str | Path, units: str | None = None, var: str | None = No
     path : str or Path
         ``.csv``/``.txt``, ``.npz`` or ``.mat``.
     units, var, rows, cols, rate : optional
-        As for :func:`sim.recordings.load_recording`; ``rows``/``cols`` select one point.
+        As for :func:`rhmpc.sim.recordings.load_recording`; ``rows``/``cols`` select one point.
 
     Returns
     -------
@@ -70,7 +70,7 @@ def load_points(path: str | Path, units: str | None = None, var: str | None = No
     Warns
     -----
     RecordingWarning
-        When the file is implausible as heart motion (:mod:`sim.recordings.plausible`): once
+        When the file is implausible as heart motion (:mod:`rhmpc.sim.recordings.plausible`): once
         for its span, and for each point with more than half of its samples missing.
     """
     path = Path(path)
@@ -150,7 +150,8 @@ def training_series(files, poi: int | None, read: dict, period: float) -> list[n
 
 class PointsAt:
     """The other tracked points of a recording, looked up by measurement time: what a
-    multi-point predictor reads beside the POI's sample (:meth:`predictors.base.Predictor.update`).
+    multi-point predictor reads beside the POI's sample
+    (:meth:`rhmpc.predictors.base.Predictor.update`).
 
     Parameters
     ----------

@@ -1,7 +1,7 @@
 """A recorded trajectory and the units recording files use.
 
-:class:`RecordedMotion` is the motion source of every reader (:mod:`sim.recordings.text`,
-:mod:`sim.recordings.matfile`); :class:`RecordingError` is what they raise.
+:class:`RecordedMotion` is the motion source of every reader (:mod:`rhmpc.sim.recordings.text`,
+:mod:`rhmpc.sim.recordings.matfile`); :class:`RecordingError` is what they raise.
 """
 
 from __future__ import annotations
@@ -10,8 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
-import boundary
-from sim.heart.motion import as_time_array
+from rhmpc import io
+from rhmpc.sim.heart.motion import as_time_array
 
 #: Length units accepted in headers and flags, in metres.
 LENGTH_UNITS: dict[str, float] = {"m": 1.0, "mm": 1e-3, "um": 1e-6, "µm": 1e-6, "cm": 1e-2}
@@ -56,7 +56,7 @@ class RecordedMotion:
     time_unit : str, optional
         The time unit the file stated (a key of :data:`TIME_UNITS`; ``"s"`` for times made
         from a stated sample rate), or None: read in seconds without the file saying so
-        (:mod:`sim.recordings.timebase` checks that reading).
+        (:mod:`rhmpc.sim.recordings.timebase` checks that reading).
     """
 
     def __init__(self, t: np.ndarray, z: np.ndarray, name: str = "recording",
@@ -131,10 +131,10 @@ class RecordedMotion:
 
 def check_file(path: Path) -> None:
     """Raise :class:`RecordingError` unless ``path`` is a regular file the one reader opens
-    (:func:`boundary.open_input`: not a folder, a FIFO or a device; within its size bound)."""
+    (:func:`rhmpc.io.open_input`: not a folder, a FIFO or a device; within its size bound)."""
     try:
-        boundary.open_input(path, "recording").close()
-    except boundary.FileError as exc:
+        io.open_input(path, "recording").close()
+    except io.FileError as exc:
         raise RecordingError(str(exc)) from None
 
 

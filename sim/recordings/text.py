@@ -6,12 +6,12 @@ Arrays ``t`` (n,) [s] and ``position`` (n, dim) (``x`` is accepted for ``positio
 numbers (complex ones are refused), and a string ``units`` (``"m"``, ``"mm"``, ``"um"`` or
 ``"cm"``) unless the caller passes ``units=``. Several tracked points: ``position`` of shape
 (n, P, 3), or (n, 3P) with point p (from 1) in columns 3(p − 1) … 3p − 1. The archive is read
-through :class:`boundary.NpzArchive` (each array's header checked before its data; nothing
+through :class:`rhmpc.io.NpzArchive` (each array's header checked before its data; nothing
 unpickled) and its arrays bounded by ``BOUNDS["samples"]``.
 
-CSV files are read by :mod:`sim.recordings.csvfile`. Every problem raises
-:class:`~sim.recordings.recorded.RecordingError` naming the file and what is wrong. Files are
-written atomically (:class:`boundary.AtomicFile`).
+CSV files are read by :mod:`rhmpc.sim.recordings.csvfile`. Every problem raises
+:class:`~rhmpc.sim.recordings.recorded.RecordingError` naming the file and what is wrong. Files are
+written atomically (:class:`rhmpc.io.AtomicFile`).
 """
 
 from __future__ import annotations
@@ -20,9 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-import boundary
-from sim.heart.motion import MotionSource
-from sim.recordings.recorded import (
+from rhmpc import io
+from rhmpc.sim.heart.motion import MotionSource
+from rhmpc.sim.recordings.recorded import (
     AXES,
     LENGTH_UNITS,
     RecordedMotion,
@@ -66,20 +66,20 @@ def _npz_arrays(path: Path) -> tuple[np.ndarray, np.ndarray, str, str | None]:
 
     A file that is not a readable archive, whose arrays are not real numbers (complex, text,
     objects) or hold more samples than fit (``BOUNDS["samples"]``), raises
-    :class:`~sim.recordings.recorded.RecordingError`.
+    :class:`~rhmpc.sim.recordings.recorded.RecordingError`.
     """
     try:
-        with boundary.NpzArchive(path, "recording") as data:
+        with io.NpzArchive(path, "recording") as data:
             keys = set(data.names)
             pos_key = "position" if "position" in keys else "x" if "x" in keys else None
             if "t" not in keys or pos_key is None:
                 raise fail(path, f"needs arrays 't' and 'position'; found {sorted(keys)}")
             shape, _ = data.header("t")
-            boundary.check("samples", int(np.prod(shape)), f"{path}: 't'")
+            io.check("samples", int(np.prod(shape)), f"{path}: 't'")
             limit = 16 * int(np.prod(shape)) * 3 * MAX_POINTS  # complex, every point
             t, z = data.read("t", 16 * int(np.prod(shape))), data.read(pos_key, limit)
             file_units = str(data.read("units", 1024)) if "units" in keys else None
-    except boundary.FileError as exc:
+    except io.FileError as exc:
         raise RecordingError(str(exc)) from None
     return _real(path, "t", t), _real(path, pos_key, z), pos_key, file_units
 
@@ -139,7 +139,7 @@ def save_recording(path: str | Path, t: np.ndarray, z: np.ndarray,
     z = np.asarray(z, dtype=float).reshape(t.size, -1)
     suffix = path.suffix.lower()
     if suffix == ".npz":
-        with boundary.atomic_write(path) as fh:
+        with io.atomic_write(path) as fh:
             np.savez_compressed(fh, t=t, position=z, units=np.array("m"))
         return path
     if suffix not in {".csv", ".txt"}:
@@ -148,7 +148,7 @@ def save_recording(path: str | Path, t: np.ndarray, z: np.ndarray,
     if axes is None:
         raise RecordingError(f"{path}: can only write 1-D or 3-D positions, got {z.shape[1]}")
     mm = z * 1e3
-    with boundary.atomic_write(path, "w", newline="") as fh:
+    with io.atomic_write(path, "w", newline="") as fh:
         if comment:
             fh.write(f"# {comment}\n")
         fh.write(",".join(["t_s", *(f"{a}_mm" for a in axes)]) + "\n")

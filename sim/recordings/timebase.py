@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.recordings.recorded import RecordedMotion, RecordingError
+from rhmpc.sim.recordings.recorded import RecordedMotion, RecordingError
 
 #: Frequencies of heart motion [Hz]: 6 breaths/min to 250 beats/min.
 MOTION_BAND = (0.1, 250.0 / 60.0)

@@ -24,17 +24,17 @@ comes from the injected ``numpy.random.Generator``.
 =====================  ===================================================================
 """
 
-from sim.sensors.crystals import CrystalArray
-from sim.sensors.encoder import Encoder
-from sim.sensors.events import Dropouts, EchoOutliers
-from sim.sensors.names import DEFAULT_PLAYBACK, SENSORS, ideal, sensor_from_name
-from sim.sensors.playback import PLAYBACKS, Upsample, playback
-from sim.sensors.sonomicrometry import Sonomicrometer, SonomicrometrySettings, sonomicrometry
-from sim.sensors.stream import Latency, SampleStream, Sensor, Stage
-from sim.sensors.trilateration import dilution, trilaterate
-from sim.sensors.ultrasound import UltrasoundSettings, ultrasound
-from sim.sensors.video import VideoSettings, video
-from sim.sensors.white import WhiteNoise, WhiteSettings, white
+from rhmpc.sim.sensors.crystals import CrystalArray
+from rhmpc.sim.sensors.encoder import Encoder
+from rhmpc.sim.sensors.events import Dropouts, EchoOutliers
+from rhmpc.sim.sensors.names import DEFAULT_PLAYBACK, SENSORS, ideal, sensor_from_name
+from rhmpc.sim.sensors.playback import PLAYBACKS, Upsample, playback
+from rhmpc.sim.sensors.sonomicrometry import Sonomicrometer, SonomicrometrySettings, sonomicrometry
+from rhmpc.sim.sensors.stream import Latency, SampleStream, Sensor, Stage
+from rhmpc.sim.sensors.trilateration import dilution, trilaterate
+from rhmpc.sim.sensors.ultrasound import UltrasoundSettings, ultrasound
+from rhmpc.sim.sensors.video import VideoSettings, video
+from rhmpc.sim.sensors.white import WhiteNoise, WhiteSettings, white
 
 __all__ = [
     "DEFAULT_PLAYBACK", "PLAYBACKS", "SENSORS", "CrystalArray", "Dropouts", "EchoOutliers",

@@ -6,7 +6,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from sim.sensors.stream import SampleStream
+from rhmpc.sim.sensors.stream import SampleStream
 
 
 @dataclass(frozen=True)

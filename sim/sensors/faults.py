@@ -3,7 +3,7 @@ missing samples, encoders that stick — each kind declared once, here.
 
 Each kind is a frozen dataclass acting on the samples whose measurement time lies in its window
 ``start_s ≤ t < end_s`` (:meth:`corrupt`; ``apply(stream, rng)`` like every sensor stage,
-:mod:`sim.sensors.stream`); the truth the sensor measures is never touched:
+:mod:`rhmpc.sim.sensors.stream`); the truth the sensor measures is never touched:
 
 ======================  ================================================================
 :class:`SensorFreeze`   z_k = z_h for t_k in the window, h the last sample before it
@@ -18,7 +18,7 @@ A kind declares its name (``kind``), its one-line form (``form``, ``KIND@START[:
 start in seconds from the start of the run, and ``arguments``, read in order), what it does
 (``what``) and the stream it acts on (``target``: the sensor's ``"samples"`` or the
 ``"encoders"``). :data:`GRAMMAR`, :func:`parse_fault` (the command line's ``--fault`` and a
-run's ``[faults]`` table, :class:`FaultSettings`), the loop (:mod:`sim.loop.faults`) and each
+run's ``[faults]`` table, :class:`FaultSettings`), the loop (:mod:`rhmpc.sim.loop.faults`) and each
 fault's record read the declaration; a new kind is a class here, added to :data:`FAULT_KINDS`.
 """
 
@@ -32,7 +32,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from sim.sensors.stream import SampleStream
+from rhmpc.sim.sensors.stream import SampleStream
 
 __all__ = ["FAULT_KINDS", "GRAMMAR", "EncoderStick", "FaultSettings", "FaultySamples", "NaNBurst",
            "SensorFreeze", "StreamJump", "parse_fault"]
@@ -243,7 +243,8 @@ class EncoderStick(_Windowed):
     ``start_s`` (q̃_k = q̃_h) for start ≤ t_k < end while the arm moves on.
 
     Applied to the encoders' readings, one row a control tick (``t`` the tick's time [s], ``z``
-    the joint angles [rad]); the loop reads them through :class:`sim.loop.faults.FaultyEncoders`.
+    the joint angles [rad]); the loop reads them through
+    :class:`rhmpc.sim.loop.faults.FaultyEncoders`.
 
     Attributes
     ----------
@@ -324,7 +325,7 @@ def parse_fault(spec: str) -> _Windowed:
 
 
 class FaultySamples:
-    """A sample source (:class:`sim.sensors.stream.SampleSource`) with faults on its samples
+    """A sample source (:class:`rhmpc.sim.sensors.stream.SampleSource`) with faults on its samples
     applied to each block, by their measurement time (the samples delivered to the control rate,
     and the raw ones a slow sensor's clock reads).
 

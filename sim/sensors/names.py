@@ -4,14 +4,14 @@ from __future__ import annotations
 
 from dataclasses import fields, replace
 
-from sim.sensors.crystals import CrystalArray
-from sim.sensors.events import Dropouts
-from sim.sensors.playback import PLAYBACKS, playback
-from sim.sensors.sonomicrometry import SonomicrometrySettings, sonomicrometry
-from sim.sensors.stream import Latency, Sensor
-from sim.sensors.ultrasound import UltrasoundSettings, ultrasound
-from sim.sensors.video import VideoSettings, video
-from sim.sensors.white import WhiteSettings, white
+from rhmpc.sim.sensors.crystals import CrystalArray
+from rhmpc.sim.sensors.events import Dropouts
+from rhmpc.sim.sensors.playback import PLAYBACKS, playback
+from rhmpc.sim.sensors.sonomicrometry import SonomicrometrySettings, sonomicrometry
+from rhmpc.sim.sensors.stream import Latency, Sensor
+from rhmpc.sim.sensors.ultrasound import UltrasoundSettings, ultrasound
+from rhmpc.sim.sensors.video import VideoSettings, video
+from rhmpc.sim.sensors.white import WhiteSettings, white
 
 #: The default playback of a sensor's samples to the control rate (causal: linear
 #: interpolation delivered one raw period late, every sample equally old).
@@ -56,8 +56,8 @@ def sensor_from_name(name: str, rate: float | None = None, latency: float | None
     Parameters
     ----------
     name : str
-        ``"sonomicrometry"`` (physical, :mod:`sim.sensors.sonomicrometry`), ``"white"``
-        (additive white noise, :mod:`sim.sensors.white`), ``"ultrasound"`` or ``"ideal"``.
+        ``"sonomicrometry"`` (physical, :mod:`rhmpc.sim.sensors.sonomicrometry`), ``"white"``
+        (additive white noise, :mod:`rhmpc.sim.sensors.white`), ``"ultrasound"`` or ``"ideal"``.
     rate : float, optional
         Sample rate [Hz] (defaults: 257, 257, 28, 25, 2000).
     latency : float, optional
@@ -74,7 +74,7 @@ def sensor_from_name(name: str, rate: float | None = None, latency: float | None
         Deliver to this rate [Hz] with ``playback``.
     playback : str
         ``"linear"`` (causal, default), ``"hold"`` (causal) or ``"offline"`` (the non-causal
-        playback of a prerecorded file), :data:`sim.sensors.playback.PLAYBACKS`.
+        playback of a prerecorded file), :data:`rhmpc.sim.sensors.playback.PLAYBACKS`.
     dim : int
         Axes of the source.
     **physics

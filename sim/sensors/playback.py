@@ -24,7 +24,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from sim.sensors.stream import BLOCK, ArraySamples, SampledSamples, SampleStream, grid_index
+from rhmpc.sim.sensors.stream import BLOCK, ArraySamples, SampledSamples, SampleStream, grid_index
 
 
 @dataclass(frozen=True)
@@ -44,7 +44,7 @@ class Upsample:
     τ_j + (arrival_k − t_k), as when a prerecorded file is played back (:func:`deliver`).
 
     The class's defaults are the offline playback; the sensors' default is the causal
-    ``"linear"`` (:data:`sim.sensors.names.DEFAULT_PLAYBACK`, :func:`playback`).
+    ``"linear"`` (:data:`rhmpc.sim.sensors.names.DEFAULT_PLAYBACK`, :func:`playback`).
 
     Attributes
     ----------
@@ -132,8 +132,8 @@ class UpsampledSamples:
     """The sensor's raw samples resampled to ``upsample.rate``, made block by block.
 
     Sample ``j`` is ``τ_j = t_0 + j / rate`` with ``z(τ_j)`` and its arrival exactly as
-    :meth:`sim.sensors.Upsample.apply` computes them for the whole stream (linear or hold, causal
-    or not), arrivals made non-decreasing by a running maximum carried from block to block.
+    :meth:`rhmpc.sim.sensors.Upsample.apply` computes them for the whole stream (linear or hold,
+    causal or not), arrivals made non-decreasing by a running maximum carried from block to block.
     Memory: the raw stream (≈ 8× smaller than the upsampled one at 257 Hz → 2 kHz).
     """
 
@@ -189,7 +189,7 @@ class UpsampledSamples:
 def sensor_samples(sensor, source, duration: float, rng: np.random.Generator):
     """``sensor.measure(source, duration, rng)`` as a sample source read in blocks.
 
-    Same samples, same random draws: a trailing :class:`~sim.sensors.Upsample` stage (the
+    Same samples, same random draws: a trailing :class:`~rhmpc.sim.sensors.Upsample` stage (the
     2-kHz playback) runs block by block on the raw samples (:class:`UpsampledSamples`), a
     sensor without stages samples the source block by block (:class:`SampledSamples`), other
     sensors are measured whole.

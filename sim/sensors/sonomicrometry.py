@@ -1,10 +1,10 @@
 r"""The sonomicrometer from its physics (Sonometrics; Tuna et al. 2013 §III-A).
 
 A POI crystal sutured on the heart and ``count`` reference crystals on a rigid base
-(:class:`~sim.sensors.crystals.CrystalArray`). Every sample, the instrument measures the time
+(:class:`~rhmpc.sim.sensors.crystals.CrystalArray`). Every sample, the instrument measures the time
 of flight of an ultrasound pulse from each reference crystal to the POI crystal, converts it to
 a range with the speed of sound it is set to, and solves the 3-D position by trilateration
-(:func:`~sim.sensors.trilateration.trilaterate`). Per range i and sample k:
+(:func:`~rhmpc.sim.sensors.trilateration.trilaterate`). Per range i and sample k:
 
 .. math::
 
@@ -49,11 +49,11 @@ from typing import ClassVar
 
 import numpy as np
 
-from sim.sensors.crystals import CrystalArray
-from sim.sensors.events import Dropouts
-from sim.sensors.playback import Upsample
-from sim.sensors.stream import SampleStream, Sensor, delivery_stages
-from sim.sensors.trilateration import trilaterate
+from rhmpc.sim.sensors.crystals import CrystalArray
+from rhmpc.sim.sensors.events import Dropouts
+from rhmpc.sim.sensors.playback import Upsample
+from rhmpc.sim.sensors.stream import SampleStream, Sensor, delivery_stages
+from rhmpc.sim.sensors.trilateration import trilaterate
 
 
 @dataclass(frozen=True)
@@ -90,7 +90,7 @@ class SonomicrometrySettings:
         at most 0.14 mm RMS above 26 Hz. The white term alone is put at 0.12 mm there, the
         middle of 0.10–0.14 mm, which leaves the rest of that residual (the motion's own
         content above 26 Hz, the counter step) inside the bound. White noise of σ_r per range
-        gives σ_r·G per position (3-D; G = ‖:func:`~sim.sensors.trilateration.dilution`‖ =
+        gives σ_r·G per position (3-D; G = ‖:func:`~rhmpc.sim.sensors.trilateration.dilution`‖ =
         √trace((HᵀH)⁻¹) = ``1.534`` for the default crystals at rest, H the unit lines of sight),
         of which the share √(1 − 2·26/f_s) lies above 26 Hz:
         σ_r = 0.12 mm / (``1.534`` · √(1 − 52/257)) = 88 µm at 257 Hz (0.125 mm above 26 Hz at
@@ -108,7 +108,7 @@ class SonomicrometrySettings:
     latency : float
         Delivery delay [s] (0: Tuna's data were prerecorded).
     upsample : Upsample or None
-        Delivery to the control rate (:mod:`sim.sensors.playback`).
+        Delivery to the control rate (:mod:`rhmpc.sim.sensors.playback`).
     """
 
     rate: float = 257.0

@@ -9,7 +9,7 @@ A run reads the samples in blocks, so that its memory does not grow with its len
 stream held whole costs ≈ 64 bytes per tick): a *sample source* has ``len()``, ``index_at(t)``
 and ``block(a, b)`` → ``(t, z, arrival)`` of samples ``a … b − 1``: :class:`ArraySamples` over
 arrays in memory, :class:`SampledSamples` (a sensor without stages, sampled on demand) and
-:class:`sim.sensors.playback.UpsampledSamples` (the delivery to the control rate, made on
+:class:`rhmpc.sim.sensors.playback.UpsampledSamples` (the delivery to the control rate, made on
 demand).
 """
 
@@ -20,7 +20,7 @@ from typing import ClassVar, Protocol
 
 import numpy as np
 
-from sim.heart.motion import MotionSource
+from rhmpc.sim.heart.motion import MotionSource
 
 
 @dataclass(frozen=True)
@@ -105,10 +105,10 @@ class Sensor:
     rate : float
         Sample rate [Hz].
     stages : tuple
-        Processing stages (:class:`~sim.sensors.white.WhiteNoise`,
-        :class:`~sim.sensors.events.EchoOutliers`, :class:`~sim.sensors.events.Dropouts`,
-        :class:`Latency`, :class:`~sim.sensors.playback.Upsample`, or anything with
-        ``apply(stream, rng)``).
+        Processing stages (:class:`~rhmpc.sim.sensors.white.WhiteNoise`,
+        :class:`~rhmpc.sim.sensors.events.EchoOutliers`,
+        :class:`~rhmpc.sim.sensors.events.Dropouts`, :class:`Latency`,
+        :class:`~rhmpc.sim.sensors.playback.Upsample`, or anything with ``apply(stream, rng)``).
     name : str
         Label for reports.
     """
@@ -223,7 +223,7 @@ class ArraySamples:
 class SampledSamples:
     """Samples ``t_k = t_0 + k / rate`` (k = 0 … n − 1) of a motion source, arriving at ``t_k``.
 
-    The samples of a :class:`sim.sensors.Sensor` without stages, made block by block.
+    The samples of a :class:`rhmpc.sim.sensors.Sensor` without stages, made block by block.
     """
 
     def __init__(self, source, rate: float, n: int, t0: float = 0.0) -> None:

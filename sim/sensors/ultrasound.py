@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from sim.sensors.events import Dropouts
-from sim.sensors.stream import Latency, Sensor
-from sim.sensors.white import WhiteNoise
+from rhmpc.sim.sensors.events import Dropouts
+from rhmpc.sim.sensors.stream import Latency, Sensor
+from rhmpc.sim.sensors.white import WhiteNoise
 
 
 @dataclass(frozen=True)

@@ -2,9 +2,9 @@
 
     z_k = p(t_k) + n_k,   n_k ~ N(0, σ² I),   t_k = k/25 s,   delivered one frame late,
 
-the sensor of the ``invivo-video`` regime (:mod:`sim.heart.invivo`). σ is measured from the in-vivo
-recording that regime was built from: its ``hold`` error one frame ahead (0.57 mm, 3-D) exceeds
-that of the regime's motion (0.43 mm, the mean over seeds 1–10) by what white noise adds at
+the sensor of the ``invivo-video`` regime (:mod:`rhmpc.sim.heart.invivo`). σ is measured from the
+in-vivo recording that regime was built from: its ``hold`` error one frame ahead (0.57 mm, 3-D)
+exceeds that of the regime's motion (0.43 mm, the mean over seeds 1–10) by what white noise adds at
 every lead, 2·3σ² in the square: σ = √((0.57² − 0.43²)/6) = 0.15 mm per axis.
 """
 
@@ -12,10 +12,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from sim.sensors.events import Dropouts
-from sim.sensors.playback import Upsample
-from sim.sensors.stream import Sensor, delivery_stages
-from sim.sensors.white import WhiteNoise
+from rhmpc.sim.sensors.events import Dropouts
+from rhmpc.sim.sensors.playback import Upsample
+from rhmpc.sim.sensors.stream import Sensor, delivery_stages
+from rhmpc.sim.sensors.white import WhiteNoise
 
 
 @dataclass(frozen=True)
@@ -33,7 +33,7 @@ class VideoSettings:
     dropouts : Dropouts or None
         Tracking losses (occlusion by instruments, specular reflections); None: none.
     upsample : Upsample or None
-        Delivery to the control rate (:mod:`sim.sensors.playback`).
+        Delivery to the control rate (:mod:`rhmpc.sim.sensors.playback`).
     """
 
     rate: float = 25.0

@@ -3,7 +3,7 @@
     z_k = p(t_k) + n_k + o_k,   n_k ~ N(0, σ² I),   o_k the echo outliers,
 
 as the 28-Hz prediction studies of Yuen et al. (2009) and Tuna et al. (2013 §VIII-C) corrupt
-their data. For sonomicrometry the physical model of :mod:`sim.sensors.sonomicrometry` is the
+their data. For sonomicrometry the physical model of :mod:`rhmpc.sim.sensors.sonomicrometry` is the
 default; this one serves those studies and noise sweeps.
 """
 
@@ -13,9 +13,9 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from sim.sensors.events import Dropouts, EchoOutliers
-from sim.sensors.playback import Upsample
-from sim.sensors.stream import SampleStream, Sensor, delivery_stages
+from rhmpc.sim.sensors.events import Dropouts, EchoOutliers
+from rhmpc.sim.sensors.playback import Upsample
+from rhmpc.sim.sensors.stream import SampleStream, Sensor, delivery_stages
 
 
 @dataclass(frozen=True)
@@ -62,7 +62,7 @@ class WhiteSettings:
     latency : float
         Delivery delay [s].
     upsample : Upsample or None
-        Delivery to the control rate (:mod:`sim.sensors.playback`).
+        Delivery to the control rate (:mod:`rhmpc.sim.sensors.playback`).
     """
 
     rate: float = 257.0

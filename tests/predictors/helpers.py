@@ -1,4 +1,5 @@
-"""Small motion sources and signal helpers for the predictor tests (no dependency on `sim`)."""
+"""Small motion sources and signal helpers for the predictor tests (no dependency on
+`rhmpc.sim`)."""
 
 from __future__ import annotations
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from predictors import make_predictor
-from predictors.base import Predictor
-from predictors.combination import Combination, CombinationSettings
+from rhmpc.predictors import make_predictor
+from rhmpc.predictors.base import Predictor
+from rhmpc.predictors.combination import Combination, CombinationSettings
 from tests.predictors.helpers import feed, tracked_points
 
 DT = 0.04
@@ -109,7 +109,7 @@ def test_scoring_starts_at_score_from_with_the_members_priors() -> None:
 def test_the_default_members_are_the_open_loop_study_s() -> None:
     """Without members, the combination takes every default predictor that is not a baseline,
     the fitted ones included: the same as the open-loop study's combination."""
-    from predictors.registry import combination_members, default_predictors, family
+    from rhmpc.predictors.registry import combination_members, default_predictors, family
 
     names = combination_members()
     assert names == tuple(n for n in default_predictors(fitted=True)

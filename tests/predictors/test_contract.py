@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from predictors import PREDICTORS, Predictor, make_predictor
-from predictors.monitor import rms_by_lead
+from rhmpc.predictors import PREDICTORS, Predictor, make_predictor
+from rhmpc.predictors.monitor import rms_by_lead
 from tests.predictors.helpers import HarmonicSource
 
 DT = 0.0075

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from predictors import make_predictor
-from predictors.ekf_fourier import wrap_phase
+from rhmpc.predictors import make_predictor
+from rhmpc.predictors.ekf_fourier import wrap_phase
 from tests.predictors.helpers import HarmonicSource, forecast_errors, run
 
 
@@ -109,7 +109,7 @@ def test_dual_ekf_tracks_breathing_plus_heartbeat():
 
 @pytest.mark.parametrize("d", [1, 2, 3, 5])
 def test_spd_inverse_matches_numpy_and_rejects_indefinite(d):
-    from predictors.ekf_fourier import spd_inverse
+    from rhmpc.predictors.ekf_fourier import spd_inverse
 
     A = np.random.default_rng(d).random((d, d))
     S = A @ A.T + np.eye(d)
@@ -122,8 +122,8 @@ def test_spd_inverse_matches_numpy_and_rejects_indefinite(d):
 def test_dual_ekf_refits_with_a_back_off_when_it_cannot_lock(monkeypatch):
     """A lock lost on every sample: re-fits spaced by 1, 2, 4 … beats, up to the window, not one
     per sample (each costs the window's FFT searches and fits)."""
-    from predictors import make_predictor
-    from predictors.ekf_dual_fourier import DualFourierEKF
+    from rhmpc.predictors import make_predictor
+    from rhmpc.predictors.ekf_dual_fourier import DualFourierEKF
 
     dt = 1 / 100
     t = np.arange(0.0, 40.0, dt)

@@ -14,8 +14,8 @@ import copy
 import numpy as np
 import pytest
 
-from predictors import make_predictor
-from predictors.delay_line import TappedDelayLine
+from rhmpc.predictors import make_predictor
+from rhmpc.predictors.delay_line import TappedDelayLine
 
 
 def test_fills_are_corrected_by_the_bridge_ramp():
@@ -73,8 +73,8 @@ def test_no_repair_without_a_forecast_or_a_finite_one():
 def _stream(seconds: float = 25.0) -> np.ndarray:
     """The physical sonomicrometer at 133 Hz on the varying-a1-top replica (no echo outliers,
     no white range error: the repair is measured against the smooth part of the forecast miss)."""
-    sim_heart = pytest.importorskip("sim.heart")
-    sim_sensors = pytest.importorskip("sim.sensors")
+    sim_heart = pytest.importorskip("rhmpc.sim.heart")
+    sim_sensors = pytest.importorskip("rhmpc.sim.sensors")
     scn = sim_heart.make_scenario("varying-a1-top", np.random.default_rng(2), duration=seconds)
     sensor = sim_sensors.sensor_from_name("sonomicrometry", dim=3, outliers=False,
                                           upsample=1 / 0.0075, range_noise=0.0)

@@ -10,8 +10,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from predictors import make_predictor
-from predictors.monitor import rms_by_lead
+from rhmpc.predictors import make_predictor
+from rhmpc.predictors.monitor import rms_by_lead
 
 RATE, SECONDS, SEED, WARMUP, LEADS = 25.0, 40.0, 2, 300, 5
 SCENARIOS = ("invivo-video", "fixed-a1-top", "fixed-a2-top", "varying-a1-top",
@@ -22,7 +22,7 @@ RATE_BAND = {"ekf": (0.5, 3.5), "dual-ekf": (0.6, 3.0), "wflc": (0.6, 3.5)}
 
 
 def _stream(scenario: str, seed: int = SEED) -> np.ndarray:
-    sim_heart = pytest.importorskip("sim.heart")
+    sim_heart = pytest.importorskip("rhmpc.sim.heart")
     source = sim_heart.make_scenario(scenario, np.random.default_rng(seed)).source
     return np.asarray(source.position(np.arange(round(SECONDS * RATE) + 1) / RATE))
 

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from predictors import make_predictor
+from rhmpc.predictors import make_predictor
 from tests.predictors.helpers import feed, tracked_points
 
 DT = 0.04

@@ -7,12 +7,12 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from predictors import make_predictor
+from rhmpc.predictors import make_predictor
 
 
 def _sonomicrometry(name: str, seconds: float, **overrides):
-    sim_heart = pytest.importorskip("sim.heart")
-    sim_sensors = pytest.importorskip("sim.sensors")
+    sim_heart = pytest.importorskip("rhmpc.sim.heart")
+    sim_sensors = pytest.importorskip("rhmpc.sim.sensors")
     scn = sim_heart.make_scenario(
         name, rng=np.random.default_rng(4), duration=seconds + 1, **overrides
     )
@@ -36,8 +36,8 @@ def _lock_scores(name: str, scenario: str, params: str | None = None,
 def _bench_stream(scenario: str, seed: int, seconds: float = 30.0, **physics):
     """The stream of ``benchmarks/predictor_streams.py``: scenario and sensor seed ``seed``, every
     second sample of the 257 Hz sonomicrometer (Δt = 7.8 ms); ``physics``: sensor settings."""
-    sim_scenarios = pytest.importorskip("sim.heart.scenarios")
-    sim_sensors = pytest.importorskip("sim.sensors")
+    sim_scenarios = pytest.importorskip("rhmpc.sim.heart.scenarios")
+    sim_sensors = pytest.importorskip("rhmpc.sim.sensors")
     scn = sim_scenarios.make_scenario(scenario, np.random.default_rng(seed), duration=seconds)
     sensor = sim_sensors.sensor_from_name("sonomicrometry", dim=int(scn.source.dim), **physics)
     st = sensor.measure(scn.source, seconds, np.random.default_rng(seed))
@@ -113,7 +113,7 @@ def test_ekf_refits_after_locking_on_half_the_heart_rate(scenario, seed, monkeyp
     outweighs the fundamental. Once the window is all new the filter re-fits (``lock_refit``).
     Measured p95 |ω̂ − ω| over the last 8 s: 2.4 / 3.4 bpm; without the rule 50.2 / 45.9.
     The streams are those without the white range error, on which these cases were found."""
-    from predictors.ekf_fourier import FourierEKF
+    from rhmpc.predictors.ekf_fourier import FourierEKF
 
     stream = _bench_stream(scenario, seed, 40.0, range_noise=0.0)
     kw = {"since": 32.0, "params": "tuna2013-hrv"}
@@ -183,7 +183,7 @@ def test_dual_ekf_refits_after_losing_lock_on_a_premature_beat(scenario):
     RMS 0.54 / 0.49 / 0.52 × hold's; without the re-fit ω̂_c stays lost (70 / 68 / 96 clamps,
     3.3 / 3.5 / 3.3 × hold's).  |ω̂_c − ω| is not asserted: the premature beat at 28.9 s swings
     the interpolated true rate 69 → 107 → 53 beats/min within a second."""
-    from sim.heart.rr import beat_times_from_annotations
+    from rhmpc.sim.heart.rr import beat_times_from_annotations
 
     beats = beat_times_from_annotations(_mitdb_100())
     beats = beats[beats >= 1200.0]

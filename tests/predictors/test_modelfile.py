@@ -13,10 +13,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-import boundary
-from predictors import make_predictor
-from predictors.learned.modelfile import VERSION, ModelFile
-from predictors.registry import load_model
+from rhmpc import io
+from rhmpc.predictors import make_predictor
+from rhmpc.predictors.learned.modelfile import VERSION, ModelFile
+from rhmpc.predictors.registry import load_model
 from tests.predictors.helpers import feed, tracked_points
 
 DT = 0.04
@@ -186,7 +186,7 @@ def test_a_network_file_holds_numbers_only_and_refuses_other_shapes(stream,
 
 def test_a_network_fitted_on_one_second_warns(stream) -> None:
     pytest.importorskip("torch", reason="the neural predictors need PyTorch (rhmpc[learned])")
-    from predictors.learned.fitted import FitWarning
+    from rhmpc.predictors.learned.fitted import FitWarning
 
     with pytest.warns(FitWarning, match=r"lstm is fitted on 25 samples \(1 s\), less than 5 s"):
         make_predictor("lstm", DT, hidden=4, epochs=1, validation=0.0).fit(stream[:25])
@@ -196,6 +196,6 @@ def test_the_saved_file_is_atomic_and_never_through_a_link(stream, tmp_path: Pat
     p = make_predictor("ridge", DT).fit(stream[:250])
     (tmp_path / "victim.npz").write_text("keep")
     (tmp_path / "m.npz").symlink_to("victim.npz")
-    with pytest.raises(boundary.FileError, match="a symbolic link"):
+    with pytest.raises(io.FileError, match="a symbolic link"):
         p.save(tmp_path / "m.npz")
     assert (tmp_path / "victim.npz").read_text() == "keep"

@@ -8,8 +8,8 @@ import copy
 import numpy as np
 import pytest
 
-from predictors import family, make_predictor
-from predictors.combination import Combination, CombinationSettings
+from rhmpc.predictors import family, make_predictor
+from rhmpc.predictors.combination import Combination, CombinationSettings
 from tests.predictors.helpers import feed, tracked_points
 
 DT = 0.04  # 25 frames/s, the stereo trackers' rate

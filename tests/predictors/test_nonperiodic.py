@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from predictors import make_predictor, settings_for
-from predictors.nonperiodic import NonPeriodic, long_run_variance
-from predictors.residual import ResidualAR
+from rhmpc.predictors import make_predictor, settings_for
+from rhmpc.predictors.nonperiodic import NonPeriodic, long_run_variance
+from rhmpc.predictors.residual import ResidualAR
 
 
 def _ar2(rng: np.random.Generator, n: int, a1: float, a2: float) -> np.ndarray:

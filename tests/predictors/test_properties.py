@@ -13,9 +13,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from predictors import PREDICTORS, make_predictor
-from predictors.base import Predictor
-from predictors.monitor import infer_unit
+from rhmpc.predictors import PREDICTORS, make_predictor
+from rhmpc.predictors.base import Predictor
+from rhmpc.predictors.monitor import infer_unit
 from tests.predictors.helpers import HarmonicSource
 
 NAMES = [n for n in PREDICTORS if n != "exact"]

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from predictors import make_predictor
-from predictors.rls import RecursiveLeastSquares
+from rhmpc.predictors import make_predictor
+from rhmpc.predictors.rls import RecursiveLeastSquares
 from tests.predictors.helpers import HarmonicSource, forecast_errors, run
 
 

@@ -9,10 +9,10 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from boundary import FileError
-from robots import ROBOTS, load_robot
-from robots.description import RobotFileError, robot_from_file
-from robots.registry import urdf_path
+from rhmpc.io import FileError
+from rhmpc.robots import ROBOTS, load_robot
+from rhmpc.robots.description import RobotFileError, robot_from_file
+from rhmpc.robots.registry import urdf_path
 
 PANDA = """urdf = "panda.urdf"
 joints = ["panda_joint1", "panda_joint2", "panda_joint4"]

@@ -7,7 +7,7 @@ import pytest
 import scipy.linalg
 from scipy.integrate import solve_ivp
 
-from robots import ROBOTS, linearize, load_robot
+from rhmpc.robots import ROBOTS, linearize, load_robot
 
 
 @pytest.fixture(scope="module", params=ROBOTS)
@@ -68,7 +68,7 @@ def test_linear_arm_carries_the_robot_and_its_limits():
     """The envelope's limits are the URDF's: PHANToM joint ranges and velocity limit."""
     import xml.etree.ElementTree as ET
 
-    from robots.registry import urdf_path
+    from rhmpc.robots.registry import urdf_path
 
     robot = load_robot("phantom")
     arm = linearize(robot)

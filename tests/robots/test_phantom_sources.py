@@ -8,9 +8,9 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from robots import load_robot
-from robots.model import forward_dynamics
-from robots.registry import urdf_path
+from rhmpc.robots import load_robot
+from rhmpc.robots.model import forward_dynamics
+from rhmpc.robots.registry import urdf_path
 
 G = 9.80665
 #: ∂(q2_src, q3_src)/∂(q2, q3), and the full map on (q1, q2, q3)

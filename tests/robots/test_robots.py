@@ -4,8 +4,8 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from robots import ROBOTS, load_robot
-from robots.model import forward_dynamics
+from rhmpc.robots import ROBOTS, load_robot
+from rhmpc.robots.model import forward_dynamics
 
 
 @pytest.fixture(scope="module", params=ROBOTS)

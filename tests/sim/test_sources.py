@@ -2,8 +2,8 @@
 
 import numpy as np
 
-from sim.heart.scenarios import SPECS
-from sim.sources import heart_source
+from rhmpc.sim.heart.scenarios import SPECS
+from rhmpc.sim.sources import heart_source
 
 
 def test_motion_stays_physiological_past_the_scenarios_nominal_length() -> None:

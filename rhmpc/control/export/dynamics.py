@@ -26,7 +26,7 @@ import casadi as ca
 import numpy as np
 import pinocchio as pin
 
-from robots.model import Body, bodies
+from rhmpc.robots.model import Body, bodies
 
 __all__ = ["cancel_function", "generate", "offset_function", "rnea_bias"]
 

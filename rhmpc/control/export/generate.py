@@ -40,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-import boundary
+from rhmpc import io
 from rhmpc.control.mpc import MPCStats, RecedingHorizonMPC
 from rhmpc.control.reference import LATENCY_CAP, PredictedReference
 
@@ -355,7 +355,7 @@ def _generate_into(controller, robot: str, out: Path) -> tuple[list[str], list[s
     if controller.cancellation is not None:
         model.append(cancel_function(controller.cancellation))
     if not model:
-        raise ExportError("the controller's arm does not carry its robot (robots.linearize)")
+        raise ExportError("the controller's arm does not carry its robot (rhmpc.robots.linearize)")
     sizes = generate(model, out)
     mpc._osqp.codegen(str(out / "osqp"), parameters="vectors", extension_name=None,
                       force_rewrite=True, prefix=OSQP_PREFIX)
@@ -414,8 +414,8 @@ def export_controller(controller, outdir: str | Path, *, robot: str,
     with tempfile.TemporaryDirectory() as tmp:
         written, notes, key = _generate_into(controller, robot, Path(tmp))
         for name in written:  # every target checked before any is written
-            boundary.check_output(outdir / name, root=outdir, create=True)
+            io.check_output(outdir / name, root=outdir, create=True)
         for name in written:
-            boundary.make_folder((outdir / name).parent, root=outdir)
-            boundary.write_bytes(outdir / name, (Path(tmp) / name).read_bytes(), root=outdir)
+            io.make_folder((outdir / name).parent, root=outdir)
+            io.write_bytes(outdir / name, (Path(tmp) / name).read_bytes(), root=outdir)
     return ExportInfo(outdir=outdir, key=key, files=tuple(written), notes=tuple(notes))

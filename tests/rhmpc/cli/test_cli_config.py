@@ -13,7 +13,7 @@ from rhmpc.control.reference import ReferenceSettings
 from rhmpc.experiment import RunConfig, load_config
 from rhmpc.experiment.config import SECTIONS
 from rhmpc.experiment.presets import PRESETS
-from sim.loop import LoopSettings
+from rhmpc.sim.loop import LoopSettings
 
 
 def _show(capsys, tmp_path: Path, *argv: str) -> tuple[str, RunConfig]:

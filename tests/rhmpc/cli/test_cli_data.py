@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from rhmpc.cli import main
-from sim.heart.scenarios import available_scenarios
-from sim.recordings import load_recording
+from rhmpc.sim.heart.scenarios import available_scenarios
+from rhmpc.sim.recordings import load_recording
 
 
 @pytest.mark.slow
@@ -185,11 +185,12 @@ def test_list_without_the_annotations(tmp_path: Path, monkeypatch: pytest.Monkey
                                       capsys: pytest.CaptureFixture[str]) -> None:
     """Where the shipped annotations are missing (a damaged install), arrhythmia-apb is skipped
     with a note, never an error."""
-    import sim.heart.specs
+    import rhmpc.sim.heart.specs
 
-    monkeypatch.setattr(sim.heart.specs, "SHARED_DATA", tmp_path)
-    assert sim.heart.specs.missing_data("arrhythmia-apb") == tmp_path / "mitdb-100" / "100.atr"
-    assert sim.heart.specs.missing_data("fixed-a2-top") is None
+    monkeypatch.setattr(rhmpc.sim.heart.specs, "SHARED_DATA", tmp_path)
+    assert rhmpc.sim.heart.specs.missing_data("arrhythmia-apb") == \
+        tmp_path / "mitdb-100" / "100.atr"
+    assert rhmpc.sim.heart.specs.missing_data("fixed-a2-top") is None
     assert "arrhythmia-apb" not in available_scenarios()
     assert main(["data", "list", "--json"]) == 0
     captured = capsys.readouterr()

@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from predictors.registry import load_model
 from rhmpc.cli import main
+from rhmpc.predictors.registry import load_model
 from tests.rhmpc.cli.test_cli_your_recordings import write_csv
 
 

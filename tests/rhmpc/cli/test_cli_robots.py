@@ -45,7 +45,7 @@ def test_console_script_runs_in_a_subprocess():
 def test_a_robot_file_wherever_a_robot_name_goes(tmp_path, capsys):
     """`robots --robot FILE` shows the robot of a file; a bad one stops `simulate` and `export`
     with one line naming the key, before anything runs."""
-    from robots.registry import urdf_path
+    from rhmpc.robots.registry import urdf_path
 
     text = open(urdf_path("phantom.toml")).read()
     (tmp_path / "phantom_premium_1_5a.urdf").write_text(

@@ -21,7 +21,7 @@ from scipy.optimize import lsq_linear
 from rhmpc.control.box_qp import BoxQP, BoxQPSettings
 from rhmpc.control.mpc import RecedingHorizonMPC
 from rhmpc.control.settings import MPCSettings
-from robots import linearize, load_robot
+from rhmpc.robots import linearize, load_robot
 
 TOL_Z = 1e-8
 

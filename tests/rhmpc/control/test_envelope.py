@@ -1,8 +1,8 @@
 """The safety envelope holds in closed loop on the nonlinear plant, and every fallback keeps it.
 
-The plant is :class:`sim.plant.ArmPlant` (the nonlinear arm) with the nonlinearity cancellation;
-the controller sees the true joint state. Each run goes with the controller as it is (OSQP at
-level 3) and with an exact level 3 (DAQP, :mod:`tests.rhmpc.control.exact`), and drives the
+The plant is :class:`rhmpc.sim.plant.ArmPlant` (the nonlinear arm) with the nonlinearity
+cancellation; the controller sees the true joint state. Each run goes with the controller as it is
+(OSQP at level 3) and with an exact level 3 (DAQP, :mod:`tests.rhmpc.control.exact`), and drives the
 reference past a limit; the limit is checked on the plant's own trajectory (its q, q̇ and
 forward kinematics).
 """
@@ -19,8 +19,8 @@ from rhmpc.control.envelope import envelope_rows
 from rhmpc.control.fallback import brake_torque
 from rhmpc.control.mpc import RecedingHorizonMPC
 from rhmpc.control.settings import MPCSettings
-from robots import load_robot
-from sim.plant import ArmPlant
+from rhmpc.robots import load_robot
+from rhmpc.sim.plant import ArmPlant
 from tests.rhmpc.control.exact import exact_mpc, qp_vectors, unconstrained
 
 N = 50

@@ -22,9 +22,9 @@ from rhmpc.control.export import ExportError, controller_in_c, export_controller
 from rhmpc.control.export.binding import missing_toolchain
 from rhmpc.experiment import RunConfig
 from rhmpc.experiment.assembly import deployable
+from rhmpc.robots import load_robot
+from rhmpc.sim.plant import make_plant
 from rhmpc.studies.bench import heart_like_reference
-from robots import load_robot
-from sim.plant import make_plant
 
 NO_TOOLCHAIN = missing_toolchain()
 needs_cc = pytest.mark.skipif(NO_TOOLCHAIN is not None, reason=NO_TOOLCHAIN or "")

@@ -12,7 +12,7 @@ import pytest
 from rhmpc.control.mpc import RecedingHorizonMPC
 from rhmpc.control.settings import MPCSettings
 from rhmpc.experiment.tables import from_dict, to_dict
-from robots import linearize, load_robot
+from rhmpc.robots import linearize, load_robot
 from tests.rhmpc.control.exact import EveryTick, exact_mpc, qp_vectors, unconstrained
 
 TIME_LIMIT = int(osqp.SolverStatus.OSQP_TIME_LIMIT_REACHED)

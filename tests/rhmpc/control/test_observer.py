@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from rhmpc.control.observer import JointObserver, ObserverSettings
-from robots import linearize, load_robot
+from rhmpc.robots import linearize, load_robot
 
 TS = 0.5e-3
 

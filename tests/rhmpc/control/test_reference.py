@@ -126,7 +126,7 @@ def test_exact_reference_slices_the_truth():
 def test_outlier_gate_rejects_spikes_and_relocks_on_a_real_jump():
     """A 4 mm spike lasting two samples is treated as missing; a lasting 4 mm step opens the
     gate after ``max_rejections`` samples, and it locks again once the forecasts agree."""
-    from predictors import make_predictor
+    from rhmpc.predictors import make_predictor
 
     dt = DS * TS
     pred = make_predictor("one-step", dt=dt)
@@ -284,7 +284,7 @@ def _gated_run(z: np.ndarray, retract: bool, outlier: np.ndarray, k_out: int):
     """The generalized predictor behind the gate (0.15 mm) on the stream ``z`` with one small
     outlier at sample ``k_out``, next to the same predictor without it: (counts, the worst
     difference of their horizons over the 40 refreshes after the outlier [m])."""
-    from predictors import make_predictor
+    from rhmpc.predictors import make_predictor
 
     dt = DS * TS
     pred = make_predictor("generalized", dt=dt)

@@ -1,5 +1,5 @@
 """Each fault alone in a short closed loop: the run goes on, the truth is the clean run's, the
-joint envelope holds, and the report counts what happened (sim.loop.faults)."""
+joint envelope holds, and the report counts what happened (rhmpc.sim.loop.faults)."""
 
 import numpy as np
 import pytest
@@ -36,7 +36,7 @@ def check_run(result, doc, clean, spec):
     assert result.trace["tick"].size == BASE.loop.ticks
     assert np.isfinite(result.tau).all() and np.isfinite(result.tau_mpc).all()
     # the marks of the faults split the run into other chunks, and a motion evaluated on
-    # shorter arrays may differ in the last bit (≤ 1e-17 m, sim.sensors.Sensor.measure)
+    # shorter arrays may differ in the last bit (≤ 1e-17 m, rhmpc.sim.sensors.Sensor.measure)
     np.testing.assert_allclose(result.poi, clean[0].poi, rtol=0, atol=1e-15)
     assert doc["joint_envelope"]["held"] and result.envelope["held"]
     (report,) = doc["faults"]

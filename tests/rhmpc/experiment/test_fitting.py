@@ -13,7 +13,7 @@ from rhmpc.cli import main
 from rhmpc.experiment import RunConfig
 from rhmpc.experiment.assembly import build_run
 from rhmpc.experiment.fitting import settling_series
-from sim.recordings.shipped import SHIPPED, resolve
+from rhmpc.sim.recordings.shipped import SHIPPED, resolve
 
 PHANTOM = SHIPPED["hamlyn-phantom"]
 
@@ -37,7 +37,7 @@ def test_the_settling_series_is_what_the_predictor_reads_before_the_score():
     run = build_run(_config("st-rls"))
     series = settling_series(run)
     assert series.shape == (150, 4, 3)  # 6 s at 25 frames/s, the POI and the 3 others
-    from sim.recordings import load_points
+    from rhmpc.sim.recordings import load_points
 
     points = load_points(PHANTOM.path, **PHANTOM.read)
     z = np.stack([p.z for p in points], axis=1)[:150]  # (T, 4, 3), point 4 is the POI
@@ -86,8 +86,8 @@ def test_train_files_and_poi_need_data(capsys):
 def test_a_run_says_what_it_fits_and_about_how_long_before_it_fits():
     """The members fitted before the run, and only they, named with their estimate."""
     pytest.importorskip("torch")
-    from predictors import make_predictor
     from rhmpc.experiment.fitting import announcement
+    from rhmpc.predictors import make_predictor
 
     combination = make_predictor("combination", 0.04, members=("one-step", "st-ridge", "tcn"))
     t = np.arange(300) * 0.04

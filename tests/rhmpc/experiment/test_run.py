@@ -6,14 +6,14 @@ import math
 import numpy as np
 import pytest
 
-from predictors import PREDICTORS, Predictor
 from rhmpc.control.reference import ArrayTruth, ExactReference, PredictedReference
 from rhmpc.experiment import RunConfig, build_run, run_experiment
 from rhmpc.experiment.assembly import build_controller
-from sim.loop import LoopSettings, run_closed_loop
-from sim.loop.closed_loop import poi_truth
-from sim.plant import make_plant
-from sim.sources import heart_source
+from rhmpc.predictors import PREDICTORS, Predictor
+from rhmpc.sim.loop import LoopSettings, run_closed_loop
+from rhmpc.sim.loop.closed_loop import poi_truth
+from rhmpc.sim.plant import make_plant
+from rhmpc.sim.sources import heart_source
 
 DOCUMENTED_KEYS = {
     "rms_error_mm": float, "max_error_mm": float, "rms_effort_mNm": float, "tick_us": dict,
@@ -72,10 +72,10 @@ def test_streamed_run_is_the_run_on_whole_arrays(tmp_path, predictor):
     (``sensor.measure`` over the run, ``poi_truth`` of the raw recording), scored
     with the whole-array ``tracking_metrics``: equal to 1e-9 relative (measured ≤ 3e-13: sums in
     another order, the mean summed per block)."""
-    from predictors import make_predictor
-    from sim.loop.trace import read_trace
-    from sim.recordings import RecordedMotion
-    from sim.sensors import sensor_from_name
+    from rhmpc.predictors import make_predictor
+    from rhmpc.sim.loop.trace import read_trace
+    from rhmpc.sim.recordings import RecordedMotion
+    from rhmpc.sim.sensors import sensor_from_name
     from tests.sim.loop.test_streams import tracking_metrics
 
     config = small_config(predictor=predictor, seed=5, **{
@@ -129,7 +129,7 @@ def test_predictor_params_pick_each_predictors_named_set():
     """``predictor_params`` names a parameter set per predictor (a preset's choice for every
     predictor a comparison runs); ``predictor_settings.params`` still wins over it. The loop
     feeds metres and says so (``unit=1``)."""
-    from predictors.fourier_settings import EKF_PARAMETER_SETS
+    from rhmpc.predictors.fourier_settings import EKF_PARAMETER_SETS
 
     def named(name):
         return dataclasses.replace(EKF_PARAMETER_SETS[name], unit=1.0)

@@ -12,7 +12,7 @@ from rhmpc.errors import UsageError
 from rhmpc.experiment import RunConfig, run_experiment
 from rhmpc.experiment.assembly import build_run
 from rhmpc.experiment.config import with_split
-from sim.recordings.shipped import SHIPPED
+from rhmpc.sim.recordings.shipped import SHIPPED
 
 PHANTOM = SHIPPED["hamlyn-phantom"]
 
@@ -82,8 +82,8 @@ def test_the_split_on_the_command_line(capsys):
 def test_fit_once_run_many(tmp_path):
     """Models saved by predict --save-models load in the closed loop: the run fits nothing
     (its model is the file's, whatever the settling window holds)."""
-    from predictors.registry import load_model
     from rhmpc.experiment.fitting import with_models
+    from rhmpc.predictors.registry import load_model
 
     assert main(["predict", "--data", "hamlyn-phantom", "--poi", "4", "--split", "100:150",
                  "--predictors", "ridge", "--save-models", str(tmp_path / "m")]) == 0

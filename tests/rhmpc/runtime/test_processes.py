@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
+from rhmpc.robots import load_robot
 from rhmpc.runtime.processes import BRAKE_S, WATCHDOG_TICKS, _Drivers
-from robots import load_robot
 
 
 def test_a_silent_controller_leaves_the_arm_braked_not_pushed():

@@ -2,8 +2,8 @@
 
 The arm follows the POI through its Jacobian at home with a lag, so the tool misses it by a few
 tenths of a millimetre; each refresh forecasts the next N ticks with an error that grows with the
-lead; the sensor's samples are the POI plus noise. Fields as :class:`sim.loop.LoopResult` has them,
-plus ``trace["q"]``, ``horizons`` and ``samples``.
+lead; the sensor's samples are the POI plus noise. Fields as :class:`rhmpc.sim.loop.LoopResult` has
+them, plus ``trace["q"]``, ``horizons`` and ``samples``.
 """
 
 from __future__ import annotations

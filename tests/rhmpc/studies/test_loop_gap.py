@@ -6,11 +6,11 @@ import json
 
 import numpy as np
 
-from predictors.registry import combination_members
 from rhmpc.cli import main
+from rhmpc.predictors.registry import combination_members
+from rhmpc.sim.recordings import load_points
+from rhmpc.sim.recordings.shipped import SHIPPED
 from rhmpc.studies.loop_gap import open_loop_beside, open_names
-from sim.recordings import load_points
-from sim.recordings.shipped import SHIPPED
 
 PHANTOM = SHIPPED["hamlyn-phantom"]
 

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from predictors import make_predictor
+from rhmpc.predictors import make_predictor
+from rhmpc.sim.recordings import on_grid
 from rhmpc.studies.recordings import (
     OpenLoopSettings,
     default_predictors,
@@ -15,7 +16,6 @@ from rhmpc.studies.recordings import (
     warmup_seconds,
 )
 from rhmpc.studies.tracks import Track, parse_points
-from sim.recordings import on_grid
 
 
 def motion(rate: float, seconds: float, seed: int = 1, noise: float = 1e-4) -> Track:

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sim.heart import make_scenario
-from sim.heart.arrhythmia import POST_PAUSE_POTENTIATION, SHARED_DATA, premature_stroke
-from sim.heart.rr import beats_from_annotations
-from sim.heart.scenarios import SPECS
+from rhmpc.sim.heart import make_scenario
+from rhmpc.sim.heart.arrhythmia import POST_PAUSE_POTENTIATION, SHARED_DATA, premature_stroke
+from rhmpc.sim.heart.rr import beats_from_annotations
+from rhmpc.sim.heart.scenarios import SPECS
 
 RECORD = SHARED_DATA / "mitdb-100" / "100"
 

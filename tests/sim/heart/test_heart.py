@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from sim.heart import (
+from rhmpc.sim.heart import (
     DEFAULT_SCENARIO,
     SCENARIOS,
     SPECS,
@@ -16,8 +16,8 @@ from sim.heart import (
     StaircaseProfile,
     make_scenario,
 )
-from sim.heart.analysis import motion_stats, peak_to_peak, rms_about_mean
-from sim.heart.rr import STAIRCASE_LEVELS_HZ
+from rhmpc.sim.heart.analysis import motion_stats, peak_to_peak, rms_about_mean
+from rhmpc.sim.heart.rr import STAIRCASE_LEVELS_HZ
 
 TUNA_TABLE = {  # name: (p-p [mm], sensor rate [Hz], duration [s]) — Table I and footnote 1
     "fixed-a1-top": (12.19, 404.0, 235.0),

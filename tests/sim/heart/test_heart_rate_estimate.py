@@ -1,13 +1,13 @@
-"""A recording's heart rate from its spectrum (sim.heart.analysis): over time, and not from too
-little data."""
+"""A recording's heart rate from its spectrum (rhmpc.sim.heart.analysis): over time, and not from
+too little data."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from sim.heart.analysis import heart_rate_track, motion_stats
-from sim.recordings import RecordedMotion
+from rhmpc.sim.heart.analysis import heart_rate_track, motion_stats
+from rhmpc.sim.recordings import RecordedMotion
 
 
 def test_the_track_follows_a_rate_step() -> None:

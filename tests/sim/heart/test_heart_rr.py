@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sim.heart import (
+from rhmpc.sim.heart import (
     PhaseTrack,
     RRSettings,
     beat_times_from_annotations,
@@ -16,7 +16,7 @@ from sim.heart import (
     rr_from_annotations,
     synthetic_rr,
 )
-from sim.heart.rr import RECORDS_DIR, find_record, shipped_records
+from rhmpc.sim.heart.rr import RECORDS_DIR, find_record, shipped_records
 
 MITDB_100 = RECORDS_DIR / "mitdb-100" / "100"
 REC_1003 = RECORDS_DIR / "1003" / "1003"

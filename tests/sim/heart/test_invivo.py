@@ -1,4 +1,4 @@
-"""The in-vivo regime (sim.heart.invivo): its statistics against the recording's, and its
+"""The in-vivo regime (rhmpc.sim.heart.invivo): its statistics against the recording's, and its
 mechanisms."""
 
 from __future__ import annotations
@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sim.heart import make_scenario
-from sim.heart.invivo import (
+from rhmpc.sim.heart import make_scenario
+from rhmpc.sim.heart.invivo import (
     PSI_ATRIAL,
     PSI_FILLING,
     PSI_SYSTOLE,

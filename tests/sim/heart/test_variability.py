@@ -1,4 +1,4 @@
-"""Physiological variability (sim.heart.variability): switches, magnitudes, seeds."""
+"""Physiological variability (rhmpc.sim.heart.variability): switches, magnitudes, seeds."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from sim.heart import SPECS, make_scenario
-from sim.heart.variability import (
+from rhmpc.sim.heart import SPECS, make_scenario
+from rhmpc.sim.heart.variability import (
     LF_BAND,
     VariabilitySettings,
     ar1,

@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sim.loop import LoopSettings
-from sim.loop.clock import arrival_tick, predictor_clock
-from sim.loop.closed_loop import Refreshes
-from sim.sensors import SampleStream, playback
-from sim.sensors.playback import UpsampledSamples
-from sim.sensors.stream import ArraySamples
+from rhmpc.sim.loop import LoopSettings
+from rhmpc.sim.loop.clock import arrival_tick, predictor_clock
+from rhmpc.sim.loop.closed_loop import Refreshes
+from rhmpc.sim.sensors import SampleStream, playback
+from rhmpc.sim.sensors.playback import UpsampledSamples
+from rhmpc.sim.sensors.stream import ArraySamples
 from tests.sim.loop.stand_ins import HarmonicHeart, ideal_stream
 
 TS = 0.5e-3

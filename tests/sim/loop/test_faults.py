@@ -5,12 +5,12 @@ import numpy as np
 import pytest
 
 from rhmpc.experiment.faults import fault_marks, fault_report
-from sim.loop.closed_loop import chunks
-from sim.loop.faults import FaultyEncoders, split_faults
-from sim.sensors import SampleStream, Upsample
-from sim.sensors.faults import EncoderStick, FaultySamples, NaNBurst, SensorFreeze, StreamJump
-from sim.sensors.playback import UpsampledSamples
-from sim.sensors.stream import ArraySamples, SampledSamples
+from rhmpc.sim.loop.closed_loop import chunks
+from rhmpc.sim.loop.faults import FaultyEncoders, split_faults
+from rhmpc.sim.sensors import SampleStream, Upsample
+from rhmpc.sim.sensors.faults import EncoderStick, FaultySamples, NaNBurst, SensorFreeze, StreamJump
+from rhmpc.sim.sensors.playback import UpsampledSamples
+from rhmpc.sim.sensors.stream import ArraySamples, SampledSamples
 from tests.sim.loop.stand_ins import HarmonicHeart
 
 FAULTS = (SensorFreeze(0.31, 0.2), StreamJump(0.6, offset_m=(1e-3, 2e-3, 0.0)),

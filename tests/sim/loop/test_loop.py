@@ -16,9 +16,9 @@ from rhmpc.control.reference import (
     ReferenceSettings,
 )
 from rhmpc.control.settings import MPCSettings
-from sim.loop import LoopSettings, poi_truth, run_closed_loop
-from sim.loop.clock import predictor_clock
-from sim.plant import make_plant
+from rhmpc.sim.loop import LoopSettings, poi_truth, run_closed_loop
+from rhmpc.sim.loop.clock import predictor_clock
+from rhmpc.sim.plant import make_plant
 from tests.sim.loop.stand_ins import HarmonicHeart, ideal_stream
 
 SHORT = LoopSettings(duration=3.0, settling=1.0)
@@ -51,7 +51,7 @@ def run_with(world, reference_of, stream_of=None, settings=SHORT, failures=0):
 
 
 def predicted(name, reference=GATED, **settings):
-    from predictors import make_predictor
+    from rhmpc.predictors import make_predictor
 
     def build(truth):
         pred = make_predictor(name, dt=SHORT.downsample * SHORT.Ts, **settings)
@@ -86,7 +86,7 @@ class _Spy:
 def spy_run(stream, settings: LoopSettings) -> list:
     """The calls a loop makes to its controller on ``stream`` (a linear plant that does not
     move)."""
-    from robots import linearize, load_robot
+    from rhmpc.robots import linearize, load_robot
 
     robot = load_robot("phantom")
     arm = linearize(robot, Ts=settings.Ts)
@@ -169,7 +169,7 @@ def test_outlier_gate_keeps_the_robot_from_chasing_echo_spikes(world):
     """Against the true motion: with the gate the spikes leave no trace; without it the robot
     jumps towards each 5 mm spike."""
     def gated(gate):
-        from predictors import make_predictor
+        from rhmpc.predictors import make_predictor
 
         def build(truth):
             pred = make_predictor("generalized", dt=SHORT.downsample * SHORT.Ts)

@@ -1,4 +1,4 @@
-"""The score at a recording's measured instants (sim.loop.metrics.MeasuredScore), against a
+"""The score at a recording's measured instants (rhmpc.sim.loop.metrics.MeasuredScore), against a
 direct computation written here: the tool's path interpolated at each sample's instant."""
 
 from __future__ import annotations
@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sim.loop.metrics import MeasuredScore
+from rhmpc.sim.loop.metrics import MeasuredScore
 
 TS = 0.5e-3
 

@@ -3,14 +3,21 @@
 import numpy as np
 import pytest
 
-from sim.loop.closed_loop import poi_truth
-from sim.loop.metrics import RunningTracking, TickHistogram, rms
-from sim.loop.streams import SourceTruth, StreamCursor
-from sim.loop.trace import DecimatedTrace, TraceFile, read_trace
-from sim.recordings import RecordedMotion
-from sim.sensors import Dropouts, Sensor, SonomicrometrySettings, Upsample, ideal, sonomicrometry
-from sim.sensors.playback import UpsampledSamples
-from sim.sensors.stream import ArraySamples, SampledSamples
+from rhmpc.sim.loop.closed_loop import poi_truth
+from rhmpc.sim.loop.metrics import RunningTracking, TickHistogram, rms
+from rhmpc.sim.loop.streams import SourceTruth, StreamCursor
+from rhmpc.sim.loop.trace import DecimatedTrace, TraceFile, read_trace
+from rhmpc.sim.recordings import RecordedMotion
+from rhmpc.sim.sensors import (
+    Dropouts,
+    Sensor,
+    SonomicrometrySettings,
+    Upsample,
+    ideal,
+    sonomicrometry,
+)
+from rhmpc.sim.sensors.playback import UpsampledSamples
+from rhmpc.sim.sensors.stream import ArraySamples, SampledSamples
 from tests.sim.loop.stand_ins import HarmonicHeart
 
 TS = 0.5e-3

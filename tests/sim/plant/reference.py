@@ -1,7 +1,7 @@
 """The plants' equations written plainly on Pinocchio: the references the kernel is checked against.
 
 Nothing here is fast or shared with the package: each equation of ``sim/plant/chain.c`` is
-restated from the docstrings of :mod:`sim.plant.arm` and :mod:`sim.plant.hardware`, with
+restated from the docstrings of :mod:`rhmpc.sim.plant.arm` and :mod:`rhmpc.sim.plant.hardware`, with
 Pinocchio's M(q) (``pin.crba``) and h(q, q̇) (``pin.nonLinearEffects``).
 """
 

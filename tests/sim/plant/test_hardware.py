@@ -8,9 +8,9 @@ import pytest
 
 from rhmpc.control.cancellation import ModelMismatch, NonlinearityCancellation
 from rhmpc.control.observer import JointObserver
-from robots import Robot, linearize
-from sim.plant import HardwareSettings, PlantSettings, make_plant
-from sim.plant.hardware import HardwarePlant, LinearPlant, cable_stiffness
+from rhmpc.robots import Robot, linearize
+from rhmpc.sim.plant import HardwareSettings, PlantSettings, make_plant
+from rhmpc.sim.plant.hardware import HardwarePlant, LinearPlant, cable_stiffness
 from tests.sim.plant import reference
 
 TS = 0.5e-3
@@ -171,7 +171,7 @@ def test_bad_settings_are_one_line_errors(bad):
 
 
 def test_hardware_plant_needs_drives(arm):
-    from robots import load_robot
+    from rhmpc.robots import load_robot
 
     ur5 = load_robot("ur5")
     with pytest.raises(ValueError, match="needs the robot's drives"):

@@ -5,8 +5,8 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from robots.model import forward_dynamics
-from sim.plant import ArmPlant, HardwarePlant, HardwareSettings, PlantSettings, kernel
+from rhmpc.robots.model import forward_dynamics
+from rhmpc.sim.plant import ArmPlant, HardwarePlant, HardwareSettings, PlantSettings, kernel
 from tests.sim.plant import reference
 
 TS = 0.5e-3
@@ -137,7 +137,7 @@ def test_a_closed_loop_run_matches_one_on_a_pinocchio_plant(monkeypatch):
     against the same run on ``reference.ideal_tick``: the metrics agree to 1e-6 relative (the
     states part by rounding: a Cholesky solve in C against LAPACK's)."""
     from rhmpc.experiment import RunConfig, assembly, run_experiment
-    from sim.loop import LoopSettings
+    from rhmpc.sim.loop import LoopSettings
 
     class PinocchioPlant(ArmPlant):
         def step(self, tau):

@@ -5,8 +5,8 @@ import pinocchio as pin
 import pytest
 
 from rhmpc.control.cancellation import ModelMismatch, NonlinearityCancellation
-from robots import load_robot
-from sim.plant import ArmPlant, PlantSettings
+from rhmpc.robots import load_robot
+from rhmpc.sim.plant import ArmPlant, PlantSettings
 from tests.sim.plant import reference
 
 TS = 0.5e-3

@@ -7,15 +7,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sim.heart import make_scenario
-from sim.recordings import (
+from rhmpc.sim.heart import make_scenario
+from rhmpc.sim.recordings import (
     RecordedMotion,
     RecordingError,
     RecordingWarning,
     load_recording,
     save_recording,
 )
-from sim.sources import export_scenario
+from rhmpc.sim.sources import export_scenario
 
 
 def _write(tmp_path: Path, text: str, name: str = "rec.csv") -> Path:

@@ -1,4 +1,4 @@
-"""MATLAB recordings (sim.recordings.matfile): v5 and v7.3, orientation, rows/cols, time,
+"""MATLAB recordings (rhmpc.sim.recordings.matfile): v5 and v7.3, orientation, rows/cols, time,
 units, refusals."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import scipy.io
 
-from sim.recordings import RecordingError, RecordingWarning, load_mat, load_recording
+from rhmpc.sim.recordings import RecordingError, RecordingWarning, load_mat, load_recording
 
 T = np.arange(0, 2, 0.01)
 XYZ = np.vstack([4 * np.sin(2 * np.pi * 1.3 * T), 2 * np.sin(2 * np.pi * 2.6 * T),
@@ -163,10 +163,10 @@ def test_only_the_variables_a_recording_needs_are_read(tmp_path: Path) -> None:
 
 def test_a_variable_of_more_samples_than_fit_is_refused_before_it_is_read(tmp_path: Path,
                                                                           monkeypatch) -> None:
-    import boundary
-    from boundary.limits import Bound
+    from rhmpc import io
+    from rhmpc.io.limits import Bound
 
-    monkeypatch.setitem(boundary.BOUNDS, "samples", Bound("samples of a recording", 1e9, 0.0))
+    monkeypatch.setitem(io.BOUNDS, "samples", Bound("samples of a recording", 1e9, 0.0))
     path = tmp_path / "r.mat"
     scipy.io.savemat(path, {"X": np.ones((3, 100)), "fs": 25.0, "units": "mm"})
     with pytest.raises(ValueError, match=r"r\.mat: 'X': 100 samples of a recording would take "

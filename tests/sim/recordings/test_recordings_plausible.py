@@ -1,4 +1,4 @@
-"""Plausibility of a recording as heart motion (sim.recordings.plausible): units, outliers,
+"""Plausibility of a recording as heart motion (rhmpc.sim.recordings.plausible): units, outliers,
 missing samples; each a RecordingWarning that names the fix, never an error."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import scipy.io
 
-from sim.recordings import (
+from rhmpc.sim.recordings import (
     Plausibility,
     RecordedMotion,
     RecordingWarning,

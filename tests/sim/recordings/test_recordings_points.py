@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import scipy.io
 
-from sim.recordings import RecordingError, load_points, load_recording
+from rhmpc.sim.recordings import RecordingError, load_points, load_recording
 
 T = np.arange(0.0, 4.0, 0.04)
 #: four points, (n, 4, 3) [mm]

@@ -10,9 +10,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from sim.recordings import RecordingError, load_recording
-from sim.recordings.recorded import RecordedMotion
-from sim.recordings.timebase import check_time_unit, strongest_frequency
+from rhmpc.sim.recordings import RecordingError, load_recording
+from rhmpc.sim.recordings.recorded import RecordedMotion
+from rhmpc.sim.recordings.timebase import check_time_unit, strongest_frequency
 
 
 def motion(t_seconds: np.ndarray, bpm: float, breaths: float = 15.0) -> np.ndarray:

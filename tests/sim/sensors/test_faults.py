@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from sim.sensors import SampleStream
-from sim.sensors.faults import (
+from rhmpc.sim.sensors import SampleStream
+from rhmpc.sim.sensors.faults import (
     EncoderStick,
     FaultSettings,
     NaNBurst,

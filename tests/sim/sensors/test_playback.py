@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sim.heart import make_scenario
-from sim.loop.streams import StreamCursor
-from sim.sensors import PLAYBACKS, Sensor, playback, sensor_from_name
-from sim.sensors.playback import UpsampledSamples
-from sim.sensors.stream import Latency
+from rhmpc.sim.heart import make_scenario
+from rhmpc.sim.loop.streams import StreamCursor
+from rhmpc.sim.sensors import PLAYBACKS, Sensor, playback, sensor_from_name
+from rhmpc.sim.sensors.playback import UpsampledSamples
+from rhmpc.sim.sensors.stream import Latency
 
 TS = 5e-4
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sim.heart import make_scenario
-from sim.sensors import (
+from rhmpc.sim.heart import make_scenario
+from rhmpc.sim.sensors import (
     SENSORS,
     Dropouts,
     EchoOutliers,

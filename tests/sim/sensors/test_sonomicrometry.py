@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sim.heart import make_scenario
-from sim.sensors import (
+from rhmpc.sim.heart import make_scenario
+from rhmpc.sim.sensors import (
     CrystalArray,
     Sonomicrometer,
     SonomicrometrySettings,
@@ -163,9 +163,9 @@ def test_one_dimensional_motion_runs_along_the_first_axis() -> None:
 def test_measuring_in_blocks_gives_the_same_stream(monkeypatch) -> None:
     """Memory: the ranges and trilateration run in blocks; the stream does not depend on the
     block size (each sample is solved on its own; the run's draws come first). Bitwise."""
-    from sim.heart.scenarios import make_scenario
-    from sim.sensors import sonomicrometry
-    from sim.sensors.sonomicrometry import Sonomicrometer
+    from rhmpc.sim.heart.scenarios import make_scenario
+    from rhmpc.sim.sensors import sonomicrometry
+    from rhmpc.sim.sensors.sonomicrometry import Sonomicrometer
 
     scn = make_scenario("fixed-a2-top", np.random.default_rng(1))
     whole = sonomicrometry().measure(scn.source, 40.0, np.random.default_rng(2))

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sim.heart import make_scenario
-from sim.heart.invivo import RECORDING
-from sim.sensors import SENSORS, sensor_from_name
+from rhmpc.sim.heart import make_scenario
+from rhmpc.sim.heart.invivo import RECORDING
+from rhmpc.sim.sensors import SENSORS, sensor_from_name
 
 
 def test_video_frames_noise_and_latency() -> None:

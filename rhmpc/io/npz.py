@@ -1,7 +1,7 @@
 """NumPy ``.npz`` archives read through the one way in, member by member.
 
 An ``.npz`` file is a zip archive of ``.npy`` members. :class:`NpzArchive` opens it with
-:func:`boundary.reader.open_input`, reads each member's header (its dtype and shape) before its
+:func:`rhmpc.io.reader.open_input`, reads each member's header (its dtype and shape) before its
 data, and reads the data only when the member is what its header says: numbers or text (never
 Python objects, so nothing is unpickled), no larger than asked, and exactly as long in the
 archive as the header makes it (a truncated or padded member is refused before it is read).
@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from boundary.limits import size_bytes
-from boundary.reader import FileError, open_input
+from rhmpc.io.limits import size_bytes
+from rhmpc.io.reader import FileError, open_input
 
 __all__ = ["NpzArchive"]
 
@@ -34,7 +34,7 @@ class NpzArchive:
     path : str or Path
         The archive.
     kind : str
-        Its kind of file (:data:`boundary.limits.FILE_BYTES`), for its largest size.
+        Its kind of file (:data:`rhmpc.io.limits.FILE_BYTES`), for its largest size.
 
     Raises
     ------

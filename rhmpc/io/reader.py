@@ -5,14 +5,14 @@ A file is read only when
 - it is a regular file: a folder, a named pipe (FIFO), a device or a socket is refused before
   anything is read from it, so that nothing blocks (a FIFO with no writer) or streams without
   end (``/dev/zero``);
-- it is no larger than the bound of its kind (:data:`boundary.limits.FILE_BYTES`), checked
+- it is no larger than the bound of its kind (:data:`rhmpc.io.limits.FILE_BYTES`), checked
   on the open descriptor, and reading stops one byte past the bound should it grow meanwhile;
 - structured text is no deeper than :data:`MAX_DEPTH` levels of brackets, checked by a scan of
   the text before the parser (a recursive one) sees it, and again on what it returns.
 
 Every error is a :class:`FileError` whose message starts with the file's name and fits on one
 line. Inside :func:`tracking_inputs` (a command's run) every file read is remembered, so that
-the writer (:mod:`boundary.writer`) never replaces one of the run's inputs.
+the writer (:mod:`rhmpc.io.writer`) never replaces one of the run's inputs.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import IO, Any
 
-from boundary.limits import FILE_BYTES, size_bytes
+from rhmpc.io.limits import FILE_BYTES, size_bytes
 
 __all__ = ["MAX_DEPTH", "FileError", "check_depth", "inputs_read", "json_loads", "open_input",
            "read_bytes", "read_json", "read_text", "read_toml", "text_depth", "tracking_inputs"]
@@ -89,7 +89,7 @@ def open_input(path: str | Path, kind: str = "file", limit: int | None = None, *
     path : str or Path
         The file.
     kind : str
-        Its kind, a key of :data:`boundary.limits.FILE_BYTES` (``"config"``, ``"recording"``,
+        Its kind, a key of :data:`rhmpc.io.limits.FILE_BYTES` (``"config"``, ``"recording"``,
         ``"model"``, …): its largest size, and its name in the message.
     limit : int, optional
         The largest size [B], instead of the kind's.

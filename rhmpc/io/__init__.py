@@ -1,5 +1,5 @@
-"""The boundary of rhmpc: files in through one guarded reader, out through one atomic writer,
-and the bounds of every count a user sets.
+"""The boundary of rhmpc (``rhmpc.io``): files in through one guarded reader, out through one
+atomic writer, and the bounds of every count a user sets.
 
 ==============  =================================================================
 ``reader``      :func:`open_input` and the readers on it (bytes, text, TOML, JSON):
@@ -10,12 +10,15 @@ and the bounds of every count a user sets.
 ``limits``      :data:`BOUNDS` and :data:`FILE_BYTES`: the one table of bounds
 ==============  =================================================================
 
-It sits below every other package (``predictors`` and ``robots`` included) and depends on the
-standard library and NumPy only, so that each layer reads and writes its files the same way.
+It sits below every other package (``rhmpc.predictors`` and ``rhmpc.robots`` included) and
+depends on the standard library and NumPy only, so that each layer reads and writes its files
+the same way. Modules import it as ``from rhmpc import io`` (``io.read_bytes``,
+``io.FileError``); one that also needs the standard library's ``io`` imports its names
+(``from io import BytesIO``).
 """
 
-from boundary.limits import BOUNDS, FILE_BYTES, Bound, check, largest
-from boundary.reader import (
+from rhmpc.io.limits import BOUNDS, FILE_BYTES, Bound, check, largest
+from rhmpc.io.reader import (
     FileError,
     json_loads,
     open_input,
@@ -25,7 +28,7 @@ from boundary.reader import (
     read_toml,
     tracking_inputs,
 )
-from boundary.writer import (
+from rhmpc.io.writer import (
     AtomicFile,
     atomic_write,
     check_output,
@@ -46,7 +49,7 @@ __all__ = [
 
 def __getattr__(name: str):
     if name == "NpzArchive":  # NumPy is imported only when an archive is read
-        from boundary.npz import NpzArchive
+        from rhmpc.io.npz import NpzArchive
 
         return NpzArchive
-    raise AttributeError(f"module 'boundary' has no attribute {name!r}")
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -11,7 +11,7 @@ target. Before any of it, :func:`check_output` refuses
   (``root``: ``rhmpc export DIR`` writes ``DIR/osqp/...`` only if ``DIR/osqp`` is a real
   folder inside ``DIR``);
 - a target that is one of the run's inputs: a file named in ``inputs``, or one read through
-  :mod:`boundary.reader` inside :func:`boundary.reader.tracking_inputs`.
+  :mod:`rhmpc.io.reader` inside :func:`rhmpc.io.reader.tracking_inputs`.
 
 Commands check their outputs before the run (:func:`check_output`); the writer checks again
 when it writes.
@@ -28,7 +28,7 @@ from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import IO
 
-from boundary.reader import FileError, inputs_read
+from rhmpc.io.reader import FileError, inputs_read
 
 __all__ = ["AtomicFile", "atomic_write", "check_output", "file_stem", "make_folder", "save_figure",
            "write_bytes", "write_text"]

@@ -11,8 +11,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-import boundary
-from boundary.reader import MAX_DEPTH, inputs_read, text_depth
+from rhmpc import io
+from rhmpc.io.reader import MAX_DEPTH, inputs_read, text_depth
 
 PROPERTY = settings(max_examples=60, deadline=None, derandomize=True,
                     suppress_health_check=[HealthCheck.function_scoped_fixture])
@@ -31,8 +31,8 @@ def test_a_fifo_is_refused_without_blocking(tmp_path: Path) -> None:
 
     def read() -> None:
         try:
-            boundary.read_toml(fifo)
-        except boundary.FileError as exc:
+            io.read_toml(fifo)
+        except io.FileError as exc:
             caught.append(exc)
         done.set()
 
@@ -46,32 +46,32 @@ def test_a_fifo_is_refused_without_blocking(tmp_path: Path) -> None:
 @pytest.mark.parametrize(("path", "kind"), [("/dev/zero", "character device"),
                                             ("/dev/null", "character device")])
 def test_a_device_is_refused_before_it_is_read(path: str, kind: str) -> None:
-    with pytest.raises(boundary.FileError, match=f"^{path}: a {kind}, not a regular file"):
-        boundary.read_toml(path)
+    with pytest.raises(io.FileError, match=f"^{path}: a {kind}, not a regular file"):
+        io.read_toml(path)
 
 
 def test_a_folder_a_missing_file_and_a_file_too_large(tmp_path: Path) -> None:
-    with pytest.raises(boundary.FileError, match="a folder, not a regular file"):
-        boundary.read_bytes(tmp_path)
-    with pytest.raises(boundary.FileError, match=r"absent\.toml: no such file$"):
-        boundary.read_toml(tmp_path / "absent.toml")
+    with pytest.raises(io.FileError, match="a folder, not a regular file"):
+        io.read_bytes(tmp_path)
+    with pytest.raises(io.FileError, match=r"absent\.toml: no such file$"):
+        io.read_toml(tmp_path / "absent.toml")
     big = tmp_path / "big.toml"
     big.write_bytes(b"#" * 101)
-    with pytest.raises(boundary.FileError, match=r"big\.toml: 101 B, larger than a file may be "
+    with pytest.raises(io.FileError, match=r"big\.toml: 101 B, larger than a file may be "
                                                  r"\(100 B\)"):
-        boundary.read_bytes(big, limit=100)
+        io.read_bytes(big, limit=100)
 
 
 def test_a_toml_file_nested_5000_levels_is_one_line(tmp_path: Path) -> None:
     deep = tmp_path / "deep.toml"
     deep.write_text("a = " + "[" * 5000 + "]" * 5000 + "\n")
-    with pytest.raises(boundary.FileError, match=r"deep\.toml: nested 5000 levels deep; at "
+    with pytest.raises(io.FileError, match=r"deep\.toml: nested 5000 levels deep; at "
                                                  "most 64 are read$"):
-        boundary.read_toml(deep)
+        io.read_toml(deep)
     dotted = tmp_path / "dotted.toml"
     dotted.write_text(".".join(["k"] * 5000) + " = 1\n")  # deep without a bracket
-    with pytest.raises(boundary.FileError, match="nested deeper than 64 levels"):
-        boundary.read_toml(dotted)
+    with pytest.raises(io.FileError, match="nested deeper than 64 levels"):
+        io.read_toml(dotted)
 
 
 def test_the_depth_scan_skips_strings_and_comments() -> None:
@@ -86,8 +86,8 @@ def test_any_bytes_as_toml_parse_or_fail_in_one_line(tmp_path: Path, data: bytes
     path = tmp_path / "any.toml"
     path.write_bytes(data)
     try:
-        boundary.read_toml(path)
-    except boundary.FileError as exc:
+        io.read_toml(path)
+    except io.FileError as exc:
         one_line(exc, str(path))
 
 
@@ -103,8 +103,8 @@ def test_json_of_any_depth_is_read_or_refused_by_its_depth(value, depth: int) ->
 
     text = "[" * depth + json.dumps(value) + "]" * depth
     try:
-        boundary.json_loads(text, "doc.json")
-    except boundary.FileError as exc:
+        io.json_loads(text, "doc.json")
+    except io.FileError as exc:
         one_line(exc, "doc.json")
         assert text_depth(text) > MAX_DEPTH
 
@@ -112,11 +112,11 @@ def test_json_of_any_depth_is_read_or_refused_by_its_depth(value, depth: int) ->
 def test_inputs_are_remembered_inside_a_run_only(tmp_path: Path) -> None:
     path = tmp_path / "rec.csv"
     path.write_text("t,x\n")
-    boundary.read_bytes(path)
+    io.read_bytes(path)
     assert inputs_read() == {}
-    with boundary.tracking_inputs():
-        boundary.read_bytes(path)
+    with io.tracking_inputs():
+        io.read_bytes(path)
         info = path.stat()
         assert inputs_read() == {(info.st_dev, info.st_ino): str(path)}
-        boundary.read_bytes(path, track=False)
+        io.read_bytes(path, track=False)
     assert inputs_read() == {}

@@ -6,7 +6,7 @@ count, what one unit costs, measured on one core (the figures and how they were 
 each entry's ``source``), and :meth:`Bound.check` refuses a value whose cost exceeds
 :data:`MEMORY_BUDGET` or :data:`TIME_BUDGET`, naming the largest value that fits, before any
 of the work starts. :data:`FILE_BYTES` bounds the size of each kind of input file
-(:mod:`boundary.reader`).
+(:mod:`rhmpc.io.reader`).
 
 The budgets are those of one command on a workstation: 2 GiB of memory, what a run may take
 beside the rest of the machine (the interactive use of a laptop of 8 GiB), and a day of

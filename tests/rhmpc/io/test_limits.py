@@ -8,12 +8,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import boundary
-from boundary.limits import MEMORY_BUDGET, TIME_BUDGET, Bound
+from rhmpc import io
+from rhmpc.io.limits import MEMORY_BUDGET, TIME_BUDGET, Bound
 
 
 def test_every_bound_states_its_measurement() -> None:
-    for name, bound in boundary.BOUNDS.items():
+    for name, bound in io.BOUNDS.items():
         assert bound.source and bound.what, name
         assert bound.largest() >= 1
 
@@ -30,11 +30,11 @@ def test_the_largest_value_fits_and_the_next_does_not() -> None:
 
 
 @settings(max_examples=50, deadline=None, derandomize=True)
-@given(value=st.integers(1, 10**15), name=st.sampled_from(sorted(boundary.BOUNDS)))
+@given(value=st.integers(1, 10**15), name=st.sampled_from(sorted(io.BOUNDS)))
 def test_a_check_passes_exactly_up_to_the_largest(value: int, name: str) -> None:
-    top = boundary.largest(name)
+    top = io.largest(name)
     try:
-        boundary.check(name, value, "--x")
+        io.check(name, value, "--x")
     except ValueError as exc:
         assert value > top and str(exc).startswith("--x: ") and "\n" not in str(exc)
     else:

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-import io
 import zipfile
+from io import BytesIO
 from pathlib import Path
 
 import numpy as np
@@ -11,7 +11,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-import boundary
+from rhmpc import io
 
 
 def _archive(tmp_path: Path, **arrays) -> Path:
@@ -23,32 +23,32 @@ def _archive(tmp_path: Path, **arrays) -> Path:
 def test_members_are_read_after_their_headers(tmp_path: Path) -> None:
     path = _archive(tmp_path, t=np.arange(5.0), label=np.array("mm"),
                     f=np.asfortranarray(np.arange(6.0).reshape(2, 3)))
-    with boundary.NpzArchive(path) as npz:
+    with io.NpzArchive(path) as npz:
         assert npz.names == ["t", "label", "f"]
         assert npz.header("t") == ((5,), np.dtype(float))
         np.testing.assert_array_equal(npz.read("t"), np.arange(5.0))
         assert str(npz.read("label")) == "mm"
         np.testing.assert_array_equal(npz.read("f"), np.arange(6.0).reshape(2, 3))
-        with pytest.raises(boundary.FileError, match=r"array 't' of shape \(5,\) would take "
+        with pytest.raises(io.FileError, match=r"array 't' of shape \(5,\) would take "
                                                      r"40 B; at most 8 B are read"):
             npz.read("t", max_bytes=8)
 
 
 def test_objects_are_never_unpickled(tmp_path: Path) -> None:
     path = _archive(tmp_path, o=np.array([1, "x"], dtype=object))
-    with boundary.NpzArchive(path) as npz, pytest.raises(boundary.FileError,
+    with io.NpzArchive(path) as npz, pytest.raises(io.FileError,
                                                          match="holds object values"):
         npz.read("o")
 
 
 def test_a_header_that_lies_about_the_size_is_refused(tmp_path: Path) -> None:
-    small = io.BytesIO()
+    small = BytesIO()
     np.lib.format.write_array(small, np.zeros(2))
     forged = small.getvalue().replace(b"(2,)", b"(9999999999,)".ljust(4))
     path = tmp_path / "forged.npz"
     with zipfile.ZipFile(path, "w") as z:
         z.writestr("t.npy", forged)
-    with boundary.NpzArchive(path) as npz, pytest.raises(boundary.FileError):
+    with io.NpzArchive(path) as npz, pytest.raises(io.FileError):
         npz.read("t")
 
 
@@ -63,8 +63,8 @@ def test_a_damaged_archive_is_one_line_naming_it(tmp_path: Path, cut: int, flip:
     path = tmp_path / "damaged.npz"
     path.write_bytes(bytes(data[: len(data) - cut]))
     try:
-        with boundary.NpzArchive(path) as npz:
+        with io.NpzArchive(path) as npz:
             for name in npz.names:
                 npz.read(name)
-    except boundary.FileError as exc:
+    except io.FileError as exc:
         assert str(exc).startswith(str(path)) and "\n" not in str(exc)
