@@ -282,12 +282,13 @@ class PredictedReference:
         predictor took it. Interpolated and guarded as a refresh's own nodes (the guard holds
         ``points[0]``); for the next ``refresh_ticks`` ticks the refreshes only keep the
         predictor learning, then they serve again. Returns whether it was taken: points not
-        finite or of another shape count ``external_rejected``; a stamp older than the last
-        taken one's or more than LATENCY_CAP before ``tick``, ``external_stale``."""
+        finite or of another shape, or a stamp after tick + 1, count ``external_rejected``; a
+        stamp older than the last taken one's or more than LATENCY_CAP before ``tick``,
+        ``external_stale``."""
         nodes, counts = np.array(points, dtype=float), self.predictor.counts
         most = self.prediction_points + math.ceil(LATENCY_CAP / self.dt) + 1
-        if not (math.isfinite(stamp) and nodes.ndim == 2 and WINDOW <= len(nodes) <= most
-                and np.isfinite(nodes).all()):
+        if not (math.isfinite(stamp) and stamp <= (tick + 1) * self.Ts and nodes.ndim == 2
+                and WINDOW <= len(nodes) <= most and np.isfinite(nodes).all()):
             counts["external_rejected"] += 1
             return False
         if stamp < self._external_stamp or tick * self.Ts - stamp > LATENCY_CAP:

@@ -44,7 +44,7 @@ from rhmpc import io
 from rhmpc.control.mpc import MPCStats, RecedingHorizonMPC
 from rhmpc.control.reference import LATENCY_CAP, PredictedReference
 
-from .dynamics import cancel_function, generate, offset_function
+from .dynamics import cancel_function, generate, offset_function, tool_function
 from .layout import template_subs
 
 #: Prefix of OSQP's generated globals (``rhmpc_osqp_solver``) and workspace files.
@@ -289,11 +289,16 @@ def _reference_subs(reference) -> dict[str, object]:
 
 
 def _controller_arrays(controller) -> dict[str, np.ndarray]:
-    """The observer's matrices, the torque limits, q0, y0 and the output map C (y = C x + y0)."""
+    """The observer's matrices, the torque and joint limits, q0, y0 and the output map C
+    (y = C x + y0)."""
     arm, n = controller.mpc.arm, controller.nu
+    robot = getattr(arm, "robot", None)
+    lower, upper = (robot.position_limits if robot is not None
+                    else (np.full(n, -np.inf), np.full(n, np.inf)))
     predict = np.hstack([controller.observer.predict_matrix, np.zeros((2 * n, 1))])
     return {"correct": np.asarray(controller.observer.correct_matrix), "predict": predict,
             "tau_max": controller.torque_limit, "q0": np.asarray(arm.q0, dtype=float),
+            "q_min": lower, "q_max": upper,
             "gate": np.asarray(controller.observer.gate, dtype=float),
             "y0": np.asarray(arm.y0, dtype=float), "output": np.asarray(arm.C, dtype=float)}
 
@@ -351,7 +356,8 @@ def _generate_into(controller, robot: str, out: Path) -> tuple[list[str], list[s
     _check(mpc)
     if not hasattr(mpc, "_osqp"):
         raise ExportError("the controller has no OSQP solver object to generate code from")
-    model = [offset_function(mpc.arm)] if getattr(mpc.arm, "robot", None) is not None else []
+    robot_model = getattr(mpc.arm, "robot", None)
+    model = [offset_function(mpc.arm), tool_function(mpc.arm)] if robot_model is not None else []
     if controller.cancellation is not None:
         model.append(cancel_function(controller.cancellation))
     if not model:
@@ -367,14 +373,16 @@ def _generate_into(controller, robot: str, out: Path) -> tuple[list[str], list[s
             "VERSION": _version("rhmpc"), "OSQP_VERSION": _version("osqp"),
             "REACQUIRE_TICKS": controller.observer.settings.reacquire_ticks,
             "FAULT_TIMEOUT_TICKS": controller.observer.timeout_ticks,
-            "INPUT_DELAY": controller.input_delay, "CANCEL": int(controller.cancellation
-                                                                 is not None),
+            "INPUT_DELAY": controller.input_delay, "TOOL": int(robot_model is not None),
+            "CANCEL": int(controller.cancellation is not None),
             **_mpc_subs(mpc), **_reference_subs(controller.reference),
             **sizes, **template_subs(), "LATENCY_CAP": repr(LATENCY_CAP),
             "NOTES": "".join(f"\n * - {n}." for n in notes)}
     key = hashlib.sha256(repr(sorted(subs.items())).encode())
     data = _data_source(controller, robot, "@HASH@")
     key.update(data.encode())
+    for name in TEMPLATES:  # the code as well as its numbers: an edit rebuilds every cache
+        key.update(files(__package__).joinpath("templates", name).read_bytes())
     subs["HASH"] = key.hexdigest()[:16]
     (out / "rhmpc_data.c").write_text(data.replace("@HASH@", subs["HASH"]))
     for name in TEMPLATES:

@@ -358,3 +358,88 @@ def test_cmake_builds_the_libraries_and_the_example_runs(tmp_path, capsys):
     for cmd in (["cmake", "-S", str(src / "udp"), "-B", str(udp)], ["cmake", "--build", str(udp)]):
         subprocess.run(cmd, check=True, capture_output=True)
     assert (udp / "rhmpc_sil_controller").is_file() and (udp / "rhmpc_robot_client").is_file()
+
+
+@needs_cc
+@pytest.mark.parametrize("which", ["python", "c"])
+def test_forecasts_alone_drive_the_reference(which):
+    """A controller given forecasts and never a sample (a deployment whose predictor runs in
+    another process, its own RLS off): its points are the forecast's, placed, from the first
+    one on. A forecast stamped after the tick is refused and does not shut out the next ones."""
+    python, c = pair({})
+    ctl = python if which == "python" else c
+    Ts, origin = python.mpc.arm.Ts, python.reference.origin
+    center = np.array([0.01, 0.02, -0.03])
+    (python.reference if which == "python" else c).place(origin, center)
+    points = center + 1e-3 * np.column_stack([np.linspace(0.0, 4.0, 6), np.zeros(6),
+                                              np.zeros(6)])
+    dt = python.reference.dt
+    assert ctl.forecast(10, 9 * Ts, points)
+    horizon = (python.reference if which == "python" else c).horizon(10)
+    expected_x = origin[0] + 1e-3 * 4.0 * ((11 + np.arange(len(horizon))) * Ts - 9 * Ts) / (5 * dt)
+    np.testing.assert_allclose(horizon[:, 0], expected_x, atol=1e-9)
+    np.testing.assert_allclose(horizon[:, 1:], np.broadcast_to(origin[1:], (len(horizon), 2)),
+                               atol=1e-12)
+    assert not ctl.forecast(20, 1000.0, points)  # from the future: refused
+    assert ctl.forecast(30, 29 * Ts, points)     # the next one is taken
+    assert ctl.predictor_counts["external_rejected"] == 1
+
+
+@needs_cc
+def test_the_tool_position_is_pinocchios():
+    """``rhmpc_tool_position`` (the generated forward kinematics) against Pinocchio's frame
+    placement at random postures within the joint limits: 1e-12 m."""
+    import ctypes
+
+    import pinocchio as pin
+
+    python, c = pair({})
+    robot = python.mpc.arm.robot
+    lower, upper = robot.position_limits
+    rng = np.random.default_rng(3)
+    lib, p = c._lib, np.zeros(3)
+    for _ in range(20):
+        q = rng.uniform(lower, upper)
+        lib.rhmpc_tool_position(q.ctypes.data_as(ctypes.c_void_p),
+                                p.ctypes.data_as(ctypes.c_void_p))
+        data = robot.create_data()
+        pin.framesForwardKinematics(robot.model, data, q)
+        np.testing.assert_allclose(p, data.oMf[robot.ee_frame_id].translation, atol=1e-12)
+    limits = [(ctypes.c_double * c.nu).in_dll(lib, name) for name in ("rhmpc_q_min", "rhmpc_q_max")]
+    np.testing.assert_array_equal([list(v) for v in limits], [lower, upper])
+
+
+def test_the_exports_key_covers_its_templates(monkeypatch, tmp_path):
+    """An edit to a template alone gives another key (the build caches by that key)."""
+    from rhmpc.control.export import generate as gen
+
+    controller = deployable(RunConfig(), 257.0)
+    before = gen._generate_into(controller, "phantom", tmp_path / "a")[2]
+    real = gen.files
+
+    class Edited:
+        def __init__(self, inner):
+            self.inner = inner
+
+        def joinpath(self, *parts):
+            path = self.inner.joinpath(*parts)
+            return _EditedFile(path) if parts[-1] == "rhmpc_mpc.c" else (
+                Edited(path) if not parts[-1].endswith((".c", ".h", ".txt")) else path)
+
+    monkeypatch.setattr(gen, "files", lambda package: Edited(real(package)))
+    (tmp_path / "b").mkdir()
+    after = gen._generate_into(controller, "phantom", tmp_path / "b")[2]
+    assert after != before
+
+
+class _EditedFile:
+    """A template file read back with one comment added."""
+
+    def __init__(self, path):
+        self.path = path
+
+    def read_bytes(self) -> bytes:
+        return self.path.read_bytes() + b"/* edited */\n"
+
+    def read_text(self) -> str:
+        return self.read_bytes().decode()

@@ -127,6 +127,19 @@ static int held_out(rhmpc_t *ctl, const double q[RHMPC_NU], double qf[RHMPC_NU])
   return 1;
 }
 
+void rhmpc_tool_position(const double q[RHMPC_NU], double p[3]) {
+#if RHMPC_TOOL
+  const double *arg[1] = {q};
+  double *res[1] = {p};
+  model_call(rhmpc_tool, arg, res);
+#else
+  for (int c = 0; c < 3; c++) { /* y = C x + y0 at rest: x = [q - q0; 0] */
+    p[c] = rhmpc_y0[c];
+    for (int j = 0; j < RHMPC_NU; j++) p[c] += rhmpc_output[c * RHMPC_NX + j] * (q[j] - rhmpc_q0[j]);
+  }
+#endif
+}
+
 int rhmpc_step(rhmpc_t *ctl, long long tick, const double q[RHMPC_NU], double tau[RHMPC_NU]) {
   long long t0 = now_ns();
   rhmpc_public_t *pub = &ctl->pub;

@@ -108,7 +108,7 @@ enum rhmpc_status {
 @STATUS_ENUM@
   RHMPC_N_STATUS
 };
-#define RHMPC_BAD_STAMP (-1)       /* rhmpc_refresh, rhmpc_forecast: a stamp that is not finite */
+#define RHMPC_BAD_STAMP (-1)       /* rhmpc_refresh, rhmpc_forecast: a stamp not finite (or ahead) */
 #define RHMPC_BAD_FORECAST (-2)    /* rhmpc_forecast: points not finite, or a count out of range */
 #define RHMPC_STALE_FORECAST (-3)  /* rhmpc_forecast: older than the last, or than the cap */
 
@@ -156,7 +156,7 @@ typedef struct {
   double g_miss2, g_threshold2;
   double g_cal[2 * RHMPC_GATE_CALIBRATION + 1], g_sorted[RHMPC_GATE_CALIBRATION + 1];
   /* the reference */
-  int have_anchor, have_held, have_forecast, have_second, have_before;
+  int have_anchor, have_points, have_held, have_forecast, have_second, have_before;
   double anchor, held_stamp;
   double held[RHMPC_D], forecast[RHMPC_D], second[RHMPC_D], before[RHMPC_D];
   double dense[RHMPC_SPAN * RHMPC_D];
@@ -210,9 +210,12 @@ int rhmpc_refresh(rhmpc_t *ctl, long long tick, double stamp, const double *z);
 
 /* Forecast points made outside, arriving on `tick`: points[k] (RHMPC_D values each [m],
  * in the sensor's frame like z) the POI at stamp + k RHMPC_DT, k = 0 ... count - 1, points[0] the newest sample
- * as that predictor took it; 3 <= count <= RHMPC_KMAX + 1. Returns 0 (taken), RHMPC_BAD_STAMP,
- * RHMPC_BAD_FORECAST (counts[external_rejected]) or RHMPC_STALE_FORECAST (a stamp older than the
- * last taken one, or than RHMPC_LATENCY_CAP before tick: counts[external_stale]). */
+ * as that predictor took it; 4 <= count <= RHMPC_KMAX + 1 (the cubic interpolation's window).
+ * Returns 0 (taken), RHMPC_BAD_STAMP (a stamp not finite or after tick + 1: counts[
+ * external_rejected]), RHMPC_BAD_FORECAST (points not finite, or a count out of range:
+ * counts[external_rejected]) or RHMPC_STALE_FORECAST (a stamp older than the last taken one, or
+ * than RHMPC_LATENCY_CAP before tick: counts[external_stale]). It drives the reference alone,
+ * with or without rhmpc_refresh. */
 int rhmpc_forecast(rhmpc_t *ctl, long long tick, double stamp, const double *points, int count);
 
 /* One control tick from the encoders' angles q [rad]: the torques tau [N*m]. Returns an
@@ -230,6 +233,13 @@ void rhmpc_force_failures(rhmpc_t *ctl, long long count);
 extern const double rhmpc_tau_max[RHMPC_NU];
 extern const double rhmpc_q0[RHMPC_NU];
 extern const double rhmpc_y0[RHMPC_NY];
+/* The joints' position limits [rad] (the robot file's). */
+extern const double rhmpc_q_min[RHMPC_NU];
+extern const double rhmpc_q_max[RHMPC_NU];
+
+/* The tool's position p [m] at the joint angles q [rad]: the controller model's forward
+ * kinematics (a deployment compares it with the POI's samples). */
+void rhmpc_tool_position(const double q[RHMPC_NU], double p[3]);
 
 /* Names of the status codes, sources and counts, e.g. for logs outside the control loop. */
 const char *rhmpc_status_name(int status);

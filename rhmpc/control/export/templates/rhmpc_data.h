@@ -15,6 +15,7 @@
 #define RHMPC_BRAKE_TICKS @BRAKE_TICKS@ /* brake: stop the joints in this many ticks */
 #define RHMPC_OFFSET @OFFSET@ /* the output offset correction (settings.offset_correction) */
 #define RHMPC_CANCEL @CANCEL@ /* the cancellation of the controller's model (0: a linear plant) */
+#define RHMPC_TOOL @TOOL@ /* the tool's forward kinematics (0: the linear model y = C x + y0) */
 
 /* the reference (rhmpc.control.reference.ReferenceSettings) and its predictor */
 #define RHMPC_FORGETTING @FORGETTING@ /* lambda */

@@ -507,7 +507,7 @@ static int predictor_retract(rhmpc_t *ctl) {
 void rhmpc_reference_reset(rhmpc_t *ctl) {
   rhmpc_reference_t *s = &ctl->ref;
   predictor_reset(ctl);
-  s->have_anchor = s->have_held = 0;
+  s->have_anchor = s->have_held = s->have_points = 0;
   s->have_forecast = s->have_second = s->have_before = 0;
   s->held_stamp = 0.0;
   s->ext_stamp = -INFINITY;
@@ -528,7 +528,7 @@ void rhmpc_place(rhmpc_t *ctl, const double origin[3], const double center[3]) {
   rhmpc_reference_t *s = &ctl->ref;
   memmove(s->origin, origin, sizeof s->origin);
   memmove(s->center, center, sizeof s->center);
-  if (!s->have_anchor) {
+  if (!s->have_points) { /* nothing interpolated yet: hold the origin */
     for (int i = 0; i < RHMPC_SPAN; i++) memcpy(ctl->pub.points + 3 * i, s->origin, sizeof s->origin);
     return;
   }
@@ -590,6 +590,7 @@ static void interpolate(rhmpc_t *ctl, long long tick, int n_nodes, double t0,
       s->dense[i * D + c] = w[0] * r[c] + w[1] * r[D + c] + w[2] * r[2 * D + c] + w[3] * r[3 * D + c];
   }
   ctl->pub.first = tick + 1;
+  s->have_points = 1;
   if (RHMPC_GUARD_SPEED > 0.0 && held != NULL) {
     double reach = RHMPC_GUARD_MARGIN +
                    RHMPC_GUARD_SPEED * (now + RHMPC_SPAN * RHMPC_TS - held_stamp);
@@ -647,7 +648,10 @@ int rhmpc_reference_refresh(rhmpc_t *ctl, long long tick, double stamp, const do
 int rhmpc_reference_forecast(rhmpc_t *ctl, long long tick, double stamp, const double *points,
                              int count) {
   rhmpc_reference_t *s = &ctl->ref;
-  if (!isfinite(stamp)) return RHMPC_BAD_STAMP;
+  if (!isfinite(stamp) || stamp > (double)(tick + 1) * RHMPC_TS) { /* none from the future */
+    ctl->pub.counts[RHMPC_EXTERNAL_REJECTED]++;
+    return RHMPC_BAD_STAMP;
+  }
   if (points == NULL || count < 4 || count > RHMPC_KMAX + 1 || !all_finite(points, count * D)) {
     ctl->pub.counts[RHMPC_EXTERNAL_REJECTED]++;
     return RHMPC_BAD_FORECAST;
