@@ -28,9 +28,10 @@ import numpy as np
 from scipy.signal import butter, sosfiltfilt
 
 from rhmpc.cli.presets import PRESETS
-from rhmpc.control.reference import ArrayTruth, ExactReference
+from rhmpc.control.reference import ExactReference
 from rhmpc.experiment import RunConfig
 from rhmpc.experiment.assembly import build_controller, build_run
+from rhmpc.positions import ArrayTruth
 from rhmpc.sim.heart.analysis import fill_gaps
 from rhmpc.sim.loop import run_closed_loop
 from rhmpc.studies.paper import COLUMNS

@@ -68,8 +68,8 @@ def one(job: tuple) -> tuple[str, int, dict]:
     """Score one ``(scenario, seed, predictor, sets, duration, rr)`` job: RMS and max of the
     25-ms error [mm], the time above 1 mm [ms], and the predictor's counts."""
     scenario, seed, predictor, sets, duration, rr = job
-    from rhmpc.control.reference import embed3
     from rhmpc.experiment.config import parse_value
+    from rhmpc.positions import embed3
 
     changes = {"scenario": scenario, "seed": seed, "predictor": predictor, "rr": rr,
                "loop.duration": duration, "loop.settling": 10.0}

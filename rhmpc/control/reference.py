@@ -67,14 +67,15 @@ import numpy as np
 
 from rhmpc.control.gate import OutlierGate
 from rhmpc.control.interpolation import WINDOW, interpolation_matrix, lagrange_weights, windows
+from rhmpc.positions import ArrayTruth, embed3
 from rhmpc.predictors.base import is_measured
 
 #: The most latency the exported controller's refresh forecasts across, and the oldest a
 #: forecast from outside may be when it arrives [s].
 LATENCY_CAP = 0.25
 
-__all__ = ["LATENCY_CAP", "ArrayTruth", "ExactReference", "PredictedReference",
-           "ReferenceSettings", "embed3", "interpolation_matrix", "lagrange_weights", "windows"]
+__all__ = ["LATENCY_CAP", "ExactReference", "PredictedReference", "ReferenceSettings",
+           "interpolation_matrix", "lagrange_weights", "windows"]
 
 
 @dataclass(frozen=True)
@@ -141,16 +142,6 @@ class ReferenceSettings:
     def gate_floor(self) -> float | None:
         """The outlier gate's fixed floor [m] (0: no gate), or None for one from the data."""
         return None if self.outlier_gate == "auto" else float(self.outlier_gate)
-
-
-def embed3(p: np.ndarray) -> np.ndarray:
-    """(n, d) positions with d ≤ 3 as (n, 3), missing axes zero (1-D motion along x)."""
-    p = np.atleast_2d(p)
-    if p.shape[1] == 3:
-        return p
-    out = np.zeros((p.shape[0], 3))
-    out[:, : p.shape[1]] = p
-    return out
 
 
 def _origin(origin, name: str = "origin") -> np.ndarray:
@@ -380,21 +371,6 @@ class PredictedReference:
             return self._hold
         start = min(max(tick + 1 - self._first, 0), self._span - self.N)
         return self._placed[start : start + self.N]
-
-
-class ArrayTruth:
-    """Centred POI truth from an array of positions at ticks 0 … n − 1 (n, d), and the
-    ``center`` [m] it was centred on (zero by default)."""
-
-    def __init__(self, truth: np.ndarray, center: np.ndarray | None = None) -> None:
-        self.truth = np.array(truth, dtype=float).reshape(len(truth), -1)
-        self.n_ticks, self.dim = self.truth.shape
-        self.center = np.zeros(self.dim) if center is None else np.asarray(center, dtype=float)
-        if not np.all(np.isfinite(self.truth).any(axis=0)):
-            raise ValueError("the truth has no finite sample on some axis")
-
-    def window(self, i0: int, i1: int) -> np.ndarray:
-        return self.truth[i0:i1]
 
 
 class ExactReference:

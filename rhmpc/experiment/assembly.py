@@ -298,7 +298,7 @@ def check_reach(robot: Robot, truth, anchor: np.ndarray, ticks: int) -> float:
     outside is warned about, with the distance and the fix. The run goes on: the controller
     keeps the arm in its envelope and takes its safe actions (a recorded jump can leave the
     workspace for a moment)."""
-    from rhmpc.control.reference import embed3
+    from rhmpc.positions import embed3
 
     worst, at, q = 0.0, 0.0, robot.q0
     for tick in np.linspace(0, ticks - 1, min(REACH_POINTS, ticks)).astype(int):

@@ -32,9 +32,9 @@ from pathlib import Path
 import numpy as np
 
 from rhmpc import io
-from rhmpc.control.reference import embed3
 from rhmpc.experiment import RunConfig, run_experiment
 from rhmpc.experiment.assembly import build_run
+from rhmpc.positions import embed3
 from rhmpc.runtime import host, processes
 from rhmpc.runtime.build import build_controller
 from rhmpc.sim.loop.metrics import MeasuredScore

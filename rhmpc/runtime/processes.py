@@ -34,7 +34,7 @@ import numpy as np
 import pinocchio as pin
 
 from rhmpc import io
-from rhmpc.control.reference import embed3
+from rhmpc.positions import embed3
 from rhmpc.runtime.host import percentiles
 from rhmpc.runtime.wire import Link, run_clock
 from rhmpc.sim.loop.closed_loop import Refreshes, _note_outliers

@@ -39,7 +39,7 @@ from collections.abc import Callable, Iterable, Iterator
 
 import numpy as np
 
-from rhmpc.control.reference import ArrayTruth
+from rhmpc.positions import ArrayTruth
 from rhmpc.sim.loop.clock import PredictorClock, arrival_tick
 from rhmpc.sim.loop.metrics import warm_ns
 from rhmpc.sim.loop.results import (

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
-from rhmpc.control.reference import embed3
+from rhmpc.positions import embed3
 from rhmpc.robots import Robot
 from rhmpc.sim.loop.metrics import MeasuredScore, RunningTracking, TickHistogram, rms
 from rhmpc.sim.loop.trace import DecimatedTrace, TraceFile

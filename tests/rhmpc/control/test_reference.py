@@ -254,7 +254,7 @@ def test_samples_in_the_sensors_frame_are_placed_by_its_registration():
 
 def test_exact_reference_read_in_windows_is_the_whole_array():
     """Gaps longer than a window, at window edges and at both ends, bridged as on the array."""
-    from rhmpc.control.reference import ArrayTruth
+    from rhmpc.positions import ArrayTruth
 
     rng = np.random.default_rng(3)
     truth = rng.normal(size=(3000, 3))

@@ -9,13 +9,9 @@ from rhmpc.control.cancellation import NonlinearityCancellation
 from rhmpc.control.controller import Controller
 from rhmpc.control.mpc import RecedingHorizonMPC
 from rhmpc.control.observer import JointObserver
-from rhmpc.control.reference import (
-    ArrayTruth,
-    ExactReference,
-    PredictedReference,
-    ReferenceSettings,
-)
+from rhmpc.control.reference import ExactReference, PredictedReference, ReferenceSettings
 from rhmpc.control.settings import MPCSettings
+from rhmpc.positions import ArrayTruth
 from rhmpc.sim.loop import LoopSettings, poi_truth, run_closed_loop
 from rhmpc.sim.loop.clock import predictor_clock
 from rhmpc.sim.plant import make_plant
