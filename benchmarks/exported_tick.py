@@ -99,7 +99,7 @@ def plant_tick(label: str, ticks: int = 4000) -> dict:
     import numpy as np
 
     from rhmpc.experiment import RunConfig, build_run
-    from rhmpc.studies.yardstick import GainTick
+    from rhmpc.timing.yardstick import GainTick
 
     config = RunConfig(predictor="generalized", seed=2)
     if label != "ideal":

@@ -16,7 +16,7 @@ import argparse
 import _results as R
 
 from rhmpc.experiment import RunConfig, run_experiment
-from rhmpc.studies.yardstick import GainTick
+from rhmpc.timing.yardstick import GainTick
 
 PREDICTORS = ("exact", "one-step", "generalized", "ekf", "hold")
 FIGURE = R.ROOT / "docs" / "_static" / "tracking-run.png"

@@ -14,6 +14,8 @@ Layers, from the bottom (peers of one layer do not import each other):
    ``rhmpc.sim.heart``'s motion sources); ``rhmpc.sim.sources`` (a scenario or a recording);
    ``rhmpc.sim.loop``. It never imports ``rhmpc.control`` (:data:`INDEPENDENT`): the loop runs
    any controller behind ``refresh`` and ``step``, and the experiment composes the two
+2.5 ``rhmpc.timing``, the instruments a run's timing is measured with (the gain tick, the
+    host's stalls)
 3. ``rhmpc.experiment``
 4. ``rhmpc.studies``, ``rhmpc.tuning``; above them ``rhmpc.runtime`` (the deployment's
    processes, which reuse the tuning's processes that die with their parent)
@@ -57,6 +59,7 @@ LAYERS: tuple[tuple[str, float, str], ...] = (
     ("rhmpc.sim.sensors", 2.1, "rhmpc.sim.sensors"),
     ("rhmpc.sim.sources", 2.2, "rhmpc.sim.sources"),
     ("rhmpc.sim.loop", 2.3, "rhmpc.sim.loop"),
+    ("rhmpc.timing", 2.5, "rhmpc.timing"),
     ("rhmpc.experiment", 3, "rhmpc.experiment"),
     ("rhmpc.studies", 4, "rhmpc.studies"),
     ("rhmpc.tuning", 4, "rhmpc.tuning"),

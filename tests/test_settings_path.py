@@ -278,8 +278,6 @@ CHAIN = {"rhmpc/experiment/config.py": "rhmpc/cli/simulate.py",
          "sim/loop/closed_loop.py": "rhmpc/experiment/run.py"}
 #: The files whose hand-offs the design page's table lists.
 HANDING = ("rhmpc/cli/simulate.py", *list(CHAIN)[:-1], "sim/sources.py")
-#: The one call that climbs a layer: the gain tick the command hands down to be timed.
-YARDSTICK = ("rhmpc/experiment/run.py", "rhmpc/studies/yardstick.py")
 
 
 def drawn_handoffs(text: str) -> set[tuple[str, str]]:
@@ -313,7 +311,7 @@ def test_the_settings_go_down_the_drawn_chain(crossings: list[Crossing]) -> None
     """Every hand-off from a file of the chain is a row of the design page's table, and
     every row is taken by one of the runs; the chain's files are first entered in order, from
     the file that hands them the settings; nothing calls back into a file further up the
-    stack, and the only call up a layer is the gain tick."""
+    stack, and no call goes up a layer."""
     drawn = drawn_handoffs(DOC.read_text(encoding="utf-8"))
     taken = set()
     for crossing in crossings:
@@ -326,7 +324,7 @@ def test_the_settings_go_down_the_drawn_chain(crossings: list[Crossing]) -> None
         assert [f for f in first if f in CHAIN] == list(CHAIN)
         assert {f: first[f] for f in list(CHAIN)[:-1]} == dict(list(CHAIN.items())[:-1])
         assert [e for e in crossing.everything if e.back and e.caller in HANDING] == []
-        assert {(e.caller, e.callee) for e in crossing.upward()} == {YARDSTICK}
+        assert {(e.caller, e.callee) for e in crossing.upward()} == set()
     assert [row for row in drawn if not any(_drawn(edge, {row}) for edge in taken)] == []
 
 

@@ -116,7 +116,7 @@ def add_host_stalls_option(p: argparse.ArgumentParser, after: str) -> None:
     """``--host-stalls SECONDS``: the host's stalls, timed after ``after``."""
     p.add_argument("--host-stalls", type=float, default=0.0, metavar="SECONDS",
                    help=f"after {after}, time a busy loop for SECONDS and report the host's "
-                   "stalls beside the tick's maximum (rhmpc.studies.host.host_stalls; default 0: "
+                   "stalls beside the tick's maximum (rhmpc.timing.host.host_stalls; default 0: "
                    "off)")
 
 
@@ -129,8 +129,8 @@ def check_host_stalls(seconds: float) -> None:
 
 def host_stalls_document(seconds: float, gain_us: float | None) -> dict:
     """The host's stalls in a busy loop of ``seconds``, in µs and in gain ticks of ``gain_us``
-    (:func:`rhmpc.studies.host.stall_summary`)."""
-    from rhmpc.studies.host import host_stalls, stall_summary
+    (:func:`rhmpc.timing.host.stall_summary`)."""
+    from rhmpc.timing.host import host_stalls, stall_summary
 
     return stall_summary(host_stalls(seconds), seconds, gain_us)
 
@@ -306,7 +306,7 @@ def run(args: argparse.Namespace) -> int:
     stalls = getattr(args, "host_stalls", 0.0)
     check_host_stalls(stalls)
     try:
-        from rhmpc.studies.yardstick import GainTick  # timed in the same run
+        from rhmpc.timing.yardstick import GainTick  # timed in the same run
 
         result, doc = run_experiment(config, progress=not args.json, trace=trace,
                                      gain_tick=GainTick, implementation=args.controller)

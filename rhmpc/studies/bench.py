@@ -9,7 +9,7 @@ bounds (so that the QP has active constraints). Every tick measures, with
   on: OSQP runs only on ticks where the unconstrained minimiser violates a bound);
 * the same MPC with OSQP on *every* tick (:class:`EveryTick`: levels 1 and 2 of the cascade
   skipped), whole call and its parts (``mpc.stats.parts_ns``), fed the same state and reference;
-* the *gain tick* g (:class:`rhmpc.studies.yardstick.GainTick`): the unconstrained gain on
+* the *gain tick* g (:class:`rhmpc.timing.yardstick.GainTick`): the unconstrained gain on
   p = [x; r; u_{−1}], u = K p + k₀ — the yardstick every timing is a multiple of — and the same
   mat-vec in plain NumPy (``K @ concatenate(...) + k0``), so that g reads as what it is;
 * an *exact tick*: the same QP (same P, q, A, l, u) solved by the active-set solver DAQP,
@@ -46,7 +46,7 @@ from rhmpc.experiment.tables import to_dict
 from rhmpc.robots import linearize, load_robot
 from rhmpc.robots.linearize import LinearArm
 from rhmpc.sim.loop.metrics import warm_ns
-from rhmpc.studies.yardstick import GainTick, numpy_gain_step
+from rhmpc.timing.yardstick import GainTick, numpy_gain_step
 
 #: Controllers :func:`run_bench` can time: the Python MPC alone, or with its compiled twin.
 CONTROLLERS: tuple[str, ...] = ("python", "c")

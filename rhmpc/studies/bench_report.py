@@ -74,7 +74,7 @@ def format_table(result: dict) -> str:
         f"max {result['tracking_max_mm']:.3f} mm (includes the reference jumps)",
     ]
     if "host_stalls" in result:
-        from rhmpc.studies.run_report import stall_line
+        from rhmpc.timing.host import stall_line
 
         lines.append("host: " + stall_line(result["host_stalls"]))
     if "exported_tick_us" in result:

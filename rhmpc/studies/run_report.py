@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from rhmpc.experiment.faults import REPORTED as FAULT_COUNTS
 from rhmpc.studies.figures import plot_run as plot_run
+from rhmpc.timing.host import stall_line
 
 
 def _seconds(x: float) -> str:
@@ -217,17 +218,6 @@ def _gate_line(gate: dict) -> str:
         where = f"floor {floor:.3f} mm (set)"
     return (f"{where}; rejected {gate.get('outliers_rejected', 0)}, unlocked "
             f"{gate.get('gate_unlocked', 0)}, retracted {gate.get('retracted', 0)} samples")
-
-
-def stall_line(stalls: dict) -> str:
-    """What the host took from a busy loop (:func:`rhmpc.studies.host.host_stalls`), in a line."""
-    over = stalls.get("over_g")
-    longest = f"{stalls['longest_us']:.0f} µs" + (
-        f" = {stalls['longest_g']:.0f} g" if "longest_g" in stalls else "")
-    return (f"a busy loop of {stalls['seconds']:g} s stalled {stalls['stalls']} times ≥ "
-            f"{stalls['floor_us']:g} µs"
-            + (f", {stalls[f'over_{over:g}_g']} of them > {over:g} g" if over else "")
-            + f"; the longest {longest}, a floor under a tick's maximum on this host")
 
 
 def _in_gain_ticks(doc: dict) -> str:

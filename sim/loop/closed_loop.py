@@ -231,7 +231,7 @@ def run_closed_loop(plant, controller, truth, stream, settings: LoopSettings,
         Write every tick to this NPZ file as the run goes (:class:`rhmpc.sim.loop.trace.TraceFile`).
     yardstick
         A reference computation ``yardstick(x̂, r, u_{−1})`` (the gain tick g of
-        :class:`rhmpc.studies.yardstick.GainTick`) timed on every 64th tick after the controller,
+        :class:`rhmpc.timing.yardstick.GainTick`) timed on every 64th tick after the controller,
         with the tick's own inputs, so that tick times can be stated as ratios to it measured in
         the same run (``LoopResult.yardstick_us``); not part of the tick, its result is not used.
     chunk_ticks

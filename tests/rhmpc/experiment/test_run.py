@@ -31,7 +31,7 @@ def small_config(**changes):
 def test_result_document_has_the_documented_keys():
     import json
 
-    from rhmpc.studies.yardstick import GainTick
+    from rhmpc.timing.yardstick import GainTick
 
     _, doc = run_experiment(small_config(), gain_tick=GainTick)
     doc = json.loads(json.dumps(doc))  # it is plain JSON

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from rhmpc.studies.host import host_stalls, stall_summary
+from rhmpc.timing.host import host_stalls, stall_summary
 
 
 def scripted_clock(steps_ns):

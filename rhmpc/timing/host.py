@@ -8,7 +8,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-__all__ = ["STALL_FLOOR_NS", "host_stalls", "stall_summary"]
+__all__ = ["STALL_FLOOR_NS", "host_stalls", "stall_line", "stall_summary"]
 
 
 #: The shortest gap :func:`host_stalls` keeps [ns]: longer than any pause of the loop itself.
@@ -52,3 +52,14 @@ def stall_summary(gaps_ns: np.ndarray, seconds: float, gain_us: float | None = N
         doc["over_g"] = float(over_g)  # the threshold of the count below [g]
         doc[f"over_{over_g:g}_g"] = int(np.count_nonzero(gaps_us > over_g * gain_us))
     return doc
+
+
+def stall_line(stalls: dict) -> str:
+    """What the host took from a busy loop (:func:`host_stalls`), in a line."""
+    over = stalls.get("over_g")
+    longest = f"{stalls['longest_us']:.0f} µs" + (
+        f" = {stalls['longest_g']:.0f} g" if "longest_g" in stalls else "")
+    return (f"a busy loop of {stalls['seconds']:g} s stalled {stalls['stalls']} times ≥ "
+            f"{stalls['floor_us']:g} µs"
+            + (f", {stalls[f'over_{over:g}_g']} of them > {over:g} g" if over else "")
+            + f"; the longest {longest}, a floor under a tick's maximum on this host")
