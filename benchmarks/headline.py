@@ -16,7 +16,6 @@ import argparse
 import _results as R
 
 from rhmpc.experiment import RunConfig, run_experiment
-from rhmpc.timing.yardstick import GainTick
 
 PREDICTORS = ("exact", "one-step", "generalized", "ekf", "hold")
 FIGURE = R.ROOT / "docs" / "_static" / "tracking-run.png"
@@ -58,7 +57,7 @@ def main() -> None:
     for name in PREDICTORS:
         config = RunConfig(predictor=name, scenario="fixed-a2-top", seed=0).replace(
             **{"loop.duration": duration, "loop.settling": settling})
-        result, doc = run_experiment(config, gain_tick=GainTick)
+        result, doc = run_experiment(config, gain_tick=True)
         if name == "generalized":
             figure(result, FIGURE)
         d = {"predictor": name, "rms_error_mm": doc["rms_error_mm"],

@@ -17,6 +17,7 @@ from rhmpc.experiment.config import RunConfig
 from rhmpc.experiment.faults import fault_marks, fault_report
 from rhmpc.sim.loop import LoopResult, run_closed_loop
 from rhmpc.sim.sensors import DEFAULT_PLAYBACK
+from rhmpc.timing.yardstick import GainTick
 
 
 def versions() -> dict[str, str]:
@@ -31,7 +32,8 @@ def versions() -> dict[str, str]:
 
 
 def run_experiment(config: RunConfig, progress: bool = False, trace: str | None = None,
-                   gain_tick=None, implementation: str = "python") -> tuple[LoopResult, dict]:
+                   gain_tick: bool = False,
+                   implementation: str = "python") -> tuple[LoopResult, dict]:
     """Run ``config`` in closed loop; returns the :class:`~rhmpc.sim.loop.LoopResult` and its
     document.
 
@@ -39,9 +41,9 @@ def run_experiment(config: RunConfig, progress: bool = False, trace: str | None 
     ``rms_effort_mNm``, ``tick_us`` with ``p50``/``p99``/``max``, ``fallbacks`` …), the wall
     time, the peak resident memory of the process so far (``peak_rss_mb``) and the package
     versions. ``trace``: write every tick to this NPZ file (:mod:`rhmpc.sim.loop.trace`).
-    ``gain_tick``: the class of ``rhmpc bench``'s gain tick (``GainTick(mpc)(x, r, u_prev)``),
-    timed in the run on every 64th tick so that the document has ``gain_tick_us`` and the
-    tick's ratios to its p50 (``tick_ratio_to_gain``). ``implementation``: ``"python"`` or
+    ``gain_tick``: time the gain tick g (:class:`~rhmpc.timing.yardstick.GainTick`) in the run
+    on every 64th tick, so that the document has ``gain_tick_us`` and the tick's ratios to its
+    p50 (``tick_ratio_to_gain``). ``implementation``: ``"python"`` or
     ``"c"`` (:func:`~rhmpc.experiment.assembly.build_run`). With faults (``config.faults``),
     the document's ``faults`` holds one record per fault
     (:func:`rhmpc.experiment.faults.fault_report`).
@@ -55,14 +57,14 @@ def run_experiment(config: RunConfig, progress: bool = False, trace: str | None 
         result = run_closed_loop(
             run.plant, run.controller, run.truth, run.stream, config.loop, run.clock,
             anchor=run.anchor, robot=run.robot, progress=callback, trace_file=trace,
-            yardstick=None if gain_tick is None else _gain_tick(run.controller, gain_tick),
+            yardstick=_gain_tick(run.controller) if gain_tick else None,
             marks=marks, points=run.points, measured=run.measured,
         )
     finally:
         if bar is not None:
             bar.close()
     wall = time.perf_counter() - wall
-    return result, document(config, run, result, wall, implementation, gain_tick is not None)
+    return result, document(config, run, result, wall, implementation, gain_tick)
 
 
 def _say(text: str) -> None:
@@ -170,11 +172,11 @@ def _clock_document(config: RunConfig, run: Run) -> dict[str, Any]:
     }
 
 
-def _gain_tick(controller, gain_tick):
+def _gain_tick(controller) -> GainTick | None:
     """``yardstick(x, r, u_prev)``: the gain tick of the controller's MPC (the C controller's:
     that of the Python MPC it was generated from), or None if it has none (a stand-in)."""
     try:
-        return gain_tick(controller.mpc)
+        return GainTick(controller.mpc)
     except AttributeError:
         return None
 
