@@ -16,9 +16,9 @@ import warnings
 
 import numpy as np
 
+from rhmpc.paper.tables import COLUMNS
 from rhmpc.predictors import make_predictor
 from rhmpc.sim.heart import make_scenario
-from rhmpc.studies.paper import COLUMNS
 
 NAMES = (*COLUMNS, "arrhythmia-apb")  # Tuna et al.'s six replicas and an arrhythmia
 PREDICTORS = ("hold", "one-step", "generalized", "ekf", "dual-ekf", "ar", "last-cycle")

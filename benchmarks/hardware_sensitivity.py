@@ -33,7 +33,7 @@ import _results as R
 
 from rhmpc.cli.presets import PRESETS
 from rhmpc.experiment import RunConfig, run_experiment
-from rhmpc.studies.paper import TUNA2013
+from rhmpc.paper.tables import TUNA2013
 
 #: The preset each sweep changes, and the published table beside it.
 PRESET = {"resonance": ("tuna2013-hardware", "II"), "mismatch": ("tuna2013-hardware", "II"),

@@ -23,7 +23,7 @@ import argparse
 import numpy as np
 
 from rhmpc.experiment import RunConfig, run_experiment
-from rhmpc.studies.paper import COLUMNS
+from rhmpc.paper.tables import COLUMNS
 
 REPLICAS = COLUMNS  # Tuna et al. Tables I–III
 

@@ -16,10 +16,10 @@ import json
 
 import numpy as np
 
+from rhmpc.paper.tables import COLUMNS
 from rhmpc.predictors import make_predictor
 from rhmpc.predictors.monitor import rms_by_lead
 from rhmpc.sim.heart import make_scenario
-from rhmpc.studies.paper import COLUMNS
 
 SCENARIOS = ("invivo-video", *COLUMNS)
 ROWS = ("hold", "last-cycle", "last-cycle:yuen2008", "one-step", "generalized", "ekf",

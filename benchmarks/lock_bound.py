@@ -14,8 +14,8 @@ import argparse
 
 import numpy as np
 
+from rhmpc.paper.tables import COLUMNS
 from rhmpc.sim.heart import make_scenario
-from rhmpc.studies.paper import COLUMNS
 
 REPLICAS = COLUMNS  # Tuna et al. Tables I–III
 

@@ -18,7 +18,7 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
-from rhmpc.studies.paper import COLUMNS
+from rhmpc.paper.tables import COLUMNS
 
 REPLICAS = COLUMNS  # Tuna et al. Tables I–III
 NAMES = ("hold", "ekf", "dual-ekf", "ar", "fading-ar", "wflc", "one-step", "generalized",

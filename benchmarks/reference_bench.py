@@ -23,7 +23,7 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
-from rhmpc.studies.paper import COLUMNS
+from rhmpc.paper.tables import COLUMNS
 
 SCENARIOS = COLUMNS  # Tuna et al. Tables I–III
 

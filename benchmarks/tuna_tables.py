@@ -38,9 +38,9 @@ import _results as R
 import numpy as np
 
 from rhmpc.cli.compare import PAPER_SEEDS
+from rhmpc.paper.findings import cross_finding, findings
+from rhmpc.paper.tables import COLUMNS, SETTING, TUNA2013, cell
 from rhmpc.predictors import settings_for
-from rhmpc.studies.findings import cross_finding, findings
-from rhmpc.studies.paper import COLUMNS, SETTING, TUNA2013, cell
 
 #: The README's command of each setting.
 PRESETS = {"simulation": "tuna2013", "hardware": "tuna2013-hardware"}

@@ -12,10 +12,10 @@ by 2 mm every 250 ms, so that the torque bounds bind after each jump (this is th
 import matplotlib.pyplot as plt
 import numpy as np
 
+from rhmpc.bench.ticks import heart_like_reference
 from rhmpc.control.mpc import RecedingHorizonMPC
 from rhmpc.control.settings import MPCSettings
 from rhmpc.robots import linearize, load_robot
-from rhmpc.studies.bench import heart_like_reference
 
 arm = linearize(load_robot("phantom"))
 mpc = RecedingHorizonMPC(arm, MPCSettings())

@@ -5,10 +5,17 @@ The package's parts (``docs/design/index.md`` maps what each may import):
 - :mod:`rhmpc.io` — the one guarded reader, the one atomic writer, the table of bounds;
 - :mod:`rhmpc.robots`, :mod:`rhmpc.predictors` — the robots, the heart-motion predictors;
 - :mod:`rhmpc.sim` — the simulated world: heart, sensors, plant, recordings, closed loop;
+- :mod:`rhmpc.positions` — what the controller and the world share: a truth held in an array;
 - :mod:`rhmpc.control` — the controller: QP, per-tick MPC, reference builder, settings;
 - :mod:`rhmpc.experiment` — one run's configuration (TOML) and its assembly;
-- :mod:`rhmpc.studies` — bench, prediction studies, the Tables I–III comparison;
+- :mod:`rhmpc.timing` — the gain tick every timing is stated in, the host's stalls;
+- :mod:`rhmpc.report` — one run's summary, figures, 3-D replay and MAT file;
+- :mod:`rhmpc.bench` — the MPC's tick against the gain tick and an exact solve;
+- :mod:`rhmpc.openloop` — the predictors open loop: on recordings, in synthetic studies;
 - :mod:`rhmpc.tuning` — resumable parameter sweeps;
+- :mod:`rhmpc.compare` — predictors × scenarios or recordings in closed loop, the table;
+- :mod:`rhmpc.paper` — Tuna et al.'s Tables I–III beside ours, and its findings;
+- :mod:`rhmpc.runtime` — the deployment in real time (``rhmpc sil``);
 - :mod:`rhmpc.cli` — the ``rhmpc`` console script.
 
 ``rhmpc.robots``, ``rhmpc.predictors`` and ``rhmpc.sim`` keep their folders at the repository's

@@ -17,8 +17,11 @@ Layers, from the bottom (peers of one layer do not import each other):
 2.5 ``rhmpc.timing``, the instruments a run's timing is measured with (the gain tick, the
     host's stalls)
 3. ``rhmpc.experiment``
-4. ``rhmpc.studies``, ``rhmpc.tuning``; above them ``rhmpc.runtime`` (the deployment's
-   processes, which reuse the tuning's processes that die with their parent)
+4. the rooms built on runs: ``rhmpc.report`` (one run's report and figures), ``rhmpc.bench``,
+   ``rhmpc.openloop`` (the predictors open loop), ``rhmpc.tuning``
+4.5 ``rhmpc.compare`` and ``rhmpc.runtime`` (the deployment's processes), which run through
+    the tuning's processes that die with their parent
+4.7 ``rhmpc.paper``, the published tables beside ``rhmpc.compare``'s cells
 5. ``rhmpc.cli``
 
 Every ``import`` statement counts, including those inside functions (deferred imports are
@@ -61,9 +64,13 @@ LAYERS: tuple[tuple[str, float, str], ...] = (
     ("rhmpc.sim.loop", 2.3, "rhmpc.sim.loop"),
     ("rhmpc.timing", 2.5, "rhmpc.timing"),
     ("rhmpc.experiment", 3, "rhmpc.experiment"),
-    ("rhmpc.studies", 4, "rhmpc.studies"),
+    ("rhmpc.report", 4, "rhmpc.report"),
+    ("rhmpc.bench", 4, "rhmpc.bench"),
+    ("rhmpc.openloop", 4, "rhmpc.openloop"),
     ("rhmpc.tuning", 4, "rhmpc.tuning"),
+    ("rhmpc.compare", 4.5, "rhmpc.compare"),
     ("rhmpc.runtime", 4.5, "rhmpc.runtime"),
+    ("rhmpc.paper", 4.7, "rhmpc.paper"),
     ("rhmpc.cli", 5, "rhmpc.cli"),
 )
 #: The peer groups of layer 0.9 that every part above may import, each other included.
@@ -184,7 +191,8 @@ def test_every_module_has_a_layer() -> None:
     ("rhmpc/control/bad.py", "from rhmpc.sim.loop import run_closed_loop\n", "layer 2"),
     ("rhmpc/control/bad.py", "def f():\n    from rhmpc.experiment import run_experiment\n",
      "layer 3"),
-    ("rhmpc/studies/bad.py", "from rhmpc.tuning import spec\n", "layer 4"),
+    ("rhmpc/bench/bad.py", "from rhmpc.tuning import spec\n", "layer 4"),
+    ("rhmpc/compare/bad.py", "from rhmpc.paper.tables import paper_table\n", "layer 4.7"),
     ("rhmpc/tuning/bad.py", "from ..cli import main\n", "layer 5"),
     ("robots/bad.py", "import rhmpc.predictors\n", "layer 0"),
     ("predictors/bad.py", "import pinocchio\n", "numpy, scipy and rhmpc.io only"),

@@ -17,7 +17,7 @@ import pytest
 from rhmpc.cli import build_parser
 from rhmpc.experiment import RunConfig
 from rhmpc.experiment.presets import PRESETS
-from rhmpc.studies.paper import paper_table
+from rhmpc.paper.tables import paper_table
 
 ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text()

@@ -6,13 +6,13 @@ import argparse
 import json
 import sys
 
+from rhmpc.bench.report import format_table
+from rhmpc.bench.ticks import run_bench
 from rhmpc.cli import COMMANDS
 from rhmpc.cli.simulate import add_host_stalls_option, check_host_stalls, host_stalls_document
 from rhmpc.control.settings import MPCSettings
 from rhmpc.errors import UsageError
 from rhmpc.robots import ROBOTS
-from rhmpc.studies.bench import run_bench
-from rhmpc.studies.bench_report import format_table
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -32,8 +32,8 @@ from rhmpc.errors import UsageError
 from rhmpc.experiment import RunConfig, run_experiment
 from rhmpc.experiment.config import with_split
 from rhmpc.experiment.fitting import with_models
+from rhmpc.paper.tuna2013 import COLUMNS
 from rhmpc.sim.recordings.shipped import resolve_all
-from rhmpc.studies.tuna2013 import COLUMNS
 
 #: Tuna et al. Table I/II column order (fixed rate: animals 1, 2; varying: 1, 3 top; 1, 3 side).
 TABLE_SCENARIOS = COLUMNS
@@ -190,8 +190,8 @@ def setting_of_config(config: RunConfig) -> str:
 
 def _predictors(args: argparse.Namespace, base: RunConfig) -> list[str]:
     """--predictors, or the default rows: the published tables' with --paper."""
+    from rhmpc.paper.tables import table_predictors
     from rhmpc.predictors import predictor_names
-    from rhmpc.studies.paper import table_predictors
 
     if args.predictors:
         names = args.predictors.split(",")
@@ -245,7 +245,7 @@ def _scenario_columns(args: argparse.Namespace) -> list[tuple[str, dict]]:
 
 def _data_columns(args: argparse.Namespace) -> list[tuple[str, dict]]:
     """(column, settings) of each recording, or of each tracked point with --points."""
-    from rhmpc.studies.tracks import file_points, parse_points
+    from rhmpc.openloop.tracks import file_points, parse_points
 
     if args.scenarios is not None or args.full or args.paper:
         raise UsageError("--scenarios, --full and --paper apply to scenarios, not --data")
@@ -315,7 +315,7 @@ def run(args: argparse.Namespace) -> int:
     docs = [outcome.by_key[job.key] for job in done]
     results = _document(docs, done, args, outcome.interrupted)
     if args.split:
-        from rhmpc.studies.loop_gap import gap_rows
+        from rhmpc.compare.loop_gap import gap_rows
 
         results["loop_gap"] = gap_rows(docs, beside)
     if args.out:
@@ -337,14 +337,14 @@ def _document(docs: list[dict], done: list[Job], args: argparse.Namespace,
               interrupted: bool) -> dict:
     """What ``--json`` prints and ``--out`` writes: the runs, the cells and, with --paper, the
     published tables beside ours and the findings."""
-    from rhmpc.studies.comparison import cells_document, json_ready
+    from rhmpc.compare.table import cells_document, json_ready
 
     predictors = list(dict.fromkeys(job.config.predictor for job in done))
     columns = list(dict.fromkeys(job.column for job in done))
     out = {"runs": docs, "seeds": seeds_of(args), "interrupted": interrupted,
            "cells": cells_document(docs, predictors, columns)}
     if args.paper and done:
-        from rhmpc.studies.paper import paper_document
+        from rhmpc.paper.tables import paper_document
 
         out["paper"] = paper_document(docs, predictors, columns, setting=_setting(done))
     return json_ready(out)
@@ -353,7 +353,7 @@ def _document(docs: list[dict], done: list[Job], args: argparse.Namespace,
 def _print_results(results: dict, docs: list[dict], todo: list[Job],
                    args: argparse.Namespace) -> None:
     """The JSON document, the CSV cells, or the tables (each printed as soon as it is made)."""
-    from rhmpc.studies.comparison import comparison_csv, comparison_table
+    from rhmpc.compare.table import comparison_csv, comparison_table
 
     predictors = list(dict.fromkeys(job.config.predictor for job in todo))
     columns = list(dict.fromkeys(job.column for job in todo))
@@ -367,12 +367,12 @@ def _print_results(results: dict, docs: list[dict], todo: list[Job],
         return
     print(comparison_table(docs, predictors, columns, recordings, seeds_of(args)), flush=True)
     if args.paper:
-        from rhmpc.studies.paper import paper_table
+        from rhmpc.paper.tables import paper_table
 
         print()
         print(paper_table(docs, predictors, columns, setting=_setting(todo)), flush=True)
     if results.get("loop_gap"):
-        from rhmpc.studies.loop_gap import gap_table
+        from rhmpc.compare.loop_gap import gap_table
 
         print("\n".join(gap_table(results["loop_gap"])), flush=True)
 
@@ -380,11 +380,11 @@ def _print_results(results: dict, docs: list[dict], todo: list[Job],
 def open_loops(todo: list[Job], args: argparse.Namespace,
                folder: Path) -> tuple[dict[str, dict], list[Job]]:
     """Per recording column of a split: every predictor's open-loop forecast of the scored
-    samples one sample ahead (:func:`rhmpc.studies.loop_gap.open_loop_beside`), made here
+    samples one sample ahead (:func:`rhmpc.compare.loop_gap.open_loop_beside`), made here
     before the closed loops run; and the jobs, whose predictors fitted before the run load
     the models fitted there (saved in ``folder``) instead of fitting again (fit once, run
     many), unless ``--model`` names others or the runs go to a cluster."""
-    from rhmpc.studies.loop_gap import open_loop_beside
+    from rhmpc.compare.loop_gap import open_loop_beside
     from rhmpc.tuning.progress import note
 
     out, share, split = {}, not (args.model or args.scheduler), parse_split(args.split)

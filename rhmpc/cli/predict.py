@@ -1,5 +1,5 @@
 """`rhmpc predict`: the prediction studies of Yuen et al. 2008 and Tuna et al. 2013, or every
-predictor on the user's recordings (``--data``, :mod:`rhmpc.studies.recordings`)."""
+predictor on the user's recordings (``--data``, :mod:`rhmpc.openloop.recordings`)."""
 
 from __future__ import annotations
 
@@ -13,9 +13,8 @@ from rhmpc import io
 from rhmpc.cli import COMMANDS
 from rhmpc.cli.simulate import add_recording_options, parse_split, recording_options
 from rhmpc.errors import UsageError
-from rhmpc.predictors import PREDICTORS
-from rhmpc.sim.recordings.shipped import resolve_all
-from rhmpc.studies.prediction import (
+from rhmpc.openloop.recordings import DEFAULT_LEADS, WARMUP_FRACTION, WARMUP_SECONDS
+from rhmpc.openloop.studies import (
     BASE_BPM,
     DEFAULT_PREDICTORS,
     DEFAULT_TRIALS,
@@ -26,7 +25,8 @@ from rhmpc.studies.prediction import (
     plot_study,
     run_study,
 )
-from rhmpc.studies.recordings import DEFAULT_LEADS, WARMUP_FRACTION, WARMUP_SECONDS
+from rhmpc.predictors import PREDICTORS
+from rhmpc.sim.recordings.shipped import resolve_all
 
 #: Options of the synthetic studies (``--study``) and of the recordings (``--data``).
 STUDY_OPTIONS = ("trials", "noise_mm", "delta_bpm", "records", "scenarios")
@@ -245,13 +245,13 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run_data(args: argparse.Namespace) -> int:
-    """``--data``: every predictor on the recordings, open loop (rhmpc.studies.recordings)."""
+    """``--data``: every predictor on the recordings, open loop (rhmpc.openloop.recordings)."""
     from functools import partial
 
+    from rhmpc.openloop.recordings import OpenLoopSettings, run_open_loop
+    from rhmpc.openloop.recordings_report import format_report, plot_leads
+    from rhmpc.openloop.tracks import load_tracks, parse_points, poi_tracks
     from rhmpc.sim.recordings import training_series
-    from rhmpc.studies.recordings import OpenLoopSettings, run_open_loop
-    from rhmpc.studies.recordings_report import format_report, plot_leads
-    from rhmpc.studies.tracks import load_tracks, parse_points, poi_tracks
 
     names = tuple(n.strip() for n in (args.predictors or "").split(",") if n.strip())
     if args.poi is not None and args.points is not None:

@@ -262,7 +262,7 @@ def check_score(doc: dict) -> None:
 def write_outputs(args: argparse.Namespace, result, doc: dict) -> None:
     """--out (JSON, or MATLAB's .mat), --plot and --view."""
     if args.out and Path(args.out).suffix.lower() == ".mat":
-        from rhmpc.studies.matlab import write_mat
+        from rhmpc.report.matlab import write_mat
 
         write_mat(args.out, result, doc)
     elif args.out:
@@ -274,11 +274,11 @@ def write_outputs(args: argparse.Namespace, result, doc: dict) -> None:
 
         robot = load_robot(doc["robot"])
     if args.plot and getattr(args, "figure", "dashboard") == "paper":
-        from rhmpc.studies.paper_figure import plot_paper
+        from rhmpc.report.paper_figure import plot_paper
 
         plot_paper(result, doc, args.plot)
     elif args.plot:
-        from rhmpc.studies.figures import plot_run
+        from rhmpc.report.figures import plot_run
 
         plot_run(result, args.plot, title=f"{doc['predictor']} on {doc['scenario']} "
                  f"({doc['robot']}): RMS error {doc['rms_error_mm']:.3f} mm",
@@ -286,7 +286,7 @@ def write_outputs(args: argparse.Namespace, result, doc: dict) -> None:
                  joint_names=[robot.model.names[j] for j in range(1, robot.nv + 1)],
                  score=doc)
     if getattr(args, "view", None):
-        from rhmpc.studies.replay import write_replay
+        from rhmpc.report.replay import write_replay
 
         write_replay(args.view, result, robot, title=f"{doc['predictor']} on "
                      f"{doc['scenario']}: RMS error {doc['rms_error_mm']:.3f} mm")
@@ -323,7 +323,7 @@ def run(args: argparse.Namespace) -> int:
         json.dump(doc, sys.stdout, indent=2)
         print()
         return 0
-    from rhmpc.studies.run_report import format_summary
+    from rhmpc.report.summary import format_summary
 
     print(format_summary(doc, settling_rule(args)))
     for option, what in (("out", "result"), ("plot", "figure"), ("view", "3-D replay"),

@@ -9,7 +9,7 @@
 - :mod:`~rhmpc.tuning.progress` — progress bars on stderr, durations and speeds in words;
 - :mod:`~rhmpc.tuning.report` — the ranked table, the best settings, the objective plot.
 
-Imports :mod:`rhmpc.experiment` and the layers below; never :mod:`rhmpc.studies` or
+Imports :mod:`rhmpc.experiment` and the layers below; never :mod:`rhmpc.compare` or
 :mod:`rhmpc.cli`. The names below load on first use, so that a worker process that needs only
 :mod:`~rhmpc.tuning.workers` starts without the run stack.
 """

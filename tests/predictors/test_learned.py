@@ -93,7 +93,7 @@ class Block(importlib.abc.MetaPathFinder):
         if name == "torch" or name.startswith("torch."):
             raise ModuleNotFoundError(f"No module named {name!r}", name=name)
 sys.meta_path.insert(0, Block())
-import predictors, rhmpc.studies.recordings
+import predictors, rhmpc.openloop.recordings
 from predictors import make_predictor
 make_predictor("st-ridge", 0.04)
 try:
@@ -111,7 +111,7 @@ def test_predictors_import_and_run_without_pytorch() -> None:
 
 
 def test_importing_predictors_does_not_import_pytorch() -> None:
-    code = "import sys, predictors, rhmpc.studies.recordings; print('torch' in sys.modules)"
+    code = "import sys, predictors, rhmpc.openloop.recordings; print('torch' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout.strip()
     assert out == "False"

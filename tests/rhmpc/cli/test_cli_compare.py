@@ -23,9 +23,9 @@ import numpy as np
 import pytest
 
 from rhmpc.cli import compare, main
+from rhmpc.compare.table import MAX_WIDTH, comparison_table, grid, interval95
 from rhmpc.experiment.run import jsonable
-from rhmpc.studies.comparison import MAX_WIDTH, comparison_table, grid, interval95
-from rhmpc.studies.paper import COLUMNS, paper_table
+from rhmpc.paper.tables import COLUMNS, paper_table
 
 REPO = Path(__file__).resolve().parents[3]
 

@@ -9,7 +9,7 @@ from rhmpc.cli import build_parser, main
 from rhmpc.cli.compare import configs
 from rhmpc.cli.simulate import config_from_args
 from rhmpc.experiment.presets import PRESETS
-from rhmpc.studies.paper import COLUMNS, TUNA2013, paper_table
+from rhmpc.paper.tables import COLUMNS, TUNA2013, paper_table
 
 
 def _args(*argv) -> argparse.Namespace:

@@ -138,7 +138,7 @@ def test_compare_bad_options_exit_2_before_running(capsys, argv, message):
 def test_the_summary_says_where_the_motion_is_and_what_ran(capsys):
     """The summary states the motion's placement (re-centred on its mean unless set absolute),
     the speed against real time and, with ``--controller c``, that the exported C ran."""
-    from rhmpc.studies.run_report import format_summary
+    from rhmpc.report.summary import format_summary
 
     code, out, _ = run_cli(capsys, "simulate", "--predictor", "generalized", *FAST, "--json")
     assert code == 0

@@ -234,7 +234,7 @@ def test_offset_free_tracking_on_the_nonlinear_plant(robot, arm, offset_correcti
     """Heart-like motion of 12 mm peak to peak around the home tip position, exact future: the
     plant's forward-kinematics error with the output offset is a fraction of the error without
     it (the linearisation floor)."""
-    from rhmpc.studies.bench import heart_like_reference
+    from rhmpc.bench.ticks import heart_like_reference
 
     ticks = 3000
     traj = heart_like_reference(ticks + N + 1, arm.Ts, np.random.default_rng(3), arm.y0,

@@ -17,6 +17,7 @@ import subprocess
 import numpy as np
 import pytest
 
+from rhmpc.bench.ticks import heart_like_reference
 from rhmpc.cli import main
 from rhmpc.control.export import ExportError, controller_in_c, export_controller
 from rhmpc.control.export.binding import missing_toolchain
@@ -24,7 +25,6 @@ from rhmpc.experiment import RunConfig
 from rhmpc.experiment.assembly import deployable
 from rhmpc.robots import load_robot
 from rhmpc.sim.plant import make_plant
-from rhmpc.studies.bench import heart_like_reference
 
 NO_TOOLCHAIN = missing_toolchain()
 needs_cc = pytest.mark.skipif(NO_TOOLCHAIN is not None, reason=NO_TOOLCHAIN or "")

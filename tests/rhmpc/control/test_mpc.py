@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 import scipy.linalg
 
+from rhmpc.bench.ticks import heart_like_reference
 from rhmpc.control.mpc import RecedingHorizonMPC
 from rhmpc.control.offset import OutputOffset
 from rhmpc.control.settings import MPCSettings
 from rhmpc.robots import linearize, load_robot
-from rhmpc.studies.bench import heart_like_reference
 from tests.rhmpc.control.exact import EveryTick, exact_mpc, qp_vectors, unconstrained
 
 #: OSQP run to (near) machine accuracy, for comparisons at 1e-6.

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from rhmpc.experiment import RunConfig, build_run, run_experiment
-from rhmpc.studies.run_report import format_summary
+from rhmpc.report.summary import format_summary
 
 #: 3 s on the ideal 2-kHz sensor (a refresh every 15 ticks reads the sample of its own tick),
 #: the outlier gate calibrated by 1 s; every fault starts at 1.5 s.

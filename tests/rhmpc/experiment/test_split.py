@@ -46,7 +46,7 @@ def test_a_recording_is_scored_at_its_measured_instants():
     e = np.linalg.norm(result.ee[rows] - p[scored], axis=1)
     np.testing.assert_allclose(doc["rms_error_mm"], 1e3 * np.sqrt(np.mean(e**2)), rtol=1e-12)
     np.testing.assert_allclose(doc["max_error_mm"], 1e3 * e.max(), rtol=1e-12)
-    from rhmpc.studies.figures import measured_errors  # what the figures draw
+    from rhmpc.report.figures import measured_errors  # what the figures draw
 
     t_fig, e_fig = measured_errors(result)
     np.testing.assert_allclose(t_fig, t[scored])
