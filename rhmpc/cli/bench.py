@@ -9,7 +9,7 @@ import sys
 from rhmpc.bench.report import format_table
 from rhmpc.bench.ticks import run_bench
 from rhmpc.cli import COMMANDS
-from rhmpc.cli.simulate import add_host_stalls_option, check_host_stalls, host_stalls_document
+from rhmpc.cli.options import add_host_stalls_option, check_host_stalls, host_stalls_document
 from rhmpc.control.settings import MPCSettings
 from rhmpc.errors import UsageError
 from rhmpc.robots import ROBOTS

@@ -11,7 +11,7 @@ from pathlib import Path
 
 from rhmpc import io
 from rhmpc.cli import COMMANDS
-from rhmpc.cli.simulate import add_recording_options, parse_split, recording_options
+from rhmpc.cli.options import add_recording_options, parse_split, recording_options
 from rhmpc.errors import UsageError
 from rhmpc.openloop.recordings import DEFAULT_LEADS, WARMUP_FRACTION, WARMUP_SECONDS
 from rhmpc.openloop.studies import (

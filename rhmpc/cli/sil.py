@@ -8,7 +8,8 @@ import json
 import sys
 
 from rhmpc.cli import COMMANDS
-from rhmpc.cli.simulate import add_recording_options, add_run_options, config_from_args
+from rhmpc.cli.options import add_recording_options, add_run_options
+from rhmpc.cli.simulate import config_from_args
 from rhmpc.errors import UsageError
 
 

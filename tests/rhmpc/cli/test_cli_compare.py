@@ -1,7 +1,7 @@
 """`rhmpc compare`: progress before the runs end, failed cells, tables within 120 characters,
 recordings against `hold`, intervals over seeds, CSV.
 
-Most tests stand in for the closed-loop run (:func:`rhmpc.cli.compare.run_job`) with a function
+Most tests stand in for the closed-loop run (:func:`rhmpc.compare.jobs.run_job`) with a function
 whose metrics follow from the predictor, the column and the seed, so that they run in a
 fraction of a second; the workers are forked, so they see the stand-in.
 """
@@ -23,6 +23,7 @@ import numpy as np
 import pytest
 
 from rhmpc.cli import compare, main
+from rhmpc.compare import jobs as compare_jobs
 from rhmpc.compare.table import MAX_WIDTH, comparison_table, grid, interval95
 from rhmpc.experiment.run import jsonable
 from rhmpc.paper.tables import COLUMNS, paper_table
@@ -34,7 +35,7 @@ STAND_IN: dict = {"delay": 0.0, "fail": set(), "crash": set(), "settings": True}
 BASE_MM = {"exact": 0.2, "hold": 0.4, "one-step": 0.22, "generalized": 0.21, "ekf": 0.6}
 
 
-def stand_in(job: compare.Job) -> dict:
+def stand_in(job: compare_jobs.Job) -> dict:
     """Metrics from the predictor, the column and the seed, after ``delay`` seconds; fails for
     (predictor, column) in ``fail``, kills its worker for those in ``crash``."""
     time.sleep(STAND_IN["delay"])
@@ -42,22 +43,22 @@ def stand_in(job: compare.Job) -> dict:
     if (config.predictor, job.column) in STAND_IN["crash"]:
         os._exit(3)
     if (config.predictor, job.column) in STAND_IN["fail"]:
-        doc = compare.failed_doc(job, "RuntimeError: boom")
+        doc = compare_jobs.failed_doc(job, "RuntimeError: boom")
         if not STAND_IN["settings"]:
             doc.pop("settings")
-        return compare._labelled(doc, job)
+        return compare_jobs.labelled(doc, job)
     rms = BASE_MM[config.predictor] * (1 + 0.1 * config.seed) * (1 + 0.01 * len(job.column))
     doc = {"predictor": config.predictor, "seed": config.seed, "rms_error_mm": rms,
            "max_error_mm": 3 * rms, "rms_effort_mNm": 100 * rms, "wall_s": 0.1,
            "prediction_rms_mm": {"lead_N": rms}, "ended": time.time(),
            "settings": jsonable(config.to_dict())}
-    return compare._labelled(doc, job)
+    return compare_jobs.labelled(doc, job)
 
 
 @pytest.fixture
 def standin(monkeypatch: pytest.MonkeyPatch) -> dict:
     """The stand-in in place of the closed-loop run; its settings to change."""
-    monkeypatch.setattr(compare, "run_job", stand_in)
+    monkeypatch.setattr(compare_jobs, "run_job", stand_in)
     monkeypatch.setitem(STAND_IN, "delay", 0.0)
     monkeypatch.setitem(STAND_IN, "fail", set())
     monkeypatch.setitem(STAND_IN, "crash", set())
@@ -291,17 +292,18 @@ CTRL_C_SCRIPT = """
 import signal, sys, time
 signal.signal(signal.SIGINT, signal.default_int_handler)
 from pathlib import Path
-from rhmpc.cli import compare, main
+from rhmpc.cli import main
+from rhmpc.compare import jobs as compare_jobs
 
 def stand_in(job):
     if job.config.predictor == "exact":
         time.sleep(120)
     Path(sys.argv[1], f"done{job.key}").write_text("")
-    return compare._labelled({"predictor": job.config.predictor, "seed": job.config.seed,
+    return compare_jobs.labelled({"predictor": job.config.predictor, "seed": job.config.seed,
                               "rms_error_mm": 0.4 + job.config.seed, "max_error_mm": 1.0,
                               "rms_effort_mNm": 10.0}, job)
 
-compare.run_job = stand_in
+compare_jobs.run_job = stand_in
 sys.exit(main(["compare", "--scenarios", "fixed-a2-top", "--predictors", "hold,exact",
                "--seeds", "4", "--duration", "1", "--jobs", "2"]))
 """

@@ -12,6 +12,7 @@ import pytest
 from scipy import stats
 
 from rhmpc.cli import compare, main
+from rhmpc.compare import jobs as compare_jobs
 from rhmpc.paper.findings import VERDICTS, cross_finding, findings, judge
 from rhmpc.paper.tables import COLUMNS, paper_document, paper_table
 from rhmpc.paper.tuna2013 import TUNA2013
@@ -150,11 +151,11 @@ def test_compare_paper_json_runs_five_seeds_of_the_tables_predictors(
         monkeypatch, capsys: pytest.CaptureFixture[str]) -> None:
     table = {(d["predictor"], d["scenario"], d["seed"]): d for d in runs("hardware")}
 
-    def stand_in(job: compare.Job) -> dict:
+    def stand_in(job: compare_jobs.Job) -> dict:
         c = job.config
-        return compare._labelled(dict(table[c.predictor, job.column, c.seed]), job)
+        return compare_jobs.labelled(dict(table[c.predictor, job.column, c.seed]), job)
 
-    monkeypatch.setattr(compare, "run_job", stand_in)
+    monkeypatch.setattr(compare_jobs, "run_job", stand_in)
     assert main(["compare", "--preset", "tuna2013-hardware", "--paper", "--json", "--quiet",
                  "--jobs", "1"]) == 0
     doc = json.loads(capsys.readouterr().out)
@@ -164,7 +165,7 @@ def test_compare_paper_json_runs_five_seeds_of_the_tables_predictors(
     assert doc["paper"]["setting"] == "hardware"
     assert {f["verdict"] for f in doc["paper"]["findings"]} <= set(VERDICTS)
     assert doc["cells"][0]["rms_error_mm"]["ci95"][0] < doc["cells"][0]["rms_error_mm"]["mean"]
-    monkeypatch.setattr(compare, "run_job", stand_in)
+    monkeypatch.setattr(compare_jobs, "run_job", stand_in)
     assert main(["compare", "--preset", "tuna2013", "--paper", "--json", "--quiet",
                  "--jobs", "1", "--seeds", "2"]) == 0
     sim = json.loads(capsys.readouterr().out)
