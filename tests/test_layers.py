@@ -18,7 +18,8 @@ Layers, from the bottom (peers of one layer do not import each other):
     host's stalls)
 3. ``rhmpc.experiment``
 4. the rooms built on runs: ``rhmpc.report`` (one run's report and figures), ``rhmpc.bench``,
-   ``rhmpc.openloop`` (the predictors open loop), ``rhmpc.tuning``
+   ``rhmpc.openloop`` (the predictors open loop), ``rhmpc.motion`` (heart motion described),
+   ``rhmpc.tuning``
 4.5 ``rhmpc.compare`` and ``rhmpc.runtime`` (the deployment's processes), which run through
     the tuning's processes that die with their parent
 4.7 ``rhmpc.paper``, the published tables beside ``rhmpc.compare``'s cells
@@ -67,6 +68,7 @@ LAYERS: tuple[tuple[str, float, str], ...] = (
     ("rhmpc.report", 4, "rhmpc.report"),
     ("rhmpc.bench", 4, "rhmpc.bench"),
     ("rhmpc.openloop", 4, "rhmpc.openloop"),
+    ("rhmpc.motion", 4, "rhmpc.motion"),
     ("rhmpc.tuning", 4, "rhmpc.tuning"),
     ("rhmpc.compare", 4.5, "rhmpc.compare"),
     ("rhmpc.runtime", 4.5, "rhmpc.runtime"),

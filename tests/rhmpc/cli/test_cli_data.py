@@ -46,12 +46,13 @@ def test_list_table(capsys: pytest.CaptureFixture[str]) -> None:
 def test_list_reads_the_specifications_only(monkeypatch: pytest.MonkeyPatch,
                                             capsys: pytest.CaptureFixture[str]) -> None:
     """Without --measure nothing is synthesised: the list is as fast as the command starts."""
-    import rhmpc.cli.data
+    import rhmpc.motion.figure
+    import rhmpc.motion.targets
 
     def refuse(*args, **kwargs):
         raise AssertionError("data list synthesised a scenario")
 
-    monkeypatch.setattr(rhmpc.cli.data, "make_scenario", refuse)
+    monkeypatch.setattr(rhmpc.motion.targets, "make_scenario", refuse)
     assert main(["data", "list"]) == 0
     out = capsys.readouterr().out
     assert "fixed-a2-top       3    257    472    8.39   3.55  100 + HRV" in out
@@ -131,17 +132,18 @@ def test_plot_draws_short_records_whole_and_long_ones_with_a_zoom(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """A record up to two windows long is one full-resolution line per axis; a longer one has
     the zoomed window beside it; the title's heart rate is the range of the panel's."""
-    import rhmpc.cli.data
+    import rhmpc.motion.figure
+    import rhmpc.motion.targets
 
     seen: dict = {}
-    figure = rhmpc.cli.data.motion_figure
+    figure = rhmpc.motion.figure.motion_figure
 
     def spy(plt, target, t, p, rate, heart, stats, args):
         fig = figure(plt, target, t, p, rate, heart, stats, args)
         seen[target.name] = (fig, heart)
         return fig
 
-    monkeypatch.setattr(rhmpc.cli.data, "motion_figure", spy)
+    monkeypatch.setattr(rhmpc.motion.figure, "motion_figure", spy)
     rec = _heart_csv(tmp_path / "rec.csv", seconds=30.0)
     for name, duration in (("fixed-a2-top", "15"), ("fixed-a2-top", "40"), (str(rec), "30")):
         assert main(["data", "plot", name, str(tmp_path / "f.png"), "--duration", duration]) == 0
@@ -266,12 +268,13 @@ BAD_INPUTS = [
 def test_bad_input_is_one_line_and_exit_2(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                           capsys: pytest.CaptureFixture[str], argv: list[str],
                                           first_line: str) -> None:
-    import rhmpc.cli.data
+    import rhmpc.motion.figure
+    import rhmpc.motion.targets
 
     monkeypatch.chdir(tmp_path)
     _bad_inputs(tmp_path)
     if argv[0] == "export" and "1e12" in argv:  # refused before any synthesis
-        monkeypatch.setattr(rhmpc.cli.data, "make_scenario", None)
+        monkeypatch.setattr(rhmpc.motion.targets, "make_scenario", None)
     assert main(["data", *argv]) == 2
     err = capsys.readouterr().err
     assert err.splitlines()[0].startswith(f"rhmpc data: error: {first_line}")
@@ -304,9 +307,10 @@ def test_a_recording_almost_all_missing(tmp_path: Path,
 
 def test_long_work_is_announced(monkeypatch: pytest.MonkeyPatch,
                                 capsys: pytest.CaptureFixture[str]) -> None:
-    import rhmpc.cli.data
+    import rhmpc.motion.figure
+    import rhmpc.motion.targets
 
-    monkeypatch.setattr(rhmpc.cli.data, "ANNOUNCE_AFTER", 0.01)
+    monkeypatch.setattr(rhmpc.motion.targets, "ANNOUNCE_AFTER", 0.01)
     assert main(["data", "show", "mitral-1d", "--duration", "5", "--json"]) == 0
     err = capsys.readouterr().err
     assert err.startswith("rhmpc data: show of 5 s of mitral-1d at 28 Hz takes about ")
@@ -316,6 +320,6 @@ def test_long_work_is_announced(monkeypatch: pytest.MonkeyPatch,
                                              (257.069, "257.1"), (0.040, "0.04"),
                                              (29.96, "29.96"), (1e12, "1e+12")])
 def test_numbers_are_printed_with_sensible_digits(value: float, text: str) -> None:
-    from rhmpc.cli.text import fmt
+    from rhmpc.motion.text import fmt
 
     assert fmt(value) == text

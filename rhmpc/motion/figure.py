@@ -4,17 +4,20 @@ spectral density."""
 
 from __future__ import annotations
 
-import argparse
 import itertools
 import textwrap
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
-from rhmpc.cli.text import fmt
-from rhmpc.sim.heart.analysis import fill_gaps, heart_rate_track, psd
+from rhmpc import io
+from rhmpc.errors import UsageError
+from rhmpc.motion.targets import PLOT_RATE
+from rhmpc.motion.text import fmt
+from rhmpc.sim.heart.analysis import fill_gaps, heart_rate_track, motion_stats, psd
 
-__all__ = ["Heart", "heart_rate", "motion_figure"]
+__all__ = ["Heart", "heart_rate", "motion_figure", "plot_motion"]
 
 #: A record no longer than this many zoom windows is drawn whole, without a zoomed window [-].
 WHOLE_WINDOWS = 2.0
@@ -30,6 +33,42 @@ class Heart:
     bpm: np.ndarray
     summary: str
     how: str
+
+
+def plot_motion(target, out: Path, window: float, start: float) -> None:
+    """Draw ``target``'s figure (:func:`motion_figure`) over a zoomed ``window`` [s] from
+    ``start`` [s] and save it to ``out`` (the format follows its suffix); a synthetic motion is
+    drawn at :data:`~rhmpc.motion.targets.PLOT_RATE` at least."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    phase = getattr(target.source, "phase", None)
+    rate = max(target.rate, PLOT_RATE) if phase is not None else target.rate
+    n = round(target.duration * rate) + 1
+    t = target.start + np.arange(n) / rate
+    p = np.asarray(target.source.position(t)).reshape(n, -1) * 1e3
+    with np.errstate(over="ignore", invalid="ignore"):
+        stats = motion_stats(target.source, target.duration, target.rate, target.start)
+    heart = heart_rate(t, p, rate, phase)
+    fig = motion_figure(plt, target, t, p, rate, heart, stats, View(window, start))
+    try:
+        io.save_figure(fig, out, dpi=110)
+    except io.FileError:
+        raise
+    except (OSError, ValueError) as exc:
+        raise UsageError(f"{out}: cannot write the figure ({exc})") from None
+    finally:
+        plt.close(fig)
+
+
+@dataclass(frozen=True)
+class View:
+    """The zoomed window of a long record: its length and its start [s]."""
+
+    window: float
+    start: float
 
 
 def heart_rate(t: np.ndarray, p: np.ndarray, rate: float, phase) -> Heart:
@@ -50,7 +89,7 @@ def heart_rate(t: np.ndarray, p: np.ndarray, rate: float, phase) -> Heart:
 
 
 def motion_figure(plt, target, t: np.ndarray, p: np.ndarray, rate: float, heart: Heart,
-            stats, args: argparse.Namespace):
+            stats, args: View):
     """Positions per axis (the whole record, and a zoomed window if it is long), the heart
     rate with the statistics, and the PSD."""
     dim = p.shape[1]
@@ -74,7 +113,7 @@ def motion_figure(plt, target, t: np.ndarray, p: np.ndarray, rate: float, heart:
 
 
 def _plot_positions(fig, grid, target, t: np.ndarray, p: np.ndarray,
-                    args: argparse.Namespace, zoom: bool) -> None:
+                    args: View, zoom: bool) -> None:
     """Per axis: the whole record (full width when short), and a zoomed window when long."""
     dim = p.shape[1]
     labels = ("x", "y", "z") if dim == 3 else ("x",)
