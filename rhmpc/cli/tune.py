@@ -95,11 +95,6 @@ def _reject(args: argparse.Namespace, names: tuple[str, ...], mode: str) -> None
             raise UsageError(f"--{name.replace('_', '-')} does not apply to {mode}")
 
 
-def _extra(spec) -> dict:
-    return {"sweep": spec.name, "objective": spec.objective.to_dict(),
-            "evaluations_per_point": len(spec.evaluations())}
-
-
 def _check_outputs(args: argparse.Namespace, inputs: tuple = ()) -> None:
     """--plot and --best-toml must be writable, and none of ``inputs`` (the spec, the results
     file), before a sweep starts."""
@@ -110,24 +105,12 @@ def _check_outputs(args: argparse.Namespace, inputs: tuple = ()) -> None:
             io.check_output(path, option, inputs=inputs)
 
 
-def _speed(records: list[dict]) -> str:
-    """``; each ran 4.1× faster than real time`` from the successful records' timings."""
-    from rhmpc.tuning.progress import speed_phrase
-
-    ok = [r for r in records if r.get("status") == "ok"]
-    simulated = sum(float(r.get("settings", {}).get("loop", {}).get("duration", 0.0))
-                    for r in ok)
-    wall = sum(float(r.get("timing", {}).get("wall_s", 0.0)) for r in ok)
-    if not (simulated > 0 and wall > 0):
-        return ""
-    return f"; each ran {speed_phrase(simulated, wall)}"
-
-
 def sweep(args: argparse.Namespace, spec_path: Path) -> int:
     from rhmpc.tuning.progress import format_duration, note
-    from rhmpc.tuning.runner import pending, run_sweep
+    from rhmpc.tuning.runner import pending
     from rhmpc.tuning.spec import load_spec, with_sampler_seed
-    from rhmpc.tuning.store import ResultsWriter, read_results
+    from rhmpc.tuning.store import read_results
+    from rhmpc.tuning.sweep import execute, log_keys, points_table, speed_words
 
     spec = load_spec(spec_path)
     if args.preset is not None:
@@ -153,17 +136,17 @@ def sweep(args: argparse.Namespace, spec_path: Path) -> int:
          f"evaluations = {len(tasks)}; done {n_ok}, failed {n_failed}, to run {len(todo)}; "
          f"results {results_path}", quiet)
     if args.dry_run:
-        _print_points(spec, tasks, existing)
+        print("\n".join(points_table(spec, tasks, existing)))
         return 0
     outcome = None
     if todo:
-        outcome = _execute(args, spec, todo, results_path, run_sweep, ResultsWriter)
+        outcome = execute(spec, todo, results_path, args.jobs, args.scheduler, quiet)
         note(f"rhmpc tune: {outcome.written} evaluation(s) in "
              f"{format_duration(outcome.elapsed_s)} = {outcome.evaluations_per_minute:.1f} "
-             f"evaluations per minute{_speed(outcome.records)}", quiet)
+             f"evaluations per minute{speed_words(outcome.records)}", quiet)
     code = report_records(args, read_results(results_path).records, spec.objective, points,
                           str(results_path), title=f"sweep '{spec.name}'",
-                          log_keys=_log_keys(spec))
+                          log_keys=log_keys(spec))
     if outcome is not None and outcome.interrupted:
         print(f"rhmpc tune: interrupted; {outcome.written} evaluation(s) written this time, "
               f"{len(todo) - outcome.written} left; run the same command again to resume",
@@ -176,59 +159,6 @@ def sweep(args: argparse.Namespace, spec_path: Path) -> int:
               "runs them again)", file=sys.stderr)
         return 1
     return code
-
-
-def _execute(args, spec, todo, results_path, run_sweep, ResultsWriter):
-    from rhmpc.tuning.objective import check_objective_metrics
-    from rhmpc.tuning.progress import Heartbeat, note, progress_bar
-    from rhmpc.tuning.runner import executors
-
-    backend = executors(args.jobs, args.scheduler, len(todo))
-    window, where = backend.window, backend.where
-    quiet = bool(args.quiet)
-    note(f"rhmpc tune: running {len(todo)} evaluation(s) on {where}", quiet)
-    bar = progress_bar(len(todo), "eval", f"tune {spec.name}", quiet)
-    failures = 0
-    checked = False
-
-    def on_result(record: dict) -> None:
-        nonlocal failures, checked
-        failures += record.get("status") != "ok"
-        if not checked and record.get("status") == "ok":
-            checked = True
-            try:
-                check_objective_metrics(spec.objective, record["metrics"])
-            except UsageError as exc:  # the runs are still worth keeping: warn, go on
-                bar.write(f"rhmpc tune: warning: {exc}", file=sys.stderr)
-        bar.update(1)
-        if failures:
-            bar.set_postfix(failed=failures)
-
-    try:
-        with ResultsWriter(results_path) as writer:
-            outcome = run_sweep(todo, writer, backend.factory, window, extra=_extra(spec),
-                                on_result=on_result, heartbeat=Heartbeat(bar))
-    finally:
-        bar.close()
-        backend.close()
-    return outcome
-
-
-def _print_points(spec, tasks, existing) -> None:
-    from rhmpc.tuning.report import align, format_value
-
-    latest = existing.latest()
-    seen: dict[str, list] = {}
-    for t in tasks:
-        seen.setdefault(t.point, []).append(t)
-    keys = [p.key for p in spec.parameters]
-    rows = [["point", "done", *keys, "note"]]
-    for i, ts in enumerate(seen.values(), 1):
-        done = sum(1 for t in ts if latest.get(t.key, {}).get("status") == "ok")
-        rows.append([str(i), f"{done}/{len(ts)}",
-                     *(format_value(ts[0].parameters.get(k)) for k in keys),
-                     "base" if ts[0].base else ""])
-    print("\n".join(align(rows, [True, True, *([False] * (len(keys) + 1))])))
 
 
 def report(args: argparse.Namespace, results_path: Path) -> int:
@@ -248,12 +178,13 @@ def report(args: argparse.Namespace, results_path: Path) -> int:
     points, log_keys = None, None
     if args.spec:
         from rhmpc.tuning.spec import load_spec
+        from rhmpc.tuning.sweep import log_keys as sweep_log_keys
 
         spec = load_spec(args.spec)
         objective = spec.objective
         points = list(dict.fromkeys(t.point for t in spec.tasks()))
         title = f"sweep '{spec.name}'"
-        log_keys = _log_keys(spec)
+        log_keys = sweep_log_keys(spec)
     else:
         objective = objective_of(data.records)
         names = list(dict.fromkeys(r.get("sweep") for r in data.records if r.get("sweep")))
@@ -262,16 +193,12 @@ def report(args: argparse.Namespace, results_path: Path) -> int:
                           log_keys)
 
 
-def _log_keys(spec) -> list[str]:
-    """The spec's parameters sampled on a log scale (plotted on log axes)."""
-    return [p.key for p in spec.parameters if p.is_range and p.scale == "log"]
-
-
 def report_records(args, records, objective, points, results: str, title: str,
                    log_keys=None) -> int:
     """Print the ranked table (or JSON), write --best-toml and --plot; the exit code."""
     from rhmpc.tuning.objective import check_objective_metrics
     from rhmpc.tuning.report import best, best_toml, format_table, plot_objective, summarize
+    from rhmpc.tuning.sweep import best_settings
 
     ok = [r for r in records if r.get("status") == "ok" and isinstance(r.get("metrics"), dict)]
     if ok:
@@ -294,7 +221,7 @@ def report_records(args, records, objective, points, results: str, title: str,
     if args.json:
         json.dump({"objective": objective.to_dict(), "results": results,
                    "points": [dict(rank=i, **s.to_dict()) for i, s in enumerate(summaries, 1)],
-                   "best_settings": best_toml_dict(top)}, sys.stdout, indent=2)
+                   "best_settings": best_settings(top)}, sys.stdout, indent=2)
         print()
         return 0
     n_eval = sum(s.n_ok + s.n_failed for s in summaries)
@@ -312,9 +239,3 @@ def report_records(args, records, objective, points, results: str, title: str,
     return 0
 
 
-def best_toml_dict(summary) -> dict | None:
-    if summary is None:
-        return None
-    from rhmpc.tuning.report import best_config
-
-    return best_config(summary).to_dict()

@@ -7,7 +7,9 @@
 - :mod:`~rhmpc.tuning.runner` — local processes or a Dask cluster;
 - :mod:`~rhmpc.tuning.workers` — local worker processes that die with their parent;
 - :mod:`~rhmpc.tuning.progress` — progress bars on stderr, durations and speeds in words;
-- :mod:`~rhmpc.tuning.report` — the ranked table, the best settings, the objective plot.
+- :mod:`~rhmpc.tuning.report` — the ranked table, the best settings, the objective plot;
+- :mod:`~rhmpc.tuning.sweep` — a sweep as ``rhmpc tune`` runs it: its pending evaluations
+  with a bar, its points, its speed.
 
 Imports :mod:`rhmpc.experiment` and the layers below; never :mod:`rhmpc.compare` or
 :mod:`rhmpc.cli`. The names below load on first use, so that a worker process that needs only
