@@ -20,11 +20,10 @@ from rhmpc.openloop.studies import (
     DEFAULT_TRIALS,
     STUDIES,
     StudySettings,
-    format_table,
     parse_float_list,
-    plot_study,
     run_study,
 )
+from rhmpc.openloop.studies_report import format_table, plot_study
 from rhmpc.predictors import PREDICTORS
 from rhmpc.sim.recordings.shipped import resolve_all
 

@@ -8,6 +8,7 @@ against what was measured.
 ``recordings_report``  its text tables and its figure
 ``studies``            the synthetic studies (``--study``): Yuen et al. 2008 §III-D and Tuna
                        et al. 2013 Fig. 8
+``studies_report``     their text table and their figure
 =====================  ==================================================================
 
 Imports :mod:`rhmpc.experiment` (the plan of the fits before the run) and the layers below.

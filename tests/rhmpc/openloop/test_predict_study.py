@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from rhmpc.cli import main
-from rhmpc.openloop.studies import StudySettings, default_records, format_table, run_study
+from rhmpc.openloop.studies import StudySettings, default_records, run_study
+from rhmpc.openloop.studies_report import format_table
 
 
 def _rows(result):
