@@ -17,15 +17,13 @@ from rhmpc.openloop.recordings import DEFAULT_LEADS, WARMUP_FRACTION, WARMUP_SEC
 from rhmpc.openloop.studies import (
     BASE_BPM,
     DEFAULT_PREDICTORS,
-    DEFAULT_TRIALS,
     STUDIES,
     StudySettings,
     parse_float_list,
     run_study,
+    study_settings,
 )
 from rhmpc.openloop.studies_report import format_table, plot_study
-from rhmpc.predictors import PREDICTORS
-from rhmpc.sim.recordings.shipped import resolve_all
 
 #: Options of the synthetic studies (``--study``) and of the recordings (``--data``).
 STUDY_OPTIONS = ("trials", "noise_mm", "delta_bpm", "records", "scenarios")
@@ -121,59 +119,18 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _settings(args: argparse.Namespace) -> StudySettings:
-    trials = DEFAULT_TRIALS[args.study] if args.trials is None else args.trials
-    if trials < 1:
-        raise UsageError(f"--trials must be >= 1, got {trials}")
-    kw: dict = {"study": args.study, "trials": trials, "seed": args.seed, "paper": args.paper}
-    if args.predictors:
-        names = tuple(n.strip() for n in args.predictors.split(",") if n.strip())
-        bad = [n for n in names if n not in PREDICTORS]
-        if bad:
-            raise UsageError(
-                f"unknown predictor(s) {', '.join(bad)}; valid: {', '.join(PREDICTORS)}"
-            )
-        if "exact" in names and args.study != "horizon":
-            raise UsageError("`exact` only makes sense in --study horizon")
-        kw["predictors"] = names
+    """The study's settings from the options (:func:`rhmpc.openloop.studies.study_settings`)."""
+    def names(text: str | None) -> tuple[str, ...]:
+        return tuple(n.strip() for n in (text or "").split(",") if n.strip())
+
     try:
-        if args.noise_mm:
-            kw["noise_mm"] = parse_float_list(args.noise_mm)
-        if args.delta_bpm:
-            kw["delta_bpm"] = parse_float_list(args.delta_bpm)
+        noise = parse_float_list(args.noise_mm) if args.noise_mm else ()
+        delta = parse_float_list(args.delta_bpm) if args.delta_bpm else ()
     except ValueError as exc:
         raise UsageError(str(exc)) from None
-    if args.records:
-        recs = tuple(r.strip() for r in args.records.split(",") if r.strip())
-        from rhmpc.sim.heart.rr import shipped_records
-
-        missing = [r for r in recs if not _is_record(r)]
-        if missing:
-            raise UsageError(f"record(s) not found: {', '.join(missing)} (shipped: "
-                             f"{', '.join(shipped_records())}, or a path without extension)")
-        kw["records"] = recs
-    if args.scenarios:
-        from rhmpc.sim.heart import SCENARIOS
-
-        scns = tuple(s.strip() for s in args.scenarios.split(",") if s.strip())
-        bad = [s for s in scns if s not in SCENARIOS]
-        if bad:
-            raise UsageError(f"unknown scenario(s) {', '.join(bad)}; valid: {', '.join(SCENARIOS)}")
-        kw["scenarios"] = scns
-    s = StudySettings(**kw)
-    if args.study == "rr" and not s.parameters():
-        raise UsageError("--study rr needs --records (no shipped record found)")
-    return s
-
-
-def _is_record(name: str) -> bool:
-    """Whether ``name`` resolves to a PhysioNet record (a path or a shipped name)."""
-    from rhmpc.sim.heart.rr import find_record
-
-    try:
-        find_record(name)
-    except ValueError:
-        return False
-    return True
+    return study_settings(args.study, args.trials, args.seed, args.paper,
+                          names(args.predictors), noise, delta, names(args.records),
+                          names(args.scenarios))
 
 
 def _check_mode(args: argparse.Namespace) -> None:
@@ -245,12 +202,9 @@ def run(args: argparse.Namespace) -> int:
 
 def _run_data(args: argparse.Namespace) -> int:
     """``--data``: every predictor on the recordings, open loop (rhmpc.openloop.recordings)."""
-    from functools import partial
-
     from rhmpc.openloop.recordings import OpenLoopSettings, run_open_loop
     from rhmpc.openloop.recordings_report import format_report, plot_leads
-    from rhmpc.openloop.tracks import load_tracks, parse_points, poi_tracks
-    from rhmpc.sim.recordings import training_series
+    from rhmpc.openloop.tracks import data_tracks
 
     names = tuple(n.strip() for n in (args.predictors or "").split(",") if n.strip())
     if args.poi is not None and args.points is not None:
@@ -264,17 +218,8 @@ def _run_data(args: argparse.Namespace) -> int:
             predictors=names, leads=DEFAULT_LEADS if args.leads is None else args.leads,
             warmup=args.warmup, latency=0.0 if args.latency is None else args.latency,
             split=split, seed=args.seed)
-        files, read, poi = resolve_all(args.data, recording_options(args))
-        if args.poi is not None or (poi is not None and args.points is None):
-            args.poi = poi if args.poi is None else args.poi
-            tracks = poi_tracks(files, args.poi, read)
-        else:
-            tracks = load_tracks(files, parse_points(args.points), read)
-        train = None
-        if args.train:
-            for f in args.train:  # each a regular file the one reader takes
-                io.open_input(f, "recording").close()
-            train = partial(training_series, args.train, args.poi, read)
+        tracks, train = data_tracks(args.data, recording_options(args), args.points, args.poi,
+                                    args.train or ())
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     if args.save_models is not None:

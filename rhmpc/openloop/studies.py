@@ -51,6 +51,7 @@ __all__ = [
     "STUDIES",
     "StudySettings",
     "run_study",
+    "study_settings",
 ]
 
 STUDIES: tuple[str, ...] = ("noise", "hr-step", "rr", "horizon")
@@ -136,6 +137,53 @@ class StudySettings:
         if self.study == "rr":
             return list(self.records or default_records())
         return list(self.scenarios)
+
+
+def study_settings(study: str, trials: int | None = None, seed: int = 0,
+                   paper: str = "yuen2008", predictors: tuple[str, ...] = (),
+                   noise_mm: tuple[float, ...] = (), delta_bpm: tuple[float, ...] = (),
+                   records: tuple[str, ...] = (), scenarios: tuple[str, ...] = ()
+                   ) -> StudySettings:
+    """The settings of ``study``, each name checked (a one-line :class:`UsageError` naming the
+    valid ones); an empty value keeps the study's default (``trials``: :data:`DEFAULT_TRIALS`).
+    """
+    from rhmpc.errors import UsageError
+    from rhmpc.predictors import PREDICTORS
+
+    trials = DEFAULT_TRIALS[study] if trials is None else trials
+    if trials < 1:
+        raise UsageError(f"--trials must be >= 1, got {trials}")
+    kw: dict = {"study": study, "trials": trials, "seed": seed, "paper": paper}
+    if bad := [n for n in predictors if n not in PREDICTORS]:
+        raise UsageError(f"unknown predictor(s) {', '.join(bad)}; valid: {', '.join(PREDICTORS)}")
+    if "exact" in predictors and study != "horizon":
+        raise UsageError("`exact` only makes sense in --study horizon")
+    if missing := [r for r in records if not _is_record(r)]:
+        raise UsageError(f"record(s) not found: {', '.join(missing)} (shipped: "
+                         f"{', '.join(default_records())}, or a path without extension)")
+    if scenarios:
+        from rhmpc.sim.heart import SCENARIOS
+
+        if bad := [s for s in scenarios if s not in SCENARIOS]:
+            raise UsageError(f"unknown scenario(s) {', '.join(bad)}; valid: "
+                             f"{', '.join(SCENARIOS)}")
+    given = {"predictors": predictors, "noise_mm": noise_mm, "delta_bpm": delta_bpm,
+             "records": records, "scenarios": scenarios}
+    s = StudySettings(**kw, **{k: v for k, v in given.items() if v})
+    if study == "rr" and not s.parameters():
+        raise UsageError("--study rr needs --records (no shipped record found)")
+    return s
+
+
+def _is_record(name: str) -> bool:
+    """Whether ``name`` resolves to a PhysioNet record (a path or a shipped name)."""
+    from rhmpc.sim.heart.rr import find_record
+
+    try:
+        find_record(name)
+    except ValueError:
+        return False
+    return True
 
 
 def default_records() -> tuple[str, ...]:

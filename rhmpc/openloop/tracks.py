@@ -7,7 +7,7 @@ are numbered from 1, in the file's order (:mod:`rhmpc.sim.recordings.points`).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -16,7 +16,8 @@ import numpy as np
 from rhmpc.sim.recordings import RecordedMotion, load_points
 from rhmpc.sim.recordings.points import load_poi, pick_point
 
-__all__ = ["Track", "file_points", "load_tracks", "parse_points", "poi_tracks", "twelve_digits"]
+__all__ = ["Track", "data_tracks", "file_points", "load_tracks", "parse_points", "poi_tracks",
+           "twelve_digits"]
 
 
 @dataclass(frozen=True)
@@ -127,3 +128,45 @@ def poi_tracks(files: Sequence[str], poi: int, read: dict) -> list[Track]:
         out.append(Track(f"{label}:p{poi}" if several else label, rec.t, rec.z, f,
                          poi if several else None, others))
     return out
+
+
+def data_tracks(data: Sequence[str], options: dict, points: str | None = None,
+                poi: int | None = None, train: Sequence[str] = ()
+                ) -> tuple[list[Track | list[Track]], Callable[[float], list] | None]:
+    """The tracks an open-loop study scores, and the training recordings as a function of the
+    sampling period (None without ``train``).
+
+    Parameters
+    ----------
+    data : sequence of str
+        The recordings: files, or the names of shipped ones
+        (:func:`rhmpc.sim.recordings.shipped.resolve_all`).
+    options : dict
+        How to read them (``load_recording``'s keywords given on the command line).
+    points : str or None
+        ``all`` or ``N[,N...]``: each point scored on its own (:func:`load_tracks`).
+    poi : int or None
+        The point of interest, with the others beside it (:func:`poi_tracks`); by default a
+        shipped recording's own.
+    train : sequence of str
+        Recordings to fit the fitted predictors on, read as ``data``.
+
+    Raises
+    ------
+    ValueError
+        A file that cannot be read, a point it does not hold.
+    """
+    from functools import partial
+
+    from rhmpc import io
+    from rhmpc.sim.recordings import training_series
+    from rhmpc.sim.recordings.shipped import resolve_all
+
+    files, read, own = resolve_all(data, options)
+    if poi is None and points is None:
+        poi = own
+    tracks = poi_tracks(files, poi, read) if poi is not None else load_tracks(
+        files, parse_points(points), read)
+    for f in train:  # each a regular file the one reader takes
+        io.open_input(f, "recording").close()
+    return tracks, partial(training_series, list(train), poi, read) if train else None
