@@ -17,3 +17,10 @@ def phantom() -> Robot:
 def arm(phantom: Robot) -> LinearArm:
     """The PHANToM linearised about its home posture at Ts = 0.5 ms (the MPC's model)."""
     return linearize(phantom)
+
+
+@pytest.fixture(autouse=True)
+def _no_model_cache(monkeypatch: pytest.MonkeyPatch) -> None:
+    """No test reads or fills the user's cache of fitted models
+    (:mod:`rhmpc.experiment.model_cache`); its own tests give it a folder of theirs."""
+    monkeypatch.setenv("RHMPC_MODEL_CACHE", "off")

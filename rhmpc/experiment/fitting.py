@@ -13,15 +13,21 @@ learns from series on its own sampling grid, (T, P, d) [m] with the POI first
   period.
 
 Fitted here or open loop (``rhmpc predict --save-models``, loaded with ``--model``), a model
-sees the same samples in the loop: the loop hands the predictor the samples as measured.
+sees the same samples in the loop: the loop hands the predictor the samples as measured. A
+model fitted on the same samples before, by a run or by ``rhmpc predict``, is loaded from the
+cache instead of fitted again (:mod:`rhmpc.experiment.model_cache`), and a new fit is kept
+there.
 """
 
 from __future__ import annotations
+
+import contextlib
 
 import numpy as np
 
 from rhmpc.errors import UsageError
 from rhmpc.experiment.fit_plan import describe, plan_fits
+from rhmpc.experiment.model_cache import fit_or_load, lookup, store
 from rhmpc.predictors.registry import LEARNED, model_kind
 from rhmpc.sim.loop.closed_loop import Refreshes
 from rhmpc.sim.recordings import RecordingError
@@ -66,9 +72,27 @@ def _fit(run, predictor, settling: np.ndarray, progress) -> None:
         for line in announcement(run.config.predictor, predictor, series, run.config.seed):
             progress(line)
     try:
-        predictor.fit(series, progress)
+        _fit_or_load(predictor, series, progress)
     except ValueError as exc:
         raise UsageError(f"fitting {run.config.predictor}: {exc}") from None
+
+
+def _fit_or_load(predictor, series: list[np.ndarray], progress) -> None:
+    """Fit ``predictor`` (a combination: its members that learn before the run) on ``series``,
+    each model loaded from the cache where it was fitted on them before, and kept there after
+    its fit (:mod:`rhmpc.experiment.model_cache`)."""
+    if not hasattr(predictor, "members"):
+        fit_or_load(predictor, series, progress)
+        return
+    todo = [m for m in predictor.members if needs_fit(m)]
+    for m in todo:
+        if (path := lookup(m, series)) is not None:
+            with contextlib.suppress(OSError, ValueError):  # unreadable: fitted below
+                m.load(path)
+    predictor.fit(series, progress)
+    for m in todo:
+        if getattr(m, "fitted", False) and not m.settings.model:
+            store(m, series)
 
 
 def announcement(name: str, predictor, series: list[np.ndarray], seed: int) -> list[str]:
@@ -79,7 +103,7 @@ def announcement(name: str, predictor, series: list[np.ndarray], seed: int) -> l
         if hasattr(predictor, "members") else ((name,), (predictor,))
     todo = {n: m for n, m in zip(names, models, strict=True) if needs_fit(m)}
     leads = max((getattr(m.settings, "leads", 1) for m in todo.values()), default=1)
-    plans = plan_fits(list(todo), predictor.dt, series, leads, seed)
+    plans = plan_fits(list(todo), predictor.dt, series, leads, seed, todo)
     frames = sum(s.shape[0] for s in series)
     return describe(plans, f"{frames} samples ({len(series)} series) before the run",
                     series[0].shape[0] if len(series) == 1 else None)

@@ -95,5 +95,5 @@ def test_a_run_says_what_it_fits_and_about_how_long_before_it_fits():
     lines = announcement("combination", combination, series, seed=0)
     assert lines[0] == "fitting st-ridge, tcn on 300 samples (1 series) before the run"
     assert "validation round on the first 80 % of those frames (0–239)" in lines[1]
-    assert lines[2].startswith("about ") and "st-ridge under a second" in lines[2]
+    assert lines[2].startswith("about ") and "st-ridge about a second" in lines[2]
     assert "tcn " in lines[2] and "networks × 2 rounds" in lines[2]

@@ -206,7 +206,7 @@ def test_the_split_says_what_it_fits_on_which_frames_and_how_long_before_fitting
                            f"{points_track().label} (the frames before TRAIN = 300; the "
                            "forecasts issued at frames 300–399 are scored)")
     assert said[first + 1].startswith("about 0 s of fitting") and \
-        "ridge under a second; st-ridge under a second" in said[first + 1]
+        "ridge about a second; st-ridge about a second" in said[first + 1]
     assert all("TRAIN" not in s for s in said[first + 2:])  # the placeholder is not said
     assert not any(s.startswith("left out") for s in said)  # predictors were given
 
