@@ -101,13 +101,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                      "of the same samples, one sample ahead")
     add_model_option(p)
     out = p.add_mutually_exclusive_group()
-    out.add_argument("--json", action="store_true", help="print the results as JSON: runs (one "
-                     "document per column, predictor and seed, each with scenario (the column: "
-                     "a scenario, a file name, FILE:pN for a point), rms_error_mm, max_error_mm "
-                     "and rms_effort_mNm; a failed run: error), cells (per predictor and "
-                     "column: runs, and each metric's mean and ci95 = [low, high] of its 95%% "
-                     "interval) and, with --paper, paper (the published cells beside ours and "
-                     "the findings, each with its verdict and cause)")
+    out.add_argument("--json", action="store_true", help="print the results as JSON (schema "
+                     "rhmpc.compare/2: the runs, the cells with their 95%% intervals and, with "
+                     "--paper, the published cells beside ours; the user guide's 'The JSON "
+                     "documents')")
     out.add_argument("--csv", action="store_true", help="print the table's cells as CSV: one "
                      "line per column and predictor with the runs behind it, each metric's mean "
                      "and 95%% half-width, and the ratios")
@@ -123,11 +120,6 @@ def seeds_of(args: argparse.Namespace) -> list[int]:
     if count < 1 or (args.jobs is not None and args.jobs < 1):
         raise UsageError("--seeds and --jobs must be >= 1")
     return list(range(args.seed, args.seed + count))
-
-
-def configs(args: argparse.Namespace) -> list[RunConfig]:
-    """One run configuration per predictor × scenario (or recording) × seed."""
-    return [job.config for job in jobs(args)]
 
 
 def jobs(args: argparse.Namespace) -> list[Job]:
@@ -214,8 +206,8 @@ def run(args: argparse.Namespace) -> int:
     if args.paper and comparison.done:
         from rhmpc.paper.tables import paper_document
 
-        results["paper"] = paper_document(comparison.docs, *_rows_columns(comparison.done),
-                                          setting=setting_of([j.config for j in comparison.done]))
+        results["paper"] = paper_document(comparison.docs, *comparison.axes(done=True),
+                                          setting=comparison.setting(done=True))
     results = json_ready(results)
     if args.out:
         io.write_text(args.out, json.dumps(results, indent=2) + "\n")
@@ -232,17 +224,11 @@ def run(args: argparse.Namespace) -> int:
     return 1 if failed else 0
 
 
-def _rows_columns(jobs_: list[Job]) -> tuple[list[str], list[str]]:
-    """The table's predictors and columns, in the jobs' order."""
-    return (list(dict.fromkeys(job.config.predictor for job in jobs_)),
-            list(dict.fromkeys(job.column for job in jobs_)))
-
-
 def _print_results(results: dict, comparison, args: argparse.Namespace) -> None:
     """The JSON document, the CSV cells, or the tables (each printed as soon as it is made)."""
     from rhmpc.compare.table import comparison_csv, comparison_table
 
-    predictors, columns = _rows_columns(comparison.jobs)
+    predictors, columns = comparison.axes()
     docs, recordings = comparison.docs, bool(args.data)
     if args.json:
         json.dump(results, sys.stdout, indent=2)
@@ -256,8 +242,7 @@ def _print_results(results: dict, comparison, args: argparse.Namespace) -> None:
         from rhmpc.paper.tables import paper_table
 
         print()
-        print(paper_table(docs, predictors, columns,
-                          setting=setting_of([j.config for j in comparison.jobs])), flush=True)
+        print(paper_table(docs, predictors, columns, setting=comparison.setting()), flush=True)
     if results.get("loop_gap"):
         from rhmpc.compare.loop_gap import gap_table
 

@@ -13,7 +13,7 @@ from rhmpc import io
 from rhmpc.cli import COMMANDS
 from rhmpc.cli.options import add_recording_options, parse_split, recording_options
 from rhmpc.errors import UsageError
-from rhmpc.openloop.recordings import DEFAULT_LEADS, WARMUP_FRACTION, WARMUP_SECONDS
+from rhmpc.openloop.plan import DEFAULT_LEADS, WARMUP_FRACTION, WARMUP_SECONDS
 from rhmpc.openloop.studies import (
     BASE_BPM,
     DEFAULT_PREDICTORS,
@@ -202,7 +202,8 @@ def run(args: argparse.Namespace) -> int:
 
 def _run_data(args: argparse.Namespace) -> int:
     """``--data``: every predictor on the recordings, open loop (rhmpc.openloop.recordings)."""
-    from rhmpc.openloop.recordings import OpenLoopSettings, run_open_loop
+    from rhmpc.openloop.plan import OpenLoopSettings
+    from rhmpc.openloop.recordings import run_open_loop
     from rhmpc.openloop.recordings_report import format_report, plot_leads
     from rhmpc.openloop.tracks import data_tracks
 

@@ -17,7 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from rhmpc.openloop.recordings import OpenLoopSettings, score_track
+from rhmpc.openloop.plan import OpenLoopSettings, TrackPlan, plan_track
+from rhmpc.openloop.recordings import run_plan
 from rhmpc.openloop.tracks import Track, poi_tracks
 from rhmpc.predictors.registry import combination_members, family
 from rhmpc.sim.recordings import load_recording
@@ -47,19 +48,12 @@ def _track(data: str, read: dict) -> Track:
     return Track(Path(data).name, rec.t, rec.z, data)
 
 
-def open_loop_beside(data: str, read: dict, split: tuple[int, int], names: Sequence[str],
-                     leads: int, seed: int = 0, progress: Callable[[str], None] | None = None,
-                     save: Path | None = None) -> dict[str, dict]:
-    """Each predictor's forecast one sample ahead of the samples TRAIN … END − 1 of ``data``
-    (module docstring), the fitted ones fitted on the samples before TRAIN for ``leads``
-    samples (those the loop asks of them: its reference's points), and each saved in the
-    folder ``save`` if given.
-
-    Returns
-    -------
-    dict
-        name → ``rms_error_mm``, ``max_error_mm``, ``scored`` (samples) and ``update_us``.
-    """
+def beside_plan(data: str, read: dict, split: tuple[int, int], names: Sequence[str],
+                leads: int, seed: int = 0) -> TrackPlan:
+    """The plan of :func:`open_loop_beside` on ``data``: each predictor's forecast one sample
+    ahead of the samples TRAIN … END − 1 (module docstring), the fitted ones fitted on the
+    samples before TRAIN for ``leads`` samples (those the loop asks of them: its reference's
+    points)."""
     train, end = split
     track = _track(data, read)
     wide = track.points().reshape(track.t.size, -1)
@@ -67,7 +61,20 @@ def open_loop_beside(data: str, read: dict, split: tuple[int, int], names: Seque
     grid = wide.reshape(wide.shape[0], -1, track.z.shape[1])
     settings = OpenLoopSettings(predictors=open_names(names), leads=leads,
                                 split=(train - 1, end - 1), seed=seed)
-    _, rows = score_track(track, settings, progress, [grid[:train]], save)
+    return plan_track(track, settings, [grid[:train]])
+
+
+def open_loop_beside(plan: TrackPlan, progress: Callable[[str], None] | None = None,
+                     save: Path | None = None) -> dict[str, dict]:
+    """Run :func:`beside_plan`'s ``plan``, the fitted models each saved in the folder ``save``
+    if given.
+
+    Returns
+    -------
+    dict
+        name → ``rms_error_mm``, ``max_error_mm``, ``scored`` (samples) and ``update_us``.
+    """
+    _, rows = run_plan(plan, progress, save)
     return {r["predictor"]: {k: r[k] for k in ("rms_error_mm", "max_error_mm", "scored",
                                                "update_us")}
             for r in rows if r["lead_samples"] == 1}

@@ -1,7 +1,9 @@
 """Running a comparison's jobs: in parallel through the sweep runner of ``rhmpc tune``
 (:func:`rhmpc.tuning.runner.run_sweep`), local worker processes or a dask.distributed
 cluster, with a progress bar on stderr; with the literature's split, each recording's open
-loop first (:mod:`rhmpc.compare.loop_gap`), whose fitted models the closed loops load.
+loop first (:mod:`rhmpc.compare.loop_gap`), whose fitted models the closed loops load. The
+whole is estimated before any of it, and the bar's time left follows the runs as they finish
+(:mod:`rhmpc.compare.estimate`).
 """
 
 from __future__ import annotations
@@ -12,13 +14,19 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from rhmpc.compare.jobs import Job, evaluate_job, failed_doc, labelled
+from rhmpc.compare.estimate import PROBE_S
+from rhmpc.compare.jobs import Job, evaluate_job, failed_doc, labelled, setting_of
 from rhmpc.errors import UsageError
 from rhmpc.experiment import RunConfig
 from rhmpc.experiment.fitting import with_models
 from rhmpc.tuning.progress import format_duration, note, speed_phrase
 
-__all__ = ["Comparison", "Execution", "document", "footer", "header", "run_comparison"]
+__all__ = ["SCHEMA", "Comparison", "Execution", "document", "footer", "header", "run_comparison"]
+
+
+#: The version of the comparison's document (docs/guide/json.md); a change to its keys bumps it.
+#: 2: the runs under ``runs`` (``results`` before).
+SCHEMA = "rhmpc.compare/2"
 
 
 @dataclass(frozen=True)
@@ -60,19 +68,83 @@ class Comparison:
     where: str
     open_loops: dict[str, dict] = field(default_factory=dict)
 
+    def axes(self, done: bool = False) -> tuple[list[str], list[str]]:
+        """The table's predictors and columns, in the jobs' order (of the runs done)."""
+        jobs = self.done if done else self.jobs
+        return (list(dict.fromkeys(job.config.predictor for job in jobs)),
+                list(dict.fromkeys(job.column for job in jobs)))
+
+    def setting(self, done: bool = False) -> str:
+        """Tuna's setting of the runs (:func:`rhmpc.compare.jobs.setting_of`)."""
+        return setting_of([job.config for job in (self.done if done else self.jobs)])
+
 
 def run_comparison(todo: list[Job], how: Execution) -> Comparison:
     """Run every job (with a split, each column's open loop first, whose models the runs load
-    instead of fitting again)."""
-    with tempfile.TemporaryDirectory(prefix="rhmpc-models-") as folder:
-        beside, todo = open_loops(todo, how, Path(folder)) if how.split else ({}, todo)
-        outcome, where = execute(todo, how)
+    instead of fitting again), the whole estimated before any of it and the time left kept on
+    the bar (:mod:`rhmpc.compare.estimate`)."""
+    from rhmpc.tuning.runner import executors
+
+    plans = open_plans(todo, how) if how.split else {}
+    fitted_here = how.split and "torch" in sys.modules  # the plans timed PyTorch networks
+    backend = executors(how.workers, how.scheduler, len(todo),
+                        start_method="spawn" if fitted_here else "fork")
+    try:
+        estimates = _estimate(todo, plans, backend, how)
+        with tempfile.TemporaryDirectory(prefix="rhmpc-models-") as folder:
+            beside, todo = open_loops(todo, plans, how, Path(folder)) if plans else ({}, todo)
+            outcome = execute(todo, backend, estimates, how)
+    finally:
+        backend.close()
     done = [job for job in todo if job.key in outcome.by_key]
     return Comparison(todo, [outcome.by_key[job.key] for job in done], done,
-                      outcome.interrupted, outcome.elapsed_s, where, beside)
+                      outcome.interrupted, outcome.elapsed_s, backend.where, beside)
 
 
-def open_loops(todo: list[Job], how: Execution,
+def _estimate(todo: list[Job], plans: dict, backend, how: Execution) -> dict[str, float]:
+    """Each job's estimate (key → seconds), after the whole is said; none with ``quiet``,
+    where no one reads it."""
+    from rhmpc.compare.estimate import job_estimates, makespan, probe
+    from rhmpc.experiment.fit_plan import duration
+
+    if how.quiet:
+        return {}
+    note(f"rhmpc compare: timing a {PROBE_S:g}-s run of hold on {todo[0].column}, and each "
+         "predictor on a few samples, for the estimate", how.quiet)
+    measured = probe(todo[0])
+    if measured is None:
+        return {}
+    steps = {column: plan.steps for column, plan in plans.items()}
+    estimates = job_estimates(todo, measured, steps)
+    runs = makespan(estimates, min(backend.window, len(todo)))
+    opened = sum(p.fitting_s + p.scoring_s() for p in plans.values())
+    fits = sum(p.fitting_s for p in plans.values())
+    note(f"rhmpc compare: about {duration(opened + runs)} in all: "
+         + (f"the open loops {duration(opened)} ({duration(fits)} of fitting), then "
+            if plans else "")
+         + f"{len(todo)} run(s) on {backend.where} {duration(runs)} (each "
+         f"{duration(min(estimates))}–{duration(max(estimates))})", how.quiet)
+    return {job.key: t for job, t in zip(todo, estimates, strict=True)}
+
+
+def open_plans(todo: list[Job], how: Execution) -> dict:
+    """Per recording column of a split: the plan of its open loop
+    (:func:`rhmpc.compare.loop_gap.beside_plan`)."""
+    from rhmpc.compare.loop_gap import beside_plan
+
+    out = {}
+    for column in dict.fromkeys(job.column for job in todo):
+        config = next(job.config for job in todo if job.column == column)
+        names = list(dict.fromkeys(job.config.predictor for job in todo if job.column == column))
+        try:
+            out[column] = beside_plan(config.data, config.data_read, how.split, names,
+                                      config.reference.prediction_points, config.seed)
+        except ValueError as exc:
+            raise UsageError(f"{column}: {exc}") from None
+    return out
+
+
+def open_loops(todo: list[Job], plans: dict, how: Execution,
                folder: Path) -> tuple[dict[str, dict], list[Job]]:
     """Per recording column of a split: every predictor's open-loop forecast of the scored
     samples one sample ahead (:func:`rhmpc.compare.loop_gap.open_loop_beside`), made here
@@ -82,9 +154,7 @@ def open_loops(todo: list[Job], how: Execution,
     from rhmpc.compare.loop_gap import open_loop_beside
 
     out, share, split = {}, not (how.models or how.scheduler), how.split
-    for i, column in enumerate(dict.fromkeys(job.column for job in todo)):
-        config = next(job.config for job in todo if job.column == column)
-        names = list(dict.fromkeys(job.config.predictor for job in todo if job.column == column))
+    for i, (column, plan) in enumerate(plans.items()):
         note(f"rhmpc compare: the open loop on {column}, split {split[0]}:{split[1]}",
              how.quiet)
         save = folder / str(i) if share else None
@@ -92,9 +162,7 @@ def open_loops(todo: list[Job], how: Execution,
             save.mkdir()
         try:
             out[column] = open_loop_beside(
-                config.data, config.data_read, split, names,
-                config.reference.prediction_points, config.seed,
-                None if how.quiet else (lambda text: note(f"  {text}", False)), save)
+                plan, None if how.quiet else (lambda text: note(f"  {text}", False)), save)
         except ValueError as exc:
             raise UsageError(f"{column}: {exc}") from None
         if save is not None:
@@ -104,47 +172,60 @@ def open_loops(todo: list[Job], how: Execution,
     return out, todo
 
 
-def execute(todo: list[Job], how: Execution):
-    """Run the jobs through the sweep runner, with a progress bar on stderr.
+def execute(todo: list[Job], backend, estimates: dict[str, float], how: Execution):
+    """Run the jobs through the sweep runner on ``backend``, with a bar on stderr whose time
+    left follows the runs' estimates (:class:`rhmpc.compare.estimate.Remaining`).
 
     Local worker processes are forked (the parent has the run stack loaded), or started afresh
     where the open loops of a split may have run PyTorch here (a fork does not carry its
-    threads: the workers hung), and die with this process; ``scheduler`` sends the jobs to a
+    threads: the workers hung), and die with this process; a scheduler sends the jobs to a
     Dask cluster. Ctrl-C stops the workers at once and keeps the runs that finished.
 
     Returns
     -------
-    tuple[SweepOutcome, str]
-        The outcome (documents by job key; a run that failed or whose worker died twice has
-        ``error``; ``interrupted``) and where the runs ran, in words.
+    SweepOutcome
+        Documents by job key (a run that failed or whose worker died twice has ``error``),
+        ``interrupted``.
     """
+    from rhmpc.compare.estimate import Remaining
     from rhmpc.tuning.progress import Heartbeat, progress_bar
-    from rhmpc.tuning.runner import executors, run_sweep
+    from rhmpc.tuning.runner import run_sweep
 
-    fitted_here = how.split and "torch" in sys.modules  # the open loops ran PyTorch
-    backend = executors(how.workers, how.scheduler, len(todo),
-                        start_method="spawn" if fitted_here else "fork")
     note(f"rhmpc compare: running {len(todo)} run(s) on {backend.where}", how.quiet)
-    bar = progress_bar(len(todo), "run", "compare", how.quiet)
+    bar = progress_bar(len(todo), "run", "compare", how.quiet,
+                       bar_format="{desc}: {n_fmt}/{total_fmt} runs |{bar}| {elapsed}{postfix}")
+    left = Remaining(estimates, backend.window)
+    keys = {(j.column, j.config.predictor, j.config.seed): j.key for j in todo}
     failed = 0
+
+    def show() -> None:
+        words = [w for w in (left.text(), f"{failed} failed" if failed else "") if w]
+        bar.set_postfix_str(", ".join(words), refresh=False)
 
     def on_result(doc: dict) -> None:
         nonlocal failed
         failed += "error" in doc
+        took = doc.get("build_s", 0.0) + doc["wall_s"] if "wall_s" in doc else None
+        left.finished(keys.get((doc.get("scenario"), doc.get("predictor"), doc.get("seed")),
+                               ""), took)
+        show()
         bar.update(1)
-        if failed:
-            bar.set_postfix(failed=failed)
 
     def failed_run(job: Job, error: str) -> dict:
         return labelled(failed_doc(job, error), job)
 
+    beat = Heartbeat(bar)
+
+    def heartbeat() -> None:
+        show()
+        beat()
+
+    show()
     try:
-        outcome = run_sweep(todo, None, backend.factory, backend.window, evaluate=evaluate_job,
-                            on_result=on_result, heartbeat=Heartbeat(bar), failed=failed_run)
+        return run_sweep(todo, None, backend.factory, backend.window, evaluate=evaluate_job,
+                         on_result=on_result, heartbeat=heartbeat, failed=failed_run)
     finally:
         bar.close()
-        backend.close()
-    return outcome, backend.where
 
 
 def document(comparison: Comparison, seeds: Sequence[int]) -> dict:
@@ -152,10 +233,10 @@ def document(comparison: Comparison, seeds: Sequence[int]) -> dict:
     (:func:`rhmpc.compare.table.cells_document`) and, with a split, the loop gap."""
     from rhmpc.compare.table import cells_document
 
-    done, docs = comparison.done, comparison.docs
-    predictors = list(dict.fromkeys(job.config.predictor for job in done))
-    columns = list(dict.fromkeys(job.column for job in done))
-    out = {"runs": docs, "seeds": list(seeds), "interrupted": comparison.interrupted,
+    docs = comparison.docs
+    predictors, columns = comparison.axes(done=True)
+    out = {"schema": SCHEMA, "runs": docs, "seeds": list(seeds),
+           "interrupted": comparison.interrupted,
            "cells": cells_document(docs, predictors, columns)}
     if comparison.open_loops:
         from rhmpc.compare.loop_gap import gap_rows

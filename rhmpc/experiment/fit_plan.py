@@ -37,8 +37,8 @@ import numpy as np
 from rhmpc import io
 from rhmpc.predictors import LEARNED, make_predictor, settings_for
 
-__all__ = ["PROBE_EPOCHS", "STEP_SAMPLES", "FitPlan", "describe", "fit_all", "plan_fits",
-           "step_seconds"]
+__all__ = ["PROBE_EPOCHS", "STEP_SAMPLES", "FitPlan", "describe", "duration", "fit_all",
+           "plan_fits", "step_seconds"]
 
 #: K, the epochs of the longer probe network.
 PROBE_EPOCHS = 5
@@ -198,7 +198,7 @@ def _rounds(plan: FitPlan, progress: Callable[[str], None]) -> Callable[[str], N
     return say
 
 
-def _duration(seconds: float) -> str:
+def duration(seconds: float) -> str:
     """``8 s``, ``57 s``, ``4.2 min``: an estimate, rounded."""
     return f"{seconds:.0f} s" if seconds < 90 else f"{seconds / 60:.1f} min"
 
@@ -206,7 +206,7 @@ def _duration(seconds: float) -> str:
 def _seconds(plan: FitPlan) -> str:
     if plan.cached is not None:
         return "from the cache"
-    return "about a second" if plan.estimate_s is None else _duration(plan.estimate_s)
+    return "about a second" if plan.estimate_s is None else duration(plan.estimate_s)
 
 
 def describe(plans: Sequence[FitPlan], where: str, frames: int | None,
@@ -248,7 +248,7 @@ def describe(plans: Sequence[FitPlan], where: str, frames: int | None,
                    "all of them")
     total = sum(p.estimate_s for p in fits if p.estimate_s is not None)
     if fits:
-        out.append(f"about {_duration(total)} of fitting (each network predictor timed "
+        out.append(f"about {duration(total)} of fitting (each network predictor timed "
                    "from a few epochs of one network): " + "; ".join(
                        f"{p.name} {_seconds(p)}" + (f" ({p.networks} networks × {p.rounds} "
                                                      "rounds)" if p.networks else "")

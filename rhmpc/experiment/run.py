@@ -19,6 +19,9 @@ from rhmpc.sim.loop import LoopResult, run_closed_loop
 from rhmpc.sim.sensors import DEFAULT_PLAYBACK
 from rhmpc.timing.yardstick import GainTick
 
+#: The version of a run's document (docs/guide/json.md); a change to its keys bumps it.
+SCHEMA = "rhmpc.simulate/1"
+
 
 def versions() -> dict[str, str]:
     """Versions of the packages a result depends on."""
@@ -39,8 +42,10 @@ def run_experiment(config: RunConfig, progress: bool = False, trace: str | None 
 
     The document holds the settings, the metrics (``rms_error_mm``, ``max_error_mm``,
     ``rms_effort_mNm``, ``tick_us`` with ``p50``/``p99``/``max``, ``fallbacks`` …), the wall
-    time, the peak resident memory of the process so far (``peak_rss_mb``) and the package
-    versions. ``trace``: write every tick to this NPZ file (:mod:`rhmpc.sim.loop.trace`).
+    time of the loop (``wall_s``) and of building the run before it (``build_s``: the robot,
+    the controller, the fits), the peak resident memory of the process so far
+    (``peak_rss_mb``) and the package versions. ``trace``: write every tick to this NPZ
+    file (:mod:`rhmpc.sim.loop.trace`).
     ``gain_tick``: time the gain tick g (:class:`~rhmpc.timing.yardstick.GainTick`) in the run
     on every 64th tick, so that the document has ``gain_tick_us`` and the tick's ratios to its
     p50 (``tick_ratio_to_gain``). ``implementation``: ``"python"`` or
@@ -48,7 +53,9 @@ def run_experiment(config: RunConfig, progress: bool = False, trace: str | None 
     the document's ``faults`` holds one record per fault
     (:func:`rhmpc.experiment.faults.fault_report`).
     """
+    built = time.perf_counter()
     run = build_run(config, implementation, _say if progress else None)
+    built = time.perf_counter() - built
     loop = config.loop
     marks = fault_marks(run.faults, config.faults.after_s, loop.Ts, loop.duration)
     bar, callback = _progress_bar(config, run.label) if progress else (None, None)
@@ -64,7 +71,9 @@ def run_experiment(config: RunConfig, progress: bool = False, trace: str | None 
         if bar is not None:
             bar.close()
     wall = time.perf_counter() - wall
-    return result, document(config, run, result, wall, implementation, gain_tick)
+    doc = document(config, run, result, wall, implementation, gain_tick)
+    doc["build_s"] = built
+    return result, doc
 
 
 def _say(text: str) -> None:
@@ -94,6 +103,7 @@ def document(config: RunConfig, run: Run, result: LoopResult, wall: float,
         metrics = result.metrics()
     stats = result.controller_stats
     doc = {
+        "schema": SCHEMA,
         "predictor": config.predictor,
         "scenario": run.label,
         "robot": config.robot,

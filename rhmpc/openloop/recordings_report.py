@@ -4,7 +4,7 @@ tables of ``rhmpc predict --data`` and the figure of ``--plot``."""
 from __future__ import annotations
 
 from rhmpc import io
-from rhmpc.openloop.recordings import WARMUP_FRACTION, WARMUP_SECONDS
+from rhmpc.openloop.plan import WARMUP_FRACTION, WARMUP_SECONDS
 
 __all__ = ["format_report", "plot_leads"]
 

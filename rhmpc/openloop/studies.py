@@ -48,12 +48,15 @@ from rhmpc.predictors import make_predictor
 __all__ = [
     "BASE_BPM",
     "DEFAULT_PREDICTORS",
+    "SCHEMA",
     "STUDIES",
     "StudySettings",
     "run_study",
     "study_settings",
 ]
 
+#: The version of a study's document (docs/guide/json.md); a change to its keys bumps it.
+SCHEMA = "rhmpc.predict.study/1"
 STUDIES: tuple[str, ...] = ("noise", "hr-step", "rr", "horizon")
 #: hr-step base rate by protocol [beats/min]: Yuen 2008 §III-D, Tuna 2013 §VIII-D
 BASE_BPM: dict[str, float] = {"yuen2008": 60.0, "tuna2013": 103.0}
@@ -359,6 +362,7 @@ def run_study(
     settings = asdict(s)
     settings["predictors"] = list(s.names)
     return {
+        "schema": SCHEMA,
         "study": s.study,
         "settings": settings,
         "parameters": [str(p) if s.study == "rr" else p for p in params],

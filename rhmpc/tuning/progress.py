@@ -36,7 +36,8 @@ def redraw_interval(stream: Any = None) -> float:
     return REDRAW_TTY_S if _is_tty(stream or sys.stderr) else REDRAW_FILE_S
 
 
-def progress_bar(total: int, unit: str, desc: str, quiet: bool = False):
+def progress_bar(total: int, unit: str, desc: str, quiet: bool = False,
+                 bar_format: str | None = None):
     """A tqdm bar on stderr with an ETA, drawn at once; disabled when ``quiet``.
 
     Parameters
@@ -49,6 +50,8 @@ def progress_bar(total: int, unit: str, desc: str, quiet: bool = False):
         The bar's label.
     quiet : bool
         No output at all (``--quiet``).
+    bar_format : str or None
+        tqdm's ``bar_format`` (e.g. a time left of the caller's own in ``{postfix}``).
 
     Returns
     -------
@@ -58,7 +61,8 @@ def progress_bar(total: int, unit: str, desc: str, quiet: bool = False):
     from tqdm import tqdm
 
     return tqdm(total=total, unit=unit, desc=desc, file=sys.stderr, disable=quiet,
-                dynamic_ncols=True, smoothing=0.1, mininterval=redraw_interval())
+                dynamic_ncols=True, smoothing=0.1, mininterval=redraw_interval(),
+                bar_format=bar_format)
 
 
 def note(text: str, quiet: bool = False) -> None:

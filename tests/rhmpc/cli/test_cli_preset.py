@@ -6,7 +6,7 @@ import json
 import pytest
 
 from rhmpc.cli import build_parser, main
-from rhmpc.cli.compare import configs
+from rhmpc.cli.compare import jobs
 from rhmpc.cli.simulate import config_from_args
 from rhmpc.experiment.presets import PRESETS
 from rhmpc.paper.tables import COLUMNS, TUNA2013, paper_table
@@ -32,8 +32,9 @@ def test_preset_sets_the_effort_weight_and_set_still_wins() -> None:
     config = config_from_args(_args("simulate", "--preset", "tuna2013", "--set",
                                     "mpc.effort_weight=7"))
     assert config.mpc.effort_weight == 7.0
-    runs = configs(_args("compare", "--preset", "tuna2013", "--seed", "3", "--seeds", "2",
-                         "--predictors", "exact", "--scenarios", "fixed-a2-top"))
+    runs = [job.config for job in jobs(_args(
+        "compare", "--preset", "tuna2013", "--seed", "3", "--seeds", "2", "--predictors",
+        "exact", "--scenarios", "fixed-a2-top"))]
     assert [c.seed for c in runs] == [3, 4]
     assert all(c.mpc.effort_weight == PRESETS["tuna2013"]["mpc.effort_weight"] for c in runs)
 

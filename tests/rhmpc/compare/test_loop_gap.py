@@ -7,7 +7,7 @@ import json
 import numpy as np
 
 from rhmpc.cli import main
-from rhmpc.compare.loop_gap import open_loop_beside, open_names
+from rhmpc.compare.loop_gap import beside_plan, open_loop_beside, open_names
 from rhmpc.predictors.registry import combination_members
 from rhmpc.sim.recordings import load_points
 from rhmpc.sim.recordings.shipped import SHIPPED
@@ -25,8 +25,9 @@ def test_the_open_loop_forecasts_the_scored_samples_one_ahead():
     """hold forecasts z_{k−1} for z_k: its figure is the RMS step of samples TRAIN … END − 1,
     computed here from the file."""
     z = load_points(PHANTOM.path, **PHANTOM.read)[3].z
-    got = open_loop_beside(str(PHANTOM.path), {**PHANTOM.read, "point": 4}, (100, 150),
-                           ["hold"], leads=4)["hold"]
+    plan = beside_plan(str(PHANTOM.path), {**PHANTOM.read, "point": 4}, (100, 150), ["hold"],
+                       leads=4)
+    got = open_loop_beside(plan)["hold"]
     step = np.linalg.norm(z[100:150] - z[99:149], axis=1)
     np.testing.assert_allclose(got["rms_error_mm"], 1e3 * np.sqrt(np.mean(step**2)), rtol=1e-12)
     assert got["scored"] == 50

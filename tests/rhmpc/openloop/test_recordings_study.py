@@ -5,14 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rhmpc.openloop.recordings import (
-    OpenLoopSettings,
-    default_predictors,
-    forecast_errors,
-    loop_lead,
-    run_open_loop,
-    warmup_seconds,
-)
+from rhmpc.openloop.plan import OpenLoopSettings, default_predictors, loop_lead, warmup_seconds
+from rhmpc.openloop.recordings import run_open_loop
+from rhmpc.openloop.scoring import forecast_errors
 from rhmpc.openloop.tracks import Track, parse_points
 from rhmpc.predictors import make_predictor
 from rhmpc.sim.recordings import on_grid
@@ -242,7 +237,7 @@ def test_each_network_line_names_its_round() -> None:
 
 
 def test_the_defaults_leave_out_the_grus_and_say_so() -> None:
-    from rhmpc.openloop.recordings import left_out, torch_available
+    from rhmpc.openloop.plan import left_out, torch_available
 
     names = default_predictors(fitted=True)
     assert left_out(names) == (["gru", "st-gru"] if torch_available() else [])
@@ -258,3 +253,22 @@ def test_a_network_fit_is_estimated_from_a_probe_of_a_few_epochs() -> None:
     (plan,) = plan_fits(["tcn"], track.period, [track.points()[:300]], 2, 0)
     assert plan.networks == 2 and plan.rounds == 2  # per-lead heads: one network per lead
     assert plan.estimate_s is not None and plan.estimate_s > 0
+
+
+def test_the_whole_is_estimated_before_the_first_fit_and_each_scoring_as_it_starts() -> None:
+    from rhmpc.openloop.plan import plan_track
+
+    said: list[str] = []
+    track = points_track()
+    settings = OpenLoopSettings(predictors=SPLIT_NAMES, leads=2, split=(300, 400))
+    run_open_loop([track], settings, said.append)
+    whole = next(i for i, s in enumerate(said) if s.startswith("about "))
+    assert said[whole].startswith("about ") and " in all on 1 track: " in said[whole]
+    assert "of fitting" in said[whole] and "of scoring (" in said[whole]
+    assert whole < said.index(next(s for s in said if s.startswith("fitting ")))
+    for name in SPLIT_NAMES:
+        assert any(s.startswith(f"{name} on {track.label} (about ") for s in said), name
+    plan = plan_track(track, settings, None)
+    assert set(plan.steps) == set(SPLIT_NAMES) - {"ridge", "st-ridge"}  # fitted: not probed
+    assert plan.steps["combination"] == sum(plan.steps[n] for n in ("one-step", "st-rls"))
+    assert plan.scoring_s() == plan.end * sum(plan.steps.values()) and plan.end == 400
