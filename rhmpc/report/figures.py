@@ -129,8 +129,8 @@ def _position_row(row, result, k: int, centre: np.ndarray, spans) -> None:
         ax.plot(t[mask], ee[mask], color=COLOURS["tool"], lw=0.9, ls="--", label="tool",
                 zorder=4)
         ax.set_ylabel(rf"${name} - \bar{{{name}}}_\mathrm{{POI}}$ [mm]")
-    _samples(row[1], result, k, centre, spans[1], size=1.5)
-    _samples(row[2], result, k, centre, spans[2], size=3.5)
+    _samples(row[1], result, k, centre, spans[1], size=3.5)
+    _samples(row[2], result, k, centre, spans[2], size=4.5)
     _forecasts(row[2], result, k, centre, spans[2])
     if k == 0:
         for ax in row:
@@ -160,13 +160,15 @@ def _forecasts(ax, result, k: int, centre: np.ndarray, span: tuple[float, float]
 
 def _samples(ax, result, k: int, centre: np.ndarray, span: tuple[float, float],
              size: float) -> None:
+    """The measured samples in ``span``, where and when they were measured, drawn over the
+    lines (a dot with a white rim, which reads on the POI's line and the tool's)."""
     samples = getattr(result, "samples", None)
     if samples is None or len(samples[0]) == 0:
         return
     t, z = np.asarray(samples[0], float), np.asarray(samples[1], float)
     w = _window(t, span)
-    ax.plot(t[w], 1e3 * (z[w, k] - centre[k]), ls="none", marker="o", ms=size, alpha=0.7,
-            mew=0, color=COLOURS["samples"], label="measured samples", zorder=2)
+    ax.plot(t[w], 1e3 * (z[w, k] - centre[k]), ls="none", marker="o", ms=size, mew=0.4,
+            mec="white", color=COLOURS["samples"], label="measured samples", zorder=6)
 
 
 def measured_errors(result) -> tuple[np.ndarray, np.ndarray] | None:

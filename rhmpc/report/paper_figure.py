@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from rhmpc import io
 from rhmpc.report.figures import (
     COLOURS,
     ZOOM_S,
@@ -61,7 +62,7 @@ def plot_paper(result, doc: dict, path: str | Path) -> None:
                                           constrained_layout=True)
         _error_panel(top, result, doc)
         _tracking_panel(bottom, result)
-        fig.savefig(path, dpi=300)
+        io.save_figure(fig, path, dpi=300)
         plt.close(fig)
 
 

@@ -317,13 +317,15 @@ class Recorder:
         return poi
 
     def _keep_refreshes(self, horizons: list, samples: list) -> None:
-        """Every ``keep_every``-th refresh's points and sample, for the figures."""
+        """Every ``keep_every``-th refresh's points and sample, for the figures: the sample
+        placed as the truth is (its centre off, at the anchor), where it was measured."""
         start, every = self.n_refreshes, self.keep_every
         for k, (horizon, sample) in enumerate(zip(horizons, samples, strict=False)):
             if (start + k) % every == 0:
                 self.kept_horizons.append(horizon)
                 stamp, z = sample
-                z = np.full(3, np.nan) if z is None else self.anchor + embed3(z)[0]
+                z = (np.full(3, np.nan) if z is None
+                     else self.anchor + embed3(np.asarray(z) - self.truth.center)[0])
                 self.kept_samples.append((stamp, z))
         self.n_refreshes += len(horizons)
 
