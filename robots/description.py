@@ -24,6 +24,8 @@ A robot file is TOML. Its keys (SI units; angles in radians)::
                                           # the POI may visit [m] (default 10 mm)
     motor_map = [[1, 0, 0], [0, 1, 0], [0, 0, 1]]    # θ = S (q − q0): see rhmpc.robots.Robot
     coupling = [{ row = [0, 1, 1], lower = -2.16, upper = 2.08 }]   # lower ≤ row·q ≤ upper
+    inconsistent_inertia = ["upper_arm"]  # links whose published inertia breaks the triangle
+                                          # inequality, kept as published
     [drives]                              # geared motors, all keys together: they give the
     gear_ratio = [13.3, 11.2, 11.2]       # torque limits η·peak_torque, the friction
     peak_torque = 0.129                   # K_t·I₀·η, the reflected inertias η²·J_m and the
@@ -34,9 +36,11 @@ A robot file is TOML. Its keys (SI units; angles in radians)::
     rotor_joints = ["j1", "j2", "j3"]     # the joint turning with each motor's output angle
                                           # (default: the actuated joints)
 
-Everything is checked before a robot is built (:func:`check`): the names exist, the limits are
-sane, the home posture lies within the joint limits and away from a singularity, and the tool
-reaches the cube of ``workspace`` about its home position. A problem raises
+Everything is checked before a robot is built: the URDF's size and physics before a native
+parser reads it (:mod:`rhmpc.robots.urdf_reader`), every number a number (not a boolean, not
+text), the names exist, the limits are sane, the home posture lies within the joint limits and
+away from a singularity, the arm holds it against gravity within its torque limits, and the
+tool reaches the cube of ``workspace`` about its home position. A problem raises
 :class:`RobotFileError`, one line naming the file and the key.
 
 The default ``workspace`` is half the mitral annulus's total travel of about 20 mm (Yuen et al.,
@@ -55,11 +59,12 @@ import pinocchio as pin
 
 from rhmpc.io import FileError, read_text, read_toml
 from rhmpc.robots.model import Robot
+from rhmpc.robots.urdf_reader import UrdfError, read_model
 
 #: Keys of a robot file and of its [drives] table.
 KEYS = ("urdf", "joints", "locked", "tool_frame", "tool", "home", "name", "description",
         "torque_limits", "armature", "friction", "damping", "encoder_resolution", "gravity",
-        "workspace", "motor_map", "coupling", "drives")
+        "workspace", "motor_map", "coupling", "inconsistent_inertia", "drives")
 DRIVE_KEYS = ("gear_ratio", "peak_torque", "torque_constant", "no_load_current",
               "rotor_inertia", "encoder_counts", "rotor_joints")
 #: The POI's reach about the tool's home position by default [m] (Yuen et al. 2009, §2).
@@ -68,6 +73,25 @@ WORKSPACE = 0.01
 MAX_URDF_BYTES = 2**26
 #: A home posture whose Jacobian's singular values differ by more than this is singular.
 MAX_CONDITION = 1e3
+#: A mass matrix at home whose eigenvalues differ by more than this holds a mass or an inertia
+#: far off: the registered arms' differ by at most about 10² (their bodies weigh grams to kg).
+MAX_MASS_CONDITION = 1e8
+#: The range of each of a robot file's numbers that describes an arm [SI units]; a value
+#: beyond it is a unit error or a typo, and would overflow the controller's arithmetic. The
+#: largest industrial arms' joint torques are about 10⁴ N·m and their gear ratios 10³; a
+#: motor's rotor holds at most about 10⁻² kg·m²; the finest encoders count 2³² a turn; Earth's
+#: surface gravity is 9.78–9.83 m/s² (twice it leaves room for a rounded or a test value and
+#: refuses 981 cm/s²); a heart moves less than 30 mm (``workspace``).
+RANGES: dict[str, tuple[float, float]] = {
+    "torque_limits": (0.0, 1e5), "armature": (0.0, 1e3), "friction": (0.0, 1e5),
+    "damping": (0.0, 1e5), "gravity": (0.0, 20.0), "workspace": (0.0, 1.0),
+    "encoder_resolution": (1e-13, 1.0), "gear_ratio": (0.0, 1e4), "peak_torque": (0.0, 1e3),
+    "torque_constant": (0.0, 1e2), "no_load_current": (0.0, 1e3), "rotor_inertia": (0.0, 1.0),
+    "encoder_counts": (1.0, 2.0**32),
+}
+#: The farthest a tool's point may lie from its frame [m]: no arm that reaches a patient's
+#: heart is larger; a point beyond it is a unit error (millimetres written as metres).
+MAX_TOOL_OFFSET = 10.0
 #: Revolute joints the controller can drive (one angle each).
 _REVOLUTE = ("JointModelRX", "JointModelRY", "JointModelRZ", "JointModelRevoluteUnaligned")
 _NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*")
@@ -102,24 +126,57 @@ def _package(url: str) -> Path:
                          "$ROS_PACKAGE_PATH")
 
 
-def _vector(doc: dict, key: str, n: int, positive: bool = False, default=None) -> np.ndarray:
-    """``doc[key]`` as n finite floats (> 0 with ``positive``, else ≥ 0 unless signed)."""
-    value = doc.get(key, default)
+def _is_number(value) -> bool:
+    """Whether ``value`` is a number of TOML (an integer or a float: not a bool, not text)."""
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def _floats(value, shape: tuple[int, ...]) -> np.ndarray | None:
+    """``value`` (nested lists) as floats of ``shape`` when each entry is a number (not a
+    bool, not text), else None."""
     try:
-        v = np.asarray(value, dtype=float)
+        a = np.asarray(value, dtype=object)
     except (TypeError, ValueError):
-        v = np.zeros(0)
-    if v.shape != (n,) or not np.all(np.isfinite(v)) or (positive and np.any(v <= 0)):
-        what = f"{n} finite numbers" + (" > 0" if positive else "")
-        raise RobotFileError(f"{key}: must be {what}, got {value!r}")
+        return None
+    if a.shape != shape or not all(_is_number(v) for v in a.flat):
+        return None
+    return a.astype(float)
+
+
+def _within(v: np.ndarray, key: str, positive: bool) -> bool:
+    """Whether the finite numbers ``v`` lie in ``key``'s :data:`RANGES` (> 0 with
+    ``positive``)."""
+    lo, hi = RANGES.get(key, (-math.inf, math.inf))
+    return bool(np.all(np.isfinite(v)) and np.all(v >= lo) and np.all(v <= hi)
+                and not (positive and np.any(v <= 0)))
+
+
+def _wanted(what: str, key: str, positive: bool) -> str:
+    """What ``key`` takes, in words: "3 finite numbers in (0, 1e+05]"."""
+    lo, hi = RANGES.get(key, (None, None))
+    if lo is None:
+        return what + (" > 0" if positive else "")
+    return f"{what} in {'(' if positive and lo == 0 else '['}{lo:g}, {hi:g}]"
+
+
+def _vector(doc: dict, key: str, n: int, positive: bool = False, default=None) -> np.ndarray:
+    """``doc[key]`` as n finite numbers in ``key``'s range (> 0 with ``positive``); booleans
+    and text are not numbers."""
+    value = doc.get(key, default)
+    v = _floats(value, (n,))
+    if v is None or not _within(v, key, positive):
+        shown = value.tolist() if isinstance(value, np.ndarray) else value
+        raise RobotFileError(f"{key}: must be {_wanted(f'{n} finite numbers', key, positive)}, "
+                             f"got {shown!r}")
     return v
 
 
 def _number(table: dict, key: str, where: str = "") -> float:
+    """``table[key]``: a finite number > 0 in ``key``'s range."""
     value = table.get(key)
-    if isinstance(value, bool) or not isinstance(value, int | float) \
-            or not math.isfinite(value) or value <= 0:
-        raise RobotFileError(f"{where}{key}: must be a finite number > 0, got {value!r}")
+    if not _is_number(value) or not _within(np.float64(value), key, True):
+        raise RobotFileError(f"{where}{key}: must be "
+                             f"{_wanted('a finite number', key, True)}, got {value!r}")
     return float(value)
 
 
@@ -127,7 +184,17 @@ def read_file(path: str | Path) -> dict:
     """The robot file's table (:func:`rhmpc.io.read_toml`: a file that cannot be read, or is
     not TOML, is a ``FileError`` naming it); unknown or missing keys raise
     :class:`RobotFileError`."""
-    doc = read_toml(path)  # FileError, naming the file
+    if Path(path).suffix.lower() in (".urdf", ".xacro", ".xml"):
+        raise RobotFileError(f"a robot file (TOML) is expected, not a URDF: write one that "
+                             f"names it, urdf = \"{Path(path).name}\", with joints, tool_frame "
+                             "and home (docs: guide/your-robot)")
+    try:
+        doc = read_toml(path)
+    except FileError as exc:  # naming the file
+        if "not valid TOML" not in str(exc):
+            raise
+        raise FileError(f"{exc}; a robot file is TOML: urdf = \"arm.urdf\", joints = [...], "
+                        "tool_frame and home (docs: guide/your-robot)") from None
     unknown = sorted(set(doc) - set(KEYS))
     if unknown:
         raise RobotFileError(f"{unknown[0]}: unknown key; valid keys: {', '.join(KEYS)}")
@@ -147,14 +214,21 @@ def _urdf_path(doc: dict, base: Path) -> Path:
     return _package(url) if url.startswith("package://") else base / url
 
 
-def _full_model(path: Path) -> pin.Model:
-    """The URDF's model (mimic joints follow their joints), read without its meshes."""
-    text = _read_urdf(path)
+def _full_model(doc: dict, path: Path) -> pin.Model:
+    """The URDF's model (mimic joints follow their joints), read without its meshes once its
+    size and physics passed :func:`rhmpc.robots.urdf_reader.check_urdf`."""
+    unchecked = doc.get("inconsistent_inertia", [])
+    if not isinstance(unchecked, list) or not all(isinstance(n, str) for n in unchecked):
+        raise RobotFileError(f"inconsistent_inertia: must be a list of link names, got "
+                             f"{unchecked!r}")
     try:
-        return pin.buildModelFromXML(text, mimic=True)
-    except (RuntimeError, ValueError) as exc:
-        first = str(exc).strip().splitlines()[:1] or ["unknown error"]
-        raise RobotFileError(f"urdf: {path} is not a URDF Pinocchio reads ({first[0]})") from None
+        model = read_model(_read_urdf(path), frozenset(unchecked))
+    except UrdfError as exc:
+        raise RobotFileError(f"urdf: {path}: {exc}") from None
+    for name in unchecked:
+        if not model.existBodyName(name):
+            raise RobotFileError(f"inconsistent_inertia: no link {name!r} in {path.name}")
+    return model
 
 
 def _joint(full: pin.Model, name, key: str, urdf: Path) -> int:
@@ -186,7 +260,7 @@ def _reduced(doc: dict, full: pin.Model, urdf: Path) -> pin.Model:
             raise RobotFileError(f"locked: joint {name!r} is also actuated (joints)")
         idx = full.joints[jid].idx_q
         lo, hi = full.lowerPositionLimit[idx], full.upperPositionLimit[idx]
-        if isinstance(value, bool) or not isinstance(value, int | float):
+        if not _is_number(value):
             raise RobotFileError(f"locked: {name} = {value!r} must be an angle [rad]")
         if not lo - 1e-9 <= value <= hi + 1e-9:
             raise RobotFileError(f"locked: {name} = {value!r} is outside its limits "
@@ -208,21 +282,32 @@ def _tool(doc: dict, model: pin.Model) -> str:
     """The tool's frame name (a frame added at ``tool.point`` for a point on a frame)."""
     if "tool_frame" in doc:
         frame = doc["tool_frame"]
-        if not isinstance(frame, str) or not model.existFrame(frame):
-            raise RobotFileError(f"tool_frame: no frame {frame!r} in the URDF")
+        _frame(model, frame, "tool_frame")
         return frame
     tool = doc["tool"]
     if not isinstance(tool, dict) or set(tool) != {"frame", "point"}:
         raise RobotFileError(f"tool: must be {{ frame = \"FRAME\", point = [x, y, z] }}, got "
                              f"{tool!r}")
-    if not isinstance(tool["frame"], str) or not model.existFrame(tool["frame"]):
-        raise RobotFileError(f"tool: no frame {tool['frame']!r} in the URDF")
+    _frame(model, tool["frame"], "tool.frame")
     point = _vector(tool, "point", 3)
+    if np.linalg.norm(point) > MAX_TOOL_OFFSET:
+        raise RobotFileError(f"tool.point: {np.linalg.norm(point):.4g} m from frame "
+                             f"{tool['frame']!r}; a tool's point lies within "
+                             f"{MAX_TOOL_OFFSET:g} m of its frame (metres, not millimetres)")
     parent = model.frames[model.getFrameId(tool["frame"])]
     placement = parent.placement * pin.SE3(np.eye(3), point)
     model.addFrame(pin.Frame("tool", parent.parentJoint, model.getFrameId(tool["frame"]),
                              placement, pin.FrameType.OP_FRAME))
     return "tool"
+
+
+def _frame(model: pin.Model, frame, key: str) -> None:
+    """``frame`` names a frame of the model; else the message lists them (the first 40)."""
+    if isinstance(frame, str) and model.existFrame(frame):
+        return
+    names = [f.name for f in model.frames if f.name != "universe"]
+    listed = ", ".join(names[:40]) + (f", … ({len(names)} in all)" if len(names) > 40 else "")
+    raise RobotFileError(f"{key}: no frame {frame!r} in the URDF (its frames: {listed})")
 
 
 def _check_limits(model: pin.Model) -> None:
@@ -248,6 +333,9 @@ def _drives(doc: dict, model: pin.Model, joints: list[str]) -> dict:
         raise RobotFileError(f"drives.{missing[0]}: missing")
     eta = _vector(drives, "gear_ratio", 3, positive=True)
     number = {k: _number(drives, k, "drives.") for k in DRIVE_KEYS[1:-1]}
+    if not number["encoder_counts"].is_integer():
+        raise RobotFileError(f"drives.encoder_counts: a whole number of counts a turn, got "
+                             f"{drives['encoder_counts']!r}")
     rotors = drives.get("rotor_joints", joints)
     if not isinstance(rotors, list) or len(rotors) != 3 or not all(
             isinstance(r, str) and model.existJointName(r) for r in rotors):
@@ -283,7 +371,7 @@ def _coupling(doc: dict) -> tuple:
             raise RobotFileError("coupling: a list of { row = [a, b, c], lower = .., upper = .. }")
         c = _vector(row, "row", 3)
         lo, hi = (row[k] for k in ("lower", "upper"))
-        if not all(isinstance(v, int | float) and math.isfinite(v) for v in (lo, hi)) \
+        if not all(_is_number(v) and math.isfinite(v) for v in (lo, hi)) \
                 or lo >= hi or not np.any(c):
             raise RobotFileError(f"coupling: lower < upper, both finite, and a row not zero, "
                                  f"got {row!r}")
@@ -291,9 +379,48 @@ def _coupling(doc: dict) -> tuple:
     return tuple(out)
 
 
+def _check_dynamics(robot: Robot) -> None:
+    """At home, the mass matrix M(q₀) positive definite and the gravity torque g(q₀) within
+    the torque limits: an arm that holds its home posture."""
+    M = robot.mass_matrix(robot.q0)
+    eigenvalues = np.linalg.eigvalsh(M) if np.all(np.isfinite(M)) else np.full(3, np.nan)
+    if not eigenvalues[0] > 0:
+        raise RobotFileError(f"urdf: the mass matrix at home is not positive definite "
+                             f"(eigenvalues {_numbers(eigenvalues)} kg·m²): the links the "
+                             "joints move need masses and inertias")
+    if eigenvalues[-1] > MAX_MASS_CONDITION * eigenvalues[0]:
+        raise RobotFileError(f"urdf: the mass matrix at home has eigenvalues "
+                             f"{_numbers(eigenvalues)} kg·m², more than "
+                             f"{MAX_MASS_CONDITION:.0e} apart: a mass or an inertia of the URDF "
+                             f"is far off ({_masses(robot)})")
+    data = robot.create_data()
+    gravity = pin.computeGeneralizedGravity(robot.model, data, robot.q0)
+    over = np.abs(gravity) > robot.torque_limit
+    if np.any(over):
+        j = int(np.flatnonzero(over)[0])
+        raise RobotFileError(
+            f"home: holding the home posture against gravity takes {abs(gravity[j]):.4g} N·m "
+            f"at joint {robot.model.names[j + 1]!r}, beyond its torque limit "
+            f"{robot.torque_limit[j]:.4g} N·m; check the URDF's masses ({_masses(robot)}), "
+            f"gravity ({-robot.model.gravity.linear[2]:.4g} m/s²) and torque_limits")
+
+
+def _numbers(values) -> str:
+    return ", ".join(f"{v:.4g}" for v in values)
+
+
+def _masses(robot: Robot) -> str:
+    """The moving bodies' masses in a message: their sum and the heaviest."""
+    inertias = list(robot.model.inertias)[1:]
+    j = int(np.argmax([i.mass for i in inertias]))
+    return (f"{sum(i.mass for i in inertias):.4g} kg in all, {inertias[j].mass:.4g} kg moved "
+            f"by joint {robot.model.names[j + 1]!r}")
+
+
 def _check_home(robot: Robot, workspace: float) -> None:
-    """The home posture regular (within the limits: :class:`Robot` checks it), and the POI's
-    cube within reach."""
+    """The home posture regular (within the limits: :class:`Robot` checks it), the arm able
+    to hold it (:func:`_check_dynamics`), and the POI's cube within reach."""
+    _check_dynamics(robot)
     sv = np.linalg.svd(robot.ee_jacobian(robot.q0), compute_uv=False)
     if not sv[-1] > sv[0] / MAX_CONDITION:
         raise RobotFileError(f"home: the tool's Jacobian is singular there (singular values "
@@ -312,7 +439,7 @@ def _check_home(robot: Robot, workspace: float) -> None:
 
 def _robot(doc: dict, path: Path) -> Robot:
     urdf = _urdf_path(doc, path.parent)
-    model = _reduced(doc, _full_model(urdf), urdf)
+    model = _reduced(doc, _full_model(doc, urdf), urdf)
     _check_limits(model)
     joints = list(doc["joints"])
     ee_frame = _tool(doc, model)
@@ -337,17 +464,17 @@ def _robot(doc: dict, path: Path) -> Robot:
     for key in ("armature", "friction", "damping"):
         if np.any(getattr(model, key) < 0):
             raise RobotFileError(f"{key}: must be ≥ 0")
+    if np.any(model.friction >= torque):
+        raise RobotFileError(f"friction: {_numbers(model.friction)} N·m, not below the torque "
+                             f"limits {_numbers(torque)} N·m: the arm could not move")
     for joint, inertia in zip(drives.get("rotor_joints", ()), drives.get("rotor", ()),
                               strict=False):
         _add_rotor(model, joint, float(inertia))
     encoder = doc.get("encoder_resolution", drives.get("encoder_resolution"))
     motor_map = doc.get("motor_map")
     if motor_map is not None:
-        try:
-            S = np.asarray(motor_map, dtype=float)
-        except (TypeError, ValueError):
-            S = np.zeros(0)
-        if S.shape != (3, 3) or not np.all(np.isfinite(S)) or abs(np.linalg.det(S)) < 1e-9:
+        S = _floats(motor_map, (3, 3))
+        if S is None or not np.all(np.isfinite(S)) or abs(np.linalg.det(S)) < 1e-9:
             raise RobotFileError(f"motor_map: must be an invertible 3x3 matrix, got {motor_map!r}")
     try:
         description = str(doc.get("description", f"from {path.name} ({urdf.name})"))
