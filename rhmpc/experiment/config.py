@@ -140,6 +140,10 @@ class RunConfig:
     def __post_init__(self) -> None:
         if isinstance(self.train, list):  # as TOML reads it
             object.__setattr__(self, "train", tuple(self.train))
+        for name, cls in SECTIONS.items():
+            if not isinstance(getattr(self, name), cls):
+                raise ValueError(f"{name} must be a {cls.__name__} (the table [{name}]), got "
+                                 f"{getattr(self, name)!r}")
         for name, kind in TOP_LEVEL.items():
             value = getattr(self, name)
             if not _is(value, kind):
@@ -221,6 +225,8 @@ class RunConfig:
             section, _, name = key.partition(".")
             if name:
                 nested.setdefault(section, {})[name] = value
+            elif key in SECTIONS:  # a whole section: a table of its settings
+                nested.setdefault(key, {}).update(_section_table(key, value))
             else:
                 top[key] = value
         for section, values in nested.items():
@@ -245,6 +251,15 @@ class RunConfig:
             return dataclasses.replace(self, **top)
         except (TypeError, ValueError) as exc:
             raise UsageError(str(exc)) from None
+
+
+def _section_table(section: str, value: Any) -> dict[str, Any]:
+    """``value`` given for a whole section: its table, else a ``UsageError`` naming it."""
+    if isinstance(value, dict):
+        return value
+    keys = ", ".join(f.name for f in dataclasses.fields(SECTIONS[section]))
+    raise UsageError(f"{section} is a section of settings ({keys}), not a value: set one as "
+                     f"{section}.KEY=VALUE, got {value!r}")
 
 
 def run_config(file: str | Path | None = None, preset: str | None = None,
