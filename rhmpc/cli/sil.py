@@ -9,7 +9,7 @@ import sys
 
 from rhmpc.cli import COMMANDS
 from rhmpc.cli.simulate import add_recording_options, add_run_options, config_from_args
-from rhmpc.errors import UsageError
+from rhmpc.errors import UsageError, one_line
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -99,7 +99,7 @@ def run(args: argparse.Namespace) -> int:
         report = run_sil(config, settings, progress=lambda text: print(f"rhmpc sil: {text}",
                                                                         file=sys.stderr))
     except DeploymentError as exc:  # not the input's fault: exit 1, on one line
-        print(f"rhmpc sil: error: {' '.join(str(exc).split())}", file=sys.stderr)
+        print(f"rhmpc sil: error: {one_line(exc)}", file=sys.stderr)
         return 1
     print(json.dumps(report, indent=2) if args.json else table(report))
     return 0

@@ -6,22 +6,31 @@ import argparse
 import json
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from rhmpc.cli import COMMANDS
 from rhmpc.cli.presets import add_preset_option
 from rhmpc.errors import UsageError
-from rhmpc.experiment import RunConfig, run_experiment
-from rhmpc.experiment.config import run_config
 from rhmpc.sim.loop.settings import DEFAULT_SETTLING, LoopSettings
-from rhmpc.sim.recordings.matfile import parse_indices
+
+if TYPE_CHECKING:  # the run's stack loads when a run starts, not for --help
+    from rhmpc.experiment import RunConfig
 
 #: Default run length [s] of every command (``LoopSettings.duration``).
 DEFAULT_DURATION = LoopSettings.duration
 #: The settling rule when neither --settling nor a config file sets it.
 SETTLING_RULE = (f"settling by default {DEFAULT_SETTLING:g} s, or a third of a run shorter than "
                  f"{3 * DEFAULT_SETTLING:g} s")
+
+
+def parse_indices(text: str) -> list[int]:
+    """``--rows``/``--cols`` (:func:`rhmpc.sim.recordings.matfile.parse_indices`), its module
+    loaded when an option is given, not for ``--help``."""
+    from rhmpc.sim.recordings.matfile import parse_indices as parse
+
+    return parse(text)
 
 
 def add_run_options(
@@ -195,6 +204,8 @@ OPTIONS = {"predictor": "predictor", "scenario": "scenario", "data": "data", "se
 def config_from_args(args: argparse.Namespace) -> RunConfig:
     """The run's settings (:func:`rhmpc.experiment.config.run_config`): defaults < --config
     file < --preset < explicit options < --set."""
+    from rhmpc.experiment.config import run_config
+
     options = {key: getattr(args, name) for name, key in OPTIONS.items()
                if getattr(args, name, None) is not None}
     if getattr(args, "data", None):
@@ -299,6 +310,7 @@ def run(args: argparse.Namespace) -> int:
 
         if reason := missing_toolchain():
             raise UsageError(reason)
+    from rhmpc.experiment import run_experiment
     from rhmpc.experiment.config import input_files
 
     check_outputs(args, [*input_files(config), *filter(None, [args.config])])
