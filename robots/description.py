@@ -166,8 +166,9 @@ def _vector(doc: dict, key: str, n: int, positive: bool = False, default=None) -
     v = _floats(value, (n,))
     if v is None or not _within(v, key, positive):
         shown = value.tolist() if isinstance(value, np.ndarray) else value
+        origin = "" if key in doc else " (not given: the URDF's or the drives'; give it)"
         raise RobotFileError(f"{key}: must be {_wanted(f'{n} finite numbers', key, positive)}, "
-                             f"got {shown!r}")
+                             f"got {shown!r}{origin}")
     return v
 
 

@@ -9,8 +9,9 @@ its numbers and its bodies' physics are checked:
 - at most :data:`MAX_LINKS` links, at most :data:`MAX_CHAIN` of them on the way from the root
   to any link, and XML at most :data:`MAX_XML_DEPTH` elements deep, checked while it is parsed;
 - every number of the kinematics and the dynamics is a finite decimal number (``nan``,
-  ``inf``, ``true`` and text are refused): origins, axes (not zero), joint limits (efforts and
-  speeds ≥ 0), joint dynamics (≥ 0), masses and inertias;
+  ``inf``, ``true`` and text are refused): origins (within :data:`MAX_OFFSET` of their
+  parent), axes (not zero), joint limits (efforts and speeds ≥ 0), joint dynamics (≥ 0),
+  masses and inertias;
 - each body's mass m is finite and > 0, and its rotational inertia about its centre of mass
   I_c (the symmetric matrix of ``ixx`` … ``izz``) is positive semi-definite with principal
   moments that satisfy the triangle inequality I₁ + I₂ ≥ I₃ for each ordering: those of a
@@ -53,6 +54,9 @@ MAX_CHAIN = 256
 MAX_XML_DEPTH = 64
 #: The most XML elements read (visuals, collisions and simulator tags included).
 MAX_ELEMENTS = 200_000
+#: The farthest a joint or a centre of mass lies from its parent frame [m]: no arm is larger;
+#: beyond it is a unit error (millimetres written as metres) or a typo.
+MAX_OFFSET = 100.0
 #: How much of urdfdom's captured messages is read [B].
 MAX_CAPTURED = 1 << 16
 #: Tolerance of the inertia checks: relative, of the largest principal moment (the rounding
@@ -85,6 +89,16 @@ def _vector(element: ET.Element | None, attribute: str, where: str) -> np.ndarra
     if len(parts) != 3:
         raise UrdfError(f"{where} {attribute} must be 3 numbers, got {text!r}")
     return np.array([_number(p, f"{where} {attribute}") for p in parts])
+
+
+def _origin(element: ET.Element | None, where: str) -> None:
+    """An ``<origin>``: three finite angles, and an offset within :data:`MAX_OFFSET` along
+    each axis."""
+    _vector(element, "rpy", where)
+    offset = float(np.abs(_vector(element, "xyz", where)).max())
+    if offset > MAX_OFFSET:
+        raise UrdfError(f"{where} xyz is {offset:.4g} m from its parent along an axis; at "
+                        f"most {MAX_OFFSET:g} m (metres, not millimetres)")
 
 
 def _parse(text: str) -> ET.Element:
@@ -154,8 +168,7 @@ def _inertial(link: ET.Element, unchecked: frozenset[str]) -> None:
         return
     name = link.get("name")
     where = f"link {name!r}"
-    _vector(inertial.find("origin"), "xyz", f"{where} inertial origin")
-    _vector(inertial.find("origin"), "rpy", f"{where} inertial origin")
+    _origin(inertial.find("origin"), f"{where} inertial origin")
     mass, tensor = inertial.find("mass"), inertial.find("inertia")
     if mass is None or tensor is None:
         raise UrdfError(f"{where}: an <inertial> needs a <mass> and an <inertia>")
@@ -184,9 +197,7 @@ def _moments(moments: np.ndarray) -> str:
 def _joint(joint: ET.Element) -> None:
     """The numbers of ``joint``: its origin, its axis (not zero), limits and dynamics."""
     where = f"joint {joint.get('name')!r}"
-    origin = joint.find("origin")
-    _vector(origin, "xyz", f"{where} origin")
-    _vector(origin, "rpy", f"{where} origin")
+    _origin(joint.find("origin"), f"{where} origin")
     if joint.get("type") in _MOVING and joint.find("axis") is not None:
         if not np.any(_vector(joint.find("axis"), "xyz", f"{where} axis")):
             raise UrdfError(f"{where} axis must not be zero")

@@ -55,6 +55,7 @@ BAD = {
     "inertia beyond the triangle": (first(r'izz="[^"]*"', 'izz="1"'), "triangle"),
     "origin nan": (first(r'xyz="[^"]*"', 'xyz="nan 0 0"'), "origin"),
     "origin two numbers": (first(r'xyz="[^"]*"', 'xyz="0 0"'), "origin"),
+    "origin 1e300 m away": (first(r'xyz="[^"]*"', 'xyz="1e300 0 0"'), "origin xyz"),
     "axis zero": (first(r'<axis xyz="[^"]*"', '<axis xyz="0 0 0"'), "axis"),
     "effort negative": (first(r'effort="[^"]*"', 'effort="-1"'), "effort"),
     "velocity text": (first(r'velocity="[^"]*"', 'velocity="fast"'), "velocity"),
