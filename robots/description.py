@@ -58,6 +58,15 @@ import numpy as np
 import pinocchio as pin
 
 from rhmpc.io import FileError, read_text, read_toml
+from rhmpc.robots.checks import (
+    RobotFileError,
+    check_home,
+    floats,
+    is_number,
+    listed,
+    number,
+    vector,
+)
 from rhmpc.robots.model import Robot
 from rhmpc.robots.urdf_reader import UrdfError, read_model
 
@@ -71,34 +80,12 @@ DRIVE_KEYS = ("gear_ratio", "peak_torque", "torque_constant", "no_load_current",
 WORKSPACE = 0.01
 #: The largest URDF read [bytes] (the robot file is a settings file: ``rhmpc.io``'s bound).
 MAX_URDF_BYTES = 2**26
-#: A home posture whose Jacobian's singular values differ by more than this is singular.
-MAX_CONDITION = 1e3
-#: A mass matrix at home whose eigenvalues differ by more than this holds a mass or an inertia
-#: far off: the registered arms' differ by at most about 10² (their bodies weigh grams to kg).
-MAX_MASS_CONDITION = 1e8
-#: The range of each of a robot file's numbers that describes an arm [SI units]; a value
-#: beyond it is a unit error or a typo, and would overflow the controller's arithmetic. The
-#: largest industrial arms' joint torques are about 10⁴ N·m and their gear ratios 10³; a
-#: motor's rotor holds at most about 10⁻² kg·m²; the finest encoders count 2³² a turn; Earth's
-#: surface gravity is 9.78–9.83 m/s² (twice it leaves room for a rounded or a test value and
-#: refuses 981 cm/s²); a heart moves less than 30 mm (``workspace``).
-RANGES: dict[str, tuple[float, float]] = {
-    "torque_limits": (0.0, 1e5), "armature": (0.0, 1e3), "friction": (0.0, 1e5),
-    "damping": (0.0, 1e5), "gravity": (0.0, 20.0), "workspace": (0.0, 1.0),
-    "encoder_resolution": (1e-13, 1.0), "gear_ratio": (0.0, 1e4), "peak_torque": (0.0, 1e3),
-    "torque_constant": (0.0, 1e2), "no_load_current": (0.0, 1e3), "rotor_inertia": (0.0, 1.0),
-    "encoder_counts": (1.0, 2.0**32),
-}
 #: The farthest a tool's point may lie from its frame [m]: no arm that reaches a patient's
 #: heart is larger; a point beyond it is a unit error (millimetres written as metres).
 MAX_TOOL_OFFSET = 10.0
 #: Revolute joints the controller can drive (one angle each).
 _REVOLUTE = ("JointModelRX", "JointModelRY", "JointModelRZ", "JointModelRevoluteUnaligned")
 _NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*")
-
-
-class RobotFileError(ValueError):
-    """A robot file that cannot describe a robot; the message names the file and the key."""
 
 
 def _read_urdf(path: Path) -> str:
@@ -124,61 +111,6 @@ def _package(url: str) -> Path:
             return Path(root) / relative
     raise RobotFileError(f"urdf: {url} is neither in example-robot-data's robots nor in "
                          "$ROS_PACKAGE_PATH")
-
-
-def _is_number(value) -> bool:
-    """Whether ``value`` is a number of TOML (an integer or a float: not a bool, not text)."""
-    return isinstance(value, int | float) and not isinstance(value, bool)
-
-
-def _floats(value, shape: tuple[int, ...]) -> np.ndarray | None:
-    """``value`` (nested lists) as floats of ``shape`` when each entry is a number (not a
-    bool, not text), else None."""
-    try:
-        a = np.asarray(value, dtype=object)
-    except (TypeError, ValueError):
-        return None
-    if a.shape != shape or not all(_is_number(v) for v in a.flat):
-        return None
-    return a.astype(float)
-
-
-def _within(v: np.ndarray, key: str, positive: bool) -> bool:
-    """Whether the finite numbers ``v`` lie in ``key``'s :data:`RANGES` (> 0 with
-    ``positive``)."""
-    lo, hi = RANGES.get(key, (-math.inf, math.inf))
-    return bool(np.all(np.isfinite(v)) and np.all(v >= lo) and np.all(v <= hi)
-                and not (positive and np.any(v <= 0)))
-
-
-def _wanted(what: str, key: str, positive: bool) -> str:
-    """What ``key`` takes, in words: "3 finite numbers in (0, 1e+05]"."""
-    lo, hi = RANGES.get(key, (None, None))
-    if lo is None:
-        return what + (" > 0" if positive else "")
-    return f"{what} in {'(' if positive and lo == 0 else '['}{lo:g}, {hi:g}]"
-
-
-def _vector(doc: dict, key: str, n: int, positive: bool = False, default=None) -> np.ndarray:
-    """``doc[key]`` as n finite numbers in ``key``'s range (> 0 with ``positive``); booleans
-    and text are not numbers."""
-    value = doc.get(key, default)
-    v = _floats(value, (n,))
-    if v is None or not _within(v, key, positive):
-        shown = value.tolist() if isinstance(value, np.ndarray) else value
-        origin = "" if key in doc else " (not given: the URDF's or the drives'; give it)"
-        raise RobotFileError(f"{key}: must be {_wanted(f'{n} finite numbers', key, positive)}, "
-                             f"got {shown!r}{origin}")
-    return v
-
-
-def _number(table: dict, key: str, where: str = "") -> float:
-    """``table[key]``: a finite number > 0 in ``key``'s range."""
-    value = table.get(key)
-    if not _is_number(value) or not _within(np.float64(value), key, True):
-        raise RobotFileError(f"{where}{key}: must be "
-                             f"{_wanted('a finite number', key, True)}, got {value!r}")
-    return float(value)
 
 
 def read_file(path: str | Path) -> dict:
@@ -261,7 +193,7 @@ def _reduced(doc: dict, full: pin.Model, urdf: Path) -> pin.Model:
             raise RobotFileError(f"locked: joint {name!r} is also actuated (joints)")
         idx = full.joints[jid].idx_q
         lo, hi = full.lowerPositionLimit[idx], full.upperPositionLimit[idx]
-        if not _is_number(value):
+        if not is_number(value):
             raise RobotFileError(f"locked: {name} = {value!r} must be an angle [rad]")
         if not lo - 1e-9 <= value <= hi + 1e-9:
             raise RobotFileError(f"locked: {name} = {value!r} is outside its limits "
@@ -290,7 +222,7 @@ def _tool(doc: dict, model: pin.Model) -> str:
         raise RobotFileError(f"tool: must be {{ frame = \"FRAME\", point = [x, y, z] }}, got "
                              f"{tool!r}")
     _frame(model, tool["frame"], "tool.frame")
-    point = _vector(tool, "point", 3)
+    point = vector(tool, "point", 3)
     if np.linalg.norm(point) > MAX_TOOL_OFFSET:
         raise RobotFileError(f"tool.point: {np.linalg.norm(point):.4g} m from frame "
                              f"{tool['frame']!r}; a tool's point lies within "
@@ -332,9 +264,9 @@ def _drives(doc: dict, model: pin.Model, joints: list[str]) -> dict:
     missing = [k for k in DRIVE_KEYS[:-1] if k not in drives]
     if missing:
         raise RobotFileError(f"drives.{missing[0]}: missing")
-    eta = _vector(drives, "gear_ratio", 3, positive=True)
-    number = {k: _number(drives, k, "drives.") for k in DRIVE_KEYS[1:-1]}
-    if not number["encoder_counts"].is_integer():
+    eta = vector(drives, "gear_ratio", 3, positive=True)
+    motor = {k: number(drives, k, "drives.") for k in DRIVE_KEYS[1:-1]}
+    if not motor["encoder_counts"].is_integer():
         raise RobotFileError(f"drives.encoder_counts: a whole number of counts a turn, got "
                              f"{drives['encoder_counts']!r}")
     rotors = drives.get("rotor_joints", joints)
@@ -342,10 +274,10 @@ def _drives(doc: dict, model: pin.Model, joints: list[str]) -> dict:
             isinstance(r, str) and model.existJointName(r) for r in rotors):
         raise RobotFileError(f"drives.rotor_joints: must name 3 joints of the model, got "
                              f"{rotors!r}")
-    return {"gear_ratio": eta, "torque_limits": eta * number["peak_torque"],
-            "friction": number["torque_constant"] * number["no_load_current"] * eta,
-            "rotor": eta**2 * number["rotor_inertia"], "rotor_joints": rotors,
-            "encoder_resolution": 2 * np.pi / (number["encoder_counts"] * eta)}
+    return {"gear_ratio": eta, "torque_limits": eta * motor["peak_torque"],
+            "friction": motor["torque_constant"] * motor["no_load_current"] * eta,
+            "rotor": eta**2 * motor["rotor_inertia"], "rotor_joints": rotors,
+            "encoder_resolution": 2 * np.pi / (motor["encoder_counts"] * eta)}
 
 
 def _add_rotor(model: pin.Model, joint: str, inertia: float) -> None:
@@ -370,9 +302,9 @@ def _coupling(doc: dict) -> tuple:
     for row in rows if isinstance(rows, list) else [None]:
         if not isinstance(row, dict) or set(row) != {"row", "lower", "upper"}:
             raise RobotFileError("coupling: a list of { row = [a, b, c], lower = .., upper = .. }")
-        c = _vector(row, "row", 3)
+        c = vector(row, "row", 3)
         lo, hi = (row[k] for k in ("lower", "upper"))
-        if not all(_is_number(v) and math.isfinite(v) for v in (lo, hi)) \
+        if not all(is_number(v) and math.isfinite(v) for v in (lo, hi)) \
                 or lo >= hi or not np.any(c):
             raise RobotFileError(f"coupling: lower < upper, both finite, and a row not zero, "
                                  f"got {row!r}")
@@ -380,62 +312,42 @@ def _coupling(doc: dict) -> tuple:
     return tuple(out)
 
 
-def _check_dynamics(robot: Robot) -> None:
-    """At home, the mass matrix M(q₀) positive definite and the gravity torque g(q₀) within
-    the torque limits: an arm that holds its home posture."""
-    M = robot.mass_matrix(robot.q0)
-    eigenvalues = np.linalg.eigvalsh(M) if np.all(np.isfinite(M)) else np.full(3, np.nan)
-    if not eigenvalues[0] > 0:
-        raise RobotFileError(f"urdf: the mass matrix at home is not positive definite "
-                             f"(eigenvalues {_numbers(eigenvalues)} kg·m²): the links the "
-                             "joints move need masses and inertias")
-    if eigenvalues[-1] > MAX_MASS_CONDITION * eigenvalues[0]:
-        raise RobotFileError(f"urdf: the mass matrix at home has eigenvalues "
-                             f"{_numbers(eigenvalues)} kg·m², more than "
-                             f"{MAX_MASS_CONDITION:.0e} apart: a mass or an inertia of the URDF "
-                             f"is far off ({_masses(robot)})")
-    data = robot.create_data()
-    gravity = pin.computeGeneralizedGravity(robot.model, data, robot.q0)
-    over = np.abs(gravity) > robot.torque_limit
-    if np.any(over):
-        j = int(np.flatnonzero(over)[0])
-        raise RobotFileError(
-            f"home: holding the home posture against gravity takes {abs(gravity[j]):.4g} N·m "
-            f"at joint {robot.model.names[j + 1]!r}, beyond its torque limit "
-            f"{robot.torque_limit[j]:.4g} N·m; check the URDF's masses ({_masses(robot)}), "
-            f"gravity ({-robot.model.gravity.linear[2]:.4g} m/s²) and torque_limits")
+def _drive_terms(doc: dict, model: pin.Model, drives: dict) -> np.ndarray:
+    """The torque limits, armature, friction and damping into ``model``: the file's, else the
+    drives', else the URDF's; the Coulomb friction below the torque limits. Returns the torque
+    limits [N·m]."""
+    urdf_effort = np.asarray(model.effortLimit, dtype=float).copy()
+    if "torque_limits" not in doc and "torque_limits" not in drives and not np.all(
+            urdf_effort > 0):
+        raise RobotFileError(f"torque_limits: the URDF gives no effort limit > 0 "
+                             f"({urdf_effort.tolist()}); give torque_limits [N·m]")
+    torque = vector(doc, "torque_limits", 3, positive=True,
+                    default=drives.get("torque_limits", urdf_effort))
+    model.effortLimit[:] = torque
+    model.armature[:] = vector(doc, "armature", 3, default=np.zeros(3))
+    model.friction[:] = vector(doc, "friction", 3, default=drives.get("friction",
+                                                                      model.friction))
+    model.damping[:] = vector(doc, "damping", 3, default=model.damping)
+    for key in ("armature", "friction", "damping"):
+        if np.any(getattr(model, key) < 0):
+            raise RobotFileError(f"{key}: must be ≥ 0")
+    if np.any(model.friction >= torque):
+        raise RobotFileError(f"friction: {listed(model.friction)} N·m, not below the torque "
+                             f"limits {listed(torque)} N·m: the arm could not move")
+    for joint, inertia in zip(drives.get("rotor_joints", ()), drives.get("rotor", ()),
+                              strict=False):
+        _add_rotor(model, joint, float(inertia))
+    return torque
 
 
-def _numbers(values) -> str:
-    return ", ".join(f"{v:.4g}" for v in values)
-
-
-def _masses(robot: Robot) -> str:
-    """The moving bodies' masses in a message: their sum and the heaviest."""
-    inertias = list(robot.model.inertias)[1:]
-    j = int(np.argmax([i.mass for i in inertias]))
-    return (f"{sum(i.mass for i in inertias):.4g} kg in all, {inertias[j].mass:.4g} kg moved "
-            f"by joint {robot.model.names[j + 1]!r}")
-
-
-def _check_home(robot: Robot, workspace: float) -> None:
-    """The home posture regular (within the limits: :class:`Robot` checks it), the arm able
-    to hold it (:func:`_check_dynamics`), and the POI's cube within reach."""
-    _check_dynamics(robot)
-    sv = np.linalg.svd(robot.ee_jacobian(robot.q0), compute_uv=False)
-    if not sv[-1] > sv[0] / MAX_CONDITION:
-        raise RobotFileError(f"home: the tool's Jacobian is singular there (singular values "
-                             f"{sv.round(6).tolist()} m/rad)")
-    y0 = robot.ee_position(robot.q0)
-    for axis, sign in ((a, s) for a in range(3) for s in (1.0, -1.0)):
-        point = y0 + sign * workspace * np.eye(3)[axis]
-        distance, _ = robot.distance_to_reach(point)
-        if distance > 1e-4:
-            raise RobotFileError(
-                f"workspace: the tool cannot reach {1e3 * workspace:g} mm along "
-                f"{'+' if sign > 0 else '-'}{'xyz'[axis]} of its home position within the "
-                f"joint limits (short by {1e3 * distance:.1f} mm); move home or reduce "
-                "workspace")
+def _motor_map(doc: dict):
+    """The file's ``motor_map`` (an invertible 3×3 matrix of numbers), or None."""
+    motor_map = doc.get("motor_map")
+    if motor_map is not None:
+        S = floats(motor_map, (3, 3))
+        if S is None or not np.all(np.isfinite(S)) or abs(np.linalg.det(S)) < 1e-9:
+            raise RobotFileError(f"motor_map: must be an invertible 3x3 matrix, got {motor_map!r}")
+    return motor_map
 
 
 def _robot(doc: dict, path: Path) -> Robot:
@@ -449,40 +361,16 @@ def _robot(doc: dict, path: Path) -> Robot:
         raise RobotFileError(f"name: letters, digits, '_', '.' and '-', got {name!r}")
     drives = _drives(doc, model, joints)
     if "gravity" in doc:
-        model.gravity.linear[:] = [0.0, 0.0, -_number(doc, "gravity")]
-    urdf_effort = np.asarray(model.effortLimit, dtype=float).copy()
-    if "torque_limits" not in doc and "torque_limits" not in drives and not np.all(
-            urdf_effort > 0):
-        raise RobotFileError(f"torque_limits: the URDF gives no effort limit > 0 "
-                             f"({urdf_effort.tolist()}); give torque_limits [N·m]")
-    torque = _vector(doc, "torque_limits", 3, positive=True,
-                     default=drives.get("torque_limits", urdf_effort))
-    model.effortLimit[:] = torque
-    model.armature[:] = _vector(doc, "armature", 3, default=np.zeros(3))
-    model.friction[:] = _vector(doc, "friction", 3, default=drives.get("friction",
-                                                                       model.friction))
-    model.damping[:] = _vector(doc, "damping", 3, default=model.damping)
-    for key in ("armature", "friction", "damping"):
-        if np.any(getattr(model, key) < 0):
-            raise RobotFileError(f"{key}: must be ≥ 0")
-    if np.any(model.friction >= torque):
-        raise RobotFileError(f"friction: {_numbers(model.friction)} N·m, not below the torque "
-                             f"limits {_numbers(torque)} N·m: the arm could not move")
-    for joint, inertia in zip(drives.get("rotor_joints", ()), drives.get("rotor", ()),
-                              strict=False):
-        _add_rotor(model, joint, float(inertia))
+        model.gravity.linear[:] = [0.0, 0.0, -number(doc, "gravity")]
+    torque = _drive_terms(doc, model, drives)
     encoder = doc.get("encoder_resolution", drives.get("encoder_resolution"))
-    motor_map = doc.get("motor_map")
-    if motor_map is not None:
-        S = _floats(motor_map, (3, 3))
-        if S is None or not np.all(np.isfinite(S)) or abs(np.linalg.det(S)) < 1e-9:
-            raise RobotFileError(f"motor_map: must be an invertible 3x3 matrix, got {motor_map!r}")
+    motor_map = _motor_map(doc)
     try:
         description = str(doc.get("description", f"from {path.name} ({urdf.name})"))
         robot = Robot(
             name=name, model=model, ee_frame=ee_frame,
-            q0=_vector(doc, "home", 3), torque_limit=torque,
-            encoder_resolution=None if encoder is None else _vector(
+            q0=vector(doc, "home", 3), torque_limit=torque,
+            encoder_resolution=None if encoder is None else vector(
                 {"encoder_resolution": encoder}, "encoder_resolution", 3, positive=True),
             description=" ".join(description.split()), motor_map=motor_map,
             gear_ratio=drives.get("gear_ratio"), rotor_inertia=drives.get("rotor"),
@@ -491,7 +379,7 @@ def _robot(doc: dict, path: Path) -> Robot:
         raise
     except ValueError as exc:  # the home posture outside the joint limits (Robot checks it)
         raise RobotFileError(f"home: {str(exc).split(': ', 1)[-1]}") from None
-    _check_home(robot, _number(doc, "workspace") if "workspace" in doc else WORKSPACE)
+    check_home(robot, number(doc, "workspace") if "workspace" in doc else WORKSPACE)
     return robot
 
 
