@@ -11,6 +11,7 @@ so that a second run of the same settings starts at once.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import os
 import shutil
@@ -21,7 +22,7 @@ from importlib.resources import files
 from pathlib import Path
 
 from rhmpc import io
-from rhmpc.compiled import cache_dir
+from rhmpc.compiled import cache_dir, compiler
 from rhmpc.control.export import PREDICTORS, export_controller
 from rhmpc.errors import UsageError
 from rhmpc.experiment import RunConfig
@@ -29,7 +30,7 @@ from rhmpc.experiment.assembly import deployable
 from rhmpc.tuning.workers import program_dies_with_parent
 
 __all__ = ["SOURCES", "TRANSPORT", "BuiltController", "build_controller", "internal_predictor",
-           "write_transport"]
+           "missing_toolchain", "write_transport"]
 
 #: The transport's files (package data of :mod:`rhmpc.runtime`, folder ``export``), which
 #: ``rhmpc export`` writes beside the controller (``DIR/udp``, :func:`write_transport`).
@@ -59,6 +60,25 @@ def internal_predictor(config: RunConfig) -> str:
     """The predictor the exported controller runs itself: the run's if it exports, else the
     generalized RLS."""
     return config.predictor if config.predictor in PREDICTORS else "generalized"
+
+
+@functools.cache
+def missing_toolchain() -> str | None:
+    """None if this host builds the deployment's programs (cmake, a C compiler, OpenSSL's
+    libcrypto and its headers), else what is missing, on one line."""
+    cc = compiler()
+    if shutil.which("cmake") is None or cc is None:
+        return "the deployment's programs need cmake and a C compiler"
+    with tempfile.TemporaryDirectory() as tmp:
+        source = Path(tmp) / "probe.c"
+        source.write_text("#include <openssl/evp.h>\nint main(void) { return EVP_MAC_fetch(0, "
+                          "\"HMAC\", 0) == 0; }\n")
+        done = subprocess.run([cc, str(source), "-o", str(Path(tmp) / "probe"), "-lcrypto"],
+                              capture_output=True)
+    if done.returncode != 0:
+        return ("the deployment's programs need OpenSSL's libcrypto and its headers "
+                "(Debian: apt-get install libssl-dev)")
+    return None
 
 
 def _cmake(*args: str) -> None:

@@ -9,7 +9,6 @@ import hmac
 import json
 import os
 import re
-import shutil
 import struct
 import subprocess
 import time
@@ -20,14 +19,15 @@ import numpy as np
 import pytest
 
 from rhmpc.compiled import compiler
+from rhmpc.runtime.build import missing_toolchain
 from rhmpc.runtime.wire import Dropped, Link, Message, bind, new_key, run_clock, seal, unseal
 from rhmpc.runtime.wire.codec import HEAD, OFFSETS
 from rhmpc.runtime.wire.table import DROPS, REPORT, VERSION
 
 C = Path(str(files("rhmpc.runtime").joinpath("export")))
 TS = 0.5e-3
-needs_build = pytest.mark.skipif(shutil.which("cmake") is None or compiler() is None,
-                                 reason="cmake or a C compiler missing")
+needs_build = pytest.mark.skipif(missing_toolchain() is not None,
+                                 reason=missing_toolchain() or "")
 
 
 def _until_tick(epoch: int, tick: float) -> None:
@@ -46,8 +46,8 @@ def _key_file(folder: Path, key: bytes) -> Path:
 def built():
     """The controller's program and the robot-side client of the default run (exported and
     built with CMake)."""
-    if shutil.which("cmake") is None or compiler() is None:
-        pytest.skip("cmake or a C compiler missing")
+    if missing_toolchain() is not None:
+        pytest.skip(missing_toolchain())
     from rhmpc.experiment import RunConfig
     from rhmpc.runtime.build import build_controller
 

@@ -25,15 +25,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rhmpc.compiled import compiler
+from rhmpc.runtime.build import missing_toolchain
 from rhmpc.runtime.wire.codec import HEAD
 from rhmpc.runtime.wire.table import VERSION
 
 REPO = Path(__file__).resolve().parents[3]
 pytestmark = [
     pytest.mark.slow,
-    pytest.mark.skipif(shutil.which("cmake") is None or compiler() is None,
-                       reason="cmake or a C compiler missing"),
+    pytest.mark.skipif(missing_toolchain() is not None, reason=missing_toolchain() or ""),
     pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc"),
 ]
 SIL = ["sil", "--scenario", "fixed-a2-top", "--predictor", "ekf", "--priority", "10"]
