@@ -38,15 +38,15 @@ def probe_command(program: Path, *, epoch_ns: int, ticks: int, Ts: float, cpu: i
 
     cyclictest cannot start at the run's epoch: it runs for the run's length from when it
     starts (just before the epoch), its first thread's wake-ups at its own phase. It asks only
-    for what the host permits (``allowed``): without SCHED_FIFO it measures the default
-    scheduler, as the controller then runs."""
+    for what the host permits (``allowed``); cyclictest cannot start without SCHED_FIFO
+    ("Unable to change scheduling policy"), so there the controller's own loop is the probe,
+    on the default scheduler as the controller then runs."""
     cyclictest = shutil.which("cyclictest")
-    if cyclictest is not None:
+    if cyclictest is not None and (allowed is None or allowed.fifo is None):
         seconds = max(1, round(ticks * Ts + 1))
-        fifo = allowed is None or allowed.fifo is None
         lock = allowed is None or allowed.mlock is None
-        return [cyclictest, *(["--mlockall"] if lock else []),
-                *([f"--priority={priority}"] if fifo else []), f"--affinity={cpu}",
+        return [cyclictest, *(["--mlockall"] if lock else []), f"--priority={priority}",
+                f"--affinity={cpu}",
                 f"--interval={round(Ts * 1e6)}", f"--duration={seconds}", "--quiet",
                 f"--histogram={HISTOGRAM_US}", f"--histfile={out}.hist"], "cyclictest"
     return [str(program), "--probe", "--epoch", str(epoch_ns), "--ticks", str(ticks),
