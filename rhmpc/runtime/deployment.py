@@ -221,15 +221,6 @@ def run_sil(config: RunConfig, settings: SilSettings = SilSettings(), progress=N
     """Run ``config`` as separate processes in real time; returns the report (:func:`report`).
     :class:`DeploymentError` when a part fails or the supervisor stops the run."""
     say = progress or (lambda text: None)
-    sockets = _bind_ports(settings)  # first: a port in use is said before any work
-    try:
-        return _run(config, settings, say, sockets)
-    finally:
-        for sock in sockets.values():
-            sock.close()
-
-
-def _run(config: RunConfig, settings: SilSettings, say, sockets: dict) -> dict:
     say("the in-process simulation of the same settings")
     in_process = run_experiment(config)[1]
     run = build_run(config)
@@ -240,6 +231,16 @@ def _run(config: RunConfig, settings: SilSettings, say, sockets: dict) -> dict:
     for refusal in allowed.refusals():
         say(f"this host does not permit {refusal}: the run goes on without it, and its "
             "supervisor stops it if the deadlines are missed")
+    sockets = _bind_ports(settings)  # just before the processes: they inherit them
+    try:
+        return _deploy(config, settings, say, sockets, run, built, cpu, allowed, in_process)
+    finally:
+        for sock in sockets.values():
+            sock.close()
+
+
+def _deploy(config, settings, say, sockets, run, built, cpu, allowed, in_process) -> dict:
+    """The processes of the run on its clock, supervised; the report."""
     load_before = os.getloadavg()
     with tempfile.TemporaryDirectory(prefix="rhmpc-sil-") as tmp:
         folder = Path(tmp)
