@@ -31,7 +31,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "loop without its work), the sensor-to-torque latency, packets lost, datagrams "
         "dropped, and the tracking error at the measured instants beside the in-process "
         "simulation's. A part that dies, the tool off the POI by more than 5 mm (or 1 mm RMS "
-        "over a second) or more than 10 %% of a second's deadlines missed stops every process "
+        "over a second) or more than 20 %% of a second's deadlines missed stops every process "
         "in the safe state and exits 1 with the cause. Ctrl-C stops every process.")
     p.add_argument("--predictor", help="predictor name (default generalized); any predictor "
                    "runs in its own process and sends its forecasts to the controller")

@@ -88,10 +88,12 @@ class SilSettings:
         ... or when the RMS of those distances over one second of samples exceeds this [m]
         (1 mm: four times the task's worst acceptable RMS).
     miss_rate : float
-        ... or when more than this share of the ticks of one second missed their deadline
-        (10 %: the robot's drivers hold a late torque for a tick, and a host's stall of a few
-        milliseconds now and then is survived; a host that loses a tenth of every second does
-        not run the controller in time).
+        ... or when more than this share of the ticks of one second missed their deadline or
+        had no reading of their own (20 %: the robot's drivers hold a late torque for a tick,
+        and a shared host's stalls of tens of milliseconds, measured on a 2-processor virtual
+        machine, cost up to a tenth of a second now and then without leaving the POI; a host
+        that loses a fifth of every second does not run the controller in time, and the tool
+        bounds catch what that costs sooner).
     """
 
     priority: int = 80
@@ -101,7 +103,7 @@ class SilSettings:
     workspace_radius: float = WORKSPACE_RADIUS
     tool_bound: float = 5e-3
     rms_bound: float = 1e-3
-    miss_rate: float = 0.1
+    miss_rate: float = 0.2
 
     def __post_init__(self) -> None:
         if not 1 <= self.priority <= 99:

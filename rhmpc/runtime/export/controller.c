@@ -24,7 +24,7 @@
  * The supervisor stops the run (the controller falls silent; the robot's drivers brake to
  * their safe state after their watchdog) and the program exits 3 with the cause on one line of
  * stderr and in PREFIX.json ("stopped") when
- *   - more than --miss-rate (default 10 %) of the ticks of one MISS_WINDOW (one second)
+ *   - more than --miss-rate (default 20 %) of the ticks of one MISS_WINDOW (one second)
  *     missed their deadline (the torque went out after the next tick began);
  *   - the robot's readings stop for STALE_LIMIT ticks (0.1 s), or more than --miss-rate of
  *     the ticks of one second have no reading of their own;
@@ -521,7 +521,7 @@ int main(int argc, char **argv) {
   static run_t r;
   r.cpu = -1, r.priority = 80, r.internal = 1, r.epoch = -1, r.ticks = -1, r.fd = -1;
   r.radius = 0.05, r.sup.settle = 2.0, r.sup.tool_bound = 5e-3, r.sup.rms_bound = 1e-3;
-  r.sup.miss_rate = 0.1;
+  r.sup.miss_rate = 0.2;
   for (int k = 0; k < TOOL_RING; k++) r.sup.tool_tick[k] = -1;
   parse(&r, argc, argv);
   if (!rhmpc_wire_little_endian()) fail("the wire format needs a little-endian host", "");
