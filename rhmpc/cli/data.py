@@ -7,7 +7,8 @@
 ``rhmpc data plot NAME FILE.png``   position per axis over time, heart rate and PSD
 
 NAME is a scenario name or the path of a recording (.csv/.npz/.mat; for .mat: ``--var``,
-``--rows``/``--cols``, ``--rate``, ``--units``). Millimetres appear only here.
+``--rows``/``--cols``, ``--rate``, ``--units``; a ROS bag: ``--topic``, ``--frame``, whose
+``show`` without ``--topic`` lists its topics). Millimetres appear only here.
 
 A scenario's motion is synthesised in memory, so a ``--duration`` (or ``--rate``) whose work
 would not fit in the memory available is refused before any work, with the memory and time it
@@ -41,11 +42,16 @@ from rhmpc.sim.heart.motion import MotionSource
 from rhmpc.sim.heart.scenarios import DEFAULT_SEED, missing_data
 from rhmpc.sim.heart.specs import ScenarioSpec
 from rhmpc.sim.recordings import (
+    Gaps,
     RecordedMotion,
     export_source,
+    find_gaps,
+    is_bag,
     load_recording,
     parse_indices,
     save_recording,
+    survey,
+    survey_lines,
 )
 from rhmpc.sim.sensors import SENSORS, sensor_from_name
 
@@ -101,6 +107,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     common.add_argument("--units", choices=("mm", "m", "um", "cm"),
                         help="length unit when the file does not state it (a CSV file's "
                         "default is mm; an NPZ or MAT file needs it)")
+    common.add_argument("--topic", help="a ROS bag's topic to read (show lists them)")
+    common.add_argument("--frame", help="the child frame read from a ROS bag's tf topic")
+    common.add_argument("--poi", type=int, help="the point read from a recording of several "
+                        "tracked points (numbered from 1)")
 
     p_list = actions.add_parser(
         "list", parents=[common], help="the scenarios: what they replicate, their targets",
@@ -238,9 +248,16 @@ def _check_work(action: str, name: str, duration: float, rate: float) -> None:
               f"takes about {time_span(seconds)}", file=sys.stderr)
 
 
+#: Options read from any recording (the reader refuses those its format does not take).
+READ_ALWAYS = {"topic": "topic", "frame": "frame", "poi": "point"}
+
+
 def _read_options(args: argparse.Namespace, path: Path) -> dict:
-    """``load_recording`` keywords: --units always, --var/--rows/--cols/--rate for .mat."""
+    """``load_recording`` keywords: --units, --topic, --frame, --poi always, --var/--rows/
+    --cols/--rate for .mat."""
     out = {"units": args.units} if getattr(args, "units", None) else {}
+    out.update({key: getattr(args, name) for name, key in READ_ALWAYS.items()
+                if getattr(args, name, None) is not None})
     if path.suffix.lower() == ".mat":
         for key in ("var", "rows", "cols", "rate"):
             if getattr(args, key, None) is not None:
@@ -263,6 +280,7 @@ def _stats_row(target: _Target) -> dict:
         rec = target.source
         inside = (rec.t >= target.start) & (rec.t <= target.start + target.duration)
         row["missing_fraction"] = round(float(np.mean(rec.missing[inside])), 5)
+        row["gaps"] = find_gaps(rec.t[inside]).as_dict()
     row["predictability"] = None if not np.isfinite(value) else round(value, 4)
     row["description"] = target.description
     return row
@@ -272,8 +290,9 @@ def _list(args: argparse.Namespace) -> int:
     """The scenarios' specifications, or (``--measure``) their measured statistics."""
     measure = args.measure or any(getattr(args, k) is not None
                                   for k in ("duration", "seed", "bpm", "record"))
-    if any(getattr(args, k) is not None for k in ("var", "rows", "cols", "units")):
-        raise UsageError("--var, --rows, --cols and --units apply to recordings, not to list")
+    if any(getattr(args, k) is not None for k in ("var", "rows", "cols", "units", *READ_ALWAYS)):
+        raise UsageError("--var, --rows, --cols, --units, --topic, --frame and --poi apply to "
+                         "recordings, not to list")
     names = []
     for name in SCENARIOS:
         if (missing := missing_data(name)) is not None:
@@ -379,15 +398,19 @@ def _bpm_text(hr: list) -> str:
 
 
 def _show(args: argparse.Namespace) -> int:
+    bag = survey(args.name) if is_bag(args.name) else None  # its topics, then one's motion
+    if bag is not None and args.topic is None:
+        print(json.dumps(bag, indent=2) if args.json else "\n".join(survey_lines(bag)))
+        return 0
     target = _target(args.name, args)
-    row = _stats_row(target)
+    row = _stats_row(target) | ({"bag": bag} if bag else {})
     invivo = args.name in SPECS and SPECS[args.name].heart == "invivo"
     if invivo:  # the in-vivo regime beside the recording it was built from
         row["regime"] = source_statistics(target.source, target.duration)
     if args.json:
         print(json.dumps(row, indent=2))
         return 0
-    print("\n".join(_show_lines(row)))
+    print("\n".join([*(survey_lines(bag) if bag else []), *_show_lines(row)]))
     if invivo:
         print("  the in-vivo recording's statistics (rhmpc.sim.heart.invivo, sampled at 25 Hz):")
         print("\n".join(statistics_table(row["regime"])))
@@ -418,6 +441,8 @@ def _show_lines(row: dict) -> list[str]:
     ]
     if row["missing_fraction"]:
         lines.append(f"  missing samples   {100 * row['missing_fraction']:.2f} %")
+    if "gaps" in row:
+        lines.append(f"  gaps              {Gaps(**row['gaps']).text()}")
     lines.append(f"  predictability    {_pred_text(row)} (one-step RLS / hold RMS error, 120 ms "
                  "ahead at 25 Hz; phantom ≈ 0.12, in-vivo heart ≈ 0.69)")
     return lines
