@@ -170,7 +170,7 @@ def _target(name: str, args: argparse.Namespace) -> _Target:
         sc = make_scenario(name, np.random.default_rng(_seed(args)), **_overrides(args))
         return _Target(sc.name, sc.source, sc.sensor_rate, sc.duration, sc.description)
     path = Path(name)
-    if path.suffix.lower() in {".csv", ".npz", ".txt", ".mat"} or path.exists():
+    if path.suffix.lower() in {".csv", ".npz", ".txt", ".mat"} or path.exists() or is_bag(path):
         if args.bpm is not None or args.record is not None:
             raise UsageError("--bpm and --record apply to scenarios, not recordings")
         rec = load_recording(path, **_read_options(args, path))
@@ -179,7 +179,7 @@ def _target(name: str, args: argparse.Namespace) -> _Target:
         return _Target(path.name, rec, rec.sample_rate, duration, f"recording {path}",
                        float(rec.t[0]))
     raise UsageError(f"unknown scenario {name!r}; valid names: {', '.join(SCENARIOS)} "
-                     "(or the path of a .csv/.npz/.mat recording)")
+                     "(or the path of a .csv/.npz/.mat recording or a ROS bag)")
 
 
 def _check_options(args: argparse.Namespace) -> None:
