@@ -42,10 +42,10 @@ from rhmpc.sim.heart.motion import MotionSource
 from rhmpc.sim.heart.scenarios import DEFAULT_SEED, missing_data
 from rhmpc.sim.heart.specs import ScenarioSpec
 from rhmpc.sim.recordings import (
-    Gaps,
     RecordedMotion,
+    coverage,
+    coverage_lines,
     export_source,
-    find_gaps,
     is_bag,
     load_recording,
     parse_indices,
@@ -109,8 +109,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "default is mm; an NPZ or MAT file needs it)")
     common.add_argument("--topic", help="a ROS bag's topic to read (show lists them)")
     common.add_argument("--frame", help="the child frame read from a ROS bag's tf topic")
-    common.add_argument("--poi", type=int, help="the point read from a recording of several "
-                        "tracked points (numbered from 1)")
+    common.add_argument("--poi", type=int, help="which of several tracked points is read, from 1")
 
     p_list = actions.add_parser(
         "list", parents=[common], help="the scenarios: what they replicate, their targets",
@@ -248,16 +247,12 @@ def _check_work(action: str, name: str, duration: float, rate: float) -> None:
               f"takes about {time_span(seconds)}", file=sys.stderr)
 
 
-#: Options read from any recording (the reader refuses those its format does not take).
-READ_ALWAYS = {"topic": "topic", "frame": "frame", "poi": "point"}
-
-
 def _read_options(args: argparse.Namespace, path: Path) -> dict:
     """``load_recording`` keywords: --units, --topic, --frame, --poi always, --var/--rows/
     --cols/--rate for .mat."""
     out = {"units": args.units} if getattr(args, "units", None) else {}
-    out.update({key: getattr(args, name) for name, key in READ_ALWAYS.items()
-                if getattr(args, name, None) is not None})
+    out |= {k: v for k, v in (("topic", args.topic), ("frame", args.frame), ("point", args.poi))
+            if v is not None}  # the reader refuses those the file's format does not take
     if path.suffix.lower() == ".mat":
         for key in ("var", "rows", "cols", "rate"):
             if getattr(args, key, None) is not None:
@@ -277,10 +272,7 @@ def _stats_row(target: _Target) -> dict:
            "duration_s": round(target.duration, 3)}
     row.update(stats.as_dict())
     if isinstance(target.source, RecordedMotion):  # the file's own samples, as the reader counts
-        rec = target.source
-        inside = (rec.t >= target.start) & (rec.t <= target.start + target.duration)
-        row["missing_fraction"] = round(float(np.mean(rec.missing[inside])), 5)
-        row["gaps"] = find_gaps(rec.t[inside]).as_dict()
+        row.update(coverage(target.source, target.start, target.duration))
     row["predictability"] = None if not np.isfinite(value) else round(value, 4)
     row["description"] = target.description
     return row
@@ -290,7 +282,8 @@ def _list(args: argparse.Namespace) -> int:
     """The scenarios' specifications, or (``--measure``) their measured statistics."""
     measure = args.measure or any(getattr(args, k) is not None
                                   for k in ("duration", "seed", "bpm", "record"))
-    if any(getattr(args, k) is not None for k in ("var", "rows", "cols", "units", *READ_ALWAYS)):
+    if any(getattr(args, k) is not None for k in ("var", "rows", "cols", "units", "topic",
+                                                  "frame", "poi")):
         raise UsageError("--var, --rows, --cols, --units, --topic, --frame and --poi apply to "
                          "recordings, not to list")
     names = []
@@ -439,10 +432,7 @@ def _show_lines(row: dict) -> list[str]:
         f"  heart rate        {hr_text}",
         f"  spectral peaks    {peaks or 'none'}" + (" Hz" if peaks else ""),
     ]
-    if row["missing_fraction"]:
-        lines.append(f"  missing samples   {100 * row['missing_fraction']:.2f} %")
-    if "gaps" in row:
-        lines.append(f"  gaps              {Gaps(**row['gaps']).text()}")
+    lines += coverage_lines(row)
     lines.append(f"  predictability    {_pred_text(row)} (one-step RLS / hold RMS error, 120 ms "
                  "ahead at 25 Hz; phantom ≈ 0.12, in-vivo heart ≈ 0.69)")
     return lines

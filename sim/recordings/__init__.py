@@ -17,7 +17,8 @@ NPZ written.
 ``formats``     every format, read by one function
 ``points``      :func:`load_points`: files of several tracked points, point by point
 ``files``       :func:`load_recording`: any of them, checked as heart motion
-``gaps``        :func:`find_gaps`: intervals of the sample times with samples missing
+``gaps``        :func:`find_gaps`: intervals of the sample times with samples missing;
+                :func:`coverage`: what of a recording was recorded
 ``plausible``   :class:`RecordingWarning` on a recording unlikely to be heart motion as read
                 (its span, outliers, missing samples, gaps): :class:`Plausibility`
 ==============  =================================================================
@@ -26,7 +27,7 @@ NPZ written.
 from rhmpc.sim.recordings.bagfile import is_bag
 from rhmpc.sim.recordings.bagsurvey import survey, survey_lines
 from rhmpc.sim.recordings.files import load_recording
-from rhmpc.sim.recordings.gaps import Gaps, find_gaps
+from rhmpc.sim.recordings.gaps import Gaps, coverage, coverage_lines, find_gaps
 from rhmpc.sim.recordings.matfile import load_mat, parse_indices
 from rhmpc.sim.recordings.plausible import Plausibility, RecordingWarning, check_recording
 from rhmpc.sim.recordings.points import load_points, on_grid, training_series
@@ -40,7 +41,8 @@ from rhmpc.sim.recordings.text import export_source, save_recording
 
 __all__ = [
     "LENGTH_UNITS", "TIME_UNITS", "Gaps", "Plausibility", "RecordedMotion", "RecordingError",
-    "RecordingWarning", "check_recording", "export_source", "find_gaps", "is_bag", "load_mat",
+    "RecordingWarning", "check_recording", "coverage", "coverage_lines", "export_source",
+    "find_gaps", "is_bag", "load_mat",
     "load_points", "load_recording", "on_grid", "parse_indices", "save_recording", "survey",
     "survey_lines", "training_series",
 ]

@@ -71,3 +71,23 @@ def find_gaps(t: np.ndarray, min_length: float = 0.0) -> Gaps:
     return Gaps(count=int(where.size), missing=int(np.sum(steps[where] - 1)),
                 seconds=float(np.sum(intervals[where])), longest=float(intervals[worst]),
                 at=float(t[worst] - t[0]))
+
+
+def coverage(rec, start: float, duration: float) -> dict:
+    """What of ``rec`` (a :class:`rhmpc.sim.recordings.RecordedMotion`) between ``start`` and
+    ``start + duration`` [s] was recorded: the fraction of its samples missing (NaN) and the
+    gaps between them (:func:`find_gaps`, as :meth:`Gaps.as_dict`)."""
+    inside = (rec.t >= start) & (rec.t <= start + duration)
+    return {"missing_fraction": round(float(np.mean(rec.missing[inside])), 5),
+            "gaps": find_gaps(rec.t[inside]).as_dict()}
+
+
+def coverage_lines(row: dict) -> list[str]:
+    """``data show``'s lines for :func:`coverage`'s entries of ``row``: the missing samples
+    (when any) and the gaps (when known)."""
+    lines = []
+    if row.get("missing_fraction"):
+        lines.append(f"  missing samples   {100 * row['missing_fraction']:.2f} %")
+    if "gaps" in row:
+        lines.append(f"  gaps              {Gaps(**row['gaps']).text()}")
+    return lines
