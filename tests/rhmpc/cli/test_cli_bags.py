@@ -64,29 +64,33 @@ def test_a_topic_that_is_not_there_is_one_line(bag: dict,
     assert "--topic and --frame apply to ROS bags" in capsys.readouterr().err
 
 
-def test_predict_reads_the_bag_as_the_same_samples(bag: dict,
-                                                   capsys: pytest.CaptureFixture[str]) -> None:
-    common = ["--predictors", "hold,one-step", "--split", "50:150", "--json"]
+def on_bag_and_npz(bag: dict, capsys, command: str, *options: str) -> list[dict]:
+    """The JSON documents of ``rhmpc COMMAND --data BAG --topic /tracker/poi OPTIONS`` and of the
+    same on the NPZ file of the same samples."""
     docs = []
     for data in (["--data", str(bag["path"]), "--topic", "/tracker/poi"],
                  ["--data", str(bag["npz"])]):
-        assert main(["predict", *data, *common]) == 0
-        docs.append(json.loads(capsys.readouterr().out)["results"])
-    assert [r["predictor"] for r in docs[0]] == [r["predictor"] for r in docs[1]]
-    for a, b in zip(*docs, strict=True):
+        assert main([command, *data, *options, "--json"]) == 0
+        docs.append(json.loads(capsys.readouterr().out))
+    return docs
+
+
+def test_predict_reads_the_bag_as_the_same_samples(bag: dict,
+                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    docs = on_bag_and_npz(bag, capsys, "predict", "--predictors", "hold,one-step", "--split",
+                          "50:150")
+    rows = [d["results"] for d in docs]
+    assert [r["predictor"] for r in rows[0]] == [r["predictor"] for r in rows[1]]
+    for a, b in zip(*rows, strict=True):
         assert a["rms_error_mm"] == pytest.approx(b["rms_error_mm"], rel=1e-9)
 
 
 @pytest.mark.slow
 def test_simulate_with_a_split_reads_the_bag_as_the_same_samples(
         bag: dict, capsys: pytest.CaptureFixture[str]) -> None:
-    common = ["--split", "100:150", "--predictor", "one-step", "--json"]
-    rms = []
-    for data in (["--data", str(bag["path"]), "--topic", "/tracker/poi"],
-                 ["--data", str(bag["npz"])]):
-        assert main(["simulate", *data, *common]) == 0
-        rms.append(json.loads(capsys.readouterr().out)["rms_error_mm"])
-    assert rms[0] == pytest.approx(rms[1], rel=1e-6)
+    docs = on_bag_and_npz(bag, capsys, "simulate", "--split", "100:150", "--predictor",
+                          "one-step")
+    assert docs[0]["rms_error_mm"] == pytest.approx(docs[1]["rms_error_mm"], rel=1e-6)
 
 
 def test_compare_reads_a_point_of_the_bag(bag: dict, capsys: pytest.CaptureFixture[str]) -> None:
