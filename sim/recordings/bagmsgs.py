@@ -9,7 +9,7 @@ header stamp.
     ``point``.
 ``geometry_msgs/TransformStamped``
     ``transform.translation``; ``--frame`` names the child frame it must have.
-``tf2_msgs/TFMessage``
+``tf2_msgs/TFMessage`` (and ROS 1's older ``tf/tfMessage``)
     The translation of each transform to the child frame ``--frame``, at its own stamp.
 ``geometry_msgs/PoseArray``
     ``poses[k].position`` is point k + 1 (``--poi``).
@@ -110,6 +110,7 @@ TYPES: dict[str, MessageType] = {
     "geometry_msgs/msg/TransformStamped": MessageType("geometry_msgs/TransformStamped",
                                                       _transform_stamped, frames=True),
     "tf2_msgs/msg/TFMessage": MessageType("tf2_msgs/TFMessage", _tf_message, frames=True),
+    "tf/msg/tfMessage": MessageType("tf/tfMessage", _tf_message, frames=True),  # ROS 1 before tf2
     "geometry_msgs/msg/PoseArray": MessageType("geometry_msgs/PoseArray", _pose_array,
                                                points=True),
     "visualization_msgs/msg/MarkerArray": MessageType("visualization_msgs/MarkerArray",

@@ -21,6 +21,7 @@ POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
 POINT_STAMPED = "geometry_msgs/msg/PointStamped"
 TRANSFORM_STAMPED = "geometry_msgs/msg/TransformStamped"
 TF = "tf2_msgs/msg/TFMessage"
+OLD_TF = "tf/msg/tfMessage"  # ROS 1 before tf2
 POSE_ARRAY = "geometry_msgs/msg/PoseArray"
 MARKER_ARRAY = "visualization_msgs/msg/MarkerArray"
 STRING = "std_msgs/msg/String"
@@ -32,9 +33,9 @@ class Messages:
     def __init__(self, ros1: bool) -> None:
         self.ros1 = ros1
         self.store = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
-        if TF not in self.store.types:  # ROS 1's store lacks tf2_msgs: its definition
+        for tf in (TF, OLD_TF) if ros1 else ():  # ROS 1's store lacks them: their definition
             self.store.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms",
-                                                   TF))
+                                                   tf))
         self.T = self.store.types
 
     def header(self, stamp_ns: int, frame: str = "tracker"):
@@ -82,7 +83,7 @@ class Messages:
             return T[msgtype](header=self.header(stamp_ns), point=self.point(positions[0]))
         if msgtype == TRANSFORM_STAMPED:
             return self.transform(stamp_ns, frame, positions[0])
-        if msgtype == TF:  # the POI's frame beside a second one, each in its own transform
+        if msgtype in (TF, OLD_TF):  # the POI's frame beside a second one, each its own
             return T[msgtype](transforms=[self.transform(stamp_ns, "camera", positions[0] + 1),
                                           self.transform(stamp_ns, frame, positions[0])])
         if msgtype == POSE_ARRAY:

@@ -24,6 +24,7 @@ from rhmpc.sim.recordings import (
 )
 from tests.sim.recordings.bags import (
     MARKER_ARRAY,
+    OLD_TF,
     POINT_STAMPED,
     POSE_ARRAY,
     POSE_STAMPED,
@@ -89,6 +90,14 @@ def test_arrays_give_each_point_its_trajectory(written: dict, storage: str, topi
     np.testing.assert_allclose(one.z, written["z"][:, 1], rtol=0, atol=1e-15)
     with pytest.raises(RecordingError, match="holds 3 tracked points; choose one with --poi N"):
         load_recording(path, topic=topic)
+
+
+def test_ros1_tf_before_tf2(tmp_path: Path) -> None:
+    stamps, receive, z = track(np.random.default_rng(4), N)
+    path = write_bag(tmp_path / "old.bag", "ros1",
+                     {"/tf": (OLD_TF, messages(stamps, receive, z))})
+    rec = load_recording(path, frame="/tool")
+    np.testing.assert_allclose(rec.z, z[:, 0], rtol=0, atol=1e-15)
 
 
 def test_a_leading_slash_and_a_ros1_frame_name_may_differ(written: dict) -> None:
