@@ -37,8 +37,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "runs in its own process and sends its forecasts to the controller")
     src = p.add_mutually_exclusive_group()
     src.add_argument("--scenario", help="heart-motion scenario (rhmpc data list)")
-    src.add_argument("--data", metavar="FILE", help="a recording (CSV, NPZ, MAT, or a shipped "
-                     "name such as hamlyn-phantom)")
+    src.add_argument("--data", metavar="FILE", help="a recording (CSV, NPZ, MAT, a ROS bag "
+                     "with --topic, or a shipped name such as hamlyn-phantom)")
     add_recording_options(p)
     p.add_argument("--poi", type=int, metavar="N", help="the point of interest of a --data file "
                    "of several tracked points (numbered from 1)")
