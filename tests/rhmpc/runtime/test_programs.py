@@ -134,7 +134,8 @@ def _spoof(foreign, controller: Link, port: int, tick: int, stamp: float, other:
 
 def _controller(built, folder: Path, ticks: int, settle: float):
     """The controller's program on a clock 0.4 s ahead, placed at the tool's home, its socket
-    inherited; a sender and a robot's end of the run's key. Its results go to FOLDER/run."""
+    inherited, a silent robot stopping it only after 10 s (a busy host stalls the test's own
+    process); a sender and a robot's end of the run's key. Its results go to FOLDER/run."""
     key = new_key()
     epoch = time.clock_gettime_ns(time.CLOCK_MONOTONIC) + 400_000_000
     me, robot = Link(bind(), key, epoch), Link(bind(), key, epoch, accepts=("servo_jf",))
@@ -143,7 +144,7 @@ def _controller(built, folder: Path, ticks: int, settle: float):
                              "--socket-fd", str(sock.fileno()), "--epoch", str(epoch),
                              "--ticks", str(ticks), "--robot-port", str(robot.port),
                              "--out", str(folder / "run"), "--priority", "1", "--settle",
-                             repr(settle), "--origin",
+                             repr(settle), "--robot-timeout", "10", "--origin",
                              *(repr(float(v)) for v in built.controller.reference.origin)],
                             pass_fds=(sock.fileno(),), stderr=subprocess.PIPE, text=True)
     return proc, me, robot, sock, epoch
