@@ -182,7 +182,7 @@ static int near(const run_t *r, const double *rows, int n, int allow_missing) {
 
 static int plausible(const run_t *r, const rhmpc_wire_t *m, double now) {
   if (!in_window(m->stamp, now) || !in_window(m->sent, now)) return 0;
-  if (m->kind == RHMPC_MEASURED_CP) return near(r, values, m->rows, 1);
+  if (m->kind == RHMPC_MEASURED_CP) return near(r, values, 1, 1); /* the POI: the others unused */
   if (m->kind == RHMPC_FORECAST_CP)
     return fabs(m->period - RHMPC_DT) <= 1e-9 && near(r, values, m->rows, 0);
   for (int j = 0; j < RHMPC_NU; j++) /* measured_js */
