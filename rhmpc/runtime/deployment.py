@@ -219,6 +219,19 @@ def _bind_ports(settings: SilSettings) -> dict:
     return sockets
 
 
+@dataclass(frozen=True)
+class _Deployment:
+    """A run ready to deploy: its settings, the built run and program, the host's answers."""
+
+    config: RunConfig
+    settings: SilSettings
+    run: object  # rhmpc.experiment.assembly's built run
+    built: object  # rhmpc.runtime.build.BuiltController
+    cpu: int
+    allowed: host.Permits
+    in_process: dict
+
+
 def run_sil(config: RunConfig, settings: SilSettings = SilSettings(), progress=None) -> dict:
     """Run ``config`` as separate processes in real time; returns the report (:func:`report`).
     :class:`DeploymentError` when a part fails or the supervisor stops the run."""
@@ -233,36 +246,37 @@ def run_sil(config: RunConfig, settings: SilSettings = SilSettings(), progress=N
     for refusal in allowed.refusals():
         say(f"this host does not permit {refusal}: the run goes on without it, and its "
             "supervisor stops it if the deadlines are missed")
+    plan = _Deployment(config, settings, run, built, cpu, allowed, in_process)
     sockets = _bind_ports(settings)  # just before the processes: they inherit them
     try:
-        return _deploy(config, settings, say, sockets, run, built, cpu, allowed, in_process)
+        return _deploy(plan, sockets, say)
     finally:
         for sock in sockets.values():
             sock.close()
 
 
-def _deploy(config, settings, say, sockets, run, built, cpu, allowed, in_process) -> dict:
+def _deploy(plan: _Deployment, sockets: dict, say) -> dict:
     """The processes of the run on its clock, supervised; the report."""
-    load_before = os.getloadavg()
+    load_before, duration = os.getloadavg(), plan.config.loop.duration
     with tempfile.TemporaryDirectory(prefix="rhmpc-sil-") as tmp:
         folder = Path(tmp)
-        role = _role(run, config, settings, sockets, folder, cpu, allowed)
+        role = _role(plan, sockets, folder)
         group, previous = _Group(), signal.signal(signal.SIGTERM, _on_sigterm)
         try:
-            _start(group, run, role, built, settings, sockets, allowed)
-            say(f"{config.loop.duration:g} s in real time ({len(group.parts)} processes)")
-            failed = _supervise(group, STARTUP_S + config.loop.duration + 30.0)
+            _start(group, plan, role, sockets)
+            say(f"{duration:g} s in real time ({len(group.parts)} processes)")
+            failed = _supervise(group, STARTUP_S + duration + 30.0)
         finally:
             group.stop()
             signal.signal(signal.SIGTERM, previous)
         if failed is not None:
-            refused = "; this host refused " + ", ".join(allowed.refusals()) \
-                if allowed.refusals() else ""
-            raise DeploymentError(_cause(failed, role, folder, config.loop.duration) + refused)
-        documents, arrays, q, host_latency = _collect(folder, host_tool(group), config)
-    score = _score(run, q, documents["predictor"]["outliers"])
-    return report(config, built, settings.internal, documents, arrays, host_latency, score,
-                  in_process, (load_before, os.getloadavg()))
+            refusals = plan.allowed.refusals()
+            refused = "; this host refused " + ", ".join(refusals) if refusals else ""
+            raise DeploymentError(_cause(failed, role, folder, duration) + refused)
+        documents, arrays, q, host_latency = _collect(folder, host_tool(group), plan.config)
+    score = _score(plan.run, q, documents["predictor"]["outliers"])
+    return report(plan.config, plan.built, plan.settings.internal, documents, arrays,
+                  host_latency, score, plan.in_process, (load_before, os.getloadavg()))
 
 
 def host_tool(group: _Group) -> str:
@@ -272,57 +286,59 @@ def host_tool(group: _Group) -> str:
         "rhmpc probe (the controller's loop without its work)"
 
 
-def _role(run, config, settings, sockets, folder, cpu, allowed) -> processes.Role:
-    loop, robot = config.loop, run.robot
+def _role(plan: _Deployment, sockets: dict, folder: Path) -> processes.Role:
+    """What every part shares: the clock, the ports, the key, the bounds."""
+    loop, robot, settings = plan.config.loop, plan.run.robot, plan.settings
     lower, upper = robot.position_limits
     bounds = Bounds(tuple(robot.torque_limit), tuple(lower), tuple(upper),
-                    tuple(float(v) for v in run.reference.center),
+                    tuple(float(v) for v in plan.run.reference.center),
                     radius=settings.workspace_radius, max_age=LATENCY_CAP)
     ports = processes.Ports(*(sockets[n].getsockname()[1]
                               for n in ("controller", "predictor", "robot")))
     epoch = time.clock_gettime_ns(time.CLOCK_MONOTONIC) + int(STARTUP_S * 1e9)
-    priority = settings.priority if allowed.fifo is None else 0
+    priority = settings.priority if plan.allowed.fifo is None else 0
     return processes.Role(epoch, loop.ticks, loop.Ts, ports, folder, new_key(), bounds,
-                          priority, cpu)
+                          priority, plan.cpu)
 
 
-def _controller_command(built, role, run, config, settings, key_fd: int, sock_fd: int):
-    command = [str(built.program), "--key-file", f"/dev/fd/{key_fd}", "--socket-fd",
+def _controller_command(plan: _Deployment, role: processes.Role, key_fd: int,
+                        sock_fd: int) -> list[str]:
+    """The controller program's command line: its key and socket inherited, its bounds."""
+    settings, loop, reference = plan.settings, plan.config.loop, plan.run.reference
+    command = [str(plan.built.program), "--key-file", f"/dev/fd/{key_fd}", "--socket-fd",
                str(sock_fd), "--epoch", str(role.epoch_ns), "--ticks", str(role.ticks),
                "--robot-port", str(role.ports.robot), "--cpu", str(role.controller_cpu),
                "--priority", str(settings.priority), "--out", str(role.folder / "controller"),
                "--radius", repr(settings.workspace_radius),
-               "--settle", repr(config.loop.settling_ticks * config.loop.Ts),
+               "--settle", repr(loop.settling_ticks * loop.Ts),
                "--tool-bound", repr(settings.tool_bound), "--rms-bound",
                repr(settings.rms_bound), "--miss-rate", repr(settings.miss_rate),
-               "--origin", *(repr(float(v)) for v in run.reference.origin),
-               "--center", *(repr(float(v)) for v in run.reference.center)]
+               "--origin", *(repr(float(v)) for v in reference.origin),
+               "--center", *(repr(float(v)) for v in reference.center)]
     return command + ([] if settings.internal else ["--no-internal"])
 
 
-def _start(group, run, role, built, settings, sockets, allowed) -> None:
+def _start(group: _Group, plan: _Deployment, role: processes.Role, sockets: dict) -> None:
     """Every part, on the run's clock: the controller (its key through a pipe it inherits),
     the host probe, then the robot, the predictor and the sensor (forked, key in memory)."""
     read, write = os.pipe()
     write_key(write, role.key)
     sock_fd = sockets["controller"].fileno()
     try:
-        group.spawn("controller", _controller_command(built, role, run, run.config, settings,
-                                                      read, sock_fd), (read, sock_fd))
+        group.spawn("controller", _controller_command(plan, role, read, sock_fd),
+                    (read, sock_fd))
     finally:
         os.close(read)
     probe, _ = host.probe_command(
-        built.program, epoch_ns=role.epoch_ns, ticks=role.ticks, Ts=role.Ts,
-        cpu=role.controller_cpu, priority=settings.priority, out=role.folder / "host",
-        phase_ns=round(role.Ts * 5e8), allowed=allowed)
+        plan.built.program, epoch_ns=role.epoch_ns, ticks=role.ticks, Ts=role.Ts,
+        cpu=role.controller_cpu, priority=plan.settings.priority, out=role.folder / "host",
+        phase_ns=round(role.Ts * 5e8), allowed=plan.allowed)
     group.spawn("host probe", probe)
-    fifo = allowed.fifo is None
-    group.fork("robot", processes.robot, run, _with(role, settings.priority - 10, fifo),
-               sockets["robot"])
+    fifo, top, run = plan.allowed.fifo is None, plan.settings.priority, plan.run
+    group.fork("robot", processes.robot, run, _with(role, top - 10, fifo), sockets["robot"])
     group.fork("predictor", processes.predictor, run, _with(role, 0, False),
                sockets["predictor"])
-    group.fork("sensor", processes.sensor, run, _with(role, settings.priority - 20, fifo),
-               sockets["sensor"])
+    group.fork("sensor", processes.sensor, run, _with(role, top - 20, fifo), sockets["sensor"])
 
 
 def _with(role: processes.Role, priority: int, fifo: bool) -> processes.Role:
