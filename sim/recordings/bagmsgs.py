@@ -29,6 +29,9 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
+__all__ = ["MARKER_ADD", "TYPES", "MessageType", "frame_name", "read_types", "stamp_ns",
+           "type_name"]
+
 #: One sample of a message: (child frame or None, stamp [ns], positions [[x, y, z], …] [m]).
 Sample = tuple[str | None, int, list[tuple[float, float, float]]]
 

@@ -1,4 +1,5 @@
-"""The Python codec of the wire format, built from its tables (:mod:`.table`) at import.
+"""The Python codec of the wire format, built from its tables at import
+(:mod:`rhmpc.runtime.wire.table`).
 
 :func:`seal` makes the datagram of a message under a key; :func:`unseal` checks a datagram's
 size and code before it reads a field of it, and raises :class:`Dropped` with the reason

@@ -3,9 +3,10 @@
 Every part of the format is a row of a table here: the header's fields, the kinds of message
 (CRTK names) with their row layouts, the authentication code that ends each datagram, the
 reasons a receiver drops a datagram, and the keys of the controller program's report. From these
-tables :mod:`.codec` builds the Python codec when it is imported, and :mod:`.generate` writes the
-C header (``rhmpc/runtime/export/rhmpc_wire.h``) and the deployment guide's tables; a test fails
-when a written file differs from what the tables give.
+tables :mod:`rhmpc.runtime.wire.codec` builds the Python codec when it is imported, and
+:mod:`rhmpc.runtime.wire.generate` writes the C header (``rhmpc/runtime/export/rhmpc_wire.h``)
+and the deployment guide's tables; a test fails when a written file differs from what the
+tables give.
 
 :data:`VERSION` changes with the layout: :data:`DIGEST` is a hash of every field, kind and the
 code's size, and a test fails when the hash of the tables is not the one recorded for the
@@ -16,7 +17,7 @@ One datagram is one message::
     header (HEADER, little-endian) | values: rows × width float64 | HMAC-SHA-256 of all before
 
 The code is HMAC (RFC 2104) with SHA-256 (FIPS 180-4) under the run's 32-byte key: only a
-process that holds the key makes a message a receiver takes (:mod:`.key`).
+process that holds the key makes a message a receiver takes (:mod:`rhmpc.runtime.wire.key`).
 """
 
 from __future__ import annotations
