@@ -42,8 +42,9 @@ from rhmpc.control.reference import LATENCY_CAP, embed3
 from rhmpc.errors import UsageError
 from rhmpc.experiment import RunConfig, run_experiment
 from rhmpc.experiment.assembly import build_run
-from rhmpc.runtime import host, processes
+from rhmpc.runtime import host, processes, ros2
 from rhmpc.runtime.build import build_controller
+from rhmpc.runtime.ros2.names import require_cyclonedds, ros_name
 from rhmpc.runtime.wire import WORKSPACE_RADIUS, Bounds, bind, new_key, write_key
 from rhmpc.sim.loop.metrics import MeasuredScore
 from rhmpc.tuning.workers import program_dies_with_parent
@@ -92,6 +93,16 @@ class SilSettings:
         (10 %: the robot's drivers hold a late torque for a tick, and a host's stall of a few
         milliseconds now and then is survived; a host that loses a tenth of every second does
         not run the controller in time).
+    tracker : str or None
+        The ROS 2 topic of the tracker's samples (PoseStamped or PoseArray): a bridge
+        (:mod:`rhmpc.runtime.ros2.tracker`) takes the sensor's place; None: the run's sensor.
+    console : str or None
+        The ROS 2 namespace of the arm (``/PSM1``): a bridge to its ``measured_js`` and
+        ``servo_jf`` (:mod:`rhmpc.runtime.ros2.console`) takes the robot's place; None: the
+        simulator.
+    allow_unauthenticated : bool
+        A console over ROS 2 is refused without it: ROS 2 without SROS2 authenticates nothing,
+        and any process on the DDS domain could command the arm or forge its readings.
     """
 
     priority: int = 80
@@ -102,6 +113,9 @@ class SilSettings:
     tool_bound: float = 5e-3
     rms_bound: float = 1e-3
     miss_rate: float = 0.1
+    tracker: str | None = None
+    console: str | None = None
+    allow_unauthenticated: bool = False
 
     def __post_init__(self) -> None:
         if not 1 <= self.priority <= 99:
@@ -115,6 +129,14 @@ class SilSettings:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be finite and > 0, got {value}")
+        for name in ("tracker", "console"):
+            if getattr(self, name) is not None:
+                object.__setattr__(self, name, ros_name(getattr(self, name)))
+        if self.console is not None and not self.allow_unauthenticated:
+            raise ValueError(f"a console over ROS 2 ({self.console}) is not authenticated: any "
+                             "process on its DDS domain can publish torques and readings "
+                             "(ROS 2 without SROS2 has no authentication); accept that with "
+                             "--allow-unauthenticated")
 
 
 class DeploymentError(RuntimeError):
@@ -221,6 +243,11 @@ def run_sil(config: RunConfig, settings: SilSettings = SilSettings(), progress=N
     """Run ``config`` as separate processes in real time; returns the report (:func:`report`).
     :class:`DeploymentError` when a part fails or the supervisor stops the run."""
     say = progress or (lambda text: None)
+    if settings.tracker or settings.console:
+        try:
+            require_cyclonedds()
+        except ImportError as exc:
+            raise UsageError(str(exc)) from None
     sockets = _bind_ports(settings)  # first: a port in use is said before any work
     try:
         return _run(config, settings, say, sockets)
@@ -257,7 +284,11 @@ def _run(config: RunConfig, settings: SilSettings, say, sockets: dict) -> dict:
                 if allowed.refusals() else ""
             raise DeploymentError(_cause(failed, role, folder, config.loop.duration) + refused)
         documents, arrays, q, host_latency = _collect(folder, host_tool(group), config)
-    score = _score(run, q, documents["predictor"]["outliers"])
+        try:  # a tracker's bridge: the POI where the tracker measured it
+            measured = ros2.taken(folder, run) if settings.tracker else run.measured
+        except ValueError as exc:
+            raise DeploymentError(str(exc)) from None
+    score = _score(run, q, documents["predictor"]["outliers"], measured)
     return report(config, built, settings.internal, documents, arrays, host_latency, score,
                   in_process, (load_before, os.getloadavg()))
 
@@ -276,7 +307,8 @@ def _role(run, config, settings, sockets, folder, cpu, allowed) -> processes.Rol
                     tuple(float(v) for v in run.reference.center),
                     radius=settings.workspace_radius, max_age=LATENCY_CAP)
     ports = processes.Ports(*(sockets[n].getsockname()[1]
-                              for n in ("controller", "predictor", "robot")))
+                              for n in ("controller", "predictor", "robot")),
+                            bridge=sockets["sensor"].getsockname()[1] if settings.tracker else None)
     epoch = time.clock_gettime_ns(time.CLOCK_MONOTONIC) + int(STARTUP_S * 1e9)
     priority = settings.priority if allowed.fifo is None else 0
     return processes.Role(epoch, loop.ticks, loop.Ts, ports, folder, new_key(), bounds,
@@ -314,12 +346,14 @@ def _start(group, run, role, built, settings, sockets, allowed) -> None:
         phase_ns=round(role.Ts * 5e8), allowed=allowed)
     group.spawn("host probe", probe)
     fifo = allowed.fifo is None
-    group.fork("robot", processes.robot, run, _with(role, settings.priority - 10, fifo),
-               sockets["robot"])
+    robot = ros2.console_part(settings.console) or ("robot", processes.robot)
+    sensor = ros2.tracker_part(settings.tracker) or ("sensor", processes.sensor)
+    group.fork(robot[0], robot[1], run, _with(role, settings.priority - 10, fifo),
+               sockets["robot"], *robot[2:])
     group.fork("predictor", processes.predictor, run, _with(role, 0, False),
                sockets["predictor"])
-    group.fork("sensor", processes.sensor, run, _with(role, settings.priority - 20, fifo),
-               sockets["sensor"])
+    group.fork(sensor[0], sensor[1], run, _with(role, settings.priority - 20, fifo),
+               sockets["sensor"], *sensor[2:])
 
 
 def _with(role: processes.Role, priority: int, fifo: bool) -> processes.Role:
@@ -373,16 +407,17 @@ def _collect(folder: Path, tool: str, config: RunConfig):
     return documents, arrays, q, host.read_probe(folder / "host", tool, config.loop.Ts)
 
 
-def _score(run, q: np.ndarray, outliers: list[float]) -> dict:
-    """The tool after each tick against the POI where it was measured (a recording: at its
-    samples' instants) or at every tick (a synthetic motion), as the in-process run."""
+def _score(run, q: np.ndarray, outliers: list[float], measured) -> dict:
+    """The tool after each tick against the POI where it was measured (``measured``: a
+    recording's or a tracker's samples, at their instants) or at every tick (a synthetic
+    motion, None), as the in-process run."""
     loop = run.config.loop
     ticks = loop.ticks
     done = np.isfinite(q).all(axis=1)
     ee = np.full((ticks, 3), np.nan)
     ee[done] = [run.robot.ee_position(row) for row in q[done]]
-    if run.measured is not None:
-        t, z = run.measured
+    if measured is not None:
+        t, z = measured
         placed = run.anchor + embed3(np.asarray(z, dtype=float).reshape(len(t), -1)
                                      - run.truth.center)
     else:
@@ -416,6 +451,9 @@ def report(config: RunConfig, built, internal: bool, documents: dict, arrays: di
     """The run's report: timing, packets, drops, the score beside the in-process one."""
     controller, robot = documents["controller"], documents["robot"]
     fallback = f"the controller's own {built.internal} RLS" if internal else "hold"
+    bridges = {part: documents[place]["ros2"] for part, place in (("tracker", "sensor"),
+                                                                  ("console", "robot"))
+               if "ros2" in documents[place]}
     return {
         "recording": config.data or config.scenario, "predictor": config.predictor,
         "duration_s": config.loop.duration, "ticks": controller["ticks"],
@@ -447,4 +485,4 @@ def report(config: RunConfig, built, internal: bool, documents: dict, arrays: di
                      "predictor": documents["predictor"]["scheduling"]},
         "host_load": {"before": [round(v, 2) for v in load[0]],
                       "after": [round(v, 2) for v in load[1]], "cpus": os.cpu_count()},
-    }
+    } | ({"ros2": bridges} if bridges else {})
