@@ -21,7 +21,7 @@ from cyclonedds.idl import Endianness, IdlStruct
 from cyclonedds.idl.annotations import final
 from cyclonedds.idl.types import byte, float64, int32, sequence, uint32
 
-from rhmpc.runtime.ros2.cdr import CDR_LE, codec
+from rhmpc.runtime.ros2.cdr import CDR_LE, CdrError, codec
 
 __all__ = ["MESSAGES", "DiagnosticStatus", "Header", "JointState", "KeyValue", "Path", "Point",
            "Pose", "PoseArray", "PoseStamped", "Quaternion", "Time", "message_name",
@@ -47,7 +47,10 @@ def _plain_cdr(cls: type) -> type:
     def deserialize(klass, data, has_header: bool = True, use_version_2=None):
         if has_header and bytes(data[:2]) == CDR_LE[:2]:
             return codec(cls).decode(data)
-        return generic_deserialize(data, has_header, use_version_2)
+        try:  # another encoding (big-endian, XCDR2): cyclonedds' own, its errors made one
+            return generic_deserialize(data, has_header, use_version_2)
+        except Exception as exc:
+            raise CdrError(f"{type(exc).__name__}: {exc}") from None
 
     cls.serialize, cls.deserialize = serialize, classmethod(deserialize)
     return cls
