@@ -6,7 +6,8 @@
  *   rhmpc_sil_controller --key-file KEY --epoch NS --ticks N --robot-port R --out PREFIX
  *                        (--port P | --socket-fd FD) [--origin X Y Z [--center X Y Z]]
  *                        [--radius M] [--settle S] [--tool-bound M] [--rms-bound M]
- *                        [--miss-rate F] [--cpu C] [--priority P] [--no-internal]
+ *                        [--miss-rate F] [--robot-timeout S] [--cpu C] [--priority P]
+ *                        [--no-internal]
  *   rhmpc_sil_controller --probe --epoch NS --ticks N --out PREFIX [--phase NS] [--cpu C]
  *                        [--priority P]
  *
@@ -24,9 +25,9 @@
  * The supervisor stops the run (the controller falls silent; the robot's drivers brake to
  * their safe state after their watchdog) and the program exits 3 with the cause on one line of
  * stderr and in PREFIX.json ("stopped") when
- *   - more than --miss-rate (default 10 %) of the ticks of one MISS_WINDOW (one second)
+ *   - more than --miss-rate (default 20 %) of the ticks of one MISS_WINDOW (one second)
  *     missed their deadline (the torque went out after the next tick began);
- *   - the robot's readings stop for STALE_LIMIT ticks (0.1 s), or more than --miss-rate of
+ *   - the robot's readings stop for --robot-timeout (default 0.1 s), or more than --miss-rate of
  *     the ticks of one second have no reading of their own;
  *   - after --settle seconds, the tool (forward kinematics of the readings) lies more than
  *     --tool-bound (default 5 mm) from a sample of the POI at that sample's instant, or the
@@ -72,7 +73,6 @@
 #define AHEAD 2e-3                  /* the latest stamp taken after the clock [s] */
 #define MISS_WINDOW 2000            /* ticks over which the deadline misses are counted */
 #define TOOL_RING 1024              /* ticks of tool positions kept for the samples' instants */
-#define STALE_LIMIT 200             /* ticks in a row without a reading that stop the run */
 
 enum { SERVED_NONE, SERVED_INTERNAL, SERVED_EXTERNAL, SERVED_HOLD, N_SERVED };
 static const char *const served_names[N_SERVED] = {"none", "internal", "external", "hold"};
@@ -87,7 +87,7 @@ static long long mono_ns(void) {
 }
 
 typedef struct {
-  double settle, tool_bound, rms_bound, miss_rate;
+  double settle, tool_bound, rms_bound, miss_rate, robot_timeout;
   long long misses[MISS_WINDOW / 100];  /* misses per 100-tick block, a ring */
   long long stale[MISS_WINDOW / 100];   /* ticks without their reading, the same */
   long long stale_run;                  /* ticks in a row without their reading */
@@ -182,7 +182,7 @@ static int near(const run_t *r, const double *rows, int n, int allow_missing) {
 
 static int plausible(const run_t *r, const rhmpc_wire_t *m, double now) {
   if (!in_window(m->stamp, now) || !in_window(m->sent, now)) return 0;
-  if (m->kind == RHMPC_MEASURED_CP) return near(r, values, m->rows, 1);
+  if (m->kind == RHMPC_MEASURED_CP) return near(r, values, 1, 1); /* the POI: the others unused */
   if (m->kind == RHMPC_FORECAST_CP)
     return fabs(m->period - RHMPC_DT) <= 1e-9 && near(r, values, m->rows, 0);
   for (int j = 0; j < RHMPC_NU; j++) /* measured_js */
@@ -274,16 +274,16 @@ static void judge_deadline(run_t *r, long long tick, int missed) {
   }
 }
 
-/* A tick's reading: the robot silent for STALE_LIMIT ticks in a row, or too many ticks of the
+/* A tick's reading: the robot silent for --robot-timeout in a row, or too many ticks of the
  * last second without their own reading, stop the run (the tool cannot be judged blind). */
 static void judge_readings(run_t *r, long long tick, int fresh) {
   supervisor_t *s = &r->sup;
   char why[256];
   s->stale_run = fresh ? 0 : s->stale_run + 1;
   long long sum = window_share(s->stale, tick, !fresh);
-  if (s->stale_run >= STALE_LIMIT && tick >= STALE_LIMIT) {
-    snprintf(why, sizeof why, "no reading from the robot for %d ms (its drivers, its host or "
-             "its link failed)", (int)(STALE_LIMIT * RHMPC_TS * 1e3));
+  if (s->stale_run * RHMPC_TS >= s->robot_timeout && tick * RHMPC_TS >= s->robot_timeout) {
+    snprintf(why, sizeof why, "no reading from the robot for %g ms (its drivers, its host or "
+             "its link failed)", s->robot_timeout * 1e3);
     stop_run(r, why);
   } else if (sum > s->miss_rate * MISS_WINDOW) {
     snprintf(why, sizeof why, "%lld of the last %d ticks had no reading of their own (%.1f %%, "
@@ -499,6 +499,7 @@ static void parse(run_t *r, int argc, char **argv) {
     else if (!strcmp(a, "--tool-bound")) r->sup.tool_bound = real(v, a), i++;
     else if (!strcmp(a, "--rms-bound")) r->sup.rms_bound = real(v, a), i++;
     else if (!strcmp(a, "--miss-rate")) r->sup.miss_rate = real(v, a), i++;
+    else if (!strcmp(a, "--robot-timeout")) r->sup.robot_timeout = real(v, a), i++;
     else if (!strcmp(a, "--out")) r->out = v, i++;
     else if (!strcmp(a, "--key-file")) r->key_file = v, i++;
     else if ((!strcmp(a, "--origin") || !strcmp(a, "--center")) && i + 3 < argc) {
@@ -513,15 +514,16 @@ static void parse(run_t *r, int argc, char **argv) {
   if (!r->probe && (r->key_file == NULL || r->robot_port <= 0 || r->robot_port > 65535 ||
                     (r->port <= 0 && r->fd < 0)))
     fail("needs --key-file, --robot-port and --port or --socket-fd (unless --probe)", "");
-  if (!(r->radius > 0 && r->sup.tool_bound > 0 && r->sup.rms_bound > 0 && r->sup.miss_rate > 0))
-    fail("--radius, --tool-bound, --rms-bound and --miss-rate must be > 0", "");
+  if (!(r->radius > 0 && r->sup.tool_bound > 0 && r->sup.rms_bound > 0 && r->sup.miss_rate > 0 &&
+        r->sup.robot_timeout > 0))
+    fail("--radius, --tool-bound, --rms-bound, --miss-rate and --robot-timeout must be > 0", "");
 }
 
 int main(int argc, char **argv) {
   static run_t r;
   r.cpu = -1, r.priority = 80, r.internal = 1, r.epoch = -1, r.ticks = -1, r.fd = -1;
   r.radius = 0.05, r.sup.settle = 2.0, r.sup.tool_bound = 5e-3, r.sup.rms_bound = 1e-3;
-  r.sup.miss_rate = 0.1;
+  r.sup.miss_rate = 0.2, r.sup.robot_timeout = 0.1;
   for (int k = 0; k < TOOL_RING; k++) r.sup.tool_tick[k] = -1;
   parse(&r, argc, argv);
   if (!rhmpc_wire_little_endian()) fail("the wire format needs a little-endian host", "");

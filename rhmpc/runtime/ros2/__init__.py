@@ -15,7 +15,43 @@ Only the bridges' own modules import ``cyclonedds``, and only for a run that ask
 
 from __future__ import annotations
 
-__all__ = ["console_part", "taken", "tracker_part"]
+from rhmpc.errors import UsageError
+from rhmpc.runtime.ros2.names import require_cyclonedds, ros_name
+
+__all__ = ["checked", "console_part", "report", "require", "taken", "tracker_part"]
+
+
+def checked(tracker: str | None, console: str | None,
+            allow_unauthenticated: bool) -> tuple[str | None, str | None]:
+    """The bridges' absolute ROS 2 names (the tracker's topic, the console's namespace);
+    ValueError on one line for a name that is not ROS 2's, or for a console without
+    ``allow_unauthenticated``."""
+    tracker, console = (None if n is None else ros_name(n) for n in (tracker, console))
+    if console is not None and not allow_unauthenticated:
+        raise ValueError(f"a console over ROS 2 ({console}) is not authenticated: any process "
+                         "on its DDS domain can publish torques and readings (ROS 2 without "
+                         "SROS2 has no authentication); accept that with "
+                         "--allow-unauthenticated")
+    return tracker, console
+
+
+def require(*names: str | None) -> None:
+    """:class:`~rhmpc.errors.UsageError` on one line when a bridge is asked for (a name not
+    None) and the ``ros2`` extra is not installed."""
+    if any(n is not None for n in names):
+        try:
+            require_cyclonedds()
+        except ImportError as exc:
+            raise UsageError(str(exc)) from None
+
+
+def report(documents: dict) -> dict:
+    """The bridges' part of a run's report: ``{"ros2": {"tracker": …, "console": …}}`` from
+    the documents of the parts they replaced, or nothing without a bridge."""
+    bridges = {part: documents[place]["ros2"] for part, place in (("tracker", "sensor"),
+                                                                  ("console", "robot"))
+               if "ros2" in documents[place]}
+    return {"ros2": bridges} if bridges else {}
 
 
 def tracker_part(topic: str | None) -> tuple | None:

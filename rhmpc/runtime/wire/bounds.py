@@ -6,8 +6,9 @@ receiver checks, before it uses one, that
 - its values are finite (a row of NaN in a ``measured_cp``: a point not tracked);
 - a torque lies within the arm's torque limits, a joint reading within its limits widened by
   :attr:`Bounds.joint_margin`;
-- a sample or a forecast lies within :attr:`Bounds.radius` of the POI's registration (the
-  tracker's point the controller is placed with);
+- the POI's sample or a forecast lies within :attr:`Bounds.radius` of the POI's registration
+  (the tracker's point the controller is placed with), the other tracked points within
+  :data:`OTHERS` radii of it;
 - its ``stamp`` and ``sent`` lie between :attr:`Bounds.max_age` before the receiver's clock
   and :attr:`Bounds.ahead` after it;
 - a forecast's period is the one expected.
@@ -25,13 +26,16 @@ import numpy as np
 
 from rhmpc.runtime.wire.codec import Message
 
-__all__ = ["WORKSPACE_RADIUS", "Bounds"]
+__all__ = ["OTHERS", "WORKSPACE_RADIUS", "Bounds"]
 
 #: The default radius of plausible samples around the POI's registration [m]. The heart's
 #: surface travels 10–15 mm peak to peak with each beat (Tuna et al. 2013, Table I's
 #: sonomicrometry; Yuen et al. 2009: about 20 mm of mitral annulus travel) and breathing adds
 #: a drift of the same order: 50 mm holds every beat with a wide margin and nothing a metre off.
 WORKSPACE_RADIUS = 0.05
+#: The other tracked points of a ``measured_cp`` may lie this many radii from the registration
+#: (0.5 m by default: markers elsewhere on the heart or the chest, within a tracker's view).
+OTHERS = 10.0
 
 
 @dataclass(frozen=True)
@@ -97,7 +101,8 @@ class Bounds:
         tracked = np.isfinite(rows).all(axis=1)
         if not (tracked | np.isnan(rows).all(axis=1)).all():
             return "a point partly tracked or infinite"
-        return self._near(rows[tracked])
+        others = rows[1:][tracked[1:]]  # the other tracked points: within a tracker's field
+        return self._near(rows[:1][tracked[:1]]) or self._near(others, OTHERS * self.radius)
 
     def _forecast_cp(self, message: Message) -> str | None:
         p = message.period
@@ -122,9 +127,10 @@ class Bounds:
             return "torques not finite or beyond their limits"
         return None
 
-    def _near(self, points: np.ndarray) -> str | None:
+    def _near(self, points: np.ndarray, radius: float | None = None) -> str | None:
+        radius = self.radius if radius is None else radius
         offset = points - np.asarray(self.center)
-        if not (np.abs(offset) <= self.radius).all() or (  # each coordinate first: no overflow
-                points.size and np.max(np.linalg.norm(offset, axis=1)) > self.radius):
-            return f"a point more than {self.radius * 1e3:g} mm from the registration"
+        if not (np.abs(offset) <= radius).all() or (  # each coordinate first: no overflow
+                points.size and np.max(np.linalg.norm(offset, axis=1)) > radius):
+            return f"a point more than {radius * 1e3:g} mm from the registration"
         return None

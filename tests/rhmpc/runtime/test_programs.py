@@ -132,6 +132,24 @@ def _spoof(foreign, controller: Link, port: int, tick: int, stamp: float, other:
     controller.seq["servo_jf"] = seq + 1
 
 
+def _controller(built, folder: Path, ticks: int, settle: float):
+    """The controller's program on a clock 0.4 s ahead, placed at the tool's home, its socket
+    inherited, a silent robot stopping it only after 10 s (a busy host stalls the test's own
+    process); a sender and a robot's end of the run's key. Its results go to FOLDER/run."""
+    key = new_key()
+    epoch = time.clock_gettime_ns(time.CLOCK_MONOTONIC) + 400_000_000
+    me, robot = Link(bind(), key, epoch), Link(bind(), key, epoch, accepts=("servo_jf",))
+    sock = bind()
+    proc = subprocess.Popen([str(built.program), "--key-file", str(_key_file(folder, key)),
+                             "--socket-fd", str(sock.fileno()), "--epoch", str(epoch),
+                             "--ticks", str(ticks), "--robot-port", str(robot.port),
+                             "--out", str(folder / "run"), "--priority", "1", "--settle",
+                             repr(settle), "--robot-timeout", "10", "--origin",
+                             *(repr(float(v)) for v in built.controller.reference.origin)],
+                            pass_fds=(sock.fileno(),), stderr=subprocess.PIPE, text=True)
+    return proc, me, robot, sock, epoch
+
+
 @needs_build
 @pytest.mark.slow
 def test_the_controller_counts_and_survives_bad_traffic(built, tmp_path):
@@ -140,18 +158,8 @@ def test_the_controller_counts_and_survives_bad_traffic(built, tmp_path):
     (taken), datagrams of no key and of another key, an encoder reading sent twice (late) and
     20 ticks without a reading (stale: the observer's fault path). Every torque is finite and
     within its limits."""
-    key, ticks = new_key(), 800
-    origin = built.controller.reference.origin
-    epoch = time.clock_gettime_ns(time.CLOCK_MONOTONIC) + 400_000_000
-    me, robot = Link(bind(), key, epoch), Link(bind(), key, epoch, accepts=("servo_jf",))
-    sock = bind()
-    out = tmp_path / "run"
-    proc = subprocess.Popen([str(built.program), "--key-file", str(_key_file(tmp_path, key)),
-                             "--socket-fd", str(sock.fileno()), "--epoch", str(epoch),
-                             "--ticks", str(ticks), "--robot-port", str(robot.port),
-                             "--out", str(out), "--priority", "1", "--settle", "100",
-                             "--origin", *(repr(float(v)) for v in origin)],
-                            pass_fds=(sock.fileno(),))
+    ticks, out = 800, tmp_path / "run"
+    proc, me, robot, sock, epoch = _controller(built, tmp_path, ticks, settle=100.0)
     port, q0, taus = sock.getsockname()[1], built.controller.mpc.arm.q0, []
     foreign = bind()
     try:
@@ -190,20 +198,20 @@ def _traffic(me: Link, robot: Link, foreign, port: int, tick: int, q0) -> None:
         robot.seq["measured_js"] -= 1  # the same number again: late
         robot.send(port, "measured_js", tick * TS, [q0])
     if tick % 15 == 1:
-        k = tick // 15
+        k, now = tick // 15, me.now() - TS  # stamped by the clock: a stall here is no stale one
         if k == 10:
             me.seq["measured_cp"] += 2  # two samples lost
-        z = 1e-3 * np.array([[np.sin(tick * TS * 7.5), 0.0, 0.0]])
+        z = 1e-3 * np.array([[np.sin(now * 7.5), 0.0, 0.0]])
         if k == 20:  # a sample from before, reordered: late
             seq = me.seq["measured_cp"]
             me.seq["measured_cp"] = seq - 3
-            me.send(port, "measured_cp", (tick - 46) * TS, z)
+            me.send(port, "measured_cp", now - 45 * TS, z)
             me.seq["measured_cp"] = seq
-        me.send(port, "measured_cp", (tick - 1) * TS, z)
-        nodes = 1e-3 * np.sin(7.5 * ((tick - 1) * TS + 15 * TS * np.arange(5)))
+        me.send(port, "measured_cp", now, z)
+        nodes = 1e-3 * np.sin(7.5 * (now + 15 * TS * np.arange(5)))
         points = np.column_stack([nodes, np.zeros(5), np.zeros(5) + 1.0 * (k == 14)])
         period = 15 * TS if k != 12 else 0.01
-        me.send(port, "forecast_cp", (tick - 1) * TS, points, period=period)
+        me.send(port, "forecast_cp", now, points, period=period)
     if tick == 600:
         foreign.sendto(b"not a message", ("127.0.0.1", port))
     if tick in (610, 620):
@@ -217,18 +225,8 @@ def test_the_supervisor_stops_when_the_tool_leaves_the_poi(built, tmp_path):
     """Readings at rest at home while the samples say the POI sits 8 mm away: after the
     settling time the controller stops the run (no torque goes out after it), exits 3 and
     names the cause."""
-    key, ticks = new_key(), 2000
-    origin = np.asarray(built.controller.reference.origin)
-    epoch = time.clock_gettime_ns(time.CLOCK_MONOTONIC) + 400_000_000
-    me, robot = Link(bind(), key, epoch), Link(bind(), key, epoch, accepts=("servo_jf",))
-    sock = bind()
-    out = tmp_path / "run"
-    proc = subprocess.Popen([str(built.program), "--key-file", str(_key_file(tmp_path, key)),
-                             "--socket-fd", str(sock.fileno()), "--epoch", str(epoch),
-                             "--ticks", str(ticks), "--robot-port", str(robot.port),
-                             "--out", str(out), "--priority", "1", "--settle", "0.2",
-                             "--origin", *(repr(float(v)) for v in origin)],
-                            pass_fds=(sock.fileno(),), stderr=subprocess.PIPE, text=True)
+    ticks, out = 2000, tmp_path / "run"
+    proc, me, robot, sock, epoch = _controller(built, tmp_path, ticks, settle=0.2)
     port, q0, torques_after = sock.getsockname()[1], built.controller.mpc.arm.q0, 0
     try:
         for tick in range(ticks):

@@ -124,6 +124,7 @@ def test_sequence_numbers_count_losses_and_no_number_locks_a_stream_out():
     ("measured_js", [[0.0, 3.0, 0.0]], {}, "joint"),               # beyond the limits + margin
     ("measured_cp", [[0.0, 0.0, 1.05]], {}, "registration"),       # a metre off
     ("measured_cp", [[0.0, 0.0, 0.05], [np.nan, 0.0, 0.0]], {}, "partly"),
+    ("measured_cp", [[0.0, 0.0, 0.05], [0.0, 0.0, 1e300]], {}, "registration"),  # another point
     ("forecast_cp", [[0.0, 0.0, 0.05]] * 4, {"period": 0.0}, "period"),
     ("forecast_cp", [[0.0, 0.0, 1e308]] * 4, {"period": 0.04}, "registration"),
 ])
@@ -138,7 +139,8 @@ def test_bounds_name_an_implausible_message(kind, values, extra, problem):
 def test_plausible_messages_pass_the_bounds():
     ok = [Message("servo_jf", 0, 0.0, np.array([[1.0, -1.0, 0.0]]), sent=0.0),
           Message("measured_js", 0, 0.0005, np.array([[1.05, -1.05, 0.0]]), sent=0.0),
-          Message("measured_cp", 0, -0.1, np.array([[0.0, 0.01, 0.06], [np.nan] * 3]), sent=0.0),
+          Message("measured_cp", 0, -0.1, np.array([[0.0, 0.01, 0.06], [np.nan] * 3,
+                                                    [0.2, 0.0, 0.05]]), sent=0.0),
           Message("forecast_cp", 0, -0.1, np.tile([0.0, 0.0, 0.08], (4, 1)), sent=0.0,
                   period=0.04)]
     assert [BOUNDS.problem(m, now=0.0) for m in ok] == [None] * 4
