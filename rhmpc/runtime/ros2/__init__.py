@@ -2,12 +2,13 @@
 
 A bridge is a process of the deployment in another part's place, so that the controller, the
 predictor and the supervisor run unchanged: the **tracker bridge**
-(:mod:`.tracker`) in the sensor's place takes the samples of a ROS 2 topic and publishes the
-forecasts and the run's status; the **console bridge** (:mod:`.console`) in the robot's place
-relays the controller's torques to an arm over ROS 2 and its readings back. Between a bridge
-and the other parts runs the deployment's authenticated wire (:mod:`rhmpc.runtime.wire`);
-between a bridge and ROS 2, DDS as ROS 2 uses it (:mod:`.dds`, :mod:`.messages`, :mod:`.cdr`),
-with Cyclone DDS's Python binding.
+(:mod:`rhmpc.runtime.ros2.tracker`) in the sensor's place takes the samples of a ROS 2 topic
+and publishes the forecasts and the run's status; the **console bridge**
+(:mod:`rhmpc.runtime.ros2.console`) in the robot's place relays the controller's torques to an
+arm over ROS 2 and its readings back. Between a bridge and the other parts runs the
+deployment's authenticated wire (:mod:`rhmpc.runtime.wire`); between a bridge and ROS 2, DDS
+as ROS 2 uses it (:mod:`rhmpc.runtime.ros2.dds`, :mod:`rhmpc.runtime.ros2.messages`,
+:mod:`rhmpc.runtime.ros2.cdr`), with Cyclone DDS's Python binding.
 
 Only the bridges' own modules import ``cyclonedds``, and only for a run that asks for a bridge:
 :func:`tracker_part` and :func:`console_part` import them when called.

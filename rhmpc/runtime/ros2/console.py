@@ -11,10 +11,10 @@ dVRK, ``sensor_msgs/JointState`` under the arm's namespace:
   whose tick has passed when it comes is not published (counted late).
 - ``NAMESPACE/measured_js`` (subscribed): the positions of those joints, found by name (or in
   order when the message names none), stamped with the instant of the reading. A reading is of
-  the tick nearest its stamp on the run's clock (:class:`~.names.RosClock`; a stamp left at zero
-  is of the next tick to begin) and is sent only while that tick has not passed, after the last
-  one sent, and within the receivers' bounds (joint limits, stamps); every other reading is
-  counted under its reason.
+  the tick nearest its stamp on the run's clock (:class:`~rhmpc.runtime.ros2.names.RosClock`;
+  a stamp left at zero is of the next tick to begin) and is sent only while that tick has not
+  passed, after the last one sent, and within the receivers' bounds (joint limits, stamps);
+  every other reading is counted under its reason.
 
 ROS 2 without SROS2 authenticates nothing: any process on the DDS domain can publish readings
 here and read the torques, which is why a deployment refuses this bridge without

@@ -5,7 +5,8 @@ plain DDS under conventions, and :class:`Node` keeps them, so that a ROS 2 node 
 topics:
 
 - a topic ``/a/b`` is the DDS topic ``rt/a/b``, its type ``PKG::msg::dds_::NAME_``
-  (:mod:`.names`, :mod:`.messages`), its samples plain CDR (:mod:`.cdr`);
+  (:mod:`rhmpc.runtime.ros2.names`, :mod:`rhmpc.runtime.ros2.messages`), its samples plain
+  CDR (:mod:`rhmpc.runtime.ros2.cdr`);
 - the domain is ``ROS_DOMAIN_ID``; Cyclone DDS reads its configuration from
   ``CYCLONEDDS_URI`` as a ROS 2 node does;
 - the QoS are ROS 2's profiles: what a bridge reads it reads with the **sensor-data** profile
@@ -75,7 +76,7 @@ class Node:
     Parameters
     ----------
     domain : int or None
-        The domain (None: ``ROS_DOMAIN_ID``, :func:`~.names.domain_id`).
+        The domain (None: ``ROS_DOMAIN_ID``, :func:`~rhmpc.runtime.ros2.names.domain_id`).
     """
 
     def __init__(self, domain: int | None = None) -> None:
@@ -107,7 +108,8 @@ class Node:
 
     def published_types(self, name: str) -> set[str]:
         """The ROS 2 types (``geometry_msgs/msg/PoseStamped``; the DDS name where it is none
-        of :data:`~.messages.MESSAGES`) of every publisher discovered on ``name`` so far."""
+        of :data:`~rhmpc.runtime.ros2.messages.MESSAGES`) of every publisher discovered on
+        ``name`` so far."""
         for endpoint in self._publications.take(64):
             topic = getattr(endpoint, "topic_name", None)
             if topic is not None:

@@ -35,8 +35,9 @@ def _dds(name: str) -> str:
 
 
 def _plain_cdr(cls: type) -> type:
-    """``cls`` serialized and deserialized by its plain-CDR codec (:mod:`.cdr`), the encoding
-    ROS 2 writes; any other encoding ``cyclonedds`` asks for goes to its own serializer."""
+    """``cls`` serialized and deserialized by its plain-CDR codec
+    (:mod:`rhmpc.runtime.ros2.cdr`), the encoding ROS 2 writes; any other encoding
+    ``cyclonedds`` asks for goes to its own serializer."""
     generic_serialize, generic_deserialize = cls.serialize, cls.deserialize
 
     def serialize(self, buffer=None, endianness=None, use_version_2=None) -> bytes:

@@ -33,7 +33,7 @@ class Status:
     Parameters
     ----------
     node : Node
-        The bridge's node (:class:`~.dds.Node`).
+        The bridge's node (:class:`~rhmpc.runtime.ros2.dds.Node`).
     part : str
         The bridge, as its status names it.
     clock : RosClock

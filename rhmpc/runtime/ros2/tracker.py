@@ -6,16 +6,16 @@ ros2:TOPIC``). It subscribes to ``TOPIC`` with the type its publisher announces,
 the POI the run's ``--poi``-th, from 1), and sends each sample, sealed under the run's key, as
 ``measured_cp`` to the predictor and the controller: what the wire's receivers take from the
 sensor. It publishes each of the predictor's forecasts as ``nav_msgs/Path`` on
-``/rhmpc/forecast_cp`` and the run's status (:mod:`.status`).
+``/rhmpc/forecast_cp`` and the run's status (:mod:`rhmpc.runtime.ros2.status`).
 
 **Stamps.** A sample is of its header's instant, ROS time mapped onto the run's clock
-(:class:`~.names.RosClock`); a header left at zero is of its arrival. The bridge sends a sample
-only when its instant lies within the receivers' window (``Bounds.max_age`` before now to
-``Bounds.ahead`` after it), after the last one sent, and at or after the run's instant 0, and
-its points within the receivers' bounds: it counts every other sample under its reason and
-drops it, as the receivers would. A gap of more than one of the run's sample periods between
-two stamps is first sent as the missing samples (rows of NaN, at most
-:attr:`~rhmpc.sim.loop.closed_loop.Refreshes.MAX_FILL`), as the sensor process does.
+(:class:`~rhmpc.runtime.ros2.names.RosClock`); a header left at zero is of its arrival. The
+bridge sends a sample only when its instant lies within the receivers' window
+(``Bounds.max_age`` before now to ``Bounds.ahead`` after it), after the last one sent, and at or
+after the run's instant 0, and its points within the receivers' bounds: it counts every other
+sample under its reason and drops it, as the receivers would. A gap of more than one of the
+run's sample periods between two stamps is first sent as the missing samples (rows of NaN, at
+most :attr:`~rhmpc.sim.loop.closed_loop.Refreshes.MAX_FILL`), as the sensor process does.
 
 A Path's poses are the forecast's points in the samples' frame (their ``frame_id``), pose k at
 ``stamp + k · period`` in ROS time; the Path's own stamp is the forecast's first instant.
