@@ -54,6 +54,19 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "the last points")
     p.add_argument("--port", type=int, metavar="P", help="the controller's UDP port on "
                    "loopback (the predictor's P+1, the robot's P+2; default: any free ones)")
+    p.add_argument("--tracker", metavar="ros2:TOPIC", help="take the samples from a ROS 2 "
+                   "topic of geometry_msgs/PoseStamped or PoseArray (the POI the --poi-th) "
+                   "through a bridge in the sensor's place, and publish the forecasts "
+                   "(nav_msgs/Path on /rhmpc/forecast_cp) and the run's status "
+                   "(diagnostic_msgs/DiagnosticStatus on /rhmpc/status); the recording still "
+                   "fits the predictor and registers the tracker's frame (needs rhmpc[ros2])")
+    p.add_argument("--console", metavar="ros2:NAMESPACE", help="command an arm over ROS 2 "
+                   "through a bridge in the robot's place: its readings from NAMESPACE/"
+                   "measured_js, the torques to NAMESPACE/servo_jf (sensor_msgs/JointState, "
+                   "the dVRK's CRTK names); refused without --allow-unauthenticated")
+    p.add_argument("--allow-unauthenticated", action="store_true", help="accept a --console "
+                   "over ROS 2, which authenticates nothing: any process on its DDS domain "
+                   "could command the arm or forge its readings")
     add_model_option(p)
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.set_defaults(func=run)
@@ -77,6 +90,8 @@ def table(r: dict) -> str:
         for reason, n in counts.items():
             dropped[reason] = dropped.get(reason, 0) + n
     drops = ", ".join(f"{n} {reason}" for reason, n in dropped.items() if n) or "none"
+    braked = "as its console's drivers decide" if r["robot_safe_state_ticks"] is None \
+        else f"{r['robot_safe_state_ticks']} ticks"
     lines = [
         f"rhmpc sil: {r['predictor']} on {r['recording']}, {r['duration_s']:g} s in real time",
         _row("ticks, deadline misses", f"{r['ticks']}, {r['deadline_misses']} "
@@ -88,7 +103,7 @@ def table(r: dict) -> str:
         _row("controller step", _p(r["controller_step_us"], "us")),
         _row("sensor to torque", _p(r["sensor_to_torque_ms"], "ms")),
         _row("packets lost", f"{lost} (stale encoder readings {r['stale_encoders']}, torques "
-             f"missed {r['torques_missed']}, robot braked {r['robot_safe_state_ticks']} ticks)"),
+             f"missed {r['torques_missed']}, robot braked {braked})"),
         _row("datagrams dropped", drops),
         _row("a lost forecast falls back to", r["forecast_fallback"]),
         _row("RMS error at measured instants", f"{r['rms_error_mm']:.4f} mm (in-process "
@@ -100,20 +115,30 @@ def table(r: dict) -> str:
     return "\n".join(lines)
 
 
+def _say(text: str) -> None:
+    print(f"rhmpc sil: {text}", file=sys.stderr)
+
+
 def run(args: argparse.Namespace) -> int:
     from rhmpc.runtime.deployment import DeploymentError, SilSettings, run_sil
+    from rhmpc.runtime.ros2.names import endpoint
 
     config = config_from_args(args)
     if config.predictor == "exact":
         raise UsageError("rhmpc sil needs a predictor ('exact' reads the future)")
     try:
+        bridges = {name: endpoint(getattr(args, name), f"--{name}")
+                   for name in ("tracker", "console") if getattr(args, name) is not None}
         settings = SilSettings(priority=args.priority, cpu=args.cpu,
-                               internal=not args.no_internal, port=args.port)
+                               internal=not args.no_internal, port=args.port,
+                               allow_unauthenticated=args.allow_unauthenticated, **bridges)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
+    if settings.tracker is not None:
+        _say(f"the samples of {settings.tracker} are not authenticated (ROS 2 without SROS2): "
+            "any process on the DDS domain can publish them, within the receivers' bounds")
     try:
-        report = run_sil(config, settings, progress=lambda text: print(f"rhmpc sil: {text}",
-                                                                        file=sys.stderr))
+        report = run_sil(config, settings, progress=_say)
     except DeploymentError as exc:  # not the input's fault: exit 1, on one line
         print(f"rhmpc sil: error: {one_line(exc)}", file=sys.stderr)
         return 1

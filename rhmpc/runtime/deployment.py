@@ -43,7 +43,7 @@ from rhmpc.control.reference import LATENCY_CAP, embed3
 from rhmpc.errors import UsageError
 from rhmpc.experiment import RunConfig, run_experiment
 from rhmpc.experiment.assembly import build_run
-from rhmpc.runtime import host, processes
+from rhmpc.runtime import host, processes, ros2
 from rhmpc.runtime.build import build_controller
 from rhmpc.runtime.wire import WORKSPACE_RADIUS, Bounds, bind, new_key, write_key
 from rhmpc.sim.loop.metrics import MeasuredScore
@@ -95,6 +95,12 @@ class SilSettings:
         machine, cost up to a tenth of a second now and then without leaving the POI; a host
         that loses a fifth of every second does not run the controller in time, and the tool
         bounds catch what that costs sooner).
+    tracker, console : str or None
+        The ROS 2 topic of a tracker's samples (PoseStamped or PoseArray), the namespace of an
+        arm over ROS 2 (``/PSM1``): a bridge takes the sensor's, the robot's place
+        (:mod:`rhmpc.runtime.ros2`); None: the run's sensor, the simulator.
+    allow_unauthenticated : bool
+        A console over ROS 2 is refused without it: ROS 2 without SROS2 authenticates nothing.
     """
 
     priority: int = 80
@@ -105,6 +111,9 @@ class SilSettings:
     tool_bound: float = 5e-3
     rms_bound: float = 1e-3
     miss_rate: float = 0.2
+    tracker: str | None = None
+    console: str | None = None
+    allow_unauthenticated: bool = False
 
     def __post_init__(self) -> None:
         if not 1 <= self.priority <= 99:
@@ -118,6 +127,9 @@ class SilSettings:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be finite and > 0, got {value}")
+        names = ros2.checked(self.tracker, self.console, self.allow_unauthenticated)
+        object.__setattr__(self, "tracker", names[0])
+        object.__setattr__(self, "console", names[1])
 
 
 class DeploymentError(RuntimeError):
@@ -237,6 +249,7 @@ def run_sil(config: RunConfig, settings: SilSettings = SilSettings(), progress=N
     """Run ``config`` as separate processes in real time; returns the report (:func:`report`).
     :class:`DeploymentError` when a part fails or the supervisor stops the run."""
     say = progress or (lambda text: None)
+    ros2.require(settings.tracker, settings.console)  # first: a missing extra before any work
     say("the in-process simulation of the same settings")
     in_process = run_experiment(config)[1]
     run = build_run(config)
@@ -275,7 +288,11 @@ def _deploy(plan: _Deployment, sockets: dict, say) -> dict:
             refused = "; this host refused " + ", ".join(refusals) if refusals else ""
             raise DeploymentError(_cause(failed, role, folder, duration) + refused)
         documents, arrays, q, host_latency = _collect(folder, host_tool(group), plan.config)
-    score = _score(plan.run, q, documents["predictor"]["outliers"])
+        try:  # a tracker's bridge: the POI where the tracker measured it
+            measured = ros2.taken(folder, plan.run) if plan.settings.tracker else plan.run.measured
+        except ValueError as exc:
+            raise DeploymentError(str(exc)) from None
+    score = _score(plan.run, q, documents["predictor"]["outliers"], measured)
     return report(plan.config, plan.built, plan.settings.internal, documents, arrays,
                   host_latency, score, plan.in_process, (load_before, os.getloadavg()))
 
@@ -295,7 +312,8 @@ def _role(plan: _Deployment, sockets: dict, folder: Path) -> processes.Role:
                     tuple(float(v) for v in plan.run.reference.center),
                     radius=settings.workspace_radius, max_age=LATENCY_CAP)
     ports = processes.Ports(*(sockets[n].getsockname()[1]
-                              for n in ("controller", "predictor", "robot")))
+                              for n in ("controller", "predictor", "robot")),
+                            bridge=sockets["sensor"].getsockname()[1] if settings.tracker else None)
     epoch = time.clock_gettime_ns(time.CLOCK_MONOTONIC) + int(STARTUP_S * 1e9)
     priority = settings.priority if plan.allowed.fifo is None else 0
     return processes.Role(epoch, loop.ticks, loop.Ts, ports, folder, new_key(), bounds,
@@ -336,10 +354,12 @@ def _start(group: _Group, plan: _Deployment, role: processes.Role, sockets: dict
         phase_ns=round(role.Ts * 5e8), allowed=plan.allowed)
     group.spawn("host probe", probe)
     fifo, top, run = plan.allowed.fifo is None, plan.settings.priority, plan.run
-    group.fork("robot", processes.robot, run, _with(role, top - 10, fifo), sockets["robot"])
+    robot = ros2.console_part(plan.settings.console) or ("robot", processes.robot)
+    sensor = ros2.tracker_part(plan.settings.tracker) or ("sensor", processes.sensor)
+    group.fork(*robot[:2], run, _with(role, top - 10, fifo), sockets["robot"], *robot[2:])
     group.fork("predictor", processes.predictor, run, _with(role, 0, False),
                sockets["predictor"])
-    group.fork("sensor", processes.sensor, run, _with(role, top - 20, fifo), sockets["sensor"])
+    group.fork(*sensor[:2], run, _with(role, top - 20, fifo), sockets["sensor"], *sensor[2:])
 
 
 def _with(role: processes.Role, priority: int, fifo: bool) -> processes.Role:
@@ -393,16 +413,17 @@ def _collect(folder: Path, tool: str, config: RunConfig):
     return documents, arrays, q, host.read_probe(folder / "host", tool, config.loop.Ts)
 
 
-def _score(run, q: np.ndarray, outliers: list[float]) -> dict:
-    """The tool after each tick against the POI where it was measured (a recording: at its
-    samples' instants) or at every tick (a synthetic motion), as the in-process run."""
+def _score(run, q: np.ndarray, outliers: list[float], measured) -> dict:
+    """The tool after each tick against the POI where it was measured (``measured``: a
+    recording's or a tracker's samples, at their instants) or at every tick (a synthetic
+    motion, None), as the in-process run."""
     loop = run.config.loop
     ticks = loop.ticks
     done = np.isfinite(q).all(axis=1)
     ee = np.full((ticks, 3), np.nan)
     ee[done] = [run.robot.ee_position(row) for row in q[done]]
-    if run.measured is not None:
-        t, z = run.measured
+    if measured is not None:
+        t, z = measured
         placed = run.anchor + embed3(np.asarray(z, dtype=float).reshape(len(t), -1)
                                      - run.truth.center)
     else:
@@ -467,4 +488,4 @@ def report(config: RunConfig, built, internal: bool, documents: dict, arrays: di
                      "predictor": documents["predictor"]["scheduling"]},
         "host_load": {"before": [round(v, 2) for v in load[0]],
                       "after": [round(v, 2) for v in load[1]], "cpus": os.cpu_count()},
-    }
+    } | ros2.report(documents)

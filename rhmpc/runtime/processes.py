@@ -48,7 +48,7 @@ from rhmpc.sim.loop.closed_loop import Refreshes, _note_outliers
 from rhmpc.tuning.workers import die_with_parent
 
 __all__ = ["BRAKE_S", "ROBOT_WAIT", "WATCHDOG_TICKS", "Drivers", "Ports", "Role", "predictor",
-           "robot", "sensor"]
+           "robot", "sensor", "set_up"]
 
 #: How long into a tick the robot waits for that tick's torque [ticks], and at least how long
 #: after sending its reading (a robot that fell behind still gives the controller time to answer).
@@ -64,11 +64,18 @@ MAX_FILL = Refreshes.MAX_FILL
 
 @dataclass(frozen=True)
 class Ports:
-    """The UDP ports on loopback of the controller, the predictor and the robot."""
+    """The UDP ports on loopback of the controller, the predictor and the robot, and of the
+    tracker's bridge, which takes the forecasts too (None: no bridge)."""
 
     controller: int
     predictor: int
     robot: int
+    bridge: int | None = None
+
+    @property
+    def forecasts(self) -> list[int]:
+        """Where the predictor sends its forecasts: the controller, and a tracker's bridge."""
+        return [self.controller] + ([] if self.bridge is None else [self.bridge])
 
 
 @dataclass(frozen=True)
@@ -99,7 +106,7 @@ class _Stop:
         self.asked = True
 
 
-def _start(role: Role, parent: int) -> tuple[_Stop, str]:
+def set_up(role: Role, parent: int) -> tuple[_Stop, str]:
     """The process's set-up: it dies with the deployment; SCHED_FIFO where asked and permitted."""
     die_with_parent(parent)
     stop = _Stop()
@@ -154,7 +161,7 @@ def _write(role: Role, name: str, document: dict) -> None:
 
 def sensor(run, role: Role, sock, parent: int) -> None:
     """The sensor's samples at their arrival ticks, to the predictor and the controller."""
-    stop, scheduling = _start(role, parent)
+    stop, scheduling = set_up(role, parent)
     refreshes = Refreshes(run.stream, run.config.loop, run.clock, run.points)
     link = Link(sock, role.key, role.epoch_ns)
     sent = 0
@@ -174,7 +181,7 @@ def sensor(run, role: Role, sock, parent: int) -> None:
 
 def predictor(run, role: Role, sock, parent: int) -> None:
     """The run's predictor behind its reference: a forecast for each sample taken."""
-    stop, scheduling = _start(role, parent)
+    stop, scheduling = set_up(role, parent)
     torch = sys.modules.get("torch")  # a learned predictor's: its thread pool is not fork-safe
     if torch is not None:
         torch.set_num_threads(1)  # one thread runs its parallel regions inline
@@ -213,7 +220,7 @@ def _forecast(reference, link: Link, message, dim: int, log: dict, role: Role) -
                        message.stamp, log)
     if nodes is None:
         return False
-    link.send(role.ports.controller, "forecast_cp", nodes[1], embed3(nodes[0]),
+    link.send(role.ports.forecasts, "forecast_cp", nodes[1], embed3(nodes[0]),
               origin=message.origin, period=reference.dt)
     return True
 
@@ -281,7 +288,7 @@ def _this_ticks_torque(link: Link, i: int, Ts: float, sent: float, pending: dict
 def robot(run, role: Role, sock, parent: int) -> None:
     """The run's plant in the robot's place: one tick per tick of the run's clock, behind its
     drivers (:class:`Drivers`)."""
-    stop, scheduling = _start(role, parent)
+    stop, scheduling = set_up(role, parent)
     plant, Ts = run.plant, role.Ts
     link = Link(sock, role.key, role.epoch_ns, accepts=("servo_jf",), bounds=role.bounds)
     q = np.full((role.ticks, plant.q.size), np.nan)
