@@ -18,6 +18,7 @@ import importlib
 import importlib.util
 from typing import Any, NamedTuple
 
+from rhmpc.io import check_kinds
 from rhmpc.predictors.ar import AutoregressivePredictor
 from rhmpc.predictors.base import Predictor
 from rhmpc.predictors.combination import Combination
@@ -189,6 +190,7 @@ def _settings(entry: _Entry, settings: dict[str, Any]):
         raise ValueError(
             f"unknown setting(s) {', '.join(unknown)} for {name!r}; valid: {', '.join(valid)}"
         )
+    check_kinds(entry.settings, settings)
     merged = {**entry.overrides, **settings}
     return entry.settings(**merged) if base is None else dataclasses.replace(base, **merged)
 

@@ -7,9 +7,28 @@ import sys
 import warnings
 from collections.abc import Iterator
 
+#: The longest message printed [characters]: about eight lines of a terminal, room for the
+#: longest list of valid keys (the MPC's settings); a longer one (a header of 10⁵ columns
+#: repeated back) keeps its start and its end.
+MAX_MESSAGE = 800
+#: Of a message cut short, the characters kept at its end (where the reason often is).
+MESSAGE_TAIL = 200
+
 
 class UsageError(ValueError):
     """Bad command-line input or a malformed input file; the CLI prints it on one line, exit 2."""
+
+
+def one_line(message: object, limit: int = MAX_MESSAGE) -> str:
+    """``message`` on one line (its whitespace collapsed) of at most about ``limit``
+    characters: a longer one keeps its start and its last :data:`MESSAGE_TAIL` characters,
+    saying how many were left out between."""
+    text = " ".join(str(message).split())
+    if len(text) <= limit:
+        return text
+    tail = min(MESSAGE_TAIL, limit // 4)
+    head = limit - tail
+    return f"{text[:head]} … ({len(text) - head - tail} characters left out) … {text[-tail:]}"
 
 
 @contextlib.contextmanager
@@ -22,8 +41,7 @@ def one_line_warnings(prefix: str) -> Iterator[None]:
     def show(message, category, filename, lineno, file=None, line=None) -> None:
         stream = sys.stderr if file is None else file
         if issubclass(category, UserWarning):
-            text = " ".join(str(message).split())  # one line, whatever the message holds
-            stream.write(f"{prefix}: warning: {text}\n")
+            stream.write(f"{prefix}: warning: {one_line(message)}\n")
         else:
             stream.write(warnings.formatwarning(message, category, filename, lineno, line))
 

@@ -24,6 +24,8 @@ A robot file is TOML. Its keys (SI units; angles in radians)::
                                           # the POI may visit [m] (default 10 mm)
     motor_map = [[1, 0, 0], [0, 1, 0], [0, 0, 1]]    # θ = S (q − q0): see rhmpc.robots.Robot
     coupling = [{ row = [0, 1, 1], lower = -2.16, upper = 2.08 }]   # lower ≤ row·q ≤ upper
+    inconsistent_inertia = ["upper_arm"]  # links whose published inertia breaks the triangle
+                                          # inequality, kept as published
     [drives]                              # geared motors, all keys together: they give the
     gear_ratio = [13.3, 11.2, 11.2]       # torque limits η·peak_torque, the friction
     peak_torque = 0.129                   # K_t·I₀·η, the reflected inertias η²·J_m and the
@@ -34,9 +36,11 @@ A robot file is TOML. Its keys (SI units; angles in radians)::
     rotor_joints = ["j1", "j2", "j3"]     # the joint turning with each motor's output angle
                                           # (default: the actuated joints)
 
-Everything is checked before a robot is built (:func:`check`): the names exist, the limits are
-sane, the home posture lies within the joint limits and away from a singularity, and the tool
-reaches the cube of ``workspace`` about its home position. A problem raises
+Everything is checked before a robot is built: the URDF's size and physics before a native
+parser reads it (:mod:`rhmpc.robots.urdf_reader`), every number a number (not a boolean, not
+text), the names exist, the limits are sane, the home posture lies within the joint limits and
+away from a singularity, the arm holds it against gravity within its torque limits, and the
+tool reaches the cube of ``workspace`` about its home position. A problem raises
 :class:`RobotFileError`, one line naming the file and the key.
 
 The default ``workspace`` is half the mitral annulus's total travel of about 20 mm (Yuen et al.,
@@ -54,27 +58,34 @@ import numpy as np
 import pinocchio as pin
 
 from rhmpc.io import FileError, read_text, read_toml
+from rhmpc.robots.checks import (
+    RobotFileError,
+    check_home,
+    floats,
+    is_number,
+    listed,
+    number,
+    vector,
+)
 from rhmpc.robots.model import Robot
+from rhmpc.robots.urdf_reader import UrdfError, read_model
 
 #: Keys of a robot file and of its [drives] table.
 KEYS = ("urdf", "joints", "locked", "tool_frame", "tool", "home", "name", "description",
         "torque_limits", "armature", "friction", "damping", "encoder_resolution", "gravity",
-        "workspace", "motor_map", "coupling", "drives")
+        "workspace", "motor_map", "coupling", "inconsistent_inertia", "drives")
 DRIVE_KEYS = ("gear_ratio", "peak_torque", "torque_constant", "no_load_current",
               "rotor_inertia", "encoder_counts", "rotor_joints")
 #: The POI's reach about the tool's home position by default [m] (Yuen et al. 2009, §2).
 WORKSPACE = 0.01
 #: The largest URDF read [bytes] (the robot file is a settings file: ``rhmpc.io``'s bound).
 MAX_URDF_BYTES = 2**26
-#: A home posture whose Jacobian's singular values differ by more than this is singular.
-MAX_CONDITION = 1e3
+#: The farthest a tool's point may lie from its frame [m]: no arm that reaches a patient's
+#: heart is larger; a point beyond it is a unit error (millimetres written as metres).
+MAX_TOOL_OFFSET = 10.0
 #: Revolute joints the controller can drive (one angle each).
 _REVOLUTE = ("JointModelRX", "JointModelRY", "JointModelRZ", "JointModelRevoluteUnaligned")
 _NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*")
-
-
-class RobotFileError(ValueError):
-    """A robot file that cannot describe a robot; the message names the file and the key."""
 
 
 def _read_urdf(path: Path) -> str:
@@ -102,32 +113,21 @@ def _package(url: str) -> Path:
                          "$ROS_PACKAGE_PATH")
 
 
-def _vector(doc: dict, key: str, n: int, positive: bool = False, default=None) -> np.ndarray:
-    """``doc[key]`` as n finite floats (> 0 with ``positive``, else ≥ 0 unless signed)."""
-    value = doc.get(key, default)
-    try:
-        v = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        v = np.zeros(0)
-    if v.shape != (n,) or not np.all(np.isfinite(v)) or (positive and np.any(v <= 0)):
-        what = f"{n} finite numbers" + (" > 0" if positive else "")
-        raise RobotFileError(f"{key}: must be {what}, got {value!r}")
-    return v
-
-
-def _number(table: dict, key: str, where: str = "") -> float:
-    value = table.get(key)
-    if isinstance(value, bool) or not isinstance(value, int | float) \
-            or not math.isfinite(value) or value <= 0:
-        raise RobotFileError(f"{where}{key}: must be a finite number > 0, got {value!r}")
-    return float(value)
-
-
 def read_file(path: str | Path) -> dict:
     """The robot file's table (:func:`rhmpc.io.read_toml`: a file that cannot be read, or is
     not TOML, is a ``FileError`` naming it); unknown or missing keys raise
     :class:`RobotFileError`."""
-    doc = read_toml(path)  # FileError, naming the file
+    if Path(path).suffix.lower() in (".urdf", ".xacro", ".xml"):
+        raise RobotFileError(f"a robot file (TOML) is expected, not a URDF: write one that "
+                             f"names it, urdf = \"{Path(path).name}\", with joints, tool_frame "
+                             "and home (docs: guide/your-robot)")
+    try:
+        doc = read_toml(path)
+    except FileError as exc:  # naming the file
+        if "not valid TOML" not in str(exc):
+            raise
+        raise FileError(f"{exc}; a robot file is TOML: urdf = \"arm.urdf\", joints = [...], "
+                        "tool_frame and home (docs: guide/your-robot)") from None
     unknown = sorted(set(doc) - set(KEYS))
     if unknown:
         raise RobotFileError(f"{unknown[0]}: unknown key; valid keys: {', '.join(KEYS)}")
@@ -147,14 +147,21 @@ def _urdf_path(doc: dict, base: Path) -> Path:
     return _package(url) if url.startswith("package://") else base / url
 
 
-def _full_model(path: Path) -> pin.Model:
-    """The URDF's model (mimic joints follow their joints), read without its meshes."""
-    text = _read_urdf(path)
+def _full_model(doc: dict, path: Path) -> pin.Model:
+    """The URDF's model (mimic joints follow their joints), read without its meshes once its
+    size and physics passed :func:`rhmpc.robots.urdf_reader.check_urdf`."""
+    unchecked = doc.get("inconsistent_inertia", [])
+    if not isinstance(unchecked, list) or not all(isinstance(n, str) for n in unchecked):
+        raise RobotFileError(f"inconsistent_inertia: must be a list of link names, got "
+                             f"{unchecked!r}")
     try:
-        return pin.buildModelFromXML(text, mimic=True)
-    except (RuntimeError, ValueError) as exc:
-        first = str(exc).strip().splitlines()[:1] or ["unknown error"]
-        raise RobotFileError(f"urdf: {path} is not a URDF Pinocchio reads ({first[0]})") from None
+        model = read_model(_read_urdf(path), frozenset(unchecked))
+    except UrdfError as exc:
+        raise RobotFileError(f"urdf: {path}: {exc}") from None
+    for name in unchecked:
+        if not model.existBodyName(name):
+            raise RobotFileError(f"inconsistent_inertia: no link {name!r} in {path.name}")
+    return model
 
 
 def _joint(full: pin.Model, name, key: str, urdf: Path) -> int:
@@ -186,7 +193,7 @@ def _reduced(doc: dict, full: pin.Model, urdf: Path) -> pin.Model:
             raise RobotFileError(f"locked: joint {name!r} is also actuated (joints)")
         idx = full.joints[jid].idx_q
         lo, hi = full.lowerPositionLimit[idx], full.upperPositionLimit[idx]
-        if isinstance(value, bool) or not isinstance(value, int | float):
+        if not is_number(value):
             raise RobotFileError(f"locked: {name} = {value!r} must be an angle [rad]")
         if not lo - 1e-9 <= value <= hi + 1e-9:
             raise RobotFileError(f"locked: {name} = {value!r} is outside its limits "
@@ -208,21 +215,32 @@ def _tool(doc: dict, model: pin.Model) -> str:
     """The tool's frame name (a frame added at ``tool.point`` for a point on a frame)."""
     if "tool_frame" in doc:
         frame = doc["tool_frame"]
-        if not isinstance(frame, str) or not model.existFrame(frame):
-            raise RobotFileError(f"tool_frame: no frame {frame!r} in the URDF")
+        _frame(model, frame, "tool_frame")
         return frame
     tool = doc["tool"]
     if not isinstance(tool, dict) or set(tool) != {"frame", "point"}:
         raise RobotFileError(f"tool: must be {{ frame = \"FRAME\", point = [x, y, z] }}, got "
                              f"{tool!r}")
-    if not isinstance(tool["frame"], str) or not model.existFrame(tool["frame"]):
-        raise RobotFileError(f"tool: no frame {tool['frame']!r} in the URDF")
-    point = _vector(tool, "point", 3)
+    _frame(model, tool["frame"], "tool.frame")
+    point = vector(tool, "point", 3)
+    if np.linalg.norm(point) > MAX_TOOL_OFFSET:
+        raise RobotFileError(f"tool.point: {np.linalg.norm(point):.4g} m from frame "
+                             f"{tool['frame']!r}; a tool's point lies within "
+                             f"{MAX_TOOL_OFFSET:g} m of its frame (metres, not millimetres)")
     parent = model.frames[model.getFrameId(tool["frame"])]
     placement = parent.placement * pin.SE3(np.eye(3), point)
     model.addFrame(pin.Frame("tool", parent.parentJoint, model.getFrameId(tool["frame"]),
                              placement, pin.FrameType.OP_FRAME))
     return "tool"
+
+
+def _frame(model: pin.Model, frame, key: str) -> None:
+    """``frame`` names a frame of the model; else the message lists them (the first 40)."""
+    if isinstance(frame, str) and model.existFrame(frame):
+        return
+    names = [f.name for f in model.frames if f.name != "universe"]
+    listed = ", ".join(names[:40]) + (f", … ({len(names)} in all)" if len(names) > 40 else "")
+    raise RobotFileError(f"{key}: no frame {frame!r} in the URDF (its frames: {listed})")
 
 
 def _check_limits(model: pin.Model) -> None:
@@ -246,17 +264,20 @@ def _drives(doc: dict, model: pin.Model, joints: list[str]) -> dict:
     missing = [k for k in DRIVE_KEYS[:-1] if k not in drives]
     if missing:
         raise RobotFileError(f"drives.{missing[0]}: missing")
-    eta = _vector(drives, "gear_ratio", 3, positive=True)
-    number = {k: _number(drives, k, "drives.") for k in DRIVE_KEYS[1:-1]}
+    eta = vector(drives, "gear_ratio", 3, positive=True)
+    motor = {k: number(drives, k, "drives.") for k in DRIVE_KEYS[1:-1]}
+    if not motor["encoder_counts"].is_integer():
+        raise RobotFileError(f"drives.encoder_counts: a whole number of counts a turn, got "
+                             f"{drives['encoder_counts']!r}")
     rotors = drives.get("rotor_joints", joints)
     if not isinstance(rotors, list) or len(rotors) != 3 or not all(
             isinstance(r, str) and model.existJointName(r) for r in rotors):
         raise RobotFileError(f"drives.rotor_joints: must name 3 joints of the model, got "
                              f"{rotors!r}")
-    return {"gear_ratio": eta, "torque_limits": eta * number["peak_torque"],
-            "friction": number["torque_constant"] * number["no_load_current"] * eta,
-            "rotor": eta**2 * number["rotor_inertia"], "rotor_joints": rotors,
-            "encoder_resolution": 2 * np.pi / (number["encoder_counts"] * eta)}
+    return {"gear_ratio": eta, "torque_limits": eta * motor["peak_torque"],
+            "friction": motor["torque_constant"] * motor["no_load_current"] * eta,
+            "rotor": eta**2 * motor["rotor_inertia"], "rotor_joints": rotors,
+            "encoder_resolution": 2 * np.pi / (motor["encoder_counts"] * eta)}
 
 
 def _add_rotor(model: pin.Model, joint: str, inertia: float) -> None:
@@ -281,9 +302,9 @@ def _coupling(doc: dict) -> tuple:
     for row in rows if isinstance(rows, list) else [None]:
         if not isinstance(row, dict) or set(row) != {"row", "lower", "upper"}:
             raise RobotFileError("coupling: a list of { row = [a, b, c], lower = .., upper = .. }")
-        c = _vector(row, "row", 3)
+        c = vector(row, "row", 3)
         lo, hi = (row[k] for k in ("lower", "upper"))
-        if not all(isinstance(v, int | float) and math.isfinite(v) for v in (lo, hi)) \
+        if not all(is_number(v) and math.isfinite(v) for v in (lo, hi)) \
                 or lo >= hi or not np.any(c):
             raise RobotFileError(f"coupling: lower < upper, both finite, and a row not zero, "
                                  f"got {row!r}")
@@ -291,28 +312,47 @@ def _coupling(doc: dict) -> tuple:
     return tuple(out)
 
 
-def _check_home(robot: Robot, workspace: float) -> None:
-    """The home posture regular (within the limits: :class:`Robot` checks it), and the POI's
-    cube within reach."""
-    sv = np.linalg.svd(robot.ee_jacobian(robot.q0), compute_uv=False)
-    if not sv[-1] > sv[0] / MAX_CONDITION:
-        raise RobotFileError(f"home: the tool's Jacobian is singular there (singular values "
-                             f"{sv.round(6).tolist()} m/rad)")
-    y0 = robot.ee_position(robot.q0)
-    for axis, sign in ((a, s) for a in range(3) for s in (1.0, -1.0)):
-        point = y0 + sign * workspace * np.eye(3)[axis]
-        distance, _ = robot.distance_to_reach(point)
-        if distance > 1e-4:
-            raise RobotFileError(
-                f"workspace: the tool cannot reach {1e3 * workspace:g} mm along "
-                f"{'+' if sign > 0 else '-'}{'xyz'[axis]} of its home position within the "
-                f"joint limits (short by {1e3 * distance:.1f} mm); move home or reduce "
-                "workspace")
+def _drive_terms(doc: dict, model: pin.Model, drives: dict) -> np.ndarray:
+    """The torque limits, armature, friction and damping into ``model``: the file's, else the
+    drives', else the URDF's; the Coulomb friction below the torque limits. Returns the torque
+    limits [N·m]."""
+    urdf_effort = np.asarray(model.effortLimit, dtype=float).copy()
+    if "torque_limits" not in doc and "torque_limits" not in drives and not np.all(
+            urdf_effort > 0):
+        raise RobotFileError(f"torque_limits: the URDF gives no effort limit > 0 "
+                             f"({urdf_effort.tolist()}); give torque_limits [N·m]")
+    torque = vector(doc, "torque_limits", 3, positive=True,
+                    default=drives.get("torque_limits", urdf_effort))
+    model.effortLimit[:] = torque
+    model.armature[:] = vector(doc, "armature", 3, default=np.zeros(3))
+    model.friction[:] = vector(doc, "friction", 3, default=drives.get("friction",
+                                                                      model.friction))
+    model.damping[:] = vector(doc, "damping", 3, default=model.damping)
+    for key in ("armature", "friction", "damping"):
+        if np.any(getattr(model, key) < 0):
+            raise RobotFileError(f"{key}: must be ≥ 0")
+    if np.any(model.friction >= torque):
+        raise RobotFileError(f"friction: {listed(model.friction)} N·m, not below the torque "
+                             f"limits {listed(torque)} N·m: the arm could not move")
+    for joint, inertia in zip(drives.get("rotor_joints", ()), drives.get("rotor", ()),
+                              strict=False):
+        _add_rotor(model, joint, float(inertia))
+    return torque
+
+
+def _motor_map(doc: dict):
+    """The file's ``motor_map`` (an invertible 3×3 matrix of numbers), or None."""
+    motor_map = doc.get("motor_map")
+    if motor_map is not None:
+        S = floats(motor_map, (3, 3))
+        if S is None or not np.all(np.isfinite(S)) or abs(np.linalg.det(S)) < 1e-9:
+            raise RobotFileError(f"motor_map: must be an invertible 3x3 matrix, got {motor_map!r}")
+    return motor_map
 
 
 def _robot(doc: dict, path: Path) -> Robot:
     urdf = _urdf_path(doc, path.parent)
-    model = _reduced(doc, _full_model(urdf), urdf)
+    model = _reduced(doc, _full_model(doc, urdf), urdf)
     _check_limits(model)
     joints = list(doc["joints"])
     ee_frame = _tool(doc, model)
@@ -321,40 +361,16 @@ def _robot(doc: dict, path: Path) -> Robot:
         raise RobotFileError(f"name: letters, digits, '_', '.' and '-', got {name!r}")
     drives = _drives(doc, model, joints)
     if "gravity" in doc:
-        model.gravity.linear[:] = [0.0, 0.0, -_number(doc, "gravity")]
-    urdf_effort = np.asarray(model.effortLimit, dtype=float).copy()
-    if "torque_limits" not in doc and "torque_limits" not in drives and not np.all(
-            urdf_effort > 0):
-        raise RobotFileError(f"torque_limits: the URDF gives no effort limit > 0 "
-                             f"({urdf_effort.tolist()}); give torque_limits [N·m]")
-    torque = _vector(doc, "torque_limits", 3, positive=True,
-                     default=drives.get("torque_limits", urdf_effort))
-    model.effortLimit[:] = torque
-    model.armature[:] = _vector(doc, "armature", 3, default=np.zeros(3))
-    model.friction[:] = _vector(doc, "friction", 3, default=drives.get("friction",
-                                                                       model.friction))
-    model.damping[:] = _vector(doc, "damping", 3, default=model.damping)
-    for key in ("armature", "friction", "damping"):
-        if np.any(getattr(model, key) < 0):
-            raise RobotFileError(f"{key}: must be ≥ 0")
-    for joint, inertia in zip(drives.get("rotor_joints", ()), drives.get("rotor", ()),
-                              strict=False):
-        _add_rotor(model, joint, float(inertia))
+        model.gravity.linear[:] = [0.0, 0.0, -number(doc, "gravity")]
+    torque = _drive_terms(doc, model, drives)
     encoder = doc.get("encoder_resolution", drives.get("encoder_resolution"))
-    motor_map = doc.get("motor_map")
-    if motor_map is not None:
-        try:
-            S = np.asarray(motor_map, dtype=float)
-        except (TypeError, ValueError):
-            S = np.zeros(0)
-        if S.shape != (3, 3) or not np.all(np.isfinite(S)) or abs(np.linalg.det(S)) < 1e-9:
-            raise RobotFileError(f"motor_map: must be an invertible 3x3 matrix, got {motor_map!r}")
+    motor_map = _motor_map(doc)
     try:
         description = str(doc.get("description", f"from {path.name} ({urdf.name})"))
         robot = Robot(
             name=name, model=model, ee_frame=ee_frame,
-            q0=_vector(doc, "home", 3), torque_limit=torque,
-            encoder_resolution=None if encoder is None else _vector(
+            q0=vector(doc, "home", 3), torque_limit=torque,
+            encoder_resolution=None if encoder is None else vector(
                 {"encoder_resolution": encoder}, "encoder_resolution", 3, positive=True),
             description=" ".join(description.split()), motor_map=motor_map,
             gear_ratio=drives.get("gear_ratio"), rotor_inertia=drives.get("rotor"),
@@ -363,7 +379,7 @@ def _robot(doc: dict, path: Path) -> Robot:
         raise
     except ValueError as exc:  # the home posture outside the joint limits (Robot checks it)
         raise RobotFileError(f"home: {str(exc).split(': ', 1)[-1]}") from None
-    _check_home(robot, _number(doc, "workspace") if "workspace" in doc else WORKSPACE)
+    check_home(robot, number(doc, "workspace") if "workspace" in doc else WORKSPACE)
     return robot
 
 

@@ -30,7 +30,7 @@ still dependencies), and no module may reach itself through imports (no cycle).
 ``rhmpc.predictors`` also depends on nothing outside numpy, scipy, the standard library and
 ``rhmpc.io``, so that a predictor can be lifted into another project; only the learned
 predictors (``rhmpc.predictors.learned``) import their optional deep-learning extra, and only
-when asked for.
+when asked for; likewise only the ROS 2 bridges (``rhmpc.runtime.ros2``) import ``cyclonedds``.
 
 ``rhmpc.robots``, ``rhmpc.predictors`` and ``rhmpc.sim`` keep their folders at the repository's
 root (``robots/``, ``predictors/``, ``sim/``; pyproject.toml's ``package-dir``): a file's module
@@ -89,6 +89,8 @@ PREDICTOR_DEPENDENCIES = ("numpy", "scipy", "rhmpc.io")
 IO_DEPENDENCIES = ("numpy",)
 #: The optional extra the learned predictors (``rhmpc.predictors.learned``) may import besides.
 LEARNED_DEPENDENCIES = ("torch",)
+#: Optional extras imported by one package only (PyTorch: the predictors' rule above).
+EXTRAS = {"cyclonedds": "rhmpc.runtime.ros2"}
 
 
 def within(module: str, package: str) -> bool:
@@ -158,6 +160,10 @@ def violations(root: Path) -> list[str]:
                     if not allowed(target, "rhmpc.predictors", (*PREDICTOR_DEPENDENCIES, *extra)):
                         found.append(f"{path.relative_to(root)}:{line}: rhmpc.predictors "
                                      f"imports {target} (numpy, scipy and rhmpc.io only)")
+                extra = EXTRAS.get(target.split(".")[0])
+                if extra is not None and not within(module, extra):
+                    found.append(f"{path.relative_to(root)}:{line}: {module} imports {target} "
+                                 f"(an optional extra: {extra} only)")
                 if target.split(".")[0] == "rhmpc" and layer_of(target) is None \
                         and target not in ("rhmpc", "rhmpc.__version__"):
                     found.append(f"{path.relative_to(root)}:{line}: {module} imports {target} "
@@ -203,6 +209,7 @@ def test_every_module_has_a_layer() -> None:
     ("rhmpc/control/bad.py", "from rhmpc import run_experiment\n", "facade"),
     ("sim/loop/bad.py", "from rhmpc.control.reference import ExactReference\n",
      "import neither the other"),
+    ("rhmpc/cli/bad.py", "def f():\n    import cyclonedds.domain\n", "rhmpc.runtime.ros2 only"),
 ])
 def test_the_check_catches_an_upward_import(tmp_path: Path, where: str, source: str,
                                             expected: str) -> None:

@@ -4,9 +4,11 @@ documentation built with warnings as errors, the tables each command names, the 
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import os
 import re
+import shlex
 import shutil
 import subprocess
 import sys
@@ -43,6 +45,41 @@ def test_ci_runs_the_readmes_test_command_verbatim() -> None:
     test_command = next(line for line in bash_lines() if "pytest" in line)
     assert "pip install -e" in test_command
     assert test_command in (ROOT / ".ci" / "run").read_text().splitlines()
+
+
+def pip_installs() -> list[str]:
+    """The README's ``pip install`` commands, each from ``pip`` to its end or its ``&&``."""
+    return [m.group(0) for line in bash_lines()
+            for m in re.finditer(r"\.venv/bin/pip install [^&]*[^&\s]", line)]
+
+
+def test_every_install_keeps_the_checkout_editable() -> None:
+    """Each install of the README is editable, the docs extra's too: ``pip install ".[docs]"``
+    would replace the editable install with a copy of the checkout."""
+    installs = pip_installs()
+    assert len(installs) >= 3 and any("[docs]" in i for i in installs), installs
+    for command in installs:
+        assert re.search(r"pip install (-e|--editable) ", command), command
+
+
+def test_ci_installs_and_builds_the_docs_as_the_readme_says() -> None:
+    ci = (ROOT / ".ci" / "run").read_text()
+    docs = next(i for i in pip_installs() if "[docs]" in i)
+    assert docs in ci.splitlines()
+    apt = next(line for line in bash_lines() if "apt-get install" in line)
+    for package in apt.split("apt-get install", 1)[1].split():  # CI installs what is missing
+        assert f"missing+=({package})" in ci, package
+
+
+def test_the_readme_names_every_system_tool_the_tests_use() -> None:
+    """What the tests look up on the machine, and the Debian package of each."""
+    apt = next(line for line in bash_lines() if "apt-get install" in line)
+    for tool, package in (("C compiler", "build-essential"), ("cmake", "cmake"),
+                          ("libcrypto", "libssl-dev"), ("Chromium", "chromium")):
+        assert tool in README and package in apt.split(), (tool, package)
+    prose = " ".join(README.split())
+    assert re.search(r"On 2 cores .*? the whole suite takes about \d+ minutes", prose)
+    assert re.search(r'`-m "not slow"` runs its quick part, about \d+ minutes', prose)
 
 
 def test_the_docs_command_turns_warnings_into_errors() -> None:
@@ -98,11 +135,26 @@ def _rms(clone: Path, env: dict) -> float:
     return json.loads(out.stdout)["rms_error_mm"]
 
 
+def _pip(clone: Path, env: dict, command: str) -> None:
+    """A README ``pip install`` command in the copy's environment, offline: its own arguments,
+    with the dependencies from this environment (``--no-deps``) and the build backend too
+    (``--no-build-isolation``)."""
+    args = shlex.split(command.split("pip install", 1)[1])
+    done = subprocess.run([str(clone / ".venv" / "bin" / "python"), "-m", "pip", "install", "-q",
+                           "--no-deps", "--no-build-isolation", "--no-index", *args], cwd=clone,
+                          env=env, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+
+
 @pytest.mark.slow
 def test_an_edit_shows_in_the_next_run_after_the_readmes_setup(tmp_path: Path) -> None:
-    """A copy of the checkout, the README's install (its pip options, offline: the
-    dependencies come from this environment), an edit that shifts every forecast by 1 mm, and
-    the next ``rhmpc simulate`` of the copy's environment."""
+    """A copy of the checkout, the README's install and then its docs step's install (their
+    pip arguments, offline: the dependencies come from this environment), an edit that shifts
+    every forecast by 1 mm, and the next ``rhmpc simulate`` of the copy's environment."""
+    for backend in ("setuptools", "wheel"):  # the build, without a network
+        if importlib.util.find_spec(backend) is None:
+            pytest.skip(f"pip cannot build the project offline here: no {backend} (the test "
+                        "extra brings it)")
     clone = tmp_path / "clone"
     shutil.copytree(ROOT, clone, ignore=shutil.ignore_patterns(
         ".venv", ".git", "_build", "build", "*.egg-info", "__pycache__", ".pytest_cache"))
@@ -115,13 +167,12 @@ def test_an_edit_shows_in_the_next_run_after_the_readmes_setup(tmp_path: Path) -
     # its own editable install of the project (a finder, not a path) nor the checkout
     ours = [p for p in sys.path if p.startswith(sys.prefix) and Path(p).is_dir()]
     (site / "dependencies.pth").write_text("\n".join(ours) + "\n")
-    pip = re.search(r"\.venv/bin/pip install (.*?)(?: &&|$)", setup_line()).group(1).split()
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
-    done = subprocess.run([str(clone / ".venv" / "bin" / "python"), "-m", "pip", "install", "-q",
-                           "--no-deps", "--no-build-isolation", *pip], cwd=clone, env=env,
-                          capture_output=True, text=True, timeout=600)
-    assert done.returncode == 0, done.stderr[-2000:]
+    setup = re.search(r"\.venv/bin/pip install .*?(?= &&|$)", setup_line()).group(0)
+    docs = next(i for i in pip_installs() if "[docs]" in i)
+    _pip(clone, env, setup)
     before = _rms(clone, env)
+    _pip(clone, env, docs)  # the docs step: the install stays editable
     with (clone / "predictors" / "base.py").open("a") as f:
         f.write(EDIT)
     after = _rms(clone, env)

@@ -20,7 +20,7 @@ import os
 import sys
 
 from rhmpc import __version__
-from rhmpc.errors import UsageError, one_line_warnings
+from rhmpc.errors import UsageError, one_line, one_line_warnings
 
 #: Subcommands (modules of this package), in the order ``rhmpc --help`` lists them, with
 #: their one-line help.
@@ -78,11 +78,11 @@ def main(argv: list[str] | None = None) -> int:
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
     except (UsageError, ValueError, OSError) as exc:
-        text = " ".join(str(exc).split())  # one line, whatever the message holds
-        print(f"rhmpc {args.command}: error: {text}", file=sys.stderr)
+        # one line of a readable length, whatever the message holds
+        print(f"rhmpc {args.command}: error: {one_line(exc)}", file=sys.stderr)
         return 2
     except MemoryError as exc:  # a setting or an input that sizes an array beyond the machine
-        text = " ".join(str(exc).split())
+        text = one_line(exc)
         print(f"rhmpc {args.command}: error: out of memory{f' ({text})' if text else ''}: a "
               "setting or an input asks for more than this machine has", file=sys.stderr)
         return 2

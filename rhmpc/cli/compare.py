@@ -49,7 +49,7 @@ TABLE_SCENARIOS = COLUMNS
 #: both presets' runs on two cores: docs/validation/tuna.md (``benchmarks/tuna_tables.py``).
 PAPER_SEEDS = 4
 #: Options that read a recording (``--data``); their ``argparse`` destinations.
-READ_OPTIONS = ("var", "rows", "cols", "data_rate", "units")
+READ_OPTIONS = ("var", "rows", "cols", "data_rate", "units", "topic", "frame")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -67,7 +67,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scenarios",
                    help="comma-separated scenario names (default: the six Table-I replicas)")
     p.add_argument("--data", nargs="+", metavar="FILE", help="recordings instead of scenarios, "
-                   "one column each (CSV t,x,y,z in s and mm, NPZ, MATLAB .mat); each runs "
+                   "one column each (CSV t,x,y,z in s and mm, NPZ, MATLAB .mat, a ROS bag "
+                   "with --topic); each runs "
                    "whole unless --duration, with the sensor 'recorded' unless --sensor")
     p.add_argument("--points", metavar="all|N[,N...]", help="files of several tracked points "
                    "(CSV t,x1,y1,z1,x2,...; NPZ (n, P, 3); MAT 3P x n): one column per point "
@@ -150,8 +151,8 @@ def _scenario_columns(args: argparse.Namespace) -> list:
     """(column, settings) of each scenario."""
     if args.points is not None or args.poi is not None or args.split is not None or any(
             getattr(args, k, None) is not None for k in READ_OPTIONS):
-        raise UsageError("--points, --poi, --split, --var, --rows, --cols, --rate and --units "
-                         "need --data FILE")
+        raise UsageError("--points, --poi, --split, --var, --rows, --cols, --rate, --units, "
+                         "--topic and --frame need --data FILE")
     names = args.scenarios or ",".join(TABLE_SCENARIOS)
     return scenario_columns(names.split(","), args.full)
 

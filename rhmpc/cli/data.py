@@ -7,7 +7,8 @@
 ``rhmpc data plot NAME FILE.png``   position per axis over time, heart rate and PSD
 
 NAME is a scenario name or the path of a recording (.csv/.npz/.mat; for .mat: ``--var``,
-``--rows``/``--cols``, ``--rate``, ``--units``). Millimetres appear only here.
+``--rows``/``--cols``, ``--rate``, ``--units``; a ROS bag: ``--topic``, ``--frame``, whose
+``show`` without ``--topic`` lists its topics). Millimetres appear only here.
 
 A scenario's motion is synthesised in memory, so a ``--duration`` (or ``--rate``) whose work
 would not fit in the memory available is refused before any work, with the memory and time it
@@ -61,6 +62,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     common.add_argument("--units", choices=("mm", "m", "um", "cm"),
                         help="length unit when the file does not state it (a CSV file's "
                         "default is mm; an NPZ or MAT file needs it)")
+    common.add_argument("--topic", help="a ROS bag's topic to read (show lists them)")
+    common.add_argument("--frame", help="the child frame read from a ROS bag's tf topic")
+    common.add_argument("--poi", type=int, help="which of several tracked points is read, from 1")
 
     p_list = actions.add_parser(
         "list", parents=[common], help="the scenarios: what they replicate, their targets",
@@ -114,8 +118,10 @@ def _list(args: argparse.Namespace) -> int:
     """The scenarios' specifications, or (``--measure``) their measured statistics."""
     measure = args.measure or any(getattr(args, k) is not None
                                   for k in ("duration", "seed", "bpm", "record"))
-    if any(getattr(args, k) is not None for k in ("var", "rows", "cols", "units")):
-        raise UsageError("--var, --rows, --cols and --units apply to recordings, not to list")
+    if any(getattr(args, k) is not None for k in ("var", "rows", "cols", "units", "topic",
+                                                  "frame", "poi")):
+        raise UsageError("--var, --rows, --cols, --units, --topic, --frame and --poi apply to "
+                         "recordings, not to list")
     names = []
     for name in SCENARIOS:
         if (missing := missing_data(name)) is not None:
@@ -134,8 +140,14 @@ def _list(args: argparse.Namespace) -> int:
 
 
 def _show(args: argparse.Namespace) -> int:
+    from rhmpc.sim.recordings import is_bag, survey, survey_lines
+
+    bag = survey(args.name) if is_bag(args.name) else None  # its topics, then one's motion
+    if bag is not None and args.topic is None:
+        print(json.dumps(bag, indent=2) if args.json else "\n".join(survey_lines(bag)))
+        return 0
     target = resolve(args.name, Request.of(args))
-    row = stats_row(target)
+    row = stats_row(target) | ({"bag": bag} if bag else {})
     invivo = args.name in SPECS and SPECS[args.name].heart == "invivo"
     if invivo:  # the in-vivo regime beside the recording it was built from
         from rhmpc.sim.heart.invivo import source_statistics
@@ -144,7 +156,7 @@ def _show(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(row, indent=2))
         return 0
-    print("\n".join(show_lines(row)))
+    print("\n".join([*(survey_lines(bag) if bag else []), *show_lines(row)]))
     if invivo:
         from rhmpc.sim.heart.invivo import statistics_table
 

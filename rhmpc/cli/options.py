@@ -8,13 +8,20 @@ import argparse
 from rhmpc.cli.presets import add_preset_option
 from rhmpc.errors import UsageError
 from rhmpc.sim.loop.settings import DEFAULT_SETTLING, LoopSettings
-from rhmpc.sim.recordings.matfile import parse_indices
 
 #: Default run length [s] of every command (``LoopSettings.duration``).
 DEFAULT_DURATION = LoopSettings.duration
 #: The settling rule when neither --settling nor a config file sets it.
 SETTLING_RULE = (f"settling by default {DEFAULT_SETTLING:g} s, or a third of a run shorter than "
                  f"{3 * DEFAULT_SETTLING:g} s")
+
+
+def parse_indices(text: str) -> list[int]:
+    """``--rows``/``--cols`` (:func:`rhmpc.sim.recordings.matfile.parse_indices`), its module
+    loaded when an option is given, not for ``--help``."""
+    from rhmpc.sim.recordings.matfile import parse_indices as parse
+
+    return parse(text)
 
 
 def add_run_options(
@@ -47,8 +54,9 @@ def add_run_options(
 
 
 def add_recording_options(p: argparse.ArgumentParser) -> None:
-    """``--var``, ``--rows``, ``--cols``, ``--rate``, ``--units``: how to read a recording."""
-    g = p.add_argument_group("reading a recording (.mat)")
+    """``--var``, ``--rows``, ``--cols``, ``--rate``, ``--units``, ``--topic``, ``--frame``: how
+    to read a recording."""
+    g = p.add_argument_group("reading a recording (.mat; ROS bags: --topic, --frame)")
     g.add_argument("--var", help="MATLAB variable holding the positions")
     g.add_argument("--rows", type=parse_indices, help="0-based rows holding x,y,z (samples along "
                    "columns), e.g. 0,1,2")
@@ -57,7 +65,11 @@ def add_recording_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--rate", type=float, dest="data_rate", metavar="HZ",
                    help="sample rate when the file has no time vector [Hz]")
     g.add_argument("--units", choices=("mm", "m", "um", "cm"),
-                   help="length unit when the file does not state it (default mm)")
+                   help="length unit when the file does not state it (default mm; a ROS bag: m)")
+    g.add_argument("--topic", help="a ROS bag's topic of the POI (PoseStamped, PointStamped, "
+                   "TransformStamped, tf2_msgs/TFMessage; PoseArray or MarkerArray with --poi)")
+    g.add_argument("--frame", help="the child frame read from a tf topic (TFMessage, "
+                   "TransformStamped)")
 
 
 
@@ -93,7 +105,8 @@ def parse_split(text: str | None) -> tuple[int, int] | None:
 
 def recording_options(args: argparse.Namespace) -> dict:
     """The ``load_recording`` keywords given on the command line."""
-    keys = {"var": "var", "rows": "rows", "cols": "cols", "data_rate": "rate", "units": "units"}
+    keys = {"var": "var", "rows": "rows", "cols": "cols", "data_rate": "rate", "units": "units",
+            "topic": "topic", "frame": "frame"}
     return {v: getattr(args, k) for k, v in keys.items() if getattr(args, k, None) is not None}
 
 

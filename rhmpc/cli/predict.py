@@ -55,7 +55,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     what = p.add_mutually_exclusive_group()
     what.add_argument("--study", choices=STUDIES, help="which synthetic study")
     what.add_argument("--data", nargs="+", metavar="FILE", help="recordings to score every "
-                      "predictor on (CSV t,x,y,z in s and mm, NPZ, or MATLAB .mat v5/v7.3)")
+                      "predictor on (CSV t,x,y,z in s and mm, NPZ, MATLAB .mat v5/v7.3, or "
+                      "ROS bags with --topic)")
     p.add_argument(
         "--trials",
         type=int,

@@ -6,6 +6,7 @@ import argparse
 import json
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -23,8 +24,9 @@ from rhmpc.cli.options import (
     recording_options,
 )
 from rhmpc.errors import UsageError
-from rhmpc.experiment import RunConfig, run_experiment
-from rhmpc.experiment.config import run_config
+
+if TYPE_CHECKING:  # the run's stack loads when a run starts, not for --help
+    from rhmpc.experiment import RunConfig
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -40,7 +42,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     src.add_argument("--scenario", help="heart-motion scenario (rhmpc data list); default "
                      "fixed-a2-top")
     src.add_argument("--data", metavar="FILE", help="a recording (CSV t,x,y,z in s and mm, NPZ, "
-                     "or MATLAB .mat v5/v7.3); runs the whole recording unless --duration")
+                     "MATLAB .mat v5/v7.3, or a ROS bag: a rosbag2 folder, .mcap, .db3, ROS 1 "
+                     ".bag); runs the whole recording unless --duration")
     add_recording_options(p)
     p.add_argument("--poi", type=int, metavar="N", help="the point of interest (numbered from 1) "
                    "of a --data file of several tracked points; a predictor that reads the "
@@ -91,6 +94,8 @@ OPTIONS = {"predictor": "predictor", "scenario": "scenario", "data": "data", "se
 def config_from_args(args: argparse.Namespace) -> RunConfig:
     """The run's settings (:func:`rhmpc.experiment.config.run_config`): defaults < --config
     file < --preset < explicit options < --set."""
+    from rhmpc.experiment.config import run_config
+
     options = {key: getattr(args, name) for name, key in OPTIONS.items()
                if getattr(args, name, None) is not None}
     if getattr(args, "data", None):
@@ -98,9 +103,10 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
         if getattr(args, "poi", None) is not None:
             options["data_read"]["point"] = args.poi
     elif any(getattr(args, k, None) is not None
-             for k in ("var", "rows", "cols", "data_rate", "units", "poi", "split")):
-        raise UsageError("--var, --rows, --cols, --rate, --units, --poi and --split need "
-                         "--data FILE")
+             for k in ("var", "rows", "cols", "data_rate", "units", "topic", "frame", "poi",
+                       "split")):
+        raise UsageError("--var, --rows, --cols, --rate, --units, --topic, --frame, --poi and "
+                         "--split need --data FILE")
     if options.get("train"):
         options["train"] = tuple(options["train"])
     return run_config(args.config, getattr(args, "preset", None), options, args.set,
@@ -195,6 +201,7 @@ def run(args: argparse.Namespace) -> int:
 
         if reason := missing_toolchain():
             raise UsageError(reason)
+    from rhmpc.experiment import run_experiment
     from rhmpc.experiment.config import input_files
 
     check_outputs(args, [*input_files(config), *filter(None, [args.config])])

@@ -18,7 +18,7 @@ import sys
 from pathlib import Path
 
 from rhmpc.cli import COMMANDS
-from rhmpc.errors import UsageError
+from rhmpc.errors import UsageError, one_line
 
 USAGE = ("rhmpc tune SPEC.toml [--jobs N | --scheduler ADDRESS] [--results FILE.jsonl] "
          "[--retry-failed] [--dry-run] [report options]\n"
@@ -131,7 +131,7 @@ def sweep(args: argparse.Namespace, spec_path: Path) -> int:
     todo, n_ok, n_failed = pending(tasks, existing, retry_failed=bool(args.retry_failed))
     quiet = bool(args.quiet)
     if skipped := existing.skipped(results_path):
-        print(f"rhmpc tune: warning: {skipped}", file=sys.stderr)
+        print(f"rhmpc tune: warning: {one_line(skipped)}", file=sys.stderr)
     note(f"rhmpc tune: sweep '{spec.name}': {len(points)} points × {len(spec.evaluations())} "
          f"evaluations = {len(tasks)}; done {n_ok}, failed {n_failed}, to run {len(todo)}; "
          f"results {results_path}", quiet)
@@ -174,7 +174,7 @@ def report(args: argparse.Namespace, results_path: Path) -> int:
                          + (f" ({data.skipped(results_path).split(': ', 1)[1]})"
                             if data.bad_lines else ""))
     if skipped := data.skipped(results_path):
-        print(f"rhmpc tune: warning: {skipped}", file=sys.stderr)
+        print(f"rhmpc tune: warning: {one_line(skipped)}", file=sys.stderr)
     points, log_keys = None, None
     if args.spec:
         from rhmpc.tuning.spec import load_spec

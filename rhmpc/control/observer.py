@@ -177,8 +177,8 @@ class JointObserver:
         self._q_in[:] = q_measured
         nu = np.subtract(self._q_in, self.q0, out=self._nu)
         nu -= self.x_prior[: self.n]
-        if self._grace:  # after a hold: fused whatever it says, while the filter settles
-            self._grace -= 1
+        if self._grace and np.isfinite(nu).all():  # after a hold: fused whatever it says (if
+            self._grace -= 1                           # it is a number), while it settles
         # every |ν_j| within the smallest gate is within its own (NaN is not): the exact test
         # of _hold only when that fails
         elif (self.held or not np.abs(nu, out=self._abs_nu).max() <= self._gate_min) \

@@ -14,19 +14,24 @@
 :func:`run_experiment`.
 """
 
-from rhmpc.experiment.assembly import Run, build_run, build_stream, make_sensor
-from rhmpc.experiment.config import (
-    GROUND_TRUTHS,
-    SECTIONS,
-    RunConfig,
-    load_config,
-    read_toml,
-    run_config,
-    save_config,
-)
-from rhmpc.experiment.run import run_experiment, versions
+from __future__ import annotations
 
-__all__ = [
-    "GROUND_TRUTHS", "SECTIONS", "Run", "RunConfig", "build_run", "build_stream", "load_config",
-    "make_sensor", "read_toml", "run_config", "run_experiment", "save_config", "versions",
-]
+import importlib
+
+#: Each name of the package and its module: loaded when first asked for, so that the command
+#: line's parsers (``rhmpc sil --help``) read the presets without the run's stack.
+_EXPORTS = {
+    "Run": "assembly", "build_run": "assembly", "build_stream": "assembly",
+    "make_sensor": "assembly", "GROUND_TRUTHS": "config", "SECTIONS": "config",
+    "RunConfig": "config", "load_config": "config", "read_toml": "config",
+    "run_config": "config", "save_config": "config", "run_experiment": "run",
+    "versions": "run",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str):
+    if name not in _EXPORTS:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return getattr(importlib.import_module(f"{__name__}.{_EXPORTS[name]}"), name)

@@ -140,6 +140,10 @@ class RunConfig:
     def __post_init__(self) -> None:
         if isinstance(self.train, list):  # as TOML reads it
             object.__setattr__(self, "train", tuple(self.train))
+        for name, cls in SECTIONS.items():
+            if not isinstance(getattr(self, name), cls):
+                raise ValueError(f"{name} must be a {cls.__name__} (the table [{name}]), got "
+                                 f"{getattr(self, name)!r}")
         for name, kind in TOP_LEVEL.items():
             value = getattr(self, name)
             if not _is(value, kind):
@@ -221,6 +225,8 @@ class RunConfig:
             section, _, name = key.partition(".")
             if name:
                 nested.setdefault(section, {})[name] = value
+            elif key in SECTIONS:  # a whole section: a table of its settings
+                nested.setdefault(key, {}).update(_section_table(key, value))
             else:
                 top[key] = value
         for section, values in nested.items():
@@ -247,6 +253,15 @@ class RunConfig:
             raise UsageError(str(exc)) from None
 
 
+def _section_table(section: str, value: Any) -> dict[str, Any]:
+    """``value`` given for a whole section: its table, else a ``UsageError`` naming it."""
+    if isinstance(value, dict):
+        return value
+    keys = ", ".join(f.name for f in dataclasses.fields(SECTIONS[section]))
+    raise UsageError(f"{section} is a section of settings ({keys}), not a value: set one as "
+                     f"{section}.KEY=VALUE, got {value!r}")
+
+
 def run_config(file: str | Path | None = None, preset: str | None = None,
                options: dict[str, Any] | None = None, sets: Sequence[str] = (),
                faults: Sequence[str] = (), models: Sequence[str] = (),
@@ -266,12 +281,13 @@ def run_config(file: str | Path | None = None, preset: str | None = None,
     ``UsageError``.
     """
     from rhmpc.experiment.fitting import model_settings
+    from rhmpc.sim.recordings.formats import found
 
     options = dict(options or {})
     if split is not None and {"loop.duration", "loop.settling"} & set(options):
         raise UsageError("--split TRAIN:END sets the settling and the duration: give neither "
                          "--settling nor --duration with it")
-    missing = [f for f in options.get("train", ()) if not Path(f).is_file()]
+    missing = [f for f in options.get("train", ()) if not found(f)]
     if missing:
         raise UsageError(f"--train: no such file {', '.join(missing)}")
     recording = _recording(options, file is None, split) if options.get("data") else None
@@ -295,12 +311,13 @@ def _recording(options: dict[str, Any], whole: bool, split: tuple[int, int] | No
     """Resolve the recording of ``options`` in place (its file, how it is read, the sensor
     that reads it as it is, and with ``whole`` and no duration or split, the run's length) and
     return it, read once (``None`` when nothing needs it read)."""
+    from rhmpc.sim.recordings.formats import found
     from rhmpc.sim.recordings.shipped import SHIPPED, resolve
 
     read = dict(options.get("data_read", {}))
     point = read.pop("point", None)
     data, read, poi = resolve(options["data"], read)
-    if not Path(data).is_file():
+    if not found(data):
         raise UsageError(f"{options['data']}: no such file (nor a shipped recording: "
                          f"{', '.join(SHIPPED)})")
     poi = point if point is not None else poi

@@ -2,13 +2,18 @@
 
 :func:`to_dict` / :func:`from_dict` convert a frozen settings dataclass to and from a ``dict`` of
 TOML-representable values (tuples become lists, ``None`` fields are left out);
-:func:`replace_settings` changes some of its fields.
+:func:`replace_settings` changes some of its fields. Both check each value's kind against its
+field's annotation first (:func:`rhmpc.io.check_kinds`): a table given where a number is set,
+or a number where a list is, is one line naming the key rather than an error of the arithmetic
+that meets it.
 """
 
 from __future__ import annotations
 
 import dataclasses
 from typing import Any, TypeVar
+
+from rhmpc.io import check_kinds
 
 S = TypeVar("S")
 
@@ -38,6 +43,7 @@ def from_dict(cls: type[S], data: dict[str, Any]) -> S:
     if unknown:
         raise ValueError(f"unknown {cls.__name__} setting(s): {', '.join(unknown)}; "
                          f"valid: {', '.join(names)}")
+    check_kinds(cls, data)
     kwargs = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items()}
     return cls(**kwargs)
 
@@ -50,5 +56,6 @@ def replace_settings(settings: S, changes: dict[str, Any]) -> S:
         if key not in names:
             raise ValueError(f"unknown {type(settings).__name__} setting {key!r}; valid: "
                              f"{', '.join(names)}")
+    check_kinds(type(settings), changes)
     return dataclasses.replace(settings, **{
         k: tuple(v) if isinstance(v, list) else v for k, v in changes.items()})

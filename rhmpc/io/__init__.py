@@ -8,6 +8,8 @@ atomic writer, and the bounds of every count a user sets.
 ``writer``      :class:`AtomicFile`, :func:`check_output`: a temporary file renamed over
                 the target; never through a link, outside its folder or onto an input
 ``limits``      :data:`BOUNDS` and :data:`FILE_BYTES`: the one table of bounds
+``kinds``       :func:`check_kinds`: a settings table's values against its dataclass's
+                annotations (a number, a string, a list, a table)
 ==============  =================================================================
 
 It sits below every other package (``rhmpc.predictors`` and ``rhmpc.robots`` included) and
@@ -17,6 +19,7 @@ the same way. Modules import it as ``from rhmpc import io`` (``io.read_bytes``,
 (``from io import BytesIO``).
 """
 
+from rhmpc.io.kinds import check_kinds
 from rhmpc.io.limits import BOUNDS, FILE_BYTES, Bound, check, largest
 from rhmpc.io.reader import (
     FileError,
@@ -41,9 +44,9 @@ from rhmpc.io.writer import (
 
 __all__ = [
     "BOUNDS", "FILE_BYTES", "AtomicFile", "Bound", "FileError", "NpzArchive", "atomic_write",
-    "check", "check_output", "file_stem", "json_loads", "largest", "make_folder", "open_input",
-    "read_bytes", "read_json", "read_text", "read_toml", "save_figure", "tracking_inputs",
-    "write_bytes", "write_text",
+    "check", "check_kinds", "check_output", "file_stem", "json_loads", "largest", "make_folder",
+    "open_input", "read_bytes", "read_json", "read_text", "read_toml", "save_figure",
+    "tracking_inputs", "write_bytes", "write_text",
 ]
 
 

@@ -14,7 +14,7 @@ from rhmpc.motion.text import fmt, mm
 from rhmpc.sim.heart import SPECS
 from rhmpc.sim.heart.analysis import motion_stats, predictability
 from rhmpc.sim.heart.specs import ScenarioSpec
-from rhmpc.sim.recordings import RecordedMotion
+from rhmpc.sim.recordings import RecordedMotion, coverage, coverage_lines
 
 __all__ = ["measured_rows", "measured_table", "show_lines", "spec_row", "spec_table",
            "stats_row"]
@@ -34,9 +34,7 @@ def stats_row(target: Target) -> dict:
            "duration_s": round(target.duration, 3)}
     row.update(stats.as_dict())
     if isinstance(target.source, RecordedMotion):  # the file's own samples, as the reader counts
-        rec = target.source
-        inside = (rec.t >= target.start) & (rec.t <= target.start + target.duration)
-        row["missing_fraction"] = round(float(np.mean(rec.missing[inside])), 5)
+        row.update(coverage(target.source, target.start, target.duration))
     row["predictability"] = None if not np.isfinite(value) else round(value, 4)
     row["description"] = target.description
     return row
@@ -152,8 +150,7 @@ def show_lines(row: dict) -> list[str]:
         f"  heart rate        {hr_text}",
         f"  spectral peaks    {peaks or 'none'}" + (" Hz" if peaks else ""),
     ]
-    if row["missing_fraction"]:
-        lines.append(f"  missing samples   {100 * row['missing_fraction']:.2f} %")
+    lines += coverage_lines(row)
     lines.append(f"  predictability    {_pred_text(row)} (one-step RLS / hold RMS error, 120 ms "
                  "ahead at 25 Hz; phantom ≈ 0.12, in-vivo heart ≈ 0.69)")
     return lines

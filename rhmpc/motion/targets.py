@@ -21,7 +21,7 @@ from rhmpc.motion.text import fmt, size_bytes, time_span
 from rhmpc.sim.heart import SCENARIOS, SPECS, make_scenario
 from rhmpc.sim.heart.motion import MotionSource
 from rhmpc.sim.heart.scenarios import DEFAULT_SEED
-from rhmpc.sim.recordings import load_recording
+from rhmpc.sim.recordings import is_bag, load_recording
 
 __all__ = ["ANNOUNCE_AFTER", "BPM_RANGE", "PLOT_RATE", "Request", "Target", "check_work",
            "export", "resolve", "seed_of", "work"]
@@ -72,8 +72,9 @@ class Request:
         A PhysioNet record whose beats drive a scenario's heart.
     rate : float or None
         The rate to write or read at [Hz] (export's; a .mat file's without sample times).
-    units, var, rows, cols
-        How to read a recording (``load_recording``'s keywords).
+    units, var, rows, cols, topic, frame, poi
+        How to read a recording (``load_recording``'s keywords; ``poi``: which of several
+        tracked points, from 1).
     """
 
     action: str
@@ -86,6 +87,9 @@ class Request:
     var: str | None = None
     rows: tuple[int, ...] | None = None
     cols: tuple[int, ...] | None = None
+    topic: str | None = None
+    frame: str | None = None
+    poi: int | None = None
 
     @classmethod
     def of(cls, options) -> Request:
@@ -103,7 +107,7 @@ def resolve(name: str, req: Request) -> Target:
         sc = make_scenario(name, np.random.default_rng(seed_of(req)), **_overrides(req))
         return Target(sc.name, sc.source, sc.sensor_rate, sc.duration, sc.description)
     path = Path(name)
-    if path.suffix.lower() in {".csv", ".npz", ".txt", ".mat"} or path.exists():
+    if path.suffix.lower() in {".csv", ".npz", ".txt", ".mat"} or path.exists() or is_bag(path):
         if req.bpm is not None or req.record is not None:
             raise UsageError("--bpm and --record apply to scenarios, not recordings")
         rec = load_recording(path, **_read_options(req, path))
@@ -112,7 +116,7 @@ def resolve(name: str, req: Request) -> Target:
         return Target(path.name, rec, rec.sample_rate, duration, f"recording {path}",
                        float(rec.t[0]))
     raise UsageError(f"unknown scenario {name!r}; valid names: {', '.join(SCENARIOS)} "
-                     "(or the path of a .csv/.npz/.mat recording)")
+                     "(or the path of a .csv/.npz/.mat recording or a ROS bag)")
 
 
 def _check_options(req: Request) -> None:
@@ -183,8 +187,11 @@ def check_work(action: str, name: str, duration: float, rate: float) -> None:
 
 
 def _read_options(req: Request, path: Path) -> dict:
-    """``load_recording`` keywords: --units always, --var/--rows/--cols/--rate for .mat."""
+    """``load_recording`` keywords: --units, --topic, --frame, --poi always, --var/--rows/
+    --cols/--rate for .mat."""
     out = {"units": req.units} if getattr(req, "units", None) else {}
+    out |= {k: v for k, v in (("topic", req.topic), ("frame", req.frame), ("point", req.poi))
+            if v is not None}  # the reader refuses those the file's format does not take
     if path.suffix.lower() == ".mat":
         for key in ("var", "rows", "cols", "rate"):
             if getattr(req, key, None) is not None:

@@ -158,8 +158,8 @@ def data_tracks(data: Sequence[str], options: dict, points: str | None = None,
     """
     from functools import partial
 
-    from rhmpc import io
     from rhmpc.sim.recordings import training_series
+    from rhmpc.sim.recordings.formats import check_source
     from rhmpc.sim.recordings.shipped import resolve_all
 
     files, read, own = resolve_all(data, options)
@@ -167,6 +167,6 @@ def data_tracks(data: Sequence[str], options: dict, points: str | None = None,
         poi = own
     tracks = poi_tracks(files, poi, read) if poi is not None else load_tracks(
         files, parse_points(points), read)
-    for f in train:  # each a regular file the one reader takes
-        io.open_input(f, "recording").close()
+    for f in train:  # each a file (or a bag's folder) the one reader takes
+        check_source(f)
     return tracks, partial(training_series, list(train), poi, read) if train else None

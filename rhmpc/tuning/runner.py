@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 
 from rhmpc.errors import UsageError
 from rhmpc.tuning.evaluate import Task, evaluate_task, record_for
+from rhmpc.tuning.scheduler import connect
 from rhmpc.tuning.store import ResultsFile, ResultsWriter
 from rhmpc.tuning.workers import process_pool, stop_executor
 
@@ -301,7 +302,8 @@ def executors(jobs: int | None, scheduler: str | None, tasks: int,
     Raises
     ------
     UsageError
-        ``jobs`` below 1, dask.distributed missing, or the scheduler unreachable.
+        ``jobs`` below 1, dask.distributed missing, or the scheduler unreachable, not Dask's,
+        or silent (:func:`rhmpc.tuning.scheduler.connect`).
     """
     if jobs is not None and jobs < 1:
         raise UsageError("--jobs must be >= 1")
@@ -309,15 +311,7 @@ def executors(jobs: int | None, scheduler: str | None, tasks: int,
         window = max(1, min(jobs or os.cpu_count() or 1, tasks))
         return Executors(lambda: process_pool(window, start_method=start_method), window,
                          f"{window} local process(es)")
-    try:
-        from distributed import Client
-    except ImportError:
-        raise UsageError("--scheduler needs dask.distributed: pip install 'rhmpc[dask]'"
-                         ) from None
-    try:
-        client = Client(scheduler, timeout="20s")
-    except OSError as exc:
-        raise UsageError(f"--scheduler {scheduler}: cannot connect: {exc}") from None
-    window = jobs or max(1, sum(client.nthreads().values()))
+    client, threads = connect(scheduler)
+    window = jobs or max(1, threads)
     return Executors(lambda: client.get_executor(pure=False), window,
                      f"Dask cluster {scheduler} ({window} in flight)", client)

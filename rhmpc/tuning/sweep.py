@@ -6,7 +6,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from rhmpc.errors import UsageError
+from rhmpc.errors import UsageError, one_line
 from rhmpc.tuning.progress import speed_phrase
 from rhmpc.tuning.report import align, best_config, format_value
 
@@ -39,7 +39,7 @@ def execute(spec, todo: list, results_path: Path, jobs: int | None, scheduler: s
             try:
                 check_objective_metrics(spec.objective, record["metrics"])
             except UsageError as exc:  # the runs are still worth keeping: warn, go on
-                bar.write(f"rhmpc tune: warning: {exc}", file=sys.stderr)
+                bar.write(f"rhmpc tune: warning: {one_line(exc)}", file=sys.stderr)
         bar.update(1)
         if failures:
             bar.set_postfix(failed=failures)

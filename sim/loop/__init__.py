@@ -12,8 +12,19 @@
 =================  ==============================================================
 """
 
-from rhmpc.sim.loop.closed_loop import poi_truth, run_closed_loop
-from rhmpc.sim.loop.results import LoopResult
-from rhmpc.sim.loop.settings import LoopSettings
+from __future__ import annotations
 
-__all__ = ["LoopResult", "LoopSettings", "poi_truth", "run_closed_loop"]
+import importlib
+
+#: Each name of the package and its module, loaded when first asked for (the settings alone
+#: load without the loop).
+_EXPORTS = {"LoopResult": "results", "LoopSettings": "settings", "poi_truth": "closed_loop",
+            "run_closed_loop": "closed_loop"}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str):
+    if name not in _EXPORTS:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return getattr(importlib.import_module(f"{__name__}.{_EXPORTS[name]}"), name)

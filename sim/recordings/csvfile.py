@@ -5,7 +5,8 @@ A header line, then one sample per line::
     t,x,y,z              (or the 1-D form  t,x)
     0.0000,1.25,-0.40,3.10
 
-Times are seconds and positions millimetres unless the header says otherwise with a unit
+The time column may be named as in a MATLAB file (``time``, ``timestamps``). Times are seconds
+and positions millimetres unless the header says otherwise with a unit
 suffix on each name, ``t_s``/``t[s]``/``t (ms)``/``t_us``, ``x_mm``/``x [m]``/``x(um)``; or the
 caller passes ``units=``. A file of several tracked points numbers them from 1, three columns each::
 
@@ -34,6 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from rhmpc import io
+from rhmpc.sim.recordings.matfile import TIME_NAMES
 from rhmpc.sim.recordings.recorded import (
     AXES,
     LENGTH_UNITS,
@@ -94,6 +96,8 @@ def _parse_header(path: Path, fields: list[str], units: str | None,
             raise fail(path, f"bad header field {raw.strip()!r}: expected t, x, y, z "
                         "optionally with a unit such as x_mm or x [mm]", 1)
         parsed.append((m.group("name").lower(), m.group("unit")))
+    if parsed[0][0] in TIME_NAMES:  # the time column under a MATLAB file's names: t, time, …
+        parsed[0] = ("t", parsed[0][1])
     names = [n for n, _ in parsed]
     if not _columns_ok(names, points):
         several = _columns_ok(names, True)

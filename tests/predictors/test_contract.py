@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -111,6 +113,20 @@ def test_registry_rejects_bad_names_and_settings():
 def test_fourier_settings_reject_values_out_of_range(name, bad, message):
     with pytest.raises(ValueError, match=message):
         make_predictor(name, DT, **bad)
+
+
+@pytest.mark.parametrize("name", list(PREDICTORS))
+def test_a_setting_given_a_table_names_its_key(name):
+    """``predictor_settings.KEY = { … }`` for every setting of every predictor: a ValueError
+    naming the key, before any arithmetic meets the table."""
+    from rhmpc.predictors.registry import settings_for
+
+    base = {"source": SRC} if name == "exact" else {}
+    for f in dataclasses.fields(settings_for(name, **base)):
+        if f.name in base:
+            continue  # the true future's source: any object with position(t)
+        with pytest.raises(ValueError, match=rf"^{f.name} must be .*, got a table"):
+            settings_for(name, **base, **{f.name: {"a": 1}})
 
 
 def test_registry_presets_and_overrides():

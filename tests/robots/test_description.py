@@ -119,6 +119,28 @@ BAD = {
     "drives incomplete": (("home = [0.0, 0.3, -1.8]\n",
                            "home = [0.0, 0.3, -1.8]\n[drives]\ngear_ratio = [1.0, 1.0, 1.0]\n"),
                           "drives.peak_torque"),
+    "home booleans": (("[0.0, 0.3, -1.8]", "[true, false, true]"), "home"),
+    "home text": (("[0.0, 0.3, -1.8]", '["0", "0.3", "-1.8"]'), "home"),
+    "gravity 1e300": (("home =", "gravity = 1e300\nhome ="), "gravity"),
+    "gravity in cm/s²": (("home =", "gravity = 981\nhome ="), "gravity"),
+    "tool point 1e6 m": (('tool_frame = "panda_hand_tcp"',
+                          'tool = { frame = "panda_link8", point = [1e6, 0.0, 0.0] }'),
+                         "tool.point"),
+    "torque limits 1e300": (("home =", "torque_limits = [1e300, 1e300, 1e300]\nhome ="),
+                            "torque_limits"),
+    "armature 1e300": (("home =", "armature = [1e300, 0.0, 0.0]\nhome ="), "armature"),
+    "friction beyond the limits": (("home =", "friction = [90.0, 0.0, 0.0]\nhome ="),
+                                   "friction"),
+    "torque limits too weak to hold home": (("home =", "torque_limits = [1.0, 1.0, 1.0]\n"
+                                             "home ="), "home"),
+    "a fractional encoder count": (("home = [0.0, 0.3, -1.8]\n",
+                                    "home = [0.0, 0.3, -1.8]\n[drives]\n"
+                                    "gear_ratio = [1.0, 1.0, 1.0]\npeak_torque = 100.0\n"
+                                    "torque_constant = 0.1\nno_load_current = 0.1\n"
+                                    "rotor_inertia = 1e-6\nencoder_counts = 4096.5\n"),
+                                   "drives.encoder_counts"),
+    "inconsistent_inertia of no link": (("home =", 'inconsistent_inertia = ["nope"]\nhome ='),
+                                        "inconsistent_inertia"),
 }
 
 
@@ -158,3 +180,45 @@ def test_unknown_names_and_files():
         load_robot("puma")
     with pytest.raises(FileError, match=r"nosuch.toml: no such file"):
         load_robot("nosuch.toml")
+
+
+#: (what changes in the Panda's URDF, what the one line names)
+BAD_URDF = {
+    "a mass nan": (('<mass value="0.646926"', '<mass value="nan"'), "mass"),
+    "a negative inertia": (('ixx="0.007962"', 'ixx="-0.007962"'), "inertia"),
+    "a link of 1e300 kg": (('<mass value="0.646926"', '<mass value="1e300"'), "mass matrix"),
+}
+
+
+@pytest.mark.parametrize("case", list(BAD_URDF))
+def test_the_urdfs_physics_is_checked_before_a_run(folder, case):
+    (old, new), named = BAD_URDF[case]
+    urdf = (folder / "panda.urdf").read_text()
+    assert old in urdf
+    (folder / "panda.urdf").write_text(urdf.replace(old, new, 1))
+    with pytest.raises(RobotFileError) as info:
+        robot_from_file(write(folder, PANDA))
+    assert "\n" not in str(info.value) and "urdf: " in str(info.value)
+    assert named in str(info.value)
+
+
+def test_a_urdf_given_as_the_robot_says_a_robot_file_is_expected(folder):
+    with pytest.raises(RobotFileError, match=r"a robot file \(TOML\) is expected"):
+        robot_from_file(folder / "panda.urdf")
+    with pytest.raises(FileError, match="a robot file is TOML"):
+        robot_from_file(write(folder, "<robot/>\n"))
+
+
+def test_a_missing_tool_frame_lists_the_frames(folder):
+    with pytest.raises(RobotFileError, match=r"its frames: .*panda_hand_tcp"):
+        robot_from_file(write(folder, PANDA.replace('"panda_hand_tcp"', '"hand"')))
+
+
+def test_every_registered_robot_holds_its_home_within_its_limits():
+    """The registered arms pass the checks a user's file meets: M(q₀) positive definite and
+    the gravity torque at home within the torque limits."""
+    for name in ROBOTS:
+        robot = load_robot(name)
+        assert np.linalg.eigvalsh(robot.mass_matrix(robot.q0))[0] > 0
+        gravity = pin.computeGeneralizedGravity(robot.model, robot.create_data(), robot.q0)
+        assert np.all(np.abs(gravity) < robot.torque_limit), name

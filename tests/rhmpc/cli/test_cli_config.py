@@ -92,3 +92,52 @@ def test_unknown_sections_and_top_level_keys(capsys) -> None:
     assert "unknown setting(s) nope; valid: data, data_read" in capsys.readouterr().err
     assert main(["config"]) == 2
     assert "choose an action: show" in capsys.readouterr().err
+
+
+def _one_line_error(capsys, argv: list[str]) -> str:
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
+    return err
+
+
+@pytest.mark.parametrize("section", list(SECTIONS))
+def test_a_section_given_a_value_names_the_section(capsys, section: str) -> None:
+    """``--set loop=1``: a section is a table; ``--set loop={duration=3.0}`` sets its key."""
+    for value in ("1", "true", '"x"', "[1, 2]"):
+        err = _one_line_error(capsys, ["config", "show", "--set", f"{section}={value}"])
+        assert f"{section} is a section of settings" in err and f"{section}.KEY=VALUE" in err
+
+
+def test_a_section_given_a_table_sets_its_keys(capsys, tmp_path: Path) -> None:
+    _, config = _show(capsys, tmp_path, "--set", "loop={duration = 3.0, downsample = 5}")
+    assert (config.loop.duration, config.loop.downsample) == (3.0, 5)
+
+
+#: A value of each kind but the one of its field: a table, a list, a boolean and a string.
+OTHER_KINDS = {"a table": "{a = 1}", "a list": "[1, 2]", "a boolean": "true", "a string": '"x"'}
+
+
+def _wrong_kinds(annotation: str) -> list[str]:
+    """The kinds of :data:`OTHER_KINDS` a field annotated ``annotation`` does not take."""
+    takes = {"a list": "tuple" in annotation, "a boolean": "bool" in annotation,
+             "a string": "str" in annotation or "Any" in annotation, "a table": False}
+    return [kind for kind, taken in takes.items() if not taken]
+
+
+@pytest.mark.parametrize("section", list(SECTIONS))
+def test_every_setting_given_the_wrong_kind_names_its_key(capsys, tmp_path: Path,
+                                                         section: str) -> None:
+    """Each field of each section, on the command line and in a settings file, given each kind
+    of value it does not take: one line naming the key, never a traceback."""
+    cls = SECTIONS[section]
+    for f in dataclasses.fields(cls):
+        for kind in _wrong_kinds(str(f.type)):
+            value = OTHER_KINDS[kind]
+            err = _one_line_error(capsys, ["config", "show", "--set",
+                                           f"{section}.{f.name}={value}"])
+            assert f"[{section}] {f.name} must be" in err and f"got {kind}" in err, err
+        path = tmp_path / "bad.toml"
+        path.write_text(f"[{section}]\n{f.name} = {{ a = 1 }}\n")
+        err = _one_line_error(capsys, ["config", "show", "--config", str(path)])
+        assert f"[{section}] {f.name} must be" in err and "got a table" in err, err

@@ -165,3 +165,24 @@ def test_readings_that_are_not_finite_are_held_out(phantom_arm):
         x = observer.correct(arm.q0 + bad)
         assert np.all(x == 0.0) and observer.held == 1  # the prediction (at rest at q0)
         np.testing.assert_array_equal(observer.reading, arm.q0)
+
+
+def test_a_reading_that_is_not_finite_is_held_out_after_a_reacquire_too(phantom_arm):
+    """A hold that ends (the reading moved again) opens a grace in which readings are fused
+    whatever the gate says: a NaN then (a reading that did not come) is still held out, and
+    the estimate stays finite."""
+    robot, arm = phantom_arm
+    observer = JointObserver(arm, robot.encoder_resolution)
+    step = 3.0 * observer.gate[0]
+    ticks = observer.settings.reacquire_ticks
+    for k in range(ticks + 1):  # a step past the gate, then a quantum further: alive
+        q = arm.q0.copy()
+        q[0] += step + robot.encoder_resolution[0] * (k > 0)
+        observer.correct(q)
+        observer.predict(np.zeros(arm.nu))
+    assert observer.counts["reacquired"] == 1
+    held = observer.counts["held"]
+    x = observer.correct(np.full(arm.nu, np.nan))
+    assert np.all(np.isfinite(x)) and observer.counts["held"] == held + 1
+    observer.predict(np.zeros(arm.nu))
+    assert np.all(np.isfinite(observer.x_prior))

@@ -33,16 +33,18 @@ try:
 except ImportError:  # pragma: no cover
     fcntl = None
 
-CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
          "--disable-background-networking", "--disable-component-update", "--disable-sync",
          "--enable-logging=stderr", "--window-size=900,650",
          # WebGL on the CPU (SwiftShader): Chromium falls back to it without a GPU but warns
          # that the fallback is going away unless asked for
          "--enable-unsafe-swiftshader")
-needs_chromium = pytest.mark.skipif(
-    CHROMIUM is None or fcntl is None,
-    reason="no chromium on PATH (Debian: apt-get install chromium), or no POSIX pipes")
+
+
+def chromium() -> str | None:
+    """The Chromium on PATH when a test runs (not when the tests are collected: one installed
+    in between is found)."""
+    return shutil.which("chromium") or shutil.which("chromium-browser")
 
 
 @pytest.fixture(scope="module")
@@ -125,7 +127,7 @@ class DevTools:
     """Chromium driven through its DevTools protocol on a pipe (it reads commands on fd 3 and
     writes replies on fd 4, each a JSON message ended by a NUL byte)."""
 
-    def __init__(self, url: str, workdir: Path) -> None:
+    def __init__(self, binary: str, url: str, workdir: Path) -> None:
         commands, self._write = os.pipe()
         self._read, replies = os.pipe()
         # out of the way of fds 3 and 4, which the child sets up
@@ -140,7 +142,7 @@ class DevTools:
         self.log = workdir / "chromium.log"
         with open(self.log, "w") as log:
             self.proc = subprocess.Popen(
-                [CHROMIUM, *FLAGS, f"--user-data-dir={workdir / 'profile'}",
+                [binary, *FLAGS, f"--user-data-dir={workdir / 'profile'}",
                  "--remote-debugging-pipe", url],
                 stdin=subprocess.DEVNULL, stdout=log, stderr=log, close_fds=False,
                 preexec_fn=child_fds)
@@ -216,8 +218,14 @@ class DevTools:
 
 
 @pytest.fixture
-def browser(page: Path, tmp_path: Path, request):
-    devtools = DevTools(page.as_uri() + getattr(request, "param", ""), tmp_path)
+def browser(tmp_path: Path, request):
+    """The replay page in a headless Chromium; the test skips, before the page is made, where
+    there is none (looked up now) or no POSIX pipes."""
+    binary = chromium()
+    if binary is None or fcntl is None:
+        pytest.skip("no chromium on PATH (Debian: apt-get install chromium), or no POSIX pipes")
+    page = request.getfixturevalue("page")
+    devtools = DevTools(binary, page.as_uri() + getattr(request, "param", ""), tmp_path)
     try:
         devtools.wait_for("window.replay !== undefined && replay.state.shown > 0")
         yield devtools
@@ -233,7 +241,6 @@ def drawn(image: np.ndarray) -> None:
 
 
 @pytest.mark.slow
-@needs_chromium
 def test_the_page_draws_the_scene_and_the_slider_moves_it(browser: DevTools) -> None:
     browser.evaluate("replay.pause(); replay.seek(30)")  # 0.5 s
     early = browser.screenshot()
@@ -245,7 +252,6 @@ def test_the_page_draws_the_scene_and_the_slider_moves_it(browser: DevTools) -> 
 
 
 @pytest.mark.slow
-@needs_chromium
 def test_the_page_plays_by_itself(browser: DevTools) -> None:
     browser.evaluate("replay.seek(0); replay.play()")
     before = browser.evaluate("[replay.state.time, replay.state.shown]")
@@ -267,7 +273,6 @@ def _colour(image: np.ndarray, name: str) -> np.ndarray:
 
 
 @pytest.mark.slow
-@needs_chromium
 @pytest.mark.parametrize("browser", ["#paused"], indirect=True)
 def test_the_first_view_shows_the_poi_the_tool_and_the_forecasts_shape(
         browser: DevTools) -> None:
@@ -286,7 +291,6 @@ def test_the_first_view_shows_the_poi_the_tool_and_the_forecasts_shape(
 
 
 @pytest.mark.slow
-@needs_chromium
 def test_the_page_says_its_options_in_its_help(browser: DevTools) -> None:
     assert browser.evaluate("document.getElementById('help').hidden") is True
     browser.evaluate("document.getElementById('help-button').click()")
@@ -306,3 +310,13 @@ def test_the_views_look_from_the_side_away_from_the_arm() -> None:
     d = view_direction(path, np.zeros(3), np.array([0.0, 0.1, 0.2]))
     assert d @ np.array([0.0, 0.1, 0.2]) < 0 and np.linalg.norm(d) == pytest.approx(1.0)
     assert abs(d[1]) > abs(d[0])  # mostly along the path's normal (y)
+
+
+def test_chromium_is_looked_up_when_a_test_runs(tmp_path: Path, monkeypatch) -> None:
+    """A Chromium installed after the tests were collected is found (a stand-in on PATH)."""
+    monkeypatch.setenv("PATH", str(tmp_path))
+    assert chromium() is None
+    stand_in = tmp_path / "chromium"
+    stand_in.write_text("#!/bin/sh\n")
+    stand_in.chmod(0o755)
+    assert chromium() == str(stand_in)

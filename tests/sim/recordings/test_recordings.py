@@ -49,6 +49,18 @@ def test_one_dimensional_csv_and_units(tmp_path: Path) -> None:
     np.testing.assert_allclose(flag.position(1.0), [2.0])
 
 
+def test_the_time_column_may_be_named_as_in_a_matlab_file(tmp_path: Path) -> None:
+    """``time`` and ``timestamps`` (a MATLAB file's names) read as ``t``, their units too."""
+    plain = load_recording(_write(tmp_path, GOOD))
+    for header in ("time,x,y,z", "Time,x,y,z", "timestamps,x,y,z", "time [ms],x,y,z"):
+        text = GOOD.replace("t,x,y,z", header)
+        if "ms" in header:
+            text = text.replace("0.5,", "500,").replace("1.0,3", "1000,3")
+        rec = load_recording(_write(tmp_path, text, "time.csv"))
+        np.testing.assert_array_equal(rec.t, plain.t)
+        np.testing.assert_array_equal(rec.position(rec.t), plain.position(plain.t))
+
+
 def test_dropouts_are_kept_as_missing(tmp_path: Path) -> None:
     text = "t,x,y,z\n0,1,1,1\n1,,,\n2,nan,NaN,nan\n3,4,4,4\n4,5,5,5\n"
     rec = load_recording(_write(tmp_path, text))
