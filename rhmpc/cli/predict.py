@@ -169,35 +169,17 @@ def run(args: argparse.Namespace) -> int:
     values = len(s.parameters())
     io.check(f"{s.study} trials", s.trials, "--trials", memory_scale=values,
                    time_scale=values * len(s.names), workers=jobs)
-    bar = None
-    if sys.stderr.isatty():
-        from tqdm import tqdm
+    from rhmpc.tuning.progress import progress_bar
 
-        bar = tqdm(
-            total=len(s.parameters()) * s.trials,
-            desc=f"predict {s.study}",
-            unit="trial",
-            file=sys.stderr,
-        )
-
-        def progress(done: int, total: int) -> None:
-            bar.update(done - bar.n)
-    else:
-
-        def progress(done: int, total: int) -> None:
-            if done == total or done % max(1, total // 10) == 0:
-                print(f"rhmpc predict: {done}/{total} trials", file=sys.stderr, flush=True)
-
-    result = run_study(s, jobs=jobs, progress=progress)
-    if bar is not None:
+    bar = progress_bar(values * s.trials, "trial", f"predict {s.study}")
+    try:
+        result = run_study(s, jobs=jobs, progress=lambda done, total: bar.update(done - bar.n))
+    finally:
         bar.close()
     _publish(args, result, plot_study, format_table)
     if not args.json:
-        print(
-            f"({result['elapsed_s']:.1f} s, {jobs} job(s); default predictors "
-            f"{','.join(DEFAULT_PREDICTORS[s.study])})",
-            file=sys.stderr,
-        )
+        print(f"({result['elapsed_s']:.1f} s, {jobs} job(s); default predictors "
+              f"{','.join(DEFAULT_PREDICTORS[s.study])})", file=sys.stderr)
     return 0
 
 
