@@ -174,9 +174,6 @@ def fit_all(plans: Sequence[FitPlan], period: float, series: list[np.ndarray], l
         tic = time.perf_counter()
         cached = fit_or_load(p, series, None if progress is None else _rounds(plan, progress))
         out[plan.name] = (p, time.perf_counter() - tic, cached)
-        if cached is not None and progress is not None:
-            progress(f"{plan.name}: the model fitted on these samples before, from the cache "
-                     f"({cached})")
         if save is not None:
             p.save(save / f"{io.file_stem(label)}.{plan.name}{p.SUFFIX}")
     return out
@@ -231,9 +228,9 @@ def describe(plans: Sequence[FitPlan], where: str, frames: int | None,
     loads = [p for p in plans if p.cached is not None]
     out = [f"fitting {', '.join(p.name for p in fits)} on {where}"] if fits else []
     if loads:
-        out.append(f"{', '.join(p.name for p in loads)}: fitted on {'these' if fits else where} "
-                   f"samples before; loaded from the cache ({loads[0].cached.parent}), not "
-                   "fitted again")
+        out.append(f"{', '.join(p.name for p in loads)}: fitted before on "
+                   f"{'the same samples' if fits else where}; loaded from the cache "
+                   f"({loads[0].cached.parent}), not fitted again")
     twice = [p for p in fits if p.rounds == 2]
     if twice:
         v = twice[0].validation

@@ -105,3 +105,17 @@ def test_a_closed_loop_run_loads_what_a_run_on_the_same_settling_window_fitted(
     assert again.settings.model is not None and Path(again.settings.model).parent == cache
     for a, b in zip(first.model["W"], again.model["W"], strict=True):
         np.testing.assert_array_equal(a, b)
+
+
+def test_the_plan_says_which_models_come_from_the_cache() -> None:
+    from rhmpc.experiment.fit_plan import FitPlan, describe
+
+    kept = Path("/cache/models/0123-L5.npz")
+    lines = describe([FitPlan("ridge", 0, 0.2, None), FitPlan("lstm", 5, 0.2, 0.0, kept)],
+                     "frames 0–599 of rec.mat", 600)
+    assert lines[0] == "fitting ridge on frames 0–599 of rec.mat"
+    assert lines[1] == ("lstm: fitted before on the same samples; loaded from the cache "
+                        "(/cache/models), not fitted again")
+    assert not any("validation round" in line for line in lines)  # nothing fitted twice
+    (only,) = describe([FitPlan("lstm", 5, 0.2, 0.0, kept)], "frames 0–599 of rec.mat", 600)
+    assert only.startswith("lstm: fitted before on frames 0–599 of rec.mat; loaded")
