@@ -61,7 +61,8 @@ def beside_plan(data: str, read: dict, split: tuple[int, int], names: Sequence[s
     grid = wide.reshape(wide.shape[0], -1, track.z.shape[1])
     settings = OpenLoopSettings(predictors=open_names(names), leads=leads,
                                 split=(train - 1, end - 1), seed=seed)
-    return plan_track(track, settings, [grid[:train]])
+    return plan_track(track, settings, [grid[:train]],
+                      where=f"frames 0–{train - 1} of {track.label}")
 
 
 def open_loop_beside(plan: TrackPlan, progress: Callable[[str], None] | None = None,

@@ -123,7 +123,8 @@ def _estimate(todo: list[Job], plans: dict, backend, how: Execution) -> dict[str
          + (f"the open loops {duration(opened)} ({duration(fits)} of fitting), then "
             if plans else "")
          + f"{len(todo)} run(s) on {backend.where} {duration(runs)} (each "
-         f"{duration(min(estimates))}–{duration(max(estimates))})", how.quiet)
+         + (f"{lo}–{hi})" if (lo := duration(min(estimates))) != (hi := duration(max(estimates)))
+            else f"about {lo})"), how.quiet)
     return {job.key: t for job, t in zip(todo, estimates, strict=True)}
 
 

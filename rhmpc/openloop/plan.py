@@ -181,14 +181,16 @@ class TrackPlan:
 
 def plan_track(track: Track, settings: OpenLoopSettings,
                train: list[np.ndarray] | None = None,
-               progress: Callable[[str], None] | None = None) -> TrackPlan:
+               progress: Callable[[str], None] | None = None,
+               where: str = "the training recordings") -> TrackPlan:
     """The plan of ``track``: its grid, the origins scored, the fits, and each predictor's step
     timed on :data:`~rhmpc.experiment.fit_plan.STEP_SAMPLES` of its samples (a fitted network's
     from its probe; the combination's, the sum of its members').
 
     ``train``: the recordings to fit the fitted predictors on
     (:func:`rhmpc.sim.recordings.training_series`); default, with a split, the track's samples
-    before TRAIN. ``progress(text)`` hears that the fits are timed, before they are.
+    before TRAIN; ``where``: those samples in words. ``progress(text)`` hears that the fits
+    are timed, before they are.
 
     Raises
     ------
@@ -203,7 +205,6 @@ def plan_track(track: Track, settings: OpenLoopSettings,
     k_loop = loop_lead(period, settings.latency, settings.horizon)
     leads = sorted({*range(1, settings.leads + 1), k_loop})
     first, end, warmup = _origins(track, t, settings, leads[-1])
-    where = "the training recordings"
     if train is None and settings.split is not None:
         train = [grid[:first]]
         where = (f"frames 0–{first - 1} of {track.label} (the frames before TRAIN = {first}; "
