@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import NamedTuple
 
 from rhmpc.errors import UsageError
 from rhmpc.experiment import RunConfig, run_experiment
@@ -26,8 +27,12 @@ TABLE_PREDICTORS = ("exact", "one-step", "generalized", "ekf")
 #: The predictors on recordings: ``hold`` first, the ratios' yardstick there.
 DATA_PREDICTORS = ("hold", "exact", "one-step", "generalized", "ekf")
 
-#: (the column's label, the settings that make a run of it: dotted keys).
-Column = tuple[str, dict]
+class Column(NamedTuple):
+    """A column of the table: its label, and the settings that make a run of it (dotted
+    keys)."""
+
+    label: str
+    changes: dict
 
 
 @dataclass(frozen=True)
@@ -129,7 +134,7 @@ def scenario_columns(names: Sequence[str], full: bool = False) -> list[Column]:
     unknown = [s for s in scenarios if s not in SCENARIOS]
     if unknown:
         raise UsageError(f"unknown scenario(s) {', '.join(unknown)}; valid: {', '.join(SCENARIOS)}")
-    return [(s, {"scenario": s, **({"loop.duration": SPECS[s].duration} if full else {})})
+    return [Column(s, {"scenario": s, **({"loop.duration": SPECS[s].duration} if full else {})})
             for s in scenarios]
 
 
@@ -181,5 +186,5 @@ def data_columns(data: Sequence[str], options: dict, points: str | None, recorde
             elif duration is not None and duration > recording.duration:
                 raise UsageError(f"{path}: the recording lasts {recording.duration:.2f} s, "
                                  f"--duration asks for {duration:.2f} s")
-            out.append((column, changes))
+            out.append(Column(column, changes))
     return out
