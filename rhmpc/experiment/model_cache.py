@@ -1,7 +1,8 @@
 """Models fitted before the run, kept and found again: the same fit is never run twice.
 
 A fitted predictor's model follows from its kind, its settings (its seed among them, its
-``leads`` aside), its sampling period and the series it is fitted on; the hash of these names
+``leads`` aside), its sampling period, the series it is fitted on and the code that fits it (the
+files of :mod:`rhmpc.predictors.learned` and of its own module); the hash of these names
 the model in the cache, ``models/`` of :func:`rhmpc.compiled.cache_dir` (``$RHMPC_CACHE``, by
 default ``~/.cache/rhmpc``), one file per fit written in the one model format
 (:mod:`rhmpc.predictors.learned.modelfile`) as ``KEY-L<leads>.npz``. So ``rhmpc predict
@@ -18,7 +19,9 @@ cache cannot read or write is passed over: the model is fitted, as without a cac
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
+import importlib
 import json
 import os
 import re
@@ -47,13 +50,29 @@ def folder() -> Path | None:
     return cache_dir() / "models"
 
 
+@functools.cache
+def code_hash(module: str) -> str:
+    """The hash of the code a fit runs: the fitted predictors' package
+    (:mod:`rhmpc.predictors.learned`) and the predictor's own ``module``, file by file."""
+    learned = Path(importlib.import_module("rhmpc.predictors.learned").__file__).parent
+    files = sorted(learned.glob("*.py"))
+    own = Path(importlib.import_module(module).__file__)
+    h = hashlib.sha256()
+    for path in [*files, *([] if own in files else [own])]:
+        h.update(path.name.encode())
+        h.update(io.read_bytes(path))
+    return h.hexdigest()[:16]
+
+
 def model_key(predictor, series: Sequence[np.ndarray]) -> str:
     """The hash (32 hex digits) of what ``predictor``'s fit on ``series`` depends on: its kind,
-    its settings but ``leads``, ``model`` and ``unit``, its period and every sample."""
+    its settings but ``leads``, ``model`` and ``unit``, its period, every sample, and the code
+    that fits it (:func:`code_hash`)."""
     settings = {k: v for k, v in dataclasses.asdict(predictor.settings).items()
                 if k not in _ASIDE}
     head = json.dumps({"kind": predictor.KIND, "version": KEY_VERSION, "dt": repr(predictor.dt),
-                       "settings": settings}, sort_keys=True, default=str)
+                       "code": code_hash(type(predictor).__module__), "settings": settings},
+                      sort_keys=True, default=str)
     h = hashlib.sha256(head.encode())
     for a in series:
         a = np.ascontiguousarray(a, dtype=np.float64)

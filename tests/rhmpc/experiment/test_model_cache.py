@@ -119,3 +119,12 @@ def test_the_plan_says_which_models_come_from_the_cache() -> None:
     assert not any("validation round" in line for line in lines)  # nothing fitted twice
     (only,) = describe([FitPlan("lstm", 5, 0.2, 0.0, kept)], "frames 0–599 of rec.mat", 600)
     assert only.startswith("lstm: fitted before on frames 0–599 of rec.mat; loaded")
+
+
+def test_the_key_follows_the_code_that_fits(monkeypatch: pytest.MonkeyPatch) -> None:
+    from rhmpc.experiment import model_cache
+
+    assert len(model_cache.code_hash("rhmpc.predictors.learned.ridge")) == 16
+    before = model_key(ridge(), series())
+    monkeypatch.setattr(model_cache, "code_hash", lambda module: "an edited fit")
+    assert model_key(ridge(), series()) != before
