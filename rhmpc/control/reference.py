@@ -260,6 +260,7 @@ class PredictedReference:
         verdict = self._calls[2](self._controller._addr, tick)
         if verdict == 1:
             self._restart()
+            self._count()
         if verdict >= 0 and self.monitor is not None:
             self.monitor.observe(tick * self.Ts, self.predictor.heart_rate_hz)
 
@@ -270,7 +271,8 @@ class PredictedReference:
         (:meth:`forecast`) — or None while nothing has been measured."""
         c = self._controller
         sample, make_nodes, _ = self._calls
-        K = sample(c._addr, tick, stamp, c._sample(z), self._retract, None, self._at[0])
+        z3 = None if z is None else embed3(np.reshape(np.asarray(z, dtype=float), (1, -1)))[0]
+        K = sample(c._addr, tick, stamp, c._sample(z3), self._retract, None, self._at[0])
         if K < 0:
             raise ValueError(f"the stamp {stamp!r} is not a finite time")
         if K == 0:
@@ -282,7 +284,7 @@ class PredictedReference:
             self.predictor.update(x, others)
         else:
             self.predictor.update(x)
-        points = np.ascontiguousarray(self.predictor.predict(K), dtype=float)
+        points = np.ascontiguousarray(embed3(self.predictor.predict(K)), dtype=float)
         ready = bool(getattr(self.predictor, "ready", True))
         n = make_nodes(c._addr, points.ctypes.data, K, ready, self._at[1])
         self._count()
@@ -293,7 +295,8 @@ class PredictedReference:
         ``points[k]`` the POI at ``stamp + k·dt`` in the sensor's frame [m], k = 0 … K − 1, 4 ≤ K ≤
         ``prediction_points + ⌈LATENCY_CAP/dt⌉ + 1``, ``points[0]`` the newest sample as that
         predictor took it (``rhmpc_forecast``). Returns whether it was taken."""
-        taken = self._controller.forecast(tick, stamp, embed3(np.asarray(points, dtype=float)))
+        taken = self._controller.take_forecast(tick, stamp,
+                                               embed3(np.asarray(points, dtype=float)))
         self._count()
         if taken and self.monitor is not None:
             self.monitor.observe(tick * self.Ts, self.predictor.heart_rate_hz)

@@ -54,7 +54,7 @@ _CALLS = (("rhmpc_init", (_VP,), None), ("rhmpc_place", (_VP, _VP, _VP), None),
           ("rhmpc_nodes", (_VP, _VP, _I, _I, _VP), _I),
           ("rhmpc_node_values", (_VP,), ctypes.POINTER(_D)),
           ("rhmpc_interpolate", (_VP, _LL), _I), ("rhmpc_points", (_VP, _LL, _VP, _I), None),
-          ("rhmpc_force_failures", (_VP, _LL), None), ("rhmpc_sizeof", (), _LL),
+          ("rhmpc_force_failures", (_VP, _LL), None), ("rhmpc_take_over", (_VP, _VP), None), ("rhmpc_sizeof", (), _LL),
           ("rhmpc_public_sizeof", (), _LL), ("rhmpc_dims", (_VP,), None))
 
 
@@ -173,6 +173,12 @@ class Controller:
     def forecast(self, tick: int, stamp: float, points: np.ndarray) -> bool:
         """A forecast made outside arriving on ``tick``: ``points[k]`` the POI at ``stamp + k·dt``
         [m] in the sensor's frame (``rhmpc_forecast``); whether it was taken."""
+        if self._exact or self.internal:
+            return self.take_forecast(tick, stamp, points)
+        return self.reference.forecast(tick, stamp, points)  # its predictor counts it
+
+    def take_forecast(self, tick: int, stamp: float, points: np.ndarray) -> bool:
+        """``rhmpc_forecast`` itself: whether the library took the points."""
         nodes = np.ascontiguousarray(points, dtype=float)
         count = nodes.shape[0] if nodes.ndim == 2 and nodes.shape[1] == 3 else 0
         taken = self._lib.rhmpc_forecast(self._addr, tick, stamp, nodes.ctypes.data, count) == 0
@@ -215,6 +221,12 @@ class Controller:
         """The points r_{tick+1..tick+N} the step of ``tick`` tracks (a read-only view)."""
         start = min(max(tick + 1 - self._pub.first, 0), self.span - self.N)
         return self._points[start : start + self.N]
+
+    def take_over(self, u: np.ndarray) -> None:
+        """The torque ``u`` [N·m] that acted last (another controller's): u_{−1} of the next
+        QP, for a bumpless start (``rhmpc_take_over``; clipped to ±u_max)."""
+        u = np.ascontiguousarray(u, dtype=float).reshape(self.nu)
+        self._lib.rhmpc_take_over(self._addr, u.ctypes.data)
 
     def force_failures(self, count: int = 1) -> None:
         """Make the next ``count`` solves report ``"injected"`` (the solve still runs)."""

@@ -314,7 +314,7 @@ def _reference_subs(reference, Ts: float, required: bool = True) -> dict[str, ob
                 "GUARD_SPEED": "0.0", "GUARD_MARGIN": "1.0", "PREDICTION_POINTS": 4, "KMAX": 4}
     common = {"DT": repr(reference.dt), "REFRESH_TICKS": reference.refresh_ticks,
               "SPAN": reference.span, **_gate_subs(reference)}
-    p, unit = predictor.settings, getattr(predictor, "unit", None)
+    p, unit = getattr(predictor, "settings", None), getattr(predictor, "unit", None)
     problem = (f"the exported controller runs the {' or '.join(PREDICTORS)} predictor, not "
                f"{name}" if name not in PREDICTORS.values() else
                "the exported predictor takes 3-D samples in metres"

@@ -270,6 +270,11 @@ int rhmpc_mpc(rhmpc_t *ctl, const double x[RHMPC_NX], const double *ref, double 
 /* The reference points r_{tick+1} ... r_{tick+N} the step of `tick` tracks (N x 3 [m]). */
 const double *rhmpc_horizon(const rhmpc_t *ctl, long long tick);
 
+/* A bumpless start when the MPC takes over from another controller: u [N*m] is the torque
+ * that acted last (u_{-1} of the next QP, whose rate term penalises the change from it;
+ * clipped to the MPC's bounds, 0 where not finite). */
+void rhmpc_take_over(rhmpc_t *ctl, const double u[RHMPC_NU]);
+
 /* Make the next `count` solves report RHMPC_INJECTED (fault injection; the solve still runs). */
 void rhmpc_force_failures(rhmpc_t *ctl, long long count);
 
