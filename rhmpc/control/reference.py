@@ -224,7 +224,7 @@ class PredictedReference:
 
     def bind(self, controller) -> None:
         """Run in ``controller``'s library (:class:`rhmpc.control.controller.Controller`)."""
-        from rhmpc.control.export.binding import RETRACT
+        from rhmpc.control.export.layout import COUNTS, RETRACT
 
         self._controller, lib = controller, controller._lib
         self._calls = lib.rhmpc_sample, lib.rhmpc_nodes, lib.rhmpc_interpolate
@@ -232,8 +232,6 @@ class PredictedReference:
         self._accepted, self._t0 = np.zeros(1, dtype=np.intc), np.zeros(1)
         self._at = self._accepted.ctypes.data, self._t0.ctypes.data
         self._node_values = lib.rhmpc_node_values(controller._addr)
-        from rhmpc.control.export.layout import COUNTS
-
         self._index = [(name, COUNTS.index(name)) for name in LIBRARY_COUNTS]
 
     def place(self, origin, center=(0.0, 0.0, 0.0)) -> None:

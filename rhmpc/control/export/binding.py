@@ -26,7 +26,7 @@ import numpy as np
 from rhmpc.compiled import build, compiler
 
 from .generate import ExportError, _generate_into
-from .layout import COUNTS, SOURCES, STATUS_NAMES, MPCStats, public_struct
+from .layout import COUNTS, RETRACT, SOURCES, STATUS_NAMES, MPCStats, public_struct
 
 _in_use: dict[str, weakref.ref] = {}
 clock = time.perf_counter_ns
@@ -45,7 +45,6 @@ _DIMS = ("N", "NX", "NU", "NY", "NV", "M", "NPAR", "NZ", "NEXTRA", "D", "SPAN", 
          "N_SOURCES", "N_COUNTS")
 #: The signatures of the library's calls: (name, argument types, result type).
 _VP, _LL, _D, _I = ctypes.c_void_p, ctypes.c_longlong, ctypes.c_double, ctypes.c_int
-RETRACT = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p)
 _CALLS = (("rhmpc_init", (_VP,), None), ("rhmpc_place", (_VP, _VP, _VP), None),
           ("rhmpc_refresh", (_VP, _LL, _D, _VP), _I),
           ("rhmpc_step", (_VP, _LL, _VP, _VP), _I), ("rhmpc_mpc", (_VP, _VP, _VP, _VP), _I),
@@ -54,8 +53,9 @@ _CALLS = (("rhmpc_init", (_VP,), None), ("rhmpc_place", (_VP, _VP, _VP), None),
           ("rhmpc_nodes", (_VP, _VP, _I, _I, _VP), _I),
           ("rhmpc_node_values", (_VP,), ctypes.POINTER(_D)),
           ("rhmpc_interpolate", (_VP, _LL), _I), ("rhmpc_points", (_VP, _LL, _VP, _I), None),
-          ("rhmpc_force_failures", (_VP, _LL), None), ("rhmpc_take_over", (_VP, _VP), None), ("rhmpc_sizeof", (), _LL),
-          ("rhmpc_public_sizeof", (), _LL), ("rhmpc_dims", (_VP,), None))
+          ("rhmpc_force_failures", (_VP, _LL), None), ("rhmpc_take_over", (_VP, _VP), None),
+          ("rhmpc_sizeof", (), _LL), ("rhmpc_public_sizeof", (), _LL),
+          ("rhmpc_dims", (_VP,), None))
 
 
 def _load(path: str) -> tuple[str, ctypes.CDLL, tempfile.TemporaryDirectory | None]:

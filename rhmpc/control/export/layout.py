@@ -128,6 +128,8 @@ PUBLIC = (
     ("encoder_reacquired", "long long", None, "held readings taken again once they moved"),
 )
 _CTYPES = {"long long": ctypes.c_longlong, "int": ctypes.c_int, "double": ctypes.c_double}
+#: ``rhmpc_retract_t``: the call the outlier gate makes to retract a predictor's newest sample.
+RETRACT = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p)
 
 
 def _enum(names, comments=None) -> str:
