@@ -6,11 +6,10 @@ the library (``rhmpc_mpc.c``, :mod:`rhmpc.control.export`), whose tick does::
 
     d = p(q0 + x̂_q) − (C x̂ + y0)       (output offset: one forward-kinematics call)
     p = [x; r_1..r_N; u_{−1}; d]        (copy into a preallocated buffer, finiteness check)
-    level 1: ẑ* = K_z [p; 1]            (K_z = −W F_z, W = P_zz⁻¹: the unconstrained minimiser)
-             if H [ẑ*; 0; p_B; 1] ≤ 0    (every row of l0 − G p ≤ A [ẑ*; 0] ≤ u0 − G p, signed,
-                                          :func:`rhmpc.control.qp.screening_rows`): done
     l, u = l0 − G p, u0 − G p           (envelope rows: only the state and offset columns)
     q_z = F_z p + f0_z                  (one mat-vec; the slacks' q is the constant ρ₁)
+    level 1: ẑ* = −W q_z                (W = P_zz⁻¹: the unconstrained minimiser)
+             if l ≤ A [ẑ*; 0] ≤ u         (every row: torque, slack and envelope): done
     level 2: the torque-box QP by active set (below); if it converges, its
              KKT certificate holds and every envelope row holds at [z; 0]: v = [z; 0], done;
              if it stops at its cap (box_max_iter solves): the fallback

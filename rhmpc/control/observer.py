@@ -28,8 +28,7 @@ Innovation gate (encoders that stick, a reading that is not finite)
     at rest reads the same). The estimate's angles then move to the reading, its velocity to
     the reading's mean over the hold, and the next ``reacquire_ticks`` readings are fused
     whatever their innovation while the filter settles. A reading held for ``fault_timeout``
-    is an encoder fault: :attr:`JointObserver.faulted` tells the controller to brake (on the
-    predicted velocity, the best it has).
+    is an encoder fault: the controller brakes (on the predicted velocity, the best it has).
 """
 
 from __future__ import annotations
@@ -118,16 +117,3 @@ class JointObserver:
                      else np.full(n, np.finfo(float).max))
         self.timeout_ticks = max(1, round(self.settings.fault_timeout / arm.Ts))
         self.Ts, self.n = arm.Ts, n
-        self._H = H
-
-    @property
-    def correct_matrix(self) -> np.ndarray:
-        """[I − L H, L, −L q0]: the correction x̂ = x̂⁻ + L (q̃ − q0 − H x̂⁻) as one mat-vec on
-        [x̂⁻; q̃; 1]."""
-        n = self.n
-        return np.hstack([np.eye(2 * n) - self.L @ self._H, self.L, -(self.L @ self.q0)[:, None]])
-
-    @property
-    def predict_matrix(self) -> np.ndarray:
-        """[A, B]: the prediction x̂⁻ = A x̂ + B u as one mat-vec on [x̂; u]."""
-        return np.hstack([self.A, self.B])

@@ -144,6 +144,12 @@ def embed3(p: np.ndarray) -> np.ndarray:
     return out
 
 
+def _three(z) -> np.ndarray:
+    """A sample as 3 coordinates (d < 3: the missing axes zero)."""
+    z = np.asarray(z, dtype=float)
+    return z if z.shape == (3,) else embed3(z.reshape(1, -1))[0]
+
+
 def place_point(origin, name: str = "origin") -> np.ndarray:
     origin = np.array(origin, dtype=float).reshape(-1)
     if origin.shape != (3,) or not np.all(np.isfinite(origin)):
@@ -231,8 +237,10 @@ class PredictedReference:
         self._retract = RETRACT(lambda _: int(bool(self.predictor.retract())))
         self._accepted, self._t0 = np.zeros(1, dtype=np.intc), np.zeros(1)
         self._at = self._accepted.ctypes.data, self._t0.ctypes.data
-        self._node_values = lib.rhmpc_node_values(controller._addr)
-        self._index = [(name, COUNTS.index(name)) for name in LIBRARY_COUNTS]
+        most = self.prediction_points + math.ceil(LATENCY_CAP / self.dt) + 1
+        self._node_view = np.ctypeslib.as_array(lib.rhmpc_node_values(controller._addr),
+                                                (most, 3))
+        self._index = np.array([COUNTS.index(name) for name in LIBRARY_COUNTS])
 
     def place(self, origin, center=(0.0, 0.0, 0.0)) -> None:
         """From now on the points are workspace points origin + E (r_s − center) (N, 3) [m],
@@ -253,7 +261,7 @@ class PredictedReference:
         """A sample's arrival on ``tick``: ``z`` measured at ``stamp`` [s] (None or NaN: none
         new), and ``others`` the other tracked points' samples of that instant. Gate, update,
         forecast, interpolation, guard, placement."""
-        if self.nodes(tick, z, stamp, others) is None:
+        if not self._made(tick, z, stamp, others):
             return
         verdict = self._calls[2](self._controller._addr, tick)
         if verdict == 1:
@@ -264,17 +272,23 @@ class PredictedReference:
 
     def nodes(self, tick: int, z: np.ndarray | None, stamp: float,
               others: np.ndarray | None = None) -> tuple[np.ndarray, float] | None:
-        """A refresh's gate, update and forecast: the nodes it interpolates, (K, d) [m] at
+        """A refresh's gate, update and forecast: the nodes it interpolates, (K, 3) [m] at
         ``t0 + k·dt``, and ``t0`` [s] — what a predictor in another process sends
         (:meth:`forecast`) — or None while nothing has been measured."""
+        n = self._made(tick, z, stamp, others)
+        return None if not n else (self._node_view[:n].copy(), float(self._t0[0]))
+
+    def _made(self, tick: int, z, stamp: float, others) -> int:
+        """The gate on ``z``, the predictor's update and forecast, the library's nodes: their
+        count (0 while nothing has been measured)."""
         c = self._controller
         sample, make_nodes, _ = self._calls
-        z3 = None if z is None else embed3(np.reshape(np.asarray(z, dtype=float), (1, -1)))[0]
-        K = sample(c._addr, tick, stamp, c._sample(z3), self._retract, None, self._at[0])
+        K = sample(c._addr, tick, stamp, c._sample(None if z is None else _three(z)),
+                   self._retract, None, self._at[0])
         if K < 0:
             raise ValueError(f"the stamp {stamp!r} is not a finite time")
         if K == 0:
-            return None  # nothing measured yet (nor lost): keep holding
+            return 0  # nothing measured yet (nor lost): keep holding
         x = None
         if self._accepted[0]:
             x = self._held = np.array(z, dtype=float)
@@ -282,11 +296,16 @@ class PredictedReference:
             self.predictor.update(x, others)
         else:
             self.predictor.update(x)
-        points = np.ascontiguousarray(embed3(self.predictor.predict(K)), dtype=float)
-        ready = bool(getattr(self.predictor, "ready", True))
-        n = make_nodes(c._addr, points.ctypes.data, K, ready, self._at[1])
+        points = self.predictor.predict(K)
+        if points.shape[1] != 3 or not points.flags.c_contiguous:
+            points = np.ascontiguousarray(embed3(points), dtype=float)
+        n = make_nodes(c._addr, points.ctypes.data, K, self._ready(), self._at[1])
         self._count()
-        return np.ctypeslib.as_array(self._node_values, (n, 3)).copy(), float(self._t0[0])
+        return n
+
+    def _ready(self) -> bool:
+        """Whether the predictor's forecasts are its own (not the hold of its newest sample)."""
+        return bool(getattr(self.predictor, "ready", True))
 
     def forecast(self, tick: int, stamp: float, points: np.ndarray) -> bool:
         """A forecast made outside (a predictor in another process) arriving on ``tick``:
@@ -302,10 +321,12 @@ class PredictedReference:
 
     def _count(self) -> None:
         """The library's counts of the reference's events, into the predictor's ``counts``."""
-        counts, view = self.predictor.counts, self._controller.counts_view
-        for name, index in self._index:
-            if view[index]:
-                counts[name] = int(view[index])
+        values = self._controller.counts_view[self._index]
+        if values.any():
+            counts = self.predictor.counts
+            for name, value in zip(LIBRARY_COUNTS, values.tolist(), strict=True):
+                if value:
+                    counts[name] = value
 
     def _restart(self) -> None:
         """Restart the predictor from the last accepted sample (its counts are kept)."""

@@ -23,9 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
-from rhmpc.compiled import build, compiler
+from rhmpc.compiled import build, compiler, remember, remembered
 
-from .generate import ExportError, _generate_into
+from .generate import ExportError, _generate_into, description_key
 from .layout import COUNTS, RETRACT, SOURCES, STATUS_NAMES, MPCStats, public_struct
 
 _in_use: dict[str, weakref.ref] = {}
@@ -125,16 +125,16 @@ class Controller:
         if ctypes.sizeof(public) != lib.rhmpc_public_sizeof():
             raise ToolchainError(f"library {path}: rhmpc_public_t does not match the binding")
         self._state = np.zeros(int(lib.rhmpc_sizeof()) // 8 + 2)  # 8-byte aligned
-        self._addr = self._state.ctypes.data
-        self._pub = pub = public.from_address(self._addr)
+        self._addr = ctypes.c_void_p(self._state.ctypes.data)
+        self._pub = pub = public.from_address(self._state.ctypes.data)
         self._points = np.ctypeslib.as_array(pub.points).reshape(self.span, 3)
         self._points.flags.writeable = False
         self.counts_view = np.ctypeslib.as_array(pub.counts)
         self._u, self._tau_c = np.ctypeslib.as_array(pub.u), np.ctypeslib.as_array(pub.tau_command)
         self._x_hat = np.ctypeslib.as_array(pub.x_hat)
         self._q, self._tau, self._z = np.zeros(self.nu), np.zeros(self.nu), np.zeros(3)
-        self._q_at, self._tau_at, self._z_at = (a.ctypes.data for a in (self._q, self._tau,
-                                                                          self._z))
+        self._q_at, self._tau_at, self._z_at = (ctypes.c_void_p(a.ctypes.data) for a in (
+            self._q, self._tau, self._z))
         self._step, self._refresh = lib.rhmpc_step, lib.rhmpc_refresh
         self._exact = getattr(reference, "predictor", False) is None
         self._refresh_ns = 0
@@ -303,14 +303,19 @@ class Controller:
 
 def build_library(controller, robot: str, internal: bool = False) -> Path:
     """Generate ``controller``'s C and build its shared library, once per distinct export (the
-    cache of :mod:`rhmpc.compiled`); raises :class:`ToolchainError` or :class:`ExportError`.
-    ``internal``: the library must run the reference's RLS predictor itself."""
+    cache of :mod:`rhmpc.compiled`; a description built before is not generated again: its
+    :func:`~rhmpc.control.export.generate.description_key`); raises :class:`ToolchainError` or
+    :class:`ExportError`. ``internal``: the library must run the reference's RLS predictor."""
+    try:
+        key = description_key(controller, robot, internal)
+    except ExportError as exc:
+        raise ExportError(f"the controller: {exc}") from None
+    known = remembered("rhmpc-controller", key)
+    if known is not None:
+        return known
     with tempfile.TemporaryDirectory(prefix="rhmpc-export-") as tmp:
         out = Path(tmp)
-        try:
-            _generate_into(controller, robot, out, internal=internal)
-        except ExportError as exc:
-            raise ExportError(f"the controller: {exc}") from None
+        _generate_into(controller, robot, out, internal=internal)
         sources = [out / n for n in ("rhmpc.c", "rhmpc_mpc.c", "rhmpc_reference.c",
                                      "rhmpc_model.c", "rhmpc_data.c",
                                      "osqp/rhmpc_osqp_workspace.c")]
@@ -320,4 +325,5 @@ def build_library(controller, robot: str, internal: bool = False) -> Path:
         library, reason = build(sources, "rhmpc-controller", include)
     if library is None:
         raise ToolchainError(reason)
+    remember("rhmpc-controller", key, library)
     return library

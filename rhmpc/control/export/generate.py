@@ -46,7 +46,6 @@ from rhmpc.control.qp import CondensedQP
 from rhmpc.control.reference import LATENCY_CAP
 from rhmpc.control.settings import MPCSettings
 
-from .dynamics import cancel_function, generate, offset_function, tool_function
 from .layout import MPCStats, template_subs
 
 #: Prefix of OSQP's generated globals (``rhmpc_osqp_solver``) and workspace files.
@@ -56,6 +55,9 @@ TEMPLATES = ("rhmpc.h", "rhmpc.c", "rhmpc_mpc.c", "rhmpc_reference.c", "rhmpc_da
              "CMakeLists.txt", "example/main.c")
 #: The predictors the exported controller runs (the registry's names and their classes').
 PREDICTORS = {"one-step": "OneStepRLS", "generalized": "GeneralizedRLS"}
+#: The most values of the regressor of the RLS predictor the library runs itself (its covariance,
+#: 3·order squared, is part of the controller's state: 512 kB at most).
+RLS_MAX = 256
 #: Reference points beyond the horizon that one push of a study's exact future covers [ticks].
 EXACT_SPAN = 64
 
@@ -318,7 +320,9 @@ def _reference_subs(reference, Ts: float, required: bool = True) -> dict[str, ob
     problem = (f"the exported controller runs the {' or '.join(PREDICTORS)} predictor, not "
                f"{name}" if name not in PREDICTORS.values() else
                "the exported predictor takes 3-D samples in metres"
-               if unit is None or not math.isclose(unit, 1.0) or p.dim not in (None, 3) else None)
+               if unit is None or not math.isclose(unit, 1.0) or p.dim not in (None, 3) else
+               f"the exported predictor's regressor holds at most {RLS_MAX} values, not "
+               f"{3 * p.order}" if 3 * p.order > RLS_MAX else None)
     if problem is not None:
         if required:
             raise ExportError(problem)
@@ -342,8 +346,12 @@ def _controller_arrays(controller) -> dict[str, np.ndarray]:
     robot = getattr(arm, "robot", None)
     lower, upper = (robot.position_limits if robot is not None
                     else (np.full(n, -np.inf), np.full(n, np.inf)))
-    predict = np.hstack([controller.observer.predict_matrix, np.zeros((2 * n, 1))])
-    return {"correct": np.asarray(controller.observer.correct_matrix), "predict": predict,
+    observer = controller.observer  # both steps as one mat-vec each, on [x; q; 1], [x; u; 1]:
+    L, q0 = observer.L, np.asarray(arm.q0, dtype=float)  # x = [I − L H, L, −L q0] [x⁻; q; 1]
+    correct = np.hstack([np.eye(2 * n) - np.hstack([L, np.zeros((2 * n, n))]), L,
+                         -(L @ q0)[:, None]])
+    predict = np.hstack([observer.A, observer.B, np.zeros((2 * n, 1))])  # x⁻ = A x + B u
+    return {"correct": correct, "predict": predict,
             "tau_max": controller.torque_limit, "q0": np.asarray(arm.q0, dtype=float),
             "q_min": lower, "q_max": upper,
             "gate": np.asarray(controller.observer.gate, dtype=float),
@@ -396,35 +404,96 @@ def _data_source(controller, robot: str, key: str) -> str:
     return "".join(parts)
 
 
+def _model_functions(controller) -> list:
+    """The controller's model as CasADi functions (:mod:`.dynamics`): the output offset and the
+    tool's position (an arm with its robot), the cancellation (a nonlinear plant)."""
+    from .dynamics import cancel_function, offset_function, tool_function
+
+    arm = controller.mpc.arm
+    model = [offset_function(arm), tool_function(arm)] if arm.robot is not None else []
+    if controller.cancellation is not None:
+        model.append(cancel_function(controller.cancellation))
+    return model
+
+
+def _model_key(controller) -> bytes:
+    """What :func:`_model_functions` are made of: the bodies of the robot's and of the
+    cancellation's model, gravity, the tool's frame, the friction and the motor map."""
+    from rhmpc.robots.model import bodies
+
+    arm, cancellation = controller.mpc.arm, controller.cancellation
+    models = [arm.robot.model] + ([cancellation.model] if cancellation is not None else [])
+    parts = [repr(bodies(m)) + repr(m.gravity.linear.tolist()) for m in models]
+    frame = arm.robot.model.frames[arm.robot.ee_frame_id]
+    parts.append(repr((int(frame.parentJoint), frame.placement.translation.tolist())))
+    if cancellation is not None:
+        parts.append(repr((cancellation.motor_map.tolist(), cancellation.damping.tolist(),
+                           cancellation.coulomb_friction.tolist(),
+                           cancellation.stiction_velocity)))
+    return "".join(parts).encode()
+
+
+def _description(controller, robot: str, internal: bool) -> tuple[dict, list[str]]:
+    """What the export is generated from: the placeholders (without the model functions' work
+    sizes) and the notes."""
+    mpc = controller.mpc
+    _check(mpc)
+    robot_model = getattr(mpc.arm, "robot", None)
+    if robot_model is None:
+        raise ExportError("the controller's arm does not carry its robot (rhmpc.robots.linearize)")
+    notes = _notes(controller)
+    robot = robot_model.name  # a name, not a file's path
+    subs = {"ROBOT": robot, "ROBOT_ID": "".join(c if c.isalnum() else "_" for c in robot),
+            "VERSION": _version("rhmpc"), "OSQP_VERSION": _version("osqp"),
+            "REACQUIRE_TICKS": controller.observer.settings.reacquire_ticks,
+            "FAULT_TIMEOUT_TICKS": controller.observer.timeout_ticks,
+            "INPUT_DELAY": controller.input_delay, "TOOL": 1,
+            "CANCEL": int(controller.cancellation is not None),
+            **_mpc_subs(mpc), **_reference_subs(controller.reference, mpc.arm.Ts, internal),
+            **template_subs(), "LATENCY_CAP": repr(LATENCY_CAP),
+            "NOTES": "".join(f"\n * - {n}." for n in notes)}
+    return subs, notes
+
+
+def description_key(controller, robot: str, internal: bool = True) -> str:
+    """A hash of everything the export of ``controller`` is generated from, without generating
+    it: the placeholders, the numbers' bytes, the model's bodies, the templates' and the
+    generator's own text, the versions of CasADi and OSQP. The same key, the same export."""
+    mpc, (subs, _) = controller.mpc, _description(controller, robot, internal)
+    key = hashlib.sha256(repr(sorted(subs.items())).encode())
+    key.update(_version("casadi").encode() + _model_key(controller))
+    key.update(repr((mpc.settings, controller.observer.settings,  # OSQP's options among them
+                     getattr(controller.reference, "settings", None))).encode())
+    qp = mpc.qp  # the numbers the generated arrays are made of
+    arrays = {**_controller_arrays(controller), "W": mpc.W, "hessian": mpc.hessian,
+              "F_z": mpc.F_z, "y_plan": mpc.y_plan, "M0": mpc.arm.M0,
+              **{name: getattr(qp, name) for name in ("P", "F", "f0", "A", "G", "l0", "u0",
+                                                       "minimiser", "gain", "gain0", "u_max",
+                                                       "shift", "shift_dual", "block_of_tick",
+                                                       "bound_columns")}}
+    for name in sorted(arrays):
+        key.update(name.encode() + np.ascontiguousarray(arrays[name], dtype=float).tobytes())
+    for name in (*(f"templates/{n}" for n in TEMPLATES), "generate.py", "dynamics.py",
+                 "layout.py"):
+        key.update(files(__package__).joinpath(*name.split("/")).read_bytes())
+    return key.hexdigest()
+
+
 def _generate_into(controller, robot: str, out: Path,
                    internal: bool = True) -> tuple[list[str], list[str], str]:
     """Write every file of the export into the empty directory ``out``; returns the files
     (relative), the notes and the key (a hash of every file)."""
+    from .dynamics import generate
+
     mpc = controller.mpc
-    _check(mpc)
-    robot_model = getattr(mpc.arm, "robot", None)
-    model = [offset_function(mpc.arm), tool_function(mpc.arm)] if robot_model is not None else []
-    if controller.cancellation is not None:
-        model.append(cancel_function(controller.cancellation))
-    if not model:
-        raise ExportError("the controller's arm does not carry its robot (rhmpc.robots.linearize)")
-    sizes = generate(model, out)
+    subs, notes = _description(controller, robot, internal)
+    robot = subs["ROBOT"]
+    subs.update(generate(_model_functions(controller), out))
     osqp_solver(mpc.qp, mpc.settings).codegen(str(out / "osqp"), parameters="vectors",
                                               extension_name=None, force_rewrite=True,
                                               prefix=OSQP_PREFIX)
     for leftover in ("emosqp.c", "Makefile"):  # OSQP's example program (printf, main)
         (out / "osqp" / leftover).unlink(missing_ok=True)
-    notes = _notes(controller)
-    robot = getattr(getattr(mpc.arm, "robot", None), "name", robot)  # a name, not a file's path
-    subs = {"ROBOT": robot, "ROBOT_ID": "".join(c if c.isalnum() else "_" for c in robot),
-            "VERSION": _version("rhmpc"), "OSQP_VERSION": _version("osqp"),
-            "REACQUIRE_TICKS": controller.observer.settings.reacquire_ticks,
-            "FAULT_TIMEOUT_TICKS": controller.observer.timeout_ticks,
-            "INPUT_DELAY": controller.input_delay, "TOOL": int(robot_model is not None),
-            "CANCEL": int(controller.cancellation is not None),
-            **_mpc_subs(mpc), **_reference_subs(controller.reference, mpc.arm.Ts, internal),
-            **sizes, **template_subs(), "LATENCY_CAP": repr(LATENCY_CAP),
-            "NOTES": "".join(f"\n * - {n}." for n in notes)}
     key = hashlib.sha256(repr(sorted(subs.items())).encode())
     data = _data_source(controller, robot, "@HASH@")
     key.update(data.encode())

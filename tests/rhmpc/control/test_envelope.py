@@ -208,18 +208,3 @@ def test_offset_free_tracking_on_the_nonlinear_plant(robot, arm, offset_correcti
         assert rms <= 8e-6  # measured 4.3 µm; margin ≈ 2×
     else:
         assert rms >= 50e-6  # measured 87 µm: the floor the offset removes
-
-
-
-
-@pytest.mark.parametrize("columns", [[0, 1, 2, 3, 4, 5], [0, 1, 2, 3, 4, 5, 159, 160, 161],
-                                     [3], [-3, -2, -1], [-1, 0]])
-@pytest.mark.slow
-def test_the_bound_columns_gather_as_a_slice_where_they_are_one_run(arm, columns):
-    """``bound_index`` picks the same parameters as ``bound_columns``: a slice (a view) when
-    they are one ascending run, else the indices themselves."""
-    qp = dataclasses.replace(RecedingHorizonMPC(arm).qp, bound_columns=np.array(columns))
-    p = np.arange(qp.npar, dtype=float)
-    np.testing.assert_array_equal(p[qp.bound_index], p[qp.bound_columns])
-    one_run = columns[0] >= 0 and columns == list(range(columns[0], columns[0] + len(columns)))
-    assert isinstance(qp.bound_index, slice) == one_run
