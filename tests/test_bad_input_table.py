@@ -22,6 +22,7 @@ import pytest
 import scipy.io
 
 from rhmpc.cli import main
+from tests.sim.recordings.bags import POSE_STAMPED, STRING, messages, write_bag
 
 #: A file to create: text, bytes, ``None`` for a directory, or a function that writes it.
 Content = str | bytes | None | Callable[[Path], None]
@@ -62,6 +63,19 @@ def mat(time_scale: float, **extra: str) -> Callable[[Path], None]:
 
 def fifo(path: Path) -> None:
     os.mkfifo(path)
+
+
+def bag(path: Path) -> None:
+    """A rosbag2 folder (MCAP) of a POI and a distracting topic, 6 s at 25 Hz [m]."""
+    stamps = 1_700_000_000 * 10**9 + np.rint(T * 1e9).astype(np.int64)
+    rows = messages(stamps, stamps + 5_000_000, HEART_MM[:, None] / 1000)
+    write_bag(path, "mcap", {"/tracker/poi": (POSE_STAMPED, rows),
+                             "/camera/info": (STRING, rows[::10])})
+
+
+#: A rosbag2 folder's metadata naming one MCAP file.
+BAG_METADATA = ("rosbag2_bagfile_information:\n  relative_file_paths: [b.mcap]\n"
+                "  storage_identifier: mcap\n")
 
 
 def link(target: str) -> Callable[[Path], None]:
@@ -129,6 +143,16 @@ CASES = [
      2, r"rhmpc data: error: nope\.csv: no such file$"),
     ("data-directory", ["data", "show", "dir.csv"], {"dir.csv": None},
      2, r"rhmpc data: error: dir\.csv: a folder, not a regular file; give a file$"),
+    ("data-garbage-bag", ["data", "show", "g.bag"], {"g.bag": b"#ROSBAG V2.0\n" + bytes(300)},
+     2, r"rhmpc data: error: g\.bag: not a readable ROS bag \("),
+    ("data-bag-fifo", ["data", "show", "b"],
+     {"b": None, "b/metadata.yaml": BAG_METADATA, "b/b.mcap": fifo},
+     2, r"rhmpc data: error: b/b\.mcap: a named pipe \(FIFO\), not a regular file"),
+    ("sim-bag-no-topic", [*DATA_SIM, "rec", "--topic", "/nope"], {"rec": bag},
+     2, r"rhmpc simulate: error: rec: no topic /nope; the bag holds /camera/info "
+        r"\(std_msgs/String, 15\), /tracker/poi \(geometry_msgs/PoseStamped, 150\)$"),
+    ("sim-bag-wrong-type", [*DATA_SIM, "rec", "--topic", "/camera/info"], {"rec": bag},
+     2, r"rhmpc simulate: error: rec: topic /camera/info is std_msgs/String, which is not read"),
     ("data-garbage-mat", ["data", "show", "g.mat"], {"g.mat": b"MATLAB 5.0" + bytes(300)},
      2, r"rhmpc data: error: g\.mat: not a readable MATLAB file"),
     ("data-mat-times-in-us-unlabelled", ["data", "show", "us.mat"], {"us.mat": mat(1e6)},

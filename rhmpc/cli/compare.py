@@ -46,7 +46,7 @@ DATA_PREDICTORS = ("hold", "exact", "one-step", "generalized", "ekf")
 #: both presets' runs on two cores: docs/validation/tuna.md (``benchmarks/tuna_tables.py``).
 PAPER_SEEDS = 4
 #: Options that read a recording (``--data``); their ``argparse`` destinations.
-READ_OPTIONS = ("var", "rows", "cols", "data_rate", "units")
+READ_OPTIONS = ("var", "rows", "cols", "data_rate", "units", "topic", "frame")
 
 
 @dataclass(frozen=True)
@@ -84,7 +84,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scenarios",
                    help="comma-separated scenario names (default: the six Table-I replicas)")
     p.add_argument("--data", nargs="+", metavar="FILE", help="recordings instead of scenarios, "
-                   "one column each (CSV t,x,y,z in s and mm, NPZ, MATLAB .mat); each runs "
+                   "one column each (CSV t,x,y,z in s and mm, NPZ, MATLAB .mat, a ROS bag "
+                   "with --topic); each runs "
                    "whole unless --duration, with the sensor 'recorded' unless --sensor")
     p.add_argument("--points", metavar="all|N[,N...]", help="files of several tracked points "
                    "(CSV t,x1,y1,z1,x2,...; NPZ (n, P, 3); MAT 3P x n): one column per point "
@@ -232,8 +233,8 @@ def _scenario_columns(args: argparse.Namespace) -> list[tuple[str, dict]]:
 
     if args.points is not None or args.poi is not None or args.split is not None or any(
             getattr(args, k, None) is not None for k in READ_OPTIONS):
-        raise UsageError("--points, --poi, --split, --var, --rows, --cols, --rate and --units "
-                         "need --data FILE")
+        raise UsageError("--points, --poi, --split, --var, --rows, --cols, --rate, --units, "
+                         "--topic and --frame need --data FILE")
     names = args.scenarios or ",".join(TABLE_SCENARIOS)
     scenarios = list(dict.fromkeys(s.strip() for s in names.split(",") if s.strip()))
     unknown = [s for s in scenarios if s not in SCENARIOS]

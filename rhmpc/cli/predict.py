@@ -58,7 +58,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     what = p.add_mutually_exclusive_group()
     what.add_argument("--study", choices=STUDIES, help="which synthetic study")
     what.add_argument("--data", nargs="+", metavar="FILE", help="recordings to score every "
-                      "predictor on (CSV t,x,y,z in s and mm, NPZ, or MATLAB .mat v5/v7.3)")
+                      "predictor on (CSV t,x,y,z in s and mm, NPZ, MATLAB .mat v5/v7.3, or "
+                      "ROS bags with --topic)")
     p.add_argument(
         "--trials",
         type=int,
@@ -249,6 +250,7 @@ def _run_data(args: argparse.Namespace) -> int:
     from functools import partial
 
     from rhmpc.sim.recordings import training_series
+    from rhmpc.sim.recordings.formats import check_source
     from rhmpc.studies.recordings import OpenLoopSettings, run_open_loop
     from rhmpc.studies.recordings_report import format_report, plot_leads
     from rhmpc.studies.tracks import load_tracks, parse_points, poi_tracks
@@ -273,8 +275,8 @@ def _run_data(args: argparse.Namespace) -> int:
             tracks = load_tracks(files, parse_points(args.points), read)
         train = None
         if args.train:
-            for f in args.train:  # each a regular file the one reader takes
-                io.open_input(f, "recording").close()
+            for f in args.train:  # each a file (or a bag's folder) the one reader takes
+                check_source(f)
             train = partial(training_series, args.train, args.poi, read)
     except ValueError as exc:
         raise UsageError(str(exc)) from None

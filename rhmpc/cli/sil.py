@@ -8,7 +8,12 @@ import json
 import sys
 
 from rhmpc.cli import COMMANDS
-from rhmpc.cli.simulate import add_recording_options, add_run_options, config_from_args
+from rhmpc.cli.simulate import (
+    add_model_option,
+    add_recording_options,
+    add_run_options,
+    config_from_args,
+)
 from rhmpc.errors import UsageError
 
 
@@ -19,18 +24,21 @@ def register(sub: argparse._SubParsersAction) -> None:
         "scenario's sensor, at its rate and latency), the predictor (any predictor), the "
         "controller (the exported C built with CMake, on an absolute 2-kHz clock, SCHED_FIFO "
         "and a pinned core where the host permits) and the robot (the simulator stepping in "
-        "real time) run as separate processes and talk over UDP on loopback (the wire format "
-        "of the deployment guide). Reports deadline misses, the controller's wake-up latency "
-        "beside the host's own (cyclictest where installed, else the controller's loop "
-        "without its work), the sensor-to-torque latency, packets lost or late, and the "
-        "tracking error at the measured instants beside the in-process simulation's. Ctrl-C "
-        "stops every process.")
+        "real time) run as separate processes and talk over UDP on loopback, every message "
+        "sealed under a key made for the run (the wire format of the deployment guide): only "
+        "the run's processes can command. Reports deadline misses, the controller's wake-up "
+        "latency beside the host's own (cyclictest where installed, else the controller's "
+        "loop without its work), the sensor-to-torque latency, packets lost, datagrams "
+        "dropped, and the tracking error at the measured instants beside the in-process "
+        "simulation's. A part that dies, the tool off the POI by more than 5 mm (or 1 mm RMS "
+        "over a second) or more than 20 %% of a second's deadlines missed stops every process "
+        "in the safe state and exits 1 with the cause. Ctrl-C stops every process.")
     p.add_argument("--predictor", help="predictor name (default generalized); any predictor "
                    "runs in its own process and sends its forecasts to the controller")
     src = p.add_mutually_exclusive_group()
     src.add_argument("--scenario", help="heart-motion scenario (rhmpc data list)")
-    src.add_argument("--data", metavar="FILE", help="a recording (CSV, NPZ, MAT, or a shipped "
-                     "name such as hamlyn-phantom)")
+    src.add_argument("--data", metavar="FILE", help="a recording (CSV, NPZ, MAT, a ROS bag "
+                     "with --topic, or a shipped name such as hamlyn-phantom)")
     add_recording_options(p)
     p.add_argument("--poi", type=int, metavar="N", help="the point of interest of a --data file "
                    "of several tracked points (numbered from 1)")
@@ -42,7 +50,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--cpu", type=int, help="the processor the controller and the probe are "
                    "pinned to (default: the last one)")
     p.add_argument("--no-internal", action="store_true", help="the controller's own RLS does "
-                   "not learn from the samples: a lost forecast holds the last points")
+                   "not learn from the samples: forecasts alone drive it, and a lost one holds "
+                   "the last points")
+    p.add_argument("--port", type=int, metavar="P", help="the controller's UDP port on "
+                   "loopback (the predictor's P+1, the robot's P+2; default: any free ones)")
+    add_model_option(p)
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.set_defaults(func=run)
 
@@ -60,7 +72,11 @@ def _p(d: dict, unit: str) -> str:
 def table(r: dict) -> str:
     """The report as lines of text."""
     lost = sum(v.get("lost", 0) for v in r["packets"].values())
-    late = sum(v.get("late", 0) for v in r["packets"].values())
+    dropped = {}
+    for counts in r["dropped"].values():
+        for reason, n in counts.items():
+            dropped[reason] = dropped.get(reason, 0) + n
+    drops = ", ".join(f"{n} {reason}" for reason, n in dropped.items() if n) or "none"
     lines = [
         f"rhmpc sil: {r['predictor']} on {r['recording']}, {r['duration_s']:g} s in real time",
         _row("ticks, deadline misses", f"{r['ticks']}, {r['deadline_misses']} "
@@ -71,9 +87,9 @@ def table(r: dict) -> str:
              f"{100 * r['host_wakeup_latency_us']['late_periods']:.3g} %)"),
         _row("controller step", _p(r["controller_step_us"], "us")),
         _row("sensor to torque", _p(r["sensor_to_torque_ms"], "ms")),
-        _row("packets lost, late", f"{lost}, {late} (stale encoder readings "
-             f"{r['stale_encoders']}, torques missed {r['torques_missed']}, robot braked "
-             f"{r['robot_safe_state_ticks']} ticks)"),
+        _row("packets lost", f"{lost} (stale encoder readings {r['stale_encoders']}, torques "
+             f"missed {r['torques_missed']}, robot braked {r['robot_safe_state_ticks']} ticks)"),
+        _row("datagrams dropped", drops),
         _row("a lost forecast falls back to", r["forecast_fallback"]),
         _row("RMS error at measured instants", f"{r['rms_error_mm']:.4f} mm (in-process "
              f"{r['in_process_rms_error_mm']:.4f} mm)"),
@@ -92,7 +108,7 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError("rhmpc sil needs a predictor ('exact' reads the future)")
     try:
         settings = SilSettings(priority=args.priority, cpu=args.cpu,
-                               internal=not args.no_internal)
+                               internal=not args.no_internal, port=args.port)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     try:

@@ -66,7 +66,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     src.add_argument("--scenario", help="heart-motion scenario (rhmpc data list); default "
                      "fixed-a2-top")
     src.add_argument("--data", metavar="FILE", help="a recording (CSV t,x,y,z in s and mm, NPZ, "
-                     "or MATLAB .mat v5/v7.3); runs the whole recording unless --duration")
+                     "MATLAB .mat v5/v7.3, or a ROS bag: a rosbag2 folder, .mcap, .db3, ROS 1 "
+                     ".bag); runs the whole recording unless --duration")
     add_recording_options(p)
     p.add_argument("--poi", type=int, metavar="N", help="the point of interest (numbered from 1) "
                    "of a --data file of several tracked points; a predictor that reads the "
@@ -137,8 +138,9 @@ def host_stalls_document(seconds: float, gain_us: float | None) -> dict:
 
 
 def add_recording_options(p: argparse.ArgumentParser) -> None:
-    """``--var``, ``--rows``, ``--cols``, ``--rate``, ``--units``: how to read a recording."""
-    g = p.add_argument_group("reading a recording (.mat)")
+    """``--var``, ``--rows``, ``--cols``, ``--rate``, ``--units``, ``--topic``, ``--frame``: how
+    to read a recording."""
+    g = p.add_argument_group("reading a recording (.mat; ROS bags: --topic, --frame)")
     g.add_argument("--var", help="MATLAB variable holding the positions")
     g.add_argument("--rows", type=parse_indices, help="0-based rows holding x,y,z (samples along "
                    "columns), e.g. 0,1,2")
@@ -147,8 +149,11 @@ def add_recording_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--rate", type=float, dest="data_rate", metavar="HZ",
                    help="sample rate when the file has no time vector [Hz]")
     g.add_argument("--units", choices=("mm", "m", "um", "cm"),
-                   help="length unit when the file does not state it (default mm)")
-
+                   help="length unit when the file does not state it (default mm; a ROS bag: m)")
+    g.add_argument("--topic", help="a ROS bag's topic of the POI (PoseStamped, PointStamped, "
+                   "TransformStamped, tf2_msgs/TFMessage; PoseArray or MarkerArray with --poi)")
+    g.add_argument("--frame", help="the child frame read from a tf topic (TFMessage, "
+                   "TransformStamped)")
 
 
 def add_split_option(p: argparse.ArgumentParser, more: str = "") -> None:
@@ -183,7 +188,8 @@ def parse_split(text: str | None) -> tuple[int, int] | None:
 
 def recording_options(args: argparse.Namespace) -> dict:
     """The ``load_recording`` keywords given on the command line."""
-    keys = {"var": "var", "rows": "rows", "cols": "cols", "data_rate": "rate", "units": "units"}
+    keys = {"var": "var", "rows": "rows", "cols": "cols", "data_rate": "rate", "units": "units",
+            "topic": "topic", "frame": "frame"}
     return {v: getattr(args, k) for k, v in keys.items() if getattr(args, k, None) is not None}
 
 
@@ -203,9 +209,10 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
         if getattr(args, "poi", None) is not None:
             options["data_read"]["point"] = args.poi
     elif any(getattr(args, k, None) is not None
-             for k in ("var", "rows", "cols", "data_rate", "units", "poi", "split")):
-        raise UsageError("--var, --rows, --cols, --rate, --units, --poi and --split need "
-                         "--data FILE")
+             for k in ("var", "rows", "cols", "data_rate", "units", "topic", "frame", "poi",
+                       "split")):
+        raise UsageError("--var, --rows, --cols, --rate, --units, --topic, --frame, --poi and "
+                         "--split need --data FILE")
     if options.get("train"):
         options["train"] = tuple(options["train"])
     return run_config(args.config, getattr(args, "preset", None), options, args.set,

@@ -266,12 +266,13 @@ def run_config(file: str | Path | None = None, preset: str | None = None,
     ``UsageError``.
     """
     from rhmpc.experiment.fitting import model_settings
+    from rhmpc.sim.recordings.formats import found
 
     options = dict(options or {})
     if split is not None and {"loop.duration", "loop.settling"} & set(options):
         raise UsageError("--split TRAIN:END sets the settling and the duration: give neither "
                          "--settling nor --duration with it")
-    missing = [f for f in options.get("train", ()) if not Path(f).is_file()]
+    missing = [f for f in options.get("train", ()) if not found(f)]
     if missing:
         raise UsageError(f"--train: no such file {', '.join(missing)}")
     recording = _recording(options, file is None, split) if options.get("data") else None
@@ -295,12 +296,13 @@ def _recording(options: dict[str, Any], whole: bool, split: tuple[int, int] | No
     """Resolve the recording of ``options`` in place (its file, how it is read, the sensor
     that reads it as it is, and with ``whole`` and no duration or split, the run's length) and
     return it, read once (``None`` when nothing needs it read)."""
+    from rhmpc.sim.recordings.formats import found
     from rhmpc.sim.recordings.shipped import SHIPPED, resolve
 
     read = dict(options.get("data_read", {}))
     point = read.pop("point", None)
     data, read, poi = resolve(options["data"], read)
-    if not Path(data).is_file():
+    if not found(data):
         raise UsageError(f"{options['data']}: no such file (nor a shipped recording: "
                          f"{', '.join(SHIPPED)})")
     poi = point if point is not None else poi

@@ -35,13 +35,19 @@ MiB = 2**20
 #: specification are hand-written, a few kB; a results file holds a line of about 2 kB per
 #: evaluation, about 10 kB once read (128 000 evaluations in 256 MiB); a recording of 10 h at
 #: 1 kHz as CSV is about 1.3 GB (its samples are bounded by ``BOUNDS["samples"]``); a model holds
-#: at most half the memory budget of weights (its copy while it loads).
+#: at most half the memory budget of weights (its copy while it loads). A ROS bag is read one
+#: message at a time and keeps only the samples of the topic asked for (bounded as a
+#: recording's), so its size bounds the time it takes to read, not memory: its topics beside
+#: the tracker's (cameras) make it large, and 256 GiB read at 100 MB/s take about 45 min; its
+#: metadata (``metadata.yaml``, a few kB) is bounded as a settings file.
 FILE_BYTES: dict[str, int] = {
     "file": 1024 * MiB,
     "config": 4 * MiB,
     "tune spec": 4 * MiB,
     "results file": 256 * MiB,
     "recording": 2048 * MiB,
+    "bag": 256 * 1024 * MiB,
+    "bag metadata": 4 * MiB,
     "model": 1024 * MiB,
     "model header": 4 * MiB,
     "annotation file": 256 * MiB,

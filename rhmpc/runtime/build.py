@@ -11,6 +11,7 @@ so that a second run of the same settings starts at once.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import os
 import shutil
@@ -21,14 +22,15 @@ from importlib.resources import files
 from pathlib import Path
 
 from rhmpc import io
-from rhmpc.compiled import cache_dir
+from rhmpc.compiled import cache_dir, compiler
 from rhmpc.control.export import PREDICTORS, export_controller
 from rhmpc.errors import UsageError
 from rhmpc.experiment import RunConfig
 from rhmpc.experiment.assembly import deployable
+from rhmpc.tuning.workers import program_dies_with_parent
 
 __all__ = ["SOURCES", "TRANSPORT", "BuiltController", "build_controller", "internal_predictor",
-           "write_transport"]
+           "missing_toolchain", "write_transport"]
 
 #: The transport's files (package data of :mod:`rhmpc.runtime`, folder ``export``), which
 #: ``rhmpc export`` writes beside the controller (``DIR/udp``, :func:`write_transport`).
@@ -41,11 +43,17 @@ BUILD_TIMEOUT = 600
 
 @dataclass(frozen=True)
 class BuiltController:
-    """The controller's program and what it was built from."""
+    """The controller's program, the robot-side client built beside it, and what they were
+    built from."""
 
     program: Path
     controller: object  # the Python controller it was exported from
     internal: str  # the predictor the controller runs itself
+
+    @property
+    def client(self) -> Path:
+        """The robot-side client (``robot_client.c``) for the same export."""
+        return self.program.parent / "rhmpc_robot_client"
 
 
 def internal_predictor(config: RunConfig) -> str:
@@ -54,13 +62,37 @@ def internal_predictor(config: RunConfig) -> str:
     return config.predictor if config.predictor in PREDICTORS else "generalized"
 
 
+@functools.cache
+def missing_toolchain() -> str | None:
+    """None if this host builds the deployment's programs (cmake, a C compiler, OpenSSL's
+    libcrypto and its headers), else what is missing, on one line."""
+    cc = compiler()
+    if shutil.which("cmake") is None or cc is None:
+        return "the deployment's programs need cmake and a C compiler"
+    with tempfile.TemporaryDirectory() as tmp:
+        source = Path(tmp) / "probe.c"
+        source.write_text("#include <openssl/evp.h>\nint main(void) { return EVP_MAC_fetch(0, "
+                          "\"HMAC\", 0) == 0; }\n")
+        done = subprocess.run([cc, str(source), "-o", str(Path(tmp) / "probe"), "-lcrypto"],
+                              capture_output=True)
+    if done.returncode != 0:
+        return ("the deployment's programs need OpenSSL's libcrypto and its headers "
+                "(Debian: apt-get install libssl-dev)")
+    return None
+
+
 def _cmake(*args: str) -> None:
     cmake = shutil.which("cmake")
     if cmake is None:
         raise UsageError("rhmpc sil builds the controller with CMake: cmake is not on the PATH")
-    done = subprocess.run([cmake, *args], capture_output=True, text=True, timeout=BUILD_TIMEOUT)
+    done = subprocess.run([cmake, *args], capture_output=True, text=True, timeout=BUILD_TIMEOUT,
+                          preexec_fn=program_dies_with_parent)
     if done.returncode != 0:
-        last = (done.stderr.strip() or done.stdout.strip()).splitlines()[-1:] or ["no output"]
+        text = done.stderr.strip() or done.stdout.strip()
+        if "OpenSSL" in text and args[0] == "-S":
+            raise UsageError("the deployment's programs need OpenSSL's libcrypto and its "
+                             "headers (Debian: apt-get install libssl-dev)")
+        last = text.splitlines()[-1:] or ["no output"]
         raise UsageError(f"the controller's build failed (cmake {args[0]}): {last[0]}")
 
 
@@ -68,7 +100,9 @@ def build_controller(config: RunConfig, sensor_rate: float) -> BuiltController:
     """Export the controller of ``config`` for a sensor of ``sensor_rate`` [Hz] and build its
     program with CMake (or take the cached build)."""
     internal = internal_predictor(config)
-    controller = deployable(config.replace(predictor=internal), sensor_rate)
+    if internal != config.predictor:  # the run's predictor's settings (a model file …) are not its
+        config = config.replace(predictor=internal, predictor_settings={})
+    controller = deployable(config, sensor_rate)
     name = controller.mpc.arm.robot.name
     with tempfile.TemporaryDirectory(prefix="rhmpc-sil-") as tmp:
         info = export_controller(controller, Path(tmp) / "export", robot=name)
@@ -83,7 +117,8 @@ def build_controller(config: RunConfig, sensor_rate: float) -> BuiltController:
             write_transport(staging / "export")
             _cmake("-S", str(staging / "export" / TRANSPORT), "-B", str(staging / "build"),
                    "-DCMAKE_BUILD_TYPE=Release")
-            _cmake("--build", str(staging / "build"), "--target", "rhmpc_sil_controller")
+            _cmake("--build", str(staging / "build"), "--target", "rhmpc_sil_controller",
+                   "rhmpc_robot_client")
             try:
                 os.replace(staging, target)  # whole, or not at all (another run built it first)
             except OSError:

@@ -12,31 +12,41 @@ behind each other.
 
 from __future__ import annotations
 
+import os
 import re
+import resource
 import shutil
+import threading
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from rhmpc import io
 
-__all__ = ["HISTOGRAM_US", "histogram_percentiles", "percentiles", "probe_command",
-           "read_histogram", "read_int64", "read_probe"]
+__all__ = ["HISTOGRAM_US", "Permits", "histogram_percentiles", "percentiles", "permits",
+           "probe_command", "read_histogram", "read_int64", "read_probe"]
 
 #: cyclictest's histogram: 1-µs bins up to this latency [µs] (beyond: its overflow count).
 HISTOGRAM_US = 10_000
 
 
 def probe_command(program: Path, *, epoch_ns: int, ticks: int, Ts: float, cpu: int,
-                  priority: int, out: Path, phase_ns: int) -> tuple[list[str], str]:
+                  priority: int, out: Path, phase_ns: int,
+                  allowed: Permits | None = None) -> tuple[list[str], str]:
     """The probe's command and its name: cyclictest where installed, else ``program --probe``.
 
     cyclictest cannot start at the run's epoch: it runs for the run's length from when it
-    starts (just before the epoch), its first thread's wake-ups at its own phase."""
+    starts (just before the epoch), its first thread's wake-ups at its own phase. It asks only
+    for what the host permits (``allowed``); cyclictest cannot start without SCHED_FIFO
+    ("Unable to change scheduling policy"), so there the controller's own loop is the probe,
+    on the default scheduler as the controller then runs."""
     cyclictest = shutil.which("cyclictest")
-    if cyclictest is not None:
+    if cyclictest is not None and (allowed is None or allowed.fifo is None):
         seconds = max(1, round(ticks * Ts + 1))
-        return [cyclictest, "--mlockall", f"--priority={priority}", f"--affinity={cpu}",
+        lock = allowed is None or allowed.mlock is None
+        return [cyclictest, *(["--mlockall"] if lock else []), f"--priority={priority}",
+                f"--affinity={cpu}",
                 f"--interval={round(Ts * 1e6)}", f"--duration={seconds}", "--quiet",
                 f"--histogram={HISTOGRAM_US}", f"--histfile={out}.hist"], "cyclictest"
     return [str(program), "--probe", "--epoch", str(epoch_ns), "--ticks", str(ticks),
@@ -110,3 +120,58 @@ def read_probe(out: Path, tool: str, Ts: float) -> dict:
         behind = io.read_json(doc, track=False)["ticks_behind"] if doc.is_file() else 0
         late = (np.sum(us >= Ts * 1e6) + behind) / max(us.size + behind, 1)
     return {**found, "late_periods": round(float(late), 6), "tool": tool}
+
+
+@dataclass(frozen=True)
+class Permits:
+    """What this host lets a process of this user have, asked before a run (None: permitted,
+    else why not, on one line)."""
+
+    fifo: str | None
+    mlock: str | None
+    pin: str | None
+
+    def refusals(self) -> list[str]:
+        """What the host refuses, one phrase each."""
+        return [why for why in (self.fifo, self.mlock, self.pin) if why is not None]
+
+
+def _capability(bit: int) -> bool:
+    """Whether this process holds capability ``bit`` (``/proc/self/status``, CapEff)."""
+    try:
+        status = Path("/proc/self/status").read_text()
+    except OSError:
+        return False
+    found = re.search(r"^CapEff:\s*([0-9a-f]+)", status, re.M)
+    return bool(found) and bool(int(found.group(1), 16) >> bit & 1)
+
+
+def _try_fifo(priority: int) -> str | None:
+    """None if a thread of this process may take SCHED_FIFO at ``priority``, else why not
+    (tried on a thread of its own, which then ends: the process is unchanged)."""
+    result: list[str | None] = []
+
+    def attempt() -> None:
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+            result.append(None)
+        except (OSError, AttributeError) as exc:
+            result.append(f"SCHED_FIFO priority {priority} ({getattr(exc, 'strerror', exc)}: "
+                          "needs root, CAP_SYS_NICE or rtprio in /etc/security/limits.conf)")
+
+    worker = threading.Thread(target=attempt, name="fifo-probe")
+    worker.start()
+    worker.join()
+    return result[0]
+
+
+def permits(priority: int, cpu: int) -> Permits:
+    """Ask the host, before a run, for SCHED_FIFO at ``priority``, locked memory and the
+    processor ``cpu``."""
+    soft, _ = resource.getrlimit(resource.RLIMIT_MEMLOCK)
+    mlock = None
+    if soft != resource.RLIM_INFINITY and not _capability(14):  # CAP_IPC_LOCK
+        mlock = (f"memory locking beyond {soft // 1024} KiB (ulimit -l; needs root, "
+                 "CAP_IPC_LOCK or memlock in /etc/security/limits.conf)")
+    pin = None if cpu in os.sched_getaffinity(0) else f"processor {cpu} (not in this process's set)"
+    return Permits(_try_fifo(priority), mlock, pin)

@@ -22,7 +22,7 @@ from collections.abc import Iterable
 from concurrent.futures import Executor, Future, ProcessPoolExecutor
 
 __all__ = ["TERMINATE_GRACE_S", "WATCHDOG_PERIOD_S", "die_with_parent", "process_pool",
-           "stop_executor", "worker_init"]
+           "program_dies_with_parent", "stop_executor", "worker_init"]
 
 #: Linux ``prctl`` option: the signal a process receives when its parent dies.
 _PR_SET_PDEATHSIG = 1
@@ -65,6 +65,12 @@ def die_with_parent(parent: int) -> None:
                          name="die-with-parent").start()
     if os.getppid() != parent:  # died before the signal was armed
         os._exit(1)
+
+
+def program_dies_with_parent() -> None:
+    """``preexec_fn`` of a program started with :mod:`subprocess`: it gets SIGKILL when the
+    process that started it ends (Linux; elsewhere nothing)."""
+    _parent_death_signal(signal.SIGKILL)
 
 
 def worker_init(parent: int) -> None:

@@ -1,4 +1,5 @@
-"""Open a recording of any supported format: CSV, NPZ or MATLAB ``.mat``."""
+"""Open a recording of any supported format: CSV, NPZ, MATLAB ``.mat`` or a ROS bag, and check
+it as heart motion."""
 
 from __future__ import annotations
 
@@ -6,29 +7,30 @@ from pathlib import Path
 
 import numpy as np
 
-from rhmpc.sim.recordings.csvfile import read_csv
-from rhmpc.sim.recordings.matfile import load_mat
+from rhmpc.sim.recordings.formats import read_any
 from rhmpc.sim.recordings.plausible import check_recording
 from rhmpc.sim.recordings.points import load_points, pick_point
-from rhmpc.sim.recordings.recorded import RecordedMotion, RecordingError, check_file, check_rate
-from rhmpc.sim.recordings.text import read_npz
+from rhmpc.sim.recordings.recorded import RecordedMotion, RecordingError, check_rate
 from rhmpc.sim.recordings.timebase import check_time_unit
 
 
 def load_recording(path: str | Path, units: str | None = None, var: str | None = None,
                    rows=None, cols=None, rate: float | None = None,
-                   point: int | None = None) -> RecordedMotion:
-    """Load a heart-motion recording (CSV, NPZ, or MATLAB .mat: see
-    :mod:`rhmpc.sim.recordings.matfile`).
+                   point: int | None = None, topic: str | None = None,
+                   frame: str | None = None) -> RecordedMotion:
+    """Load a heart-motion recording (CSV, NPZ, MATLAB .mat: see
+    :mod:`rhmpc.sim.recordings.matfile`; or a topic of a ROS bag:
+    :mod:`rhmpc.sim.recordings.bagfile`).
 
     Parameters
     ----------
     path : str or Path
-        ``.csv`` (or ``.txt``), ``.npz`` or ``.mat`` file.
+        ``.csv`` (or ``.txt``), ``.npz`` or ``.mat`` file, or a ROS bag (a rosbag2 folder, its
+        ``.mcap`` or ``.db3`` file, a ROS 1 ``.bag``).
     units : str, optional
         Length unit of the positions when the file does not state it (``"m"``, ``"mm"``,
-        ``"um"``, ``"cm"``). A CSV without units is in millimetres; an NPZ or MAT file needs
-        its units, from the file or from here.
+        ``"um"``, ``"cm"``). A CSV or MAT file without units is in millimetres, a bag in
+        metres (ROS's unit); an NPZ file needs its units, from the file or from here.
     var, rows, cols, rate : optional
         For ``.mat`` files: the variable, its 0-based rows or columns holding the coordinates,
         and the sample rate [Hz] when the file has neither a time vector nor a rate
@@ -36,6 +38,9 @@ def load_recording(path: str | Path, units: str | None = None, var: str | None =
     point : int, optional
         In a file of several tracked points, the point to read, from 1
         (:mod:`rhmpc.sim.recordings.points`); such a file needs it.
+    topic, frame : str, optional
+        For a ROS bag: the POI's topic, and the child frame of a tf topic
+        (:func:`rhmpc.sim.recordings.bagfile.read_bag`).
 
     Returns
     -------
@@ -45,33 +50,24 @@ def load_recording(path: str | Path, units: str | None = None, var: str | None =
     Raises
     ------
     RecordingError
-        Naming the file, the line and the problem; also when its times, read in seconds
-        because the file states no unit, look like milliseconds or frame numbers
+        Naming the file, the line (or the topic) and the problem; also when its times, read in
+        seconds because the file states no unit, look like milliseconds or frame numbers
         (:mod:`rhmpc.sim.recordings.timebase`).
 
     Warns
     -----
     RecordingWarning
         When the recording is implausible as heart motion: a span outside 0.5–40 mm (with the
-        unit that would fit), outliers, or more than half of its samples missing
-        (:mod:`rhmpc.sim.recordings.plausible`).
+        unit that would fit), outliers, more than half of its samples missing, or a gap in its
+        sample times of a second or more (:mod:`rhmpc.sim.recordings.plausible`); for a bag,
+        also when messages were reordered or left out by their stamps
+        (:mod:`rhmpc.sim.recordings.bagstamps`).
     """
     path = Path(path)
     if point is not None:
-        return pick_point(path, load_points(path, units, var, rows, cols, rate), point)
-    check_file(path)
-    suffix = path.suffix.lower()
-    if suffix == ".mat":
-        rec = load_mat(path, var=var, rows=rows, cols=cols, rate=rate, units=units)
-    elif var is not None or rows is not None or cols is not None or rate is not None:
-        raise RecordingError(f"{path}: --var, --rows, --cols and --rate apply to .mat files")
-    elif suffix in {".csv", ".txt"}:
-        rec = read_csv(path, units)
-    elif suffix == ".npz":
-        rec = read_npz(path, units)
-    else:
-        raise RecordingError(f"{path}: unsupported file type {path.suffix!r} "
-                             "(use .csv, .npz or .mat)")
+        points = load_points(path, units, var, rows, cols, rate, topic, frame)
+        return pick_point(path, points, point)
+    rec = read_any(path, units, var, rows, cols, rate, topic, frame)
     if not np.any(np.all(np.isfinite(rec.z), axis=1)):
         raise RecordingError(f"{path}: no complete sample (all positions missing)")
     check_rate(rec)

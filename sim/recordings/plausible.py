@@ -1,4 +1,5 @@
-"""Whether a recording looks like heart motion: its span, its outliers, its missing samples.
+"""Whether a recording looks like heart motion: its span, its outliers, its missing samples,
+the gaps in its sample times.
 
 Heart motion spans 0.5–40 mm peak to peak: a few millimetres on the epicardium, up to about
 20 mm at the mitral annulus, more with breathing. A recording far outside that range was most
@@ -19,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rhmpc.sim.recordings.gaps import find_gaps
 from rhmpc.sim.recordings.recorded import LENGTH_UNITS, RecordedMotion
 
 #: The length units a fix may name, smallest first (``µm`` is ``um``).
@@ -49,6 +51,10 @@ class Plausibility:
     min_seconds : float
         The span is judged only on a recording with at least this much time of complete
         samples: a shorter stretch may hold less than a beat [s].
+    max_gap : float
+        The longest gap in the sample times that passes without a warning [s]
+        (:mod:`rhmpc.sim.recordings.gaps`): 1 s, a beat at 60 beats/min; over a longer one a
+        predictor goes without a sample for a beat or more.
     """
 
     min_span: float = 0.5e-3
@@ -57,6 +63,7 @@ class Plausibility:
     outlier_factor: float = 10.0
     max_missing: float = 0.5
     min_seconds: float = 2.0
+    max_gap: float = 1.0
 
     def __post_init__(self) -> None:
         if not 0 < self.min_span < self.max_span < math.inf:
@@ -70,6 +77,8 @@ class Plausibility:
             raise ValueError(f"max_missing must be in [0, 1] [-], got {self.max_missing!r}")
         if not 0 <= self.min_seconds < math.inf:
             raise ValueError(f"min_seconds must be >= 0 [s], got {self.min_seconds!r}")
+        if not 0 < self.max_gap < math.inf:
+            raise ValueError(f"max_gap must be > 0 [s], got {self.max_gap!r}")
 
 
 def robust_span(z: np.ndarray, quantile: float) -> float:
@@ -140,10 +149,23 @@ def missing_problem(rec: RecordedMotion, settings: Plausibility = Plausibility()
             "rests on those")
 
 
+def gap_problem(rec: RecordedMotion, settings: Plausibility = Plausibility()) -> str | None:
+    """The gaps of at least ``max_gap`` in the sample times of ``rec``
+    (:func:`rhmpc.sim.recordings.gaps.find_gaps`), when there are any."""
+    gaps = find_gaps(rec.t, settings.max_gap)
+    if not gaps.count:
+        return None
+    return (f"{rec.name}: {gaps.count} gap(s) of {settings.max_gap:g} s or more in the sample "
+            f"times, {gaps.seconds:.4g} s in all; the longest {gaps.longest:.4g} s from "
+            f"t = {gaps.at:.4g} s: nothing was measured there (rhmpc data show lists every "
+            "gap)")
+
+
 def check_recording(rec: RecordedMotion, settings: Plausibility = Plausibility(), *,
-                    span: bool = True, missing: bool = True) -> list[str]:
+                    span: bool = True, missing: bool = True, gaps: bool = True) -> list[str]:
     """Warn (:class:`RecordingWarning`) about what makes ``rec`` implausible as heart motion:
-    its span (``span``: also its outliers), its missing samples (``missing``).
+    its span (``span``: also its outliers), its missing samples (``missing``), the gaps in its
+    sample times (``gaps``).
 
     Returns
     -------
@@ -155,6 +177,8 @@ def check_recording(rec: RecordedMotion, settings: Plausibility = Plausibility()
         problems += [span_problem(rec, settings), outlier_problem(rec, settings)]
     if missing:
         problems.append(missing_problem(rec, settings))
+    if gaps:
+        problems.append(gap_problem(rec, settings))
     messages = [p for p in problems if p is not None]
     for message in messages:
         warnings.warn(message, RecordingWarning, stacklevel=2)

@@ -8,6 +8,8 @@ CSV          header ``t,x1,y1,z1,x2,y2,z2,…`` (unit suffixes as in a one-point
 NPZ          ``position`` of shape (n, P, 3), or (n, 3P) with x1, y1, z1, x2, …
 MAT          a 3P × n (or n × 3P) matrix, e.g. 12 × N for four points: x1, y1, z1, x2, …
              along its shorter axis
+ROS bag      a ``geometry_msgs/PoseArray`` or ``visualization_msgs/MarkerArray`` topic
+             (:mod:`rhmpc.sim.recordings.bagmsgs`)
 ===========  =========================================================================
 
 Points are numbered from 1, in the file's order. A one-point file is a file of one point.
@@ -20,40 +22,22 @@ from pathlib import Path
 
 import numpy as np
 
-from rhmpc.sim.recordings.csvfile import read_csv
-from rhmpc.sim.recordings.matfile import load_mat
+from rhmpc.sim.recordings.formats import read_any
 from rhmpc.sim.recordings.plausible import check_recording
-from rhmpc.sim.recordings.recorded import RecordedMotion, RecordingError, check_file, check_rate
-from rhmpc.sim.recordings.text import read_npz
+from rhmpc.sim.recordings.recorded import RecordedMotion, RecordingError, check_rate
 from rhmpc.sim.recordings.timebase import check_time_unit
 
 
-def _wide(path: Path, units, var, rows, cols, rate) -> RecordedMotion:
-    """Every column of a recording: (n, 1), (n, 3) or (n, 3P)."""
-    check_file(path)
-    suffix = path.suffix.lower()
-    if suffix == ".mat":
-        return load_mat(path, var=var, rows=rows, cols=cols, rate=rate, units=units,
-                        points=True)
-    if var is not None or rows is not None or cols is not None or rate is not None:
-        raise RecordingError(f"{path}: --var, --rows, --cols and --rate apply to .mat files")
-    if suffix in {".csv", ".txt"}:
-        return read_csv(path, units, points=True)
-    if suffix == ".npz":
-        return read_npz(path, units, points=True)
-    raise RecordingError(f"{path}: unsupported file type {path.suffix!r} "
-                         "(use .csv, .npz or .mat)")
-
-
 def load_points(path: str | Path, units: str | None = None, var: str | None = None,
-                rows=None, cols=None, rate: float | None = None) -> list[RecordedMotion]:
+                rows=None, cols=None, rate: float | None = None, topic: str | None = None,
+                frame: str | None = None) -> list[RecordedMotion]:
     """Every tracked point of a recording, in the file's order (module docstring).
 
     Parameters
     ----------
     path : str or Path
-        ``.csv``/``.txt``, ``.npz`` or ``.mat``.
-    units, var, rows, cols, rate : optional
+        ``.csv``/``.txt``, ``.npz``, ``.mat`` or a ROS bag.
+    units, var, rows, cols, rate, topic, frame : optional
         As for :func:`rhmpc.sim.recordings.load_recording`; ``rows``/``cols`` select one point.
 
     Returns
@@ -74,7 +58,7 @@ def load_points(path: str | Path, units: str | None = None, var: str | None = No
         for its span, and for each point with more than half of its samples missing.
     """
     path = Path(path)
-    wide = _wide(path, units, var, rows, cols, rate)
+    wide = read_any(path, units, var, rows, cols, rate, topic, frame, points=True)
     check_rate(wide)
     check_time_unit(wide)
     if wide.dim <= 3:
@@ -88,7 +72,7 @@ def load_points(path: str | Path, units: str | None = None, var: str | None = No
             raise RecordingError(f"{path}: {where} has no complete sample (all missing)")
     check_recording(wide, missing=False)  # the units once per file, the gaps per point
     for rec in recordings:
-        check_recording(rec, span=False)
+        check_recording(rec, span=False, gaps=False)
     return recordings
 
 

@@ -30,6 +30,19 @@ SNAP = 1e-9
 MIN_RATE = 1.0
 
 
+def interval_steps(t: np.ndarray) -> np.ndarray:
+    """k_i = max(1, round((t_{i+1} − t_i)/Δ̃)): each interval of the increasing times ``t``
+    [s] in steps of their median interval Δ̃, shape (n − 1,)."""
+    gaps = np.diff(np.asarray(t, dtype=float))
+    return np.maximum(np.rint(gaps / np.median(gaps)), 1.0)
+
+
+def nominal_rate(t: np.ndarray) -> float:
+    """The nominal sample rate of the increasing times ``t`` (n ≥ 2) [Hz]: Σ k_i / (t[-1] −
+    t[0]), the intervals counted in steps of the median interval (:func:`interval_steps`)."""
+    return float(np.sum(interval_steps(t)) / (t[-1] - t[0]))
+
+
 class RecordingError(ValueError):
     """A recording file is missing, unreadable or malformed; the message names file and line."""
 
@@ -89,9 +102,7 @@ class RecordedMotion:
         Timestamps written with few decimals (1/30 s as 0.033 and 0.034) give the true rate,
         not 1/Δ̃; a gap of about k intervals counts as k.
         """
-        gaps = np.diff(self.t)
-        steps = np.maximum(np.rint(gaps / np.median(gaps)), 1.0)
-        return float(np.sum(steps) / (self.t[-1] - self.t[0]))
+        return nominal_rate(self.t)
 
     @property
     def missing(self) -> np.ndarray:

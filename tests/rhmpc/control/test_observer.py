@@ -145,3 +145,22 @@ def test_readings_that_are_not_finite_are_held_out(phantom_arm):
         tau = c.step(0, arm.q0 + bad)
         assert np.all(c.x_hat == 0.0) and c.encoder_counts["held"] == 1
         assert np.all(np.isfinite(tau))
+
+
+def test_a_reading_that_is_not_finite_is_held_out_after_a_reacquire_too(phantom_arm):
+    """A hold that ends (the reading moved again) opens a grace in which readings are fused
+    whatever the gate says: a NaN then (a reading that did not come) is still held out, and
+    the estimate stays finite."""
+    robot, arm = phantom_arm
+    res = robot.encoder_resolution
+    c = library(robot, arm)
+    ticks = c.observer.settings.reacquire_ticks
+    missing = 50 + ticks + 3  # within the grace after the reacquisition
+
+    def reading(k, q):  # joint 0 offset by 2 mrad from tick 50 (alive), one reading lost
+        q = np.rint(q / res) * res + np.array([2e-3, 0.0, 0.0]) * (k >= 50)
+        return np.full_like(q, np.nan) if k == missing else q
+
+    est, _, taus = _loop(c, arm, missing + 2, reading)
+    assert c.encoder_counts == {"held": ticks + 1, "reacquired": 1}
+    assert np.all(np.isfinite(est)) and np.all(np.isfinite(taus))

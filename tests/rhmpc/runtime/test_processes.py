@@ -6,13 +6,16 @@ import numpy as np
 import pinocchio as pin
 
 from rhmpc.robots import load_robot
-from rhmpc.runtime.processes import BRAKE_S, WATCHDOG_TICKS, _Drivers
+from rhmpc.runtime.processes import BRAKE_S, WATCHDOG_TICKS, Drivers
 
 
 def test_a_silent_controller_leaves_the_arm_braked_not_pushed():
     robot = load_robot("phantom")
-    drivers, Ts = _Drivers(robot, 0.5e-3), 0.5e-3
+    drivers, Ts = Drivers(robot, 0.5e-3), 0.5e-3
     q = robot.q0.copy()
+    gravity = pin.computeGeneralizedGravity(robot.model, robot.create_data(), q)
+    np.testing.assert_allclose(drivers.torque(None, q), gravity)  # before any torque: held up
+    assert drivers.missed == drivers.safe == 0  # waiting, not missing
     command = np.array([0.2, -0.1, 0.05])
     np.testing.assert_array_equal(drivers.torque(command, q), command)
     for _ in range(WATCHDOG_TICKS):  # a short silence: the last torque holds
@@ -33,7 +36,8 @@ def test_bad_settings_of_sil_are_one_line(capsys):
 
     for argv, words in ((["--priority", "0"], "priority must be 1"),
                         (["--cpu", "100000"], "cpu 100000 is not one"),
-                        (["--predictor", "exact"], "needs a predictor")):
+                        (["--predictor", "exact"], "needs a predictor"),
+                        (["--port", "80"], "port must be 1024")):
         assert main(["sil", "--duration", "2", *argv]) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and words in err[0], err

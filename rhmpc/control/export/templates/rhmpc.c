@@ -89,7 +89,9 @@ static void model_call(int (*f)(const double **, double **, long long *, double 
 static int held_out(rhmpc_t *ctl, const double q[RHMPC_NU], double qf[RHMPC_NU]) {
   int past[RHMPC_NU], any = 0, finite = 1, moved = 1;
   memcpy(qf, q, RHMPC_NU * sizeof(double));
-  if (ctl->grace > 0) { /* after a hold: fused whatever it says, while the filter settles */
+  for (int j = 0; j < RHMPC_NU; j++) finite &= isfinite(q[j]) != 0;
+  if (ctl->grace > 0 && finite) { /* after a hold: fused whatever it says (if it is a number),
+                                     while the filter settles */
     ctl->grace -= 1;
     return 0;
   }
@@ -97,7 +99,6 @@ static int held_out(rhmpc_t *ctl, const double q[RHMPC_NU], double qf[RHMPC_NU])
     const double nu = (q[j] - rhmpc_q0[j]) - ctl->x_prior[j];
     past[j] = !(fabs(nu) <= rhmpc_gate[j]); /* NaN is past */
     any |= past[j];
-    finite &= isfinite(q[j]) != 0;
     if (ctl->suspect[j] && !(q[j] != ctl->first[j])) moved = 0;
   }
   if (!any) {
