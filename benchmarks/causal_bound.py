@@ -28,11 +28,11 @@ import numpy as np
 from scipy.signal import butter, sosfiltfilt
 
 from rhmpc.cli.presets import PRESETS
-from rhmpc.control.reference import ArrayTruth, ExactReference
 from rhmpc.experiment import RunConfig
 from rhmpc.experiment.assembly import build_controller, build_run
 from rhmpc.sim.heart.analysis import fill_gaps
 from rhmpc.sim.loop import run_closed_loop
+from rhmpc.sim.loop.exact import ArrayTruth, ExactReference
 from rhmpc.studies.paper import COLUMNS
 
 #: Cut-off frequencies of the bound [Hz].

@@ -5,7 +5,7 @@ The package's parts (``docs/design/index.md`` maps what each may import):
 - :mod:`rhmpc.io` — the one guarded reader, the one atomic writer, the table of bounds;
 - :mod:`rhmpc.robots`, :mod:`rhmpc.predictors` — the robots, the heart-motion predictors;
 - :mod:`rhmpc.sim` — the simulated world: heart, sensors, plant, recordings, closed loop;
-- :mod:`rhmpc.control` — the controller: QP, per-tick MPC, reference builder, settings;
+- :mod:`rhmpc.control` — the controller: its formulation and settings, its library's binding;
 - :mod:`rhmpc.experiment` — one run's configuration (TOML) and its assembly;
 - :mod:`rhmpc.studies` — bench, prediction studies, the Tables I–III comparison;
 - :mod:`rhmpc.tuning` — resumable parameter sweeps;
@@ -36,9 +36,10 @@ except PackageNotFoundError:  # running from a source tree that is not installed
     __version__ = "0.0.0+unknown"
 
 _EXPORTS = {
+    "Controller": "rhmpc.control.controller",
     "MPCSettings": "rhmpc.control.settings",
     "RecedingHorizonMPC": "rhmpc.control.mpc",
-    "ExactReference": "rhmpc.control.reference",
+    "ExactReference": "rhmpc.sim.loop.exact",
     "PredictedReference": "rhmpc.control.reference",
     "RunConfig": "rhmpc.experiment",
     "load_config": "rhmpc.experiment",
