@@ -12,15 +12,15 @@ moment ahead):
   own holding the run, on the other processors.
 
 The parts are supervised by :mod:`rhmpc.runtime.supervisor` and reported by
-:mod:`rhmpc.runtime.report`. Only the run's processes can command: the key (:mod:`rhmpc.runtime.wire.key`) reaches the
-controller through an inherited pipe and the others in memory, never a command line or the
-environment, and every message is sealed with it. The deployment supervises its parts: a
-part that dies, or a controller whose supervisor stopped the run (the tool off the POI,
-deadlines missed), stops every process in the safe state (the controller first, so that the
-robot's drivers brake) and raises :class:`DeploymentError` with one line naming the part and
-the cause. Every child ends with this process however it ends (the parent-death signal). The
-tool's positions the robot logged are scored where the POI was measured, as the in-process run
-is.
+:mod:`rhmpc.runtime.report`. Only the run's processes can command: the key
+(:mod:`rhmpc.runtime.wire.key`) reaches the controller through an inherited pipe and the others in
+memory, never a command line or the environment, and every message is sealed with it. The
+deployment supervises its parts: a part that dies, or a controller whose supervisor stopped the run
+(the tool off the POI, deadlines missed), stops every process in the safe state (the controller
+first, so that the robot's drivers brake) and raises :class:`DeploymentError` with one line naming
+the part and the cause. Every child ends with this process however it ends (the parent-death
+signal). The tool's positions the robot logged are scored where the POI was measured, as the in-
+process run is.
 """
 
 from __future__ import annotations
