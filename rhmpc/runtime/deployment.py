@@ -19,8 +19,8 @@ deployment supervises its parts: a part that dies, or a controller whose supervi
 (the tool off the POI, deadlines missed), stops every process in the safe state (the controller
 first, so that the robot's drivers brake) and raises :class:`DeploymentError` with one line naming
 the part and the cause. Every child ends with this process however it ends (the parent-death
-signal). The tool's positions the robot logged are scored where the POI was measured, as the in-
-process run is.
+signal). The tool's positions the robot logged are scored where the POI was measured, as the
+in-process run is.
 """
 
 from __future__ import annotations
