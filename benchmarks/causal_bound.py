@@ -28,13 +28,12 @@ import numpy as np
 from scipy.signal import butter, sosfiltfilt
 
 from rhmpc.cli.presets import PRESETS
-from rhmpc.control.reference import ExactReference
 from rhmpc.experiment import RunConfig
 from rhmpc.experiment.assembly import build_controller, build_run
 from rhmpc.paper.tables import COLUMNS
-from rhmpc.positions import ArrayTruth
 from rhmpc.sim.heart.analysis import fill_gaps
 from rhmpc.sim.loop import run_closed_loop
+from rhmpc.sim.loop.exact import ArrayTruth, ExactReference
 
 #: Cut-off frequencies of the bound [Hz].
 CUTOFFS = (26.0, 40.0, 60.0)

@@ -97,6 +97,7 @@ def plant_tick(label: str, ticks: int = 4000) -> dict:
     import time
 
     import numpy as np
+    import pinocchio as pin
 
     from rhmpc.experiment import RunConfig, build_run
     from rhmpc.timing.yardstick import GainTick
@@ -106,7 +107,7 @@ def plant_tick(label: str, ticks: int = 4000) -> dict:
         config = config.replace(**{"plant.model": "hardware"})
     run = build_run(config)
     plant, gain = run.plant, GainTick(run.controller.mpc)
-    hold = run.controller.cancellation.torque(run.robot.q0, np.zeros(3))
+    hold = pin.computeGeneralizedGravity(run.robot.model, run.robot.create_data(), run.robot.q0)
     x, ref, u = np.zeros(6), np.tile(run.arm.y0, (run.controller.N, 1)), np.zeros(3)
     plant_ns, gain_ns, clock = [], [], time.perf_counter_ns
     for i in range(ticks):

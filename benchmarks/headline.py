@@ -73,9 +73,9 @@ def main() -> None:
     R.write("headline", "Closed loop on the main job", {
         "scenario": "fixed-a2-top", "sensor": "sonomicrometry", "seed": 0,
         "duration_s": duration, "settling_s": settling, "rows": data}, {"": tab}, a.quick,
-        notes="The simulation's tick is the Python controller's, which a study runs; the "
-              "controller to deploy is the C of `rhmpc export`, whose tick the benchmarks "
-              "page gives.")
+        notes="A simulation runs the controller to deploy: one library, the C of `rhmpc "
+              "export`, bound to Python; the run's predictor feeds it from Python. The "
+              "benchmarks page gives its tick.")
 
 
 if __name__ == "__main__":

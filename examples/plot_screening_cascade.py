@@ -12,21 +12,21 @@ by 2 mm every 250 ms, so that the torque bounds bind after each jump (this is th
 import matplotlib.pyplot as plt
 import numpy as np
 
-from rhmpc.bench.ticks import heart_like_reference
-from rhmpc.control.mpc import RecedingHorizonMPC
+from rhmpc.bench.ticks import bench_controller, heart_like_reference
 from rhmpc.control.settings import MPCSettings
 from rhmpc.robots import linearize, load_robot
 
 arm = linearize(load_robot("phantom"))
-mpc = RecedingHorizonMPC(arm, MPCSettings())
+controller = bench_controller(arm, MPCSettings())  # the controller's library: its MPC alone
+mpc = controller.mpc
 ticks = 2000
 ref = heart_like_reference(ticks + mpc.N + 1, arm.Ts, np.random.default_rng(0), arm.y0,
                            jump=2e-3, jump_every=500)
 x = np.zeros(arm.nx)
 level, tau = np.zeros(ticks, int), np.zeros((ticks, mpc.nu))
 for k in range(ticks):
-    tau[k] = mpc.step(x, ref[k + 1 : k + 1 + mpc.N])
-    level[k] = mpc.stats.level
+    tau[k] = controller.mpc_step(x, ref[k + 1 : k + 1 + mpc.N])
+    level[k] = controller.stats.level
     x = arm.A @ x + arm.B @ tau[k]
 print({lv: int(np.sum(level == lv)) for lv in (1, 2, 3)})
 

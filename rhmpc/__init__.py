@@ -5,8 +5,8 @@ The package's parts (``docs/design/index.md`` maps what each may import):
 - :mod:`rhmpc.io` — the one guarded reader, the one atomic writer, the table of bounds;
 - :mod:`rhmpc.robots`, :mod:`rhmpc.predictors` — the robots, the heart-motion predictors;
 - :mod:`rhmpc.sim` — the simulated world: heart, sensors, plant, recordings, closed loop;
-- :mod:`rhmpc.positions` — what the controller and the world share: a truth held in an array;
-- :mod:`rhmpc.control` — the controller: QP, per-tick MPC, reference builder, settings;
+- :mod:`rhmpc.positions` — what the controller and the world share: points in the workspace;
+- :mod:`rhmpc.control` — the controller: its formulation and settings, its library's binding;
 - :mod:`rhmpc.experiment` — one run's configuration (TOML) and its assembly;
 - :mod:`rhmpc.timing` — the gain tick every timing is stated in, the host's stalls;
 - :mod:`rhmpc.report` — one run's summary, figures, 3-D replay and MAT file;
@@ -43,9 +43,10 @@ except PackageNotFoundError:  # running from a source tree that is not installed
     __version__ = "0.0.0+unknown"
 
 _EXPORTS = {
+    "Controller": "rhmpc.control.controller",
     "MPCSettings": "rhmpc.control.settings",
     "RecedingHorizonMPC": "rhmpc.control.mpc",
-    "ExactReference": "rhmpc.control.reference",
+    "ExactReference": "rhmpc.sim.loop.exact",
     "PredictedReference": "rhmpc.control.reference",
     "RunConfig": "rhmpc.experiment",
     "load_config": "rhmpc.experiment",

@@ -1,6 +1,6 @@
-"""The exported controller of ``rhmpc export`` timed tick by tick in a closed loop of its own
-(``rhmpc bench --controller c``), and replayed against the Python controller it was generated
-from (the module docstring of :mod:`rhmpc.bench.ticks` states the protocol)."""
+"""The whole controller timed tick by tick in a closed loop of its own, its own RLS refreshing
+(``rhmpc bench --controller c``; the module docstring of :mod:`rhmpc.bench.ticks` states the
+protocol)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from rhmpc.control.settings import MPCSettings
 from rhmpc.sim.loop.metrics import warm_ns
 from rhmpc.timing.yardstick import GainTick
 
-__all__ = ["c_against_python", "exported_ticks", "percentiles"]
+__all__ = ["exported_ticks", "percentiles"]
 
 
 def percentiles(values: np.ndarray) -> dict[str, float]:
@@ -27,19 +27,20 @@ def percentiles(values: np.ndarray) -> dict[str, float]:
 
 def exported_ticks(robot: str, settings: MPCSettings, traj: np.ndarray, warmup: int,
                    disable_gc: bool = True) -> dict:
-    """The whole exported controller in a closed loop of its own on ``traj`` (n + N + 1, 3):
-    every tick timed inside C, refresh ticks included, beside the gain tick (see the module
-    docstring). Returns ``exported_tick_us``, ``exported_tick_g``, ``exported_refresh_us``,
-    its levels, fallbacks and the tracking of the linear model."""
-    from rhmpc.control.export import controller_in_c
+    """The whole controller in a closed loop of its own on ``traj`` (n + N + 1, 3), its own
+    generalized RLS refreshing: every tick timed inside C, refresh ticks included, beside the
+    gain tick (see the module docstring). Returns ``exported_tick_us``, ``exported_tick_g``,
+    ``exported_refresh_us``, its levels, fallbacks and the tracking of the linear model."""
     from rhmpc.experiment import RunConfig
-    from rhmpc.experiment.assembly import deployable
+    from rhmpc.experiment.assembly import build_controller, build_reference, build_robot
+    from rhmpc.sim.loop.clock import clock_for_rate
 
     config = RunConfig(robot=robot, mpc=settings)
-    python = deployable(config, 257.0)
-    c, arm, center = controller_in_c(python, robot), python.mpc.arm, traj.mean(axis=0)
+    model, arm = build_robot(config)
+    reference = build_reference(config, None, None, clock_for_rate(config.loop, 257.0))
+    c, center = build_controller(config, model, arm, reference, "c"), traj.mean(axis=0)
     c.place(center)
-    gain, every, n = GainTick(python.mpc), config.loop.downsample, traj.shape[0] - c.N - 1
+    gain, every, n = GainTick(c.mpc), config.loop.downsample, traj.shape[0] - c.N - 1
     tick_ns, gain_ns = np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64)
     level, err, refreshed = np.zeros(n, dtype=np.int64), np.zeros(n), np.zeros(n, dtype=bool)
     x, u_prev = np.zeros(arm.nx), np.zeros(arm.nu)
@@ -69,7 +70,6 @@ def exported_ticks(robot: str, settings: MPCSettings, traj: np.ndarray, warmup: 
         "controller": "c",
         "exported_tick_us": percentiles(us),
         "c_tick_us": percentiles(us[~refreshed[sl]]),
-        "c_vs_python_max_frac": c_against_python(python, c, traj, center, every),
         "exported_tick_g": {k: v / g for k, v in percentiles(us).items() if k != "mean"},
         "exported_gain_tick_us": percentiles(gain_ns[sl] * 1e-3),
         "exported_refresh_tick_us": percentiles(us[refreshed[sl]]) if refreshed[sl].any() else None,
@@ -82,24 +82,3 @@ def exported_ticks(robot: str, settings: MPCSettings, traj: np.ndarray, warmup: 
         "exported_tracking_rms_mm": float(1e3 * np.sqrt(np.mean(err[sl] ** 2))),
         "exported_library": c.library,
     }
-
-
-def c_against_python(python, c, traj: np.ndarray, center: np.ndarray, every: int) -> float:
-    """max over the ticks of ``|τ_C − τ_Python|`` / τ_max: both controllers reset, placed
-    at ``center`` and fed the same samples of ``traj`` and the same encoder readings (those of
-    the linear model driven by the C's torque)."""
-    c.reset()
-    c.place(center)
-    python.reset()
-    python.reference.place(center)
-    arm, n = python.mpc.arm, traj.shape[0] - c.N - 1
-    x, worst = np.zeros(arm.nx), 0.0
-    for k in range(n):
-        if k % every == 1:
-            for controller in (c, python):
-                controller.refresh(k, traj[k - 1] - center, (k - 1) * arm.Ts)
-        q = arm.q0 + x[: arm.nu]
-        tau_c, tau_py = c.step(k, q), python.step(k, q)
-        worst = max(worst, float(np.max(np.abs(tau_c - tau_py) / python.torque_limit)))
-        x = arm.A @ x + arm.B @ c.u
-    return worst

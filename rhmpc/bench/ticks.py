@@ -5,31 +5,27 @@ on a moving heart-like reference with occasional reference jumps that saturate t
 bounds (so that the QP has active constraints). Every tick measures, with
 ``time.perf_counter_ns``:
 
-* the MPC tick ``mpc.step(x, r)`` (whole call) with the given settings (by default screening
-  on: OSQP runs only on ticks where the unconstrained minimiser violates a bound);
-* the same MPC with OSQP on *every* tick (:class:`EveryTick`: levels 1 and 2 of the cascade
-  skipped), whole call and its parts (``mpc.stats.parts_ns``), fed the same state and reference;
+* the MPC tick of the controller's library (``rhmpc_mpc``: the screening cascade, OSQP only
+  where levels 1 and 2 do not settle the tick), timed inside C;
+* the same QP given to OSQP's own Python interface on *every* tick (:class:`EveryTick`),
+  warm-started by OSQP, fed the same state and reference;
 * the *gain tick* g (:class:`rhmpc.timing.yardstick.GainTick`): the unconstrained gain on
   p = [x; r; u_{−1}], u = K p + k₀ — the yardstick every timing is a multiple of — and the same
   mat-vec in plain NumPy (``K @ concatenate(...) + k0``), so that g reads as what it is;
 * an *exact tick*: the same QP (same P, q, A, l, u) solved by the active-set solver DAQP,
   hot-started from its previous active set. Its u0 is the accuracy reference:
   ``u0_error = |u0_mpc − u0_exact| / τ_max`` per joint (τ_max = the robot's torque limit);
-* with ``controller="c"``, the whole exported controller of ``rhmpc export``
-  (:mod:`rhmpc.control.export`: the generalized predictor's refresh, the observer, the MPC and
-  the cancellation) in a closed loop of its own on the same linear model and reference: a sensor
-  samples the reference every ``downsample`` ticks (one tick late), the model is driven by the
-  MPC torque, and every tick, refresh ticks included, is timed inside C
-  (``clock_gettime(CLOCK_MONOTONIC)``) beside the gain tick on the C's own state and points:
-  ``exported_tick_us`` and ``exported_tick_g``; ``c_tick_us``, the ticks without a refresh;
-  and, replayed after the timed loop with the Python controller it was generated from fed the
-  same samples and encoder readings, ``c_vs_python_max_frac`` = max over the ticks of
-  ``|τ_C − τ_Python|`` / τ_max.
+* with ``controller="c"``, the whole controller as ``rhmpc export`` writes it (the
+  generalized predictor's refresh in C, the observer, the MPC and the cancellation) in a closed
+  loop of its own on the same linear model and reference: a sensor samples the reference every
+  ``downsample`` ticks (one tick late), the model is driven by the MPC torque, and every tick,
+  refresh ticks included, is timed inside C (``clock_gettime(CLOCK_MONOTONIC)``) beside the
+  gain tick on the C's own state and points: ``exported_tick_us`` and ``exported_tick_g``;
+  ``c_tick_us``, the ticks without a refresh.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import gc
 import math
 import platform
@@ -40,16 +36,20 @@ from importlib.metadata import version as _version
 import numpy as np
 
 from rhmpc.bench.exported import exported_ticks, percentiles
+from rhmpc.control.controller import Controller
+from rhmpc.control.export.generate import osqp_solver
 from rhmpc.control.mpc import RecedingHorizonMPC
-from rhmpc.control.offset import OutputOffset
+from rhmpc.control.observer import JointObserver
+from rhmpc.control.reference import PredictedReference
 from rhmpc.control.settings import MPCSettings
 from rhmpc.experiment.tables import to_dict
+from rhmpc.predictors.registry import make_predictor
 from rhmpc.robots import linearize, load_robot
 from rhmpc.robots.linearize import LinearArm
 from rhmpc.sim.loop.metrics import warm_ns
 from rhmpc.timing.yardstick import GainTick, numpy_gain_step
 
-#: Controllers :func:`run_bench` can time: the Python MPC alone, or with its compiled twin.
+#: What :func:`run_bench` times: the MPC alone, or also the whole controller (``"c"``).
 CONTROLLERS: tuple[str, ...] = ("python", "c")
 
 
@@ -105,40 +105,64 @@ def heart_like_reference(
 
 
 class QPParameters:
-    """p = [x; r_1..r_N; u_{−1}; d] in a preallocated buffer, d by forward kinematics as in the
-    controller (:class:`rhmpc.control.offset.OutputOffset`), so that the exact tick solves the QP
-    the controller solves."""
+    """p = [x; r_1..r_N; u_{−1}; d] in a preallocated buffer, d = p(q0 + x_q) − (C x + y0) by the
+    robot's forward kinematics as in the controller, so that the references solve the QP the
+    controller solves."""
 
     def __init__(self, mpc: RecedingHorizonMPC) -> None:
-        qp = mpc.qp
+        qp, arm = mpc.qp, mpc.arm
         self.p = np.zeros(qp.npar)
         self._nx, self._nr, self._nu = qp.nx, qp.N * qp.ny, qp.nu
         self._d = self.p[self._nx + self._nr + self._nu :]
-        self._offset = OutputOffset(mpc.arm) if mpc.settings.offset_correction else None
+        self._arm = arm if mpc.settings.offset_correction else None
 
     def fill(self, x: np.ndarray, ref: np.ndarray, u_prev: np.ndarray) -> bool:
         """Write p; False if it is not finite."""
-        p = self.p
+        p, arm = self.p, self._arm
         p[: self._nx] = x
         p[self._nx : self._nx + self._nr] = ref.reshape(-1)
         p[self._nx + self._nr : self._nx + self._nr + self._nu] = u_prev
-        if self._offset is not None:
-            self._offset(x, out=self._d)
+        if arm is not None:
+            self._d[:] = arm.robot.ee_position(arm.q0 + x[: self._nu]) - (arm.C @ x + arm.y0)
         return math.isfinite(p.sum())
 
 
-class EveryTick(RecedingHorizonMPC):
-    """Reference 1: the MPC with its QP given to OSQP on every tick (no screening, no back-off
-    after its failures)."""
+class EveryTick:
+    """Reference 1: the tick's QP given to OSQP's own Python interface on every tick, with the
+    controller's OSQP settings (:func:`rhmpc.control.export.generate.osqp_solver`), warm-started
+    by OSQP: the clipped first input of its iterate after at most ``max_iter`` iterations
+    (``solved`` tells whether it met its tolerance)."""
 
     def __init__(self, mpc: RecedingHorizonMPC) -> None:
-        super().__init__(mpc.arm, dataclasses.replace(mpc.settings, backoff_max_ticks=0))
+        self._qp, self._params = mpc.qp, QPParameters(mpc)
+        self._solver = osqp_solver(mpc.qp, mpc.settings)
+        self.iterations, self.solved, self.solve_ns = 0, True, 0
 
-    def _level1(self) -> bool:
-        return False
+    def __call__(self, x: np.ndarray, ref: np.ndarray, u_prev: np.ndarray) -> np.ndarray:
+        qp = self._qp
+        self._params.fill(x, ref, u_prev)
+        p = self._params.p
+        if qp.param_bounds:
+            lower, upper = qp.bounds(p)
+            self._solver.update(q=qp.q(p), l=lower, u=upper)
+        else:
+            self._solver.update(q=qp.q(p))
+        t0 = time.perf_counter_ns()
+        result = self._solver.solve(raise_error=False)
+        self.solve_ns = time.perf_counter_ns() - t0
+        self.iterations = result.info.iter
+        self.solved = result.info.status_val == 1  # OSQP_SOLVED
+        u = np.nan_to_num(result.x[: qp.nu]) * qp.u_max
+        return np.clip(u, -qp.u_max, qp.u_max)
 
-    def _box_solved(self) -> bool:
-        return False
+
+def bench_controller(arm: LinearArm, settings: MPCSettings) -> Controller:
+    """The controller library of ``settings`` on ``arm`` for :meth:`Controller.mpc_step` (a
+    generalized predictor's reference at 15 ticks, which the MPC alone does not read)."""
+    predictor = make_predictor("generalized", 15 * arm.Ts, data_unit=1.0)
+    reference = PredictedReference(predictor, arm.Ts, settings.horizon, 15)
+    return Controller(RecedingHorizonMPC(arm, settings), reference,
+                      JointObserver(arm, None), None, arm.torque_limit)
 
 
 class ExactTick:
@@ -201,44 +225,43 @@ def _ratio(a: np.ndarray, b: np.ndarray) -> dict[str, float]:
 class _Ticks:
     """One run of the benchmark: the controllers it times and a column per measured figure."""
 
-    COLUMNS = ("tick_ns", "every_ns", "gain_ns", "numpy_ns", "exact_ns", "parts_ns", "iters",
+    COLUMNS = ("tick_ns", "every_ns", "gain_ns", "numpy_ns", "exact_ns", "solve_ns", "iters",
                "exact_iters", "u0_err", "every_err", "active", "screened", "level", "box_iters",
                "err")
 
-    def __init__(self, mpc: RecedingHorizonMPC, total: int) -> None:
+    def __init__(self, controller: Controller, total: int) -> None:
+        mpc = controller.mpc
         arm = mpc.arm
-        self.mpc, self.arm = mpc, arm
+        self.controller, self.mpc, self.arm = controller, mpc, arm
         self.every = EveryTick(mpc)
         self.gain, self.exact = GainTick(mpc), ExactTick(mpc)
         self.numpy_gain = numpy_gain_step(self.gain._K, self.gain._k0)
         self.tau_max = np.asarray(arm.torque_limit, dtype=float)
         for name in self.COLUMNS:
-            shape = (total, 4) if name == "parts_ns" else total
             dtype = float if name.endswith("err") else bool if name in ("active", "screened") \
                 else np.int64
-            setattr(self, name, np.zeros(shape, dtype=dtype))
-        self.exact_failures = 0
+            setattr(self, name, np.zeros(total, dtype=dtype))
+        self.exact_failures = self.every_failures = 0
 
     def tick(self, k: int, x: np.ndarray, ref: np.ndarray) -> np.ndarray:
         """Time every controller on tick ``k`` with state ``x`` and points ``ref``; returns τ."""
-        mpc, every, exact, clock = self.mpc, self.every, self.exact, time.perf_counter_ns
-        u_prev, n_screened = mpc.u_prev, mpc.stats.screened
-        t0 = clock()
-        tau = mpc.step(x, ref)
-        t1 = clock()
+        c, every, exact, clock = self.controller, self.every, self.exact, time.perf_counter_ns
+        u_prev, n_screened = c.u, c.stats.screened
+        tau = c.mpc_step(x, ref)
+        stats = c.stats
         self.gain_ns[k] = warm_ns(self.gain, x, ref, u_prev)
         self.numpy_ns[k] = warm_ns(self.numpy_gain, x, ref, u_prev)
         t2 = clock()
         u_exact = exact(x, ref, u_prev)
         t3 = clock()
-        every.u_prev = u_prev  # the same QP as the default controller's and DAQP's
-        tau_every = every.step(x, ref)
+        tau_every = every(x, ref, u_prev)  # the same QP as the controller's and DAQP's
         t4 = clock()
-        self.tick_ns[k], self.exact_ns[k] = t1 - t0, t3 - t2
-        self.every_ns[k] = t4 - t3
-        self.screened[k] = mpc.stats.screened > n_screened
-        self.level[k], self.box_iters[k] = mpc.stats.level, mpc.stats.box_iterations
-        self.parts_ns[k], self.iters[k] = every.stats.parts_ns, every.stats.iterations
+        self.tick_ns[k], self.exact_ns[k] = c.step_ns, t3 - t2
+        self.every_ns[k], self.solve_ns[k] = t4 - t3, every.solve_ns
+        self.screened[k] = stats.screened > n_screened
+        self.level[k], self.box_iters[k] = stats.level, stats.box_iterations
+        self.iters[k] = every.iterations
+        self.every_failures += not every.solved
         self.exact_iters[k] = exact.iterations
         self.exact_failures += exact.exitflag < 0
         self.active[k] = bool(np.any(np.abs(exact.zhat) >= 1.0 - 1e-9))
@@ -288,10 +311,11 @@ def run_bench(
     arm = arm if arm is not None else linearize(load_robot(robot))
     settings = settings if settings is not None else MPCSettings()
     t_build = time.perf_counter()
-    mpc = RecedingHorizonMPC(arm, settings)
+    library = bench_controller(arm, settings)
     build_s = time.perf_counter() - t_build
+    mpc = library.mpc
     total = warmup + ticks
-    run = _Ticks(mpc, total)
+    run = _Ticks(library, total)
     traj = heart_like_reference(total + mpc.N + 1, arm.Ts, np.random.default_rng(seed), arm.y0,
                                 jump=jump, jump_every=jump_every)
     x = np.zeros(arm.nx)
@@ -323,7 +347,8 @@ def _summary(run: _Ticks, sl: slice) -> dict:
     us = 1e-3
     tick, g, e = run.tick_ns[sl] * us, run.gain_ns[sl] * us, run.exact_ns[sl] * us
     level, every = run.level[sl], run.every_ns[sl] * us
-    u0, parts = run.u0_err[sl], run.parts_ns[sl] * us
+    u0 = run.u0_err[sl]
+    stats = run.controller.stats
     return {
         "nz": run.mpc.qp.nz,
         "tick_us": percentiles(tick),
@@ -337,8 +362,7 @@ def _summary(run: _Ticks, sl: slice) -> dict:
                            else None),
         "osqp_tick_us": percentiles(every),
         "osqp_u0_error_max_frac": float(run.every_err[sl].max()),
-        **{f"{name}_us": percentiles(parts[:, i])
-           for i, name in enumerate(("reference", "update", "solve", "output"))},
+        "solve_us": percentiles(run.solve_ns[sl] * us),
         "iterations": percentiles(run.iters[sl]),
         "gain_tick_us": percentiles(g),
         "numpy_gain_us": percentiles(run.numpy_ns[sl] * us),
@@ -349,10 +373,10 @@ def _summary(run: _Ticks, sl: slice) -> dict:
         "ratio_tick_to_gain": _ratio(tick, g),
         "ratio_tick_to_exact": _ratio(tick, e),
         "ratio_osqp_tick_to_gain": _ratio(every, g),
-        "controller": "python",
-        "fallbacks": dict(run.mpc.stats.fallbacks),
-        "failures": dict(run.mpc.stats.failures),
-        "osqp_fallbacks": dict(run.every.stats.fallbacks),
+        "controller": "mpc",
+        "fallbacks": dict(stats.fallbacks),
+        "failures": dict(stats.failures),
+        "osqp_unsolved": int(run.every_failures),
         "u0_error_max_frac": float(u0.max()),
         "u0_error_p99_frac": float(np.percentile(u0, 99)),
         # on the ticks levels 1 and 2 settled (exact, so rounding only against DAQP)

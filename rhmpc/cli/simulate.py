@@ -55,8 +55,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "settling window (same rate and layout; --poi applies)")
     p.add_argument("--seed", type=int, help="seed of every random draw (default 0)")
     p.add_argument("--controller", choices=("python", "c"), default="python",
-                   help="'c': the compiled controller of `rhmpc export` in the loop (built once, "
-                   "cached; needs a C compiler)")
+                   help="who refreshes the reference: the run's predictor in Python (default), "
+                   "or 'c', the controller library's own RLS predictor, as on a target with no "
+                   "predictor process (one-step, generalized); the tick is the same library")
     add_run_options(p)
     p.add_argument("--out", metavar="FILE", help="write the result document: FILE.json, or "
                    "FILE.mat for MATLAB (the summary and the trace: time, error, ee, poi, "
@@ -196,11 +197,10 @@ def write_outputs(args: argparse.Namespace, result, doc: dict) -> None:
 
 def run(args: argparse.Namespace) -> int:
     config = config_from_args(args)
-    if args.controller == "c":
-        from rhmpc.control.export import missing_toolchain
+    from rhmpc.control.export import missing_toolchain
 
-        if reason := missing_toolchain():
-            raise UsageError(reason)
+    if reason := missing_toolchain():
+        raise UsageError(reason)
     from rhmpc.experiment import run_experiment
     from rhmpc.experiment.config import input_files
 

@@ -1,17 +1,16 @@
-"""The controller: the MPC's QP (formulated once with CasADi), the per-tick controller (the
-exact screening cascade, OSQP, fallbacks), the reference builder, and their settings.
+"""The controller: its description in Python, its tick in the C library generated from it.
 
 - :mod:`~rhmpc.control.settings` — :class:`MPCSettings` and the dataclass ↔ dict helpers;
 - :mod:`~rhmpc.control.qp` — the condensed QP, built once (CasADi);
 - :mod:`~rhmpc.control.envelope` — joint position/velocity and Cartesian limits as soft rows;
-- :mod:`~rhmpc.control.offset` — the output offset from forward kinematics (offset-free MPC);
-- :mod:`~rhmpc.control.box_qp` — level 2 of the cascade, the torque-box QP by active set;
-- :mod:`~rhmpc.control.osqp_solver` — level 3, OSQP set up once;
-- :mod:`~rhmpc.control.fallback` — :class:`MPCStats`, the fallback torques;
-- :mod:`~rhmpc.control.mpc` — :class:`RecedingHorizonMPC`, the per-tick controller;
-- :mod:`~rhmpc.control.reference` — the N-point reference from a predictor or the true future.
+- :mod:`~rhmpc.control.mpc` — :class:`RecedingHorizonMPC`, the QP and the screening cascade's data;
+- :mod:`~rhmpc.control.observer` — the observer's gains and innovation gate;
+- :mod:`~rhmpc.control.cancellation` — the controller's model of the arm's nonlinearities;
+- :mod:`~rhmpc.control.reference` — the reference's settings and a predictor driving it;
+- :mod:`~rhmpc.control.controller` — :class:`Controller`, the binding to the library;
+- :mod:`~rhmpc.control.export` — the generator of that library (``rhmpc export``).
 
-Imports only :mod:`rhmpc.robots`, :mod:`rhmpc.predictors` and :mod:`rhmpc.compiled` (the export's
+Imports only :mod:`rhmpc.robots`, :mod:`rhmpc.predictors` and :mod:`rhmpc.compiled` (the library's
 build). The names below load on first use, so that ``rhmpc.control.settings`` stays cheap to import.
 """
 
@@ -24,8 +23,8 @@ _EXPORTS = {
     "MPCSettings": "rhmpc.control.settings",
     "CondensedQP": "rhmpc.control.qp",
     "build_condensed_qp": "rhmpc.control.qp",
+    "Controller": "rhmpc.control.controller",
     "RecedingHorizonMPC": "rhmpc.control.mpc",
-    "ExactReference": "rhmpc.control.reference",
     "PredictedReference": "rhmpc.control.reference",
 }
 

@@ -21,12 +21,16 @@ time; nothing here runs per tick.
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
+from importlib.metadata import version as _version
+from pathlib import Path
 
-import casadi as ca
 import numpy as np
 import scipy.linalg
 
+from rhmpc import io
+from rhmpc.compiled import cached
 from rhmpc.control.envelope import EnvelopeRows, envelope_rows
 from rhmpc.control.settings import MPCSettings
 from rhmpc.robots.linearize import LinearArm
@@ -118,14 +122,6 @@ class CondensedQP:
     def npar(self) -> int:
         return self.F.shape[1]
 
-    @property
-    def bound_index(self) -> slice | np.ndarray:
-        """``bound_columns`` as a slice where they are one ascending run (a view, not a copy)."""
-        c = self.bound_columns
-        if c.size and c[0] >= 0 and np.array_equal(c, np.arange(c[0], c[0] + c.size)):
-            return slice(int(c[0]), int(c[0]) + c.size)
-        return c
-
     def q(self, p: np.ndarray) -> np.ndarray:
         """Linear cost term q(p) = F p + f0."""
         return self.F @ p + self.f0
@@ -166,7 +162,8 @@ def _check_arm(arm: LinearArm) -> None:
 
 
 def build_condensed_qp(arm: LinearArm, settings: MPCSettings) -> CondensedQP:
-    """Formulate the MPC QP with CasADi and extract its numeric data.
+    """Formulate the MPC QP with CasADi and extract its numeric data, once per distinct arm,
+    settings and formulation (:func:`rhmpc.compiled.cached`, keyed by their hash).
 
     Raises
     ------
@@ -175,6 +172,20 @@ def build_condensed_qp(arm: LinearArm, settings: MPCSettings) -> CondensedQP:
         joint bounds of the wrong length or excluding q0, a singular Hessian, …).
     """
     _check_arm(arm)
+    key = hashlib.sha256(repr(settings).encode() + _version("casadi").encode())
+    robot = getattr(arm, "robot", None)
+    for part in (arm.A, arm.B, arm.C, arm.y0, arm.q0, arm.Ts, arm.M0, arm.torque_limit,
+                 arm.position_limits, arm.velocity_limit):
+        key.update(b"-" if part is None else np.asarray(part, dtype=float).tobytes())
+    for c, lo, hi in getattr(robot, "coupling", None) or ():
+        key.update(np.asarray([*c, lo, hi], dtype=float).tobytes())
+    for module in ("qp.py", "envelope.py"):
+        key.update(io.read_bytes(Path(__file__).with_name(module), track=False))
+    return cached(CondensedQP, "qp", key.hexdigest(), lambda: _formulate(arm, settings))
+
+
+def _formulate(arm: LinearArm, settings: MPCSettings) -> CondensedQP:
+    """The QP's data (:func:`build_condensed_qp`)."""
     s = settings
     nx, nu, N = arm.nx, arm.nu, s.horizon
     u_max = (1.0 - s.torque_margin) * np.asarray(arm.torque_limit, dtype=float)
@@ -247,6 +258,7 @@ def _extract(arm: LinearArm, s: MPCSettings, u_max: np.ndarray, env, blocking: n
 
     Returns H, F = ∂∇J/∂p, f0 = ∇J(0, 0), ∂g/∂z, ∂g/∂p, g(0, 0) (g: the envelope rows).
     """
+    import casadi as ca  # only where the QP is formulated, not where it is cached
     A, B, C = (ca.DM(np.asarray(m, dtype=float)) for m in (arm.A, arm.B, arm.C))
     y0 = ca.DM(np.asarray(arm.y0, dtype=float))
     nx, nu, ny, N, nz = arm.nx, arm.nu, arm.ny, s.horizon, blocking.shape[1]
@@ -339,24 +351,3 @@ def _constraints(
     row_scale = np.ones(m)
     row_scale[nv:] = 1.0 / np.linalg.norm(A[nv:], axis=1)
     return A * row_scale[:, None], G * row_scale[:, None], l0 * row_scale, u0 * row_scale
-
-
-def screening_rows(qp: CondensedQP) -> np.ndarray:
-    """H such that H [z; s; p_B; 1] ≤ 0 holds exactly when l0 − G p ≤ A [z; s] ≤ u0 − G p.
-
-    ``p_B`` are the parameters the bounds depend on (``qp.bound_columns``). A row with a finite
-    upper bound gives [A_i, G_i, −u0_i], one with a finite lower bound [−A_i, −G_i, l0_i]; rows
-    that hold whatever z and p (the slacks' s ≥ 0 at s = 0) are left out.
-    """
-    nz, nv = qp.nz, qp.nv
-    G = qp.G[:, qp.bound_columns]
-    rows = []
-    for i in range(qp.A.shape[0]):
-        if np.isfinite(qp.u0[i]):
-            rows.append(np.concatenate([qp.A[i, :nv], G[i], [-qp.u0[i]]]))
-        if np.isfinite(qp.l0[i]):
-            rows.append(np.concatenate([-qp.A[i, :nv], -G[i], [qp.l0[i]]]))
-    H = np.array(rows).reshape(-1, nv + G.shape[1] + 1)
-    H[:, nz:nv] = 0.0  # the slacks are 0 at level 1
-    needed = np.any(H[:, :nz] != 0, axis=1) | np.any(H[:, nv:-1] != 0, axis=1) | (H[:, -1] > 0)
-    return np.ascontiguousarray(H[needed])

@@ -46,7 +46,7 @@ class MPCSettings:
              q_lo − s ≤ q_k ≤ q_hi + s,  |q̇_k| ≤ q̇_max + s,  Cartesian set (+ s)  (soft, s ≥ 0)
 
     ``d = p(q̂) − (C x̂ + y0)`` is the output offset from forward kinematics
-    (:mod:`rhmpc.control.offset`); the envelope rows and their slacks are described in
+    (:mod:`rhmpc.control.export.dynamics`); the envelope rows and their slacks are described in
     :mod:`rhmpc.control.envelope`.
 
     with ``Q_k = tracking_weight · w_k / position_scale² · I``, ``R = effort_weight ·
@@ -124,7 +124,7 @@ class MPCSettings:
         scaled by u_max (inputs of magnitude ≤ 1) [-]; the relative one is 0.
     box_max_iter : int or None
         Cap on level 2's active-set solves (Cholesky factorisations of at most nz × nz) per
-        tick [-]; past it the tick takes the fallback (:mod:`rhmpc.control.box_qp`). None
+        tick [-]; past it the tick takes the fallback (:mod:`rhmpc.control.mpc`). None
         (default): its PDAS solves plus nz, those of a dual phase in which every torque bound
         enters once and none leaves (Goldfarb & Idnani 1983).
     backoff_max_ticks : int

@@ -13,15 +13,15 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from rhmpc.control.cancellation import NonlinearityCancellation
 from rhmpc.control.controller import Controller
+from rhmpc.control.export import PREDICTORS, ToolchainError
 from rhmpc.control.mpc import RecedingHorizonMPC
 from rhmpc.control.observer import JointObserver
-from rhmpc.control.reference import ExactReference, PredictedReference
+from rhmpc.control.reference import PredictedReference
 from rhmpc.errors import UsageError
 from rhmpc.experiment.config import RunConfig
 from rhmpc.experiment.fitting import fit_predictor
@@ -29,6 +29,7 @@ from rhmpc.experiment.monitor import HeartRateScore
 from rhmpc.predictors.registry import make_predictor
 from rhmpc.robots import LinearArm, Robot, linearize, load_robot
 from rhmpc.sim.loop.clock import PredictorClock, clock_for_rate, predictor_clock
+from rhmpc.sim.loop.exact import ExactReference
 from rhmpc.sim.loop.faults import FaultyEncoders, split_faults
 from rhmpc.sim.loop.streams import SourceTruth
 from rhmpc.sim.plant import make_plant
@@ -39,10 +40,8 @@ from rhmpc.sim.sensors.playback import UpsampledSamples, sensor_samples
 from rhmpc.sim.sensors.stream import SampleSource
 from rhmpc.sim.sources import HeartSource, heart_source
 
-if TYPE_CHECKING:
-    from rhmpc.control.export.binding import CController
-
-#: Who runs the controller: this package's Python, or the C of ``rhmpc export``.
+#: Who serves the reference's refreshes: the run's predictor (Python, ``rhmpc.predictors``), or
+#: the controller library's own RLS predictor (``"c"``: a target with no predictor process).
 IMPLEMENTATIONS: tuple[str, ...] = ("python", "c")
 
 
@@ -59,8 +58,8 @@ class Run:
         The controller's linear model about the home posture.
     plant
         The plant (:func:`build_plant`).
-    controller : Controller or CController
-        The Python controller, or the exported C one (``implementation="c"``).
+    controller : Controller
+        The controller (its library: :class:`rhmpc.control.controller.Controller`).
     truth : SourceTruth
         The centred POI truth, read per window.
     anchor : ndarray, shape (3,)
@@ -81,14 +80,14 @@ class Run:
     measured : tuple or None
         A recording's own samples (t [s] from 0, z (n, d) [m]): where the run is scored.
     reference : ExactReference or PredictedReference or None
-        The controller's reference (the Python controller's; None for the C one).
+        The controller's reference.
     """
 
     config: RunConfig
     robot: Robot
     arm: LinearArm
     plant: object
-    controller: Controller | CController
+    controller: Controller
     truth: SourceTruth
     anchor: np.ndarray
     stream: SampleSource
@@ -104,8 +103,8 @@ class Run:
 def build_run(config: RunConfig, implementation: str = "python", progress=None) -> Run:
     """Build robot, heart motion, sensor stream, reference, controller and plant for ``config``.
 
-    ``implementation="c"``: the controller is the C one of ``rhmpc export`` (built once and
-    cached, :func:`rhmpc.control.export.controller_in_c`) instead of the Python one. A
+    ``implementation="c"``: the controller library's own RLS predictor serves the refreshes
+    instead of the run's Python predictor (``one-step`` and ``generalized`` only). A
     predictor that learns before the run is fitted (:mod:`rhmpc.experiment.fitting`);
     ``progress(text)`` hears how that goes.
     """
@@ -123,7 +122,7 @@ def build_run(config: RunConfig, implementation: str = "python", progress=None) 
     plant = build_plant(config, robot, arm)
     run = Run(config, robot, arm, plant, controller, truth, anchor, stream, heart.label,
               loop.duration, clock, config.faults.faults, heart.points, heart.measured,
-              getattr(controller, "reference", None))
+              reference)
     fit_predictor(run, progress)
     return run
 
@@ -234,9 +233,9 @@ def build_reference(config: RunConfig, truth: SourceTruth, heart: HeartSource,
 
 
 def build_controller(config: RunConfig, robot: Robot, arm: LinearArm, reference,
-                     implementation: str = "python") -> Controller | CController:
-    """The controller of ``config`` around ``reference`` (already placed): Python, or the C of
-    ``rhmpc export`` (``"c"``, built once and cached)."""
+                     implementation: str = "python") -> Controller:
+    """The controller of ``config`` around ``reference``: its library, built once per distinct
+    description and cached; ``"c"``: the library's own RLS predictor serves the refreshes."""
     if implementation not in IMPLEMENTATIONS:
         raise UsageError(f"implementation must be one of {', '.join(IMPLEMENTATIONS)}, "
                          f"got {implementation!r}")
@@ -244,14 +243,16 @@ def build_controller(config: RunConfig, robot: Robot, arm: LinearArm, reference,
     cancellation = None if linear else NonlinearityCancellation(
         robot, config.mismatch, config.plant.stiction_velocity)
     delay = config.hardware.delay_ticks if config.plant.model == "hardware" else 0
-    controller = Controller(RecedingHorizonMPC(arm, config.mpc), reference,
-                            JointObserver(arm, robot.encoder_resolution, config.observer),
-                            cancellation, robot.torque_limit, delay)
-    if implementation == "c":
-        from rhmpc.control.export import controller_in_c  # a C compiler at first use
-
-        return controller_in_c(controller, config.robot)
-    return controller
+    if implementation == "c" and config.predictor not in PREDICTORS:
+        raise UsageError(f"--controller c runs the library's own RLS predictor ("
+                         f"{', '.join(PREDICTORS)}), not {config.predictor}")
+    try:
+        return Controller(RecedingHorizonMPC(arm, config.mpc), reference,
+                          JointObserver(arm, robot.encoder_resolution, config.observer),
+                          cancellation, robot.torque_limit, delay,
+                          internal=implementation == "c")
+    except ToolchainError as exc:
+        raise UsageError(f"the controller's build: {exc}") from None
 
 
 def build_plant(config: RunConfig, robot: Robot, arm: LinearArm):

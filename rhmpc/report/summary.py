@@ -67,25 +67,20 @@ def _measured_lines(doc: dict) -> str:
         ("after_last_sample_ticks", "ticks after the last sample")) if ex.get(k)]
     return out + ("\n                   left out: " + ", ".join(left) if left else "")
 
-#: The controller that ran (the document's ``implementation``), as the summary names it.
-CONTROLLERS = {"python": "Python reference", "c": "deployable C (rhmpc export)"}
+#: Who served the refreshes (the document's ``implementation``), as the summary names it.
+CONTROLLERS = {"python": "the library, the run's predictor in Python",
+               "c": "the library with its own RLS predictor"}
 
 
 def _tick_line(doc: dict, Ts: float) -> str:
-    """The controller's tick: the deployable C's against the real-time budget, or the Python
-    reference's as the speed of a study (the deployable's is what ``rhmpc bench --controller
-    c`` and ``simulate --controller c`` report)."""
+    """The controller's tick: the library's step, timed inside C, against the real-time budget,
+    with the refreshes (the Python predictor's time included where it served them)."""
     tick = doc["tick_us"]
     times = (f"p50 {tick['p50']:.1f} µs   p99 {tick['p99']:.1f} µs   "
              + (f"p99.9 {tick['p999']:.1f} µs   " if "p999" in tick else "")
              + f"max {tick['max']:.1f} µs")
-    if doc.get("implementation") == "c":
-        line = (f"  controller tick  {times}   (the deployable C: budget {1e6 * Ts:.0f} µs, "
-                "refreshes included)")
-    else:
-        line = (f"  study speed      Python reference tick {times}   (not the deployable's: "
-                "rhmpc bench --controller c and simulate --controller c time the C against "
-                f"the {1e6 * Ts:.0f}-µs budget)")
+    line = (f"  controller tick  {times}   (budget {1e6 * Ts:.0f} µs, refreshes included"
+            + ("" if doc.get("implementation") == "c" else ", the Python predictor's too") + ")")
     return line + (_in_gain_ticks(doc) if "gain_tick_us" in doc else "")
 
 
@@ -124,8 +119,7 @@ def format_summary(doc: dict, settling_rule: str | None = None) -> str:
         + (", failures " + ", ".join(f"{k} {v}" for k, v in fails.items()) if fails else ""),
         f"  wall time        {doc['wall_s']:.1f} s ({_speed(doc['real_time_factor'])})"
         + (f", peak memory {doc['peak_rss_mb']:.0f} MB" if "peak_rss_mb" in doc else "")
-        + ("; the controller in C (rhmpc export): refresh, observer, MPC, cancellation"
-           if doc.get("implementation") == "c" else ""),
+
     ]
     counts = dict(doc.get("predictor_counts") or {})
     if counts:  # what the predictor and the safety layers did (missing samples, outliers, …)

@@ -11,53 +11,43 @@ moment ahead):
 - the **robot**, the **predictor** and the **sensor** (:mod:`.processes`), each a process of its
   own holding the run, on the other processors.
 
-Only the run's processes can command: the key (:mod:`rhmpc.runtime.wire.key`) reaches the
-controller through an inherited pipe and the others in memory, never a command line or the
-environment, and every message is sealed with it. The deployment supervises its parts: a
-part that dies, or a controller whose supervisor stopped the run (the tool off the POI,
-deadlines missed), stops every process in the safe state (the controller first, so that the
-robot's drivers brake) and raises :class:`DeploymentError` with one line naming the part and
-the cause. Every child ends with this process however it ends (the parent-death signal). The
-tool's positions the robot logged are scored where the POI was measured, as the in-process run
-is.
+The parts are supervised by :mod:`rhmpc.runtime.supervisor` and reported by
+:mod:`rhmpc.runtime.report`. Only the run's processes can command: the key
+(:mod:`rhmpc.runtime.wire.key`) reaches the controller through an inherited pipe and the others in
+memory, never a command line or the environment, and every message is sealed with it. The
+deployment supervises its parts: a part that dies, or a controller whose supervisor stopped the run
+(the tool off the POI, deadlines missed), stops every process in the safe state (the controller
+first, so that the robot's drivers brake) and raises :class:`DeploymentError` with one line naming
+the part and the cause. Every child ends with this process however it ends (the parent-death
+signal). The tool's positions the robot logged are scored where the POI was measured, as the
+in-process run is.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-import multiprocessing
 import os
 import signal
-import subprocess
 import tempfile
 import time
 from dataclasses import dataclass
-from io import BytesIO
 from pathlib import Path
 
-import numpy as np
-
-from rhmpc import io
 from rhmpc.control.reference import LATENCY_CAP
 from rhmpc.errors import UsageError
 from rhmpc.experiment import RunConfig, run_experiment
 from rhmpc.experiment.assembly import build_run
-from rhmpc.positions import embed3
 from rhmpc.runtime import host, processes, ros2
 from rhmpc.runtime.build import build_controller
+from rhmpc.runtime.report import collect, report, score
+from rhmpc.runtime.supervisor import GRACE_S, Group, cause, supervise
 from rhmpc.runtime.wire import WORKSPACE_RADIUS, Bounds, bind, new_key, write_key
-from rhmpc.sim.loop.metrics import MeasuredScore
-from rhmpc.tuning.workers import program_dies_with_parent
 
 __all__ = ["GRACE_S", "DeploymentError", "SilSettings", "run_sil"]
 
-#: Seconds from a stop request to SIGKILL.
-GRACE_S = 2.0
 #: The run's epoch lies this far after the processes start [s].
 STARTUP_S = 2.0
-#: What the controller program's exit statuses mean.
-_CONTROLLER_EXITS = {1: "was stopped by a signal", 2: "refused its command line"}
 
 
 @dataclass(frozen=True)
@@ -145,77 +135,6 @@ def _on_sigterm(*_) -> None:
     raise _Stopped
 
 
-@dataclass
-class _Part:
-    """A child process of the run and the part it plays."""
-
-    name: str
-    child: subprocess.Popen | multiprocessing.Process
-
-    @property
-    def code(self) -> int | None:
-        """Its exit status (negative: the signal that ended it), None while it runs."""
-        if isinstance(self.child, subprocess.Popen):
-            return self.child.poll()
-        return None if self.child.is_alive() else self.child.exitcode
-
-    def stop(self) -> None:
-        if self.code is None:
-            self.child.terminate()
-
-    def kill(self) -> None:
-        if self.code is None:
-            self.child.kill()
-
-    def reap(self) -> None:
-        if isinstance(self.child, subprocess.Popen):
-            self.child.wait()
-        else:
-            self.child.join()
-
-
-class _Group:
-    """The run's parts: started, supervised and stopped together, the controller first."""
-
-    def __init__(self) -> None:
-        self.parts: list[_Part] = []
-
-    def spawn(self, name: str, command: list[str], fds: tuple[int, ...] = ()) -> None:
-        child = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                                 text=True, pass_fds=fds, preexec_fn=program_dies_with_parent)
-        self.parts.append(_Part(name, child))
-
-    def fork(self, name: str, target, *args) -> None:
-        child = multiprocessing.get_context("fork").Process(
-            target=processes.run_part, args=(name, target, *args, os.getpid()), name=name)
-        child.start()
-        self.parts.append(_Part(name, child))
-
-    def failed(self) -> _Part | None:
-        """The first part that ended with a failure (the host probe's own is not one)."""
-        return next((p for p in self.parts if p.name != "host probe" and p.code not in (None, 0)),
-                    None)
-
-    def running(self) -> bool:
-        return any(p.code is None for p in self.parts)
-
-    def stop(self) -> None:
-        """The controller first (its silence brings the robot's drivers to their safe state
-        after their watchdog), the others once they braked; SIGKILL after :data:`GRACE_S`."""
-        for part in self.parts:
-            if part.name == "controller":
-                part.stop()
-        time.sleep(2 * processes.WATCHDOG_TICKS * 0.5e-3)
-        for part in self.parts:
-            part.stop()
-        deadline = time.monotonic() + GRACE_S
-        while self.running() and time.monotonic() < deadline:
-            time.sleep(0.02)
-        for part in self.parts:
-            part.kill()
-            part.reap()
-
-
 def _bind_ports(settings: SilSettings) -> dict:
     """The run's sockets on loopback, bound before any process starts (no port can be taken
     between a choice and a bind). :class:`UsageError` names a port already in use."""
@@ -276,29 +195,29 @@ def _deploy(plan: _Deployment, sockets: dict, say) -> dict:
     with tempfile.TemporaryDirectory(prefix="rhmpc-sil-") as tmp:
         folder = Path(tmp)
         role = _role(plan, sockets, folder)
-        group, previous = _Group(), signal.signal(signal.SIGTERM, _on_sigterm)
+        group, previous = Group(), signal.signal(signal.SIGTERM, _on_sigterm)
         try:
             _start(group, plan, role, sockets)
             say(f"{duration:g} s in real time ({len(group.parts)} processes)")
-            failed = _supervise(group, STARTUP_S + duration + 30.0)
+            failed = supervise(group, STARTUP_S + duration + 30.0)
         finally:
             group.stop()
             signal.signal(signal.SIGTERM, previous)
         if failed is not None:
             refusals = plan.allowed.refusals()
             refused = "; this host refused " + ", ".join(refusals) if refusals else ""
-            raise DeploymentError(_cause(failed, role, folder, duration) + refused)
-        documents, arrays, q, host_latency = _collect(folder, host_tool(group), plan.config)
+            raise DeploymentError(cause(failed, role, folder, duration) + refused)
+        documents, arrays, q, host_latency = collect(folder, host_tool(group), plan.config)
         try:  # a tracker's bridge: the POI where the tracker measured it
             measured = ros2.taken(folder, plan.run) if plan.settings.tracker else plan.run.measured
         except ValueError as exc:
             raise DeploymentError(str(exc)) from None
-    score = _score(plan.run, q, documents["predictor"]["outliers"], measured)
+    scored = score(plan.run, q, documents["predictor"]["outliers"], measured)
     return report(plan.config, plan.built, plan.settings.internal, documents, arrays,
-                  host_latency, score, plan.in_process, (load_before, os.getloadavg()))
+                  host_latency, scored, plan.in_process, (load_before, os.getloadavg()))
 
 
-def host_tool(group: _Group) -> str:
+def host_tool(group: Group) -> str:
     """The host probe's tool: cyclictest, or the controller's loop without its work."""
     probe = next(p for p in group.parts if p.name == "host probe")
     return "cyclictest" if "cyclictest" in str(probe.child.args[0]) else \
@@ -338,7 +257,7 @@ def _controller_command(plan: _Deployment, role: processes.Role, key_fd: int,
     return command + ([] if settings.internal else ["--no-internal"])
 
 
-def _start(group: _Group, plan: _Deployment, role: processes.Role, sockets: dict) -> None:
+def _start(group: Group, plan: _Deployment, role: processes.Role, sockets: dict) -> None:
     """Every part, on the run's clock: the controller (its key through a pipe it inherits),
     the host probe, then the robot, the predictor and the sensor (forked, key in memory)."""
     read, write = os.pipe()
@@ -369,124 +288,3 @@ def _with(role: processes.Role, priority: int, fifo: bool) -> processes.Role:
     return dataclasses.replace(role, priority=max(priority, 1) if fifo else 0)
 
 
-def _supervise(group: _Group, seconds: float) -> _Part | None:
-    """Watch the parts until every one has ended (None) or one failed or hung (that part)."""
-    deadline = time.monotonic() + seconds
-    while group.running():
-        failed = group.failed()
-        if failed is not None:
-            return failed
-        if time.monotonic() > deadline:
-            return next(p for p in group.parts if p.code is None)
-        time.sleep(0.05)
-    return group.failed()
-
-
-def _cause(part: _Part, role: processes.Role, folder: Path, duration: float) -> str:
-    """One line: which part, what happened, when."""
-    at = max(0.0, (time.clock_gettime_ns(time.CLOCK_MONOTONIC) - role.epoch_ns) * 1e-9)
-    code = part.code
-    if code is None:
-        what = "hung (still running after the run's end)"
-    elif code < 0:
-        what = f"died ({signal.Signals(-code).name})"
-    elif part.name == "controller" and code == 3:
-        doc = io.read_json(folder / "controller.json", track=False)
-        what = f"stopped the run: {doc.get('stopped', 'its supervisor')}"
-    elif part.name == "controller":
-        err = part.child.stderr.read().strip().splitlines() if part.child.stderr else []
-        what = f"{_CONTROLLER_EXITS.get(code, f'failed (exit {code})')}" + \
-            (f": {err[-1]}" if err else "")
-    else:
-        fault = folder / f"{part.name}.fault"
-        what = "failed: " + (io.read_text(fault).strip() if fault.is_file() else f"exit {code}")
-    return (f"the {part.name} {what} at {min(at, duration):.1f} s of the {duration:g}-s run; "
-            "every part stopped in the safe state")
-
-
-def _collect(folder: Path, tool: str, config: RunConfig):
-    """The parts' documents, the controller's timing arrays, the robot's log and the probe's."""
-    documents = {name: io.read_json(folder / f"{name}.json", track=False)
-                 for name in ("controller", "robot", "predictor", "sensor")}
-    arrays = {name: host.read_int64(folder / f"controller.{name}")
-              for name in ("wake", "work", "step", "s2t")}
-    q = np.load(BytesIO(io.read_bytes(folder / "robot_q.npy", track=False)))
-    return documents, arrays, q, host.read_probe(folder / "host", tool, config.loop.Ts)
-
-
-def _score(run, q: np.ndarray, outliers: list[float], measured) -> dict:
-    """The tool after each tick against the POI where it was measured (``measured``: a
-    recording's or a tracker's samples, at their instants) or at every tick (a synthetic
-    motion, None), as the in-process run."""
-    loop = run.config.loop
-    ticks = loop.ticks
-    done = np.isfinite(q).all(axis=1)
-    ee = np.full((ticks, 3), np.nan)
-    ee[done] = [run.robot.ee_position(row) for row in q[done]]
-    if measured is not None:
-        t, z = measured
-        placed = run.anchor + embed3(np.asarray(z, dtype=float).reshape(len(t), -1)
-                                     - run.truth.center)
-    else:
-        t = (np.arange(ticks) + 1) * loop.Ts
-        placed = run.anchor + embed3(run.truth.window(1, ticks + 1))
-    score = MeasuredScore(t, placed, loop.settling_ticks * loop.Ts, ticks * loop.Ts, loop.Ts)
-    score.add(0, ee)
-    score.fold(outliers)
-    return score.result()
-
-
-def _packets(documents: dict) -> dict:
-    """Per kind: sent, and what its receivers took, lost and dropped."""
-    controller, robot, predictor = (documents[k] for k in ("controller", "robot", "predictor"))
-    sent = {"measured_cp": documents["sensor"]["sent"], "forecast_cp": predictor["forecasts"],
-            "measured_js": controller["ticks"] + 1, "servo_jf": controller["ticks"]}
-    out = {kind: {"sent": sent[kind], "received": controller["received"][kind],
-                  "lost": controller["lost"][kind]}
-           for kind in ("measured_cp", "forecast_cp", "measured_js")}
-    out["servo_jf"] = {"sent": sent["servo_jf"], "received": robot["arrivals"]["received"][
-        "servo_jf"], "lost": robot["arrivals"]["lost"]["servo_jf"]}
-    out["measured_cp_at_predictor"] = {"sent": sent["measured_cp"],
-                                       "received": predictor["arrivals"]["received"][
-                                           "measured_cp"],
-                                       "lost": predictor["arrivals"]["lost"]["measured_cp"]}
-    return out
-
-
-def report(config: RunConfig, built, internal: bool, documents: dict, arrays: dict,
-           host_latency: dict, score: dict, in_process: dict, load: tuple) -> dict:
-    """The run's report: timing, packets, drops, the score beside the in-process one."""
-    controller, robot = documents["controller"], documents["robot"]
-    fallback = f"the controller's own {built.internal} RLS" if internal else "hold"
-    return {
-        "recording": config.data or config.scenario, "predictor": config.predictor,
-        "duration_s": config.loop.duration, "ticks": controller["ticks"],
-        "deadline_misses": controller["deadline_misses"],
-        "wakeup_latency_us": host.percentiles(arrays["wake"] * 1e-3),
-        "host_wakeup_latency_us": host_latency,
-        "tick_work_us": host.percentiles(arrays["work"] * 1e-3),
-        "controller_step_us": host.percentiles(arrays["step"] * 1e-3),
-        "sensor_to_torque_ms": {k: None if v is None else round(v * 1e-3, 3) for k, v in
-                                host.percentiles(arrays["s2t"] * 1e-3).items()},
-        "packets": _packets(documents),
-        "dropped": {"controller": controller["dropped"],
-                    "predictor": documents["predictor"]["arrivals"]["dropped"],
-                    "robot": robot["arrivals"]["dropped"]},
-        "stale_encoders": controller["stale_encoders"],
-        "torques_missed": robot["torques_missed"], "torques_late": robot["torques_late"],
-        "robot_safe_state_ticks": robot["safe_state_ticks"],
-        "forecasts_rejected": controller["forecasts_rejected"],
-        "forecast_fallback": fallback,
-        "points_served_ticks": controller["served"],
-        "rms_error_mm": score["rms_error_mm"], "max_error_mm": score["max_error_mm"],
-        "scored_samples": score["scored_samples"],
-        "in_process_rms_error_mm": in_process["rms_error_mm"],
-        "supervisor_tool_error_mm": controller["tool_error_mm"],
-        "fallbacks": controller["fallbacks"], "failures": controller["failures"],
-        "predictor_forecast_ms": documents["predictor"]["forecast_ms"],
-        "realtime": {"controller": controller["realtime"], "robot": robot["scheduling"],
-                     "sensor": documents["sensor"]["scheduling"],
-                     "predictor": documents["predictor"]["scheduling"]},
-        "host_load": {"before": [round(v, 2) for v in load[0]],
-                      "after": [round(v, 2) for v in load[1]], "cpus": os.cpu_count()},
-    } | ros2.report(documents)

@@ -39,8 +39,8 @@ from collections.abc import Callable, Iterable, Iterator
 
 import numpy as np
 
-from rhmpc.positions import ArrayTruth
 from rhmpc.sim.loop.clock import PredictorClock, arrival_tick
+from rhmpc.sim.loop.exact import ArrayTruth
 from rhmpc.sim.loop.metrics import warm_ns
 from rhmpc.sim.loop.results import (
     YARDSTICK_EVERY,

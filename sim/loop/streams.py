@@ -6,7 +6,7 @@ position at every tick; the loop reads both in blocks:
 - :class:`StreamCursor` walks a sample source (:mod:`rhmpc.sim.sensors.stream`) forward in time: the
   newest sample arrived by a given instant;
 - a *truth* has ``center`` (the POI's mean over the run), ``n_ticks`` and ``window(i0, i1)``, the
-  centred positions of ticks ``i0 … i1 − 1``: :class:`rhmpc.positions.ArrayTruth` wraps
+  centred positions of ticks ``i0 … i1 − 1``: :class:`rhmpc.sim.loop.exact.ArrayTruth` wraps
   an array, :class:`SourceTruth` evaluates a motion source per window (two passes: the mean,
   then the run).
 

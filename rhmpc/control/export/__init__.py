@@ -1,18 +1,19 @@
-"""The controller as generated C: ``rhmpc export`` and the binding that runs it in a loop.
+"""The controller as generated C: ``rhmpc export`` and the binding that runs it.
 
 =============  ==================================================================
 ``generate``   :func:`export_controller`: the whole real-time controller as C sources
 ``dynamics``   the controller's model (cancellation, output offset) as CasADi expressions
-``binding``    :class:`CController`: the exported controller behind the Python calls
+``layout``     the names and the public struct the C and its binding share
+``binding``    :class:`Controller`: the library built from an export, behind Python calls
 =============  ==================================================================
 """
 
 from __future__ import annotations
 
-from .binding import CController, ToolchainError, build_library, controller_in_c, missing_toolchain
+from .binding import Controller, ToolchainError, build_library, missing_toolchain
 from .generate import PREDICTORS, ExportError, ExportInfo, export_controller
 
 __all__ = [
-    "PREDICTORS", "CController", "ExportError", "ExportInfo", "ToolchainError", "build_library",
-    "controller_in_c", "export_controller", "missing_toolchain",
+    "PREDICTORS", "Controller", "ExportError", "ExportInfo", "ToolchainError", "build_library",
+    "export_controller", "missing_toolchain",
 ]

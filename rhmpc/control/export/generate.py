@@ -41,11 +41,12 @@ from pathlib import Path
 import numpy as np
 
 from rhmpc import io
-from rhmpc.control.mpc import MPCStats, RecedingHorizonMPC
-from rhmpc.control.reference import LATENCY_CAP, PredictedReference
+from rhmpc.control.mpc import RecedingHorizonMPC
+from rhmpc.control.qp import CondensedQP
+from rhmpc.control.reference import LATENCY_CAP
+from rhmpc.control.settings import MPCSettings
 
-from .dynamics import cancel_function, generate, offset_function, tool_function
-from .layout import template_subs
+from .layout import MPCStats, template_subs
 
 #: Prefix of OSQP's generated globals (``rhmpc_osqp_solver``) and workspace files.
 OSQP_PREFIX = "rhmpc_osqp_"
@@ -54,6 +55,11 @@ TEMPLATES = ("rhmpc.h", "rhmpc.c", "rhmpc_mpc.c", "rhmpc_reference.c", "rhmpc_da
              "CMakeLists.txt", "example/main.c")
 #: The predictors the exported controller runs (the registry's names and their classes').
 PREDICTORS = {"one-step": "OneStepRLS", "generalized": "GeneralizedRLS"}
+#: The most values of the regressor of the RLS predictor the library runs itself (its covariance,
+#: 3·order squared, is part of the controller's state: 512 kB at most).
+RLS_MAX = 256
+#: Reference points beyond the horizon that one push of a study's exact future covers [ticks].
+EXACT_SPAN = 64
 
 
 class ExportError(ValueError):
@@ -80,6 +86,25 @@ class ExportInfo:
     key: str
     files: tuple[str, ...]
     notes: tuple[str, ...] = ()
+
+
+def osqp_solver(qp: CondensedQP, s: MPCSettings):
+    """Level 3, the condensed QP in OSQP (Stellato et al., "OSQP: an operator splitting solver
+    for quadratic programs", Math. Prog. Comp. 12, 2020), set up for its embedded code: a fixed
+    step ρ (its KKT matrix factorised once), no polishing, no timer, no scaling (the QP is
+    scaled physically), the residuals checked every 5 iterations and the duality gap not
+    required (the envelope's slack penalty ρ₁ turns slack noise into a gap far above the
+    tolerance)."""
+    import osqp
+    import scipy.sparse as sp
+
+    solver = osqp.OSQP()
+    solver.setup(
+        sp.csc_matrix(np.triu(qp.P)), qp.f0.copy(), sp.csc_matrix(qp.A), qp.l0.copy(),
+        qp.u0.copy(), verbose=False, eps_abs=s.osqp_eps_abs, eps_rel=0.0,
+        max_iter=s.max_iter, rho=s.osqp_rho, adaptive_rho=False, check_termination=5,
+        check_dualgap=False, polishing=False, scaling=0, warm_starting=True)
+    return solver
 
 
 def _version(name: str) -> str:
@@ -180,7 +205,7 @@ def _q_row_order(mpc: RecedingHorizonMPC) -> np.ndarray:
     48 % of the block columns skipped against 26 % in the natural order)."""
     qp = mpc.qp
     nx, N, ny = qp.nx, qp.N, qp.ny
-    F = np.asarray(mpc._F_z)
+    F = np.asarray(mpc.F_z)
 
     def key(i: int) -> tuple:
         rc = np.flatnonzero(F[i, nx:nx + N * ny])
@@ -193,7 +218,7 @@ def _blocked_arrays(mpc: RecedingHorizonMPC) -> dict[str, tuple[np.ndarray, str]
     """The block-sparse maps of the screening cascade: F_z (q_z = F_z [p; 1]) and the distinct
     envelope rows' z part, as (array, C type) per name."""
     out: dict[str, tuple[np.ndarray, str]] = {}
-    for name, blocked in (("F_z", _blocked(mpc._F_z, _q_row_order(mpc))),
+    for name, blocked in (("F_z", _blocked(mpc.F_z, _q_row_order(mpc))),
                           ("A_env", _blocked(_envelope_rows(mpc)[0]))):
         for part, values in blocked.items():
             out[f"{name}_{part}"] = (values, "double" if part == "T" else "int")
@@ -207,9 +232,9 @@ def _data_arrays(mpc: RecedingHorizonMPC) -> dict[str, np.ndarray]:
         "F_ext": np.column_stack([qp.F, qp.f0]),
         "minimiser": np.asarray(qp.minimiser),
         # the screening cascade (levels 1 and 2), column-major: the controller's own arrays
-        "neg_W": _column_major(mpc.box._negW),
-        "W": np.asarray(mpc.box.W),  # symmetric, read by rows
-        "H": _column_major(mpc.box.H),
+        "neg_W": _column_major(-mpc.W),
+        "W": np.asarray(mpc.W),  # symmetric, read by rows
+        "H": _column_major(mpc.hessian),
         "G_env_T": _column_major(_envelope_rows(mpc)[1]),
         "l0": np.asarray(qp.l0),
         "u0": np.asarray(qp.u0),
@@ -218,7 +243,7 @@ def _data_arrays(mpc: RecedingHorizonMPC) -> dict[str, np.ndarray]:
         "u_max": np.asarray(qp.u_max),
         "M0": np.asarray(mpc.arm.M0, dtype=float),
         # the dual the controller pairs with a primal plan in its warm starts
-        "y_plan": np.asarray(getattr(mpc, "_y_zero", np.zeros(qp.A.shape[0])), dtype=float),
+        "y_plan": np.asarray(mpc.y_plan, dtype=float),
     }
 
 
@@ -254,37 +279,63 @@ def _csr(values: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return ptr, cols, values[rows, cols]
 
 
-def _reference_subs(reference) -> dict[str, object]:
-    """The placeholders of the reference and its predictor, from the Python reference;
-    ExportError for a reference the C does not run."""
-    predictor = getattr(reference, "predictor", None)
-    name = type(predictor).__name__
-    if not isinstance(reference, PredictedReference) or name not in PREDICTORS.values():
-        which = "the exact future" if predictor is None else name
-        raise ExportError(f"the exported controller runs the {' or '.join(PREDICTORS)} "
-                          f"predictor, not {which}")
-    p, r, gate = predictor.settings, reference.settings, reference.gate
-    unit = getattr(predictor, "unit", None)
-    if unit is None or not math.isclose(unit, 1.0) or p.dim not in (None, 3):
-        raise ExportError("the exported predictor takes 3-D samples in metres")
-    generalized = name == "GeneralizedRLS"
-    K = r.prediction_points + math.ceil(LATENCY_CAP / reference.dt)
+def _gate_subs(reference) -> dict[str, object]:
+    """The placeholders of the outlier gate and the reference guard."""
+    r, gate = reference.settings, reference.gate
     return {
-        "PREDICTOR": next(k for k, v in PREDICTORS.items() if v == name),
-        "DT": repr(reference.dt), "REFRESH_TICKS": reference.refresh_ticks,
-        "PREDICTION_POINTS": r.prediction_points, "KMAX": K, "SPAN": reference._span,
-        "GENERALIZED": int(generalized), "CORRELATED": int(p.correlated), "ORDER": p.order,
-        "POINTS": p.points if generalized else 1, "GATE": int(gate is not None),
-        "GATE_CALIBRATION": gate.calibration if gate is not None and gate.gate is None else 0,
-        "FORGETTING": repr(float(p.forgetting_factor)), "DELTA": repr(float(p.delta)),
-        "P_MAX": repr(float(p.p_max_factor / p.delta)), "HOLD_INIT": int(p.init == "hold"),
-        "GUARD_MULTIPLE": repr(float(predictor.GUARD_MULTIPLE)),
-        "ENVELOPE_BLOCK": max(1, round(predictor.RANGE_SECONDS / 8 / predictor.dt)),
-        "GATE_FLOOR": "NAN" if gate is None or gate.gate is None else repr(float(gate.gate)),
+        "GATE": int(gate is not None),
+        "GATE_CALIBRATION": gate.calibration if gate is not None and gate.floor is None else 0,
+        "GATE_FLOOR": "NAN" if gate is None or gate.floor is None else repr(float(gate.floor)),
         "MIN_FLOOR": repr(float(gate.MIN_FLOOR if gate is not None else 0.0)),
         "MAX_REJECTIONS": gate.max_rejections if gate is not None else 0,
         "RELOCK": gate.relock if gate is not None else 1,
         "GUARD_SPEED": repr(float(r.guard_speed)), "GUARD_MARGIN": repr(float(r.guard_margin)),
+        "PREDICTION_POINTS": r.prediction_points,
+        "KMAX": r.prediction_points + math.ceil(LATENCY_CAP / reference.dt),
+    }
+
+
+#: The placeholders of a library without a predictor of its own (a dormant RLS of order 1).
+_NO_PREDICTOR = {"PREDICTOR": "outside", "INTERNAL": 0, "GENERALIZED": 0, "CORRELATED": 1,
+                 "ORDER": 1, "POINTS": 1, "FORGETTING": "1.0", "DELTA": "1.0", "P_MAX": "1.0",
+                 "HOLD_INIT": 1, "GUARD_MULTIPLE": "1.0", "ENVELOPE_BLOCK": 1}
+
+
+def _reference_subs(reference, Ts: float, required: bool = True) -> dict[str, object]:
+    """The placeholders of the reference and of the RLS predictor the library runs itself
+    (where the reference's predictor is one), from the Python reference. A reference without a
+    predictor (a study's exact future) gets its points whole (``rhmpc_points``); another
+    predictor feeds the library from outside. ExportError where ``required`` and the library
+    cannot run the predictor itself."""
+    predictor = getattr(reference, "predictor", None)
+    name = type(predictor).__name__
+    if predictor is None:
+        return {**_NO_PREDICTOR, "DT": repr(float(Ts)), "REFRESH_TICKS": 1,
+                "SPAN": reference.N + EXACT_SPAN, "GATE": 0, "GATE_CALIBRATION": 0,
+                "GATE_FLOOR": "NAN", "MIN_FLOOR": "0.0", "MAX_REJECTIONS": 0, "RELOCK": 1,
+                "GUARD_SPEED": "0.0", "GUARD_MARGIN": "1.0", "PREDICTION_POINTS": 4, "KMAX": 4}
+    common = {"DT": repr(reference.dt), "REFRESH_TICKS": reference.refresh_ticks,
+              "SPAN": reference.span, **_gate_subs(reference)}
+    p, unit = getattr(predictor, "settings", None), getattr(predictor, "unit", None)
+    problem = (f"the exported controller runs the {' or '.join(PREDICTORS)} predictor, not "
+               f"{name}" if name not in PREDICTORS.values() else
+               "the exported predictor takes 3-D samples in metres"
+               if unit is None or not math.isclose(unit, 1.0) or p.dim not in (None, 3) else
+               f"the exported predictor's regressor holds at most {RLS_MAX} values, not "
+               f"{3 * p.order}" if 3 * p.order > RLS_MAX else None)
+    if problem is not None:
+        if required:
+            raise ExportError(problem)
+        return {**_NO_PREDICTOR, **common}
+    generalized = name == "GeneralizedRLS"
+    return {
+        "PREDICTOR": next(k for k, v in PREDICTORS.items() if v == name), "INTERNAL": 1,
+        "GENERALIZED": int(generalized), "CORRELATED": int(p.correlated), "ORDER": p.order,
+        "POINTS": p.points if generalized else 1,
+        "FORGETTING": repr(float(p.forgetting_factor)), "DELTA": repr(float(p.delta)),
+        "P_MAX": repr(float(p.p_max_factor / p.delta)), "HOLD_INIT": int(p.init == "hold"),
+        "GUARD_MULTIPLE": repr(float(predictor.GUARD_MULTIPLE)),
+        "ENVELOPE_BLOCK": max(1, round(predictor.RANGE_SECONDS / 8 / predictor.dt)), **common,
     }
 
 
@@ -295,8 +346,12 @@ def _controller_arrays(controller) -> dict[str, np.ndarray]:
     robot = getattr(arm, "robot", None)
     lower, upper = (robot.position_limits if robot is not None
                     else (np.full(n, -np.inf), np.full(n, np.inf)))
-    predict = np.hstack([controller.observer.predict_matrix, np.zeros((2 * n, 1))])
-    return {"correct": np.asarray(controller.observer.correct_matrix), "predict": predict,
+    observer = controller.observer  # both steps as one mat-vec each, on [x; q; 1], [x; u; 1]:
+    L, q0 = observer.L, np.asarray(arm.q0, dtype=float)  # x = [I − L H, L, −L q0] [x⁻; q; 1]
+    correct = np.hstack([np.eye(2 * n) - np.hstack([L, np.zeros((2 * n, n))]), L,
+                         -(L @ q0)[:, None]])
+    predict = np.hstack([observer.A, observer.B, np.zeros((2 * n, 1))])  # x⁻ = A x + B u
+    return {"correct": correct, "predict": predict,
             "tau_max": controller.torque_limit, "q0": np.asarray(arm.q0, dtype=float),
             "q_min": lower, "q_max": upper,
             "gate": np.asarray(controller.observer.gate, dtype=float),
@@ -315,11 +370,11 @@ def _mpc_subs(mpc: RecedingHorizonMPC) -> dict[str, object]:
         "BRAKE": int(_brakes(mpc)), "BRAKE_TICKS": s.block_lengths[0],
         "PLAN_FALLBACK_TICKS": s.plan_fallback_ticks, "MAX_ITER": s.max_iter,
         "BACKOFF_MAX_TICKS": s.backoff_max_ticks,
-        "PARAM_BOUNDS": int(qp.param_bounds), "BOX_MAX_ITER": mpc.box.settings.max_iter,
-        "BOX_PDAS_ITER": mpc.box.settings.pdas_iter,
-        "BOX_PRIMAL_TOL": repr(float(mpc.box.settings.primal_tol)),
-        "BOX_DUAL_TOL": repr(float(mpc.box.settings.dual_tol)),
-        "BOX_KKT_TOL": repr(float(mpc.box.settings.kkt_tol)), "OSQP_PREFIX": OSQP_PREFIX,
+        "PARAM_BOUNDS": int(qp.param_bounds), "BOX_MAX_ITER": mpc.box.max_iter,
+        "BOX_PDAS_ITER": mpc.box.pdas_iter,
+        "BOX_PRIMAL_TOL": repr(float(mpc.box.primal_tol)),
+        "BOX_DUAL_TOL": repr(float(mpc.box.dual_tol)),
+        "BOX_KKT_TOL": repr(float(mpc.box.kkt_tol)), "OSQP_PREFIX": OSQP_PREFIX,
     }
 
 
@@ -349,35 +404,96 @@ def _data_source(controller, robot: str, key: str) -> str:
     return "".join(parts)
 
 
-def _generate_into(controller, robot: str, out: Path) -> tuple[list[str], list[str], str]:
-    """Write every file of the export into the empty directory ``out``; returns the files
-    (relative), the notes and the key (a hash of every file)."""
-    mpc = controller.mpc
-    _check(mpc)
-    if not hasattr(mpc, "_osqp"):
-        raise ExportError("the controller has no OSQP solver object to generate code from")
-    robot_model = getattr(mpc.arm, "robot", None)
-    model = [offset_function(mpc.arm), tool_function(mpc.arm)] if robot_model is not None else []
+def _model_functions(controller) -> list:
+    """The controller's model as CasADi functions (:mod:`.dynamics`): the output offset and the
+    tool's position (an arm with its robot), the cancellation (a nonlinear plant)."""
+    from .dynamics import cancel_function, offset_function, tool_function
+
+    arm = controller.mpc.arm
+    model = [offset_function(arm), tool_function(arm)] if arm.robot is not None else []
     if controller.cancellation is not None:
         model.append(cancel_function(controller.cancellation))
-    if not model:
+    return model
+
+
+def _model_key(controller) -> bytes:
+    """What :func:`_model_functions` are made of: the bodies of the robot's and of the
+    cancellation's model, gravity, the tool's frame, the friction and the motor map."""
+    from rhmpc.robots.model import bodies
+
+    arm, cancellation = controller.mpc.arm, controller.cancellation
+    models = [arm.robot.model] + ([cancellation.model] if cancellation is not None else [])
+    parts = [repr(bodies(m)) + repr(m.gravity.linear.tolist()) for m in models]
+    frame = arm.robot.model.frames[arm.robot.ee_frame_id]
+    parts.append(repr((int(frame.parentJoint), frame.placement.translation.tolist())))
+    if cancellation is not None:
+        parts.append(repr((cancellation.motor_map.tolist(), cancellation.damping.tolist(),
+                           cancellation.coulomb_friction.tolist(),
+                           cancellation.stiction_velocity)))
+    return "".join(parts).encode()
+
+
+def _description(controller, robot: str, internal: bool) -> tuple[dict, list[str]]:
+    """What the export is generated from: the placeholders (without the model functions' work
+    sizes) and the notes."""
+    mpc = controller.mpc
+    _check(mpc)
+    robot_model = getattr(mpc.arm, "robot", None)
+    if robot_model is None:
         raise ExportError("the controller's arm does not carry its robot (rhmpc.robots.linearize)")
-    sizes = generate(model, out)
-    mpc._osqp.codegen(str(out / "osqp"), parameters="vectors", extension_name=None,
-                      force_rewrite=True, prefix=OSQP_PREFIX)
-    for leftover in ("emosqp.c", "Makefile"):  # OSQP's example program (printf, main)
-        (out / "osqp" / leftover).unlink(missing_ok=True)
     notes = _notes(controller)
-    robot = getattr(getattr(mpc.arm, "robot", None), "name", robot)  # a name, not a file's path
+    robot = robot_model.name  # a name, not a file's path
     subs = {"ROBOT": robot, "ROBOT_ID": "".join(c if c.isalnum() else "_" for c in robot),
             "VERSION": _version("rhmpc"), "OSQP_VERSION": _version("osqp"),
             "REACQUIRE_TICKS": controller.observer.settings.reacquire_ticks,
             "FAULT_TIMEOUT_TICKS": controller.observer.timeout_ticks,
-            "INPUT_DELAY": controller.input_delay, "TOOL": int(robot_model is not None),
+            "INPUT_DELAY": controller.input_delay, "TOOL": 1,
             "CANCEL": int(controller.cancellation is not None),
-            **_mpc_subs(mpc), **_reference_subs(controller.reference),
-            **sizes, **template_subs(), "LATENCY_CAP": repr(LATENCY_CAP),
+            **_mpc_subs(mpc), **_reference_subs(controller.reference, mpc.arm.Ts, internal),
+            **template_subs(), "LATENCY_CAP": repr(LATENCY_CAP),
             "NOTES": "".join(f"\n * - {n}." for n in notes)}
+    return subs, notes
+
+
+def description_key(controller, robot: str, internal: bool = True) -> str:
+    """A hash of everything the export of ``controller`` is generated from, without generating
+    it: the placeholders, the numbers' bytes, the model's bodies, the templates' and the
+    generator's own text, the versions of CasADi and OSQP. The same key, the same export."""
+    mpc, (subs, _) = controller.mpc, _description(controller, robot, internal)
+    key = hashlib.sha256(repr(sorted(subs.items())).encode())
+    key.update(_version("casadi").encode() + _model_key(controller))
+    key.update(repr((mpc.settings, controller.observer.settings,  # OSQP's options among them
+                     getattr(controller.reference, "settings", None))).encode())
+    qp = mpc.qp  # the numbers the generated arrays are made of
+    arrays = {**_controller_arrays(controller), "W": mpc.W, "hessian": mpc.hessian,
+              "F_z": mpc.F_z, "y_plan": mpc.y_plan, "M0": mpc.arm.M0,
+              **{name: getattr(qp, name) for name in ("P", "F", "f0", "A", "G", "l0", "u0",
+                                                       "minimiser", "gain", "gain0", "u_max",
+                                                       "shift", "shift_dual", "block_of_tick",
+                                                       "bound_columns")}}
+    for name in sorted(arrays):
+        key.update(name.encode() + np.ascontiguousarray(arrays[name], dtype=float).tobytes())
+    for name in (*(f"templates/{n}" for n in TEMPLATES), "generate.py", "dynamics.py",
+                 "layout.py"):
+        key.update(files(__package__).joinpath(*name.split("/")).read_bytes())
+    return key.hexdigest()
+
+
+def _generate_into(controller, robot: str, out: Path,
+                   internal: bool = True) -> tuple[list[str], list[str], str]:
+    """Write every file of the export into the empty directory ``out``; returns the files
+    (relative), the notes and the key (a hash of every file)."""
+    from .dynamics import generate
+
+    mpc = controller.mpc
+    subs, notes = _description(controller, robot, internal)
+    robot = subs["ROBOT"]
+    subs.update(generate(_model_functions(controller), out))
+    osqp_solver(mpc.qp, mpc.settings).codegen(str(out / "osqp"), parameters="vectors",
+                                              extension_name=None, force_rewrite=True,
+                                              prefix=OSQP_PREFIX)
+    for leftover in ("emosqp.c", "Makefile"):  # OSQP's example program (printf, main)
+        (out / "osqp" / leftover).unlink(missing_ok=True)
     key = hashlib.sha256(repr(sorted(subs.items())).encode())
     data = _data_source(controller, robot, "@HASH@")
     key.update(data.encode())

@@ -8,6 +8,7 @@ torque's sources and the reference's events, and the layout of ``rhmpc_public_t`
 from __future__ import annotations
 
 import ctypes
+from dataclasses import dataclass, field
 
 #: ``enum rhmpc_status``: (C name, the name of Python's ``MPCStats.failures``, comment).
 STATUS = (
@@ -29,6 +30,72 @@ COUNTS = ("updates", "missing", "outliers_rejected", "gate_unlocked", "retracted
           "forecast_clamped", "forecast_nonfinite", "rls_reset", "rls_bound", "reference_guard",
           "repaired", "forecast_capped", "external", "external_rejected", "external_stale")
 STATUS_NAMES = tuple(python for _, python, _ in STATUS)
+
+
+@dataclass
+class MPCStats:
+    """What the controller did: the last tick, and counters since construction or reset.
+
+    Attributes
+    ----------
+    ticks : int
+        Number of steps.
+    status : str
+        Last tick: ``"solved"`` or the failure reason (an OSQP status such as ``"max_iter"``,
+        ``"time_limit"``, ``"primal_infeasible"``, or ``"nonfinite_input"``,
+        ``"nonfinite_solution"``, ``"solver_error"``, ``"injected"``).
+    source : str
+        Where the last torque came from: ``"qp"``, ``"plan"``, ``"lq"``, ``"brake"``, ``"zero"``.
+    iterations : int
+        OSQP iterations of the last tick (0 if no solve ran).
+    screened : int
+        Ticks solved by level 1 of the screening cascade (the unconstrained minimiser holds
+        every row), without calling the solver (their ``source`` is ``"qp"``).
+    boxed : int
+        Ticks solved by level 2 (the torque-box QP by active set, every envelope row holding:
+        :mod:`rhmpc.control.mpc`), without calling the solver (``source`` ``"qp"``).
+    level : int
+        Last tick: the cascade level that produced the QP solution (1, 2, or 3 = OSQP), 0 if
+        the tick never reached the QP (non-finite inputs).
+    box_iterations : int
+        Last tick: level 2's active-set solves (also when it was tried and the tick went on to
+        level 3), else 0.
+    solve_time : float
+        Wall time of the last ``solve()`` call [s].
+    parts_ns : list[int]
+        Last tick's phases [ns]: reference handling (incl. the offset), vector update (incl. warm
+        start), OSQP solve, output (status check, clipping, bookkeeping).
+    failures : dict[str, int]
+        Ticks whose QP result was not used, by reason.
+    fallbacks : dict[str, int]
+        Ticks served by each fallback: ``"plan"``, ``"lq"``, ``"brake"``, ``"zero"``.
+    relaxed : int
+        Solved ticks whose plan relaxes the envelope (some slack above 0.01 of its unit, i.e.
+        0.01 % of a joint range or 1 µm Cartesian): the soft constraints were needed.
+    slack_max : float
+        Largest slack of a solved tick [units of :mod:`rhmpc.control.envelope`].
+    """
+
+    ticks: int = 0
+    status: str = "none"
+    source: str = "none"
+    iterations: int = 0
+    screened: int = 0
+    boxed: int = 0
+    level: int = 0
+    box_iterations: int = 0
+    solve_time: float = 0.0
+    parts_ns: list[int] = field(default_factory=lambda: [0, 0, 0, 0])
+    failures: dict[str, int] = field(default_factory=dict)
+    fallbacks: dict[str, int] = field(default_factory=lambda: dict.fromkeys(SOURCES[1:], 0))
+    relaxed: int = 0
+    slack_max: float = 0.0
+
+    @property
+    def fallback_total(self) -> int:
+        """Ticks that did not apply the QP solution."""
+        return sum(self.fallbacks.values())
+
 
 #: ``rhmpc_public_t``: (field, C type, length as (dimension, factor) or None, comment).
 PUBLIC = (
@@ -61,6 +128,8 @@ PUBLIC = (
     ("encoder_reacquired", "long long", None, "held readings taken again once they moved"),
 )
 _CTYPES = {"long long": ctypes.c_longlong, "int": ctypes.c_int, "double": ctypes.c_double}
+#: ``rhmpc_retract_t``: the call the outlier gate makes to retract a predictor's newest sample.
+RETRACT = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p)
 
 
 def _enum(names, comments=None) -> str:

@@ -148,7 +148,10 @@ static void go_realtime(run_t *r) {
 
 static int open_socket(int port) {
   int fd = socket(AF_INET, SOCK_DGRAM, 0);
+  const int buffer = 1 << 20; /* a burst of foreign datagrams must not push out the run's own */
   struct sockaddr_in a = {0};
+  if (fd >= 0 && setsockopt(fd, SOL_SOCKET, SO_RCVBUFFORCE, &buffer, sizeof buffer) != 0)
+    setsockopt(fd, SOL_SOCKET, SO_RCVBUF, &buffer, sizeof buffer); /* up to rmem_max */
   a.sin_family = AF_INET;
   a.sin_port = htons((uint16_t)port);
   a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);

@@ -206,6 +206,9 @@ int main(int argc, char **argv) {
   me.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
   me.sin_port = htons((uint16_t)c.port);
   c.fd = socket(AF_INET, SOCK_DGRAM, 0);
+  const int buffer = 1 << 20; /* a burst of foreign datagrams must not push out the run's own */
+  if (c.fd >= 0 && setsockopt(c.fd, SOL_SOCKET, SO_RCVBUFFORCE, &buffer, sizeof buffer) != 0)
+    setsockopt(c.fd, SOL_SOCKET, SO_RCVBUF, &buffer, sizeof buffer); /* up to rmem_max */
   if (c.fd < 0 || bind(c.fd, (struct sockaddr *)&me, sizeof me) != 0) {
     fprintf(stderr, "rhmpc_robot_client: cannot bind UDP port %d: %s\n", c.port, strerror(errno));
     return 1;

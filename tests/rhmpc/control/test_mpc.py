@@ -1,33 +1,33 @@
-"""The MPC's QP is the intended one: LQ/Riccati and LQR agreement, exact-QP agreement,
-feasibility over many warm-started ticks."""
+"""The MPC's QP is the intended one, and the controller's library solves it: LQ/Riccati and LQR
+(DARE) agreement, exact-QP agreement (DAQP), the screening cascade's levels, feasibility over many
+warm-started ticks. The library's MPC runs alone (``mpc_step``); the references are built apart
+from it (:mod:`tests.rhmpc.control.library`)."""
 
 from __future__ import annotations
 
-import daqp
 import numpy as np
 import pytest
 import scipy.linalg
 
 from rhmpc.bench.ticks import heart_like_reference
 from rhmpc.control.mpc import RecedingHorizonMPC
-from rhmpc.control.offset import OutputOffset
 from rhmpc.control.settings import MPCSettings
-from rhmpc.robots import linearize, load_robot
-from tests.rhmpc.control.exact import EveryTick, exact_mpc, qp_vectors, unconstrained
+from tests.rhmpc.control.library import (
+    daqp_input,
+    daqp_solve,
+    mpc_library,
+    offset,
+    qp_vectors,
+    unconstrained,
+)
 
 #: OSQP run to (near) machine accuracy, for comparisons at 1e-6.
 TIGHT = {"max_iter": 100_000, "osqp_eps_abs": 1e-10}
 
 
-@pytest.fixture(scope="module")
-def fk():
-    """Forward kinematics p(q) [m] of an independent robot instance (its own Pinocchio data)."""
-    return load_robot("phantom").ee_position
-
-
-def _y0_seen(arm, fk, x):
+def _y0_seen(arm, x):
     """y0 + d: the output the offset-corrected model starts from, d = p(q) − (C x + y0)."""
-    return arm.y0 + fk(arm.q0 + x[:3]) - (arm.C @ x + arm.y0)
+    return arm.y0 + offset(arm, x)
 
 
 def _small_problem(arm, rng, N=50):
@@ -116,65 +116,70 @@ def _rel(a, b):
 
 @pytest.mark.parametrize("point_weights", [None, "ramp"])
 @pytest.mark.slow
-def test_unblocked_first_input_equals_backward_riccati(arm, fk, point_weights):
+def test_unblocked_first_input_equals_backward_riccati(arm, point_weights):
     rng = np.random.default_rng(1)
     pw = None if point_weights is None else tuple(np.linspace(1.0, 0.2, 50))
     settings = MPCSettings(blocks=None, point_weights=pw, effort_weight=1e-3, rate_weight=0.05,
                            **TIGHT)
-    mpc = RecedingHorizonMPC(arm, settings)
+    lib = mpc_library(arm, settings)
+    mpc = lib.mpc
     Q, R, Rd = _weights(mpc)
     for _ in range(3):
         x, ref, u_prev = _small_problem(arm, rng)
-        u_lq = riccati_first_input(arm, Q, R, Rd, x, ref, u_prev, y0=_y0_seen(arm, fk, x))
+        u_lq = riccati_first_input(arm, Q, R, Rd, x, ref, u_prev, y0=_y0_seen(arm, x))
         assert np.all(np.abs(u_lq) < 0.5 * mpc.u_max)  # the bounds are inactive
         assert _rel(unconstrained(mpc, x, ref, u_prev), u_lq) < 1e-6  # the QP data
-        mpc.reset(u_prev)
-        u = mpc.step(x, ref)
-        assert mpc.stats.status == "solved"
-        assert _rel(u, u_lq) < 1e-6  # the OSQP solution
+        lib.reset()
+        lib.take_over(u_prev)
+        u = lib.mpc_step(x, ref)
+        assert lib.stats.status == "solved" and lib.stats.level == 1
+        assert _rel(u, u_lq) < 1e-6  # the library's level 1
 
 
-def test_blocked_first_input_equals_blocked_least_squares(arm, fk):
+def test_blocked_first_input_equals_blocked_least_squares(arm):
     rng = np.random.default_rng(2)
-    settings = MPCSettings(**TIGHT)
-    mpc = RecedingHorizonMPC(arm, settings)
+    settings = MPCSettings()
+    lib = mpc_library(arm, settings)
+    mpc = lib.mpc
     Q, R, Rd = _weights(mpc)
     x, ref, u_prev = _small_problem(arm, rng)
-    y0 = _y0_seen(arm, fk, x)
+    y0 = _y0_seen(arm, x)
     u_ls = blocked_lstsq_first_input(arm, settings.blocks, Q, R, Rd, x, ref, u_prev, y0=y0)
     assert _rel(unconstrained(mpc, x, ref, u_prev), u_ls) < 1e-6
-    mpc.reset(u_prev)
-    assert _rel(mpc.step(x, ref), u_ls) < 1e-6
+    lib.take_over(u_prev)
+    assert _rel(lib.mpc_step(x, ref), u_ls) < 1e-6
     # …and blocking really changes the problem: the unblocked solution differs.
     u_free = riccati_first_input(arm, Q, R, Rd, x, ref, u_prev, y0=y0)
     assert _rel(u_free, u_ls) > 1e-3
 
 
 @pytest.mark.parametrize("displacement_deg", [2.0, 10.0])
-@pytest.mark.slow
-def test_output_offset_is_the_forward_kinematics_residual(arm, fk, displacement_deg):
+def test_output_offset_is_the_forward_kinematics_residual(arm, displacement_deg):
     """At rest at a posture q ≠ q0 with the reference on the tip (r_k = p(q)), the corrected
-    controller's optimum is exactly u = 0 (zero cost); the uncorrected one moves the arm."""
+    controller's optimum is exactly u = 0 (zero cost): the library's offset is the forward
+    kinematics' residual; the uncorrected formulation moves the arm."""
     x = np.zeros(6)
     x[:3] = np.radians(displacement_deg) * np.array([1.0, -0.7, 0.5])
-    d = fk(arm.q0 + x[:3]) - (arm.C @ x + arm.y0)
-    mpc = RecedingHorizonMPC(arm)
-    np.testing.assert_allclose(OutputOffset(arm)(x), d, rtol=0, atol=1e-15)
+    d = offset(arm, x)
     assert np.linalg.norm(d) > 1e-4  # 0.1 mm or more: the linearisation's floor
-    ref = np.tile(fk(arm.q0 + x[:3]), (mpc.N, 1))
-    u = unconstrained(mpc, x, ref, np.zeros(3))
+    lib = mpc_library(arm)
+    ref = np.tile(arm.y0 + arm.C @ x + d, (lib.N, 1))
+    u = lib.mpc_step(x, ref)
     # |u| is rounding only: F p cancels terms of ~1e3 (absolute positions [m] times the gain);
-    # measured 1.1e-11 of u_max, asserted at 1e-9.
-    assert np.max(np.abs(u) / mpc.u_max) <= 1e-9
+    # measured 1e-11 of u_max, asserted at 1e-9.
+    assert np.max(np.abs(u) / lib.mpc.u_max) <= 1e-9
     plain = RecedingHorizonMPC(arm, MPCSettings(offset_correction=False))
     u_lin = unconstrained(plain, x, ref, np.zeros(3))
-    assert np.max(np.abs(u_lin) / mpc.u_max) > 1e-3
+    assert np.max(np.abs(u_lin) / plain.u_max) > 1e-3
 
 
 def test_dare_terminal_weight_gives_the_lqr_action(arm):
+    """With the DARE's terminal weight, no blocking and no rate weight, the first input is the
+    infinite-horizon LQR's, u = −K (x − x_s), K from scipy's DARE solution."""
     settings = MPCSettings(blocks=None, terminal="dare", effort_weight=1e-2, rate_weight=0.0,
                            horizon=20, offset_correction=False, **TIGHT)
-    mpc = RecedingHorizonMPC(arm, settings)
+    lib = mpc_library(arm, settings)
+    mpc = lib.mpc
     Q, R, _ = _weights(mpc)
     Qx = arm.C.T @ Q[-1] @ arm.C
     P = scipy.linalg.solve_discrete_are(arm.A, arm.B, Qx, R)
@@ -183,14 +188,14 @@ def test_dare_terminal_weight_gives_the_lqr_action(arm):
     for _ in range(3):
         x = np.concatenate([1e-5 * rng.normal(size=3), 1e-4 * rng.normal(size=3)])
         # Regulation to y0, and to a constant offset target r (x_s = [C_q⁻¹(r − y0); 0]).
-        for offset in (np.zeros(3), 1e-5 * rng.normal(size=3)):
-            ref = np.tile(arm.y0 + offset, (mpc.N, 1))
-            x_s = np.concatenate([np.linalg.solve(arm.C[:, :3], offset), np.zeros(3)])
+        for target in (np.zeros(3), 1e-5 * rng.normal(size=3)):
+            ref = np.tile(arm.y0 + target, (mpc.N, 1))
+            x_s = np.concatenate([np.linalg.solve(arm.C[:, :3], target), np.zeros(3)])
             u_lqr = -K @ (x - x_s)
             assert np.all(np.abs(u_lqr) < mpc.u_max)
             assert _rel(unconstrained(mpc, x, ref, np.zeros(3)), u_lqr) < 1e-6
-            mpc.reset()
-            assert _rel(mpc.step(x, ref), u_lqr) < 1e-6
+            lib.reset()
+            assert _rel(lib.mpc_step(x, ref), u_lqr) < 1e-6
     # Without the terminal weight a short horizon gives a different action; with it, the same.
     x = np.array([1e-5, -1e-5, 1e-5, 0.0, 0.0, 0.0])
     for terminal, differs in (("none", True), ("dare", False)):
@@ -201,122 +206,73 @@ def test_dare_terminal_weight_gives_the_lqr_action(arm):
         assert (_rel(u3, -K @ x) > 1e-2) == differs
 
 
-def _daqp_solve(mpc, q, lo, up):
-    """Exact active-set solution of the same QP (simple bounds first, then general rows)."""
-    qp = mpc.qp
-    A_gen = qp.A[qp.nv:]  # the first nv rows are the identity: DAQP's simple bounds
-    x, _, exitflag, info = daqp.solve(qp.P, q, A_gen, np.minimum(up, 1e30), np.maximum(lo, -1e30))
-    assert exitflag == 1, exitflag
-    return x, info["lam"]
-
-
-def _check_kkt(mpc, q, lo, up, z, y, tol):
-    qp = mpc.qp
-    Az = qp.A @ z
-    assert np.all(Az >= lo - tol) and np.all(Az <= up + tol)  # primal feasibility
-    stationarity = qp.P @ z + q + qp.A.T @ y
-    assert np.max(np.abs(stationarity)) <= tol * max(1.0, np.max(np.abs(q)))
-    # Complementarity: a multiplier is non-zero only on its active side.
-    upper, lower = y > tol, y < -tol
-    assert np.all(np.abs(Az[upper] - up[upper]) <= tol)
-    assert np.all(np.abs(Az[lower] - lo[lower]) <= tol)
-
-
-def _saturating_problem(arm, mpc, jump):
-    x = np.zeros(arm.nx)
-    ref = np.tile(arm.y0 + jump, (mpc.N, 1))
-    return x, ref
-
-
-@pytest.mark.parametrize("settings_kind", ["default", "tight", "daqp"])
-def test_active_torque_bounds_agree_with_daqp(arm, settings_kind):
-    if settings_kind == "daqp":
-        mpc = exact_mpc(arm)
-    else:
-        mpc = RecedingHorizonMPC(arm, MPCSettings(**(TIGHT if settings_kind == "tight" else {})))
-    x, ref = _saturating_problem(arm, mpc, np.array([3e-3, -2e-3, 2e-3]))
-    q, lo, up = qp_vectors(mpc, x, ref)
-    tau = mpc.step(x, ref)
-    assert mpc.stats.status == "solved"
-    z, y = mpc.last_solution()
-    z_ex, _ = _daqp_solve(mpc, q, lo, up)
-    active = np.abs(z_ex) >= 1 - 1e-9
-    assert active.sum() >= 3, "the test needs active bounds"
-    u0_exact = z_ex[:3] * mpc.u_max
-    tau_max = arm.torque_limit
-    if settings_kind == "default":
-        assert np.max(np.abs(tau - u0_exact) / tau_max) <= 0.01
-    elif settings_kind == "daqp":  # DAQP in the controller: exact, checked by its KKT system
-        assert np.max(np.abs(tau - u0_exact) / tau_max) <= 1e-9
-        _check_kkt(mpc, q, lo, up, z, y, tol=1e-9)
-    else:
-        assert np.max(np.abs(z - z_ex)) <= 1e-6
-        assert np.max(np.abs(tau - u0_exact) / tau_max) <= 1e-6
-        _check_kkt(mpc, q, lo, up, z, y, tol=1e-6)
-        # The exact solution satisfies the same KKT system with OSQP's multipliers' active set.
-        _check_kkt(mpc, q, lo, up, z_ex, y, tol=1e-5)
+def test_active_torque_bounds_agree_with_daqp(arm):
+    """A 4-mm jump saturates the torque: levels 1–2 settle it exactly (DAQP's u0 to 1e-9 of
+    τ_max); with OSQP run to machine accuracy the result is the same."""
+    x, jump = np.zeros(arm.nx), np.array([3e-3, -2e-3, 2e-3])
+    for settings in (MPCSettings(), MPCSettings(**TIGHT)):
+        lib = mpc_library(arm, settings)
+        ref = np.tile(arm.y0 + jump, (lib.N, 1))
+        z_ex, _ = daqp_solve(lib.mpc, *qp_vectors(lib.mpc, x, ref))
+        assert np.sum(np.abs(z_ex) >= 1 - 1e-9) >= 3, "the test needs active bounds"
+        tau = lib.mpc_step(x, ref)
+        assert lib.stats.status == "solved" and lib.stats.level in (2, 3)
+        assert np.max(np.abs(tau - daqp_input(lib.mpc, x, ref)) / arm.torque_limit) <= 1e-6
 
 
 def test_active_joint_bounds_agree_with_daqp(arm):
     lo = arm.q0 - np.radians(1.0)
     hi = arm.q0 + np.radians(1.0)
-    settings = MPCSettings(joint_lower=tuple(lo), joint_upper=tuple(hi), **TIGHT)
-    mpc = RecedingHorizonMPC(arm, settings)
+    lib = mpc_library(arm, MPCSettings(joint_lower=tuple(lo), joint_upper=tuple(hi), **TIGHT))
+    mpc = lib.mpc
     assert mpc.qp.param_bounds
     # A target 10 mm away needs ≈3° of joint motion: the joint bounds must become active.
-    x, ref = _saturating_problem(arm, mpc, np.array([0.0, 10e-3, 0.0]))
+    x, ref = np.zeros(arm.nx), np.tile(arm.y0 + np.array([0.0, 10e-3, 0.0]), (mpc.N, 1))
     x[3:] = 0.05  # moving already
     q, lo, up = qp_vectors(mpc, x, ref)
-    tau = mpc.step(x, ref)
-    assert mpc.stats.status == "solved"
-    z, y = mpc.last_solution()
-    z_ex, _ = _daqp_solve(mpc, q, lo, up)
+    tau = lib.mpc_step(x, ref)
+    assert lib.stats.status == "solved" and lib.stats.level == 3
+    z_ex, _ = daqp_solve(mpc, q, lo, up)
     Az = mpc.qp.A @ z_ex
     nv = mpc.qp.nv
     assert np.any(np.isclose(Az[nv:], up[nv:], atol=1e-8) | np.isclose(Az[nv:], lo[nv:], atol=1e-8))
     assert np.max(z_ex[mpc.qp.nz:]) <= 1e-9  # the soft envelope holds as the hard one would
-    assert np.max(np.abs(z - z_ex)) <= 1e-6
     assert np.max(np.abs(tau - z_ex[:3] * mpc.u_max)) <= 1e-6
-    _check_kkt(mpc, q, lo, up, z, y, tol=1e-6)
 
 
-def test_ten_thousand_warm_started_ticks_stay_feasible(arm):
-    """Default settings, closed loop on the linear model, heart-like reference with jumps.
-
-    The plant is the linear model itself, so the output offset is off (it would be the FK's).
-    OSQP's raw primal (before the clip) is checked against the torque bounds to its primal
-    tolerance eps_abs = 1e-3 on the normalised inputs.
-    """
-    mpc = RecedingHorizonMPC(arm, MPCSettings(offset_correction=False))
-    ticks = 10_000
+@pytest.mark.slow
+def test_ten_thousand_warm_started_ticks_stay_within_the_bounds(arm):
+    """Default settings, closed loop on the linear model, heart-like reference with jumps: every
+    torque within ±u_max, no fallback, the bounds reached (the plant is the linear model
+    itself, so the output offset is off)."""
+    lib = mpc_library(arm, MPCSettings(offset_correction=False))
+    mpc, ticks = lib.mpc, 10_000
     traj = heart_like_reference(ticks + mpc.N + 1, arm.Ts, np.random.default_rng(5), arm.y0,
                                 jump=2e-3, jump_every=1000)
     x = np.zeros(arm.nx)
     x[:3] = np.linalg.solve(arm.C[:, :3], traj[0] - arm.y0)
     saturated = 0
     for k in range(ticks):
-        tau = mpc.step(x, traj[k + 1:k + 1 + mpc.N])
-        z, _ = mpc.last_solution()
-        assert np.max(np.abs(z[:mpc.qp.nz])) <= 1 + 1e-3, (k, z)
+        tau = lib.mpc_step(x, traj[k + 1:k + 1 + mpc.N])
+        assert np.all(np.abs(tau) <= mpc.u_max), (k, tau)
         saturated += bool(np.any(np.abs(tau) >= mpc.u_max * (1 - 1e-6)))
         x = arm.A @ x + arm.B @ tau
-    assert mpc.stats.ticks == ticks
-    assert mpc.stats.fallback_total == 0, mpc.stats.failures
+    assert lib.stats.ticks == ticks
+    assert lib.stats.fallback_total == 0, lib.stats.failures
     assert saturated > 0  # the jumps did drive the torque into its bounds
 
 
 def test_exact_reference_tracking_on_the_linear_model(arm):
     """Heart-like motion (8 mm p-p, 1.66 Hz + 4 harmonics, 0.17 Hz breathing), exact future.
-
     The plant is the linear model: no output offset."""
-    mpc = RecedingHorizonMPC(arm, MPCSettings(offset_correction=False))
-    ticks = 4000
+    lib = mpc_library(arm, MPCSettings(offset_correction=False))
+    mpc, ticks = lib.mpc, 4000
     traj = heart_like_reference(ticks + mpc.N + 1, arm.Ts, np.random.default_rng(0), arm.y0)
     x = np.zeros(arm.nx)
     x[:3] = np.linalg.solve(arm.C[:, :3], traj[0] - arm.y0)
     err, taus = [], []
     for k in range(ticks):
-        tau = mpc.step(x, traj[k + 1:k + 1 + mpc.N])
+        tau = lib.mpc_step(x, traj[k + 1:k + 1 + mpc.N])
         x = arm.A @ x + arm.B @ tau
         err.append(np.linalg.norm(arm.C @ x + arm.y0 - traj[k + 1]))
         taus.append(tau)
@@ -329,107 +285,45 @@ def test_exact_reference_tracking_on_the_linear_model(arm):
 @pytest.mark.slow
 def test_screening_is_exact_and_hands_binding_ticks_to_osqp(arm, joint_bounds):
     """Ticks settled by the screening cascade (level 1: unconstrained minimiser; level 2: the
-    torque-box QP) return the exact QP solution (DAQP, to 1e-9 of τ_max) and satisfy every row;
-    the others go to OSQP (level 3, checked against DAQP too)."""
-    # OSQP as an accurate solver here (100 iterations a tick, not the real-time bound)
+    torque-box QP) return the exact QP solution (DAQP, to 1e-9 of τ_max); the others go to OSQP
+    (level 3). A C edit that breaks a level's decision or its arithmetic fails here."""
     extra = {"joint_envelope": False, "max_iter": 100}
     if joint_bounds:
         extra = {"joint_lower": tuple(arm.q0 - np.radians(5.0)),
                  "joint_upper": tuple(arm.q0 + np.radians(5.0)), "max_iter": 100}
-    mpc = RecedingHorizonMPC(arm, MPCSettings(**extra))
-    every = EveryTick(arm, MPCSettings(**extra))
-    ticks = 1500
+    lib = mpc_library(arm, MPCSettings(**extra))
+    mpc, ticks = lib.mpc, 1500
     traj = heart_like_reference(ticks + mpc.N + 1, arm.Ts, np.random.default_rng(2), arm.y0,
                                 jump=4e-3, jump_every=500)
-    x = np.zeros(arm.nx)
+    x, u_prev = np.zeros(arm.nx), np.zeros(arm.nu)
     screened_err, levels = [], [0, 0, 0, 0]
     for k in range(ticks):
         ref = traj[k + 1:k + 1 + mpc.N]
-        every.u_prev = mpc.u_prev
-        q, lo, up = qp_vectors(mpc, x, ref)
-        tau = mpc.step(x, ref)
-        tau_every = every.step(x, ref)
-        level = mpc.stats.level
+        u_exact = daqp_input(mpc, x, ref, u_prev)
+        tau = lib.mpc_step(x, ref)
+        level = lib.stats.level
         levels[level] += 1
         if level in (1, 2):
-            assert mpc.stats.iterations == 0
-            z_ex, _ = _daqp_solve(mpc, q, lo, up)
-            screened_err.append(np.max(np.abs(tau - z_ex[:3] * mpc.u_max) / arm.torque_limit))
-            Az = mpc.qp.A @ mpc.last_solution()[0]
-            assert np.all(Az >= lo - 1e-9) and np.all(Az <= up + 1e-9)
+            assert lib.stats.iterations == 0
+            screened_err.append(np.max(np.abs(tau - u_exact) / arm.torque_limit))
         else:
-            assert level == 3 and mpc.stats.iterations > 0
-        if level >= 2 and not joint_bounds:
-            # Warm starts differ; with torque bounds only, OSQP is within 1 % of τ_max of the
-            # exact u0. (With joint bounds the default eps_abs = 1e-3 and max_iter = 100 leave
-            # a few % — measured up to 3.6 % here; test_active_joint_bounds_agree_with_daqp
-            # uses tight tolerances.)
-            z_ex, _ = _daqp_solve(mpc, q, lo, up)
-            assert np.max(np.abs(tau_every - z_ex[:3] * mpc.u_max) / arm.torque_limit) <= 0.01
-        x = arm.A @ x + arm.B @ tau
+            assert level == 3 and lib.stats.iterations > 0
+        x, u_prev = arm.A @ x + arm.B @ tau, tau
     assert levels[1] > ticks // 2 and levels[2] > 0 and levels[0] == 0
-    assert mpc.stats.screened == levels[1] and mpc.stats.boxed == levels[2]
+    assert lib.stats.screened == levels[1] and lib.stats.boxed == levels[2]
     assert max(screened_err) <= 1e-9
-    assert mpc.stats.fallback_total == 0 and every.stats.fallback_total == 0
+    assert lib.stats.fallback_total == 0
 
 
-@pytest.mark.slow
-def test_level_2_checks_every_envelope_row_it_skips(arm):
-    """Tight joint bounds and reference jumps: the torque-box QP's minimiser (an independent
-    BVLS solve, scipy ``lsq_linear``) sometimes breaks an envelope row. Those ticks go to the
-    solver (level 3), never to level 2; ticks whose box minimiser keeps every row (margin
-    1e-7 of a row's unit, so that rounding cannot decide) and has an active bound are level 2;
-    each accepted level-2 point satisfies every row and is DAQP's solution of the full QP."""
-    from scipy.optimize import lsq_linear
-
-    q0 = arm.q0
-    mpc = exact_mpc(arm, MPCSettings(
-        joint_lower=tuple(q0 - np.array([0.015, 0.01, 0.03])),
-        joint_upper=tuple(q0 + np.array([0.015, 0.01, 0.03]))))
-    qp, nz = mpc.qp, mpc.qp.nz
-    Lc = np.linalg.cholesky(qp.P[:nz, :nz])
-    ticks = 3000
-    traj = heart_like_reference(ticks + mpc.N + 1, arm.Ts, np.random.default_rng(3), arm.y0,
-                                jump=2e-3, jump_every=400)
-    x = np.zeros(arm.nx)
-    seen = {"level2": 0, "envelope_breaks": 0}
-    for k in range(ticks):
-        ref = traj[k + 1:k + 1 + mpc.N]
-        q, lo, up = qp_vectors(mpc, x, ref)
-        tau = mpc.step(x, ref)
-        level = mpc.stats.level
-        if level != 1:
-            d = -scipy.linalg.solve_triangular(Lc, q[:nz], lower=True)
-            zb = lsq_linear(Lc.T, d, bounds=(-1.0, 1.0), method="bvls", tol=1e-14).x
-            v = np.concatenate([zb, np.zeros(qp.ns)])
-            g = (qp.A @ v)[qp.nv:]
-            margin = np.minimum(up[qp.nv:] - g, g - lo[qp.nv:]).min()
-            if margin < -1e-7:
-                assert level == 3
-                seen["envelope_breaks"] += 1
-            elif margin > 1e-7 and np.abs(zb).max() >= 1 - 1e-9:
-                assert level == 2
-            if level == 2:
-                seen["level2"] += 1
-                z, _ = mpc.last_solution()
-                assert np.max(np.abs(z[:nz] - zb)) <= 1e-8
-                Az = qp.A @ z
-                assert np.all(Az >= lo - 1e-9) and np.all(Az <= up + 1e-9)
-                z_ex, _ = _daqp_solve(mpc, q, lo, up)
-                assert np.max(np.abs(z - z_ex)) <= 1e-8
-        x = arm.A @ x + arm.B @ tau
-    assert seen["level2"] > 0 and seen["envelope_breaks"] > 0, seen
-
-
-def test_a_state_that_is_not_finite_leaves_the_next_tick_alone():
+def test_a_state_that_is_not_finite_leaves_the_next_tick_alone(arm):
     """A tick at a state that is not finite takes the fallback without touching what the next
-    tick computes: with finite inputs it solves as it would have anyway."""
-    arm = linearize(load_robot("phantom"))
-    mpc, twin = RecedingHorizonMPC(arm), RecedingHorizonMPC(arm)
-    x = np.zeros(arm.nx)
-    ref = np.tile(arm.y0, (mpc.N, 1))
-    mpc.step(np.full(arm.nx, np.nan), ref)
-    assert mpc.stats.status == "nonfinite_input"
-    mpc.reset()
-    np.testing.assert_array_equal(mpc.step(x, ref), twin.step(x, ref))
-    assert mpc.stats.fallback_total == 0
+    tick computes: with finite inputs it solves as a fresh library does."""
+    lib = mpc_library(arm)
+    x, ref = np.zeros(arm.nx), np.tile(arm.y0, (lib.N, 1))
+    lib.mpc_step(np.full(arm.nx, np.nan), ref)
+    assert lib.stats.status == "nonfinite_input" and lib.stats.source == "zero"
+    lib.reset()
+    first = lib.mpc_step(x, ref)
+    lib.reset()
+    np.testing.assert_array_equal(lib.mpc_step(x, ref), first)
+    assert lib.stats.fallback_total == 0

@@ -1,13 +1,22 @@
-"""The joint observer: textbook equations, the Kalman gain against the Riccati recursion, and
-velocity estimation from quantised encoders."""
+"""The joint observer in the controller's library: its steps against the textbook filter, the
+Kalman gain against the Riccati recursion, velocity from quantised encoders, and the innovation
+gate's holds, reacquisitions and encoder faults on constructed readings.
+
+The library runs on the linear model itself (no cancellation, so the torque that acts is the MPC
+torque u the step returns), tracking the exact future of a heartbeat-like motion."""
 
 import numpy as np
 import pytest
 
+from rhmpc.control.controller import Controller
+from rhmpc.control.mpc import RecedingHorizonMPC
 from rhmpc.control.observer import JointObserver, ObserverSettings
+from rhmpc.control.settings import MPCSettings
 from rhmpc.robots import linearize, load_robot
+from rhmpc.sim.loop.exact import ExactReference
 
 TS = 0.5e-3
+TICKS = 4000
 
 
 @pytest.fixture(scope="module")
@@ -16,21 +25,48 @@ def phantom_arm():
     return robot, linearize(robot, Ts=TS)
 
 
-def test_fused_steps_equal_the_textbook_filter(phantom_arm):
-    robot, arm = phantom_arm  # readings 1 mrad apart: the innovation gate off
-    observer = JointObserver(arm, robot.encoder_resolution, ObserverSettings(innovation_gate=0))
+def _motion(arm, ticks=TICKS):
+    """A 1.2-Hz, 4-mm swing of the tool about its home position (centred truth) [m]."""
+    t = np.arange(ticks + 200)[:, None] * TS
+    return 2e-3 * np.sin(2 * np.pi * 1.2 * t) * np.array([1.0, 0.5, -0.5])
+
+
+def library(robot, arm, settings=None):
+    """The controller's library on the linear arm, its observer with ``settings``."""
+    reference = ExactReference(_motion(arm), 50)
+    reference.place(arm.y0)
+    mpc = RecedingHorizonMPC(arm, MPCSettings(offset_correction=False))
+    observer = JointObserver(arm, robot.encoder_resolution, settings)
+    return Controller(mpc, reference, observer, None, arm.torque_limit)
+
+
+def _loop(controller, arm, ticks, reading):
+    """The linear model driven by the library's torque, the encoders giving ``reading(k, q)``;
+    returns the estimates (ticks, 2n), the true velocities (ticks, n) and the torques."""
+    x, est, vel, taus = np.zeros(arm.nx), [], [], []
+    for k in range(ticks):
+        tau = controller.step(k, reading(k, arm.q0 + x[: arm.nu]))
+        est.append(controller.x_hat)
+        vel.append(x[arm.nu:].copy())
+        taus.append(tau)
+        x = arm.A @ x + arm.B @ tau
+    return np.array(est), np.array(vel), np.array(taus)
+
+
+def test_steps_equal_the_textbook_filter(phantom_arm):
+    """x̂ = x̂⁻ + L (q̃ − q0 − H x̂⁻), x̂⁻ = A x̂ + B u, with u the torque the step returned
+    (readings 1 mrad apart: the innovation gate off)."""
+    robot, arm = phantom_arm
+    c = library(robot, arm, ObserverSettings(innovation_gate=0))
+    L, n = c.observer.L, arm.nu
     rng = np.random.default_rng(3)
-    n = arm.nu
-    H = np.hstack([np.eye(n), np.zeros((n, n))])
     x_prior = np.zeros(2 * n)
-    for _ in range(200):
+    for k in range(200):
         q = arm.q0 + rng.normal(size=n) * 1e-3
-        u = rng.normal(size=n) * 0.1
-        x = x_prior + observer.L @ (q - arm.q0 - H @ x_prior)
-        np.testing.assert_allclose(observer.correct(q), x, rtol=0, atol=1e-12)
-        observer.predict(u)
+        u = c.step(k, q)
+        x = x_prior + L @ (q - arm.q0 - x_prior[:n])
+        np.testing.assert_allclose(c.x_hat, x, rtol=0, atol=1e-12)
         x_prior = arm.A @ x + arm.B @ u
-        np.testing.assert_allclose(observer.x_prior, x_prior, rtol=0, atol=1e-12)
 
 
 def test_gain_is_the_limit_of_the_riccati_recursion(phantom_arm):
@@ -51,120 +87,64 @@ def test_gain_is_the_limit_of_the_riccati_recursion(phantom_arm):
 
 def test_velocity_from_quantised_encoders_beats_differentiation(phantom_arm):
     robot, arm = phantom_arm
-    observer = JointObserver(arm, robot.encoder_resolution)
     res = robot.encoder_resolution
-    t = np.arange(4000) * TS
-    omega = 2 * np.pi * 1.2  # a heartbeat-like joint oscillation
-    amp = 0.02  # [rad]
-    q = arm.q0 + amp * np.sin(omega * t)[:, None] * np.ones(arm.nu)
-    v = amp * omega * np.cos(omega * t)[:, None] * np.ones(arm.nu)
-    qd = amp * -(omega**2) * np.sin(omega * t)[:, None] * np.ones(arm.nu)
-    M = TS * np.linalg.pinv(arm.B[arm.nu :])  # the model's inertia: u = M q̈
-    est = []
-    for k in range(len(t)):
-        x = observer.correct(np.rint(q[k] / res) * res)
-        est.append(x[arm.nu :].copy())
-        # the torque of this motion in the model (what the MPC torque is in the loop)
-        observer.predict(M @ qd[k])
-    est = np.array(est)[1000:]
-    err = np.sqrt(np.mean((est - v[1000:]) ** 2, axis=0))
-    naive = np.diff(np.rint(q / res) * res, axis=0)[1000:] / TS
-    naive_err = np.sqrt(np.mean((naive - v[1001:]) ** 2, axis=0))
+    c = library(robot, arm)
+    est, vel, _ = _loop(c, arm, TICKS, lambda k, q: np.rint(q / res) * res)
+    err = np.sqrt(np.mean((est[1000:, arm.nu:] - vel[1000:]) ** 2, axis=0))
+    assert np.ptp(vel[1000:], axis=0).min() > 0.01  # the joints move [rad/s]
+    q = np.rint((arm.q0 + np.cumsum(vel, axis=0) * TS) / res) * res
+    naive = np.diff(q, axis=0)[999:] / TS
+    naive_err = np.sqrt(np.mean((naive - vel[1000:]) ** 2, axis=0))
     assert np.all(err < 0.2 * naive_err), (err, naive_err)
-    assert np.all(err < 0.02)  # [rad/s], vs a peak velocity of 0.15 rad/s
-    assert observer.counts == {"held": 0, "reacquired": 0}  # healthy readings all fused
+    assert c.encoder_counts == {"held": 0, "reacquired": 0}  # healthy readings all fused
 
 
-def _moving(observer, arm, ticks: int, reading, accel: float = 5.0):
-    """Drive the observer with a model-consistent motion from rest under a constant joint
-    acceleration ``accel`` [rad/s²] (the torque that acts), the encoder giving
-    ``reading(k, q)``; returns the estimates (ticks, 2n) and the true velocities (ticks, n)."""
-    M = TS * np.linalg.pinv(arm.B[arm.nu:])
-    a = np.full(arm.nu, accel)
-    q, v, est, vel = arm.q0.copy(), np.zeros(arm.nu), [], []
-    for k in range(ticks):
-        est.append(observer.correct(reading(k, q)).copy())
-        vel.append(v.copy())
-        observer.predict(M @ a)
-        q, v = q + TS * (v + TS * a / 2), v + TS * a
-    return np.array(est), np.array(vel)
-
-
-def test_a_stuck_encoder_is_held_out_and_faults_after_the_timeout(phantom_arm):
-    """A joint driven by a torque whose encoder stops: the model moves on, the reading does not.
-    The filter absorbs a steady acceleration a as the innovation bias a Ts / L_v, so the gate
-    sees an acceleration past γ √S L_v / Ts (≈ 100 rad/s² on the PHANToM at γ = 5): a loop
-    fighting a stuck joint saturates its torque and gets there; 400 rad/s² here."""
+def test_a_stuck_encoder_is_held_out_and_the_controller_brakes_after_the_timeout(phantom_arm):
+    """A joint whose encoder stops while the loop moves it: the reading is held out, and after
+    ``fault_timeout`` the MPC brakes (failure ``encoder_fault``, torque from ``brake``)."""
     robot, arm = phantom_arm
     res = robot.encoder_resolution
-    observer = JointObserver(arm, res)
-    stuck, first_held = {}, []
+    c = library(robot, arm)
+    stuck = {}
 
     def reading(k, q):
-        if observer.held and not first_held:
-            first_held.append(k)
         q = np.rint(q / res) * res
-        if k >= 100:  # joint 1 sticks at its reading of tick 100
-            q[1] = stuck.setdefault("q", q[1])
+        if k >= 300:  # joint 0 sticks at its reading of tick 300
+            q[0] = stuck.setdefault("q", q[0])
         return q
 
-    est, vel = _moving(observer, arm, 200 + observer.timeout_ticks, reading, accel=400.0)
-    assert first_held[0] - 100 <= 10  # within 5 ms
-    assert observer.held >= observer.timeout_ticks and observer.faulted
-    assert observer.counts["reacquired"] == 0  # it never moves again
-    # held whole, the reading is predicted: the estimate keeps moving with the torque
-    np.testing.assert_allclose(est[-1, arm.nu:], vel[-1], rtol=0.05)
+    timeout = c.observer.timeout_ticks
+    _loop(c, arm, 1500, reading)
+    assert c.encoder_counts["held"] >= timeout and c.encoder_counts["reacquired"] == 0
+    assert c.stats.failures.get("encoder_fault", 0) > 0
+    assert c.stats.status == "encoder_fault" and c.stats.source == "brake"
 
 
 def test_a_reading_that_moves_again_is_taken_again(phantom_arm):
     robot, arm = phantom_arm
     res = robot.encoder_resolution
-    observer = JointObserver(arm, res)
-    ticks = observer.settings.reacquire_ticks
+    c = library(robot, arm)
+    ticks = c.observer.settings.reacquire_ticks
 
     def reading(k, q):  # joint 0 is offset by 2 mrad from tick 50 (a disturbance, alive)
-        q = np.rint(q / res) * res
-        return q + np.array([2e-3, 0.0, 0.0]) * (k >= 50)
+        return np.rint(q / res) * res + np.array([2e-3, 0.0, 0.0]) * (k >= 50)
 
-    est, vel = _moving(observer, arm, 50 + 2 * ticks + 10, reading)
-    assert observer.counts == {"held": ticks, "reacquired": 1}
-    assert not observer.faulted and observer.held == 0
-    q = arm.q0 + est[-1, :arm.nu]
-    assert abs(est[-1, 0] - est[-1, 1] - 2e-3) < 2 * res[0]  # the angle moved to the reading
-    # [rad/s]: the velocity from Δ over the 10-ms hold is within 0.014
-    np.testing.assert_allclose(est[-1, arm.nu:], vel[-1], atol=0.03)
-    assert np.all(np.isfinite(q))
-
-
-def test_a_joint_the_prediction_drifts_from_during_a_hold_is_no_suspect(phantom_arm):
-    """A reading held for joint 0 (a step past its gate, then a quantum further: alive) while
-    the open-loop prediction carries joint 1, whose encoder reads an arm at rest, past its own
-    gate: the hold ends on joint 0's change alone; joint 1's steady reading is no fault."""
-    robot, arm = phantom_arm
-    res = robot.encoder_resolution
-    observer = JointObserver(arm, res)
-    x = np.zeros(2 * arm.nu)
-    x[arm.nu + 1] = 0.05  # [rad/s]: the estimate believes joint 1 moves
-    observer.reset(x)
-    step = 3.0 * observer.gate[0]
-    for k in range(2 * observer.timeout_ticks):
-        q = arm.q0.copy()
-        q[0] += step + res[0] * (k > 0)
-        observer.correct(q)
-        observer.predict(np.zeros(arm.nu))
-        if k == observer.settings.reacquire_ticks - 1:  # the prediction is past joint 1's gate
-            assert abs(observer.x_prior[1]) > observer.gate[1]
-    assert observer.counts["reacquired"] == 1 and not observer.faulted
+    est, _, _ = _loop(c, arm, 50 + 2 * ticks + 10, reading)
+    assert c.encoder_counts == {"held": ticks, "reacquired": 1}
+    assert c.stats.failures.get("encoder_fault", 0) == 0
+    assert np.all(np.isfinite(est))
 
 
 def test_readings_that_are_not_finite_are_held_out(phantom_arm):
+    """A reading with a NaN or an infinity is held out whole: the estimate is the prediction
+    (at rest at q0 after a reset), and the step's torque stays finite."""
     robot, arm = phantom_arm
-    observer = JointObserver(arm, robot.encoder_resolution)
+    c = library(robot, arm)
     for bad in (np.array([np.nan, 0.0, 0.0]), np.array([np.inf, 1e300, -np.inf])):
-        observer.reset()
-        x = observer.correct(arm.q0 + bad)
-        assert np.all(x == 0.0) and observer.held == 1  # the prediction (at rest at q0)
-        np.testing.assert_array_equal(observer.reading, arm.q0)
+        c.reset()
+        tau = c.step(0, arm.q0 + bad)
+        assert np.all(c.x_hat == 0.0) and c.encoder_counts["held"] == 1
+        assert np.all(np.isfinite(tau))
 
 
 def test_a_reading_that_is_not_finite_is_held_out_after_a_reacquire_too(phantom_arm):
@@ -172,17 +152,15 @@ def test_a_reading_that_is_not_finite_is_held_out_after_a_reacquire_too(phantom_
     whatever the gate says: a NaN then (a reading that did not come) is still held out, and
     the estimate stays finite."""
     robot, arm = phantom_arm
-    observer = JointObserver(arm, robot.encoder_resolution)
-    step = 3.0 * observer.gate[0]
-    ticks = observer.settings.reacquire_ticks
-    for k in range(ticks + 1):  # a step past the gate, then a quantum further: alive
-        q = arm.q0.copy()
-        q[0] += step + robot.encoder_resolution[0] * (k > 0)
-        observer.correct(q)
-        observer.predict(np.zeros(arm.nu))
-    assert observer.counts["reacquired"] == 1
-    held = observer.counts["held"]
-    x = observer.correct(np.full(arm.nu, np.nan))
-    assert np.all(np.isfinite(x)) and observer.counts["held"] == held + 1
-    observer.predict(np.zeros(arm.nu))
-    assert np.all(np.isfinite(observer.x_prior))
+    res = robot.encoder_resolution
+    c = library(robot, arm)
+    ticks = c.observer.settings.reacquire_ticks
+    missing = 50 + ticks + 3  # within the grace after the reacquisition
+
+    def reading(k, q):  # joint 0 offset by 2 mrad from tick 50 (alive), one reading lost
+        q = np.rint(q / res) * res + np.array([2e-3, 0.0, 0.0]) * (k >= 50)
+        return np.full_like(q, np.nan) if k == missing else q
+
+    est, _, taus = _loop(c, arm, missing + 2, reading)
+    assert c.encoder_counts == {"held": ticks + 1, "reacquired": 1}
+    assert np.all(np.isfinite(est)) and np.all(np.isfinite(taus))

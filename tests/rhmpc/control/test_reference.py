@@ -1,16 +1,21 @@
-"""Cubic interpolation of the predictor's points into the N control-rate references."""
+"""The reference in the controller's library, driven by a predictor: the cubic interpolation
+of its points into the N control-rate references, the latency, the outlier gate, its
+retraction and its floor, the guard, the placement and the forecasts from outside; and the
+exact future of a study. References: the signals themselves (a cubic is reproduced exactly)."""
 
 from collections import Counter
+from functools import lru_cache
 
 import numpy as np
 import pytest
 
-from rhmpc.control.reference import (
-    ExactReference,
-    PredictedReference,
-    ReferenceSettings,
-    lagrange_weights,
-)
+from rhmpc.control.controller import Controller
+from rhmpc.control.mpc import RecedingHorizonMPC
+from rhmpc.control.observer import JointObserver
+from rhmpc.control.reference import PredictedReference, ReferenceSettings
+from rhmpc.control.settings import MPCSettings
+from rhmpc.robots import linearize, load_robot
+from rhmpc.sim.loop.exact import ArrayTruth, ExactReference
 
 TS, DS, N = 0.5e-3, 15, 50
 #: No gate, no guard: the interpolation alone.
@@ -21,6 +26,20 @@ def plain(points: int = 4, **changes) -> ReferenceSettings:
     """The reference without gate and guard, with ``points`` forecast points and ``changes``."""
     return ReferenceSettings(**{"outlier_gate": 0.0, "guard_speed": 0.0,
                                 "prediction_points": points, **changes})
+
+
+@lru_cache(maxsize=1)
+def _arm():
+    return linearize(load_robot("phantom"), Ts=TS)
+
+
+def reference(predictor, settings=PLAIN, refresh_ticks=DS) -> PredictedReference:
+    """``predictor``'s reference, bound to a controller library of its own (the MPC default)."""
+    arm = _arm()
+    ref = PredictedReference(predictor, TS, N, refresh_ticks, settings)
+    Controller(RecedingHorizonMPC(arm, MPCSettings()), ref, JointObserver(arm, None), None,
+               arm.torque_limit)
+    return ref
 
 
 class Scripted:
@@ -44,24 +63,9 @@ class Scripted:
         return np.column_stack([self.f(t), t])
 
 
-def test_weights_reproduce_cubics_exactly_and_pass_through_the_nodes():
-    s = np.linspace(-0.5, 6.5, 57)
-    m, w = lagrange_weights(s, 6)
-    cubic = lambda x: 3.0 - 2.0 * x + 0.7 * x**2 - 0.2 * x**3  # noqa: E731
-    nodes = cubic(np.arange(6.0))
-    got = sum(w[:, j] * nodes[m + j] for j in range(4))
-    np.testing.assert_allclose(got, cubic(s), atol=1e-11)
-    k = np.arange(6.0)
-    m, w = lagrange_weights(k, 6)
-    np.testing.assert_allclose(sum(w[:, j] * nodes[m + j] for j in range(4)), nodes, atol=1e-12)
-    assert m.tolist() == [0, 0, 1, 2, 2, 2]  # the window around the interval, clipped
-    with pytest.raises(ValueError):
-        lagrange_weights(s, 3)
-
-
 def build(f, latency_ticks=0, points=4):
     pred = Scripted(f)
-    ref = PredictedReference(pred, TS, N, DS, plain(points))
+    ref = reference(pred, plain(points))
     for k in range(4):
         tick = k * DS
         stamp = (tick - latency_ticks) * TS
@@ -69,12 +73,13 @@ def build(f, latency_ticks=0, points=4):
     return ref, pred, 3 * DS
 
 
-def test_quadratic_signal_is_reproduced_over_every_tick_of_the_cycle():
-    f = lambda t: 1e-3 + 0.2 * t - 3.0 * t**2  # noqa: E731
+@pytest.mark.parametrize("f", [lambda t: 1e-3 + 0.2 * t - 3.0 * t**2,
+                               lambda t: 1e-3 + 0.2 * t - 3.0 * t**2 + 40.0 * t**3])
+def test_quadratic_and_cubic_signals_are_reproduced_over_every_tick_of_the_cycle(f):
     ref, _, tick0 = build(f)
     for tick in range(tick0, tick0 + DS):
         t = (tick + np.arange(1, N + 1)) * TS
-        np.testing.assert_allclose(ref.horizon(tick)[:, 0], f(t), atol=1e-15)
+        np.testing.assert_allclose(ref.horizon(tick)[:, 0], f(t), atol=1e-14)
 
 
 def test_heart_like_sinusoid_is_interpolated_within_a_micrometre():
@@ -101,7 +106,7 @@ def test_missing_samples_keep_a_finite_reference_and_the_origin_before_data():
     runs the predictor open-loop."""
     f = lambda t: np.sin(t)  # noqa: E731
     pred = Scripted(f)
-    ref = PredictedReference(pred, TS, N, DS, PLAIN)
+    ref = reference(pred)
     ref.place(np.array([0.1, 0.2, 0.3]))
     ref.refresh(0, None, 0.0)
     np.testing.assert_array_equal(ref.horizon(0), np.tile([0.1, 0.2, 0.3], (N, 1)))
@@ -130,8 +135,8 @@ def test_outlier_gate_rejects_spikes_and_relocks_on_a_real_jump():
 
     dt = DS * TS
     pred = make_predictor("one-step", dt=dt)
-    ref = PredictedReference(pred, TS, N, DS, plain(outlier_gate=1.5e-3, outlier_max_rejections=2))
-    clean = PredictedReference(make_predictor("one-step", dt=dt), TS, N, DS, PLAIN)
+    ref = reference(pred, plain(outlier_gate=1.5e-3, outlier_max_rejections=2))
+    clean = reference(make_predictor("one-step", dt=dt))
     f = lambda t: 2e-3 * np.sin(2 * np.pi * 1.5 * t)  # noqa: E731
     n = 2000
     spikes = {1500, 1501}
@@ -189,7 +194,7 @@ class Diverging:
 
 def test_reference_guard_holds_the_last_sample_when_the_predictor_diverges():
     pred = Diverging()
-    ref = PredictedReference(pred, TS, N, DS, plain(guard_speed=0.3, guard_margin=2e-3))
+    ref = reference(pred, plain(guard_speed=0.3, guard_margin=2e-3))
     z = np.array([5e-3, -2e-3, 1e-3])
     for k in range(49):
         ref.refresh(k * DS, z, k * DS * TS)
@@ -200,7 +205,7 @@ def test_reference_guard_holds_the_last_sample_when_the_predictor_diverges():
     np.testing.assert_array_equal(h, np.broadcast_to(z, h.shape))  # holds the last sample
     assert pred.n == 1  # restarted from the held sample
     # Without the guard the same forecasts would be handed to the MPC.
-    free = PredictedReference(Diverging(), TS, N, DS, PLAIN)
+    free = reference(Diverging())
     for k in range(50):
         free.refresh(k * DS, z, k * DS * TS)
     assert np.abs(free.horizon(49 * DS)).max() > 0.01
@@ -209,7 +214,7 @@ def test_reference_guard_holds_the_last_sample_when_the_predictor_diverges():
 def test_placement_and_a_skipped_refresh_holds_the_last_window():
     f = np.sin
     origin = np.array([0.1, -0.2, 0.3])
-    ref = PredictedReference(Scripted(f), TS, N, DS, PLAIN)
+    ref = reference(Scripted(f))
     ref.place(origin)
     for k in range(3):
         t = k * DS * TS
@@ -235,7 +240,7 @@ def test_samples_in_the_sensors_frame_are_placed_by_its_registration():
     """A sample z is the workspace point origin + E (z − center); before the first sample the
     reference holds the origin itself; a center that is not 3 finite numbers is refused."""
     origin, center = np.array([0.1, -0.2, 0.3]), np.array([0.05, 0.04])
-    ref = PredictedReference(Scripted(lambda t: np.sin(t) + center[0]), TS, N, DS, PLAIN)
+    ref = reference(Scripted(lambda t: np.sin(t) + center[0]))
     ref.place(origin, center)
     np.testing.assert_array_equal(ref.horizon(0), np.broadcast_to(origin, (N, 3)))
     for k in range(3):
@@ -254,8 +259,6 @@ def test_samples_in_the_sensors_frame_are_placed_by_its_registration():
 
 def test_exact_reference_read_in_windows_is_the_whole_array():
     """Gaps longer than a window, at window edges and at both ends, bridged as on the array."""
-    from rhmpc.positions import ArrayTruth
-
     rng = np.random.default_rng(3)
     truth = rng.normal(size=(3000, 3))
     truth[:7, 0] = np.nan  # before the first finite tick
@@ -290,8 +293,8 @@ def _gated_run(z: np.ndarray, retract: bool, outlier: np.ndarray, k_out: int):
     pred = make_predictor("generalized", dt=dt)
     if not retract:
         pred.retract = lambda: False
-    ref = PredictedReference(pred, TS, N, DS, plain(outlier_gate=0.15e-3))
-    clean = PredictedReference(make_predictor("generalized", dt=dt), TS, N, DS, PLAIN)
+    ref = reference(pred, plain(outlier_gate=0.15e-3))
+    clean = reference(make_predictor("generalized", dt=dt))
     worst = 0.0
     for k in range(k_out + 40):
         t = k * dt
@@ -322,38 +325,59 @@ def test_gate_retracts_a_small_outlier_that_it_let_through(k_out):
     assert counts["outliers_rejected"] < plain["outliers_rejected"]
 
 
+class Misses:
+    """A 'predictor' that always forecasts the origin: each sample is its own miss."""
+
+    dt, ready = DS * TS, True
+
+    def __init__(self):
+        self.counts = Counter()
+
+    def reset(self):
+        self.counts.clear()
+
+    def update(self, z):
+        pass
+
+    def predict(self, steps):
+        return np.zeros((steps, 3))
+
+
 def test_the_automatic_gate_floor_is_four_times_the_rms_miss_after_convergence():
     """After ``calibration`` misses of convergence, the floor is 4 × the RMS of the next
     ``calibration`` misses; an outlier in the window and the converging misses before it do
     not inflate it."""
-    from rhmpc.control.gate import OutlierGate
-
     rng = np.random.default_rng(7)
-    counts = {"outliers_rejected": 0, "gate_unlocked": 0}
-    gate = OutlierGate(None, max_rejections=3, calibration=400)
+    pred = Misses()
+    ref = reference(pred, ReferenceSettings(gate_calibration=400 * DS * TS, guard_speed=0.0))
     sigma = 0.2e-3  # per axis [m]: RMS of the 3-D miss √3·σ
     converging = rng.normal(0.0, 5 * sigma, (400, 3))
     window = rng.normal(0.0, sigma, (400, 3))
     window[123] = 5e-3  # an echo outlier inside the calibration window
-    for k, miss in enumerate(np.concatenate([converging, window])):
-        assert gate.floor is None  # every sample is taken while calibrating
-        assert gate.accept(miss, np.zeros(3), counts), k
-    assert gate.floor == pytest.approx(4 * np.sqrt(3) * sigma, rel=0.1)
+    controller = ref._controller
+    ref.refresh(0, np.zeros(3), 0.0)  # the first sample: no forecast to judge it by yet
+    for k, miss in enumerate(np.concatenate([converging, window]), start=1):
+        assert controller.gate_floor is None  # every sample is taken while calibrating
+        ref.refresh(k * DS, miss, k * DS * TS)
+    assert pred.counts["outliers_rejected"] == 0
+    assert controller.gate_floor == pytest.approx(4 * np.sqrt(3) * sigma, rel=0.1)
     # Gaussian misses of the same size then pass; a 3-mm spike does not
-    rejected = sum(not gate.accept(m, np.zeros(3), counts)
-                   for m in rng.normal(0.0, sigma, (2000, 3)))
-    assert rejected == 0
-    assert not gate.accept(np.full(3, 3e-3), np.zeros(3), counts)
+    for k, miss in enumerate(rng.normal(0.0, sigma, (2000, 3)), start=801):
+        ref.refresh(k * DS, miss, k * DS * TS)
+    assert pred.counts["outliers_rejected"] == 0
+    ref.refresh(2801 * DS, np.full(3, 3e-3), 2801 * DS * TS)
+    assert pred.counts["outliers_rejected"] == 1
 
 
 def test_a_fixed_gate_floor_is_used_as_given():
-    from rhmpc.control.gate import OutlierGate
-
-    gate = OutlierGate(1e-3)
-    assert gate.floor == 1e-3
-    assert not gate.accept(np.array([2e-3, 0, 0]), np.zeros(3), {"outliers_rejected": 0})
-    with pytest.raises(ValueError, match="> 0"):
-        OutlierGate(-1.0)
+    pred = Misses()
+    ref = reference(pred, ReferenceSettings(outlier_gate=1e-3, guard_speed=0.0))
+    assert ref._controller.gate_floor == 1e-3
+    ref.refresh(0, np.zeros(3), 0.0)
+    ref.refresh(DS, np.array([2e-3, 0, 0]), DS * TS)
+    assert pred.counts["outliers_rejected"] == 1
+    with pytest.raises(ValueError, match="outlier_gate"):
+        ReferenceSettings(outlier_gate=-1.0)
 
 
 def test_a_forecast_from_outside_serves_until_refreshes_take_over_again():

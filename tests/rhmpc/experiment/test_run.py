@@ -6,13 +6,13 @@ import math
 import numpy as np
 import pytest
 
-from rhmpc.control.reference import ExactReference, PredictedReference
+from rhmpc.control.reference import PredictedReference
 from rhmpc.experiment import RunConfig, build_run, run_experiment
 from rhmpc.experiment.assembly import build_controller
-from rhmpc.positions import ArrayTruth
 from rhmpc.predictors import PREDICTORS, Predictor
 from rhmpc.sim.loop import LoopSettings, run_closed_loop
 from rhmpc.sim.loop.closed_loop import poi_truth
+from rhmpc.sim.loop.exact import ArrayTruth, ExactReference
 from rhmpc.sim.plant import make_plant
 from rhmpc.sim.sources import heart_source
 

@@ -9,11 +9,11 @@ from rhmpc.control.cancellation import NonlinearityCancellation
 from rhmpc.control.controller import Controller
 from rhmpc.control.mpc import RecedingHorizonMPC
 from rhmpc.control.observer import JointObserver
-from rhmpc.control.reference import ExactReference, PredictedReference, ReferenceSettings
+from rhmpc.control.reference import PredictedReference, ReferenceSettings
 from rhmpc.control.settings import MPCSettings
-from rhmpc.positions import ArrayTruth
 from rhmpc.sim.loop import LoopSettings, poi_truth, run_closed_loop
 from rhmpc.sim.loop.clock import predictor_clock
+from rhmpc.sim.loop.exact import ArrayTruth, ExactReference
 from rhmpc.sim.plant import make_plant
 from tests.sim.loop.stand_ins import HarmonicHeart, ideal_stream
 
@@ -40,7 +40,7 @@ def run_with(world, reference_of, stream_of=None, settings=SHORT, failures=0):
     controller = Controller(RecedingHorizonMPC(arm, MPCSettings()), reference,
                             JointObserver(arm, robot.encoder_resolution),
                             NonlinearityCancellation(robot), robot.torque_limit)
-    controller.mpc.force_failures(failures)
+    controller.force_failures(failures)
     return run_closed_loop(make_plant(robot, arm, settings.Ts), controller,
                            ArrayTruth(truth, center), stream, settings,
                            predictor_clock(settings, stream), anchor=arm.y0, robot=robot)

@@ -7,8 +7,11 @@ import pinocchio as pin
 import pytest
 
 from rhmpc.control.cancellation import ModelMismatch, NonlinearityCancellation
+from rhmpc.control.controller import Controller
+from rhmpc.control.mpc import RecedingHorizonMPC
 from rhmpc.control.observer import JointObserver
 from rhmpc.robots import Robot, linearize
+from rhmpc.sim.loop.exact import ExactReference
 from rhmpc.sim.plant import HardwareSettings, PlantSettings, make_plant
 from rhmpc.sim.plant.hardware import HardwarePlant, LinearPlant, cable_stiffness
 from tests.sim.plant import reference
@@ -54,19 +57,18 @@ def drive(plant: HardwarePlant, torques) -> np.ndarray:
     return np.array(out)
 
 
-def hold_home(robot: Robot, arm, plant, ticks: int, u_of=lambda i: 0.0,
+def hold_home(robot: Robot, arm, plant, ticks: int,
               mismatch: ModelMismatch | None = None) -> list:
-    """The controller's observer and cancellation around ``plant`` with the MPC torque
-    ``u_of(i)``: the arm's states after each tick."""
-    cancel = NonlinearityCancellation(robot, mismatch)
-    observer = JointObserver(arm, robot.encoder_resolution)
+    """The controller (its library: observer, MPC holding the home point, cancellation) around
+    ``plant``: the arm's states after each tick."""
+    reference = ExactReference(np.zeros((ticks + 60, 3)), 50)
+    reference.place(arm.y0)
+    controller = Controller(RecedingHorizonMPC(arm), reference,
+                            JointObserver(arm, robot.encoder_resolution),
+                            NonlinearityCancellation(robot, mismatch), robot.torque_limit)
     states = []
     for i in range(ticks):
-        q = plant.encoders()
-        x = observer.correct(q)
-        u = np.broadcast_to(np.asarray(u_of(i), dtype=float), (robot.nv,))
-        plant.step(cancel.torque(q, x[robot.nv :], u))
-        observer.predict(u)
+        plant.step(controller.step(i, plant.encoders()))
         states.append(np.r_[plant.q_arm, plant.v, plant.theta_r, plant.current])
     return states
 
@@ -179,9 +181,9 @@ def test_hardware_plant_needs_drives(arm):
 
 
 def test_phantom_rests_at_home_under_its_own_cancellation(phantom, arm):
-    """Default hardware plant (delay, DAC, lag, stiction), the controller's model the plant's:
-    at rest with zero MPC torque the tip stays within 0.02 mm over 1 s (what is left: the DAC's
-    rounding of the gravity torque, creeping against the smoothed friction)."""
+    """Default hardware plant (delay, DAC, lag, stiction), the controller's model the plant's,
+    its MPC holding the home point: the tip stays within 0.02 mm over 1 s (what is left: the
+    DAC's rounding of the gravity torque, creeping against the smoothed friction)."""
     plant = make_plant(phantom, arm, TS, PlantSettings(model="hardware"))
     assert isinstance(plant, HardwarePlant)
     states = hold_home(phantom, arm, plant, 2000)

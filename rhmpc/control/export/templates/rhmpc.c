@@ -141,6 +141,28 @@ void rhmpc_tool_position(const double q[RHMPC_NU], double p[3]) {
 #endif
 }
 
+/* d = p(q0 + x_q) - (C x + y0) into d (RHMPC_NEXTRA values; zeros without the offset) */
+static void output_offset(const double x[RHMPC_NX], double *d) {
+#if RHMPC_OFFSET
+  const double *arg[1] = {x};
+  double *res[1] = {d};
+  model_call(rhmpc_offset, arg, res);
+#else
+  (void)x;
+  (void)d;
+#endif
+}
+
+int rhmpc_mpc(rhmpc_t *ctl, const double x[RHMPC_NX], const double *ref, double u[RHMPC_NU]) {
+  long long t0 = now_ns();
+  double d[RHMPC_NEXTRA + 1] = {0};
+  output_offset(x, d);
+  int status = rhmpc_mpc_tick(ctl, x, ref, d, u);
+  memcpy(ctl->pub.u, u, sizeof ctl->pub.u);
+  ctl->pub.step_ns = now_ns() - t0;
+  return status;
+}
+
 int rhmpc_step(rhmpc_t *ctl, long long tick, const double q[RHMPC_NU], double tau[RHMPC_NU]) {
   long long t0 = now_ns();
   rhmpc_public_t *pub = &ctl->pub;
@@ -149,13 +171,7 @@ int rhmpc_step(rhmpc_t *ctl, long long tick, const double q[RHMPC_NU], double ta
     memcpy(x, ctl->x_prior, sizeof ctl->x_prior);
   else
     affine(rhmpc_correct, RHMPC_NX, ctl->x_prior, RHMPC_NX, qf, RHMPC_NU, x);
-#if RHMPC_OFFSET
-  {
-    const double *arg[1] = {x};
-    double *res[1] = {d};
-    model_call(rhmpc_offset, arg, res);
-  }
-#endif
+  output_offset(x, d);
   int status = ctl->held >= RHMPC_FAULT_TIMEOUT_TICKS
                    ? rhmpc_mpc_brake(ctl, x, RHMPC_ENCODER_FAULT, pub->u)
                    : rhmpc_mpc_tick(ctl, x, rhmpc_horizon(ctl, tick), d, pub->u);

@@ -90,6 +90,7 @@ extern "C" {
 #define RHMPC_PREDICTION_POINTS @PREDICTION_POINTS@
 #define RHMPC_KMAX @KMAX@ /* the most forecast points (latency included) */
 #define RHMPC_SPAN @SPAN@ /* reference points of a refresh: RHMPC_REFRESH_TICKS + RHMPC_N */
+#define RHMPC_INTERNAL @INTERNAL@  /* 1: the library runs its own RLS predictor (rhmpc_refresh) */
 #define RHMPC_GENERALIZED @GENERALIZED@  /* 1: the generalized predictor, 0: the one-step */
 #define RHMPC_CORRELATED @CORRELATED@  /* 1: d x d weight blocks, 0: one filter per axis */
 #define RHMPC_ORDER @ORDER@   /* N, past samples in the regressor */
@@ -157,7 +158,8 @@ typedef struct {
   double g_cal[2 * RHMPC_GATE_CALIBRATION + 1], g_sorted[RHMPC_GATE_CALIBRATION + 1];
   /* the reference */
   int have_anchor, have_points, have_held, have_forecast, have_second, have_before;
-  double anchor, held_stamp;
+  int measured_now, n_nodes;            /* the last sample was accepted; the nodes it made */
+  double anchor, held_stamp, latency, t0;
   double held[RHMPC_D], forecast[RHMPC_D], second[RHMPC_D], before[RHMPC_D];
   double dense[RHMPC_SPAN * RHMPC_D];
   double origin[3], center[3];
@@ -218,12 +220,60 @@ int rhmpc_refresh(rhmpc_t *ctl, long long tick, double stamp, const double *z);
  * with or without rhmpc_refresh. */
 int rhmpc_forecast(rhmpc_t *ctl, long long tick, double stamp, const double *points, int count);
 
+/* A predictor outside the library (the research predictors of a simulation, or of a deployment's
+ * predictor process) refreshes the reference through its steps, in this order:
+ *   K = rhmpc_sample(ctl, tick, stamp, z, retract, arg, &accepted);   the gate and the anchor
+ *   (K <= 0: nothing measured yet, or a bad stamp: stop here)
+ *   the predictor learns z (accepted) or runs one period open-loop, and forecasts K points
+ *   n = rhmpc_nodes(ctl, points, K, ready, &t0);   the nodes [z; points] at t0 + k RHMPC_DT
+ *   if (rhmpc_interpolate(ctl, tick)) restart the predictor from the last accepted sample
+ * rhmpc_refresh is the same with the library's own predictor. */
+typedef int (*rhmpc_retract_t)(void *arg); /* retract the newest sample; 1 if it could */
+
+/* The outlier gate on z (RHMPC_D values [m], NULL: none): 1 accepted, 0 treated as missing.
+ * Judged against the forecast the last rhmpc_nodes kept; a sample that misses it but agrees with
+ * the two-step forecast made before the newest accepted sample is accepted if retract(arg)
+ * retracts that one (the outlier; retract may be NULL). */
+int rhmpc_outlier_gate(rhmpc_t *ctl, const double *z, rhmpc_retract_t retract, void *arg);
+
+/* The gate on z measured at `stamp` and the reference's anchor: the number of points to
+ * forecast (RHMPC_PREDICTION_POINTS plus the latency, at most RHMPC_KMAX), 0 while nothing has
+ * been measured (hold), or RHMPC_BAD_STAMP; *accepted: the gate took z. */
+int rhmpc_sample(rhmpc_t *ctl, long long tick, double stamp, const double *z,
+                 rhmpc_retract_t retract, void *arg, int *accepted);
+
+/* The predictor's `count` points after rhmpc_sample (z_hat at the anchor + k RHMPC_DT, k = 1 ...
+ * count; ready: they are its own forecasts, not the hold): the nodes, the gate's forecasts of
+ * the next samples, the age. Returns the nodes' count (rhmpc_node_values) and their first time
+ * *t0 [s], or RHMPC_BAD_FORECAST. */
+int rhmpc_nodes(rhmpc_t *ctl, const double *points, int count, int ready, double *t0);
+const double *rhmpc_node_values(const rhmpc_t *ctl);
+
+/* The nodes of the last rhmpc_nodes interpolated to the ticks after `tick` and guarded: 0, or 1
+ * if the guard found them diverged (the reference holds the last accepted sample, and the
+ * predictor is to restart from it); -1 if a forecast from outside serves these ticks. */
+int rhmpc_interpolate(rhmpc_t *ctl, long long tick);
+
+/* Reference points given whole (a study's exact future): r_{tick+1} ... r_{tick+count} in the
+ * workspace [m] (count >= 1; the last repeats up to RHMPC_SPAN). */
+void rhmpc_points(rhmpc_t *ctl, long long tick, const double *points, int count);
+
 /* One control tick from the encoders' angles q [rad]: the torques tau [N*m]. Returns an
  * enum rhmpc_status. */
 int rhmpc_step(rhmpc_t *ctl, long long tick, const double q[RHMPC_NU], double tau[RHMPC_NU]);
 
+/* The MPC alone, for studies and tests: u = tau_mpc [N*m] for the state x = [q - q0; qdot] and
+ * the points ref (N x 3 [m]), with the output offset of x; the counters and the plan as in a
+ * step (no observer, no cancellation). Returns an enum rhmpc_status. */
+int rhmpc_mpc(rhmpc_t *ctl, const double x[RHMPC_NX], const double *ref, double u[RHMPC_NU]);
+
 /* The reference points r_{tick+1} ... r_{tick+N} the step of `tick` tracks (N x 3 [m]). */
 const double *rhmpc_horizon(const rhmpc_t *ctl, long long tick);
+
+/* A bumpless start when the MPC takes over from another controller: u [N*m] is the torque
+ * that acted last (u_{-1} of the next QP, whose rate term penalises the change from it;
+ * clipped to the MPC's bounds, 0 where not finite). */
+void rhmpc_take_over(rhmpc_t *ctl, const double u[RHMPC_NU]);
 
 /* Make the next `count` solves report RHMPC_INJECTED (fault injection; the solve still runs). */
 void rhmpc_force_failures(rhmpc_t *ctl, long long count);

@@ -131,6 +131,12 @@ void rhmpc_mpc_reset(rhmpc_t *ctl) {
   osqp_warm_start(SOLVER, zeros_z, rhmpc_y_plan);
 }
 
+void rhmpc_take_over(rhmpc_t *ctl, const double u[RHMPC_NU]) {
+  double *p_u = ctl->mpc.p_ext + RHMPC_NX + RHMPC_NY * RHMPC_N;
+  for (int i = 0; i < RHMPC_NU; ++i)
+    p_u[i] = isfinite(u[i]) ? clip(u[i], rhmpc_u_max[i]) : 0.0;
+}
+
 void rhmpc_force_failures(rhmpc_t *ctl, long long count) {
   if (count > 0) ctl->mpc.forced += count;
 }

@@ -537,47 +537,53 @@ void rhmpc_place(rhmpc_t *ctl, const double origin[3], const double center[3]) {
       ctl->pub.points[3 * i + c] = s->origin[c] + (c < D ? s->dense[i * D + c] - s->center[c] : 0.0);
 }
 
-/* PredictedReference._gated: z if the gate accepts it (retracting the previous sample where it
- * was the outlier), else NULL */
-static const double *gated(rhmpc_t *ctl, const double *z) {
+/* The outlier gate (PredictedReference._gated): z if the gate accepts it (retracting the
+ * previous sample where it was the outlier, when `retract` can), else NULL */
+int rhmpc_outlier_gate(rhmpc_t *ctl, const double *z, rhmpc_retract_t retract, void *arg) {
   rhmpc_reference_t *s = &ctl->ref;
-  if (!measured(z)) return NULL;
-  if (!RHMPC_GATE || !s->have_forecast) return z;
+  if (!measured(z)) return 0;
+  if (!RHMPC_GATE || !s->have_forecast) return 1;
   double m2 = miss2(z, s->forecast);
   if (s->have_before && !gate_inside(ctl, m2) && gate_inside(ctl, miss2(z, s->before))
-      && predictor_retract(ctl)) {
+      && retract != NULL && retract(arg)) {
     gate_accept(ctl, miss2(z, s->before));
-    return z;
+    return 1;
   }
-  return gate_accept(ctl, m2) ? z : NULL;
+  return gate_accept(ctl, m2);
 }
 
-/* PredictedReference._diverged: hold `held`; with `restart`, restart the predictor from it
- * (counts kept) */
+static int internal_retract(void *arg) { return predictor_retract((rhmpc_t *)arg); }
+
+/* Hold `held`; with `restart`, forget the gate's forecasts, and with restart 2 restart the
+ * library's own predictor from it (counts kept; a predictor outside restarts itself:
+ * rhmpc_interpolate says so) */
 static void diverged(rhmpc_t *ctl, const double *held_in, int restart) {
   rhmpc_reference_t *s = &ctl->ref;
   long long counts[RHMPC_N_COUNTS];
   double held[D];
   memcpy(held, held_in, sizeof held);
   if (restart) {
-    memcpy(counts, ctl->pub.counts, sizeof counts);
-    predictor_reset(ctl);
-    memcpy(ctl->pub.counts, counts, sizeof counts);
-    predictor_update(ctl, held);
+    if (RHMPC_INTERNAL && restart == 2) {
+      memcpy(counts, ctl->pub.counts, sizeof counts);
+      predictor_reset(ctl);
+      memcpy(ctl->pub.counts, counts, sizeof counts);
+      predictor_update(ctl, held);
+    }
     s->have_forecast = s->have_second = s->have_before = 0;
   }
   ctl->pub.counts[RHMPC_REFERENCE_GUARD]++;
   for (int i = 0; i < RHMPC_SPAN; i++) memcpy(s->dense + i * D, held, sizeof held);
 }
 
-/* PredictedReference._interpolate: the span points after `tick` from the nodes at t0 + k dt,
- * piecewise-cubic Lagrange (s = lead + age/dt, window m = clamp(floor(s) - 1, 0, nodes - 4),
- * u = s - m), guarded against `held` (measured at held_stamp; NULL: none) and placed */
-static void interpolate(rhmpc_t *ctl, long long tick, int n_nodes, double t0,
-                        const double *held, double held_stamp, int restart) {
+/* The span points after `tick` from the nodes at t0 + k dt, piecewise-cubic Lagrange (s = lead +
+ * age/dt, window m = clamp(floor(s) - 1, 0, nodes - 4), u = s - m), guarded against `held`
+ * (measured at held_stamp; NULL: none) and placed; 1 if the guard found them diverged */
+static int interpolate(rhmpc_t *ctl, long long tick, int n_nodes, double t0,
+                       const double *held, double held_stamp, int restart) {
   rhmpc_reference_t *s = &ctl->ref;
   const double now = (double)tick * RHMPC_TS, shift = (now - t0) / RHMPC_DT;
   const double top = (double)(n_nodes - 4);
+  int tripped = 0;
   for (int i = 0; i < RHMPC_SPAN; i++) {
     double si = (i + 1) * (RHMPC_TS / RHMPC_DT) + shift, m = floor(si) - 1.0;
     m = m > top ? top : m;
@@ -597,50 +603,92 @@ static void interpolate(rhmpc_t *ctl, long long tick, int n_nodes, double t0,
     for (int k = 0; k < RHMPC_SPAN * D; k++)
       if (fabs(s->dense[k] - held[k % D]) > reach) {
         diverged(ctl, held, restart);
+        tripped = 1;
         break;
       }
   }
   rhmpc_place(ctl, s->origin, s->center);
+  return tripped;
 }
 
-int rhmpc_reference_refresh(rhmpc_t *ctl, long long tick, double stamp, const double *z) {
+int rhmpc_sample(rhmpc_t *ctl, long long tick, double stamp, const double *z,
+                 rhmpc_retract_t retract, void *arg, int *accepted) {
   rhmpc_reference_t *s = &ctl->ref;
+  int ok;
+  *accepted = 0;
   if (!isfinite(stamp)) return RHMPC_BAD_STAMP;
-  z = gated(ctl, z);
-  if (z == NULL && !s->have_anchor) return 0; /* nothing measured yet (nor lost): hold */
-  predictor_update(ctl, z);
-  if (z != NULL) {
+  ok = rhmpc_outlier_gate(ctl, z, retract, arg);
+  if (!ok && !s->have_anchor) return 0; /* nothing measured yet (nor lost): hold */
+  if (ok) {
     s->have_anchor = s->have_held = 1;
     s->anchor = s->held_stamp = stamp;
     memcpy(s->held, z, D * sizeof(double));
   } else {
-    s->anchor += RHMPC_DT; /* the predictor advanced one period open-loop */
+    s->anchor += RHMPC_DT; /* the predictor advances one period open-loop */
   }
+  s->measured_now = *accepted = ok;
   double latency = (double)tick * RHMPC_TS - s->anchor;
-  double steps = ceil((latency > 0.0 ? latency : 0.0) / RHMPC_DT - 1e-9);
+  s->latency = latency > 0.0 ? latency : 0.0;
+  double steps = ceil(s->latency / RHMPC_DT - 1e-9);
   int K = RHMPC_PREDICTION_POINTS + (steps < RHMPC_KMAX ? (int)steps : RHMPC_KMAX);
   if (K > RHMPC_KMAX) {
     K = RHMPC_KMAX;
     ctl->pub.counts[RHMPC_FORECAST_CAPPED]++;
   }
-  const int off = z != NULL; /* node 0 is z itself when measured */
-  if (off) memcpy(s->nodes, z, D * sizeof(double));
-  predictor_predict(ctl, K, s->nodes + off * D);
-  if (RHMPC_GATE) {
+  return K;
+}
+
+int rhmpc_nodes(rhmpc_t *ctl, const double *points, int count, int ready, double *t0) {
+  rhmpc_reference_t *s = &ctl->ref;
+  const int off = s->measured_now; /* node 0 is the sample itself when measured */
+  if (points == NULL || count < 2 || count > RHMPC_KMAX) return RHMPC_BAD_FORECAST;
+  if (off) memcpy(s->nodes, s->held, D * sizeof(double));
+  memmove(s->nodes + off * D, points, (size_t)count * D * sizeof(double));
+  if (RHMPC_GATE) { /* the one- and two-step forecasts the gate judges the next samples by */
     s->have_before = off && s->have_second;
     if (s->have_before) memcpy(s->before, s->second, D * sizeof(double));
-    s->have_forecast = s->have_second = ctl->pub.ready;
+    s->have_forecast = s->have_second = ready != 0;
     memcpy(s->forecast, s->nodes + off * D, D * sizeof(double));
     memcpy(s->second, s->nodes + (off + 1) * D, D * sizeof(double));
   }
   if (off) {
-    ctl->pub.age_sum += latency > 0.0 ? latency : 0.0;
+    ctl->pub.age_sum += s->latency;
     ctl->pub.age_count++;
   }
-  if (tick >= s->ext_until) /* else a forecast from outside serves these ticks */
-    interpolate(ctl, tick, K + off, off ? s->anchor : s->anchor + RHMPC_DT,
-                s->have_held ? s->held : NULL, s->held_stamp, 1);
+  s->n_nodes = count + off;
+  s->t0 = off ? s->anchor : s->anchor + RHMPC_DT;
+  if (t0 != NULL) *t0 = s->t0;
+  return s->n_nodes;
+}
+
+const double *rhmpc_node_values(const rhmpc_t *ctl) { return ctl->ref.nodes; }
+
+static int interpolate_nodes(rhmpc_t *ctl, long long tick, int restart) {
+  rhmpc_reference_t *s = &ctl->ref;
+  if (tick < s->ext_until || s->n_nodes < 4) return -1; /* a forecast from outside serves */
+  return interpolate(ctl, tick, s->n_nodes, s->t0, s->have_held ? s->held : NULL,
+                     s->held_stamp, restart);
+}
+
+int rhmpc_interpolate(rhmpc_t *ctl, long long tick) { return interpolate_nodes(ctl, tick, 1); }
+
+int rhmpc_reference_refresh(rhmpc_t *ctl, long long tick, double stamp, const double *z) {
+  rhmpc_reference_t *s = &ctl->ref;
+  int accepted;
+  if (!RHMPC_INTERNAL) return isfinite(stamp) ? 0 : RHMPC_BAD_STAMP;
+  int K = rhmpc_sample(ctl, tick, stamp, z, internal_retract, ctl, &accepted);
+  if (K <= 0) return K;
+  predictor_update(ctl, accepted ? z : NULL);
+  predictor_predict(ctl, K, s->nodes + accepted * D);
+  rhmpc_nodes(ctl, s->nodes + accepted * D, K, ctl->pub.ready, NULL);
+  interpolate_nodes(ctl, tick, 2);
   return 0;
+}
+
+void rhmpc_points(rhmpc_t *ctl, long long tick, const double *points, int count) {
+  for (int i = 0; i < RHMPC_SPAN; i++)
+    memcpy(ctl->pub.points + 3 * i, points + 3 * (i < count ? i : count - 1), 3 * sizeof(double));
+  ctl->pub.first = tick + 1;
 }
 
 /* PredictedReference.forecast: points made outside, interpolated and guarded as the refresh's
