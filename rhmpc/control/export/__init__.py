@@ -2,6 +2,7 @@
 
 =============  ==================================================================
 ``generate``   :func:`export_controller`: the whole real-time controller as C sources
+``arrays``     the controller's numbers as C arrays (``rhmpc_data.c``)
 ``dynamics``   the controller's model (cancellation, output offset) as CasADi expressions
 ``layout``     the names and the public struct the C and its binding share
 ``binding``    :class:`Controller`: the library built from an export, behind Python calls
