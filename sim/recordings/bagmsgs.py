@@ -28,12 +28,27 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import NamedTuple
 
-__all__ = ["MARKER_ADD", "TYPES", "MessageType", "frame_name", "read_types", "stamp_ns",
-           "type_name"]
+__all__ = ["MARKER_ADD", "TYPES", "MessageType", "Sample", "frame_name", "read_types",
+           "stamp_ns", "type_name"]
 
-#: One sample of a message: (child frame or None, stamp [ns], positions [[x, y, z], …] [m]).
-Sample = tuple[str | None, int, list[tuple[float, float, float]]]
+class Sample(NamedTuple):
+    """One sample of a message.
+
+    Attributes
+    ----------
+    frame : str or None
+        The child frame of a transform; None for a message of one frame.
+    stamp : int
+        The header's stamp [ns].
+    points : list of (float, float, float)
+        The positions [m], one per tracked point.
+    """
+
+    frame: str | None
+    stamp: int
+    points: list[tuple[float, float, float]]
 
 
 @dataclass(frozen=True)
@@ -73,16 +88,16 @@ def _xyz(v) -> tuple[float, float, float]:
 
 
 def _pose_stamped(msg) -> list[Sample]:
-    return [(None, stamp_ns(msg.header.stamp), [_xyz(msg.pose.position)])]
+    return [Sample(None, stamp_ns(msg.header.stamp), [_xyz(msg.pose.position)])]
 
 
 def _point_stamped(msg) -> list[Sample]:
-    return [(None, stamp_ns(msg.header.stamp), [_xyz(msg.point)])]
+    return [Sample(None, stamp_ns(msg.header.stamp), [_xyz(msg.point)])]
 
 
 def _transform_stamped(msg) -> list[Sample]:
-    return [(frame_name(msg.child_frame_id), stamp_ns(msg.header.stamp),
-             [_xyz(msg.transform.translation)])]
+    return [Sample(frame_name(msg.child_frame_id), stamp_ns(msg.header.stamp),
+                   [_xyz(msg.transform.translation)])]
 
 
 def _tf_message(msg) -> list[Sample]:
@@ -92,7 +107,7 @@ def _tf_message(msg) -> list[Sample]:
 def _pose_array(msg) -> list[Sample]:
     if not msg.poses:
         return []
-    return [(None, stamp_ns(msg.header.stamp), [_xyz(p.position) for p in msg.poses])]
+    return [Sample(None, stamp_ns(msg.header.stamp), [_xyz(p.position) for p in msg.poses])]
 
 
 #: ``visualization_msgs/Marker``'s action ADD (also MODIFY): a marker that is shown.
@@ -103,7 +118,8 @@ def _marker_array(msg) -> list[Sample]:
     shown = sorted((m for m in msg.markers if m.action == MARKER_ADD), key=lambda m: (m.ns, m.id))
     if not shown:
         return []
-    return [(None, stamp_ns(shown[0].header.stamp), [_xyz(m.pose.position) for m in shown])]
+    return [Sample(None, stamp_ns(shown[0].header.stamp),
+                   [_xyz(m.pose.position) for m in shown])]
 
 
 #: The message types read, by the name a bag's connection gives (``pkg/msg/Name``).
