@@ -19,6 +19,7 @@ import pytest
 from rhmpc.cli import build_parser
 from rhmpc.experiment import RunConfig
 from rhmpc.experiment.presets import PRESETS
+from rhmpc.experiment.tables import to_dict
 from rhmpc.paper.tables import paper_table
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -104,10 +105,10 @@ def test_help_and_readme_name_the_tables_each_preset_is_set_beside() -> None:
     lines = re.findall(r"^rhmpc compare --preset ([\w-]+) --paper\s+# (.*)$", README, re.M)
     assert {preset for preset, _ in lines} == {"tuna2013", "tuna2013-hardware"}
     for preset, comment in lines:
-        plant = RunConfig().replace(**PRESETS[preset]).plant.model
+        plant = to_dict(RunConfig().replace(**PRESETS[preset]).plant)
         docs = [{"predictor": "exact", "scenario": "fixed-a2-top", "seed": 0,
                  "rms_error_mm": 0.1, "max_error_mm": 0.5, "rms_effort_mNm": 20.0,
-                 "settings": {"plant": {"model": plant}}}]
+                 "settings": {"plant": plant}}]
         header = paper_table(docs, ["exact"], ["fixed-a2-top"]).splitlines()[0]
         tables = re.search(r"set beside (Tables? [IV–]+)", header).group(1)
         assert re.search(rf"\b{tables}\b", comment), (preset, comment, tables)

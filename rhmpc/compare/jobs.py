@@ -94,7 +94,7 @@ def labelled(doc: dict, job: Job) -> dict:
 def setting_of(configs: Sequence[RunConfig]) -> str:
     """Tuna's setting of runs: ``hardware`` when every plant is the hardware-like one, else
     ``simulation``."""
-    plants = {c.plant.model for c in configs}
+    plants = {c.plant.label for c in configs}
     return "hardware" if plants == {"hardware"} else "simulation"
 
 

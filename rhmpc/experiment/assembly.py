@@ -239,10 +239,9 @@ def build_controller(config: RunConfig, robot: Robot, arm: LinearArm, reference,
     if implementation not in IMPLEMENTATIONS:
         raise UsageError(f"implementation must be one of {', '.join(IMPLEMENTATIONS)}, "
                          f"got {implementation!r}")
-    linear = config.plant.model == "linear"
-    cancellation = None if linear else NonlinearityCancellation(
-        robot, config.mismatch, config.plant.stiction_velocity)
-    delay = config.hardware.delay_ticks if config.plant.model == "hardware" else 0
+    linear = config.plant.kind == "linear"
+    cancellation = None if linear else NonlinearityCancellation(robot, config.mismatch)
+    delay = 0 if linear else config.plant.delay_ticks
     if implementation == "c" and config.predictor not in PREDICTORS:
         raise UsageError(f"--controller c runs the library's own RLS predictor ("
                          f"{', '.join(PREDICTORS)}), not {config.predictor}")
@@ -259,7 +258,7 @@ def build_plant(config: RunConfig, robot: Robot, arm: LinearArm):
     """The plant of ``config.plant`` (:func:`rhmpc.sim.plant.make_plant`) at the home posture, its
     encoders with the injected encoder faults."""
     loop = config.loop
-    plant = make_plant(robot, arm, loop.Ts, config.plant, config.hardware)
+    plant = make_plant(robot, arm, loop.Ts, config.plant)
     _, encoder_faults = split_faults(config.faults.faults)
     if not encoder_faults:
         return plant

@@ -18,7 +18,7 @@ from rhmpc.experiment.presets import preset_settings
 from rhmpc.experiment.tables import from_dict, replace_settings, to_dict
 from rhmpc.io import FileError
 from rhmpc.sim.loop import LoopSettings
-from rhmpc.sim.plant import HardwareSettings, PlantSettings
+from rhmpc.sim.plant import PlantSettings
 from rhmpc.sim.sensors import sensor_from_name
 from rhmpc.sim.sensors.faults import FaultSettings, parse_fault
 
@@ -30,7 +30,6 @@ SECTIONS: dict[str, type] = {
     "plant": PlantSettings,
     "mismatch": ModelMismatch,
     "observer": ObserverSettings,
-    "hardware": HardwareSettings,
     "faults": FaultSettings,
 }
 
@@ -107,9 +106,9 @@ class RunConfig:
         included) — or ``"true"`` — the noise-free motion.
     seed : int
         Seed of the run's ``numpy.random.Generator`` (heart variability, sensor noise).
-    loop, reference, mpc, plant, mismatch, observer, hardware
-        Component settings (see their classes for units); ``hardware`` applies when
-        ``plant.model = "hardware"``.
+    loop, reference, mpc, plant, mismatch, observer
+        Component settings (see their classes for units); ``plant`` holds the plant's physical
+        quantities, each hardware effect an option (``--preset hardware``: Tuna's rig).
     faults
         Faults injected into the run (:class:`rhmpc.sim.sensors.faults.FaultSettings`): each starts
         within the run, and one with an end ends within it.
@@ -134,7 +133,6 @@ class RunConfig:
     plant: PlantSettings = field(default_factory=PlantSettings)
     mismatch: ModelMismatch = field(default_factory=ModelMismatch)
     observer: ObserverSettings = field(default_factory=ObserverSettings)
-    hardware: HardwareSettings = field(default_factory=HardwareSettings)
     faults: FaultSettings = field(default_factory=FaultSettings)
 
     def __post_init__(self) -> None:
@@ -195,6 +193,7 @@ class RunConfig:
         names = {f.name for f in dataclasses.fields(cls)}
         kwargs: dict[str, Any] = {}
         for key, value in data.items():
+            _refuse_old(key, value if isinstance(value, dict) else {}, where)
             if key not in names:
                 raise UsageError(
                     f"{where}: unknown key {key!r}; valid keys: {', '.join(sorted(names))}"
@@ -223,6 +222,8 @@ class RunConfig:
         nested: dict[str, dict[str, Any]] = {}
         for key, value in changes.items():
             section, _, name = key.partition(".")
+            if not name:
+                _refuse_old(key, value if isinstance(value, dict) else {})
             if name:
                 nested.setdefault(section, {})[name] = value
             elif key in SECTIONS:  # a whole section: a table of its settings
@@ -230,6 +231,7 @@ class RunConfig:
             else:
                 top[key] = value
         for section, values in nested.items():
+            _refuse_old(section, values)
             if section in SECTIONS:
                 _check_keys(section, SECTIONS[section], values)
                 try:
@@ -413,6 +415,28 @@ def check_bounds(config: RunConfig) -> None:
     MPC's horizon (its memory, and its computing over the run's ticks)."""
     ticks = config.loop.duration / config.loop.Ts
     io.check("horizon", config.mpc.horizon, "mpc.horizon", time_scale=ticks)
+
+
+#: Keys of earlier versions → the one line that names what replaced them.
+RENAMED: dict[str, str] = {
+    "plant.model": 'plant.model is now plant.kind ("arm" or "linear"); the hardware-like plant '
+                   "is the arm with its effects on: --preset hardware",
+    "plant.stiction_velocity": "plant.stiction_velocity is now plant.friction_smoothing [rad/s]",
+    "hardware": "[hardware] is now part of [plant]: write plant.{key} (--preset hardware sets "
+                "every value of Tuna's rig)",
+}
+
+
+def _refuse_old(section: str, values: dict[str, Any], where: str = "") -> None:
+    """Raise ``UsageError`` with the new key of an earlier version's ``section`` or of its key
+    in ``values`` (:data:`RENAMED`); nothing is reinterpreted."""
+    prefix = f"{where}: " if where else ""
+    if section == "hardware":
+        key = next(iter(values), "KEY")
+        raise UsageError(prefix + RENAMED["hardware"].format(key=key.partition(".")[0]))
+    for key in values:
+        if f"{section}.{key}" in RENAMED:
+            raise UsageError(prefix + RENAMED[f"{section}.{key}"])
 
 
 def _check_keys(section: str, cls: type, values: dict[str, Any]) -> None:

@@ -6,8 +6,9 @@ the published cell is the maximum over ten runs whose deviation "had been very s
 findings are judged by :mod:`rhmpc.paper.findings`.
 
 A run belongs beside the simulation table (Table I) unless its plant is the hardware-like one
-(``plant.model = "hardware"``, Tables II–III): :func:`paper_table` never sets one against the
-other's table, and a cell whose runs all failed reads ``failed``.
+(some of ``[plant]``'s hardware effects on, ``--preset hardware``, Tables II–III):
+:func:`paper_table` never sets one against the other's table, and a cell whose runs all failed
+reads ``failed``.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from collections.abc import Sequence
 from rhmpc.compare.table import grid, interval95
 from rhmpc.paper.findings import CROSS, findings
 from rhmpc.paper.tuna2013 import COLUMNS, SETTING, TUNA2013
+from rhmpc.sim.plant import PlantSettings
 
 __all__ = ["COLUMNS", "SETTING", "TUNA2013", "cell", "paper_document", "paper_table",
            "setting_of", "table_predictors"]
@@ -40,9 +42,21 @@ def setting_of(docs: Sequence[dict]) -> str:
 
     Documents without settings (a run that failed before it had any) do not count.
     """
-    models = {d["settings"].get("plant", {}).get("model", "ideal") for d in docs
-              if isinstance(d.get("settings"), dict)}
+    models = {plant_label(d["settings"]) for d in docs if isinstance(d.get("settings"), dict)}
     return "hardware" if models == {"hardware"} else "simulation"
+
+
+def plant_label(settings: dict) -> str:
+    """The plant of a run's settings: ``"linear"``, ``"ideal"`` or ``"hardware"``
+    (:attr:`PlantSettings.label`; a document of an earlier version names it ``plant.model``; a
+    table it cannot read: ``"?"``)."""
+    plant = settings.get("plant", {})
+    if isinstance(plant, dict) and "model" in plant:
+        return str(plant["model"])
+    try:
+        return PlantSettings(**plant).label
+    except (TypeError, ValueError):
+        return "?"
 
 
 def cell(docs: Sequence[dict], predictor: str, scenario: str, metric: str) -> dict:
@@ -73,8 +87,8 @@ def _seeds(docs: Sequence[dict]) -> str:
 def _header(docs: Sequence[dict], setting: str) -> list[str]:
     """What our runs are, against which of Tuna's settings, and what a cell holds."""
     runs = [d for d in docs if isinstance(d.get("settings"), dict)]
-    plant = {d["settings"].get("plant", {}).get("model", "ideal") for d in runs}
-    hw = {d["settings"].get("hardware", {}).get("error_from", "true") for d in runs}
+    plant = {plant_label(d["settings"]) for d in runs}
+    hw = {d["settings"].get("plant", {}).get("error_from", "true") for d in runs}
     n = _runs_per_cell(docs)
     tables = "Tables II–III" if setting == "hardware" else "Table I"
     ours = (f"the mean ± the half-width of its 95 % interval over {n} runs" if n > 1
@@ -87,10 +101,10 @@ def _header(docs: Sequence[dict], setting: str) -> list[str]:
         lines.append("(n=k): only k of our runs finished; failed: none did.")
     if setting == "simulation" and plant != {"linear"}:
         lines.append("Note: Tuna's Table I plant is a linearised reduced-order model; ours "
-                     "here is not (plant.model = \"linear\" is, --preset tuna2013).")
+                     "here is not (plant.kind = \"linear\" is, --preset tuna2013).")
     if setting == "hardware" and hw != {"encoders"}:
         lines.append("Note: Tuna's hardware error is the encoders' forward kinematics; ours "
-                     "here is the arm's true tip (hardware.error_from).")
+                     "here is the arm's true tip (plant.error_from).")
     return lines
 
 

@@ -1,11 +1,12 @@
 """The robot the controller drives: torques in, encoder angles out.
 
 ================  ================================================================
+``settings``      :class:`PlantSettings` (``[plant]``): the plant's kind, its integration and
+                  each hardware effect as an option, off at its neutral value
 ``kernel``        the one dynamics kernel (``chain.c``): the arm's rigid-body dynamics and
                   its drives integrated over a tick, checked against Pinocchio
-``arm``           :class:`ArmPlant`, the ideal plant (torque limits, friction);
-                  :class:`PlantSettings`
-``hardware``      the hardware-like plant (:class:`HardwareSettings`: I/O delay, DAC, current
+``arm``           :class:`ArmPlant`, the ideal plant (torque limits, friction): every effect off
+``hardware``      the hardware-like plant (:class:`HardwarePlant`: I/O delay, DAC, current
                   amplifier, friction with stiction, cables) and the linear plant
 ================  ================================================================
 
@@ -17,21 +18,21 @@ control tick with the torque τ [N·m] held), ``q`` (the joint angles the loop s
 from __future__ import annotations
 
 from rhmpc.robots import LinearArm, Robot
-from rhmpc.sim.plant.arm import ArmPlant, PlantSettings
-from rhmpc.sim.plant.hardware import HardwarePlant, HardwareSettings, LinearPlant
+from rhmpc.sim.plant.arm import ArmPlant
+from rhmpc.sim.plant.hardware import HardwarePlant, LinearPlant
+from rhmpc.sim.plant.settings import PlantSettings
 
-__all__ = ["ArmPlant", "HardwarePlant", "HardwareSettings", "LinearPlant", "PlantSettings",
-           "make_plant"]
+__all__ = ["ArmPlant", "HardwarePlant", "LinearPlant", "PlantSettings", "make_plant"]
 
 
 def make_plant(robot: Robot, arm: LinearArm, Ts: float, settings: PlantSettings | None = None,
-               hardware: HardwareSettings | None = None) -> ArmPlant | HardwarePlant | LinearPlant:
-    """The plant of ``settings.model`` at the home posture, at rest: ``"ideal"`` (the nonlinear
-    arm, :class:`ArmPlant`), ``"hardware"`` (:class:`HardwarePlant` with ``hardware``, default
-    settings if None) or ``"linear"`` (the MPC's own model, :class:`LinearPlant`)."""
+               ) -> ArmPlant | HardwarePlant | LinearPlant:
+    """The plant of ``settings`` at the home posture, at rest: the MPC's own model
+    (:class:`LinearPlant`) for ``kind = "linear"``; else the arm, :class:`ArmPlant` with every
+    effect at its neutral value (the ideal plant) or :class:`HardwarePlant` with some on."""
     settings = settings or PlantSettings()
-    if settings.model == "linear":
+    if settings.kind == "linear":
         return LinearPlant(robot, arm)
-    if settings.model == "hardware":
-        return HardwarePlant(robot, Ts, hardware or HardwareSettings())
+    if settings.effects:
+        return HardwarePlant(robot, Ts, settings)
     return ArmPlant(robot, Ts, settings)

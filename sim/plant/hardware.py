@@ -40,107 +40,15 @@ torque that acts over each tick), not what the DAC, amplifier and cables make of
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
 from rhmpc.robots import LinearArm, Robot
 from rhmpc.sim.plant.kernel import Chain, Drive, state
-
-ERRORS_FROM = ("true", "encoders")
-
-
-@dataclass(frozen=True)
-class HardwareSettings:
-    """The hardware-like plant's effects, each default with its source or stated assumption.
-
-    Attributes
-    ----------
-    delay_ticks : int
-        I/O delay [ticks]: 1, the torque computed at tick i acts over tick i + 1. Assumption:
-        Tuna et al. give only the 0.5-ms xPC Target period (§VIII); one tick is what a loop
-        that samples the encoders at the start of a tick and writes the DAC at its end has.
-    current_time_constant : float
-        τ_e of the current-mode amplifier [s]: L/R = ``0.238`` mH / 2.18 Ω = 0.109 ms, the Maxon
-        RE 25 118743's winding (mahilab/Phantom README.md). The amplifier's own bandwidth is
-        not published; a current loop closed around the winding is faster than L/R, so this is
-        the slow bound. 0: the current follows the command at once.
-    torque_constant : float
-        K_t [N·m/A]: 23.4 mN·m/A (Maxon RE 25 118743).
-    dac_bits : int
-        DAC resolution [bits]: 12. Assumption: neither SensAble's card nor Tuna's xPC Target
-        I/O board is named in a source we found; 12 bits is the coarse end of the boards of
-        that time (16 bits gives a 16× finer step). 0: no quantisation.
-    dac_range : float
-        I_max, the current at the DAC's full scale [A]: 5.5 A, the motor's stall current at its
-        rated 12 V (datasheet), the most an amplifier for it delivers; it makes the saturation
-        η K_t I_max = η·129 mN·m the robot's torque limit. (mahilab/Phantom's rig maps ±10 V to
-        ±1.5 A.) The step is then 2.7 mA: 0.84, 0.70, 0.70 mN·m at the joints.
-    stiction_ratio : float
-        F_s / F_c, the static friction's peak over the Coulomb level [-]: 1.25. Assumption:
-        no published value for this drive (the identification of Taati et al., Presence 17(4),
-        2008, was not reachable); 1.0–1.5 is the usual range for brushed motors.
-    stribeck_velocity : float
-        v_S, the output rate over which the stiction peak decays [rad/s]: 0.01. Assumption.
-    friction_smoothing : float
-        v_s of the friction's tanh [rad/s]: 1 mrad/s on the output (the smoothing makes the
-        friction a steep viscous law near rest: a residual torque below the stiction peak
-        creeps at ≈ v_s·τ/F_s, 1.4 mrad/s at 90 % of it; the explicit steps need
-        h ≤ J v_s / F_s, which sets ``substeps``).
-    cable_resonance : float
-        f_r of the cable transmissions [Hz]; 0: rigid cables. Not published for this device:
-        sweep 40–150 Hz for sensitivity, do not pick one.
-    cable_damping_ratio : float
-        ζ of each cable [-]: 0.05. Assumption (light damping of steel cable drives).
-    substeps : int
-        Integration steps per tick; 0: 4 rigid (h = 125 µs against J v_s/F_s ≈ 120 µs for the
-        elbow's ≈ 1e-3 kg·m²), 20 with cables (h = 25 µs: the rotor, ``1.3e-4`` kg·m², alone on
-        its friction).
-    error_from : str
-        Which joint angles the loop scores the tip from: ``"true"`` (the arm's) or
-        ``"encoders"`` (forward kinematics of the encoder angles, what Tuna et al. measured on
-        the hardware, §VIII: "calculated from joint angles").
-    """
-
-    delay_ticks: int = 1
-    current_time_constant: float = 0.238e-3 / 2.18
-    torque_constant: float = 0.0234
-    dac_bits: int = 12
-    dac_range: float = 5.5
-    stiction_ratio: float = 1.25
-    stribeck_velocity: float = 0.01
-    friction_smoothing: float = 1e-3
-    cable_resonance: float = 0.0
-    cable_damping_ratio: float = 0.05
-    substeps: int = 0
-    error_from: str = "true"
-
-    def __post_init__(self) -> None:
-        for name in ("delay_ticks", "dac_bits", "substeps"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-                raise ValueError(f"hardware {name} must be an integer >= 0, got {value!r}")
-        for name in ("current_time_constant", "cable_resonance", "cable_damping_ratio"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"hardware {name} must be finite and >= 0, got {value!r}")
-        for name in ("torque_constant", "dac_range", "stribeck_velocity", "friction_smoothing"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"hardware {name} must be finite and > 0, got {value!r}")
-        if not (math.isfinite(self.stiction_ratio) and self.stiction_ratio >= 1):
-            raise ValueError(f"hardware stiction_ratio must be >= 1, got {self.stiction_ratio!r}")
-        if self.error_from not in ERRORS_FROM:
-            raise ValueError(f"hardware error_from must be one of {', '.join(ERRORS_FROM)}, "
-                             f"got {self.error_from!r}")
-
-    @property
-    def steps(self) -> int:
-        """Integration steps per tick (``substeps``, or its default)."""
-        return self.substeps or (20 if self.cable_resonance > 0 else 4)
+from rhmpc.sim.plant.settings import PlantSettings, integration_steps
 
 
-def dac_step(settings: HardwareSettings) -> float:
+def dac_step(settings: PlantSettings) -> float:
     """The DAC's step 2 I_max / 2^bits [A] (0: no quantisation)."""
     return 2.0 * settings.dac_range / 2**settings.dac_bits if settings.dac_bits else 0.0
 
@@ -163,7 +71,8 @@ class HardwarePlant:
         The true arm; it must have gear ratios, a motor map and encoders.
     Ts : float
         Control period [s].
-    settings : HardwareSettings
+    settings : PlantSettings
+        The plant's quantities and the effects that are on.
 
     Raises
     ------
@@ -171,31 +80,27 @@ class HardwarePlant:
         A robot without drives, or no dynamics kernel (:mod:`rhmpc.sim.plant.kernel`).
     """
 
-    def __init__(self, robot: Robot, Ts: float, settings: HardwareSettings) -> None:
+    def __init__(self, robot: Robot, Ts: float, settings: PlantSettings) -> None:
         if robot.gear_ratio is None or robot.encoder_resolution is None:
             raise ValueError(f"the hardware plant needs the robot's drives (gear ratios, "
                              f"encoders); robot {robot.name!r} has none")
         self.robot, self.Ts, self.settings = robot, float(Ts), settings
         S, n = robot.motor_map, robot.nv
         self._S, self._S_inv = S, np.linalg.inv(S)
-        gain = robot.gear_ratio * settings.torque_constant  # output torque per ampere
         chain = Chain(robot.model)
         gravity = chain.rnea(robot.q0, np.zeros(n), np.zeros(n))  # g(q0) [N·m]
-        self._cables = cables = None
-        if settings.cable_resonance > 0:
-            M_l = chain.mass(robot.q0) - S.T @ np.diag(robot.rotor_inertia) @ S
-            link = np.diag(self._S_inv.T @ M_l @ self._S_inv)
-            cables = (robot.rotor_inertia, *cable_stiffness(
-                settings.cable_resonance, robot.rotor_inertia, link, settings.cable_damping_ratio))
-            self._cables = cables
-        self._drive = Drive(chain, self.Ts, settings.steps, motor_map=S, gain=gain,
+        M = chain.mass(robot.q0)
+        self._cables = cables = self._cable_model(M) if settings.cable_resonance > 0 else None
+        inertia = (robot.rotor_inertia if cables is not None
+                   else np.diag(self._S_inv.T @ M @ self._S_inv))
+        steps = integration_steps(settings, self.Ts, inertia, robot.coulomb_friction)
+        gain, drive = self._command()
+        self._drive = Drive(chain, self.Ts, steps, motor_map=S, gain=gain,
                             coulomb=robot.coulomb_friction, damping=robot.damping,
                             stiction_ratio=settings.stiction_ratio,
                             stribeck_velocity=settings.stribeck_velocity,
                             smoothing_velocity=settings.friction_smoothing, q0=robot.q0,
-                            command_map=self._S_inv.T / gain[:, None],  # i* = S⁻ᵀ τ / (η K_t)
-                            full_scale=settings.dac_range, dac_step=dac_step(settings),
-                            current_lag=settings.current_time_constant, cables=cables)
+                            current_lag=settings.current_time_constant, cables=cables, **drive)
         held = self._S_inv.T @ gravity  # the motors hold the arm against gravity at rest
         if cables is not None:
             self.theta_r = held / cables[1]  # the cables' twist that holds it
@@ -205,6 +110,27 @@ class HardwarePlant:
         res = robot.encoder_resolution  # the encoders' counts: Δ⁻¹ S (q − q0), and back
         self._to_counts, self._from_counts = S / res[:, None], self._S_inv * res
         self._counts0 = self._to_counts @ robot.q0
+
+    def _cable_model(self, M: np.ndarray) -> tuple:
+        """(J_r, k, c) of the cables on each motor (:func:`cable_stiffness`), from M(q0)."""
+        robot, S_inv = self.robot, self._S_inv
+        M_l = M - robot.motor_map.T @ np.diag(robot.rotor_inertia) @ robot.motor_map
+        link = np.diag(S_inv.T @ M_l @ S_inv)
+        return (robot.rotor_inertia, *cable_stiffness(
+            self.settings.cable_resonance, robot.rotor_inertia, link,
+            self.settings.cable_damping_ratio))
+
+    def _command(self) -> tuple[np.ndarray, dict]:
+        """The output torque per unit of command, and the command's map and limits: with a
+        current drive i* = S⁻ᵀ τ / (η K_t) [A], within ±I_max and rounded to the DAC's step;
+        without, the motor torques S⁻ᵀ τ [N·m] of τ within the robot's limits."""
+        s, robot = self.settings, self.robot
+        if not s.torque_constant:
+            return np.ones(robot.nv), {"command_map": self._S_inv.T,
+                                       "torque_limit": robot.torque_limit}
+        gain = robot.gear_ratio * s.torque_constant  # output torque per ampere
+        return gain, {"command_map": self._S_inv.T / gain[:, None],
+                      "full_scale": s.dac_range, "dac_step": dac_step(s)}
 
     q_arm = state(0, "The arm's joint angles [rad].")
     v = state(1, "The arm's joint rates [rad/s].")
@@ -234,7 +160,7 @@ class HardwarePlant:
     @property
     def q(self) -> np.ndarray:
         """The joint angles the loop scores [rad]: the arm's (``q_arm``), or the encoders'
-        (``HardwareSettings.error_from``)."""
+        (``PlantSettings.error_from``)."""
         return self.encoders() if self.settings.error_from == "encoders" else self.q_arm
 
     def step(self, tau: np.ndarray) -> None:

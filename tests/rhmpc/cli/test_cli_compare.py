@@ -135,7 +135,7 @@ def test_failed_cells_read_failed_and_hardware_runs_stay_beside_table_2(
 def test_paper_table_keeps_its_setting_when_failed_runs_have_no_settings() -> None:
     docs = [{"predictor": p, "scenario": s, "seed": 0, "rms_error_mm": 0.2,
              "max_error_mm": 1.0, "rms_effort_mNm": 30.0, "prediction_rms_mm": {"lead_N": 0.2},
-             "settings": {"plant": {"model": "hardware"}}}
+             "settings": {"plant": {"delay_ticks": 1}}}
             for p in ("exact", "generalized") for s in COLUMNS]
     docs += [{"predictor": "one-step", "scenario": s, "seed": 0, "error": "boom"}
              for s in COLUMNS]

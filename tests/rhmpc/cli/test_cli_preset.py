@@ -18,14 +18,14 @@ def _args(*argv) -> argparse.Namespace:
 
 def test_presets_set_the_plant_and_the_weights() -> None:
     table1 = config_from_args(_args("simulate", "--preset", "tuna2013"))
-    assert table1.mpc.effort_weight == 50.0 and table1.plant.model == "linear"
+    assert table1.mpc.effort_weight == 50.0 and table1.plant.kind == "linear"
     table2 = config_from_args(_args("simulate", "--preset", "tuna2013-hardware"))
-    assert table2.mpc.effort_weight == 50.0 and table2.plant.model == "hardware"
-    assert table2.hardware.error_from == "encoders"
+    assert table2.mpc.effort_weight == 50.0 and table2.plant.label == "hardware"
+    assert table2.plant.error_from == "encoders"
     assert table2.mismatch.parameters == "phantom-cavusoglu"
     hardware = config_from_args(_args("simulate", "--preset", "hardware"))
-    assert hardware.plant.model == "hardware" and hardware.hardware.error_from == "true"
-    assert config_from_args(_args("simulate")).plant.model == "ideal"
+    assert hardware.plant.label == "hardware" and hardware.plant.error_from == "true"
+    assert config_from_args(_args("simulate")).plant.label == "ideal"
 
 
 def test_preset_sets_the_effort_weight_and_set_still_wins() -> None:
@@ -39,11 +39,15 @@ def test_preset_sets_the_effort_weight_and_set_still_wins() -> None:
     assert all(c.mpc.effort_weight == PRESETS["tuna2013"]["mpc.effort_weight"] for c in runs)
 
 
+#: A run's ``[plant]`` table of each plant.
+PLANT_TABLES = {"linear": {"kind": "linear"}, "ideal": {}, "hardware": {"delay_ticks": 1}}
+
+
 def _docs(plant: str, **scale) -> list[dict]:
     """Synthetic results: RMS 0.1 mm × the predictor's scale, effort 10 mN·m × the same."""
     return [{"predictor": p, "scenario": s, "seed": 0, "rms_error_mm": 0.1 * scale.get(p, 1.0),
              "max_error_mm": 1.0, "rms_effort_mNm": 10.0 * scale.get(p, 1.0),
-             "prediction_rms_mm": {"lead_N": 0.2}, "settings": {"plant": {"model": plant}}}
+             "prediction_rms_mm": {"lead_N": 0.2}, "settings": {"plant": PLANT_TABLES[plant]}}
             for p in ("exact", "one-step", "generalized", "ekf") for s in COLUMNS]
 
 
@@ -65,7 +69,7 @@ def test_paper_table_has_every_cell_of_its_setting_only() -> None:
     assert "0.237 / 0.100 / 0.42" in sim  # Table I, fixed-a2-top, exact RMS
     assert "5.157 / 1.000 / 0.19" in hw  # Table III, fixed-a1-top, EKF max
     assert "28.512 / 10.000 / 0.35" in hw  # Table II(b), fixed-a2-top, exact effort
-    assert "plant.model = \"linear\" is" in paper_table(_docs("ideal"), preds, list(COLUMNS))
+    assert "plant.kind = \"linear\" is" in paper_table(_docs("ideal"), preds, list(COLUMNS))
 
 
 @pytest.mark.slow
@@ -94,9 +98,13 @@ def test_bad_sensor_settings_one_line_exit_2(capsys, setting, message) -> None:
 
 
 @pytest.mark.parametrize("setting, message", [
-    ("plant.model=\"rigid\"", "unknown plant model 'rigid'"),
-    ("hardware.dac_bits=-1", "hardware dac_bits must be an integer >= 0"),
-    ("hardware.error_from=\"tip\"", "hardware error_from must be one of true, encoders"),
+    ("plant.kind=\"rigid\"", "unknown plant kind 'rigid'"),
+    ("plant.dac_bits=-1", "plant dac_bits must be an integer >= 0"),
+    ("plant.error_from=\"tip\"", "plant error_from must be one of true, encoders"),
+    ("plant.dac_bits=16", "plant dac_bits needs a current drive"),
+    ("plant.model=\"hardware\"", "plant.model is now plant.kind"),
+    ("plant.stiction_velocity=0.001", "plant.stiction_velocity is now plant.friction_smoothing"),
+    ("hardware.dac_bits=16", "[hardware] is now part of [plant]: write plant.dac_bits"),
     ("mismatch.parameters=\"puma\"", "unknown parameters 'puma'"),
 ])
 def test_bad_plant_settings_one_line_exit_2(capsys, setting, message) -> None:

@@ -44,10 +44,11 @@ def ideal_tick(robot, q, v, tau, Ts, substeps=2, v_s=5e-3):
     return q, v
 
 
-def hardware_tick(robot, settings, state, current, tau, Ts=0.5e-3):
+def hardware_tick(robot, settings, state, current, tau, Ts=0.5e-3, steps=None):
     """One tick of the hardware-like plant after its delay, from ``state`` = [q, q̇, θ_r, θ̇_r]
     and the winding currents: the DAC, the lag (the current's exact mean over each step), the
-    rigid or cable dynamics, explicit midpoint steps. Returns the new state and currents."""
+    rigid or cable dynamics, ``steps`` explicit midpoint steps (default ``settings.substeps``).
+    Returns the new state and currents."""
     S, q0, n = robot.motor_map, robot.q0, robot.nv
     gain = robot.gear_ratio * settings.torque_constant
     wanted = np.linalg.solve(S.T, tau) / gain
@@ -55,7 +56,7 @@ def hardware_tick(robot, settings, state, current, tau, Ts=0.5e-3):
         step = 2 * settings.dac_range / 2**settings.dac_bits
         wanted = step * np.round(wanted / step)
     command = np.clip(wanted, -settings.dac_range, settings.dac_range)
-    data, steps = robot.create_data(), settings.steps
+    data, steps = robot.create_data(), steps or settings.substeps
     h, tau_e = Ts / steps, settings.current_time_constant
     rotor, (k, c) = robot.rotor_inertia, cables_of(robot, settings)
 

@@ -12,15 +12,15 @@ from rhmpc.control.mpc import RecedingHorizonMPC
 from rhmpc.control.observer import JointObserver
 from rhmpc.robots import Robot, linearize
 from rhmpc.sim.loop.exact import ExactReference
-from rhmpc.sim.plant import HardwareSettings, PlantSettings, make_plant
+from rhmpc.sim.plant import PlantSettings, make_plant
 from rhmpc.sim.plant.hardware import HardwarePlant, LinearPlant, cable_stiffness
-from tests.sim.plant import reference
+from tests.sim.plant import reference, rig
 
 TS = 0.5e-3
 J_LINK, J_ROTOR, ETA, KT = 2.0e-3, 1.5e-4, 10.0, 0.0234
 #: Every effect off: the reference against which one effect at a time is switched on.
 BARE = dict(delay_ticks=0, current_time_constant=0.0, dac_bits=0, dac_range=100.0,
-            stiction_ratio=1.0)
+            stiction_ratio=1.0, torque_constant=KT, friction_smoothing=1e-3)
 
 
 def drum(coulomb: float = 0.0) -> Robot:
@@ -42,7 +42,8 @@ def drum(coulomb: float = 0.0) -> Robot:
 
 
 def tick_of(robot: Robot, **settings) -> HardwarePlant:
-    hardware = HardwareSettings(**{**BARE, "torque_constant": KT, **settings})
+    steps = 20 if settings.get("cable_resonance") else 4
+    hardware = PlantSettings(**{**BARE, "substeps": steps, **settings})
     return HardwarePlant(robot, TS, hardware)
 
 
@@ -144,7 +145,7 @@ def test_friction_is_the_stribeck_law():
     friction law of ``reference.friction`` (peaking at rest: 1.25 F_c at 0.1 mrad/s)."""
     ts = 1e-9
     for w in (1e-4, 3e-3, 0.02, 1.0, -1.0):
-        plant = HardwarePlant(drum(coulomb=0.01), ts, HardwareSettings(
+        plant = HardwarePlant(drum(coulomb=0.01), ts, PlantSettings(
             **{**BARE, "stiction_ratio": 1.25, "substeps": 1}))
         plant.v = np.array([w])
         plant.step(np.zeros(1))
@@ -163,12 +164,14 @@ def test_stiction_holds_a_torque_below_the_peak():
     assert abs(held[-1]) < 0.1 * abs(moved[-1])
 
 
-@pytest.mark.parametrize("bad", [{"delay_ticks": -1}, {"dac_bits": 1.5}, {"dac_range": 0.0},
+@pytest.mark.parametrize("bad", [{"delay_ticks": -1}, {"dac_bits": 1.5}, {"dac_range": -1.0},
+                                 {"dac_bits": 12}, {"torque_constant": 0.0234}, {"kind": "ideal"},
+                                 {"substeps": -1}, {"friction_smoothing": 0.0},
                                  {"stiction_ratio": 0.5}, {"cable_resonance": float("nan")},
                                  {"error_from": "tip"}])
 def test_bad_settings_are_one_line_errors(bad):
     with pytest.raises(ValueError) as err:
-        HardwareSettings(**bad)
+        PlantSettings(**bad)
     assert "\n" not in str(err.value)
 
 
@@ -177,14 +180,14 @@ def test_hardware_plant_needs_drives(arm):
 
     ur5 = load_robot("ur5")
     with pytest.raises(ValueError, match="needs the robot's drives"):
-        make_plant(ur5, linearize(ur5), TS, PlantSettings(model="hardware"))
+        make_plant(ur5, linearize(ur5), TS, rig())
 
 
 def test_phantom_rests_at_home_under_its_own_cancellation(phantom, arm):
     """Default hardware plant (delay, DAC, lag, stiction), the controller's model the plant's,
     its MPC holding the home point: the tip stays within 0.02 mm over 1 s (what is left: the
     DAC's rounding of the gravity torque, creeping against the smoothed friction)."""
-    plant = make_plant(phantom, arm, TS, PlantSettings(model="hardware"))
+    plant = make_plant(phantom, arm, TS, rig())
     assert isinstance(plant, HardwarePlant)
     states = hold_home(phantom, arm, plant, 2000)
     drift = max(np.linalg.norm(phantom.ee_position(x[:3]) - phantom.ee_position(phantom.q0))
@@ -193,7 +196,7 @@ def test_phantom_rests_at_home_under_its_own_cancellation(phantom, arm):
 
 
 def test_linear_plant_is_the_mpc_model(phantom, arm):
-    plant = make_plant(phantom, arm, TS, PlantSettings(model="linear"))
+    plant = make_plant(phantom, arm, TS, PlantSettings(kind="linear"))
     assert isinstance(plant, LinearPlant)
     rng = np.random.default_rng(0)
     x = np.zeros(6)

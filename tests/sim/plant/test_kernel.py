@@ -6,8 +6,8 @@ import pinocchio as pin
 import pytest
 
 from rhmpc.robots.model import forward_dynamics
-from rhmpc.sim.plant import ArmPlant, HardwarePlant, HardwareSettings, PlantSettings, kernel
-from tests.sim.plant import reference
+from rhmpc.sim.plant import ArmPlant, HardwarePlant, PlantSettings, kernel
+from tests.sim.plant import reference, rig
 
 TS = 0.5e-3
 
@@ -109,7 +109,7 @@ def test_ideal_tick_is_the_plain_midpoint_on_pinocchio(phantom):
 def test_hardware_tick_is_the_plain_one_on_pinocchio(phantom, cables):
     """One tick of :class:`HardwarePlant` without delay (DAC, lag, Stribeck friction, rigid or
     with cables) against ``reference.hardware_tick``, from random states and currents."""
-    settings = HardwareSettings(delay_ticks=0, cable_resonance=cables)
+    settings = rig(delay_ticks=0, cable_resonance=cables, substeps=20 if cables else 4)
     plant = HardwarePlant(phantom, TS, settings)
     rng = np.random.default_rng(3)
     worst = 0.0

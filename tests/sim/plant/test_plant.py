@@ -112,7 +112,7 @@ def test_mass_mismatch_scales_gravity_compensation(phantom):
 
 
 def test_bad_plant_settings_raise():
-    with pytest.raises(ValueError, match="valid: ideal"):
-        PlantSettings(model="rigid")
+    with pytest.raises(ValueError, match="valid: arm, linear"):
+        PlantSettings(kind="rigid")
     with pytest.raises(ValueError, match="substeps"):
-        PlantSettings(substeps=0)
+        PlantSettings(substeps=-1)
