@@ -16,10 +16,11 @@ after (``--host-stalls``: a loop that only reads the clock; no tick that a stall
 shorter). Where no C compiler is found, this part is skipped and the record says why.
 
 Then the Python simulation's speed on the main job, ``rhmpc simulate --predictor generalized
---duration 60 --seed 2 --json``, on the ideal plant and on the hardware-like one (``--set
-plant.model="hardware"``, all else the same): the wall time per simulated second and the tick's
-parts (the controller's step, the reference's refreshes) in the gain tick of that run, and the
-plant's own tick (``encoders()`` and ``step(τ)``, the dynamics kernel and what composes it)
+--duration 60 --seed 2 --json``, on the ideal plant and on the hardware-like one (a ``--set`` of
+each value of ``rhmpc.experiment.presets.HARDWARE_PLANT``, the hardware preset's plant, all else
+the same): the wall time per simulated second and the tick's parts (the controller's step, the
+reference's refreshes) in the gain tick of that run, and the plant's own tick (``encoders()``
+and ``step(τ)``, the dynamics kernel and what composes it)
 timed here beside g. That is how fast a study runs, not a real-time figure: the Python
 controller is the reference implementation. Writes ``docs/results/exported_tick``.
 
@@ -34,6 +35,8 @@ import subprocess
 import sys
 
 import _results as R
+
+from rhmpc.experiment.presets import HARDWARE_PLANT
 
 #: The references of the exported controller's runs: label → ``rhmpc bench`` options.
 REFERENCES = {"2-mm jumps": (), "1-m jumps (unreachable)": ("--jump-mm", "1000")}
@@ -71,7 +74,9 @@ def exported(ticks: int, stalls: float) -> tuple[dict, str | None]:
 
 
 #: The plants of the simulation's runs: label → ``rhmpc simulate`` options.
-PLANTS = {"ideal": (), "hardware-like": ("--set", 'plant.model="hardware"')}
+PLANTS = {"ideal": (), "hardware-like": tuple(
+    item for key, value in HARDWARE_PLANT.items()
+    for item in ("--set", f"{key}={json.dumps(value)}"))}
 
 
 def simulation(duration: float) -> tuple[dict | None, str]:
@@ -104,7 +109,7 @@ def plant_tick(label: str, ticks: int = 4000) -> dict:
 
     config = RunConfig(predictor="generalized", seed=2)
     if label != "ideal":
-        config = config.replace(**{"plant.model": "hardware"})
+        config = config.replace(**HARDWARE_PLANT)
     run = build_run(config)
     plant, gain = run.plant, GainTick(run.controller.mpc)
     hold = pin.computeGeneralizedGravity(run.robot.model, run.robot.create_data(), run.robot.q0)
