@@ -43,9 +43,9 @@ class PlantSettings:
         torque applied as commanded); ``"linear"``: the MPC's own linear model as the plant
         (Tuna et al.'s Table I simulation, the effects ignored).
     substeps : int
-        Explicit-midpoint steps per control tick, h = Ts / substeps [s]; 0: automatic (the
-        module's rule). 2: the ideal arm's accuracy count. A count below the friction's
-        stability bound is refused.
+        Explicit-midpoint steps per control tick [-] (the step h = Ts / substeps); 0:
+        automatic (the module's rule). 2: the ideal arm's accuracy count. A count below the
+        friction's stability bound is refused.
     friction_smoothing : float
         v_s of the friction's ``tanh(ω / v_s)`` on the motors' output rates [rad/s]: ``5e-3``.
         A smaller v_s makes the friction a steeper viscous law near rest (a residual torque
@@ -170,7 +170,8 @@ def integration_steps(settings: PlantSettings, Ts: float, inertia: np.ndarray,
     if not settings.substeps:
         return automatic
     if math.isfinite(h) and settings.substeps < math.ceil(Ts / (2 * h)):
+        bound = math.ceil(Ts / (2 * h))
         raise ValueError(f"plant substeps = {settings.substeps} is below the friction's "
-                         f"stability bound ({math.ceil(Ts / (2 * h))} for h ≤ 2 J v_s / F_s); "
-                         f"set plant.substeps = 0 (automatic: {automatic}) or more")
+                         f"stability bound ({bound} for h ≤ 2 J v_s / F_s); set plant.substeps "
+                         f">= {bound}, or 0 (automatic: {automatic})")
     return settings.substeps
