@@ -196,8 +196,9 @@ def report(args: argparse.Namespace, results_path: Path) -> int:
 def report_records(args, records, objective, points, results: str, title: str,
                    log_keys=None) -> int:
     """Print the ranked table (or JSON), write --best-toml and --plot; the exit code."""
+    from rhmpc.tuning.figure import plot_objective
     from rhmpc.tuning.objective import check_objective_metrics
-    from rhmpc.tuning.report import best, best_toml, format_table, plot_objective, summarize
+    from rhmpc.tuning.report import best, best_toml, format_table, summarize
     from rhmpc.tuning.sweep import best_settings
 
     ok = [r for r in records if r.get("status") == "ok" and isinstance(r.get("metrics"), dict)]

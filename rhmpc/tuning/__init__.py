@@ -7,7 +7,8 @@
 - :mod:`~rhmpc.tuning.runner` — local processes or a Dask cluster;
 - :mod:`~rhmpc.tuning.workers` — local worker processes that die with their parent;
 - :mod:`~rhmpc.tuning.progress` — progress bars on stderr, durations and speeds in words;
-- :mod:`~rhmpc.tuning.report` — the ranked table, the best settings, the objective plot;
+- :mod:`~rhmpc.tuning.report` — the points' summaries, the ranked table, the best settings;
+- :mod:`~rhmpc.tuning.figure` — the objective against the parameters (``--plot``);
 - :mod:`~rhmpc.tuning.sweep` — a sweep as ``rhmpc tune`` runs it: its pending evaluations
   with a bar, its points, its speed.
 

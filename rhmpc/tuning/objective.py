@@ -1,4 +1,5 @@
-"""What a sweep minimises: the objective, its penalties and constraints, and metric look-up.
+"""What a sweep minimises: the objective, its penalties and constraints, metric look-up, and the
+spec's ``objective`` table read into them (:func:`parse_objective`).
 
 The objective of one evaluation is ``metric + Σ weight·max(0, penalty_metric − limit)``; a point's
 score is its mean over the point's evaluations, and points whose means break a constraint rank
@@ -15,8 +16,8 @@ from typing import Any
 
 from rhmpc.errors import UsageError
 
-__all__ = ["Constraint", "Objective", "Penalty", "check_objective_metrics", "metric_names",
-           "metric_value"]
+__all__ = ["Constraint", "Objective", "Penalty", "check_keys", "check_objective_metrics",
+           "is_number", "metric_names", "metric_value", "parse_objective"]
 
 
 @dataclass(frozen=True)
@@ -161,3 +162,65 @@ def check_objective_metrics(objective: Objective, metrics: dict) -> None:
         if name not in names:
             raise UsageError(f"objective: metric {name!r} is not in the results; available: "
                              f"{', '.join(names)}")
+
+
+def is_number(value: Any) -> bool:
+    """Whether ``value`` is a finite number of a TOML table (not a boolean)."""
+    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def check_keys(table: dict, valid: tuple[str, ...], where: str) -> None:
+    """Raise ``UsageError`` naming the first key of ``table`` not in ``valid`` (``where.key``)."""
+    unknown = sorted(set(table) - set(valid))
+    if unknown:
+        raise UsageError(f"{where}.{unknown[0]}: unknown key; valid keys: {', '.join(valid)}")
+
+
+def _as_list(value: Any) -> list:
+    return value if isinstance(value, list) else [value]
+
+
+def parse_objective(table: dict, where: str) -> Objective:
+    """The objective of a spec's (or a results line's) ``objective`` table: ``metric``,
+    ``penalty`` and ``constraint`` (each a table or a list of tables); one line naming the key
+    on anything else."""
+    check_keys(table, ("metric", "penalty", "constraint"), f"{where}: objective")
+    metric = table.get("metric", "rms_error_mm")
+    if not isinstance(metric, str) or not metric:
+        raise UsageError(f"{where}: objective.metric must be a metric name such as "
+                         "'rms_error_mm'")
+    penalties = []
+    for item in _as_list(table.get("penalty", [])):
+        here = f"{where}: objective.penalty"
+        if not isinstance(item, dict):
+            raise UsageError(f"{here} must be a table {{metric, weight, limit}}")
+        check_keys(item, ("metric", "weight", "limit"), here)
+        if not isinstance(item.get("metric"), str):
+            raise UsageError(f"{here}.metric: missing or not a string")
+        weight, limit = item.get("weight"), item.get("limit", 0.0)
+        if not is_number(weight) or weight < 0:
+            raise UsageError(f"{here}.weight must be a number >= 0, got {weight!r}")
+        if not is_number(limit):
+            raise UsageError(f"{here}.limit must be a number, got {limit!r}")
+        penalties.append(Penalty(item["metric"], float(weight), float(limit)))
+    constraints = []
+    for item in _as_list(table.get("constraint", [])):
+        here = f"{where}: objective.constraint"
+        if not isinstance(item, dict):
+            raise UsageError(f"{here} must be a table {{metric, max, min}}")
+        check_keys(item, ("metric", "max", "min"), here)
+        if not isinstance(item.get("metric"), str):
+            raise UsageError(f"{here}.metric: missing or not a string")
+        bounds = {k: item.get(k) for k in ("max", "min")}
+        if all(v is None for v in bounds.values()):
+            raise UsageError(f"{here}: give max and/or min")
+        for k, v in bounds.items():
+            if v is not None and not is_number(v):
+                raise UsageError(f"{here}.{k} must be a number, got {v!r}")
+        constraints.append(Constraint(item["metric"], _opt_float(bounds["max"]),
+                                      _opt_float(bounds["min"])))
+    return Objective(metric, tuple(penalties), tuple(constraints))
+
+
+def _opt_float(value: Any) -> float | None:
+    return None if value is None else float(value)

@@ -39,7 +39,7 @@ from rhmpc.errors import UsageError
 from rhmpc.experiment import SECTIONS, RunConfig, load_config, read_toml
 from rhmpc.experiment.run import jsonable
 from rhmpc.tuning.evaluate import Task, apply_point, current_value, evaluation_key
-from rhmpc.tuning.objective import Constraint, Objective, Penalty
+from rhmpc.tuning.objective import Objective, check_keys, is_number, parse_objective
 
 __all__ = [
     "Parameter",
@@ -242,7 +242,7 @@ def parse_spec(data: dict, where: str = "spec", root: Path | None = None,
     base = _parse_base(data.get("base", {}), where, root or Path("."))
     parameters = _parse_parameters(data.get("parameters", {}), where)
     sampler = _table(data, "sampler", where)
-    _check_keys(sampler, ("method", "budget", "seed", "include_base"), f"{where}: sampler")
+    check_keys(sampler, ("method", "budget", "seed", "include_base"), f"{where}: sampler")
     method = sampler.get("method", "grid")
     if method not in SAMPLERS:
         raise UsageError(f"{where}: sampler.method must be one of {', '.join(SAMPLERS)}, "
@@ -269,7 +269,7 @@ def parse_spec(data: dict, where: str = "spec", root: Path | None = None,
         raise UsageError(f"{where}: parameters: nothing to vary (add parameters, or set "
                          "sampler.include_base = true)")
     scenarios, seeds = _parse_evaluate(_table(data, "evaluate", where), base, where)
-    objective = _parse_objective(_table(data, "objective", where), where)
+    objective = parse_objective(_table(data, "objective", where), where)
     spec = TuneSpec(name, base, parameters, method, budget, int(seed), include_base,
                     scenarios, seeds, objective)
     _check_size(spec, where)
@@ -288,21 +288,11 @@ def _is_int(value: Any) -> bool:
     return isinstance(value, int) and not isinstance(value, bool)
 
 
-def _is_number(value: Any) -> bool:
-    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
-
-
 def _table(data: dict, key: str, where: str) -> dict:
     value = data.get(key, {})
     if not isinstance(value, dict):
         raise UsageError(f"{where}: {key} must be a table")
     return value
-
-
-def _check_keys(table: dict, valid: tuple[str, ...], where: str) -> None:
-    unknown = sorted(set(table) - set(valid))
-    if unknown:
-        raise UsageError(f"{where}.{unknown[0]}: unknown key; valid keys: {', '.join(valid)}")
 
 
 def _parse_base(value: Any, where: str, root: Path) -> RunConfig:
@@ -348,9 +338,9 @@ def _parse_parameters(table: Any, where: str) -> tuple[Parameter, ...]:
                 raise UsageError(f"{here}: the list of values is empty")
             out.append(Parameter(key, values=tuple(jsonable(v) for v in value)))
         elif isinstance(value, dict):
-            _check_keys(value, _RANGE_KEYS, here)
+            check_keys(value, _RANGE_KEYS, here)
             lo, hi = value.get("low"), value.get("high")
-            if not (_is_number(lo) and _is_number(hi)):
+            if not (is_number(lo) and is_number(hi)):
                 raise UsageError(f"{here}: a range needs numbers low and high")
             if not lo < hi:
                 raise UsageError(f"{here}: low must be < high, got {lo} >= {hi}")
@@ -378,7 +368,7 @@ def _parse_evaluate(table: dict, base: RunConfig, where: str) -> tuple[tuple[str
                                                                        tuple[int, ...]]:
     from rhmpc.sim.heart import SCENARIOS
 
-    _check_keys(table, ("scenarios", "seeds"), f"{where}: evaluate")
+    check_keys(table, ("scenarios", "seeds"), f"{where}: evaluate")
     scenarios = table.get("scenarios", [])
     if isinstance(scenarios, str):
         scenarios = [scenarios]
@@ -399,53 +389,6 @@ def _parse_evaluate(table: dict, base: RunConfig, where: str) -> tuple[tuple[str
     if not isinstance(seeds, list) or not seeds or not all(_is_int(s) for s in seeds):
         raise UsageError(f"{where}: evaluate.seeds must be a count or a list of integers")
     return tuple(dict.fromkeys(scenarios)), tuple(dict.fromkeys(seeds))
-
-
-def _as_list(value: Any) -> list:
-    return value if isinstance(value, list) else [value]
-
-
-def _parse_objective(table: dict, where: str) -> Objective:
-    _check_keys(table, ("metric", "penalty", "constraint"), f"{where}: objective")
-    metric = table.get("metric", "rms_error_mm")
-    if not isinstance(metric, str) or not metric:
-        raise UsageError(f"{where}: objective.metric must be a metric name such as "
-                         "'rms_error_mm'")
-    penalties = []
-    for item in _as_list(table.get("penalty", [])):
-        here = f"{where}: objective.penalty"
-        if not isinstance(item, dict):
-            raise UsageError(f"{here} must be a table {{metric, weight, limit}}")
-        _check_keys(item, ("metric", "weight", "limit"), here)
-        if not isinstance(item.get("metric"), str):
-            raise UsageError(f"{here}.metric: missing or not a string")
-        weight, limit = item.get("weight"), item.get("limit", 0.0)
-        if not _is_number(weight) or weight < 0:
-            raise UsageError(f"{here}.weight must be a number >= 0, got {weight!r}")
-        if not _is_number(limit):
-            raise UsageError(f"{here}.limit must be a number, got {limit!r}")
-        penalties.append(Penalty(item["metric"], float(weight), float(limit)))
-    constraints = []
-    for item in _as_list(table.get("constraint", [])):
-        here = f"{where}: objective.constraint"
-        if not isinstance(item, dict):
-            raise UsageError(f"{here} must be a table {{metric, max, min}}")
-        _check_keys(item, ("metric", "max", "min"), here)
-        if not isinstance(item.get("metric"), str):
-            raise UsageError(f"{here}.metric: missing or not a string")
-        bounds = {k: item.get(k) for k in ("max", "min")}
-        if all(v is None for v in bounds.values()):
-            raise UsageError(f"{here}: give max and/or min")
-        for k, v in bounds.items():
-            if v is not None and not _is_number(v):
-                raise UsageError(f"{here}.{k} must be a number, got {v!r}")
-        constraints.append(Constraint(item["metric"], _opt_float(bounds["max"]),
-                                      _opt_float(bounds["min"])))
-    return Objective(metric, tuple(penalties), tuple(constraints))
-
-
-def _opt_float(value: Any) -> float | None:
-    return None if value is None else float(value)
 
 
 def _check_size(spec: TuneSpec, where: str) -> None:

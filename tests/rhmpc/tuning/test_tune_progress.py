@@ -14,9 +14,10 @@ import numpy as np
 import pytest
 
 from rhmpc.errors import UsageError
+from rhmpc.tuning.figure import log_spaced, objective_figure
 from rhmpc.tuning.objective import Objective
 from rhmpc.tuning.progress import format_duration, speed_phrase
-from rhmpc.tuning.report import PointSummary, log_spaced, objective_figure
+from rhmpc.tuning.report import PointSummary
 from rhmpc.tuning.runner import run_sweep
 from rhmpc.tuning.spec import MAX_EVALUATIONS, parse_spec
 from rhmpc.tuning.store import ResultsWriter
