@@ -17,12 +17,27 @@ control tick with the torque τ [N·m] held), ``q`` (the joint angles the loop s
 
 from __future__ import annotations
 
-from rhmpc.robots import LinearArm, Robot
-from rhmpc.sim.plant.arm import ArmPlant
-from rhmpc.sim.plant.hardware import HardwarePlant, LinearPlant
+import importlib
+from typing import TYPE_CHECKING
+
 from rhmpc.sim.plant.settings import PlantSettings
 
+if TYPE_CHECKING:
+    from rhmpc.robots import LinearArm, Robot
+    from rhmpc.sim.plant.arm import ArmPlant
+    from rhmpc.sim.plant.hardware import HardwarePlant, LinearPlant
+
+#: The plants and their modules, loaded when first asked for: the settings alone (the presets,
+#: the command line's parsers) load neither Pinocchio nor the kernel.
+_EXPORTS = {"ArmPlant": "arm", "HardwarePlant": "hardware", "LinearPlant": "hardware"}
+
 __all__ = ["ArmPlant", "HardwarePlant", "LinearPlant", "PlantSettings", "make_plant"]
+
+
+def __getattr__(name: str):
+    if name not in _EXPORTS:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return getattr(importlib.import_module(f"{__name__}.{_EXPORTS[name]}"), name)
 
 
 def make_plant(robot: Robot, arm: LinearArm, Ts: float, settings: PlantSettings | None = None,
@@ -30,6 +45,9 @@ def make_plant(robot: Robot, arm: LinearArm, Ts: float, settings: PlantSettings 
     """The plant of ``settings`` at the home posture, at rest: the MPC's own model
     (:class:`LinearPlant`) for ``kind = "linear"``; else the arm, :class:`ArmPlant` with every
     effect at its neutral value (the ideal plant) or :class:`HardwarePlant` with some on."""
+    from rhmpc.sim.plant.arm import ArmPlant
+    from rhmpc.sim.plant.hardware import HardwarePlant, LinearPlant
+
     settings = settings or PlantSettings()
     if settings.kind == "linear":
         return LinearPlant(robot, arm)
