@@ -1,5 +1,5 @@
 /*
- * The controller of rhmpc.h: rhmpc.control.controller.Controller in C.
+ * The controller of rhmpc.h (bound to Python as rhmpc.control.controller.Controller).
  *
  *   refresh:  the reference (rhmpc_reference.c): gate -> predictor -> interpolation -> guard
  *   forecast: a forecast made outside -> interpolation -> guard (rhmpc_reference.c)

@@ -24,8 +24,8 @@
  * rhmpc_step: the observer (x_hat = [q - q0; qdot] from the encoders), the output offset by
  * forward kinematics, the MPC (screening cascade, OSQP, fallbacks, envelope), the cancellation
  * of gravity, Coriolis and friction with the controller's model, the torque clip.
- * The Python controller it is generated from (rhmpc.control.controller.Controller) is the
- * reference: `rhmpc simulate --controller c` runs this code in its closed loop.
+ * The Python controller (rhmpc.control.controller.Controller) is a binding to this library,
+ * generated from the same description: every simulation runs this code.
  *
  * Units (SI) and layouts
  *   tick        the control tick's index (time = tick * RHMPC_TS); the same clock in both calls

@@ -1,13 +1,14 @@
 /*
- * The MPC of rhmpc_step: the per-tick logic of rhmpc.control.mpc.RecedingHorizonMPC.step, in C.
- * Numbers (QP maps, screening map, shift, LQ gain) come from rhmpc_data.c, generated from the
- * same CondensedQP the Python controller uses; the QP is solved by OSQP's generated code.
+ * The MPC of rhmpc_step, the per-tick work of the problem rhmpc.control.mpc.RecedingHorizonMPC
+ * describes (its CasADi formulation, rhmpc.control.qp). Numbers (QP maps, screening map, shift,
+ * LQ gain) come from rhmpc_data.c, generated from that CondensedQP; level 3 is OSQP's generated
+ * code.
  *
  *   p = [x; r_1..r_N; u_prev; d]                 (finiteness check: sum of squares)
  *   l, u = l0 - G p, u0 - G p                    (only with parameter-dependent bounds)
  *   q_z = F_z [p; 1]                             (the slacks' part of q is the constant rho_1)
  *   level 1: z* = -W q_z; if l <= A [z*; 0] <= u: tau = u_max o z*_0, done    (exact)
- *   level 2: the torque-box QP by a primal-dual active set on W (rhmpc.control.box_qp): if it
+ *   level 2: the torque-box QP by a primal-dual active set on W, then the dual active set: if it
  *            converges, its KKT residual is small and every envelope row holds: done (exact);
  *            at its cap (RHMPC_BOX_MAX_ITER solves): the fallback
  *   back-off: after k consecutive failed ticks, levels 2 and 3 rest for
@@ -439,8 +440,8 @@ static int box_dual(rhmpc_t *ctl, double dual_tol) {
   return 1;
 }
 
-/* Level 2: min 1/2 z'Hz + q'z s.t. -1 <= z <= 1, exactly (rhmpc/control/box_qp.py: the same
- * steps in the same order): phase 1 PDAS, else phase 2 the dual active set, at most
+/* Level 2: min 1/2 z'Hz + q'z s.t. -1 <= z <= 1, exactly (held to DAQP's solution by
+ * tests/rhmpc/control/test_mpc.py): phase 1 PDAS, else phase 2 the dual active set, at most
  * RHMPC_BOX_MAX_ITER Cholesky solves in all; then accepted iff
  * |H z + q + mu|_inf <= eps_kkt (1 + |q|_inf) and every envelope row holds at [z; 0]. */
 static int box_solved(rhmpc_t *ctl) {

@@ -1,13 +1,16 @@
 /*
  * The reference of rhmpc_refresh: outlier gate, RLS predictor, interpolation, guard.
  *
- * The C of rhmpc.control.reference.PredictedReference around the @PREDICTOR@ predictor
- * (predictors/rls_generalized.py, Tuna et al. 2013 section VI; predictors/rls_one_step.py,
- * section V), with the bookkeeping of predictors/base.py (counts, range guard, non-finite
- * relearn), predictors/delay_line.py (tapped delay line, ramp repair, cubic gap interpolation,
- * retraction), predictors/rls.py (Haykin, Adaptive Filter Theory, Table 10.1, with its
- * covariance guards) and rhmpc/control/gate.py (OutlierGate). The Python is the reference: each
- * function here names its counterpart there.
+ * The reference's per-sample work, whose settings rhmpc.control.reference describes: the
+ * outlier gate, the anchor and the nodes of a forecast, the interpolation, the guard and the
+ * placement live here only (rhmpc.control.reference.PredictedReference binds them). The one
+ * logic kept in two languages is the library's own @PREDICTOR@ predictor, for a target with no
+ * predictor process: the twin of predictors/rls_generalized.py (Tuna et al. 2013, section VI) or
+ * predictors/rls_one_step.py (section V), with the bookkeeping of predictors/base.py (counts,
+ * range guard, non-finite relearn), predictors/delay_line.py (tapped delay line, ramp repair,
+ * cubic gap interpolation, retraction) and predictors/rls.py (Haykin, Adaptive Filter Theory,
+ * Table 10.1, with its covariance guards); each of its functions names its twin there, and
+ * tests/rhmpc/control/test_export.py holds the two to the same torques tick by tick.
  */
 #include "rhmpc.h"
 #include "rhmpc_data.h"
