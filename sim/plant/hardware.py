@@ -109,7 +109,8 @@ class HardwarePlant:
         self.saturated = False
         res = robot.encoder_resolution  # the encoders' counts: Δ⁻¹ S (q − q0), and back
         self._to_counts, self._from_counts = S / res[:, None], self._S_inv * res
-        self._counts0 = self._to_counts @ robot.q0
+        self._counts0, self._q0, self._res, self._n = self._to_counts @ robot.q0, robot.q0, res, n
+        self._read: tuple[bytes, np.ndarray] = (b"", np.zeros(n))  # (state, its reading)
 
     def _cable_model(self, M: np.ndarray) -> tuple:
         """(J_r, k, c) of the cables on each motor (:func:`cable_stiffness`), from M(q0)."""
@@ -150,12 +151,15 @@ class HardwarePlant:
     def encoders(self) -> np.ndarray:
         """q̃ = q0 + S⁻¹ Δ round(θ/Δ): joint angles from the motor encoders [rad], θ = S (q −
         q0) rigid, θ_r with cables."""
-        n, res = self.robot.nv, self.robot.encoder_resolution
-        if self._cables is None:
-            counts = np.rint(self._to_counts @ self._drive.x[:n] - self._counts0)
-        else:
-            counts = np.rint(self._drive.x[2 * n:3 * n] / res)
-        return self.robot.q0 + self._from_counts @ counts
+        x, n = self._drive.x, self._n
+        state = x.tobytes()
+        if state != self._read[0]:  # read once per state: the controller's and the score's
+            if self._cables is None:
+                counts = np.rint(self._to_counts @ x[:n] - self._counts0)
+            else:
+                counts = np.rint(x[2 * n:3 * n] / self._res)
+            self._read = (state, self._q0 + self._from_counts @ counts)
+        return self._read[1].copy()
 
     @property
     def q(self) -> np.ndarray:
