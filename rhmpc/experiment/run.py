@@ -138,6 +138,7 @@ def document(config: RunConfig, run: Run, result: LoopResult, wall: float,
         doc["outlier_gate"] = {
             "setting": config.reference.outlier_gate,
             "floor_mm": None if floor is None else 1e3 * floor,
+            "calibration_s": 2 * config.reference.gate_calibration,  # convergence + calibration
             **{key: int(counts.get(key, 0))
                for key in ("outliers_rejected", "gate_unlocked", "retracted", "repaired")},
         }

@@ -204,7 +204,10 @@ def _gate_line(gate: dict) -> str:
     if gate.get("setting") == 0:
         return "off"
     if floor is None:
-        where = "still calibrating at the end of the run (all samples accepted)"
+        learn = gate.get("calibration_s", 10.0)
+        where = (f"not armed: it learns its floor over the first {learn:g} s of samples, more "
+                 "than this run had (every sample accepted; reference.gate_calibration sets "
+                 "half of it)")
     elif gate.get("setting") == "auto":
         where = (f"floor {floor:.3f} mm (4 × the RMS one-step miss of this run's first "
                  "seconds)")

@@ -32,3 +32,11 @@ def test_the_tick_with_the_librarys_own_predictor(doc: dict) -> None:
     text = format_summary({**doc, "implementation": "c"})
     assert "controller the library with its own RLS predictor, seed 0" in text.splitlines()[0]
     assert "(budget 500 µs, refreshes included)" in _line(text, "controller tick")
+
+
+def test_a_run_shorter_than_the_gates_learning_says_so(doc: dict) -> None:
+    gate = doc["outlier_gate"]
+    assert gate["floor_mm"] is None and gate["calibration_s"] == 10.0  # 2 × 5 s, the default
+    line = _line(format_summary(doc), "outlier gate")
+    assert "not armed: it learns its floor over the first 10 s of samples" in line
+    assert "calibrating" not in line
