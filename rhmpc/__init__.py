@@ -33,14 +33,8 @@ import importlib
 import importlib.util
 import sys
 from importlib.machinery import ModuleSpec
-from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any
-
-try:
-    __version__ = version("rhmpc")
-except PackageNotFoundError:  # running from a source tree that is not installed
-    __version__ = "0.0.0+unknown"
 
 _EXPORTS = {
     "Controller": "rhmpc.control.controller",
@@ -90,7 +84,20 @@ if (_ROOT / "pyproject.toml").is_file() and all(
     sys.meta_path.insert(0, _CheckoutFinder)
 
 
+def _version() -> str:
+    """The installed distribution's version (read when first asked: importlib.metadata costs
+    tens of milliseconds of every command's start-up)."""
+    from importlib.metadata import PackageNotFoundError, version
+    try:
+        return version("rhmpc")
+    except PackageNotFoundError:  # running from a source tree that is not installed
+        return "0.0.0+unknown"
+
+
 def __getattr__(name: str) -> Any:
+    if name == "__version__":
+        globals()["__version__"] = value = _version()
+        return value
     if name in _EXPORTS:
         return getattr(importlib.import_module(_EXPORTS[name]), name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -19,7 +19,6 @@ import importlib
 import os
 import sys
 
-from rhmpc import __version__
 from rhmpc.errors import UsageError, one_line, one_line_warnings
 
 #: Subcommands (modules of this package), in the order ``rhmpc --help`` lists them, with
@@ -41,6 +40,19 @@ COMMANDS: dict[str, str] = {
 }
 
 
+class _Version(argparse.Action):
+    """``--version``: the installed version, read only when asked (see ``rhmpc.__version__``)."""
+
+    def __init__(self, option_strings, dest=argparse.SUPPRESS, **kwargs) -> None:
+        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS,
+                         help="show the version and exit")
+
+    def __call__(self, parser, namespace, values, option_string=None) -> None:
+        import rhmpc
+        print(f"rhmpc {rhmpc.__version__}")  # on standard output, as argparse's own
+        parser.exit()
+
+
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """The parser of every subcommand; with ``command``, that one's in full and the others by
     name and help only, so that a command loads only its own modules (and what they import)."""
@@ -49,7 +61,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
         description="Receding-horizon MPC with heart-motion prediction "
         "for robot-assisted beating-heart surgery research.",
     )
-    parser.add_argument("--version", action="version", version=f"rhmpc {__version__}")
+    parser.add_argument("--version", action=_Version)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name, summary in COMMANDS.items():
         if command in (None, name):

@@ -290,7 +290,7 @@ def _run_ticks(plant, controller, refreshes: Refreshes, c0: int, c1: int, log: d
     for i in range(c0, c1):
         k = i - c0
         spent, refreshed = 0, False
-        for z, stamp, others in due(i):
+        for z, stamp, others in due(i) if i >= refreshes.next else ():
             before = controller.outliers
             refresh(i, z, stamp, others)
             spent += controller.refresh_ns

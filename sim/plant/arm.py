@@ -43,6 +43,7 @@ class ArmPlant:
                             smoothing_velocity=self.settings.friction_smoothing, q0=robot.q0,
                             torque_limit=robot.torque_limit, command_map=S_inv.T)
         self._shape = (robot.nv,)
+        self._counts = np.empty(robot.nv)  # the encoders' counts, q / Δ rounded
         self.saturated = False
 
     q = state(0, "Joint angles [rad].")
@@ -55,8 +56,11 @@ class ArmPlant:
 
     def encoders(self) -> np.ndarray:
         """The encoders' joint angles q̃ = Δ·round(q/Δ) [rad] (q without an encoder model)."""
-        res = self.robot.encoder_resolution
-        return self.q if res is None else res * np.rint(self.q / res)
+        q, res = self._drive.x[:self._shape[0]], self.robot.encoder_resolution
+        if res is None:
+            return q.copy()
+        counts = np.rint(np.divide(q, res, out=self._counts), out=self._counts)
+        return res * counts
 
     def step(self, tau: np.ndarray) -> None:
         """Advance one control tick with ``tau`` [N·m] clipped to ±``torque_limit`` and held."""
