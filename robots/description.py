@@ -134,9 +134,9 @@ def read_file(path: str | Path) -> dict:
     for key in ("urdf", "joints", "home"):
         if key not in doc:
             raise RobotFileError(f"{key}: missing")
-    if ("tool_frame" in doc) == ("tool" in doc):
+    if "tool_frame" in doc and "tool" in doc:
         raise RobotFileError("tool_frame: give the tool as tool_frame = \"FRAME\" or as tool = "
-                             "{ frame = \"FRAME\", point = [x, y, z] }, one of the two")
+                             "{ frame = \"FRAME\", point = [x, y, z] }, not both")
     return doc
 
 
@@ -213,6 +213,10 @@ def _reduced(doc: dict, full: pin.Model, urdf: Path) -> pin.Model:
 
 def _tool(doc: dict, model: pin.Model) -> str:
     """The tool's frame name (a frame added at ``tool.point`` for a point on a frame)."""
+    if "tool_frame" not in doc and "tool" not in doc:  # said once the frames are known
+        raise RobotFileError("tool_frame: missing; name the controlled point's frame, "
+                             f"tool_frame = \"FRAME\" (the URDF's frames: {_frames(model)}), "
+                             "or a point on one, tool = { frame = \"FRAME\", point = [x, y, z] }")
     if "tool_frame" in doc:
         frame = doc["tool_frame"]
         _frame(model, frame, "tool_frame")
@@ -238,9 +242,13 @@ def _frame(model: pin.Model, frame, key: str) -> None:
     """``frame`` names a frame of the model; else the message lists them (the first 40)."""
     if isinstance(frame, str) and model.existFrame(frame):
         return
+    raise RobotFileError(f"{key}: no frame {frame!r} in the URDF (its frames: {_frames(model)})")
+
+
+def _frames(model: pin.Model) -> str:
+    """The model's frame names, the first 40 of them."""
     names = [f.name for f in model.frames if f.name != "universe"]
-    listed = ", ".join(names[:40]) + (f", … ({len(names)} in all)" if len(names) > 40 else "")
-    raise RobotFileError(f"{key}: no frame {frame!r} in the URDF (its frames: {listed})")
+    return ", ".join(names[:40]) + (f", … ({len(names)} in all)" if len(names) > 40 else "")
 
 
 def _check_limits(model: pin.Model) -> None:

@@ -214,6 +214,18 @@ def test_a_missing_tool_frame_lists_the_frames(folder):
         robot_from_file(write(folder, PANDA.replace('"panda_hand_tcp"', '"hand"')))
 
 
+def test_no_tool_at_all_lists_the_frames(folder):
+    """Neither tool_frame nor tool: one line naming the key and the URDF's frames."""
+    missing = PANDA.replace('tool_frame = "panda_hand_tcp"\n', "")
+    assert missing != PANDA
+    said = r"toml: tool_frame: missing; .*frames: .*panda_hand_tcp"
+    with pytest.raises(RobotFileError, match=said):
+        robot_from_file(write(folder, missing))
+    both = PANDA + 'tool = { frame = "panda_link8", point = [0.0, 0.0, 0.1] }\n'
+    with pytest.raises(RobotFileError, match="not both"):
+        robot_from_file(write(folder, both))
+
+
 def test_every_registered_robot_holds_its_home_within_its_limits():
     """The registered arms pass the checks a user's file meets: M(q₀) positive definite and
     the gravity torque at home within the torque limits."""
