@@ -10,6 +10,10 @@ Time is integer ticks of ``Ts`` (seconds = tick·Ts). Each tick ``i``:
    the reference's points r_{i+1..i+N}, cancellation), and returns the torque;
 3. the plant integrates one tick with that torque held.
 
+Between two refreshes the ideal plant runs steps 2–3 of the controller's library in C
+(``ArmPlant.run_ticks``, ``plant_run`` in ``sim/plant/chain.c``): the same calls in the same
+order, so the records are those of the ticks one at a time, to the last bit.
+
 The heart and its sensor do not see the robot; their samples are made a block at a time
 (:mod:`rhmpc.sim.loop.streams`). The controller is a :class:`rhmpc.control.controller.Controller`,
 or the exported C controller behind the same two calls (:mod:`rhmpc.control.export`); the loop uses
@@ -280,39 +284,62 @@ def chunks(n: int, size: int, marks: Iterable[int] = ()) -> list[tuple[int, int]
 def _run_ticks(plant, controller, refreshes: Refreshes, c0: int, c1: int, log: dict,
                yardstick, progress) -> None:
     """Ticks c0 … c1 − 1 (the module's steps 1–3), written into the chunk's records ``log``
-    (:meth:`~rhmpc.sim.loop.results.Recorder.start_chunk`)."""
-    due, refresh, step, advance = refreshes.due, controller.refresh, controller.step, plant.step
-    q_log, ref0, u_log, tau_log, cmd_log = (log[k] for k in ("q", "ref0", "u", "tau", "cmd"))
-    step_ns, refresh_ns, horizons, samples = (log[k] for k in ("step_ns", "refresh_ns",
-                                                               "horizons", "samples"))
-    each = log["refresh_each_ns"]
-    u_prev = log["u_prev"]
-    for i in range(c0, c1):
-        k = i - c0
-        spent, refreshed = 0, False
-        for z, stamp, others in due(i) if i >= refreshes.next else ():
-            before = controller.outliers
-            refresh(i, z, stamp, others)
-            spent += controller.refresh_ns
-            each.append(controller.refresh_ns)
-            refreshed = True
-            if z is not None:
-                _note_outliers(before, controller.outliers, stamp, log)
-            samples.append((stamp, z))
-        tau = step(i, plant.encoders())
-        advance(tau)
-        step_ns[k], refresh_ns[k] = controller.step_ns, spent
-        points = controller.horizon(i)
-        if refreshed:
-            horizons.append((i, points.copy()))
-        ref0[k] = points[0]
-        u = controller.u
-        if yardstick is not None and i % YARDSTICK_EVERY == YARDSTICK_PHASE \
-                and u_prev is not None:
-            log["yardstick_ns"].append(warm_ns(yardstick, controller.x_hat, points, u_prev))
-        u_prev = u
-        u_log[k], tau_log[k], cmd_log[k] = u, tau, controller.tau_command
-        q_log[k] = plant.q
+    (:meth:`~rhmpc.sim.loop.results.Recorder.start_chunk`): the ticks with nothing for Python
+    (:func:`_alone_until`) in C where the plant and the controller can (the ideal plant's
+    ``run_ticks`` with the controller's library), the others one at a time."""
+    in_c = hasattr(type(plant), "run_ticks") and hasattr(controller, "library_loop")
+    ahead = plant.run_ticks if in_c else None  # not a wrapper's, nor for another controller
+    rows = ("q", "ref0", "u", "tau", "cmd", "step_ns")
+    i = c0
+    while i < c1:
+        end = i if ahead is None else _alone_until(i, c1, refreshes, controller, yardstick,
+                                                     progress)
+        if end > i:
+            ahead(controller, i, {k: log[k][i - c0:end - c0] for k in rows})
+            log["u_prev"], i = controller.u, end
+            continue
+        _run_tick(plant, controller, refreshes, i, i - c0, log, yardstick)
         if progress is not None and (i + 1) % PROGRESS == 0:
             progress(i + 1)
-    log["u_prev"] = u_prev
+        i += 1
+
+
+def _alone_until(i: int, c1: int, refreshes: Refreshes, controller, yardstick,
+                 progress) -> int:
+    """The first tick from ``i`` on that needs Python: a refresh due, the yardstick's or the
+    progress's tick, the exact reference's next points (``controller.steps_alone``), or c1."""
+    end = min(c1, refreshes.next, controller.steps_alone() + 1)
+    if yardstick is not None:
+        end = min(end, i + (YARDSTICK_PHASE - i) % YARDSTICK_EVERY)
+    if progress is not None:
+        end = min(end, i + (PROGRESS - 1 - i) % PROGRESS)
+    return int(end) if end > i else i
+
+
+def _run_tick(plant, controller, refreshes: Refreshes, i: int, k: int, log: dict,
+              yardstick) -> None:
+    """Tick ``i`` (the module's steps 1–3) into row ``k`` of the chunk's records ``log``."""
+    spent, refreshed = 0, False
+    for z, stamp, others in refreshes.due(i) if i >= refreshes.next else ():
+        before = controller.outliers
+        controller.refresh(i, z, stamp, others)
+        spent += controller.refresh_ns
+        log["refresh_each_ns"].append(controller.refresh_ns)
+        refreshed = True
+        if z is not None:
+            _note_outliers(before, controller.outliers, stamp, log)
+        log["samples"].append((stamp, z))
+    tau = controller.step(i, plant.encoders())
+    plant.step(tau)
+    log["step_ns"][k], log["refresh_ns"][k] = controller.step_ns, spent
+    points = controller.horizon(i)
+    if refreshed:
+        log["horizons"].append((i, points.copy()))
+    log["ref0"][k] = points[0]
+    u, u_prev = controller.u, log["u_prev"]
+    if yardstick is not None and i % YARDSTICK_EVERY == YARDSTICK_PHASE \
+            and u_prev is not None:
+        log["yardstick_ns"].append(warm_ns(yardstick, controller.x_hat, points, u_prev))
+    log["u_prev"] = u
+    log["u"][k], log["tau"][k], log["cmd"][k] = u, tau, controller.tau_command
+    log["q"][k] = plant.q

@@ -62,6 +62,12 @@ class ArmPlant:
         counts = np.rint(np.divide(q, res, out=self._counts), out=self._counts)
         return res * counts
 
+    def run_ticks(self, controller, tick: int, rows: dict) -> None:
+        """The closed loop's ticks from ``tick`` on, one per row of ``rows``, in C: the encoders,
+        ``controller``'s step and this plant's tick (:meth:`~rhmpc.sim.plant.kernel.Drive.run`),
+        the same numbers as :meth:`encoders`, the controller's ``step`` and :meth:`step`."""
+        self.saturated = self._drive.run(controller, self.robot.encoder_resolution, tick, rows)
+
     def step(self, tau: np.ndarray) -> None:
         """Advance one control tick with ``tau`` [N·m] clipped to ±``torque_limit`` and held."""
         if np.shape(tau) != self._shape:

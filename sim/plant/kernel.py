@@ -52,6 +52,16 @@ class _Plant(ctypes.Structure):
     ]
 
 
+class _Loop(ctypes.Structure):
+    """``loop_t`` of sim/plant/chain.c: the controller's step and the public fields the loop
+    records (:meth:`Drive.run`)."""
+
+    _fields_ = [
+        ("step", _p), ("ctl", _p), ("res", _p), ("u", _p), ("tau_command", _p), ("step_ns", _p),
+        ("first", _p), ("points", _p), ("span", _i), ("horizon", _i),
+    ]
+
+
 @functools.cache
 def _library() -> ctypes.CDLL:
     """The compiled kernel (built once per source version); ValueError where it cannot be."""
@@ -63,6 +73,8 @@ def _library() -> ctypes.CDLL:
                            "chain_mass": [_p] * 3, "plant_tick": [_p] * 4}.items():
         getattr(library, name).argtypes, getattr(library, name).restype = argtypes, None
     library.plant_tick.restype = _i
+    library.plant_run.argtypes = [_p] * 4 + [ctypes.c_longlong, _i] + [_p] * 6
+    library.plant_run.restype = _i
     return library
 
 
@@ -183,6 +195,7 @@ class Drive:
             _fill(p.R, S.T @ np.diag(rotor) @ S)
         self.x, self.current, self.torque = np.zeros(4 * n), np.zeros(n), np.zeros(n)
         self.x[:n] = q0
+        self._loop = None  # (controller, its loop_t, the resolution it points to, the call)
         self._tick = functools.partial(chain._lib.plant_tick, ctypes.addressof(p),
                                        self.x.ctypes.data, self.current.ctypes.data,
                                        self.torque.ctypes.data)
@@ -192,6 +205,23 @@ class Drive:
         in place; True if a limit cut the torque or the command."""
         self.torque[:] = tau
         return bool(self._tick())
+
+    def run(self, controller, resolution, tick: int, rows: dict) -> bool:
+        """The loop's ticks ``tick`` … ``tick + m − 1`` in C (``plant_run``): the encoders'
+        reading Δ·round(q/Δ) (``resolution`` Δ, or None: q), ``controller``'s step
+        (:meth:`rhmpc.control.export.binding.Controller.library_loop`), this tick; ``rows`` the
+        loop's records of those ticks, m rows each (``q``, ``ref0``, ``u``, ``tau``, ``cmd``,
+        ``step_ns``), filled. True if a limit cut the last tick's torque or command."""
+        if self._loop is None or self._loop[0] is not controller:
+            res = None if resolution is None else np.ascontiguousarray(
+                np.broadcast_to(np.asarray(resolution, dtype=float), (self.n,)))
+            loop = _Loop(**controller.library_loop(),
+                         res=None if res is None else res.ctypes.data)
+            self._loop = (controller, loop, res, functools.partial(
+                self._chain._lib.plant_run, ctypes.addressof(self._p), self.x.ctypes.data,
+                self.current.ctypes.data, ctypes.addressof(loop)))
+        return bool(self._loop[3](tick, rows["step_ns"].shape[0], *(
+            rows[k].ctypes.data for k in ("q", "ref0", "u", "tau", "cmd", "step_ns"))))
 
     def part(self, k: int) -> np.ndarray:
         """A copy of the k-th n-vector of the state (0 q, 1 q̇, 2 θ_r, 3 θ̇_r)."""

@@ -15,6 +15,7 @@ workspace is a set of static globals, so one library image holds one controller;
 from __future__ import annotations
 
 import ctypes
+import math
 import shutil
 import tempfile
 import time
@@ -199,6 +200,22 @@ class Controller:
         self._q[:] = q
         self._step(self._addr, tick, self._q_at, self._tau_at)
         return self._tau.copy()
+
+    def library_loop(self) -> dict[str, int]:
+        """The library's step and the public fields a loop in C records, as addresses: ``step``
+        (``rhmpc_step``), ``ctl``, ``u``, ``tau_command``, ``step_ns``, ``first``, ``points``;
+        ``span`` and ``horizon`` (N). A loop in C steps the library directly on the ticks up to
+        :meth:`steps_alone` (the simulated plant's, :meth:`rhmpc.sim.plant.kernel.Drive.run`)."""
+        base, public = ctypes.addressof(self._pub), type(self._pub)
+        fields = {name: base + getattr(public, name).offset
+                  for name in ("u", "tau_command", "step_ns", "first", "points")}
+        return {"step": ctypes.cast(self._step, ctypes.c_void_p).value,
+                "ctl": self._addr.value, **fields, "span": self.span, "horizon": self.N}
+
+    def steps_alone(self) -> float:
+        """The last tick :meth:`step` needs nothing of Python for: with the exact reference, the
+        last whose horizon the library holds; else every tick (inf)."""
+        return self._covered - self.N if self._exact else math.inf
 
     def mpc_step(self, x: np.ndarray, ref: np.ndarray) -> np.ndarray:
         """The MPC alone (``rhmpc_mpc``): τ_mpc [N·m] for the state ``x`` = [q − q0; q̇] (nx,)

@@ -194,3 +194,40 @@ def test_scripted_solver_failures_are_survived_and_counted(world):
     # (0.0787 without failures), max 0.194 mm; bounds: measured + 15 %
     assert result.metrics()["rms_error_mm"] < 0.09
     assert result.metrics()["max_error_mm"] < 0.22
+
+
+@pytest.mark.parametrize("reference", ["exact", "generalized"])
+def test_the_ticks_in_c_record_what_the_ticks_one_by_one_record(world, reference, tmp_path,
+                                                                 monkeypatch):
+    """The ideal plant runs the ticks that need no Python in C (``ArmPlant.run_ticks``): every
+    tick's record is the one the loop makes a tick at a time, to the last bit, with the exact
+    reference (its points given ahead) and with a predictor (a refresh every few ticks)."""
+    from rhmpc.sim.loop.trace import read_trace
+    from rhmpc.sim.plant.arm import ArmPlant
+
+    build = (lambda truth: ExactReference(truth, N)) if reference == "exact" \
+        else predicted(reference)
+    robot, arm = world
+    src = HarmonicHeart()
+    center, truth = poi_truth(src, SHORT.ticks + N + 1, SHORT.Ts)
+    stream = ideal_stream(src, SHORT.duration + 0.1)
+
+    def run(path):
+        ref = build(truth)
+        ref.place(arm.y0, center)
+        controller = Controller(RecedingHorizonMPC(arm, MPCSettings()), ref,
+                                JointObserver(arm, robot.encoder_resolution),
+                                NonlinearityCancellation(robot), robot.torque_limit)
+        return run_closed_loop(make_plant(robot, arm, SHORT.Ts), controller,
+                               ArrayTruth(truth, center), stream, SHORT,
+                               predictor_clock(SHORT, stream), anchor=arm.y0, robot=robot,
+                               trace_file=str(path))
+
+    run(tmp_path / "c.npz")
+    monkeypatch.delattr(ArmPlant, "run_ticks")
+    run(tmp_path / "python.npz")
+    c, python = read_trace(tmp_path / "c.npz"), read_trace(tmp_path / "python.npz")
+    assert sorted(c) == sorted(python) and len(c["time"]) == SHORT.ticks
+    for name in c:
+        if not name.endswith("_ns"):  # clocks
+            np.testing.assert_array_equal(c[name], python[name], err_msg=name)
