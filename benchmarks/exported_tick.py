@@ -15,7 +15,7 @@ screening cascade, the fallbacks and the solver's failures, and the host's stall
 after (``--host-stalls``: a loop that only reads the clock; no tick that a stall lands in can be
 shorter). Where no C compiler is found, this part is skipped and the record says why.
 
-Then the Python simulation's speed on the main job, ``rhmpc simulate --predictor generalized
+Then the simulation's speed on the main job, ``rhmpc simulate --predictor generalized
 --duration 60 --seed 2 --json``, on the ideal plant and on the hardware-like one (a ``--set`` of
 each value of ``rhmpc.experiment.presets.HARDWARE_PLANT``, the hardware preset's plant, all else
 the same): the wall time per simulated second and the tick's parts (the controller's step, the
@@ -159,7 +159,7 @@ def exported_tables(runs: dict) -> dict[str, str]:
 
 
 def simulation_table(runs: dict) -> str:
-    """The Python simulation's speed on each plant, its tick's parts and the plant's tick."""
+    """The simulation's speed on each plant, its tick's parts and the plant's tick."""
     rows = []
     for label, d in runs.items():
         tick, parts, plant = d["tick_us"], d["tick_parts_us"], d["plant_tick"]
@@ -185,14 +185,16 @@ def main() -> None:
     if sim is None:
         sys.exit(f"rhmpc simulate failed: {command}")
     tables = exported_tables(runs) if runs else {}
-    tables["simulation|The Python simulation's speed on the main job (not a real-time figure)"] \
+    tables["simulation|The simulation's speed on the main job (not a real-time figure)"] \
         = simulation_table(sim)
     simulation_note = (
-        "The simulation's rows are the Python reference implementation running a study (the "
-        "generalized predictor on fixed-a2-top, PHANToM, sonomicrometer) on each plant: its "
-        "step is the controller's (observer, MPC, cancellation), its refresh the reference's "
-        "(gate, predictor, interpolation); the plant's tick (encoders and step, the dynamics "
-        "kernel and what composes it) is timed beside g in the benchmark's own process.")
+        "The simulation's rows are a study's run (the generalized predictor on fixed-a2-top, "
+        "PHANToM, sonomicrometer) on each plant: its step is the controller's library "
+        "(observer, MPC, cancellation), its refresh the reference's (the gate and the "
+        "interpolation in the library, the predictor in Python); on the ideal plant the ticks "
+        "between two refreshes run in C (`plant_run`), on the hardware-like one a tick at a "
+        "time from Python. The plant's tick (encoders and step, the dynamics kernel and what "
+        "composes it) is timed beside g in the benchmark's own process.")
     if runs:
         predictor = next(iter(runs.values()))["exported_predictor"]
         notes = ("The exported controller runs in a closed loop of its own on the linear "
