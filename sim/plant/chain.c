@@ -457,17 +457,17 @@ int plant_tick(const plant_t *p, double *x, double *i0, const double *tau) {
  * between two refreshes): each tick the encoders' reading q~ = res round(q / res) (q where res
  * is NULL), the controller's step (the exported library's rhmpc_step, called through `step`),
  * then plant_tick; each tick's records, row k: q after the tick, the reference point r_{tick+1}
- * (rhmpc_horizon's first), u, tau, tau_command and the step's time, read from the controller's
- * public fields. Returns plant_tick's cut of the last tick. */
+ * (the first of the library's rhmpc_horizon), u, tau, tau_command and the step's time, read
+ * from the controller's public fields. Returns plant_tick's cut of the last tick. */
 typedef int (*step_fn)(void *ctl, long long tick, const double *q, double *tau);
+typedef const double *(*horizon_fn)(const void *ctl, long long tick);
 typedef struct {
     step_fn step;
+    horizon_fn horizon;
     void *ctl;
     const double *res;                  /* the encoders' resolution [rad], or NULL */
     const double *u, *tau_command;      /* the controller's public fields */
-    const long long *step_ns, *first;
-    const double *points;               /* (span, 3) */
-    int span, horizon;
+    const long long *step_ns;
 } loop_t;
 
 int plant_run(const plant_t *p, double *x, double *i0, const loop_t *L, long long tick0,
@@ -476,12 +476,11 @@ int plant_run(const plant_t *p, double *x, double *i0, const loop_t *L, long lon
     int n = p->arm->n, cut = 0;
     double q[MAXJ], tau[MAXJ];
     for (int k = 0; k < count; k++) {
-        long long tick = tick0 + k, start = tick + 1 - *L->first;
+        long long tick = tick0 + k;
         for (int j = 0; j < n; j++) q[j] = L->res ? L->res[j] * rint(x[j] / L->res[j]) : x[j];
         L->step(L->ctl, tick, q, tau);
         cut = plant_tick(p, x, i0, tau);
-        start = start < 0 ? 0 : (start > L->span - L->horizon ? L->span - L->horizon : start);
-        memcpy(ref0 + 3 * k, L->points + 3 * start, 3 * sizeof(double));
+        memcpy(ref0 + 3 * k, L->horizon(L->ctl, tick), 3 * sizeof(double));
         memcpy(q_log + n * k, x, n * sizeof(double));
         memcpy(u_log + n * k, L->u, n * sizeof(double));
         memcpy(tau_log + n * k, tau, n * sizeof(double));

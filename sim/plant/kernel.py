@@ -57,8 +57,8 @@ class _Loop(ctypes.Structure):
     records (:meth:`Drive.run`)."""
 
     _fields_ = [
-        ("step", _p), ("ctl", _p), ("res", _p), ("u", _p), ("tau_command", _p), ("step_ns", _p),
-        ("first", _p), ("points", _p), ("span", _i), ("horizon", _i),
+        ("step", _p), ("horizon", _p), ("ctl", _p), ("res", _p), ("u", _p), ("tau_command", _p),
+        ("step_ns", _p),
     ]
 
 

@@ -202,15 +202,16 @@ class Controller:
         return self._tau.copy()
 
     def library_loop(self) -> dict[str, int]:
-        """The library's step and the public fields a loop in C records, as addresses: ``step``
-        (``rhmpc_step``), ``ctl``, ``u``, ``tau_command``, ``step_ns``, ``first``, ``points``;
-        ``span`` and ``horizon`` (N). A loop in C steps the library directly on the ticks up to
+        """The library's calls and the public fields a loop in C records, as addresses:
+        ``step`` (``rhmpc_step``), ``horizon`` (``rhmpc_horizon``), ``ctl``, ``u``,
+        ``tau_command``, ``step_ns``. A loop in C steps the library directly on the ticks up to
         :meth:`steps_alone` (the simulated plant's, :meth:`rhmpc.sim.plant.kernel.Drive.run`)."""
         base, public = ctypes.addressof(self._pub), type(self._pub)
         fields = {name: base + getattr(public, name).offset
-                  for name in ("u", "tau_command", "step_ns", "first", "points")}
-        return {"step": ctypes.cast(self._step, ctypes.c_void_p).value,
-                "ctl": self._addr.value, **fields, "span": self.span, "horizon": self.N}
+                  for name in ("u", "tau_command", "step_ns")}
+        calls = {name: ctypes.cast(getattr(self._lib, f"rhmpc_{name}"), ctypes.c_void_p).value
+                 for name in ("step", "horizon")}
+        return {**calls, "ctl": self._addr.value, **fields}
 
     def steps_alone(self) -> float:
         """The last tick :meth:`step` needs nothing of Python for: with the exact reference, the
