@@ -8,7 +8,10 @@ included, beside the gain tick g of the same loop. Two references:
 
 * the bench's own, which jumps by 2 mm every 1000 ticks so that the torque bounds bind;
 * ``--jump-mm 1000``, jumps of 1 m: a reference the arm cannot reach, which keeps the solver and
-  the fallbacks busy (the worst case the tick must still fit).
+  the fallbacks busy (the worst case the tick must still fit);
+* the first with ``--reading-delay 40``: each step takes the encoders' reading of 40 ticks
+  before (20 ms, the observer's window), which it fuses there and carries forward with 40
+  predictions (the most a step of a robot behind a middleware does).
 
 For each: p50, p99 and max in µs and in g, the refresh ticks alone, the ticks per level of the
 screening cascade, the fallbacks and the solver's failures, and the host's stalls measured right
@@ -39,7 +42,8 @@ import _results as R
 from rhmpc.experiment.presets import HARDWARE_PLANT
 
 #: The references of the exported controller's runs: label → ``rhmpc bench`` options.
-REFERENCES = {"2-mm jumps": (), "1-m jumps (unreachable)": ("--jump-mm", "1000")}
+REFERENCES = {"2-mm jumps": (), "1-m jumps (unreachable)": ("--jump-mm", "1000"),
+              "2-mm jumps, readings 20 ms late": ("--reading-delay", "40")}
 #: The fallbacks of the MPC, in the order it tries them.
 FALLBACKS = ("plan", "lq", "brake", "zero")
 
@@ -203,7 +207,9 @@ def main() -> None:
                  "it in the same loop. A level's cell is its number of ticks, and in "
                  "parentheses their p99. The host's longest stall is measured right after the "
                  "ticks, in the same process: a tick's maximum near it is the host's, not the "
-                 "controller's. " + simulation_note)
+                 "controller's. With the readings 20 ms late, each step fuses the reading of "
+                 "40 ticks before and predicts 40 ticks forward (the observer's window). "
+                 + simulation_note)
     else:
         notes = f"The exported controller was not timed here: {skipped}. " + simulation_note
     R.write("exported_tick", "The exported controller's tick, and the simulation's speed",

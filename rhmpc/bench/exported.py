@@ -26,11 +26,14 @@ def percentiles(values: np.ndarray) -> dict[str, float]:
 
 
 def exported_ticks(robot: str, settings: MPCSettings, traj: np.ndarray, warmup: int,
-                   disable_gc: bool = True) -> dict:
+                   disable_gc: bool = True, reading_delay: int = 0) -> dict:
     """The whole controller in a closed loop of its own on ``traj`` (n + N + 1, 3), its own
     generalized RLS refreshing: every tick timed inside C, refresh ticks included, beside the
-    gain tick (see the module docstring). Returns ``exported_tick_us``, ``exported_tick_g``,
-    ``exported_refresh_us``, its levels, fallbacks and the tracking of the linear model."""
+    gain tick (see the module docstring). Each tick's step takes the reading of
+    ``reading_delay`` ticks before (``rhmpc_step_delayed``: the observer's correction at that
+    tick and as many predictions; none at the first ticks). Returns ``exported_tick_us``,
+    ``exported_tick_g``, ``exported_refresh_us``, its levels, fallbacks and the tracking of the
+    linear model."""
     from rhmpc.experiment import RunConfig
     from rhmpc.experiment.assembly import build_controller, build_reference, build_robot
     from rhmpc.sim.loop.clock import clock_for_rate
@@ -44,6 +47,7 @@ def exported_ticks(robot: str, settings: MPCSettings, traj: np.ndarray, warmup: 
     tick_ns, gain_ns = np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64)
     level, err, refreshed = np.zeros(n, dtype=np.int64), np.zeros(n), np.zeros(n, dtype=bool)
     x, u_prev = np.zeros(arm.nx), np.zeros(arm.nu)
+    readings = np.full((n, arm.nu), np.nan)
     gc_was_enabled = gc.isenabled()
     if disable_gc:
         gc.collect()
@@ -54,7 +58,9 @@ def exported_ticks(robot: str, settings: MPCSettings, traj: np.ndarray, warmup: 
             if k % every == 1:  # a sample taken one tick ago arrives
                 c.refresh(k, traj[k - 1] - center, (k - 1) * arm.Ts)
                 refresh_ns, refreshed[k] = c.refresh_ns, True
-            c.step(k, arm.q0 + x[: arm.nu])
+            readings[k] = arm.q0 + x[: arm.nu]
+            c.step(k, readings[k - reading_delay] if k >= reading_delay else readings[0] * np.nan,
+                   reading_delay)
             tick_ns[k], level[k] = c.step_ns + refresh_ns, c.stats.level
             gain_ns[k] = warm_ns(gain, c.x_hat, c.horizon(k), u_prev)
             u_prev = c.u
@@ -67,7 +73,7 @@ def exported_ticks(robot: str, settings: MPCSettings, traj: np.ndarray, warmup: 
     us, g = tick_ns[sl] * 1e-3, np.median(gain_ns[sl]) * 1e-3
     stats = c.stats
     return {
-        "controller": "c",
+        "controller": "c", "exported_reading_delay_ticks": reading_delay,
         "exported_tick_us": percentiles(us),
         "c_tick_us": percentiles(us[~refreshed[sl]]),
         "exported_tick_g": {k: v / g for k, v in percentiles(us).items() if k != "mean"},

@@ -283,6 +283,7 @@ def run_bench(
     disable_gc: bool = True,
     progress: Callable[[int, int], None] | None = None,
     controller: str = "python",
+    reading_delay: int = 0,
 ) -> dict:
     """Run the benchmark and return its results (JSON-serialisable ``dict``).
 
@@ -303,6 +304,9 @@ def run_bench(
     controller : str
         ``"python"``, or ``"c"`` to also run the whole exported C controller in a loop of its
         own on the same reference (built once and cached, :mod:`rhmpc.compiled`).
+    reading_delay : int
+        The exported controller's readings come this many ticks late [ticks] (its observer
+        fuses each into its own tick and predicts forward: a robot behind a middleware).
     """
     if ticks < 1:
         raise ValueError(f"ticks must be >= 1, got {ticks}")
@@ -338,7 +342,7 @@ def run_bench(
               "gc_disabled": disable_gc, "build_s": build_s}
     result = {**header, **_summary(run, slice(warmup, total)), "settings": to_dict(settings)}
     if controller == "c":
-        result.update(exported_ticks(robot, settings, traj, warmup, disable_gc))
+        result.update(exported_ticks(robot, settings, traj, warmup, disable_gc, reading_delay))
     return result
 
 

@@ -40,6 +40,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         "C compiler) in a loop of its own on the same reference, every tick timed inside C, "
         "refresh ticks included",
     )
+    p.add_argument(
+        "--reading-delay", type=int, default=0, metavar="TICKS",
+        help="with --controller c: each step takes the encoders' reading of TICKS ticks before "
+        "(the observer fuses it there and predicts forward; default 0)",
+    )
     p.add_argument("--gc", action="store_true", help="leave the garbage collector on in the loop")
     add_host_stalls_option(p, "the ticks")
     p.add_argument("--json", action="store_true", help="print machine-readable JSON")
@@ -53,6 +58,8 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--warmup must be >= 0, got {args.warmup}")
     if args.jump_mm < 0 or args.jump_every < 0:
         raise UsageError("--jump-mm and --jump-every must be >= 0")
+    if args.reading_delay < 0 or (args.reading_delay and args.controller != "c"):
+        raise UsageError("--reading-delay takes ticks >= 0, with --controller c")
     check_host_stalls(args.host_stalls)
     if args.controller == "c":
         from rhmpc.control.export import missing_toolchain
@@ -68,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
         robot=args.robot, ticks=args.ticks, seed=args.seed, settings=MPCSettings(),
         jump=args.jump_mm * 1e-3, jump_every=args.jump_every, warmup=args.warmup,
         disable_gc=not args.gc, progress=progress if sys.stderr.isatty() else None,
-        controller=args.controller,
+        controller=args.controller, reading_delay=args.reading_delay,
     )
     if sys.stderr.isatty():
         print(file=sys.stderr)

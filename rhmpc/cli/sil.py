@@ -98,8 +98,10 @@ def table(r: dict) -> str:
              f"{100 * r['host_wakeup_latency_us']['late_periods']:.3g} %)"),
         _row("controller step", _p(r["controller_step_us"], "us")),
         _row("sensor to torque", _p(r["sensor_to_torque_ms"], "ms")),
-        _row("packets lost", f"{lost} (stale encoder readings {r['stale_encoders']}, torques "
-             f"missed {r['torques_missed']}, robot braked {braked})"),
+        _row("packets lost", f"{lost} (ticks without a new reading {r['stale_encoders']}, "
+             f"torques missed {r['torques_missed']}, robot braked {braked})"),
+        _row("readings fused late", f"{r['late_readings']['fused']} (at most "
+             f"{r['late_readings']['max_delay_ticks']} ticks late)"),
         _row("datagrams dropped", drops),
         _row("a lost forecast falls back to", r["forecast_fallback"]),
         _row("RMS error at measured instants", f"{r['rms_error_mm']:.4f} mm (in-process "

@@ -10,6 +10,7 @@ formulation, the settings, the numbers: :mod:`rhmpc.control.export`); in Python 
     controller.forecast(tick, stamp, pts)  or a forecast made outside (another process):
                                            interpolation, in place of the refresh's own
     tau = controller.step(tick, q)         every control tick, from the encoders' angles q̃
+    tau = controller.step(tick, q, delay)  or from a reading of tick − delay that came late
 
 A step, with the reference's points r_{i+1..i+N} of tick i::
 
@@ -24,7 +25,9 @@ observer predicts with the torque that acts, including what the clip took off it
 reading the observer fused: the encoders' angles, or the prediction for a joint whose reading
 it held out (past its innovation gate, or not finite). While a joint has been held for the
 observer's ``fault_timeout`` (an encoder fault), the MPC brakes instead of tracking (failure
-``encoder_fault``). A command that is not finite holds the last torque.
+``encoder_fault``). A command that is not finite holds the last torque. A reading that comes
+``delay`` ticks late corrects the prior of its own tick, and the observer carries the estimate
+to this one with the torques that acted since; q̄ is then the estimate's angles.
 """
 
 from __future__ import annotations

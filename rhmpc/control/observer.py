@@ -29,6 +29,15 @@ Innovation gate (encoders that stick, a reading that is not finite)
     the reading's mean over the hold, and the next ``reacquire_ticks`` readings are fused
     whatever their innovation while the filter settles. A reading held for ``fault_timeout``
     is an encoder fault: the controller brakes (on the predicted velocity, the best it has).
+
+Delayed readings (a robot behind a middleware)
+    A reading of tick m that comes at tick k > m is fused into the prior of its own tick and
+    carried forward through the torques that acted since, x̂⁻_{t+1} = A x̂_t + B u_t for
+    t = m … k − 1, with no reading at the ticks after m (the recalculation of Larsen, Andersen,
+    Ravn & Poulsen, "Incorporation of time delayed measurements in a discrete-time Kalman
+    filter", *Proc. 37th IEEE CDC*, 1998): the estimate the filter would have made with that
+    reading on time and none since. Readings up to ``max_delay`` late are fused; an older
+    one, or one not newer than the last taken, is none.
 """
 
 from __future__ import annotations
@@ -58,6 +67,11 @@ class ObserverSettings:
         Ticks a reading is held before one that has changed is taken again [ticks].
     fault_timeout : float
         A reading held this long is an encoder fault: the controller brakes [s].
+    max_delay : float
+        The latest a reading may come after its instant and still be fused [s]. The default,
+        20 ms, holds the round trips of a middleware such as ROS 2 (a DDS round trip between
+        two processes of one host takes about 0.3 ms, its tail a few ms) with a margin, and
+        stays below ``fault_timeout``.
     """
 
     acceleration_noise: float = 20.0
@@ -65,6 +79,7 @@ class ObserverSettings:
     innovation_gate: float = 5.0
     reacquire_ticks: int = 20
     fault_timeout: float = 0.05
+    max_delay: float = 0.02
 
     def __post_init__(self) -> None:
         for name in ("acceleration_noise", "angle_noise", "fault_timeout"):
@@ -74,6 +89,9 @@ class ObserverSettings:
         gate = self.innovation_gate
         if not (isinstance(gate, int | float) and np.isfinite(gate) and gate >= 0):
             raise ValueError(f"innovation_gate must be a finite number >= 0, got {gate!r}")
+        delay = self.max_delay
+        if not (isinstance(delay, int | float) and np.isfinite(delay) and delay >= 0):
+            raise ValueError(f"max_delay must be a finite number >= 0, got {delay!r}")
         ticks = self.reacquire_ticks
         if isinstance(ticks, bool) or not isinstance(ticks, int) or ticks < 1:
             raise ValueError(f"reacquire_ticks must be an integer >= 1, got {ticks!r}")
@@ -90,6 +108,7 @@ class JointObserver:
     S : (n, n) the innovation's steady-state covariance H P⁻ Hᵀ + R [rad²]
     gate : (n,) γ √S_jj, the largest innovation fused per joint [rad]
     timeout_ticks : int, ticks a reading is held before it is an encoder fault
+    delay_ticks : int, the most ticks a reading may come late and be fused
     """
 
     def __init__(
@@ -116,4 +135,5 @@ class JointObserver:
         self.gate = (gamma * np.sqrt(np.diag(self.S)) if gamma > 0
                      else np.full(n, np.finfo(float).max))
         self.timeout_ticks = max(1, round(self.settings.fault_timeout / arm.Ts))
+        self.delay_ticks = round(self.settings.max_delay / arm.Ts)
         self.Ts, self.n = arm.Ts, n

@@ -81,11 +81,11 @@ class SilSettings:
         (1 mm: four times the task's worst acceptable RMS).
     miss_rate : float
         ... or when more than this share of the ticks of one second missed their deadline or
-        had no reading of their own (20 %: the robot's drivers hold a late torque for a tick,
-        and a shared host's stalls of tens of milliseconds, measured on a 2-processor virtual
-        machine, cost up to a tenth of a second now and then without leaving the POI; a host
-        that loses a fifth of every second does not run the controller in time, and the tool
-        bounds catch what that costs sooner).
+        had no reading of their own within the observer's ``max_delay`` (20 %: the robot's
+        drivers hold a late torque for a tick, and a shared host's stalls of tens of
+        milliseconds, measured on a 2-processor virtual machine, cost up to a tenth of a second
+        now and then without leaving the POI; a host that loses a fifth of every second does
+        not run the controller in time, and the tool bounds catch what that costs sooner).
     tracker, console : str or None
         The ROS 2 topic of a tracker's samples (PoseStamped or PoseArray), the namespace of an
         arm over ROS 2 (``/PSM1``): a bridge takes the sensor's, the robot's place

@@ -87,6 +87,8 @@ def report(config: RunConfig, built, internal: bool, documents: dict, arrays: di
                     "predictor": documents["predictor"]["arrivals"]["dropped"],
                     "robot": robot["arrivals"]["dropped"]},
         "stale_encoders": controller["stale_encoders"],
+        "late_readings": {"fused": controller["late_readings"],
+                          "max_delay_ticks": controller["delay_max"]},
         "torques_missed": robot["torques_missed"], "torques_late": robot["torques_late"],
         "robot_safe_state_ticks": robot["safe_state_ticks"],
         "forecasts_rejected": controller["forecasts_rejected"],

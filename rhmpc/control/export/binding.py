@@ -48,7 +48,9 @@ _DIMS = ("N", "NX", "NU", "NY", "NV", "M", "NPAR", "NZ", "NEXTRA", "D", "SPAN", 
 _VP, _LL, _D, _I = ctypes.c_void_p, ctypes.c_longlong, ctypes.c_double, ctypes.c_int
 _CALLS = (("rhmpc_init", (_VP,), None), ("rhmpc_place", (_VP, _VP, _VP), None),
           ("rhmpc_refresh", (_VP, _LL, _D, _VP), _I),
-          ("rhmpc_step", (_VP, _LL, _VP, _VP), _I), ("rhmpc_mpc", (_VP, _VP, _VP, _VP), _I),
+          ("rhmpc_step", (_VP, _LL, _VP, _VP), _I),
+          ("rhmpc_step_delayed", (_VP, _LL, _LL, _VP, _VP), _I),
+          ("rhmpc_mpc", (_VP, _VP, _VP, _VP), _I),
           ("rhmpc_forecast", (_VP, _LL, _D, _VP, _I), _I),
           ("rhmpc_sample", (_VP, _LL, _D, _VP, RETRACT, _VP, _VP), _I),
           ("rhmpc_nodes", (_VP, _VP, _I, _I, _VP), _I),
@@ -193,12 +195,17 @@ class Controller:
         self._z[:] = z
         return self._z_at
 
-    def step(self, tick: int, q: np.ndarray) -> np.ndarray:
-        """One control tick from the encoders' joint angles ``q`` [rad]: the torque τ [N·m]."""
+    def step(self, tick: int, q: np.ndarray, delay: int = 0) -> np.ndarray:
+        """One control tick from the encoders' joint angles ``q`` [rad] of tick
+        ``tick − delay``: the torque τ [N·m]. A late reading is fused into its own tick and
+        carried forward (``rhmpc_step_delayed``; :mod:`rhmpc.control.observer`)."""
         if self._exact and tick + self.N > self._covered:
             self._cover(tick)
         self._q[:] = q
-        self._step(self._addr, tick, self._q_at, self._tau_at)
+        if delay:
+            self._lib.rhmpc_step_delayed(self._addr, tick, delay, self._q_at, self._tau_at)
+        else:
+            self._step(self._addr, tick, self._q_at, self._tau_at)
         return self._tau.copy()
 
     def library_loop(self) -> dict[str, int]:

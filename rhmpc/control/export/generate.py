@@ -274,6 +274,7 @@ def _description(controller, robot: str, internal: bool) -> tuple[dict, list[str
             "VERSION": _version("rhmpc"), "OSQP_VERSION": _version("osqp"),
             "REACQUIRE_TICKS": controller.observer.settings.reacquire_ticks,
             "FAULT_TIMEOUT_TICKS": controller.observer.timeout_ticks,
+            "MAX_DELAY": controller.observer.delay_ticks,
             "INPUT_DELAY": controller.input_delay, "TOOL": 1,
             "CANCEL": int(controller.cancellation is not None),
             **_mpc_subs(mpc), **_reference_subs(controller.reference, mpc.arm.Ts, internal),

@@ -19,16 +19,18 @@
  * JOINT_MARGIN, stamps between MAX_AGE before the clock and AHEAD after it, a forecast's period
  * RHMPC_DT. A measured_cp feeds rhmpc_refresh (the internal predictor; not with --no-internal),
  * a forecast_cp rhmpc_forecast, a measured_js the step: the reading of tick i is awaited until
- * Ts/5 after the tick began, else the step gets NaN (the observer's fault path). The step's
- * torque goes to the robot as servo_jf.
+ * Ts/5 after the tick began; else the newest reading not yet taken, up to RHMPC_MAX_DELAY ticks
+ * old, is fused late (rhmpc_step_delayed: a robot behind a middleware); else the step gets NaN
+ * (the observer's hold). The step's torque goes to the robot as servo_jf.
  *
  * The supervisor stops the run (the controller falls silent; the robot's drivers brake to
  * their safe state after their watchdog) and the program exits 3 with the cause on one line of
  * stderr and in PREFIX.json ("stopped") when
  *   - more than --miss-rate (default 20 %) of the ticks of one MISS_WINDOW (one second)
  *     missed their deadline (the torque went out after the next tick began);
- *   - the robot's readings stop for --robot-timeout (default 0.1 s), or more than --miss-rate of
- *     the ticks of one second have no reading of their own;
+ *   - no new reading from the robot for --robot-timeout (default 0.1 s), or more than
+ *     --miss-rate of the ticks of one second have no reading of their own that came within
+ *     RHMPC_MAX_DELAY ticks;
  *   - after --settle seconds, the tool (forward kinematics of the readings) lies more than
  *     --tool-bound (default 5 mm) from a sample of the POI at that sample's instant, or the
  *     RMS of those distances over one second of samples (or over the last ones, or over the
@@ -104,7 +106,7 @@ typedef struct {
   uint64_t last_seq[RHMPC_WIRE_N_KINDS];
   int have_seq[RHMPC_WIRE_N_KINDS];
   long long received[RHMPC_WIRE_N_KINDS], lost[RHMPC_WIRE_N_KINDS];
-  long long dropped[RHMPC_WIRE_N_VERDICTS], stale_encoders, misses;
+  long long dropped[RHMPC_WIRE_N_VERDICTS], stale_encoders, late_readings, delay_max, misses;
   long long forecasts_rejected, served[N_SERVED], n_s2t, torques_sent, send_errors;
   int fd, port, robot_port, cpu, priority, internal, probe;
   const char *out, *key_file;
@@ -277,13 +279,16 @@ static void judge_deadline(run_t *r, long long tick, int missed) {
   }
 }
 
-/* A tick's reading: the robot silent for --robot-timeout in a row, or too many ticks of the
- * last second without their own reading, stop the run (the tool cannot be judged blind). */
+/* A tick's reading: no new one for --robot-timeout in a row, or too many ticks of the last
+ * second whose own reading did not come (judged RHMPC_MAX_DELAY ticks on, when it can no longer
+ * be fused), stop the run (the tool cannot be judged blind). */
 static void judge_readings(run_t *r, long long tick, int fresh) {
   supervisor_t *s = &r->sup;
   char why[256];
+  const long long own = tick - RHMPC_MAX_DELAY; /* the reading of tick `own` came, or never will */
   s->stale_run = fresh ? 0 : s->stale_run + 1;
-  long long sum = window_share(s->stale, tick, !fresh);
+  if (own < 0) return;
+  long long sum = window_share(s->stale, own, s->tool_tick[own % TOOL_RING] != own);
   if (s->stale_run * RHMPC_TS >= s->robot_timeout && tick * RHMPC_TS >= s->robot_timeout) {
     snprintf(why, sizeof why, "no reading from the robot for %g ms (its drivers, its host or "
              "its link failed)", s->robot_timeout * 1e3);
@@ -372,7 +377,9 @@ static void judge_end(run_t *r) {
 }
 
 static void run_loop(run_t *r, long long *wake, long long *work, long long *step, long long *s2t) {
-  long long q_tick = -1;
+  long long q_tick = -1, fused = -1; /* the newest reading's tick; the newest taken's */
+  double none[RHMPC_NU];
+  for (int j = 0; j < RHMPC_NU; j++) none[j] = NAN;
   int source = SERVED_NONE;
   for (long long tick = 0; tick < r->ticks && !stop_requested && !r->stopped[0]; tick++) {
     long long next = r->epoch + tick * TS_NS + r->phase, now = wake_up(r, next, wake);
@@ -387,12 +394,17 @@ static void run_loop(run_t *r, long long *wake, long long *work, long long *step
       if (left <= 0 || ppoll(&p, 1, &wait, NULL) <= 0) break;
       take_arrivals(r, tick, &q_tick, &source, &origin);
     }
-    if (q_tick != tick) { /* stale or missing: the observer's fault path */
-      for (int j = 0; j < RHMPC_NU; j++) q[j] = NAN;
-      r->stale_encoders++;
+    long long delay = tick - q_tick; /* the newest reading, if not yet taken and not too old */
+    int fresh = q_tick > fused && delay >= 0 && delay <= RHMPC_MAX_DELAY;
+    if (!fresh) /* none new: the observer's hold */
+      delay = 0, r->stale_encoders++;
+    else if (delay > 0) {
+      r->late_readings++;
+      r->delay_max = delay > r->delay_max ? delay : r->delay_max;
     }
-    judge_readings(r, tick, q_tick == tick);
-    rhmpc_step(&ctl, tick, q, tau);
+    fused = fresh ? q_tick : fused;
+    judge_readings(r, tick, fresh);
+    rhmpc_step_delayed(&ctl, tick, delay, fresh ? q : none, tau);
     step[tick] = ctl.pub.step_ns;
     if (r->stopped[0]) break; /* the supervisor stopped the run: no torque goes out */
     send_torque(r, tick);
@@ -433,9 +445,11 @@ static void write_results(const run_t *r) {
   if (f == NULL) return;
   const supervisor_t *s = &r->sup;
   fprintf(f, "{\"%s\": %lld, \"%s\": %lld, \"%s\": %lld, \"%s\": \"%s\", \"%s\": %lld, "
-             "\"%s\": %lld, \"%s\": %lld, \"%s\": %d, \"%s\": \"%s\", \"%s\": %d",
+             "\"%s\": %lld, \"%s\": %lld, \"%s\": %lld, \"%s\": %lld, \"%s\": %d, "
+             "\"%s\": \"%s\", \"%s\": %d",
           KEY(TICKS), r->done, KEY(DEADLINE_MISSES), r->misses, KEY(TICKS_BEHIND), r->behind,
           KEY(REALTIME), r->realtime, KEY(STALE_ENCODERS), r->stale_encoders,
+          KEY(LATE_READINGS), r->late_readings, KEY(DELAY_MAX), r->delay_max,
           KEY(FORECASTS_REJECTED), r->forecasts_rejected, KEY(SEND_ERRORS), r->send_errors,
           KEY(INTERRUPTED), (int)stop_requested, KEY(STOPPED), r->stopped, KEY(PROBE), r->probe);
   write_per_kind(f, KEY(RECEIVED), r->received);
@@ -544,7 +558,6 @@ int main(int argc, char **argv) {
   if (wake == NULL || work == NULL || step == NULL || s2t == NULL) fail("out of memory", "");
   rhmpc_init(&ctl);
   if (r.placed) rhmpc_place(&ctl, r.origin, r.center);
-  for (int j = 0; j < RHMPC_NU; j++) q[j] = NAN;
   go_realtime(&r);
   run_loop(&r, wake, work, step, s2t);
   if (!r.probe && !stop_requested) judge_end(&r);

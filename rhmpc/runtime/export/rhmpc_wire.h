@@ -100,7 +100,9 @@ enum rhmpc_report_key {
   RHMPC_REPORT_DEADLINE_MISSES, /* ticks whose torque went out after the next tick began */
   RHMPC_REPORT_TICKS_BEHIND, /* ticks begun late, with no sleep before them */
   RHMPC_REPORT_REALTIME, /* what the host permitted: memory locking, scheduling, pinning */
-  RHMPC_REPORT_STALE_ENCODERS, /* ticks without the reading of that tick (the observer's fault path) */
+  RHMPC_REPORT_STALE_ENCODERS, /* ticks without a new reading (the observer's hold) */
+  RHMPC_REPORT_LATE_READINGS, /* readings fused after their own tick (the observer carries them forward) */
+  RHMPC_REPORT_DELAY_MAX, /* the latest of those [ticks] */
   RHMPC_REPORT_FORECASTS_REJECTED, /* forecasts the controller's reference refused */
   RHMPC_REPORT_SEND_ERRORS, /* torques the socket refused */
   RHMPC_REPORT_INTERRUPTED, /* 1 when a signal ended the loop */
@@ -118,7 +120,7 @@ enum rhmpc_report_key {
   RHMPC_REPORT_N_S2T, /* sensor-to-torque latencies recorded */
   RHMPC_N_REPORT_KEYS
 };
-static const char *const rhmpc_report_keys[RHMPC_N_REPORT_KEYS] = {"ticks", "deadline_misses", "ticks_behind", "realtime", "stale_encoders", "forecasts_rejected", "send_errors", "interrupted", "stopped", "probe", "received", "lost", "dropped", "served", "counts", "fallbacks", "failures", "encoder_held", "tool_error_mm", "n_s2t"};
+static const char *const rhmpc_report_keys[RHMPC_N_REPORT_KEYS] = {"ticks", "deadline_misses", "ticks_behind", "realtime", "stale_encoders", "late_readings", "delay_max", "forecasts_rejected", "send_errors", "interrupted", "stopped", "probe", "received", "lost", "dropped", "served", "counts", "fallbacks", "failures", "encoder_held", "tool_error_mm", "n_s2t"};
 
 typedef struct {
   int kind;

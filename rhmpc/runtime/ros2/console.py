@@ -12,9 +12,10 @@ dVRK, ``sensor_msgs/JointState`` under the arm's namespace:
 - ``NAMESPACE/measured_js`` (subscribed): the positions of those joints, found by name (or in
   order when the message names none), stamped with the instant of the reading. A reading is of
   the tick nearest its stamp on the run's clock (:class:`~rhmpc.runtime.ros2.names.RosClock`;
-  a stamp left at zero is of the next tick to begin) and is sent only while that tick has not
-  passed, after the last one sent, and within the receivers' bounds (joint limits, stamps);
-  every other reading is counted under its reason.
+  a stamp left at zero is of the next tick to begin) and is sent while that tick is at most
+  the observer's ``max_delay`` old (the controller fuses a late reading into its own tick and
+  carries it forward), after the last one sent, and within the receivers' bounds (joint
+  limits, stamps); every other reading is counted under its reason.
 
 ROS 2 without SROS2 authenticates nothing: any process on the DDS domain can publish readings
 here and read the torques, which is why a deployment refuses this bridge without
@@ -68,11 +69,15 @@ class Readings:
         ROS time against the run's clock.
     names : list of str
         The actuated joints.
+    late : int
+        The most ticks a reading may come after its own and still be sent (the controller's
+        observer's ``delay_ticks``).
     """
 
     def __init__(self, link: Link, role: processes.Role, clock: RosClock,
-                 names: list[str]) -> None:
+                 names: list[str], late: int) -> None:
         self.link, self.role, self.clock, self.names = link, role, clock, names
+        self.late = late
         self.q = np.full((role.ticks, len(names)), np.nan)  # after tick i: the reading of i + 1
         self.received, self.sent, self.last = 0, 0, -1
         self.dropped = dict.fromkeys(READING_DROPS, 0)
@@ -102,7 +107,7 @@ class Readings:
         tick = math.ceil(now / Ts) if ns == 0 else round(self.clock.run_time(ns) / Ts)
         if tick < 0:
             return "before_start"
-        if tick < math.floor(now / Ts):
+        if tick < math.floor(now / Ts) - self.late:
             return "passed"
         if tick <= self.last:
             return "order"
@@ -126,7 +131,8 @@ def console(run, role: processes.Role, sock, namespace: str, parent: int) -> Non
     clock, Ts, end = RosClock(role.epoch_ns), role.Ts, role.ticks * role.Ts
     torques = Link(sock, role.key, role.epoch_ns, accepts=("servo_jf",), bounds=role.bounds)
     names = joint_names(run.robot)
-    readings = Readings(Link(bind(0), role.key, role.epoch_ns), role, clock, names)
+    readings = Readings(Link(bind(0), role.key, role.epoch_ns), role, clock, names,
+                        run.controller.observer.delay_ticks)
     node = Node()
     writer = node.publisher(f"{namespace}/servo_jf", JointState)
     node.subscription(f"{namespace}/measured_js", JointState, readings.take)

@@ -93,3 +93,20 @@ def test_run_bench_with_the_exported_controller():
     text = format_table(r)
     assert "exported controller" in text and "refresh ticks" in text
     json.dumps(r)
+
+
+@pytest.mark.skipif(missing_toolchain() is not None, reason=missing_toolchain() or "")
+@pytest.mark.slow
+def test_run_bench_with_readings_that_come_late():
+    """`--reading-delay 40`: every step fuses the reading of 40 ticks before and predicts
+    forward. The bench's plant is the controller's model, so that the prediction from a late
+    reading is the state itself: the loop tracks as the on-time one does (to rounding). The
+    option needs the exported controller."""
+    late = run_bench(ticks=1500, warmup=100, seed=1, jump_every=400, controller="c",
+                     reading_delay=40)
+    on_time = run_bench(ticks=1500, warmup=100, seed=1, jump_every=400, controller="c")
+    assert late["exported_reading_delay_ticks"] == 40
+    assert 0 < late["exported_tick_us"]["p50"] <= late["exported_tick_us"]["p99"]
+    assert late["exported_tracking_rms_mm"] == pytest.approx(
+        on_time["exported_tracking_rms_mm"], rel=1e-9)
+    assert main(["bench", "--reading-delay", "4"]) == 2

@@ -164,3 +164,62 @@ def test_a_reading_that_is_not_finite_is_held_out_after_a_reacquire_too(phantom_
     est, _, taus = _loop(c, arm, missing + 2, reading)
     assert c.encoder_counts == {"held": ticks + 1, "reacquired": 1}
     assert np.all(np.isfinite(est)) and np.all(np.isfinite(taus))
+
+
+def _filter(x_prior, L, n, q0, readings, inputs, A, B, tick):
+    """The textbook filter from ``x_prior`` at tick 0 to the estimate of ``tick``, fusing the
+    readings of the ticks in ``readings`` (tick → q̃) and none at the others."""
+    x = x_prior
+    for t in range(tick + 1):
+        if t in readings:
+            x = x + L @ (readings[t] - q0 - x[:n])
+        if t < tick:
+            x = A @ x + B @ inputs[t]
+    return x
+
+
+def test_a_late_reading_is_fused_into_its_tick_and_carried_forward(phantom_arm):
+    """Readings that come 0 to 6 ticks after their instant (seeded), the step given the newest
+    that has come (the others skipped, a tick with none new given NaN): at every tick the
+    estimate is the textbook filter's that fused those readings at their own ticks and none
+    at the ticks between, with the torques the steps returned (the recalculation of Larsen
+    et al. 1998)."""
+    robot, arm = phantom_arm
+    c = library(robot, arm, ObserverSettings(innovation_gate=0))
+    L, n, rng = c.observer.L, arm.nu, np.random.default_rng(11)
+    ticks = 240
+    q = arm.q0 + rng.normal(size=(ticks, n)) * 1e-3
+    came = np.arange(ticks) + rng.integers(0, 7, size=ticks)  # the tick each reading comes on
+    fused, inputs, last, late = {}, [], -1, 0
+    for k in range(ticks):
+        newest = max((m for m in range(last + 1, k + 1) if came[m] <= k), default=None)
+        if newest is None:
+            inputs.append(c.step(k, np.full(n, np.nan)))
+        else:
+            inputs.append(c.step(k, q[newest], delay=k - newest))
+            fused[newest], last, late = q[newest], newest, late + (newest < k)
+        expected = _filter(np.zeros(2 * n), L, n, arm.q0, fused, inputs, arm.A, arm.B, k)
+        np.testing.assert_allclose(c.x_hat, expected, rtol=0, atol=1e-12, err_msg=f"tick {k}")
+    assert late > ticks // 5 and len(fused) < ticks  # many came late, some were skipped
+
+
+def test_a_reading_too_late_or_superseded_is_no_reading(phantom_arm):
+    """A reading not newer than the last one taken, or more than ``max_delay`` late, leaves the
+    estimate at the prediction, as a reading that did not come (held out, counted)."""
+    robot, arm = phantom_arm
+    c = library(robot, arm, ObserverSettings(innovation_gate=0, max_delay=2e-3))  # 4 ticks
+    for k in range(8):
+        tau = c.step(k, arm.q0)
+    for k in (8, 9):
+        tau = c.step(k, np.full(arm.nu, np.nan))
+    q = arm.q0 + 1e-3
+    held = c.encoder_counts["held"]
+    tau = c.step(10, q, delay=2)  # of tick 8: fused
+    assert c.encoder_counts["held"] == held
+    for k, delay in ((11, 3), (12, 5)):  # tick 8 again; tick 7, older and past the window
+        prediction = arm.A @ c.x_hat + arm.B @ tau
+        tau = c.step(k, q, delay=delay)
+        np.testing.assert_allclose(c.x_hat, prediction, rtol=0, atol=1e-15, err_msg=f"{k}")
+    assert c.encoder_counts["held"] == held + 2
+    c.step(13, q, delay=4)  # of tick 9: newer than 8, within the window
+    assert c.encoder_counts["held"] == held + 2

@@ -61,6 +61,8 @@ def test_the_presets_integrate_as_before(preset, sets):
         "loop.duration": 0.6, "loop.settling": 0.3, "predictor": "generalized"})
     result, doc = run_experiment(config)
     rms, total, last = BEFORE[(preset, sets)]
-    np.testing.assert_allclose([doc["rms_error_mm"], doc["rms_effort_mNm"]], rms, rtol=1e-12)
-    np.testing.assert_allclose(result.tau.sum(axis=0), total, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(result.tau[-1], last, rtol=0, atol=1e-12)
+    # another processor's rounding (numpy's and the BLAS's vector paths) moves these by up to
+    # 1e-10 relative over the 1 200 ticks; other integration constants move them by far more
+    np.testing.assert_allclose([doc["rms_error_mm"], doc["rms_effort_mNm"]], rms, rtol=1e-8)
+    np.testing.assert_allclose(result.tau.sum(axis=0), total, rtol=1e-8, atol=1e-9)
+    np.testing.assert_allclose(result.tau[-1], last, rtol=1e-8, atol=1e-9)

@@ -198,7 +198,7 @@ def test_readings_are_put_on_their_tick() -> None:
     role = _role()
     clock = RosClock(role.epoch_ns)
     link = _Link(clock)
-    readings = Readings(link, role, clock, ["yaw", "shoulder", "elbow"])
+    readings = Readings(link, role, clock, ["yaw", "shoulder", "elbow"], late=40)
     tick = math.ceil(clock.now() / role.Ts) + 600  # 0.3 s ahead
 
     def at(k: int, names: list[str], q: list[float]) -> messages.JointState:
@@ -216,7 +216,13 @@ def test_readings_are_put_on_their_tick() -> None:
     assert readings.dropped == {"joints": 1, "before_start": 0, "passed": 1, "order": 1,
                                 "implausible": 1}
     assert readings.sent == 2
-    fresh = Readings(link, role, clock, ["yaw", "shoulder", "elbow"])
+    late = Readings(link, role, clock, ["yaw", "shoulder", "elbow"], late=40)
+    now = math.floor(clock.now() / role.Ts)
+    late.take(at(now - 60, [], [0.1, 0.2, 0.3]))  # 30 ms late: past the observer's window
+    late.take(at(now - 10, [], [0.1, 0.2, 0.3]))  # 5 ms late: the controller fuses it late
+    assert late.dropped["passed"] == 1 and late.sent == 1
+    assert link.sent[-1][2] == pytest.approx((now - 10) * role.Ts)
+    fresh = Readings(link, role, clock, ["yaw", "shoulder", "elbow"], late=40)
     before = clock.now()
     fresh.take(messages.JointState(_header(clock, None), [], [0.1, 0.2, 0.3]))
     after = clock.now()  # unstamped: the tick after its arrival, which lies between the two

@@ -3,7 +3,9 @@
  *
  *   refresh:  the reference (rhmpc_reference.c): gate -> predictor -> interpolation -> guard
  *   forecast: a forecast made outside -> interpolation -> guard (rhmpc_reference.c)
- *   step:     x_hat = [I - L H, L, -L q0] [x_prior; q; 1]          (the observer's correction)
+ *   step:     x_hat = [I - L H, L, -L q0] [x_prior; q; 1]          (the observer's correction;
+ *                                 a reading d ticks late: into the prior of its tick, then d
+ *                                 predictions with the torques that acted since)
  *             d = p(q0 + x_q) - (C x_hat + y0)                     (rhmpc_model.c: offset)
  *             u = MPC(x_hat, r_{tick+1..tick+N}, d)                (rhmpc_mpc.c)
  *             tau_c = u + g(q) + C(q, qdot) qdot + f(qdot)         (rhmpc_model.c: cancel)
@@ -41,6 +43,8 @@ void rhmpc_init(rhmpc_t *ctl) {
   static const double zero[3] = {0.0, 0.0, 0.0};
   rhmpc_place(ctl, rhmpc_y0, zero);
   rhmpc_reference_reset(ctl);
+  ctl->fused = -1;
+  for (int i = 0; i <= RHMPC_MAX_DELAY; i++) ctl->past_tick[i] = -1;
 }
 
 int rhmpc_refresh(rhmpc_t *ctl, long long tick, double stamp, const double *z) {
@@ -84,9 +88,11 @@ static void model_call(int (*f)(const double **, double **, long long *, double 
   f(arg, res, iw, w, 0);
 }
 
-/* The observer's innovation gate (JointObserver.correct): 1 if the reading is held out, then
- * qf holds the prediction; 0 if it is fused (qf = q), maybe taken again after a hold. */
-static int held_out(rhmpc_t *ctl, const double q[RHMPC_NU], double qf[RHMPC_NU]) {
+/* The observer's innovation gate (JointObserver.correct) on the reading q of the tick whose
+ * prior is `prior`: 1 if the reading is held out, then qf holds the prediction; 0 if it is
+ * fused (qf = q), maybe taken again after a hold (which moves the prior to it). */
+static int held_out(rhmpc_t *ctl, double prior[RHMPC_NX], const double q[RHMPC_NU],
+                    double qf[RHMPC_NU]) {
   int past[RHMPC_NU], any = 0, finite = 1, moved = 1;
   memcpy(qf, q, RHMPC_NU * sizeof(double));
   for (int j = 0; j < RHMPC_NU; j++) finite &= isfinite(q[j]) != 0;
@@ -96,7 +102,7 @@ static int held_out(rhmpc_t *ctl, const double q[RHMPC_NU], double qf[RHMPC_NU])
     return 0;
   }
   for (int j = 0; j < RHMPC_NU; j++) {
-    const double nu = (q[j] - rhmpc_q0[j]) - ctl->x_prior[j];
+    const double nu = (q[j] - rhmpc_q0[j]) - prior[j];
     past[j] = !(fabs(nu) <= rhmpc_gate[j]); /* NaN is past */
     any |= past[j];
     if (ctl->suspect[j] && !(q[j] != ctl->first[j])) moved = 0;
@@ -110,8 +116,8 @@ static int held_out(rhmpc_t *ctl, const double q[RHMPC_NU], double qf[RHMPC_NU])
     for (int j = 0; j < RHMPC_NU; j++) first_finite &= isfinite(ctl->first[j]) != 0;
     for (int j = 0; j < RHMPC_NU; j++) {
       if (first_finite)
-        ctl->x_prior[RHMPC_NU + j] = (q[j] - ctl->first[j]) / ((double)ctl->held * RHMPC_TS);
-      ctl->x_prior[j] = q[j] - rhmpc_q0[j];
+        prior[RHMPC_NU + j] = (q[j] - ctl->first[j]) / ((double)ctl->held * RHMPC_TS);
+      prior[j] = q[j] - rhmpc_q0[j];
     }
     ctl->held = 0;
     ctl->grace = RHMPC_REACQUIRE_TICKS;
@@ -124,7 +130,7 @@ static int held_out(rhmpc_t *ctl, const double q[RHMPC_NU], double qf[RHMPC_NU])
   }
   ctl->held += 1;
   ctl->pub.encoder_held += 1;
-  for (int j = 0; j < RHMPC_NU; j++) qf[j] = rhmpc_q0[j] + ctl->x_prior[j];
+  for (int j = 0; j < RHMPC_NU; j++) qf[j] = rhmpc_q0[j] + prior[j];
   return 1;
 }
 
@@ -163,14 +169,56 @@ int rhmpc_mpc(rhmpc_t *ctl, const double x[RHMPC_NX], const double *ref, double 
   return status;
 }
 
+/* The slot of `tick` in the ring of the last ticks */
+static int past(long long tick) {
+  const long long n = RHMPC_MAX_DELAY + 1;
+  return (int)(((tick % n) + n) % n);
+}
+
+/* The observer's estimate x of `tick` from the reading q of tick `of` <= tick, and the angles qf
+ * the cancellation takes: the reading itself when it is this tick's and fused, else the
+ * estimate's. A late reading corrects the prior of its own tick, and the predictions carry it
+ * to this tick through the torques that acted (the ring's priors after it are redone). */
+static void observe(rhmpc_t *ctl, long long tick, long long of, const double q[RHMPC_NU],
+                    double x[RHMPC_NX], double qf[RHMPC_NU]) {
+  double none[RHMPC_NU];
+  int finite = 1;
+  ctl->past_tick[past(tick)] = tick;
+  memcpy(ctl->past_prior[past(tick)], ctl->x_prior, sizeof ctl->x_prior);
+  if (of != tick && (of > tick || tick - of > RHMPC_MAX_DELAY || of <= ctl->fused ||
+                     ctl->past_tick[past(of)] != of))
+  { /* too late, superseded or from the future: no reading */
+    for (int j = 0; j < RHMPC_NU; j++) none[j] = NAN;
+    q = none, of = tick;
+  }
+  for (int j = 0; j < RHMPC_NU; j++) finite &= isfinite(q[j]) != 0;
+  if (finite) ctl->fused = of;
+  double *prior = ctl->past_prior[past(of)];
+  if (held_out(ctl, prior, q, qf)) /* x_hat = x_prior */
+    memcpy(x, prior, sizeof ctl->x_prior);
+  else
+    affine(rhmpc_correct, RHMPC_NX, prior, RHMPC_NX, qf, RHMPC_NU, x);
+  for (long long t = of; t < tick; t++) {
+    affine(rhmpc_predict, RHMPC_NX, x, RHMPC_NX, ctl->past_acting[past(t)], RHMPC_NU,
+           ctl->past_prior[past(t + 1)]);
+    memcpy(x, ctl->past_prior[past(t + 1)], sizeof ctl->x_prior);
+  }
+  if (of != tick) {
+    memcpy(ctl->x_prior, x, sizeof ctl->x_prior);
+    for (int j = 0; j < RHMPC_NU; j++) qf[j] = rhmpc_q0[j] + x[j];
+  }
+}
+
 int rhmpc_step(rhmpc_t *ctl, long long tick, const double q[RHMPC_NU], double tau[RHMPC_NU]) {
+  return rhmpc_step_delayed(ctl, tick, 0, q, tau);
+}
+
+int rhmpc_step_delayed(rhmpc_t *ctl, long long tick, long long delay, const double q[RHMPC_NU],
+                       double tau[RHMPC_NU]) {
   long long t0 = now_ns();
   rhmpc_public_t *pub = &ctl->pub;
   double *x = pub->x_hat, d[RHMPC_NEXTRA + 1] = {0}, acting[RHMPC_NU], qf[RHMPC_NU], sum;
-  if (held_out(ctl, q, qf)) /* x_hat = x_prior */
-    memcpy(x, ctl->x_prior, sizeof ctl->x_prior);
-  else
-    affine(rhmpc_correct, RHMPC_NX, ctl->x_prior, RHMPC_NX, qf, RHMPC_NU, x);
+  observe(ctl, tick, tick - delay, q, x, qf);
   output_offset(x, d);
   int status = ctl->held >= RHMPC_FAULT_TIMEOUT_TICKS
                    ? rhmpc_mpc_brake(ctl, x, RHMPC_ENCODER_FAULT, pub->u)
@@ -205,6 +253,7 @@ int rhmpc_step(rhmpc_t *ctl, long long tick, const double q[RHMPC_NU], double ta
     ctl->acting_next = (ctl->acting_next + 1) % (RHMPC_INPUT_DELAY > 0 ? RHMPC_INPUT_DELAY : 1);
   }
   affine(rhmpc_predict, RHMPC_NX, x, RHMPC_NX, acting, RHMPC_NU, ctl->x_prior);
+  memcpy(ctl->past_acting[past(tick)], acting, sizeof acting);
   pub->step_ns = now_ns() - t0;
   return status;
 }

@@ -13,6 +13,8 @@
  *         rhmpc_forecast(&ctl, tick, stamp, points, count);
  *     every tick (Ts = @TS_US@ us):
  *         rhmpc_step(&ctl, tick, q, tau);           // encoders in, motor torques out
+ *     or, where the readings come late (a middleware between the arm and the controller):
+ *         rhmpc_step_delayed(&ctl, tick, delay, q, tau);  // q of tick - delay
  *
  * rhmpc_refresh: the outlier gate, the @PREDICTOR@ predictor (update and
  * forecast of RHMPC_PREDICTION_POINTS points at its period RHMPC_DT, plus the latency of the
@@ -82,6 +84,7 @@ extern "C" {
 #define RHMPC_INPUT_DELAY @INPUT_DELAY@ /* ticks from a torque's computation to its action */
 #define RHMPC_REACQUIRE_TICKS @REACQUIRE_TICKS@ /* a held reading that moved is taken again */
 #define RHMPC_FAULT_TIMEOUT_TICKS @FAULT_TIMEOUT_TICKS@ /* a reading held this long: brake */
+#define RHMPC_MAX_DELAY @MAX_DELAY@ /* the most ticks a reading may come late and be fused */
 
 /* The reference and its predictor (@PREDICTOR@, Tuna et al. 2013) */
 #define RHMPC_D 3                    /* coordinates of a sample */
@@ -197,6 +200,12 @@ typedef struct {
   int held, grace;                      /* ticks held in a row; ticks still fused ungated */
   double acting[RHMPC_INPUT_DELAY + 1][RHMPC_NU];  /* the MPC torques still to act (a ring) */
   int acting_next;
+  /* the last RHMPC_MAX_DELAY + 1 ticks, a ring by tick: their priors and the torques that acted
+   * over them (a reading that comes late is fused into its own tick and carried forward) */
+  double past_prior[RHMPC_MAX_DELAY + 1][RHMPC_NX];
+  double past_acting[RHMPC_MAX_DELAY + 1][RHMPC_NU];
+  long long past_tick[RHMPC_MAX_DELAY + 1];
+  long long fused; /* the tick of the newest reading taken (fused or held out) */
 } rhmpc_t;
 
 /* At rest at the home posture: no plan, no points (they hold the origin), zero counters. */
@@ -258,9 +267,18 @@ int rhmpc_interpolate(rhmpc_t *ctl, long long tick);
  * workspace [m] (count >= 1; the last repeats up to RHMPC_SPAN). */
 void rhmpc_points(rhmpc_t *ctl, long long tick, const double *points, int count);
 
-/* One control tick from the encoders' angles q [rad]: the torques tau [N*m]. Returns an
- * enum rhmpc_status. */
+/* One control tick from the encoders' angles q [rad] of this tick: the torques tau [N*m].
+ * Returns an enum rhmpc_status. A q that is not finite is no reading (the observer's hold). */
 int rhmpc_step(rhmpc_t *ctl, long long tick, const double q[RHMPC_NU], double tau[RHMPC_NU]);
+
+/* The same with the newest reading q of tick `tick - delay`, late by `delay` ticks (a robot
+ * behind a middleware: its readings come a few ticks after their instant). The observer fuses
+ * it into the prior of its own tick and carries the estimate forward through the torques that
+ * acted since (Larsen et al., "Incorporation of time delayed measurements in a discrete-time
+ * Kalman filter", CDC 1998: recalculation). A reading not newer than the last one taken, or
+ * more than RHMPC_MAX_DELAY ticks late, is no reading. rhmpc_step is delay 0. */
+int rhmpc_step_delayed(rhmpc_t *ctl, long long tick, long long delay, const double q[RHMPC_NU],
+                       double tau[RHMPC_NU]);
 
 /* The MPC alone, for studies and tests: u = tau_mpc [N*m] for the state x = [q - q0; qdot] and
  * the points ref (N x 3 [m]), with the output offset of x; the counters and the plan as in a
