@@ -122,6 +122,7 @@ def docstrings() -> list[tuple[str, str]]:
     return out
 
 
+@pytest.mark.slow
 def test_every_number_in_a_docstring_is_held_by_a_results_file() -> None:
     held = held_strings()
     missing = [f"{where}: {m.group(0)} in {line.strip()!r}"

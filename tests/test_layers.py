@@ -319,6 +319,7 @@ def parts_graph(graph: dict[str, set[str]]) -> dict[str, set[str]]:
     return out
 
 
+@pytest.mark.slow
 def test_no_cycle_between_parts() -> None:
     """No part reaches itself through another (``rhmpc.sim`` and ``rhmpc.experiment``, say), even
     where no single module does."""

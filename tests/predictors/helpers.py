@@ -4,6 +4,15 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
+
+#: Predictors whose tests take several times the others' (the combination runs every member).
+SLOW = frozenset({"combination"})
+
+
+def each(names) -> list:
+    """``names`` as the parameters of a test, those of :data:`SLOW` marked slow."""
+    return [pytest.param(n, marks=pytest.mark.slow) if n in SLOW else n for n in names]
 
 
 class HarmonicSource:

@@ -36,6 +36,7 @@ def _rms(f: np.ndarray, truth: np.ndarray, lo: int, hi: int, k: int = 1) -> floa
     return float(np.sqrt(np.mean(np.sum(e**2, axis=1))))
 
 
+@pytest.mark.slow
 def test_it_tracks_the_best_member_of_a_switching_stream() -> None:
     T, switch = 3000, 1500
     truth = tracked_points(T + 8, DT)[:, 0]

@@ -9,7 +9,7 @@ import pytest
 
 from rhmpc.predictors import PREDICTORS, Predictor, make_predictor
 from rhmpc.predictors.monitor import rms_by_lead
-from tests.predictors.helpers import HarmonicSource
+from tests.predictors.helpers import HarmonicSource, each
 
 DT = 0.0075
 SRC = HarmonicSource(f_hz=1.2)
@@ -21,7 +21,7 @@ def _make(name, dt=DT, **kw):
     return make_predictor(name, dt, **kw)
 
 
-@pytest.mark.parametrize("name", list(PREDICTORS))
+@pytest.mark.parametrize("name", each(PREDICTORS))
 def test_shapes_reset_and_missing_kinds(name):
     p = _make(name)
     assert isinstance(p, Predictor)
@@ -45,14 +45,14 @@ def test_shapes_reset_and_missing_kinds(name):
     assert p.n == 0 and not p.counts
 
 
-@pytest.mark.parametrize("name", [n for n in PREDICTORS if n != "exact"])
+@pytest.mark.parametrize("name", each(n for n in PREDICTORS if n != "exact"))
 def test_predict_before_any_sample_raises(name):
     p = _make(name)
     with pytest.raises(RuntimeError):
         p.predict(4)
 
 
-@pytest.mark.parametrize("name", list(PREDICTORS))
+@pytest.mark.parametrize("name", each(PREDICTORS))
 @pytest.mark.slow
 def test_one_second_dropout_stays_finite_and_recovers_within_two_seconds(name):
     """20 s of data, 1 s without samples, then 4 s: the 4-step error 2–4 s after the gap is back."""
@@ -115,7 +115,7 @@ def test_fourier_settings_reject_values_out_of_range(name, bad, message):
         make_predictor(name, DT, **bad)
 
 
-@pytest.mark.parametrize("name", list(PREDICTORS))
+@pytest.mark.parametrize("name", each(PREDICTORS))
 def test_a_setting_given_a_table_names_its_key(name):
     """``predictor_settings.KEY = { … }`` for every setting of every predictor: a ValueError
     naming the key, before any arithmetic meets the table."""

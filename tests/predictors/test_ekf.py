@@ -119,6 +119,7 @@ def test_spd_inverse_matches_numpy_and_rejects_indefinite(d):
     assert spd_inverse(bad) is None
 
 
+@pytest.mark.slow
 def test_dual_ekf_refits_with_a_back_off_when_it_cannot_lock(monkeypatch):
     """A lock lost on every sample: re-fits spaced by 1, 2, 4 … beats, up to the window, not one
     per sample (each costs the window's FFT searches and fits)."""

@@ -104,12 +104,14 @@ print("torch" in sys.modules)
 """
 
 
+@pytest.mark.slow
 def test_predictors_import_and_run_without_pytorch() -> None:
     out = subprocess.run([sys.executable, "-c", SCRIPT], capture_output=True, text=True,
                          check=True).stdout.splitlines()
     assert out == ["predictor 'st-lstm' needs PyTorch: pip install \"rhmpc[learned]\"", "False"]
 
 
+@pytest.mark.slow
 def test_importing_predictors_does_not_import_pytorch() -> None:
     code = "import sys, predictors, rhmpc.openloop.recordings; print('torch' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
@@ -143,6 +145,7 @@ def test_a_network_is_reproducible_by_seed_and_round_trips_a_file(name, stream,
     np.testing.assert_allclose(feed(d, stream, 4), fa, rtol=0, atol=1e-12)
 
 
+@pytest.mark.slow
 def test_the_file_loads_without_running_code(stream, tmp_path) -> None:
     p = _tiny("lstm").fit(stream[:300])
     path = tmp_path / "lstm.npz"
@@ -153,6 +156,7 @@ def test_the_file_loads_without_running_code(stream, tmp_path) -> None:
         make_predictor("gru", DT, model=str(path))
 
 
+@pytest.mark.slow
 def test_the_validation_estimate_and_the_online_missing_samples(stream) -> None:
     p = make_predictor("st-tcn", DT, **{**TINY["st-tcn"], "validation": 0.2})
     pytest.importorskip("torch", reason="the neural predictors need PyTorch")

@@ -16,9 +16,9 @@ from hypothesis import strategies as st
 from rhmpc.predictors import PREDICTORS, make_predictor
 from rhmpc.predictors.base import Predictor
 from rhmpc.predictors.monitor import infer_unit
-from tests.predictors.helpers import HarmonicSource
+from tests.predictors.helpers import HarmonicSource, each
 
-NAMES = [n for n in PREDICTORS if n != "exact"]
+NAMES = each(n for n in PREDICTORS if n != "exact")
 RATES = (25.0, 28.0, 133.3, 500.0, 2000.0)
 
 

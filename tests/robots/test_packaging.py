@@ -128,6 +128,7 @@ def checkout_imports(*paths: Path) -> list[str]:
     return out.stdout.split()
 
 
+@pytest.mark.slow
 def test_a_checkout_imports_its_own_root_folders() -> None:
     """``rhmpc`` imported from the checkout (Python started at its root, without an editable
     install) finds rhmpc.robots, rhmpc.predictors and rhmpc.sim in the checkout's folders."""

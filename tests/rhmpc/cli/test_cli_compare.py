@@ -311,6 +311,7 @@ sys.exit(main(["compare", "--scenarios", "fixed-a2-top", "--predictors", "hold,e
 """
 
 
+@pytest.mark.slow
 def test_ctrl_c_prints_the_runs_done_so_far(tmp_path: Path) -> None:
     """Ctrl-C with 4 of 8 runs done: the tables of those 4, a line that says so, exit 130, at
     once (the bound only catches a wait for the two-minute runs)."""

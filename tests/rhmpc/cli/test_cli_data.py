@@ -79,6 +79,7 @@ def test_show(capsys: pytest.CaptureFixture[str]) -> None:
     assert "predictability" in row
 
 
+@pytest.mark.slow
 def test_show_with_record(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                           capsys: pytest.CaptureFixture[str]) -> None:
     monkeypatch.chdir(tmp_path)  # the shipped record by name, outside the repository

@@ -47,6 +47,7 @@ def test_the_faults_table_round_trips_and_is_left_out_when_empty(tmp_path):
         RunConfig().replace(**{"loop.duration": 1.0, "faults.events": ["freeze@0.5:0.6"]})
 
 
+@pytest.mark.slow
 def test_a_fault_over_the_whole_run_has_its_during_record(capsys):
     """A jump from the first tick to the end of the run: its record measures the whole run."""
     assert main(["simulate", "--fault", "jump@0:5mm", "--duration", "1.0", "--settling", "0.3",

@@ -38,6 +38,7 @@ def recordings(tmp_path_factory) -> list[Path]:
     return [write_csv(d / f"rec{rate:g}.csv", rate, 5.0) for rate in RATES]
 
 
+@pytest.mark.slow
 def test_predict_data_at_every_rate(recordings: list[Path],
                                     capsys: pytest.CaptureFixture[str]) -> None:
     names = "hold,last-cycle,one-step,generalized"

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 
 from rhmpc.cli import main
 from rhmpc.compare.loop_gap import beside_plan, open_loop_beside, open_names
@@ -33,6 +34,7 @@ def test_the_open_loop_forecasts_the_scored_samples_one_ahead():
     assert got["scored"] == 50
 
 
+@pytest.mark.slow
 def test_compare_sets_each_closed_loop_beside_its_open_loop(capsys):
     assert main(["compare", "--data", "hamlyn-phantom", "--poi", "4", "--split", "100:150",
                  "--predictors", "hold,one-step", "--jobs", "1", "--json", "--quiet"]) == 0

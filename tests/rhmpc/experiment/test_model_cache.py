@@ -89,6 +89,7 @@ def test_the_cache_can_be_turned_off(cache: Path, monkeypatch: pytest.MonkeyPatc
     assert store(p, series()) is None and not cache.exists()
 
 
+@pytest.mark.slow
 def test_a_closed_loop_run_loads_what_a_run_on_the_same_settling_window_fitted(
         cache: Path) -> None:
     from rhmpc.experiment import RunConfig

@@ -39,6 +39,7 @@ def test_warmup_rule() -> None:
     assert warmup_seconds(60.0, 2.5) == 2.5
 
 
+@pytest.mark.slow
 def test_scores_match_a_direct_run_and_the_rows_are_complete() -> None:
     track = motion(25.0, 16.0)
     doc = run_open_loop([track], OpenLoopSettings(leads=3, warmup=4.0))

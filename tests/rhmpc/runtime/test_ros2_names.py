@@ -45,6 +45,7 @@ def test_the_refusal_is_one_line(capsys) -> None:
     assert "--allow-unauthenticated" in line and "not authenticated" in line
 
 
+@pytest.mark.slow
 def test_sil_imports_no_cyclonedds_unless_asked() -> None:
     code = ("import sys\nfrom rhmpc.cli import build_parser\nimport rhmpc.runtime.deployment\n"
             "build_parser('sil').parse_args(['sil', '--tracker', 'ros2:/t'])\n"

@@ -71,6 +71,7 @@ def test_a_huge_grid_is_refused_before_it_is_listed() -> None:
         parse_spec(tomllib.loads(text), where="grid.toml")
 
 
+@pytest.mark.slow
 def test_the_largest_allowed_budget_parses() -> None:
     spec = parse_spec(tomllib.loads(RANDOM.format(budget=MAX_EVALUATIONS // 2)))
     assert spec.budget == MAX_EVALUATIONS // 2

@@ -58,6 +58,7 @@ def test_a_recording_without_a_rhythm_keeps_its_reading() -> None:
 
 @settings(max_examples=40, deadline=None, derandomize=True,
           suppress_health_check=[HealthCheck.function_scoped_fixture])
+@pytest.mark.slow
 @given(rate=st.sampled_from([25.0, 30.0, 100.0, 257.0, 1000.0, 2000.0]),
        bpm=st.floats(40.0, 180.0), seconds=st.floats(8.0, 30.0),
        unit=st.sampled_from(["s", "ms"]), stated=st.booleans())
