@@ -221,6 +221,37 @@ def _traffic(me: Link, robot: Link, foreign, port: int, tick: int, q0) -> None:
 
 @needs_build
 @pytest.mark.slow
+def test_the_controller_fuses_readings_that_come_late(built, tmp_path):
+    """0.5 s of readings each sent 3 ticks after its tick (an arm behind a middleware), then
+    100 ticks of readings 50 ticks old (past the observer's 40-tick window): the first are fused
+    late and counted, the others are no reading; the supervisor, which counts a tick's reading
+    as missing only once it can no longer be fused, lets the run end; every torque is finite."""
+    ticks, out = 1100, tmp_path / "run"
+    proc, me, robot, sock, epoch = _controller(built, tmp_path, ticks, settle=100.0)
+    port, q0, taus = sock.getsockname()[1], built.controller.mpc.arm.q0, []
+    try:
+        for tick in range(ticks):
+            _until_tick(epoch, tick - 0.5)
+            late = 3 if tick < 1000 else 50
+            if tick >= late:
+                robot.send(port, "measured_js", (tick - late) * TS, [q0])
+            while (message := robot.receive(timeout=0.0)) is not None:
+                taus.append(message.values[0])
+        assert proc.wait(timeout=30) == 0, proc.stderr.read()[-500:]
+    finally:
+        proc.kill()
+        for end in (me, robot):
+            end.close()
+        sock.close()
+    result = json.loads(Path(f"{out}.json").read_text())
+    assert result["ticks"] == ticks and result["stopped"] == ""
+    assert result["late_readings"] > 800 and 3 <= result["delay_max"] <= 40
+    assert result["stale_encoders"] >= 100  # the readings past the window, and the first ticks
+    assert np.isfinite(np.array(taus)).all()
+
+
+@needs_build
+@pytest.mark.slow
 def test_the_supervisor_stops_when_the_tool_leaves_the_poi(built, tmp_path):
     """Readings at rest at home while the samples say the POI sits 8 mm away: after the
     settling time the controller stops the run (no torque goes out after it), exits 3 and
