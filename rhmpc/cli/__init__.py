@@ -71,7 +71,14 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     return parser
 
 
+#: OpenBLAS's threads for the command's process and its workers, unless the environment sets
+#: them: rhmpc's matrices are small, and the threads spin between calls for more processor time
+#: than they save (docs/design/decisions/blas-threads.md).
+BLAS_THREADS = "1"
+
+
 def main(argv: list[str] | None = None) -> int:
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", BLAS_THREADS)  # before numpy loads OpenBLAS
     argv = sys.argv[1:] if argv is None else list(argv)
     command = argv[0] if argv and argv[0] in COMMANDS else ""
     parser = build_parser(command)

@@ -1,6 +1,8 @@
-"""`rhmpc robots`, `--help`, `--version`, and that the shipped URDF is found."""
+"""`rhmpc robots`, `--help`, `--version`, that the shipped URDF is found, and the command's BLAS
+threads."""
 
 import json
+import os
 import subprocess
 import sys
 
@@ -59,3 +61,14 @@ def test_a_robot_file_wherever_a_robot_name_goes(tmp_path, capsys):
         assert main([*argv, "--robot", str(tmp_path / "bad.toml")]) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and "joints: no joint 'elbow2'" in err[0], err
+
+
+def test_the_command_runs_one_blas_thread_unless_the_environment_says(monkeypatch) -> None:
+    """``OPENBLAS_NUM_THREADS`` is 1 for the command and its workers, and a value the user set
+    stays."""
+    monkeypatch.delenv("OPENBLAS_NUM_THREADS", raising=False)
+    assert main(["robots"]) == 0
+    assert os.environ["OPENBLAS_NUM_THREADS"] == "1"
+    monkeypatch.setenv("OPENBLAS_NUM_THREADS", "4")
+    assert main(["robots"]) == 0
+    assert os.environ["OPENBLAS_NUM_THREADS"] == "4"
