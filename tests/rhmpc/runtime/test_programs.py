@@ -150,6 +150,14 @@ def _controller(built, folder: Path, ticks: int, settle: float):
     return proc, me, robot, sock, epoch
 
 
+def _close(proc, sock, *ends) -> None:
+    """The controller's program ended (killed if it still runs), the test's sockets closed."""
+    proc.kill()
+    for end in ends:
+        end.close()
+    sock.close()
+
+
 @needs_build
 @pytest.mark.slow
 def test_the_controller_counts_and_survives_bad_traffic(built, tmp_path):
@@ -170,11 +178,7 @@ def test_the_controller_counts_and_survives_bad_traffic(built, tmp_path):
                 taus.append(message.values[0])
         assert proc.wait(timeout=30) == 0
     finally:
-        proc.kill()
-        for end in (me, robot):
-            end.close()
-        sock.close()
-        foreign.close()
+        _close(proc, sock, me, robot, foreign)
     result = json.loads(Path(f"{out}.json").read_text())
     assert result["ticks"] == ticks and result["stopped"] == ""
     assert result["lost"]["measured_cp"] == 2 and result["dropped"]["late"] == 2
@@ -239,10 +243,7 @@ def test_the_controller_fuses_readings_that_come_late(built, tmp_path):
                 taus.append(message.values[0])
         assert proc.wait(timeout=30) == 0, proc.stderr.read()[-500:]
     finally:
-        proc.kill()
-        for end in (me, robot):
-            end.close()
-        sock.close()
+        _close(proc, sock, me, robot)
     result = json.loads(Path(f"{out}.json").read_text())
     assert result["ticks"] == ticks and result["stopped"] == ""
     assert result["late_readings"] > 800 and 3 <= result["delay_max"] <= 40
@@ -271,10 +272,7 @@ def test_the_supervisor_stops_when_the_tool_leaves_the_poi(built, tmp_path):
         while (message := robot.receive(timeout=0.0)) is not None:
             torques_after += message.stamp > 0.25
     finally:
-        proc.kill()
-        for end in (me, robot):
-            end.close()
-        sock.close()
+        _close(proc, sock, me, robot)
     result = json.loads(Path(f"{out}.json").read_text())
     assert code == 3 and "left its 5-mm bound" in result["stopped"] and "stopped" in err
     assert 400 <= result["ticks"] < 600 and torques_after < 50
