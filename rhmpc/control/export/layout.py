@@ -126,6 +126,7 @@ PUBLIC = (
     ("age_count", "long long", None, "forecasts made from a sample"),
     ("encoder_held", "long long", None, "encoder readings the observer held out"),
     ("encoder_reacquired", "long long", None, "held readings taken again once they moved"),
+    ("fused", "long long", None, "the tick of the newest encoder reading taken (-1: none yet)"),
 )
 _CTYPES = {"long long": ctypes.c_longlong, "int": ctypes.c_int, "double": ctypes.c_double}
 #: ``rhmpc_retract_t``: the call the outlier gate makes to retract a predictor's newest sample.

@@ -377,9 +377,7 @@ static void judge_end(run_t *r) {
 }
 
 static void run_loop(run_t *r, long long *wake, long long *work, long long *step, long long *s2t) {
-  long long q_tick = -1, fused = -1; /* the newest reading's tick; the newest taken's */
-  double none[RHMPC_NU];
-  for (int j = 0; j < RHMPC_NU; j++) none[j] = NAN;
+  long long q_tick = -1; /* the newest reading's tick */
   int source = SERVED_NONE;
   for (long long tick = 0; tick < r->ticks && !stop_requested && !r->stopped[0]; tick++) {
     long long next = r->epoch + tick * TS_NS + r->phase, now = wake_up(r, next, wake);
@@ -394,17 +392,16 @@ static void run_loop(run_t *r, long long *wake, long long *work, long long *step
       if (left <= 0 || ppoll(&p, 1, &wait, NULL) <= 0) break;
       take_arrivals(r, tick, &q_tick, &source, &origin);
     }
-    long long delay = tick - q_tick; /* the newest reading, if not yet taken and not too old */
-    int fresh = q_tick > fused && delay >= 0 && delay <= RHMPC_MAX_DELAY;
-    if (!fresh) /* none new: the observer's hold */
-      delay = 0, r->stale_encoders++;
+    long long delay = tick - q_tick, taken = ctl.pub.fused;
+    rhmpc_step_delayed(&ctl, tick, delay, q, tau); /* the newest reading: taken, or the hold */
+    const int fresh = ctl.pub.fused > taken;
+    if (!fresh)
+      r->stale_encoders++;
     else if (delay > 0) {
       r->late_readings++;
       r->delay_max = delay > r->delay_max ? delay : r->delay_max;
     }
-    fused = fresh ? q_tick : fused;
     judge_readings(r, tick, fresh);
-    rhmpc_step_delayed(&ctl, tick, delay, fresh ? q : none, tau);
     step[tick] = ctl.pub.step_ns;
     if (r->stopped[0]) break; /* the supervisor stopped the run: no torque goes out */
     send_torque(r, tick);

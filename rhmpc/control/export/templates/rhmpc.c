@@ -43,7 +43,7 @@ void rhmpc_init(rhmpc_t *ctl) {
   static const double zero[3] = {0.0, 0.0, 0.0};
   rhmpc_place(ctl, rhmpc_y0, zero);
   rhmpc_reference_reset(ctl);
-  ctl->fused = -1;
+  ctl->pub.fused = -1;
   for (int i = 0; i <= RHMPC_MAX_DELAY; i++) ctl->past_tick[i] = -1;
 }
 
@@ -185,14 +185,14 @@ static void observe(rhmpc_t *ctl, long long tick, long long of, const double q[R
   int finite = 1;
   ctl->past_tick[past(tick)] = tick;
   memcpy(ctl->past_prior[past(tick)], ctl->x_prior, sizeof ctl->x_prior);
-  if (of != tick && (of > tick || tick - of > RHMPC_MAX_DELAY || of <= ctl->fused ||
+  if (of != tick && (of > tick || tick - of > RHMPC_MAX_DELAY || of <= ctl->pub.fused ||
                      ctl->past_tick[past(of)] != of))
   { /* too late, superseded or from the future: no reading */
     for (int j = 0; j < RHMPC_NU; j++) none[j] = NAN;
     q = none, of = tick;
   }
   for (int j = 0; j < RHMPC_NU; j++) finite &= isfinite(q[j]) != 0;
-  if (finite) ctl->fused = of;
+  if (finite) ctl->pub.fused = of;
   double *prior = ctl->past_prior[past(of)];
   if (held_out(ctl, prior, q, qf)) /* x_hat = x_prior */
     memcpy(x, prior, sizeof ctl->x_prior);

@@ -205,7 +205,6 @@ typedef struct {
   double past_prior[RHMPC_MAX_DELAY + 1][RHMPC_NX];
   double past_acting[RHMPC_MAX_DELAY + 1][RHMPC_NU];
   long long past_tick[RHMPC_MAX_DELAY + 1];
-  long long fused; /* the tick of the newest reading taken (fused or held out) */
 } rhmpc_t;
 
 /* At rest at the home posture: no plan, no points (they hold the origin), zero counters. */
@@ -276,7 +275,8 @@ int rhmpc_step(rhmpc_t *ctl, long long tick, const double q[RHMPC_NU], double ta
  * it into the prior of its own tick and carries the estimate forward through the torques that
  * acted since (Larsen et al., "Incorporation of time delayed measurements in a discrete-time
  * Kalman filter", CDC 1998: recalculation). A reading not newer than the last one taken, or
- * more than RHMPC_MAX_DELAY ticks late, is no reading. rhmpc_step is delay 0. */
+ * more than RHMPC_MAX_DELAY ticks late, is no reading; ctl.pub.fused is the tick of the newest
+ * one taken (a caller sees whether this one was). rhmpc_step is delay 0. */
 int rhmpc_step_delayed(rhmpc_t *ctl, long long tick, long long delay, const double q[RHMPC_NU],
                        double tau[RHMPC_NU]);
 
